@@ -1,0 +1,1 @@
+"""lantern_jax: LANTERN cooperative-warning benchmark in JAX."""

@@ -1,0 +1,74 @@
+"""Shared constants and enumerations.
+
+Frames and units (used everywhere in the package):
+
+* **World frame**: right-handed, x east, y north, metres; yaw in radians measured
+  counter-clockwise from +x.
+* **Ego frame (policy interface, paper convention)**: x forward, y to the **right**, metres.
+  Conversions live in :mod:`lantern_jax.geometry` (``world_to_ego`` / ``ego_to_world``).
+* Time in seconds from the start of an execution; speeds in m/s; accelerations in m/s^2.
+"""
+
+from __future__ import annotations
+
+# --- time -------------------------------------------------------------------------------------
+DT = 0.05  # s, simulation tick (20 Hz, CARLA leaderboard)
+WAYPOINT_DT = 0.25  # s, spacing of policy waypoints
+NUM_WAYPOINTS = 10  # policy output horizon: 10 x 0.25 s = 2.5 s
+
+# --- ego vehicle (Lincoln MKZ 2020, reference/parameters.md) ----------------------------------
+EGO_HALF_LENGTH = 2.4508  # m
+EGO_HALF_WIDTH = 1.0642  # m
+EGO_WHEELBASE = 2.85  # m, physical MKZ wheelbase
+EGO_MAX_STEER = 0.3685  # rad, max front-wheel angle (PDM-Lite fit)
+EGO_MAX_STEER_RATE = 0.7  # rad/s
+EGO_MAX_ACCEL = 3.0  # m/s^2, throttle limit
+EGO_MAX_BRAKE = 8.0  # m/s^2, brake limit on dry asphalt (friction 1.0)
+GRAVITY = 9.81  # m/s^2
+CAMERA_BACK_OFFSET = 1.5  # m, front camera behind the vehicle centre
+FRONT_CAMERA_FOV = 110.0  # degrees
+
+# --- actor kinds ------------------------------------------------------------------------------
+KIND_VEHICLE = 0
+KIND_PEDESTRIAN = 1
+KIND_STATIC = 2
+KIND_NAMES = ("vehicle", "pedestrian", "static")
+
+# --- actor roles ------------------------------------------------------------------------------
+ROLE_HAZARD = 0  # the controlled scenario actor (TTC, clearance, warning termination)
+ROLE_OCCLUDER = 1  # scenery kept in Route B (parked truck, lead van)
+ROLE_CONTEXT = 2  # scenario context actor (Route B stand-in, cross-traffic context)
+ROLE_BACKGROUND = 3  # ordinary traffic
+ROLE_NAMES = ("hazard", "occluder", "context", "background")
+
+# --- actor motion models ----------------------------------------------------------------------
+MOTION_SCRIPTED = 0  # path + speed profile + trigger time (closed form in time)
+MOTION_IDM = 1  # intelligent-driver-model car following along the actor's path
+
+# --- scripted trigger sources -----------------------------------------------------------------
+TRIGGER_CLOCK = 0  # trigger at t = trigger_delay
+TRIGGER_EVENT = 1  # trigger at t = t_event + trigger_delay (the protocol's physical event)
+TRIGGER_NEVER = 2  # never triggers (Route B stand-ins)
+
+# --- traffic-light states ---------------------------------------------------------------------
+LIGHT_GREEN = 0
+LIGHT_YELLOW = 1
+LIGHT_RED = 2
+
+# --- scenario families (paper order) ----------------------------------------------------------
+FAMILIES = ("PE", "VC", "OR", "LWW", "RWW", "RTY")
+FAMILY_NAMES = (
+    "Pedestrian Emergence",
+    "Vehicle Cut-In",
+    "Obstacle Reveal",
+    "Left-Turn Wrong-Way",
+    "Right-Turn Wrong-Way",
+    "Right-Turn Yield",
+)
+PE, VC, OR, LWW, RWW, RTY = range(6)
+
+# --- weather profiles of the frozen suite -----------------------------------------------------
+WEATHERS = ("clear_day", "cloudy_day", "wet_day", "light_rain", "dusk")
+
+BIG = 1.0e6  # finite stand-in for "infinitely far" distances (keeps gradients finite)
+INF_TIME = 1.0e9  # s, stand-in for "not yet happened" times

@@ -1,0 +1,1 @@
+"""Vehicle and actor dynamics: ego bicycle, waypoint controller, IDM, scripted actors."""

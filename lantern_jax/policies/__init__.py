@@ -1,0 +1,1 @@
+"""Driving policies: the interface, the registry and the reference planners."""

@@ -1,0 +1,1 @@
+"""Road builder, the six LANTERN scenario families, warnings, protocol and the frozen suite."""

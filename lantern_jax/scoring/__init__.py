@@ -1,0 +1,1 @@
+"""Cooperative Unified Score: telemetry accumulators, components, gates, CUS, aggregation."""

@@ -1,0 +1,1 @@
+"""Batched closed-loop rollout of World states."""

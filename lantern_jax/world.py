@@ -1,0 +1,386 @@
+"""World state of ONE scenario execution, as ``flax.struct`` pytrees.
+
+Every function in the package takes and returns a single scenario; batches are made with
+``jax.vmap`` outside.  Capacities (``A`` actors, ``P`` path points, ``L`` lanes, ``Q`` lane
+points, ``R`` route points, ``T`` traffic lights) are static and fixed by the arrays' shapes;
+padded slots carry a ``valid`` mask.
+
+Frames: world frame x east / y north / yaw counter-clockwise (see :mod:`lantern_jax.constants`).
+
+Each struct has a ``validate()`` method that runs **outside** ``jit`` on concrete arrays and raises
+:class:`ValueError` naming the offending field (``"Actors.extent: ..."``).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from flax import struct
+
+from lantern_jax.constants import INF_TIME
+
+Array = jax.Array
+
+
+# ---------------------------------------------------------------------------------------------
+# validation helpers (numpy, outside jit)
+# ---------------------------------------------------------------------------------------------
+def _arr(name: str, x: Any) -> np.ndarray:
+    try:
+        return np.asarray(x)
+    except Exception as err:  # pragma: no cover - defensive
+        raise ValueError(f"{name}: cannot convert to an array ({err})") from err
+
+
+def check_shape(name: str, x: Any, shape: tuple) -> np.ndarray:
+    """Check that ``x`` has ``shape`` (``None`` entries match any size) and return it as numpy.
+
+    Raises:
+        ValueError: naming ``name`` when the rank or a fixed dimension differs.
+    """
+    a = _arr(name, x)
+    if a.ndim != len(shape) or any(s is not None and s != d for s, d in zip(shape, a.shape)):
+        want = "(" + ", ".join("?" if s is None else str(s) for s in shape) + ")"
+        raise ValueError(f"{name}: expected shape {want}, got {a.shape}")
+    return a
+
+
+def check_finite(name: str, x: Any, mask: Any = None) -> np.ndarray:
+    """Check that every (masked) entry of ``x`` is finite; raise ``ValueError`` naming ``name``."""
+    a = _arr(name, x).astype(np.float64)
+    if mask is not None:
+        m = np.broadcast_to(np.asarray(mask, bool).reshape(np.shape(mask) + (1,) * (a.ndim - np.ndim(mask))), a.shape)
+        a = np.where(m, a, 0.0)
+    if not np.all(np.isfinite(a)):
+        idx = np.argwhere(~np.isfinite(a))[0].tolist()
+        raise ValueError(f"{name}: contains NaN or inf (first at index {idx})")
+    return a
+
+
+def check_nonneg(name: str, x: Any, mask: Any = None) -> None:
+    """Check that every (masked) entry of ``x`` is >= 0; raise ``ValueError`` naming ``name``."""
+    a = check_finite(name, x, mask)
+    if np.any(a < 0):
+        idx = np.argwhere(a < 0)[0].tolist()
+        raise ValueError(f"{name}: must be non-negative (first negative at index {idx})")
+
+
+# ---------------------------------------------------------------------------------------------
+# state structs
+# ---------------------------------------------------------------------------------------------
+@struct.dataclass
+class EgoState:
+    """Ego vehicle state (kinematic bicycle, reference point = box centre)."""
+
+    xy: Array  # (2,) float32, m, world frame, box centre
+    yaw: Array  # () float32, rad, CCW from +x
+    speed: Array  # () float32, m/s, >= 0 (no reversing)
+    steer: Array  # () float32, rad, front-wheel angle, + = left
+    accel: Array  # () float32, m/s^2, longitudinal acceleration applied during the last tick
+
+    def validate(self) -> EgoState:
+        check_shape("EgoState.xy", self.xy, (2,))
+        for f in ("yaw", "speed", "steer", "accel"):
+            check_shape(f"EgoState.{f}", getattr(self, f), ())
+        for f in ("xy", "yaw", "speed", "steer", "accel"):
+            check_finite(f"EgoState.{f}", getattr(self, f))
+        check_nonneg("EgoState.speed", self.speed)
+        return self
+
+
+@struct.dataclass
+class Actors:
+    """Dynamic state and boxes of a fixed-capacity padded actor set (A slots)."""
+
+    xy: Array  # (A, 2) float32, m, world frame, box centre
+    yaw: Array  # (A,) float32, rad, CCW from +x
+    speed: Array  # (A,) float32, m/s, signed along the heading
+    extent: Array  # (A, 2) float32, m, (half length, half width), >= 0
+    kind: Array  # (A,) int32, KIND_* (vehicle, pedestrian, static)
+    role: Array  # (A,) int32, ROLE_* (hazard, occluder, context, background)
+    valid: Array  # (A,) bool, slot holds an actor of this execution (padding = False)
+    active: Array  # (A,) bool, actor currently in the world (False after despawn)
+    s: Array  # (A,) float32, m, arc length along the actor's path
+    lat: Array  # (A,) float32, m, lateral offset from the path, + = left of travel
+
+    @property
+    def num(self) -> int:
+        """Static capacity A."""
+        return self.xy.shape[-2]
+
+    @property
+    def present(self) -> Array:
+        """(A,) bool: valid and active — the actors that exist in the world right now."""
+        return self.valid & self.active
+
+    def validate(self) -> Actors:
+        xy = check_shape("Actors.xy", self.xy, (None, 2))
+        n = xy.shape[0]
+        for f in ("yaw", "speed", "kind", "role", "valid", "active", "s", "lat"):
+            check_shape(f"Actors.{f}", getattr(self, f), (n,))
+        check_shape("Actors.extent", self.extent, (n, 2))
+        v = np.asarray(self.valid, bool)
+        for f in ("xy", "yaw", "speed", "s", "lat"):
+            check_finite(f"Actors.{f}", getattr(self, f), v)
+        check_nonneg("Actors.extent", self.extent, v)
+        kind = np.asarray(self.kind)
+        if np.any(v & ((kind < 0) | (kind > 2))):
+            raise ValueError("Actors.kind: must be 0 (vehicle), 1 (pedestrian) or 2 (static)")
+        role = np.asarray(self.role)
+        if np.any(v & ((role < 0) | (role > 3))):
+            raise ValueError("Actors.role: must be 0..3 (hazard, occluder, context, background)")
+        return self
+
+
+@struct.dataclass
+class ActorScript:
+    """How each actor moves (static over an execution).
+
+    Scripted actors (``motion == MOTION_SCRIPTED``) move in closed form in time::
+
+        trigger time   tau = trigger_delay            (TRIGGER_CLOCK)
+                       tau = t_event + trigger_delay  (TRIGGER_EVENT; inf until the event)
+        before tau     s(t) = min(s_init + v_pre * t, s_hold)
+        after tau      s(t) = s(tau) + v_post * (t - tau),  lat(t) = lat_shift * smoothstep((t - tau) / lat_duration)
+        always         s clipped to s_end; the actor despawns at s_end when ``despawn_at_end``.
+
+    A static object is ``v_pre = v_post = 0``.  IDM actors (``motion == MOTION_IDM``) integrate
+    ``s`` with the intelligent driver model, desired speed ``v_pre``, stopping at ``stop_s`` while
+    the light ``light_index`` is not green.
+    """
+
+    motion: Array  # (A,) int32, MOTION_*
+    path: Array  # (A, P, 2) float32, m, world-frame polyline followed by the actor
+    path_s: Array  # (A, P) float32, m, cumulative arc length of ``path`` (0 at the first point)
+    path_valid: Array  # (A, P) bool, valid polyline points (a prefix of each row)
+    s_init: Array  # (A,) float32, m, initial arc length
+    v_pre: Array  # (A,) float32, m/s, speed before the trigger (IDM: desired speed)
+    v_post: Array  # (A,) float32, m/s, speed after the trigger
+    s_hold: Array  # (A,) float32, m, arc where the actor waits until its trigger (BIG = none)
+    s_end: Array  # (A,) float32, m, arc where the actor stops (or despawns)
+    trigger: Array  # (A,) int32, TRIGGER_*
+    trigger_delay: Array  # (A,) float32, s, delay after the trigger source
+    lat_shift: Array  # (A,) float32, m, lateral offset executed after the trigger, + = left
+    lat_duration: Array  # (A,) float32, s, duration of the lateral manoeuvre, > 0
+    despawn_at_end: Array  # (A,) bool, remove the actor when it reaches ``s_end``
+    light_index: Array  # (A,) int32, traffic light governing an IDM actor (-1 = none)
+    stop_s: Array  # (A,) float32, m, arc of that light's stop line on the actor's path
+
+    def validate(self, num_actors: int | None = None) -> ActorScript:
+        motion = check_shape("ActorScript.motion", self.motion, (num_actors,))
+        n = motion.shape[0]
+        path = check_shape("ActorScript.path", self.path, (n, None, 2))
+        p = path.shape[1]
+        check_shape("ActorScript.path_s", self.path_s, (n, p))
+        pv = check_shape("ActorScript.path_valid", self.path_valid, (n, p)).astype(bool)
+        check_finite("ActorScript.path", self.path, pv)
+        check_finite("ActorScript.path_s", self.path_s, pv)
+        for f in (
+            "s_init", "v_pre", "v_post", "s_hold", "s_end", "trigger", "trigger_delay",
+            "lat_shift", "lat_duration", "despawn_at_end", "light_index", "stop_s",
+        ):  # fmt: skip
+            check_shape(f"ActorScript.{f}", getattr(self, f), (n,))
+            check_finite(f"ActorScript.{f}", getattr(self, f))
+        for f in ("v_pre", "v_post", "trigger_delay"):
+            check_nonneg(f"ActorScript.{f}", getattr(self, f))
+        if np.any(np.asarray(self.lat_duration) <= 0):
+            raise ValueError("ActorScript.lat_duration: must be > 0")
+        if np.any(pv.sum(-1) < 1):
+            raise ValueError("ActorScript.path_valid: every actor path needs at least one point")
+        return self
+
+
+@struct.dataclass
+class Lanes:
+    """Driving lanes as padded centre-line polylines; travel direction = point order."""
+
+    center: Array  # (L, Q, 2) float32, m, world frame
+    s: Array  # (L, Q) float32, m, cumulative arc length
+    point_valid: Array  # (L, Q) bool
+    width: Array  # (L,) float32, m
+    valid: Array  # (L,) bool
+    kind: Array  # (L,) int32, 0 = driving, 1 = shoulder/parking, 2 = junction connector
+
+    def validate(self) -> Lanes:
+        c = check_shape("Lanes.center", self.center, (None, None, 2))
+        n, q = c.shape[:2]
+        check_shape("Lanes.s", self.s, (n, q))
+        pv = check_shape("Lanes.point_valid", self.point_valid, (n, q)).astype(bool)
+        for f in ("width", "valid", "kind"):
+            check_shape(f"Lanes.{f}", getattr(self, f), (n,))
+        check_finite("Lanes.center", self.center, pv)
+        v = np.asarray(self.valid, bool)
+        check_nonneg("Lanes.width", self.width, v)
+        if np.any(v & (pv.sum(-1) < 2)):
+            raise ValueError("Lanes.point_valid: every valid lane needs at least two points")
+        return self
+
+
+@struct.dataclass
+class Route:
+    """The ego route: a padded polyline with cumulative arc length."""
+
+    xy: Array  # (R, 2) float32, m, world frame
+    s: Array  # (R,) float32, m, cumulative arc length (0 at the start)
+    valid: Array  # (R,) bool, valid points (a prefix)
+    length: Array  # () float32, m, total route length
+
+    def validate(self) -> Route:
+        xy = check_shape("Route.xy", self.xy, (None, 2))
+        r = xy.shape[0]
+        check_shape("Route.s", self.s, (r,))
+        v = check_shape("Route.valid", self.valid, (r,)).astype(bool)
+        check_shape("Route.length", self.length, ())
+        if v.sum() < 2:
+            raise ValueError(f"Route.xy: a route needs at least two points, got {int(v.sum())}")
+        check_finite("Route.xy", self.xy, v)
+        check_finite("Route.s", self.s, v)
+        s = np.asarray(self.s)[v]
+        if np.any(np.diff(s) <= 0):
+            raise ValueError("Route.s: arc length must be strictly increasing (duplicate points?)")
+        return self
+
+
+@struct.dataclass
+class TrafficLights:
+    """Fixed-cycle traffic lights (T slots); phase = (t + offset) mod (green + yellow + red)."""
+
+    green: Array  # (T,) float32, s
+    yellow: Array  # (T,) float32, s
+    red: Array  # (T,) float32, s
+    offset: Array  # (T,) float32, s, phase offset at t = 0
+    stop_xy: Array  # (T, 2) float32, m, centre of the stop line (for drawing)
+    valid: Array  # (T,) bool
+
+    def validate(self) -> TrafficLights:
+        g = check_shape("TrafficLights.green", self.green, (None,))
+        n = g.shape[0]
+        for f in ("yellow", "red", "offset", "valid"):
+            check_shape(f"TrafficLights.{f}", getattr(self, f), (n,))
+        check_shape("TrafficLights.stop_xy", self.stop_xy, (n, 2))
+        v = np.asarray(self.valid, bool)
+        for f in ("green", "yellow", "red"):
+            check_nonneg(f"TrafficLights.{f}", getattr(self, f), v)
+        check_finite("TrafficLights.offset", self.offset, v)
+        return self
+
+
+@struct.dataclass
+class ScenarioParams:
+    """Per-execution scenario parameters: markers, condition, clearance rule, weather, ablations.
+
+    Distances along the route are arc lengths of :class:`Route`.  Everything here is data, so
+    the condition (warning / no-warning) and the route variant (A / B) never branch in Python.
+    """
+
+    family: Array  # () int32, index into constants.FAMILIES
+    is_route_a: Array  # () bool, Route A (hazard) vs Route B (control)
+    warning_enabled: Array  # () bool, warning condition (only meaningful on Route A)
+    s_warn: Array  # () float32, m, route arc of the warning point
+    s_event: Array  # () float32, m, route arc of the geometric event trigger
+    s_conflict: Array  # () float32, m, route arc of the conflict point
+    hazard_index: Array  # () int32, actor slot of the controlled hazard actor
+    clear_s: Array  # () float32, m, hazard path arc beyond which the hazard has cleared
+    clear_time_limit: Array  # () float32, s after the event: safety/stop limit forcing clearance
+    clear_on_ego_stop: Array  # () bool, clearance once the ego has held still after the event
+    despawn_on_clear: Array  # () bool, remove the hazard actor at clearance
+    force_event: Array  # () bool, anti-deadlock countdown applies (False for RTY)
+    force_delay: Array  # () float32, s, anti-deadlock countdown (2.0)
+    ego_light: Array  # () int32, traffic light governing the ego (-1 = none)
+    ego_stop_s: Array  # () float32, m, route arc of the ego's stop line (BIG = none)
+    d_safe: Array  # () float32, m, clearance normaliser (2 m PE/OR, 3 m otherwise)
+    v_ref: Array  # () float32, m/s, reference (target) speed of the route
+    friction: Array  # () float32, tyre-road friction coefficient (weather)
+    sensing_range: Array  # () float32, m, camera range (weather)
+    template_id: Array  # () int32, warning template (family) id
+    text_id: Array  # () int32, warning text id in the text bank
+    timeout_s: Array  # () float32, s, route timeout
+    late_onset: Array  # () bool, ablation: warning delivered from the event on
+    warn_hold_extra: Array  # () float32, s, ablation: warning held beyond termination
+    pos_noise_sigma: Array  # () float32, m, ablation: Gaussian noise on the grounded position
+    noise_seed: Array  # () uint32, seed of that noise
+
+    def validate(self) -> ScenarioParams:
+        for f in self.__dataclass_fields__:
+            check_shape(f"ScenarioParams.{f}", getattr(self, f), ())
+            check_finite(f"ScenarioParams.{f}", getattr(self, f))
+        for f in ("d_safe", "v_ref", "friction", "sensing_range", "timeout_s", "force_delay"):
+            if float(getattr(self, f)) <= 0:
+                raise ValueError(f"ScenarioParams.{f}: must be > 0, got {float(getattr(self, f))}")
+        check_nonneg("ScenarioParams.pos_noise_sigma", self.pos_noise_sigma)
+        check_nonneg("ScenarioParams.warn_hold_extra", self.warn_hold_extra)
+        if not float(self.s_warn) <= float(self.s_event) <= float(self.s_conflict):
+            raise ValueError(
+                "ScenarioParams.s_warn/s_event/s_conflict: need s_warn <= s_event <= s_conflict, "
+                f"got {float(self.s_warn)}, {float(self.s_event)}, {float(self.s_conflict)}"
+            )
+        return self
+
+
+@struct.dataclass
+class ProtocolState:
+    """Temporal-protocol times of one execution; INF_TIME until the transition happens."""
+
+    t_warn_point: Array  # () float32, s, ego reached the warning point (= t_ref)
+    t_warn_on: Array  # () float32, s, warning delivery starts (warning condition only)
+    t_event: Array  # () float32, s, physical event onset
+    t_warn_off: Array  # () float32, s, warning termination (hazard seen after the event)
+    t_clear: Array  # () float32, s, hazard clearance
+    countdown: Array  # () float32, s, anti-deadlock time accumulated since the warning point
+    event_forced: Array  # () bool, the event was started by the anti-deadlock rule
+    clear_by_limit: Array  # () bool, clearance came from a safety/stop limit
+    ego_still_time: Array  # () float32, s, continuous time the ego has been (almost) still
+
+    @staticmethod
+    def initial() -> ProtocolState:
+        """All transitions pending."""
+        inf = jnp.asarray(INF_TIME, jnp.float32)
+        z = jnp.asarray(0.0, jnp.float32)
+        f = jnp.asarray(False)
+        return ProtocolState(inf, inf, inf, inf, inf, z, f, f, z)
+
+
+@struct.dataclass
+class World:
+    """Everything the simulator steps for one scenario execution."""
+
+    t: Array  # () float32, s, simulation clock
+    tick: Array  # () int32, ticks since start
+    ego: EgoState
+    actors: Actors
+    script: ActorScript
+    lanes: Lanes
+    route: Route
+    lights: TrafficLights
+    params: ScenarioParams
+    protocol: ProtocolState
+
+    def validate(self) -> World:
+        """Validate every component (outside jit) and their mutual consistency."""
+        self.ego.validate()
+        self.actors.validate()
+        self.script.validate(self.actors.num)
+        self.lanes.validate()
+        self.route.validate()
+        self.lights.validate()
+        self.params.validate()
+        h = int(self.params.hazard_index)
+        if not 0 <= h < self.actors.num:
+            raise ValueError(f"ScenarioParams.hazard_index: {h} outside 0..{self.actors.num - 1}")
+        el = int(self.params.ego_light)
+        if el >= self.lights.valid.shape[0]:
+            raise ValueError(f"ScenarioParams.ego_light: {el} >= number of light slots")
+        return self
+
+
+def tree_stack(items: list) -> Any:
+    """Stack a list of identically-shaped pytrees along a new leading batch axis."""
+    return jax.tree.map(lambda *xs: jnp.stack(xs), *items)
+
+
+def tree_index(tree: Any, i: int) -> Any:
+    """Take element ``i`` of a batched pytree."""
+    return jax.tree.map(lambda x: x[i], tree)
