@@ -1,0 +1,181 @@
+"""The LANTERN temporal protocol as masked state transitions (paper §3.2 and appendix D).
+
+Every transition is a ``jnp.where`` on flags and times — no Python control flow — so the
+protocol batches under ``vmap`` and traces once.  Times start at ``INF_TIME`` and are written
+once.  Per execution:
+
+* ``t_warn_point`` — the ego reaches the route-relative warning point (both conditions and both
+  routes record it: it is the anticipation reference ``t_ref`` and opens Route B's matched
+  false-brake interval).  Interpolated inside the tick from the progress crossing, so that it
+  varies smoothly with scenario parameters.
+* ``t_event = min(t_geom, t_warn_point + tau_force)`` — the anti-deadlock rule.  The countdown
+  only advances while the ego is not legitimately held (red/yellow light ahead, or a queue of
+  ordinary traffic); ``force_event`` is False for Right-Turn Yield, whose event point equals its
+  warning point.  The rule only moves the scenario actor: the event time feeds the scripted
+  actors' trigger, never the ego's control.
+* ``t_warn_off`` — the first tick at/after the event at which the hazard is visible to the front
+  camera.  A hazard that clears (is removed) before it was ever seen ends the warning at
+  clearance, so that a warning never outlives its hazard.
+* ``t_clear`` — the family's clearance condition: the hazard reached ``clear_s`` on its path, or
+  ``clear_time_limit`` seconds passed since the event (``clear_by_limit`` records that a limit,
+  rather than a geometric clearance, ended the interaction, when a geometric one was defined),
+  or (``clear_on_ego_stop``) the ego has stood still for 1 s after seeing the hazard.
+
+Warning delivery (what a policy reads) is a function of these times and the ablation switches:
+active on ``[t_on, t_warn_off + warn_hold_extra)`` with ``t_on = t_warn_point`` (or ``t_event``
+with the late-onset ablation), and only in the warning condition of Route A.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+from lantern_jax.constants import BIG, DT, INF_TIME
+from lantern_jax.world import ProtocolState, ScenarioParams
+
+Array = jax.Array
+
+_HALF_INF = INF_TIME * 0.5
+STILL_SPEED = 0.1  # m/s, "stopped"
+STILL_TIME_FOR_CLEAR = 1.0  # s, ego response that lets the Obstacle Reveal object be removed
+
+
+def happened(t_mark: Array) -> Array:
+    """() bool: a protocol time has been written (is not INF_TIME)."""
+    return t_mark < _HALF_INF
+
+
+def crossing_time(t_next: Array, prev: Array, cur: Array, threshold: Array, dt: float) -> Array:
+    """Sub-tick time at which a monotone quantity crossed ``threshold`` during the last tick.
+
+    Args:
+        t_next: () s, time at the end of the tick.
+        prev: () value at the start of the tick.
+        cur: () value at the end of the tick (``cur >= threshold > prev`` assumed by caller).
+        threshold: () crossing level.
+        dt: tick length, s.
+
+    Returns:
+        () s, linear interpolation of the crossing inside ``[t_next - dt, t_next]``.
+    """
+    span = cur - prev
+    safe = jnp.where(span > 1e-6, span, 1.0)
+    frac = jnp.where(span > 1e-6, (threshold - prev) / safe, 1.0)
+    return t_next - dt + jnp.clip(frac, 0.0, 1.0) * dt
+
+
+def advance_markers(
+    proto: ProtocolState,
+    params: ScenarioParams,
+    t_next: Array,
+    progress_prev: Array,
+    progress: Array,
+    ego_held: Array,
+    dt: float = DT,
+) -> ProtocolState:
+    """Warning point, anti-deadlock countdown and event onset after the ego moved.
+
+    Args:
+        proto: protocol state at the start of the tick.
+        params: scenario parameters.
+        t_next: () s, time at the end of the tick.
+        progress_prev: () m, route progress at the start of the tick.
+        progress: () m, route progress at the end of the tick.
+        ego_held: () bool, a red light or a queue legitimately holds the ego (pauses the
+            countdown).
+
+    Returns:
+        The protocol state with ``t_warn_point``, ``countdown`` and ``t_event`` updated.
+    """
+    reach_warn = (~happened(proto.t_warn_point)) & (progress >= params.s_warn)
+    t_warn_point = jnp.where(
+        reach_warn,
+        crossing_time(t_next, progress_prev, progress, params.s_warn, dt),
+        proto.t_warn_point,
+    )
+    event_pending = ~happened(proto.t_event)
+    counting = happened(t_warn_point) & event_pending & params.force_event & ~ego_held
+    # Seconds of this tick that lie after the warning point (sub-tick on the first tick).
+    tick_share = jnp.clip(t_next - jnp.maximum(t_warn_point, t_next - dt), 0.0, dt)
+    countdown = proto.countdown + jnp.where(counting, tick_share, 0.0)
+
+    geom = event_pending & (progress >= params.s_event)
+    t_geom = crossing_time(t_next, progress_prev, progress, params.s_event, dt)
+    # RTY: the event point is the warning point, so the event coincides with it exactly.
+    t_geom = jnp.where(params.s_event <= params.s_warn, t_warn_point, t_geom)
+    forced = event_pending & counting & (countdown >= params.force_delay)
+    t_forced = t_next - (countdown - params.force_delay)
+    t_new = jnp.minimum(jnp.where(geom, t_geom, INF_TIME), jnp.where(forced, t_forced, INF_TIME))
+    forced = forced & ~(geom & (t_geom <= t_forced))
+    t_event = jnp.where(geom | forced, t_new, proto.t_event)
+    return proto.replace(
+        t_warn_point=t_warn_point,
+        countdown=countdown,
+        t_event=t_event,
+        event_forced=proto.event_forced | forced,
+    )
+
+
+def advance_hazard(
+    proto: ProtocolState,
+    params: ScenarioParams,
+    t_next: Array,
+    hazard_visible: Array,
+    hazard_s: Array,
+    ego_speed: Array,
+    dt: float = DT,
+) -> ProtocolState:
+    """Clearance and warning termination after the actors moved and visibility was computed.
+
+    Args:
+        proto: protocol state after :func:`advance_markers`.
+        params: scenario parameters.
+        t_next: () s, time at the end of the tick.
+        hazard_visible: () bool, the hazard is visible to the front camera now.
+        hazard_s: () m, the hazard's arc along its own path.
+        ego_speed: () m/s.
+
+    Returns:
+        The protocol state with ``t_clear``, ``t_warn_off`` and the ego-still timer updated.
+    """
+    still = jnp.where(ego_speed < STILL_SPEED, proto.ego_still_time + dt, 0.0)
+    after_event = happened(proto.t_event) & (t_next >= proto.t_event)
+    pending = ~happened(proto.t_clear)
+    geometric = hazard_s >= params.clear_s
+    by_limit = (t_next - proto.t_event) >= params.clear_time_limit
+    by_stop = (
+        params.clear_on_ego_stop & happened(proto.t_warn_off) & (still >= STILL_TIME_FOR_CLEAR)
+    )
+    clear_now = pending & after_event & (geometric | by_limit | by_stop)
+    t_clear = jnp.where(clear_now, t_next, proto.t_clear)
+    limit_flag = clear_now & by_limit & ~geometric & ~by_stop & (params.clear_s < BIG * 0.5)
+
+    seen = after_event & hazard_visible & ~happened(proto.t_warn_off)
+    t_warn_off = jnp.where(seen, t_next, proto.t_warn_off)
+    # A hazard removed before it was ever seen ends the warning at clearance.
+    t_warn_off = jnp.where(happened(t_clear) & ~happened(t_warn_off), t_clear, t_warn_off)
+    return proto.replace(
+        t_clear=t_clear,
+        t_warn_off=t_warn_off,
+        clear_by_limit=proto.clear_by_limit | limit_flag,
+        ego_still_time=still,
+    )
+
+
+def warning_onset(proto: ProtocolState, params: ScenarioParams) -> Array:
+    """() s, start of warning delivery (INF_TIME when no warning is delivered at all)."""
+    t_on = jnp.where(params.late_onset, proto.t_event, proto.t_warn_point)
+    delivered = params.warning_enabled & params.is_route_a
+    return jnp.where(delivered, t_on, INF_TIME)
+
+
+def warning_active(proto: ProtocolState, params: ScenarioParams, t: Array) -> Array:
+    """() bool: the warning text is delivered to the policy at time ``t``.
+
+    Active on ``[t_on, t_warn_off + warn_hold_extra)``; ``t_warn_off`` is INF_TIME until the
+    hazard is seen, so the interval stays open until then.
+    """
+    t_on = warning_onset(proto, params)
+    t_off = jnp.where(happened(proto.t_warn_off), proto.t_warn_off + params.warn_hold_extra, INF_TIME)
+    return happened(t_on) & (t >= t_on) & (t < t_off)
