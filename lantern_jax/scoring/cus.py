@@ -1,0 +1,326 @@
+"""Cooperative Unified Score of a matched Route A/B pair (paper appendix "Complete Cooperative
+Unified Score", Eq. supp_cus_complete)::
+
+    S_TTC  = clip(TTC_min / 3 s)                  no closing trend -> 1, overlap -> 0
+    S_clear = clip(d_min / d_safe)                d_safe = 2 m (PE, OR), 3 m otherwise
+    S_ant  = clip((t_event - t_react) / (t_event - t_ref))
+             no response, or response at/after the event -> 0; coincident onset (RTY):
+             1 iff a response was already present at the event, else 0
+    S_rec  = clip(1 - RL / 8 s)                   no recovery -> 0
+    S_A = (S_TTC + S_clear) / 2      T_A = (S_ant + S_rec) / 2
+    Q_A = 0.40 P_A + 0.35 S_A + 0.25 T_A
+    CUS = 100 G_coll G_road G_lane G_rule G_block (Route A) G_FB (Route B) (0.85 Q_A + 0.15 P_B)
+
+A component that is unavailable (``NaN``) contributes 0 inside the formula and stays ``NaN`` in
+the returned components.  Every hard function is elementwise, so it works on scalars and on
+batched arrays alike.
+
+The soft score (:func:`soft_pair_cus`) uses the same formula with sigmoid gates of signed margins,
+soft minima and softplus clips; it converges to the hard score as the temperature goes to 0.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+
+from lantern_jax.constants import DT, FAMILIES
+from lantern_jax.scoring import thresholds as th
+from lantern_jax.scoring.metrics import ExecutionMetrics, availability, release_time
+from lantern_jax.scoring.smooth import smooth_clip01, soft_gate, softmin_decode
+from lantern_jax.scoring.telemetry import Telemetry
+
+Array = jax.Array
+
+GATE_NAMES = (
+    "gate_collision",
+    "gate_route_deviation",
+    "gate_lane",
+    "gate_rule",
+    "gate_block",
+    "gate_false_brake",
+)
+
+
+def d_safe_for_family(family: Any) -> Array:
+    """Clearance normaliser in m: 2 m for PE and OR, 3 m otherwise.
+
+    Args:
+        family: family index (int or int array, ``constants.FAMILIES`` order) or code string.
+    """
+    if isinstance(family, str):
+        return jnp.asarray(th.D_SAFE_BY_FAMILY[FAMILIES.index(family)], jnp.float32)
+    table = jnp.asarray(th.D_SAFE_BY_FAMILY, jnp.float32)
+    return table[jnp.asarray(family, jnp.int32)]
+
+
+# ---------------------------------------------------------------------------------------------
+# hard components (elementwise)
+# ---------------------------------------------------------------------------------------------
+def _f(x: Any) -> Array:
+    return jnp.asarray(x, jnp.float32)
+
+
+def _nz(x: Array) -> Array:
+    """NaN (unavailable) -> 0 for use inside the formula."""
+    return jnp.where(jnp.isnan(x), 0.0, x)
+
+
+def s_ttc(ttc_min_s: Any) -> Array:
+    """``clip(TTC_min / 3 s)``; ``inf`` (no closing trend) -> 1; ``NaN`` (unavailable) stays."""
+    x = _f(ttc_min_s)
+    return jnp.where(jnp.isnan(x), jnp.nan, jnp.clip(x / th.TTC_NORM_S, 0.0, 1.0))
+
+
+def s_clear(clearance_min_m: Any, d_safe: Any) -> Array:
+    """``clip(d_min / d_safe)``; ``NaN`` (unavailable) stays ``NaN``."""
+    x = _f(clearance_min_m)
+    return jnp.where(jnp.isnan(x), jnp.nan, jnp.clip(x / _f(d_safe), 0.0, 1.0))
+
+
+def s_ant(
+    t_ref: Any, t_event: Any, t_react: Any, available: Any = True, coincident: Any = None
+) -> Array:
+    """Anticipation ``clip((t_event - t_react) / (t_event - t_ref))``.
+
+    Args:
+        t_ref, t_event: s; ``NaN`` makes the component unavailable.
+        t_react: s; ``NaN`` or ``inf`` = no sustained response (scores 0).
+        available: bool, ``False`` -> ``NaN``.
+        coincident: bool, coincident warning/event onset; ``None`` means ``t_event <= t_ref``.
+            Coincident onset scores 1 iff ``t_react < t_event`` (a response was already present
+            at the event), else 0.
+    """
+    t_ref, t_event, t_react = _f(t_ref), _f(t_event), _f(t_react)
+    span = t_event - t_ref
+    coinc = (span <= 0.0) if coincident is None else jnp.asarray(coincident, bool)
+    responded = jnp.isfinite(t_react)
+    safe_span = jnp.where(span > 0.0, span, 1.0)
+    regular = jnp.clip((t_event - t_react) / safe_span, 0.0, 1.0)
+    value = jnp.where(coinc, (t_react < t_event).astype(jnp.float32), regular)
+    value = jnp.where(responded, value, 0.0)
+    ok = jnp.asarray(available, bool) & ~jnp.isnan(t_ref) & ~jnp.isnan(t_event)
+    return jnp.where(ok, value, jnp.nan)
+
+
+def s_rec(recovery_latency_s: Any, available: Any = True) -> Array:
+    """``clip(1 - RL / 8 s)``; ``NaN``/``inf`` latency = no recovery (0); unavailable -> ``NaN``."""
+    rl = _f(recovery_latency_s)
+    value = jnp.where(jnp.isfinite(rl), jnp.clip(1.0 - rl / th.RECOVER_CAP_S, 0.0, 1.0), 0.0)
+    return jnp.where(jnp.asarray(available, bool), value, jnp.nan)
+
+
+def combine(
+    p_a: Any,
+    p_b: Any,
+    s_ttc_: Any,
+    s_clear_: Any,
+    s_ant_: Any,
+    s_rec_: Any,
+    gate_product: Any,
+) -> dict[str, Array]:
+    """Weighted quality and CUS from normalised components (``NaN`` components count as 0).
+
+    Returns:
+        dict with ``S_A``, ``T_A``, ``Q_A`` and ``CUS`` (0..100).
+    """
+    s_a = 0.5 * (_nz(_f(s_ttc_)) + _nz(_f(s_clear_)))
+    t_a = 0.5 * (_nz(_f(s_ant_)) + _nz(_f(s_rec_)))
+    q_a = th.W_PROGRESS_A * _nz(_f(p_a)) + th.W_SAFETY_A * s_a + th.W_TEMPORAL_A * t_a
+    quality = th.W_ROUTE_A * q_a + th.W_ROUTE_B * _nz(_f(p_b))
+    return {"S_A": s_a, "T_A": t_a, "Q_A": q_a, "CUS": 100.0 * _f(gate_product) * quality}
+
+
+def components_from_values(
+    P_A: Any,
+    P_B: Any,
+    ttc_min: Any,
+    d_min: Any,
+    d_safe: Any,
+    t_ref: Any,
+    t_event: Any,
+    t_react: Any,
+    RL: Any,
+    *,
+    gate_collision: Any = True,
+    gate_route_deviation: Any = True,
+    gate_lane: Any = True,
+    gate_rule: Any = True,
+    gate_block: Any = True,
+    gate_false_brake: Any = True,
+    coincident: Any = None,
+    anticipation_available: Any = True,
+    recovery_available: Any = True,
+) -> dict[str, Array]:
+    """All components, gates and the CUS from plain values (units: s, m; gates: True = passed).
+
+    ``ttc_min``: ``inf`` = no closing trend, ``NaN`` = unavailable.  ``d_min``: ``NaN`` =
+    unavailable.  ``t_react`` / ``RL``: ``NaN`` or ``inf`` = no response / no recovery.
+    """
+    gates = {
+        "gate_collision": jnp.asarray(gate_collision, bool),
+        "gate_route_deviation": jnp.asarray(gate_route_deviation, bool),
+        "gate_lane": jnp.asarray(gate_lane, bool),
+        "gate_rule": jnp.asarray(gate_rule, bool),
+        "gate_block": jnp.asarray(gate_block, bool),
+        "gate_false_brake": jnp.asarray(gate_false_brake, bool),
+    }
+    product = jnp.ones((), jnp.float32)
+    for name in GATE_NAMES:
+        product = product * gates[name].astype(jnp.float32)
+    comps = {
+        "P_A": _f(P_A),
+        "P_B": _f(P_B),
+        "S_ttc": s_ttc(ttc_min),
+        "S_clear": s_clear(d_min, d_safe),
+        "S_ant": s_ant(t_ref, t_event, t_react, anticipation_available, coincident),
+        "S_rec": s_rec(RL, recovery_available),
+    }
+    out = combine(
+        comps["P_A"], comps["P_B"], comps["S_ttc"], comps["S_clear"], comps["S_ant"],
+        comps["S_rec"], product,
+    )  # fmt: skip
+    return {**comps, **gates, "gate_product": product, **out}
+
+
+def cus_from_values(*args: Any, **kwargs: Any) -> Array:
+    """CUS (0..100) from plain values; same arguments as :func:`components_from_values`."""
+    return components_from_values(*args, **kwargs)["CUS"]
+
+
+def pair_components(
+    metrics_a: ExecutionMetrics, metrics_b: ExecutionMetrics, d_safe: Any
+) -> dict[str, Array]:
+    """Hard components, gates and CUS of matched pairs (elementwise over any batch shape).
+
+    Args:
+        metrics_a: Route A execution outputs (from :func:`~lantern_jax.scoring.metrics.finalize`).
+        metrics_b: Route B execution outputs; only ``progress`` and ``gate_false_brake`` are used.
+        d_safe: clearance normaliser in m (see :func:`d_safe_for_family`).
+
+    Returns:
+        dict: ``P_A, P_B, S_ttc, S_clear, S_ant, S_rec`` (float, ``NaN`` = unavailable), the six
+        ``gate_*`` pass flags (bool), ``gate_product``, ``S_A, T_A, Q_A`` and ``CUS`` (0..100).
+    """
+    a, b = metrics_a, metrics_b
+    return components_from_values(
+        a.progress, b.progress, a.ttc_min_s, a.clearance_min_m, d_safe,
+        a.t_ref_s, a.t_event_s, a.t_react_s, a.recovery_latency_s,
+        gate_collision=a.gate_collision,
+        gate_route_deviation=a.gate_route_deviation,
+        gate_lane=a.gate_lane,
+        gate_rule=a.gate_rule,
+        gate_block=a.gate_block,
+        gate_false_brake=b.gate_false_brake,
+        coincident=a.coincident_onset,
+        anticipation_available=a.anticipation_available,
+        recovery_available=a.recovery_available,
+    )  # fmt: skip
+
+
+# ---------------------------------------------------------------------------------------------
+# soft (differentiable) score
+# ---------------------------------------------------------------------------------------------
+def soft_execution_terms(tel: Telemetry, d_safe: Any, temperature: Any = None) -> dict[str, Array]:
+    """Smooth components and gates of one execution.
+
+    The log-sum-exp and first-crossing accumulators were built with ``tel.temperature`` and are
+    decoded with it; ``temperature`` (default ``tel.temperature``) sets the smooth clips and the
+    gate sigmoids.  Availability masks are the hard ones (an unavailable component contributes 0).
+
+    Returns:
+        dict of () float32: ``P, S_ttc, S_clear, S_ant, S_rec`` and the six soft gates
+        ``gate_collision, gate_route_deviation, gate_lane, gate_rule, gate_block,
+        gate_false_brake`` in [0, 1].
+    """
+    t_acc = tel.temperature
+    t = t_acc if temperature is None else jnp.asarray(temperature, jnp.float32)
+    d_safe = _f(d_safe)
+    avail = availability(tel)
+    length = tel.route_length_m
+    safe_len = jnp.where(length > 0, length, 1.0)
+    p = jnp.where(length > 0, smooth_clip01(tel.progress_m / safe_len, t), 0.0)
+
+    ttc = softmin_decode(tel.ttc_lse, t_acc, cap=th.TTC_NORM_S)
+    s_ttc_ = jnp.where(avail["ttc"], smooth_clip01(ttc / th.TTC_NORM_S, t), 0.0)
+    d_min = softmin_decode(tel.clear_lse, t_acc, cap=d_safe)
+    s_clear_ = jnp.where(avail["clearance"], smooth_clip01(d_min / d_safe, t), 0.0)
+
+    # anticipation: P(response) * clip((t_event - E[t_react | response]) / (t_event - t_ref))
+    p_resp = tel.react_p
+    has = p_resp > 1e-12
+    e_react = tel.react_pt / jnp.where(has, p_resp, 1.0)
+    span = tel.t_event - tel.t_warn_point
+    safe_span = jnp.where(avail["anticipation"] & (span > 0), span, 1.0)
+    regular = jnp.where(has, p_resp * smooth_clip01((tel.t_event - e_react) / safe_span, t), 0.0)
+    s_ant_ = jnp.where(tel.coincident_onset, tel.soft_response_at_event, regular)
+    s_ant_ = jnp.where(avail["anticipation"], s_ant_, 0.0)
+
+    # recovery: P(recovered) * clip(1 - (E[t_recover | recovered] - t_release) / 8 s)
+    p_rec = tel.rec_p
+    has_r = p_rec > 1e-12
+    e_rec = tel.rec_pt / jnp.where(has_r, p_rec, 1.0)
+    t_rel = jnp.where(avail["recovery"], release_time(tel), 0.0)
+    rl = e_rec - t_rel
+    s_rec_ = jnp.where(has_r, p_rec * smooth_clip01(1.0 - rl / th.RECOVER_CAP_S, t), 0.0)
+    s_rec_ = jnp.where(avail["recovery"], s_rec_, 0.0)
+
+    still_margin = (th.BLOCK_STILL - 0.5 - tel.max_still_run.astype(jnp.float32)) * DT
+    completion_margin = tel.progress_m - (length - th.COMPLETION_TOL_M)
+    lane_margin = (th.LANE_DEBOUNCE - 0.5 - tel.n_outside.astype(jnp.float32)) * DT
+    fb_margin = (th.FALSE_BRAKE - 0.5 - tel.fb_max_run.astype(jnp.float32)) * DT
+    no_fault = 1.0 - tel.fault.astype(jnp.float32)
+    return {
+        "P": p,
+        "S_ttc": s_ttc_,
+        "S_clear": s_clear_,
+        "S_ant": s_ant_,
+        "S_rec": s_rec_,
+        "gate_collision": (1.0 - tel.collided.astype(jnp.float32)) * soft_gate(tel.coll_margin, t),
+        "gate_route_deviation": soft_gate(th.ROUTE_DEVIATION_M - tel.max_route_dist, t),
+        "gate_lane": soft_gate(lane_margin, t),
+        "gate_rule": 1.0 - tel.red_light.astype(jnp.float32),
+        "gate_block": soft_gate(still_margin, t) * soft_gate(completion_margin, t) * no_fault,
+        "gate_false_brake": soft_gate(fb_margin, t),
+    }
+
+
+def soft_pair_components(
+    tel_a: Telemetry, tel_b: Telemetry, d_safe: Any, temperature: Any = None
+) -> dict[str, Array]:
+    """Soft counterpart of :func:`pair_components` (same keys; all values in [0, 1] / 0..100)."""
+    a = soft_execution_terms(tel_a, d_safe, temperature)
+    b = soft_execution_terms(tel_b, d_safe, temperature)
+    gates = {name: a[name] for name in GATE_NAMES[:-1]}
+    gates["gate_false_brake"] = b["gate_false_brake"]
+    product = jnp.ones((), jnp.float32)
+    for name in GATE_NAMES:
+        product = product * gates[name]
+    comps = {
+        "P_A": a["P"],
+        "P_B": b["P"],
+        "S_ttc": a["S_ttc"],
+        "S_clear": a["S_clear"],
+        "S_ant": a["S_ant"],
+        "S_rec": a["S_rec"],
+    }
+    out = combine(
+        comps["P_A"], comps["P_B"], comps["S_ttc"], comps["S_clear"], comps["S_ant"],
+        comps["S_rec"], product,
+    )  # fmt: skip
+    return {**comps, **gates, "gate_product": product, **out}
+
+
+def soft_pair_cus(
+    tel_a: Telemetry, tel_b: Telemetry, d_safe: Any, temperature: Any = None
+) -> Array:
+    """Differentiable CUS (0..100) of one pair; converges to the hard CUS as temperature -> 0.
+
+    Args:
+        tel_a, tel_b: final Route A / Route B telemetry, folded with the same temperature.
+        d_safe: () float32, m.
+        temperature: () float32 for gates and clips (default: the accumulators' temperature).
+    """
+    return soft_pair_components(tel_a, tel_b, d_safe, temperature)["CUS"]

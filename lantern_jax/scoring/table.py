@@ -1,0 +1,254 @@
+"""Route-level results: one row per (model, condition, pair), its schema, validation and files.
+
+The column set, order, dtypes, units and missing-value rules live in
+``lantern_jax/data/route_level_schema.json`` (:func:`load_schema`); gate columns are ints
+(1 = passed, 0 = failed), times are seconds from execution start, ``NaN`` marks undefined values.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from collections.abc import Sequence
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import jax
+import numpy as np
+import pandas as pd
+
+from lantern_jax.constants import FAMILIES
+from lantern_jax.scoring.cus import GATE_NAMES, d_safe_for_family, pair_components
+from lantern_jax.scoring.metrics import ExecutionMetrics
+
+KEY_COLUMNS = ("model", "condition", "pair_id")
+WARNING_CONDITION = "warning"
+
+
+def load_schema() -> dict:
+    """The route-level schema (``lantern_jax/data/route_level_schema.json``) as a dict."""
+    text = resources.files("lantern_jax").joinpath("data/route_level_schema.json").read_text()
+    return json.loads(text)
+
+
+def schema_columns() -> list[tuple[str, str]]:
+    """``[(name, dtype), ...]`` in table order; dtype is ``string``, ``int64`` or ``float64``."""
+    return [(c["name"], c["dtype"]) for c in load_schema()["columns"]]
+
+
+def _per_row(name: str, value: Any, n: int) -> list:
+    if isinstance(value, str) or np.ndim(value) == 0:
+        return [value] * n
+    out = list(value)
+    if len(out) != n:
+        raise ValueError(f"build_route_table: {name} has {len(out)} entries, expected {n}")
+    return out
+
+
+def _family_codes(families: Any, n: int) -> list[str]:
+    codes = []
+    for f in _per_row("families", families, n):
+        if isinstance(f, str):
+            if f not in FAMILIES:
+                raise ValueError(f"build_route_table: unknown family {f!r}; known: {FAMILIES}")
+            codes.append(f)
+        else:
+            codes.append(FAMILIES[int(f)])
+    return codes
+
+
+def build_route_table(
+    metrics_a: ExecutionMetrics,
+    metrics_b: ExecutionMetrics,
+    *,
+    model: str | Sequence[str],
+    condition: str | Sequence[str],
+    pair_ids: Sequence[str],
+    families: Sequence[str] | Sequence[int],
+    weathers: Sequence[str],
+    t_warn_on: Any = None,
+    d_safe: Any = None,
+) -> pd.DataFrame:
+    """Route-level DataFrame from batched per-execution metrics.
+
+    Args:
+        metrics_a: Route A metrics, every field with leading axis ``n`` (numpy or jax arrays).
+        metrics_b: the matched Route B metrics, same leading axis.
+        model, condition: one string for all rows or one per row.
+        pair_ids, families (codes or indices), weathers: one entry per row.
+        t_warn_on: (n,) s, start of warning delivery (``NaN`` = none).  Default: ``t_ref_s`` for
+            rows whose condition is ``"warning"``, ``NaN`` otherwise.
+        d_safe: (n,) m, clearance normalisers; default from the family (2 m PE/OR, else 3 m).
+
+    Returns:
+        DataFrame with the schema's columns in order (see :func:`validate_route_table`).
+    """
+    a = jax.tree.map(np.asarray, metrics_a)
+    b = jax.tree.map(np.asarray, metrics_b)
+    n = int(np.shape(a.progress)[0]) if np.ndim(a.progress) else 1
+    if np.ndim(a.progress) == 0:
+        a = jax.tree.map(lambda x: x[None], a)
+        b = jax.tree.map(lambda x: x[None], b)
+    if np.shape(b.progress)[0] != n:
+        raise ValueError(
+            f"build_route_table: {n} Route A executions but {np.shape(b.progress)[0]} Route B"
+        )
+    fam = _family_codes(families, n)
+    conds = [str(c) for c in _per_row("condition", condition, n)]
+    if d_safe is None:
+        d_safe = np.asarray(d_safe_for_family(np.asarray([FAMILIES.index(f) for f in fam])))
+    d_safe = np.broadcast_to(np.asarray(d_safe, np.float64), (n,))
+    comps = {k: np.asarray(v, np.float64) for k, v in pair_components(a, b, d_safe).items()}
+    t_ref = np.asarray(a.t_ref_s, np.float64)
+    if t_warn_on is None:
+        warned = np.asarray([c == WARNING_CONDITION for c in conds])
+        t_warn_on = np.where(warned, t_ref, np.nan)
+    f64 = lambda x: np.asarray(x, np.float64)  # noqa: E731
+    data = {
+        "model": [str(m) for m in _per_row("model", model, n)],
+        "condition": conds,
+        "pair_id": [str(p) for p in _per_row("pair_ids", pair_ids, n)],
+        "family": fam,
+        "weather": [str(w) for w in _per_row("weathers", weathers, n)],
+        "A_progress": f64(a.progress),
+        "B_progress": f64(b.progress),
+        "ttc_min_s": f64(a.ttc_min_s),
+        "clearance_min_m": f64(a.clearance_min_m),
+        "t_ref_s": t_ref,
+        "t_warn_on_s": np.broadcast_to(f64(t_warn_on), (n,)),
+        "t_event_s": f64(a.t_event_s),
+        "t_warn_off_s": f64(a.t_warn_off_s),
+        "t_clear_s": f64(a.t_clear_s),
+        "t_react_s": f64(a.t_react_s),
+        "recovery_latency_s": f64(a.recovery_latency_s),
+        "S_ttc": comps["S_ttc"],
+        "S_clear": comps["S_clear"],
+        "S_ant": comps["S_ant"],
+        "S_rec": comps["S_rec"],
+        **{g: comps[g].astype(np.int64) for g in GATE_NAMES},
+        "CUS": comps["CUS"],
+        "d_safe_m": d_safe.copy(),
+        "controller_fault": np.asarray(a.controller_fault).astype(np.int64),
+        "coincident_onset": np.asarray(a.coincident_onset).astype(np.int64),
+        "t_first_failure_s": f64(a.t_first_failure_s),
+    }
+    df = pd.DataFrame(data)
+    for name, dtype in schema_columns():
+        if dtype == "string":
+            df[name] = df[name].astype(object)
+    return df[[c for c, _ in schema_columns()]]
+
+
+def _dtype_ok(series: pd.Series, dtype: str) -> bool:
+    if dtype == "int64":
+        return pd.api.types.is_integer_dtype(series)
+    if dtype == "float64":
+        return pd.api.types.is_float_dtype(series)
+    return pd.api.types.is_string_dtype(series) or (
+        series.dtype == object and all(isinstance(v, str) for v in series)
+    )
+
+
+def validate_route_table(df: pd.DataFrame, require_same_pairs: bool = True) -> pd.DataFrame:
+    """Check a route-level table against the schema; return it unchanged if it is valid.
+
+    Checks: every schema column present and in schema order (extra columns may follow), dtypes,
+    known family codes, gate values in {0, 1}, CUS in [0, 100], each (model, condition, pair_id)
+    exactly once, every pair with both its Route A and Route B data (``A_progress`` and
+    ``B_progress`` not ``NaN``), and (``require_same_pairs``) the same pair set in every
+    (model, condition) group.
+
+    Raises:
+        ValueError: naming the missing columns, the wrongly typed columns or the offending pairs.
+    """
+    cols = schema_columns()
+    names = [c for c, _ in cols]
+    missing = [c for c in names if c not in df.columns]
+    if missing:
+        raise ValueError(f"route table: missing column(s) {missing}")
+    if list(df.columns[: len(names)]) != names:
+        raise ValueError(
+            f"route table: columns out of order; expected the schema order {names}, "
+            f"got {list(df.columns)}"
+        )
+    bad = [f"{c} (expected {d}, got {df[c].dtype})" for c, d in cols if not _dtype_ok(df[c], d)]
+    if bad:
+        raise ValueError(f"route table: wrong dtype for column(s) {bad}")
+
+    def pairs(mask: Any) -> list[str]:
+        rows = df.loc[mask, list(KEY_COLUMNS)]
+        return ["/".join(map(str, r)) for r in rows.itertuples(index=False)]
+
+    unknown = sorted(set(df["family"]) - set(FAMILIES))
+    if unknown:
+        raise ValueError(f"route table: unknown family code(s) {unknown}; known: {FAMILIES}")
+    for g in GATE_NAMES:
+        off = ~df[g].isin([0, 1])
+        if off.any():
+            raise ValueError(f"route table: {g} must be 0 or 1; offending rows {pairs(off)}")
+    cus = df["CUS"]
+    off = cus.isna() | (cus < 0) | (cus > 100)
+    if off.any():
+        raise ValueError(f"route table: CUS must lie in [0, 100]; offending rows {pairs(off)}")
+    dup = df.duplicated(list(KEY_COLUMNS), keep=False)
+    if dup.any():
+        raise ValueError(
+            f"route table: duplicate (model, condition, pair_id) rows {sorted(set(pairs(dup)))}"
+        )
+    for col, route in (("A_progress", "Route A"), ("B_progress", "Route B")):
+        off = df[col].isna()
+        if off.any():
+            raise ValueError(f"route table: pair(s) lacking their {route} execution {pairs(off)}")
+    if require_same_pairs and len(df):
+        all_pairs = set(df["pair_id"])
+        for key, g in df.groupby(["model", "condition"], sort=True):
+            lacking = sorted(all_pairs - set(g["pair_id"]))
+            if lacking:
+                raise ValueError(
+                    f"route table: model/condition {'/'.join(key)} lacks pair(s) {lacking}"
+                )
+    return df
+
+
+def _atomic_write_text(path: Path, text: str) -> None:
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def schema_path_for(path: str | os.PathLike) -> Path:
+    """Where :func:`write_route_table` puts the schema: ``<name>.schema.json`` next to the CSV."""
+    p = Path(path)
+    return p.with_name(p.stem + ".schema.json")
+
+
+def write_route_table(df: pd.DataFrame, path: str | os.PathLike) -> Path:
+    """Validate ``df`` and write it as CSV atomically, with the schema JSON next to it.
+
+    Returns:
+        The CSV path.  The schema goes to :func:`schema_path_for` ``(path)``.
+    """
+    validate_route_table(df)
+    p = Path(path)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    _atomic_write_text(p, df.to_csv(index=False))
+    _atomic_write_text(schema_path_for(p), json.dumps(load_schema(), indent=2) + "\n")
+    return p
+
+
+def read_route_table(path: str | os.PathLike) -> pd.DataFrame:
+    """Read a CSV written by :func:`write_route_table` with the schema's dtypes restored."""
+    cols = schema_columns()
+    dtypes = {c: (object if d == "string" else d) for c, d in cols}
+    df = pd.read_csv(path, dtype=dtypes, keep_default_na=False, na_values=["", "NaN", "nan"])
+    return df

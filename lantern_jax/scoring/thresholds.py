@@ -1,0 +1,66 @@
+"""Operational thresholds and weights of the Cooperative Unified Score (paper appendix
+"Complete Cooperative Unified Score", DESIGN.md section 8).
+
+Durations that are checked on the 20 Hz tick grid are stated both in seconds and in ticks; the
+tick counts are what the accumulators compare against (``duration = ticks * DT``).
+"""
+
+from __future__ import annotations
+
+from lantern_jax.constants import DT, FAMILIES, INF_TIME
+
+# --- time bookkeeping --------------------------------------------------------------------------
+HAPPENED_BELOW = 0.5 * INF_TIME  # s, a protocol time below this has happened
+
+
+def ticks(seconds: float) -> int:
+    """Number of 20 Hz ticks spanning ``seconds`` (``round(seconds / DT)``)."""
+    return int(round(seconds / DT))
+
+
+# --- time-to-collision -------------------------------------------------------------------------
+TTC_NORM_S = 3.0  # s, S_TTC = clip(TTC_min / 3 s)
+CLOSING_MIN_MPS = 0.05  # m/s, a TTC sample needs a closing speed above this
+
+# --- clearance ---------------------------------------------------------------------------------
+D_SAFE_SMALL_M = 2.0  # m, Pedestrian Emergence and Obstacle Reveal
+D_SAFE_LARGE_M = 3.0  # m, vehicle interactions (VC, LWW, RWW, RTY)
+D_SAFE_BY_FAMILY = tuple(
+    D_SAFE_SMALL_M if name in ("PE", "OR") else D_SAFE_LARGE_M for name in FAMILIES
+)
+
+# --- anticipation ------------------------------------------------------------------------------
+REACT_WINDOW_S = 0.5  # s, length of the sustained-response window
+REACT_WINDOW = ticks(REACT_WINDOW_S)  # 10 ticks
+REACT_FRACTION = 0.8  # share of window samples that must show a response
+REACT_MIN_COUNT = int(round(REACT_FRACTION * REACT_WINDOW))  # 8 of 10
+REACT_ACCEL_MPS2 = -0.5  # m/s^2, braking response: accel <= this
+REACT_SPEED_DROP_MPS = 1.0  # m/s, slowing response: speed <= v_pre - this
+
+# --- recovery ----------------------------------------------------------------------------------
+RECOVER_WINDOW_S = 1.0  # s, speed must stay above the threshold for this long
+RECOVER_WINDOW = ticks(RECOVER_WINDOW_S)  # 20 ticks
+RECOVER_MIN_SPEED_MPS = 2.0  # m/s, threshold = max(2 m/s, 0.5 v_pre)
+RECOVER_PRE_FRACTION = 0.5
+RECOVER_MIN_PROGRESS_M = 0.5  # m, additional route progress over the window
+RECOVER_CAP_S = 8.0  # s, S_rec = clip(1 - RL / 8 s)
+
+# --- gates -------------------------------------------------------------------------------------
+COLLISION_MIN_SPEED_MPS = 0.1  # m/s, a contact counts as a collision only at ego speed >= this
+ROUTE_DEVIATION_M = 30.0  # m, severe route deviation: distance to route >= this
+LANE_DEBOUNCE_S = 1.0  # s, total time outside the driving lanes that fails the lane gate
+LANE_DEBOUNCE = ticks(LANE_DEBOUNCE_S)  # 20 ticks
+STILL_SPEED_MPS = 0.1  # m/s, "standing still" for the blocking gate: speed < this
+BLOCK_STILL_S = 20.0  # s, continuous standstill (route not completed) that fails the block gate
+BLOCK_STILL = ticks(BLOCK_STILL_S)  # 400 ticks
+COMPLETION_TOL_M = 2.0  # m, route completed when progress >= route_length - this
+FALSE_BRAKE_SPEED_MPS = 0.1  # m/s, Route B stop: speed <= this
+FALSE_BRAKE_S = 1.0  # s, continuous unjustified stop in the matched interval that fails the gate
+FALSE_BRAKE = ticks(FALSE_BRAKE_S)  # 20 ticks
+
+# --- weights -----------------------------------------------------------------------------------
+W_ROUTE_A = 0.85
+W_ROUTE_B = 0.15
+W_PROGRESS_A = 0.40
+W_SAFETY_A = 0.35
+W_TEMPORAL_A = 0.25

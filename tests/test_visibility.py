@@ -1,0 +1,264 @@
+"""Tests for lantern_jax.sensors.visibility: tiny hand-built scenes, reference parity, gradients.
+
+Unless stated otherwise the camera sits at the origin looking east (+x), fov 110 deg, range 50 m.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from lantern_jax.constants import CAMERA_BACK_OFFSET, FRONT_CAMERA_FOV
+from lantern_jax.sensors import visibility as vis
+
+try:  # tests/ as a rootdir-relative folder or as a package
+    import reference_numpy_geometry as ref
+except ImportError:  # pragma: no cover
+    from tests import reference_numpy_geometry as ref
+
+CAM = np.zeros(2, np.float32)
+CAM_YAW = np.float32(0.0)
+CAR = (2.4, 1.0)  # half extents of a car, m
+RANGE = np.float32(50.0)
+
+
+@functools.partial(jax.jit, static_argnames=("fov_deg",))
+def visible(cam_xy, cam_yaw, centers, yaws, extents, present, fov_deg, max_range):
+    return vis.visible_actors(cam_xy, cam_yaw, centers, yaws, extents, present, fov_deg, max_range)
+
+
+@functools.partial(jax.jit, static_argnames=("fov_deg", "num_rays"))
+def ranges_of(cam_xy, cam_yaw, centers, yaws, extents, present, fov_deg, num_rays, max_range):
+    return vis.range_image(
+        cam_xy, cam_yaw, centers, yaws, extents, present, fov_deg, num_rays, max_range
+    )
+
+
+def scene(*actors, pad: int = 0):
+    """Arrays for actors given as (x, y, yaw, half_length, half_width[, present])."""
+    rows = [tuple(a) + (True,) if len(a) == 5 else tuple(a) for a in actors]
+    rows += [(0.0, 0.0, 0.0, 0.0, 0.0, False)] * pad
+    arr = np.array([r[:5] for r in rows], np.float32)
+    present = np.array([r[5] for r in rows], bool)
+    return arr[:, :2], arr[:, 2], arr[:, 3:5], present
+
+
+def see(actors, fov=FRONT_CAMERA_FOV, rng=RANGE, cam=CAM, cam_yaw=CAM_YAW):
+    c, y, e, p = actors
+    return np.asarray(visible(cam, cam_yaw, c, y, e, p, fov, rng))
+
+
+# ---------------------------------------------------------------------------------------------
+# camera pose
+# ---------------------------------------------------------------------------------------------
+def test_camera_pose():
+    # ego at (0, 0) heading north: camera 1.5 m south of the centre, looking north
+    xy, yaw = vis.camera_pose(np.zeros(2, np.float32), np.float32(np.pi / 2))
+    np.testing.assert_allclose(xy, [0.0, -CAMERA_BACK_OFFSET], atol=1e-6)
+    assert float(yaw) == pytest.approx(np.pi / 2)
+    xy, _ = vis.camera_pose(np.array([10.0, 0.0], np.float32), np.float32(0.0))
+    np.testing.assert_allclose(xy, [8.5, 0.0], atol=1e-6)
+
+
+def test_sample_points_layout():
+    # axis-aligned box at (1, 2), half extents (2, 1): centre, 4 corners, 4 edge midpoints
+    pts = vis.actor_sample_points(np.array([1, 2], np.float32), np.float32(0), np.float32([2, 1]))
+    want = [[1, 2], [3, 3], [-1, 3], [-1, 1], [3, 1], [3, 2], [1, 3], [-1, 2], [1, 1]]
+    np.testing.assert_allclose(pts, want, atol=1e-6)
+
+
+# ---------------------------------------------------------------------------------------------
+# visibility goldens
+# ---------------------------------------------------------------------------------------------
+def test_target_straight_ahead_is_visible():
+    assert see(scene((20, 0, 0, *CAR))).tolist() == [True]
+
+
+def test_full_occlusion():
+    # target car x in [17.6, 22.4], y in [-1, 1]; occluder x in [9, 11], y in [-5, 5].
+    # every sight line reaches |y| <= 11/17.6 < 5 inside the occluder -> target hidden,
+    # while the occluder itself is in plain view
+    assert see(scene((20, 0, 0, *CAR), (10, 0, 0, 1, 5))).tolist() == [False, True]
+
+
+def test_partial_occlusion_one_corner_visible():
+    # occluder x in [9, 11], y in [-2.5, 0.48] (centre y = -1.01, half width 1.49).
+    # sight lines rise with x, so each is lowest at the occluder's near face x = 9, where
+    # y = 9 * y_p / x_p: rear-left corner (17.6, 1) -> 0.511 > 0.48 (clears it);
+    # left midpoint (20, 1) -> 0.45 and front-left corner (22.4, 1) -> 0.40 (blocked);
+    # all other points have y_p <= 0 and are blocked too.  Exactly one point is seen.
+    actors = scene((20, 0, 0, *CAR), (10, -1.01, 0, 1, 1.49))
+    pts = ref.point_visibility(CAM, 0.0, *actors, FRONT_CAMERA_FOV, 50.0)
+    assert pts[0].tolist() == [False, False, True] + [False] * 6
+    assert see(actors).tolist() == [True, True]
+    # raising the occluder top to 0.6 > 0.511 hides the last corner
+    assert see(scene((20, 0, 0, *CAR), (10, -0.95, 0, 1, 1.55))).tolist() == [False, True]
+
+
+def test_field_of_view():
+    # pedestrian 20 m away at a bearing of +60 deg (and -60 deg): outside the 110 deg fov
+    # (half angle 55 deg; the 0.3 m box subtends < 1.3 deg), inside the 360 deg rig's field
+    b = math.radians(60.0)
+    for sign in (1.0, -1.0):
+        actors = scene((20 * math.cos(b), sign * 20 * math.sin(b), 0, 0.3, 0.3))
+        assert see(actors).tolist() == [False]
+        assert see(actors, fov=vis.SIX_CAMERA_FOV).tolist() == [True]
+    # straight behind the camera: only the six-camera rig sees it
+    actors = scene((-15, 0, 0, *CAR))
+    assert see(actors).tolist() == [False]
+    assert see(actors, fov=vis.SIX_CAMERA_FOV).tolist() == [True]
+    # the field follows the camera heading: looking north, the +60 deg pedestrian (30 deg
+    # off the heading) is in view
+    actors = scene((20 * math.cos(b), 20 * math.sin(b), 0, 0.3, 0.3))
+    assert see(actors, cam_yaw=np.float32(np.pi / 2)).tolist() == [True]
+
+
+def test_max_range():
+    # nearest sample point of a car centred 60 m ahead is 57.6 m away
+    actors = scene((60, 0, 0, *CAR))
+    assert see(actors, rng=np.float32(50.0)).tolist() == [False]
+    assert see(actors, rng=np.float32(58.0)).tolist() == [True]
+
+
+def test_non_present_occluder_does_not_block():
+    actors = scene((20, 0, 0, *CAR), (10, 0, 0, 1, 5, False))
+    assert see(actors).tolist() == [True, False]
+
+
+def test_padding_changes_nothing():
+    base = scene((20, 0, 0, *CAR), (10, -1.01, 0, 1, 1.49), (30, 8, 0.5, *CAR))
+    want = see(base)
+    # zero-extent padding at the camera position, plus non-present garbage boxes that would
+    # hide everything if they counted
+    padded = scene(
+        (20, 0, 0, *CAR),
+        (10, -1.01, 0, 1, 1.49),
+        (30, 8, 0.5, *CAR),
+        (5, 0, 0, 3, 20, False),
+        (0, 0, 0, 5, 5, False),
+        pad=3,
+    )
+    got = see(padded)
+    assert got[:3].tolist() == want.tolist()
+    assert not got[3:].any()
+
+
+def test_camera_inside_a_box_sees_only_that_box():
+    # a present box around the camera blocks every sight line that leaves it
+    actors = scene((20, 0, 0, *CAR), (0, 0, 0, 2, 2))
+    assert see(actors, fov=vis.SIX_CAMERA_FOV).tolist() == [False, True]
+
+
+def test_matches_reference_on_random_scenes():
+    rng = np.random.default_rng(7)
+    n, a = 24, 8
+    centers = rng.uniform(-30, 30, (n, a, 2)).astype(np.float32)
+    yaws = rng.uniform(-np.pi, np.pi, (n, a)).astype(np.float32)
+    ext = rng.uniform(0.3, 3.0, (n, a, 2)).astype(np.float32)
+    present = rng.uniform(size=(n, a)) < 0.8
+    cams = rng.uniform(-5, 5, (n, 2)).astype(np.float32)
+    cam_yaws = rng.uniform(-np.pi, np.pi, n).astype(np.float32)
+    for fov in (FRONT_CAMERA_FOV, vis.SIX_CAMERA_FOV):
+        f = jax.jit(jax.vmap(functools.partial(vis.visible_actors, fov_deg=fov, max_range=RANGE)))
+        got = np.asarray(f(cams, cam_yaws, centers, yaws, ext, present))
+        want = np.array(
+            [
+                ref.visible_actors(
+                    cams[i], float(cam_yaws[i]), centers[i], yaws[i], ext[i], present[i], fov, 50.0
+                )
+                for i in range(n)
+            ]
+        )
+        assert 0 < want.sum() < present.sum()  # some actors seen, some hidden
+        np.testing.assert_array_equal(got, want)
+        # batch invariance: vmap(f)(batch)[i] == f(batch[i])
+        for i in (0, n - 1):
+            single = see(
+                (centers[i], yaws[i], ext[i], present[i]), fov, RANGE, cams[i], cam_yaws[i]
+            )
+            np.testing.assert_array_equal(got[i], single)
+
+
+def test_compiles_once():
+    traces = []
+
+    @functools.partial(jax.jit, static_argnames=("fov_deg",))
+    def f(cam, yaw, c, y, e, p, fov_deg):
+        traces.append(1)
+        return vis.visible_actors(cam, yaw, c, y, e, p, fov_deg, RANGE)
+
+    for x in (10.0, 20.0, 30.0):
+        c, y, e, p = scene((x, 0, 0, *CAR), (5, 3, 0, 1, 1), pad=2)
+        f(CAM, CAM_YAW, c, y, e, p, FRONT_CAMERA_FOV)
+    assert len(traces) == 1
+
+
+# ---------------------------------------------------------------------------------------------
+# range image
+# ---------------------------------------------------------------------------------------------
+def test_ray_angles_layout():
+    a = vis.ray_angles(FRONT_CAMERA_FOV, 11)
+    np.testing.assert_allclose(a[[0, 5, 10]], np.radians([-55, 0, 55]), atol=1e-6)
+    a = vis.ray_angles(vis.SIX_CAMERA_FOV, 8)
+    # full circle at 45 deg spacing, ray 4 straight ahead, no duplicated seam
+    np.testing.assert_allclose(a, np.radians(np.arange(-180, 180, 45)), atol=1e-6)
+    assert vis.ray_angles(FRONT_CAMERA_FOV, 1).tolist() == [0.0]
+
+
+def test_range_image_box_ahead():
+    # box x in [9, 11], y in [-1, 1]: the central ray (index 5 of 11) hits the face x = 9.
+    # the +-11 deg rays reach y = 9 tan(11 deg) = 1.75 at x = 9 and miss (all the others too)
+    c, y, e, p = scene((10, 0, 0, 1, 1), pad=2)
+    r, idx = ranges_of(CAM, CAM_YAW, c, y, e, p, FRONT_CAMERA_FOV, 11, RANGE)
+    assert float(r[5]) == pytest.approx(9.0, abs=1e-5) and int(idx[5]) == 0
+    mask = np.arange(11) != 5
+    np.testing.assert_allclose(np.asarray(r)[mask], 50.0)
+    assert np.all(np.asarray(idx)[mask] == -1)
+    assert r.dtype == jnp.float32 and idx.dtype == jnp.int32
+    # the six-camera rig with 8 rays: ray 4 looks ahead (9 m), ray 0 looks back (nothing)
+    r, idx = ranges_of(CAM, CAM_YAW, c, y, e, p, vis.SIX_CAMERA_FOV, 8, RANGE)
+    assert float(r[4]) == pytest.approx(9.0, abs=1e-5) and int(idx[4]) == 0
+    assert float(r[0]) == 50.0 and int(idx[0]) == -1
+    # nearest box wins; beyond max_range is capped and reported as no hit
+    c, y, e, p = scene((30, 0, 0, 1, 1), (10, 0, 0, 1, 1), (70, 0, 0, 1, 1), pad=1)
+    r, idx = ranges_of(CAM, CAM_YAW, c, y, e, p, FRONT_CAMERA_FOV, 11, RANGE)
+    assert float(r[5]) == pytest.approx(9.0, abs=1e-5) and int(idx[5]) == 1
+    c, y, e, p = scene((70, 0, 0, 1, 1))
+    r, idx = ranges_of(CAM, CAM_YAW, c, y, e, p, FRONT_CAMERA_FOV, 11, RANGE)
+    assert float(r[5]) == 50.0 and int(idx[5]) == -1
+
+
+def test_range_image_matches_reference():
+    rng = np.random.default_rng(8)
+    c = rng.uniform(-25, 25, (10, 2)).astype(np.float32)
+    y = rng.uniform(-np.pi, np.pi, 10).astype(np.float32)
+    e = rng.uniform(0.3, 3.0, (10, 2)).astype(np.float32)
+    p = rng.uniform(size=10) < 0.8
+    cam, cam_yaw = np.float32([1.0, -2.0]), np.float32(0.7)
+    for fov, n in ((FRONT_CAMERA_FOV, 33), (vis.SIX_CAMERA_FOV, 64)):
+        r, idx = ranges_of(cam, cam_yaw, c, y, e, p, fov, n, RANGE)
+        want_r, want_idx = ref.range_image(cam, float(cam_yaw), c, y, e, p, fov, n, 50.0)
+        assert (want_idx >= 0).sum() > 3
+        np.testing.assert_array_equal(idx, want_idx)
+        np.testing.assert_allclose(r, want_r, atol=1e-3)
+
+
+def test_range_image_gradients_finite_with_padding():
+    # one real box ahead, padded zero-extent slots at the camera position and elsewhere
+    c, y, e, p = scene((10, 0, 0, 1, 1), (0, 0, 0, 0, 0, False), (5, 0, 0, 0, 0, False), pad=2)
+
+    def total(centers, yaws, extents, cam):
+        r, _ = vis.range_image(cam, CAM_YAW, centers, yaws, extents, p, FRONT_CAMERA_FOV, 11, RANGE)
+        return jnp.sum(r)
+
+    grads = jax.jit(jax.grad(total, argnums=(0, 1, 2, 3)))(c, y, e, CAM)
+    assert all(bool(jnp.all(jnp.isfinite(x))) for x in grads)
+    # only the central ray hits the box face x = cx - ex: d(sum)/d(cx) = 1, d/d(ex) = -1
+    np.testing.assert_allclose(grads[0][0], [1.0, 0.0], atol=1e-5)
+    np.testing.assert_allclose(grads[2][0], [-1.0, 0.0], atol=1e-5)
+    np.testing.assert_allclose(grads[0][1:], 0.0)
