@@ -17,7 +17,6 @@ import platform
 import time
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 from lantern_jax.constants import (
@@ -47,7 +46,7 @@ def sixteen_actor_scene(shift: float):
     while len(actors) < 16:
         y, direction = lanes[k % 3]
         x0 = 20.0 + 14.0 * (k // 3) + shift if y != 0.0 else -30.0 - 12.0 * (k // 3)
-        path = np.array([[-60.0, y], [220.0, y]])[:: direction]
+        path = np.array([[-60.0, y], [220.0, y]])[::direction]
         s0 = x0 + 60.0 if direction > 0 else 220.0 - x0
         actors.append(ActorSpec(path=path, motion=MOTION_IDM, s_init=s0, v_pre=8.0 + 0.2 * k))
         k += 1

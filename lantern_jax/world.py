@@ -42,7 +42,9 @@ def check_shape(name: str, x: Any, shape: tuple) -> np.ndarray:
         ValueError: naming ``name`` when the rank or a fixed dimension differs.
     """
     a = _arr(name, x)
-    if a.ndim != len(shape) or any(s is not None and s != d for s, d in zip(shape, a.shape)):
+    if a.ndim != len(shape) or any(
+        s is not None and s != d for s, d in zip(shape, a.shape, strict=True)
+    ):
         want = "(" + ", ".join("?" if s is None else str(s) for s in shape) + ")"
         raise ValueError(f"{name}: expected shape {want}, got {a.shape}")
     return a
@@ -52,7 +54,10 @@ def check_finite(name: str, x: Any, mask: Any = None) -> np.ndarray:
     """Check that every (masked) entry of ``x`` is finite; raise ``ValueError`` naming ``name``."""
     a = _arr(name, x).astype(np.float64)
     if mask is not None:
-        m = np.broadcast_to(np.asarray(mask, bool).reshape(np.shape(mask) + (1,) * (a.ndim - np.ndim(mask))), a.shape)
+        m = np.broadcast_to(
+            np.asarray(mask, bool).reshape(np.shape(mask) + (1,) * (a.ndim - np.ndim(mask))),
+            a.shape,
+        )
         a = np.where(m, a, 0.0)
     if not np.all(np.isfinite(a)):
         idx = np.argwhere(~np.isfinite(a))[0].tolist()
@@ -144,7 +149,8 @@ class ActorScript:
         trigger time   tau = trigger_delay            (TRIGGER_CLOCK)
                        tau = t_event + trigger_delay  (TRIGGER_EVENT; inf until the event)
         before tau     s(t) = min(s_init + v_pre * t, s_hold)
-        after tau      s(t) = s(tau) + v_post * (t - tau),  lat(t) = lat_shift * smoothstep((t - tau) / lat_duration)
+        after tau      s(t) = s(tau) + v_post * (t - tau)
+                       lat(t) = lat_shift * smoothstep((t - tau) / lat_duration)
         always         s clipped to s_end; the actor despawns at s_end when ``despawn_at_end``.
 
     A static object is ``v_pre = v_post = 0``.  IDM actors (``motion == MOTION_IDM``) integrate

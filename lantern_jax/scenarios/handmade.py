@@ -22,8 +22,8 @@ from lantern_jax.constants import (
     TRIGGER_NEVER,
 )
 from lantern_jax.world import (
-    ActorScript,
     Actors,
+    ActorScript,
     EgoState,
     Lanes,
     ProtocolState,
@@ -259,9 +259,9 @@ def straight_scene(
     route = pack_route(np.array([[0.0, 0.0], [length, 0.0]]))
     lanes = pack_lanes(
         [
-            resample(np.array([[-50.0, 0.0], [length + 50.0, 0.0]]), 5.0),
-            resample(np.array([[-50.0, -3.5], [length + 50.0, -3.5]]), 5.0),
-            resample(np.array([[length + 50.0, 3.5], [-50.0, 3.5]]), 5.0),
+            resample(np.array([[-50.0, 0.0], [length + 50.0, 0.0]]), 10.0),
+            resample(np.array([[-50.0, -3.5], [length + 50.0, -3.5]]), 10.0),
+            resample(np.array([[length + 50.0, 3.5], [-50.0, 3.5]]), 10.0),
         ],
         [3.5, 3.5, 3.5],
     )

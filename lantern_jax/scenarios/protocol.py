@@ -177,5 +177,7 @@ def warning_active(proto: ProtocolState, params: ScenarioParams, t: Array) -> Ar
     hazard is seen, so the interval stays open until then.
     """
     t_on = warning_onset(proto, params)
-    t_off = jnp.where(happened(proto.t_warn_off), proto.t_warn_off + params.warn_hold_extra, INF_TIME)
+    t_off = jnp.where(
+        happened(proto.t_warn_off), proto.t_warn_off + params.warn_hold_extra, INF_TIME
+    )
     return happened(t_on) & (t >= t_on) & (t < t_off)

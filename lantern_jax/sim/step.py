@@ -106,8 +106,8 @@ def _route_frame(world: World, xy: Array) -> tuple[Array, Array]:
 
 def _corridor_ahead(world: World, ego_arc: Array, extra_margin: float) -> tuple[Array, Array]:
     """(A,) route gap ahead of the ego and in-corridor flag for every actor."""
-    a = world.actors
-    arcs, dists = jax.vmap(lambda q: _route_frame(world, q))(a.xy)
+    a, r = world.actors, world.route
+    arcs, _, _, dists = polyline.project_many(r.xy, r.s, r.valid, a.xy)
     half = jnp.max(a.extent, axis=-1)
     in_corr = dists < EGO_HALF_WIDTH + half + extra_margin
     gap = arcs - ego_arc - EGO_HALF_LENGTH - half
@@ -171,9 +171,7 @@ def tick(
         & (world.actors.speed < 1.0)
     )
     held = held_light | jnp.any(queue)
-    proto = protocol.advance_markers(
-        world.protocol, p, t_next, percept.progress, progress, held
-    )
+    proto = protocol.advance_markers(world.protocol, p, t_next, percept.progress, progress, held)
 
     # Actors.
     lights_now = light_states(world.lights, t_next)
@@ -205,9 +203,7 @@ def tick(
     red_violation = crossed_stop & (light == LIGHT_RED)
     gap2, in_corr2 = _corridor_ahead(world, arc_now, 1.0)
     lead = jnp.any(in_corr2 & (gap2 > -2.0) & (gap2 < JUSTIFY_LEAD_DIST))
-    justified = (
-        held_light | lead | (world.route.length - arc_now < ROUTE_END_DIST)
-    )
+    justified = held_light | lead | (world.route.length - arc_now < ROUTE_END_DIST)
     sample = TickSample(
         t=t_next,
         ego_speed=ego.speed,

@@ -1,0 +1,137 @@
+"""Scripted actors: closed-form motion along a path (see :class:`lantern_jax.world.ActorScript`).
+
+For one actor with trigger time ``tau``::
+
+    before tau   s(t) = min(s_init + v_pre t, s_hold)                speed v_pre (0 once held)
+    after tau    s(t) = s(tau) + v_post (t - tau)                     speed v_post
+                 lat(t) = lat_shift * smoothstep((t - tau) / lat_duration)
+    always       s clipped to s_end (speed 0 there); inactive from s_end on if despawn_at_end
+    pose         xy = path(s) + left_normal(path_heading(s)) * lat
+                 yaw = path_heading(s) + atan2(dlat/dt, ds/dt)
+
+with ``smoothstep(x) = 3 x^2 - 2 x^3`` on ``[0, 1]`` (0 below, 1 above).  Everything is a
+piecewise-smooth function of the script parameters and of ``tau``, so the position has finite
+gradients with respect to ``v_pre``, ``v_post``, ``s_init``, ``lat_shift``, ``lat_duration`` and
+the trigger time (hence ``trigger_delay`` and ``t_event``).  A trigger time at or above
+``INF_TIME / 2`` means "not (yet) triggered": it is replaced by ``t`` before any arithmetic, so
+no huge number ever enters a value or a gradient.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+from lantern_jax.constants import INF_TIME, TRIGGER_CLOCK, TRIGGER_EVENT
+from lantern_jax.polyline import interpolate, left_normal, safe_atan2, safe_norm
+
+Array = jax.Array
+
+PENDING_TIME = 0.5 * INF_TIME  # s, trigger times at or above this have not happened
+
+
+def trigger_time(trigger: Array, trigger_delay: Array, t_event: Array) -> Array:
+    """Trigger time of a scripted actor.
+
+    Args:
+        trigger: (...) int32, TRIGGER_* source.
+        trigger_delay: (...) float32, s, delay after the source.
+        t_event: () or (...) float32, s, physical event onset (``INF_TIME`` until it happens).
+
+    Returns:
+        (...) float32, s: ``trigger_delay`` (clock), ``t_event + trigger_delay`` (event; stays
+        ``INF_TIME`` while the event is pending), ``INF_TIME`` (never).
+    """
+    event_pending = t_event >= PENDING_TIME
+    t_ev = jnp.where(event_pending, 0.0, t_event)
+    tau_event = jnp.where(event_pending, INF_TIME, t_ev + trigger_delay)
+    tau = jnp.where(
+        trigger == TRIGGER_CLOCK,
+        trigger_delay,
+        jnp.where(trigger == TRIGGER_EVENT, tau_event, INF_TIME),
+    )
+    return tau.astype(jnp.float32)
+
+
+def smoothstep(x: Array) -> Array:
+    """``3 x^2 - 2 x^3`` on ``x`` clipped to ``[0, 1]``.
+
+    Args:
+        x: (...) float32.
+
+    Returns:
+        (...) float32 in [0, 1].
+    """
+    x = jnp.clip(x, 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
+def scripted_pose(
+    path: Array,
+    path_s: Array,
+    path_valid: Array,
+    s_init: Array,
+    v_pre: Array,
+    v_post: Array,
+    s_hold: Array,
+    s_end: Array,
+    lat_shift: Array,
+    lat_duration: Array,
+    despawn_at_end: Array,
+    t: Array,
+    t_trigger: Array,
+) -> tuple[Array, Array, Array, Array, Array, Array]:
+    """Closed-form state of ONE scripted actor at time ``t``.
+
+    Args:
+        path: (P, 2) float32, m, world-frame polyline.
+        path_s: (P,) float32, m, its cumulative arc length.
+        path_valid: (P,) bool, prefix mask of valid points.
+        s_init: () float32, m, arc at t = 0.
+        v_pre: () float32, m/s, speed before the trigger (>= 0).
+        v_post: () float32, m/s, speed after the trigger (>= 0).
+        s_hold: () float32, m, arc where the actor waits for its trigger (BIG = none).
+        s_end: () float32, m, arc where the actor stops or despawns.
+        lat_shift: () float32, m, lateral offset reached after the trigger, + = left of travel.
+        lat_duration: () float32, s, duration of the lateral manoeuvre (> 0).
+        despawn_at_end: () bool, the actor leaves the world when it reaches ``s_end``.
+        t: () float32, s, time.
+        t_trigger: () float32, s, trigger time ``tau`` (>= INF_TIME / 2 = not triggered).
+
+    Returns:
+        s: () float32, m, arc along the path.
+        lat: () float32, m, lateral offset, + = left of travel.
+        speed: () float32, m/s, ``sqrt((ds/dt)^2 + (dlat/dt)^2)`` along ``yaw``.
+        xy: (2,) float32, m, world-frame box centre.
+        yaw: () float32, rad, CCW from +x.
+        active: () bool, False once ``s_end`` is reached when ``despawn_at_end``.
+    """
+    pending = t_trigger >= PENDING_TIME
+    tau = jnp.where(pending, t, t_trigger)
+    t_pre = jnp.minimum(t, tau)  # time spent in the pre-trigger phase
+    fired = (~pending) & (t >= tau)
+    dt_post = jnp.where(fired, t - tau, 0.0)
+
+    s_free = s_init + v_pre * t_pre
+    held = s_free >= s_hold
+    s_pre = jnp.minimum(s_free, s_hold)
+    s_raw = s_pre + v_post * dt_post
+    reached = s_raw >= s_end
+    s = jnp.minimum(s_raw, s_end)
+    v_long = jnp.where(fired, v_post, jnp.where(held, 0.0, v_pre))
+    v_long = jnp.where(reached, 0.0, v_long)
+
+    dur = jnp.maximum(lat_duration, 1e-3)
+    x = jnp.where(fired, dt_post / dur, 0.0)
+    lat = lat_shift * smoothstep(x)
+    in_manoeuvre = fired & (x < 1.0)
+    xc = jnp.clip(x, 0.0, 1.0)
+    v_lat = jnp.where(in_manoeuvre, lat_shift * 6.0 * xc * (1.0 - xc) / dur, 0.0)
+
+    point, heading = interpolate(path, path_s, path_valid, s)
+    xy = point + left_normal(heading) * lat
+    yaw = heading + safe_atan2(v_lat, v_long)
+    yaw = jnp.arctan2(jnp.sin(yaw), jnp.cos(yaw))
+    speed = safe_norm(jnp.stack([v_long, v_lat]))
+    active = ~(despawn_at_end & reached)
+    return s, lat, speed, xy, yaw, active

@@ -1,0 +1,250 @@
+"""Junction families: Left-Turn Wrong-Way (LWW), Right-Turn Wrong-Way (RWW), Right-Turn Yield (RTY).
+
+Canonical frame (rotated afterwards by ``rotation_deg``): a 3- or 4-arm junction with two lanes
+per direction centred at the origin (:func:`lantern_jax.scenarios.road.junction`); the ego
+approaches from the south arm heading north.  Left turns go from the inner lane into the inner
+westbound lane (a 15.75-m-radius quarter circle); right turns from the outer lane into the
+outer eastbound lane (8.75 m).  The route is ``approach`` m of straight approach, the connector
+lane, and the exit lane until the route is ``route_length`` m long.
+
+The conflict point C is the first route arc at which the ego box would reach the scenario
+actor's path corridor: the ego centre within ``EGO_HALF_LENGTH + actor half width + 0.5 m`` of
+the actor's path line (the exit lane's centre line for all three families).
+
+Background traffic starts only on *departing* lane sections (beyond the box, moving away from
+it) other than the ego's approach and exit lanes, so it can never cross the ego's turn or the
+scenario actor's path; approaching cross or oncoming traffic would need junction yielding that
+the background IDM does not model.  Lights: signalized junctions get two light groups (N-S and
+E-W, :func:`~lantern_jax.scenarios.road.signal_lights`); the ego's light 0 is red for ``red_s``
+seconds and then green for the rest of the route.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+from lantern_jax.constants import (
+    EGO_HALF_LENGTH,
+    FAMILIES,
+    KIND_VEHICLE,
+    ROLE_CONTEXT,
+    ROLE_HAZARD,
+    TRIGGER_CLOCK,
+    TRIGGER_EVENT,
+)
+from lantern_jax.scenarios import families_common as fc
+from lantern_jax.scenarios import road as rd
+from lantern_jax.scenarios.spec import PARAM_RANGES
+
+TURN = {"LWW": "left", "RWW": "right", "RTY": "right"}
+EGO_LANES = {"left": (0, "W", 0), "right": (1, "E", 1)}  # (lane in, exit arm, lane out)
+ALLOWED_MISSING = {"LWW": ("N", "E"), "RWW": ("N", "W"), "RTY": ("N",)}
+LEADS = {"LWW": (10.0, 4.0), "RWW": (10.0, 4.0), "RTY": (10.0, 10.0)}  # (warn, event), m
+SPAWN_OFFSET = {"LWW": 25.0, "RWW": 20.0}  # m along the wrong-way path before C's nearest point
+CLEAR_TARGET = {"LWW": 15.0, "RWW": 20.0}  # m past C's nearest point
+RTY_CLEAR_PAST = 5.0  # m the RTY actor's rear must be past its crossing point
+SAFETY_LIMIT_S = 12.0  # s after the event (wrong-way and cross-traffic actors)
+CORRIDOR_MARGIN = 0.5  # m
+APPROACH_MIN = {"left": 12.0, "right": 15.0}  # m (warning point >= ~10 m into the route)
+APPROACH_MIN_SIGNALIZED = 20.0  # m, room to stop for the initial red
+RECOVERY = 29.0  # m of route after the conflict point
+PATH_TAIL = 10.0  # m of path beyond the clearance point
+
+
+@functools.cache
+def turn_layout(turn: str) -> tuple[float, float]:
+    """``(connector_length, conflict_offset)`` of the ego's turn, m.
+
+    ``conflict_offset`` is C's distance past the junction-box entry along the route (it does
+    not depend on the approach length, the arm count or the lights).
+    """
+    k_in, arm, k_out = EGO_LANES[turn]
+    road = rd.junction(4, 2, False)
+    probe = rd.turn_route(road, "S", k_in, arm, k_out, 20.0, 100.0)
+    conn = float(rd.arc_length(road.lane(probe.lanes[1]).center)[-1])
+    return conn, _conflict_s(road, probe, arm, k_out) - probe.box_in_s
+
+
+def _conflict_s(road: rd.RoadMap, route: rd.RouteSpec, arm: str, k_out: int) -> float:
+    name, s_out = rd.outbound_lane(road, arm, k_out)
+    p_line = rd.point_at(road.lane(name).center, s_out)
+    thr = EGO_HALF_LENGTH + fc.CAR_EXTENT[1] + CORRIDOR_MARGIN
+    return rd.corridor_entry(route.xy, p_line, rd.ARM_DIR[arm], thr)
+
+
+def _approach_min(fam: str, signalized: bool) -> float:
+    return APPROACH_MIN_SIGNALIZED if signalized else APPROACH_MIN[TURN[fam]]
+
+
+def sample_junction(fam: str, rng: np.random.Generator, weather: str) -> dict:
+    """Sample LWW / RWW / RTY parameters (about a third signalized)."""
+    tab = PARAM_RANGES[fam]
+    p = dict(
+        family=fam,
+        seed=int(rng.integers(0, 2**31 - 1)),
+        bg_seed=int(rng.integers(0, 2**31 - 1)),
+        weather=weather,
+        rotation_deg=fc.uniform(rng, 0.0, 360.0),
+    )
+    p["num_arms"] = int(rng.choice([3, 4]))
+    p["missing_arm"] = str(rng.choice(ALLOWED_MISSING[fam])) if p["num_arms"] == 3 else "none"
+    p["signalized"] = bool(rng.random() < 1.0 / 3.0)
+    p["red_s"] = fc.uniform(rng, 2.0, 8.0)
+    p["v_ref"] = fc.uniform(rng, 6.0, 8.0)
+    sp = tab["actor_speed"]
+    p["actor_speed"] = fc.uniform(rng, sp.lo, sp.hi)
+    if fam == "RTY":
+        p["source_dist"] = fc.uniform(rng, 10.0, 50.0)
+    _, off = turn_layout(TURN[fam])
+    a_min = _approach_min(fam, p["signalized"])
+    lr = tab["route_length"]
+    p["route_length"] = fc.uniform(rng, max(lr.lo, a_min + off + RECOVERY + 0.5), lr.hi)
+    a_hi = min(tab["approach"].hi, p["route_length"] - off - RECOVERY - 0.5)
+    p["approach"] = fc.uniform(rng, a_min, a_hi)
+    return p
+
+
+def check_junction(p: dict) -> None:
+    """Cross-field feasibility of a junction-family parameter dict."""
+    fam = p["family"]
+    if int(p["num_arms"]) == 4 and p["missing_arm"] != "none":
+        raise ValueError(f"{fam}.missing_arm: {p['missing_arm']!r} must be 'none' for 4 arms")
+    if int(p["num_arms"]) == 3 and p["missing_arm"] not in ALLOWED_MISSING[fam]:
+        opts = ", ".join(ALLOWED_MISSING[fam])
+        raise ValueError(
+            f"{fam}.missing_arm: {p['missing_arm']!r} not one of {{{opts}}} for a 3-arm {fam}"
+        )
+    a_min = _approach_min(fam, bool(p["signalized"]))
+    if p["approach"] < a_min:
+        why = "signalized" if p["signalized"] else "unsignalized"
+        raise ValueError(
+            f"{fam}.approach: {float(p['approach'])!r} below {a_min:g} ({why} junction)"
+        )
+    _, off = turn_layout(TURN[fam])
+    need = float(p["approach"]) + off + RECOVERY
+    if p["route_length"] < need:
+        raise ValueError(
+            f"{fam}.route_length: {float(p['route_length'])!r} too short, needs >= approach + "
+            f"{off:.3f} + {RECOVERY:g} = {need:.3f}"
+        )
+
+
+def build_junction(p: dict):
+    """Build an LWW / RWW / RTY pair (see :func:`build_wrong_way` and :func:`build_rty`)."""
+    fam = p["family"]
+    turn = TURN[fam]
+    k_in, arm, k_out = EGO_LANES[turn]
+    road = rd.junction(
+        int(p["num_arms"]),
+        2,
+        bool(p["signalized"]),
+        missing_arm=p["missing_arm"],
+        ego_red_s=float(p["red_s"]),
+    )
+    route = rd.turn_route(road, "S", k_in, arm, k_out, float(p["approach"]), p["route_length"])
+    s_c = _conflict_s(road, route, arm, k_out)
+    name, s_out = rd.outbound_lane(road, arm, k_out)
+    exit_lane = road.lane(name)
+    d_line = np.asarray(rd.ARM_DIR[arm])
+    p_line = rd.point_at(exit_lane.center, s_out)
+    c_xy = rd.point_at(route.xy, s_c)
+    near = p_line + float((c_xy - p_line) @ d_line) * d_line
+    v = float(p["actor_speed"])
+    if fam == "RTY":
+        slots_a, slots_b, rules, spawn = _rty_actors(p, near, d_line, v)
+    else:
+        slots_a, slots_b, rules, spawn = _wrong_way_actors(fam, road, exit_lane, near, d_line, v)
+    warn, event = LEADS[fam]
+    markers = (s_c - warn, s_c - event, s_c)
+    sections = []
+    for x in road.arms:
+        for k in range(road.lanes_per_direction):
+            ln_name, s_dep = rd.outbound_lane(road, x, k)
+            if ln_name in route.lanes:
+                continue
+            lane = road.lane(ln_name)
+            sections.append(fc.LaneSection(lane, s_dep + 5.0, lane.length - 15.0))
+    extra = dict(conflict_xy=c_xy.tolist(), near_xy=near.tolist(), spawn_xy=spawn.tolist(),
+                 turn=turn, box_in_s=route.box_in_s, box_out_s=route.box_out_s)  # fmt: skip
+    return fc.finish_pair(
+        p, FAMILIES.index(fam), road, route, slots_a, slots_b, sections, markers, rules, extra
+    )
+
+
+def _wrong_way_actors(fam, road, exit_lane, near, d_line, v):
+    """LWW / RWW actors.
+
+    Route A: the wrong-way vehicle waits (v_pre 0) in the ego's exit lane facing the junction,
+    ``SPAWN_OFFSET`` m along its path before the point nearest to C; on the event it drives
+    against traffic along that lane line at ``actor_speed`` and straight on across the box (it
+    does not turn into the ego's approach lane, where a yielding ego could not avoid it).  It
+    clears ``CLEAR_TARGET`` m past C's nearest point and despawns.  Route B: the same vehicle at
+    the same spawn point, rotated into the legal direction and driving away from the junction
+    along its lane at ``actor_speed`` from t = 0 (the paper hands it to Traffic Manager); it
+    despawns at the end of the arm.
+    """
+    dw = -d_line
+    off, clear = SPAWN_OFFSET[fam], CLEAR_TARGET[fam]
+    spawn = near - off * dw
+    if np.max(np.abs(spawn)) < road.half_size + fc.CAR_EXTENT[0]:
+        raise ValueError(f"{fam}: wrong-way spawn {spawn.tolist()} inside the junction box")
+    car = fc.ActorSpec(
+        fc.straight_path(spawn, dw, off + clear + PATH_TAIL),
+        fc.CAR_EXTENT,
+        KIND_VEHICLE,
+        ROLE_HAZARD,
+        v_pre=0.0,
+        v_post=v,
+        trigger=TRIGGER_EVENT,
+        despawn_at_end=True,
+    )
+    s_sp, _ = rd.project(exit_lane.center, spawn)
+    legal = fc.ActorSpec(
+        fc.straight_path(spawn, d_line, exit_lane.length - s_sp),
+        fc.CAR_EXTENT,
+        KIND_VEHICLE,
+        ROLE_CONTEXT,
+        v_pre=v,
+        v_post=v,
+        trigger=TRIGGER_CLOCK,
+        trigger_delay=0.0,
+        despawn_at_end=True,
+    )
+    rules = dict(
+        clear_s=off + clear, clear_time_limit=SAFETY_LIMIT_S, clear_on_ego_stop=False,
+        despawn_on_clear=True, force_event=True, d_safe=3.0,
+    )  # fmt: skip
+    return {fc.HAZARD_SLOT: car}, {fc.HAZARD_SLOT: legal}, rules, spawn
+
+
+def _rty_actors(p, near, d_line, v):
+    """RTY actors.
+
+    Route A: one evaluated cross-traffic vehicle from the left, waiting ``source_dist`` m before
+    its crossing point (the point of its lane nearest to C) in the lane the ego turns into; on
+    the event (= the warning point; no forced trigger) it drives straight through at
+    ``actor_speed``.  It clears once its rear is 5 m past the crossing point (or at the 12-s
+    safety limit) and despawns.  Route B: a stationary context vehicle at the same pose.
+    """
+    d = float(p["source_dist"])
+    spawn = near - d * d_line
+    clear = d + fc.CAR_EXTENT[0] + RTY_CLEAR_PAST
+    car = fc.ActorSpec(
+        fc.straight_path(spawn, d_line, clear + PATH_TAIL),
+        fc.CAR_EXTENT,
+        KIND_VEHICLE,
+        ROLE_HAZARD,
+        v_pre=0.0,
+        v_post=v,
+        trigger=TRIGGER_EVENT,
+        despawn_at_end=True,
+    )
+    yaw = float(np.arctan2(d_line[1], d_line[0]))
+    ctx = fc.static_actor(spawn, yaw, fc.CAR_EXTENT, KIND_VEHICLE, ROLE_CONTEXT)
+    rules = dict(
+        clear_s=clear, clear_time_limit=SAFETY_LIMIT_S, clear_on_ego_stop=False,
+        despawn_on_clear=True, force_event=False, d_safe=3.0,
+    )  # fmt: skip
+    return {fc.HAZARD_SLOT: car}, {fc.HAZARD_SLOT: ctx}, rules, spawn
