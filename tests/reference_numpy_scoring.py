@@ -300,7 +300,8 @@ def reference_execution(tr: dict[str, np.ndarray]) -> dict[str, float]:
         return x if _hap(x) and math.isfinite(x) else nan
 
     return {
-        "progress": min(max(prog[-1] / L[-1], 0.0), 1.0),
+        # Completion counts against the end zone: route_length - 2 m (COMPLETION_TOL_M).
+        "progress": min(max(prog[-1] / (L[-1] - 2.0), 0.0), 1.0),
         "ttc_min_s": (ttc if ttc_any else math.inf) if ttc_av else nan,
         "clearance_min_m": clear if clear_av else nan,
         "t_ref_s": tt(tref[-1]),

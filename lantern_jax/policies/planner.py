@@ -44,7 +44,8 @@ from lantern_jax.policies.observation import ROUTE_STEP, Observation
 
 Array = jax.Array
 
-FORECAST_STEPS = 9  # 0 .. 2.0 s at 0.25 s
+FORECAST_STEPS = 5  # 0 .. 2.0 s at 0.5 s
+FORECAST_DT = 0.5  # s
 
 
 @struct.dataclass
@@ -194,7 +195,7 @@ def actor_constraints(
     hl, hw = obs.actor_extent[:, 0], obs.actor_extent[:, 1]
     # Footprint of the actor across / along the route (orientation aware).
     n_act = obs.actor_xy.shape[0]
-    taus = jnp.arange(FORECAST_STEPS, dtype=jnp.float32) * 0.25
+    taus = jnp.arange(FORECAST_STEPS, dtype=jnp.float32) * FORECAST_DT
     fut = obs.actor_xy[:, None, :] + obs.actor_vel[:, None, :] * taus[None, :, None]  # (A,F,2)
     arcs_all, dists_all = project_points_on_route(
         route, jnp.concatenate([obs.actor_xy, fut.reshape(-1, 2)], axis=0)
@@ -212,7 +213,11 @@ def actor_constraints(
     in_corr = dist < EGO_HALF_WIDTH + half_across + p.corridor_margin
     ahead = arc > 0.0
     v_along = jnp.sum(obs.actor_vel * tang, -1)
-    lead_gap = jnp.where(seen & in_corr & ahead, arc - EGO_HALF_LENGTH - half_along, BIG)
+    # An oncoming leader (moving against the route) is met where it will be at the end of the
+    # forecast, treated as stopped there.
+    horizon = (FORECAST_STEPS - 1) * FORECAST_DT
+    oncoming = jnp.minimum(v_along, 0.0) * horizon
+    lead_gap = jnp.where(seen & in_corr & ahead, arc - EGO_HALF_LENGTH - half_along + oncoming, BIG)
 
     # 2) constant-velocity forecast overlapping the ego's constant-speed corridor.
     ego_arc = ego_speed * taus  # (F,)
@@ -221,7 +226,10 @@ def actor_constraints(
         1.3 * EGO_HALF_LENGTH + half_along[:, None] + p.forecast_margin
     )
     moving = jnp.linalg.norm(obs.actor_vel, axis=-1) > 0.3
-    hit = lat_hit & lon_hit & (f_arc > 0.0) & moving[:, None] & ~in_corr[:, None]
+    # Same-direction leaders in the corridor are handled by IDM; everything else moving
+    # (crossing, oncoming, merging) is checked for a forecast overlap.
+    follower = in_corr & (v_along >= 0.0)
+    hit = lat_hit & lon_hit & (f_arc > 0.0) & moving[:, None] & ~follower[:, None]
     first_arc = jnp.min(jnp.where(hit, f_arc, BIG), axis=1)
     conflict_gap = jnp.where(
         seen & (first_arc < BIG * 0.5),

@@ -240,8 +240,9 @@ def soft_execution_terms(tel: Telemetry, d_safe: Any, temperature: Any = None) -
     d_safe = _f(d_safe)
     avail = availability(tel)
     length = tel.route_length_m
-    safe_len = jnp.where(length > 0, length, 1.0)
-    p = jnp.where(length > 0, smooth_clip01(tel.progress_m / safe_len, t), 0.0)
+    span = th.completion_length(length)
+    safe_len = jnp.where(span > 0, span, 1.0)
+    p = jnp.where(span > 0, smooth_clip01(tel.progress_m / safe_len, t), 0.0)
 
     ttc = softmin_decode(tel.ttc_lse, t_acc, cap=th.TTC_NORM_S)
     s_ttc_ = jnp.where(avail["ttc"], smooth_clip01(ttc / th.TTC_NORM_S, t), 0.0)

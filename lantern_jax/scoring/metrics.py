@@ -47,7 +47,7 @@ class ExecutionMetrics:
 
     is_route_a: Array  # bool
     coincident_onset: Array  # bool
-    progress: Array  # float32, route completion fraction, clip(progress / length, 0, 1)
+    progress: Array  # float32, route completion, clip(progress / (length - 2 m), 0, 1)
     progress_m: Array  # float32, m
     route_length_m: Array  # float32, m
     completed: Array  # bool, progress >= route_length - 2 m at the end
@@ -135,7 +135,8 @@ def finalize(tel: Telemetry) -> ExecutionMetrics:
     t_fail = first_failure_time(tel)
     t_rel = release_time(tel)
     length = tel.route_length_m
-    frac = jnp.where(length > 0, tel.progress_m / jnp.where(length > 0, length, 1.0), 0.0)
+    span = th.completion_length(length)
+    frac = jnp.where(span > 0, tel.progress_m / jnp.where(span > 0, span, 1.0), 0.0)
     completed = tel.progress_m >= length - th.COMPLETION_TOL_M
 
     ttc = jnp.where(tel.ttc_any, tel.ttc_min, jnp.inf)

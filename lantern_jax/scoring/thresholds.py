@@ -54,6 +54,14 @@ STILL_SPEED_MPS = 0.1  # m/s, "standing still" for the blocking gate: speed < th
 BLOCK_STILL_S = 20.0  # s, continuous standstill (route not completed) that fails the block gate
 BLOCK_STILL = ticks(BLOCK_STILL_S)  # 400 ticks
 COMPLETION_TOL_M = 2.0  # m, route completed when progress >= route_length - this
+
+
+def completion_length(route_length):
+    """Length against which route completion is measured: reaching the route's end zone
+    (``route_length - COMPLETION_TOL_M``) counts as 100 % (the leaderboard's > 99 % rule)."""
+    return route_length - COMPLETION_TOL_M
+
+
 FALSE_BRAKE_SPEED_MPS = 0.1  # m/s, Route B stop: speed <= this
 FALSE_BRAKE_S = 1.0  # s, continuous unjustified stop in the matched interval that fails the gate
 FALSE_BRAKE = ticks(FALSE_BRAKE_S)  # 20 ticks
