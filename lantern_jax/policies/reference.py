@@ -22,6 +22,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 import numpy as np
+from flax import struct
 
 from lantern_jax.constants import BIG, LWW, OR, PE, RTY, RWW, VC
 from lantern_jax.policies.base import Policy, register_policy
@@ -102,46 +103,86 @@ def warning_constraints(
     return merge(obstacle, cut, yld)
 
 
-def _init(key: jax.Array) -> PlannerParams:
-    del key
-    return default_planner_params()
+@struct.dataclass
+class ReferenceParams:
+    """Parameters of the reference policies: one act function, behaviour chosen by data.
+
+    Because ``expert``, ``ego`` and ``coop`` share :func:`reference_act` and differ only in
+    these (traced) flags, evaluating all three reuses one compiled rollout.
+    """
+
+    planner: PlannerParams
+    privileged: jax.Array  # () bool, plan over every present actor (else: camera-visible only)
+    use_warning: jax.Array  # () bool, turn active warnings into virtual constraints
 
 
-def _expert_act(params: PlannerParams, obs: Observation) -> jax.Array:
-    return plan(params, obs, obs.present)[0]
+_CANONICAL_SEMANTICS = None
 
 
-def _ego_act(params: PlannerParams, obs: Observation) -> jax.Array:
-    return plan(params, obs, obs.visible)[0]
+def _semantics_table() -> jax.Array:
+    global _CANONICAL_SEMANTICS
+    if _CANONICAL_SEMANTICS is None:
+        _CANONICAL_SEMANTICS = np.asarray(text_semantics(("canonical",)))
+    return jnp.asarray(_CANONICAL_SEMANTICS)
 
 
-def make_coop_act(understood_kinds: tuple[str, ...] = ("canonical",)):
-    """Build the ``coop`` act function for the given understood text kinds."""
-    table = jnp.asarray(text_semantics(understood_kinds))
+def reference_act(params: ReferenceParams, obs: Observation) -> jax.Array:
+    """The shared act function of the reference policies.
 
-    def act(params: PlannerParams, obs: Observation) -> jax.Array:
-        extra = warning_constraints(params, obs, table, obs.visible)
-        return plan(params, obs, obs.visible, extra)[0]
+    Args:
+        params: :class:`ReferenceParams`.
+        obs: one scenario's observation.
 
-    return act
+    Returns:
+        (10, 2) float32 waypoints, ego frame (x forward, y right), 0.25 s apart.
+    """
+    seen = jnp.where(params.privileged, obs.present, obs.visible)
+    extra = warning_constraints(params.planner, obs, _semantics_table(), seen)
+    extra = extra.replace(gap=jnp.where(params.use_warning, extra.gap, BIG))
+    return plan(params.planner, obs, seen, extra)[0]
+
+
+def _make_init(privileged: bool, use_warning: bool):
+    def init(key: jax.Array) -> ReferenceParams:
+        del key
+        return ReferenceParams(
+            planner=default_planner_params(),
+            privileged=jnp.asarray(privileged),
+            use_warning=jnp.asarray(use_warning),
+        )
+
+    return init
 
 
 def expert_policy() -> Policy:
     """Privileged planner over all present actors (upper reference)."""
     return Policy(
-        "expert", _init, _expert_act, "privileged PDM-Lite-style planner", privileged=True
+        "expert",
+        _make_init(True, False),
+        reference_act,
+        "privileged PDM-Lite-style planner over every actor, hidden ones included",
+        privileged=True,
     )
 
 
 def ego_policy() -> Policy:
     """The planner restricted to the front camera; ignores warnings."""
-    return Policy("ego", _init, _ego_act, "front-camera planner, ignores warnings")
+    return Policy(
+        "ego",
+        _make_init(False, False),
+        reference_act,
+        "the same planner restricted to the front camera; ignores warnings",
+    )
 
 
 def coop_policy() -> Policy:
     """``ego`` plus cooperative-warning handling."""
     return Policy(
-        "coop", _init, make_coop_act(), "front-camera planner + warnings", uses_warning=True
+        "coop",
+        _make_init(False, True),
+        reference_act,
+        "front-camera planner + cooperative warnings as virtual constraints",
+        uses_warning=True,
     )
 
 

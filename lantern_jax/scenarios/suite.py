@@ -159,8 +159,8 @@ def static_check(params: dict, seen_hashes: set[str]) -> tuple[World, World, dic
         raise ValueError(f"{fam}: Route A and Route B differ in the ego start")
     shared = [i for i in range(a.actors.num) if i not in meta["scenario_slots"]]
     for i in shared:
-        if not _tree_equal(jax.tree.map(lambda x: x[i], (a.actors, a.script)),
-                           jax.tree.map(lambda x: x[i], (b.actors, b.script))):  # fmt: skip
+        if not _tree_equal(jax.tree.map(lambda x, i=i: x[i], (a.actors, a.script)),
+                           jax.tree.map(lambda x, i=i: x[i], (b.actors, b.script))):  # fmt: skip
             raise ValueError(f"{fam}: Route A and Route B differ in actor slot {i}")
     h = content_hash(params)
     if h in seen_hashes:

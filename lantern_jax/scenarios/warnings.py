@@ -64,6 +64,28 @@ def _family_index(family: int | str) -> int:
 #: The text bank; canonical entries first so that ``text_id == family`` for them.
 TEXT_BANK: list[WarningText] = [WarningText(i, i, "canonical", t) for i, t in enumerate(TEMPLATES)]
 
+#: Held-out paraphrases (ids 6-11, family order): same meaning, different wording.  Used by the
+#: ``held_out_paraphrase`` ablation; a policy built for the canonical wording need not
+#: understand them.
+PARAPHRASES: tuple[str, ...] = (
+    "Watch out: someone on foot near <FRONT_CAR_POS> is stepping into your lane.",
+    "A car around <FRONT_CAR_POS> is about to merge in front of you.",
+    "Something is stopped in your lane near <FRONT_CAR_POS>; the road ahead is blocked.",
+    "A car driving against traffic near <FRONT_CAR_POS> will pass through your left turn. "
+    "Wait before turning.",
+    "A car driving against traffic near <FRONT_CAR_POS> will pass through your right turn. "
+    "Wait before turning.",
+    "Cross traffic near <FRONT_CAR_POS> is heading through your right turn. Let it pass first.",
+)
+TEXT_BANK += [
+    WarningText(len(TEMPLATES) + i, i, "paraphrase", t) for i, t in enumerate(PARAPHRASES)
+]
+
+
+def paraphrase_text_id(family: int) -> int:
+    """Text id of a family's held-out paraphrase."""
+    return len(TEMPLATES) + int(family)
+
 
 def add_text(family: int | str, kind: str, text: str) -> int:
     """Append a text to :data:`TEXT_BANK` and return its new ``text_id``.
@@ -137,8 +159,6 @@ def ground_position(hazard_xy: jax.Array, ego_xy: jax.Array, ego_yaw: jax.Array)
     Returns:
         (..., 2) float32, m: ``(forward, right)`` relative to the ego.
     """
-    d = jnp.asarray(hazard_xy) - jnp.asarray(ego_xy)
-    c, s = jnp.cos(ego_yaw), jnp.sin(ego_yaw)
-    forward = c * d[..., 0] + s * d[..., 1]
-    left = -s * d[..., 0] + c * d[..., 1]
-    return jnp.stack([forward, -left], axis=-1)
+    from lantern_jax.geometry import world_to_ego
+
+    return world_to_ego(jnp.asarray(hazard_xy), jnp.asarray(ego_xy), jnp.asarray(ego_yaw))

@@ -1,0 +1,328 @@
+"""One-call evaluation of a policy on a suite: every pair under Route A with warning, Route A
+without warning and Route B, stepped in one jitted, vmapped call, then scored.
+
+Stateless policies see the same Route B under both conditions, so Route B runs once per policy
+and is paired with both Route A executions (DESIGN §2).  Ablations (paper §4.4) change only
+protocol data of the batch (:data:`ABLATIONS`).
+
+Example::
+
+    from lantern_jax.evaluate import evaluate
+    result = evaluate(["expert", "ego", "coop"])          # built-in suite lantern-v1
+    print(result.family_table)
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import importlib.metadata as md
+import platform
+import sys
+import time
+from collections.abc import Sequence
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pandas as pd
+
+from lantern_jax.constants import DT, FAMILIES
+from lantern_jax.policies.base import Policy, check_policy_output, get_policy
+from lantern_jax.scenarios.suite import Suite, build_suite_worlds, load_suite
+from lantern_jax.scenarios.warnings import paraphrase_text_id
+from lantern_jax.scoring.aggregate import decomposition_table, family_scores
+from lantern_jax.scoring.metrics import finalize
+from lantern_jax.scoring.table import build_route_table
+from lantern_jax.sim.rollout import rollout_batch
+from lantern_jax.world import World, tree_stack
+
+CONDITIONS = ("warning", "no-warning")
+
+
+def _ablate(field: str, value):
+    def apply(p, family):
+        del family
+        return p.replace(**{field: jnp.full_like(getattr(p, field), value)})
+
+    return apply
+
+
+def _paraphrase(p, family):
+    return p.replace(text_id=jnp.asarray(family * 0 + paraphrase_text_id(0), jnp.int32) + family)
+
+
+#: Ablations of the temporal protocol and the warning (paper Table "Sensitivity ...").
+ABLATIONS: dict[str, Any] = {
+    "none": None,
+    "late_onset": _ablate("late_onset", True),
+    "warning_beyond_termination": _ablate("warn_hold_extra", 10.0),
+    "no_anti_deadlock": _ablate("force_event", False),
+    "noisy_position": _ablate("pos_noise_sigma", 2.0),
+    "held_out_paraphrase": _paraphrase,
+}
+
+
+def ablation_names() -> list[str]:
+    """Valid ablation names."""
+    return list(ABLATIONS)
+
+
+@dataclasses.dataclass
+class Executions:
+    """The batched executions of a suite: ``[A warning | A no-warning | B]`` x pairs."""
+
+    worlds: World  # leaves with leading axis 3 * num_pairs
+    num_pairs: int
+    pair_ids: list[str]
+    families: list[str]
+    weathers: list[str]
+    max_ticks: int
+
+
+def build_executions(suite: Suite, ablation: str = "none") -> Executions:
+    """Build the batched worlds of every execution of a suite under an ablation.
+
+    Raises:
+        ValueError: listing the valid ablations for an unknown name.
+    """
+    if ablation not in ABLATIONS:
+        raise ValueError(f"unknown ablation {ablation!r}; valid: {', '.join(ABLATIONS)}")
+    wa, wb, _ = build_suite_worlds(suite)
+    a = tree_stack(wa)
+    b = tree_stack(wb)
+    a_warn = a.replace(params=a.params.replace(warning_enabled=jnp.ones_like(a.params.is_route_a)))
+    a_none = a.replace(params=a.params.replace(warning_enabled=jnp.zeros_like(a.params.is_route_a)))
+    fn = ABLATIONS[ablation]
+    if fn is not None:
+        a_warn = a_warn.replace(params=fn(a_warn.params, a_warn.params.family))
+        a_none = a_none.replace(params=fn(a_none.params, a_none.params.family))
+    worlds = jax.tree.map(lambda *x: jnp.concatenate(x), a_warn, a_none, b)
+    max_ticks = int(np.ceil(float(np.max(np.asarray(worlds.params.timeout_s))) / DT))
+    return Executions(
+        worlds=worlds,
+        num_pairs=len(suite.pairs),
+        pair_ids=[p.pair_id for p in suite.pairs],
+        families=[p.family for p in suite.pairs],
+        weathers=[p.weather for p in suite.pairs],
+        max_ticks=max_ticks,
+    )
+
+
+_COMPILED: dict[tuple, Any] = {}
+
+
+def compiled_rollout(act, max_ticks: int):
+    """The jitted batched rollout for a policy ``act`` (cached: repeated calls reuse it)."""
+    key = (act, max_ticks)
+    if key not in _COMPILED:
+        _COMPILED[key] = jax.jit(
+            lambda worlds, params: rollout_batch(worlds, act, params, max_ticks)
+        )
+    return _COMPILED[key]
+
+
+def params_hash(params: Any) -> str:
+    """SHA-256 over the policy parameter leaves (shapes, dtypes and bytes)."""
+    h = hashlib.sha256()
+    for leaf in jax.tree.leaves(params):
+        a = np.asarray(leaf)
+        h.update(str((a.shape, a.dtype.str)).encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def package_versions() -> dict[str, str]:
+    """Versions of the packages that determine the results."""
+    out = {"python": sys.version.split()[0], "platform": platform.platform()}
+    for name in ("lantern-jax", "jax", "jaxlib", "flax", "numpy", "pandas", "optax"):
+        try:
+            out[name] = md.version(name)
+        except md.PackageNotFoundError:
+            out[name] = "not installed"
+    out["jax_backend"] = jax.default_backend()
+    return out
+
+
+@dataclasses.dataclass
+class PolicyRun:
+    """Raw results of one policy on one suite."""
+
+    policy: str
+    params_sha256: str
+    metrics: dict[str, np.ndarray]  # per execution (3 * num_pairs), numpy
+    protocol: dict[str, np.ndarray]
+    route_table: pd.DataFrame
+    seconds_compile: float
+    seconds_run: float
+
+
+def run_policy(
+    policy: Policy | str, execs: Executions, params: Any = None, model: str | None = None
+) -> PolicyRun:
+    """Run one policy on prepared executions and build its route-level rows.
+
+    Args:
+        policy: a :class:`Policy` or a registered name.
+        execs: from :func:`build_executions`.
+        params: policy parameters (default ``policy.init(PRNGKey(0))``).
+        model: name used in the tables (default: the policy name).
+    """
+    pol = get_policy(policy) if isinstance(policy, str) else policy
+    if params is None:
+        params = pol.init(jax.random.PRNGKey(0))
+    from lantern_jax.sim.observe import observe, sense
+
+    w0 = jax.tree.map(lambda x: x[0], execs.worlds)
+    check_policy_output(pol, params, jax.eval_shape(lambda w: observe(w, sense(w, 0.0)), w0))
+    fn = compiled_rollout(pol.act, execs.max_ticks)
+    t0 = time.perf_counter()
+    lowered = fn.lower(execs.worlds, params)
+    key = ("exe", pol.act, execs.max_ticks, jax.tree.structure(params), execs.num_pairs)
+    if key not in _COMPILED:
+        _COMPILED[key] = lowered.compile()
+    exe = _COMPILED[key]
+    t1 = time.perf_counter()
+    final = exe(execs.worlds, params)
+    jax.block_until_ready(final)
+    t2 = time.perf_counter()
+    m_struct = jax.tree.map(np.asarray, finalize(final.telemetry))
+    metrics = {f.name: getattr(m_struct, f.name) for f in dataclasses.fields(m_struct)}
+    proto = jax.tree.map(np.asarray, final.world.protocol)
+    proto = {f.name: getattr(proto, f.name) for f in dataclasses.fields(proto)}
+    n = execs.num_pairs
+    rows = []
+    from lantern_jax.scenarios.protocol import warning_onset
+
+    onset = np.asarray(jax.vmap(warning_onset)(final.world.protocol, final.world.params))
+    onset = np.where(onset < 1e8, onset, np.nan)
+    for ci, cond in enumerate(CONDITIONS):
+        sl = slice(ci * n, (ci + 1) * n)
+        rows.append(
+            build_route_table(
+                jax.tree.map(lambda x, sl=sl: x[sl], m_struct),
+                jax.tree.map(lambda x: x[2 * n : 3 * n], m_struct),
+                model=model or pol.name,
+                condition=cond,
+                pair_ids=execs.pair_ids,
+                families=execs.families,
+                weathers=execs.weathers,
+                t_warn_on=onset[sl],
+            )
+        )
+    table = pd.concat(rows, ignore_index=True)
+    return PolicyRun(
+        policy=model or pol.name,
+        params_sha256=params_hash(params),
+        metrics=metrics,
+        protocol=proto,
+        route_table=table,
+        seconds_compile=t1 - t0,
+        seconds_run=t2 - t1,
+    )
+
+
+def family_table(route_table: pd.DataFrame) -> pd.DataFrame:
+    """Per-family CUS rows for every (model, condition) plus each model's paired warning gain.
+
+    Columns: ``model, condition, PE, VC, OR, LWW, RWW, RTY, Overall``.
+    """
+    fam = family_scores(route_table).reset_index()
+    out = []
+    for model in dict.fromkeys(fam["model"]):
+        sub = fam[fam["model"] == model].set_index("condition")
+        for cond in CONDITIONS:
+            if cond in sub.index:
+                out.append({"model": model, "condition": cond, **sub.loc[cond].drop("model")})
+        if all(c in sub.index for c in CONDITIONS):
+            gain = sub.loc["warning"].drop("model") - sub.loc["no-warning"].drop("model")
+            out.append({"model": model, "condition": "warning gain", **gain})
+    cols = ["model", "condition", *FAMILIES, "Overall"]
+    return pd.DataFrame(out)[cols]
+
+
+@dataclasses.dataclass
+class EvalResult:
+    """Everything an evaluation produces."""
+
+    route_table: pd.DataFrame
+    family_table: pd.DataFrame
+    decomposition: pd.DataFrame
+    manifest: dict
+    runs: list[PolicyRun]
+
+
+def evaluate(
+    policies: Sequence[str | Policy] | str | Policy = ("expert", "ego", "coop"),
+    params: Sequence[Any] | None = None,
+    suite: Suite | str = "lantern-v1",
+    ablation: str = "none",
+    progress: bool = True,
+) -> EvalResult:
+    """Evaluate policies on a suite: one jitted, vmapped rollout call per policy, then score.
+
+    Args:
+        policies: policy names / objects (one or several).
+        params: parameters per policy (default: each policy's ``init``).
+        suite: a :class:`Suite` or a suite id / manifest path.
+        ablation: one of :func:`ablation_names`.
+        progress: show a progress bar.
+
+    Returns:
+        :class:`EvalResult` with the route-level table, the family table (with paired warning
+        gains), the decomposition table and the reproducibility manifest.
+    """
+    if isinstance(policies, str | Policy):
+        policies = [policies]
+    pols = [get_policy(p) if isinstance(p, str) else p for p in policies]
+    if params is None:
+        params = [None] * len(pols)
+    if len(params) != len(pols):
+        raise ValueError(f"params: {len(params)} entries for {len(pols)} policies")
+    s = load_suite(suite) if isinstance(suite, str) else suite
+    execs = build_executions(s, ablation)
+    runs: list[PolicyRun] = []
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=len(pols), desc=f"evaluating on {s.suite_id}", unit="policy")
+    for pol, par in zip(pols, params, strict=True):
+        if bar is not None:
+            bar.set_postfix_str(f"{pol.name}: compile + {3 * execs.num_pairs} executions")
+        runs.append(run_policy(pol, execs, par))
+        if bar is not None:
+            bar.update(1)
+    if bar is not None:
+        bar.close()
+    route = pd.concat([r.route_table for r in runs], ignore_index=True)
+    manifest = dict(
+        suite_id=s.suite_id,
+        suite_sha256=s.suite_sha256,
+        suite_seed=s.seed,
+        num_pairs=len(s.pairs),
+        ablation=ablation,
+        conditions=list(CONDITIONS),
+        executions_per_policy=3 * execs.num_pairs,
+        max_ticks=execs.max_ticks,
+        dt_s=DT,
+        policies=[
+            dict(
+                name=r.policy,
+                params_sha256=r.params_sha256,
+                seconds_compile=round(r.seconds_compile, 3),
+                seconds_run=round(r.seconds_run, 3),
+            )
+            for r in runs
+        ],
+        policy_init_seed=0,
+        packages=package_versions(),
+    )
+    return EvalResult(
+        route_table=route,
+        family_table=family_table(route),
+        decomposition=decomposition_table(route).reset_index(),
+        manifest=manifest,
+        runs=runs,
+    )
