@@ -133,6 +133,37 @@ def interpolate(points: Array, s: Array, valid: Array, s_query: Array) -> tuple[
     return xy, heading
 
 
+def nearest_segment(points: Array, valid: Array, query: Array) -> tuple[Array, Array]:
+    """Distance to a padded polyline and the travel direction of its nearest segment.
+
+    A lean single-query variant of :func:`project` (no arc, no extrapolation) for hot loops such
+    as the per-tick lane check.
+
+    Args:
+        points: (P, 2) float32, m.
+        valid: (P,) bool, prefix mask.
+        query: (2,) float32, m.
+
+    Returns:
+        distance: () float32, m, to the nearest valid segment (BIG-ish when none).
+        direction: (2,) float32, unnormalised direction vector of that segment.
+    """
+    ax, ay = points[:-1, 0], points[:-1, 1]
+    dx, dy = points[1:, 0] - ax, points[1:, 1] - ay
+    seg_valid = valid[1:] & valid[:-1]
+    len2 = dx * dx + dy * dy
+    inv = jnp.where(len2 > _EPS2, 1.0 / jnp.maximum(len2, _EPS2), 0.0)
+    rx, ry = query[0] - ax, query[1] - ay
+    t = jnp.clip((rx * dx + ry * dy) * inv, 0.0, 1.0)
+    ex, ey = rx - t * dx, ry - t * dy
+    d2 = jnp.where(seg_valid, ex * ex + ey * ey, BIG)
+    best = jnp.min(d2)
+    sel = d2 <= best
+    direction = jnp.stack([jnp.sum(jnp.where(sel, dx, 0.0)), jnp.sum(jnp.where(sel, dy, 0.0))])
+    pos = best > _EPS2
+    return jnp.where(pos, jnp.sqrt(jnp.where(pos, best, 1.0)), 0.0), direction
+
+
 def project_many(
     points: Array, s: Array, valid: Array, queries: Array
 ) -> tuple[Array, Array, Array, Array]:
@@ -219,5 +250,45 @@ def project(
         distance: () float32, m, Euclidean distance to the nearest point of the polyline (its
             ends not extended); ``|query - points[0]|`` for a single-point polyline.
     """
-    arc, lateral, heading, distance = project_many(points, s, valid, query[None, :])
-    return arc[0], lateral[0], heading[0], distance[0]
+    # One query: keep the segments on the minor axis (a (P-1,) layout); the nearest segment is
+    # picked with a min and a first-index mask rather than argmin + gather (slow on CPU).
+    n = num_valid(valid)
+    nseg = points.shape[0] - 1
+    ax, ay = points[:-1, 0], points[:-1, 1]
+    dx, dy = points[1:, 0] - ax, points[1:, 1] - ay
+    seg_valid = valid[1:] & valid[:-1]
+    len2 = dx * dx + dy * dy
+    nonzero = seg_valid & (len2 > _EPS2)
+    inv_len2 = jnp.where(nonzero, 1.0 / jnp.where(nonzero, len2, 1.0), 0.0)
+    rx, ry = query[0] - ax, query[1] - ay
+    t_raw = (rx * dx + ry * dy) * inv_len2
+    t_clip = jnp.clip(t_raw, 0.0, 1.0)
+    ex, ey = rx - t_clip * dx, ry - t_clip * dy
+    dist2 = jnp.where(seg_valid, ex * ex + ey * ey, BIG)
+    best = jnp.min(dist2)
+    iota = jnp.arange(nseg, dtype=jnp.int32)
+    first = jnp.min(jnp.where(dist2 <= best, iota, nseg))
+    sel = iota == first
+
+    def pick(x):
+        return jnp.sum(jnp.where(sel, x, 0.0))
+
+    lo = jnp.where(first == 0, -jnp.inf, 0.0)
+    hi = jnp.where(first == jnp.maximum(n - 2, 0), jnp.inf, 1.0)
+    t_i = jnp.clip(pick(t_raw), lo, hi)
+    l2 = pick(len2)
+    ok = pick(nonzero.astype(jnp.float32)) > 0.5
+    length = jnp.where(ok, jnp.sqrt(jnp.where(ok, l2, 1.0)), 0.0)
+    ux = jnp.where(ok, pick(dx) / jnp.where(ok, length, 1.0), 0.0)
+    uy = jnp.where(ok, pick(dy) / jnp.where(ok, length, 1.0), 0.0)
+    arc = pick(s[:-1]) + t_i * length
+    lateral = ux * pick(ry) - uy * pick(rx)
+    heading = jnp.where(ok, safe_atan2(uy, ux), 0.0)
+    pos = best > _EPS2
+    distance = jnp.where(pos, jnp.sqrt(jnp.where(pos, best, 1.0)), 0.0)
+    single = n < 2
+    distance = jnp.where(single, safe_norm(query - points[0]), distance)
+    arc = jnp.where(single, 0.0, arc)
+    lateral = jnp.where(single, 0.0, lateral)
+    heading = jnp.where(single, 0.0, heading)
+    return arc, lateral, heading, distance

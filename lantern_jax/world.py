@@ -331,7 +331,8 @@ class ProtocolState:
     """Temporal-protocol times of one execution; INF_TIME until the transition happens."""
 
     t_warn_point: Array  # () float32, s, ego reached the warning point (= t_ref)
-    t_warn_on: Array  # () float32, s, warning delivery starts (warning condition only)
+    t_warn_on: Array  # () float32, s, warning delivery starts (INF_TIME in the no-warning
+    #                   condition and on Route B)
     t_event: Array  # () float32, s, physical event onset
     t_warn_off: Array  # () float32, s, warning termination (hazard seen after the event)
     t_clear: Array  # () float32, s, hazard clearance
@@ -339,6 +340,7 @@ class ProtocolState:
     event_forced: Array  # () bool, the event was started by the anti-deadlock rule
     clear_by_limit: Array  # () bool, clearance came from a safety/stop limit
     ego_still_time: Array  # () float32, s, continuous time the ego has been (almost) still
+    hazard_visible_at_warn: Array  # () bool, the hazard was camera-visible at the warning point
 
     @staticmethod
     def initial() -> ProtocolState:
@@ -346,7 +348,7 @@ class ProtocolState:
         inf = jnp.asarray(INF_TIME, jnp.float32)
         z = jnp.asarray(0.0, jnp.float32)
         f = jnp.asarray(False)
-        return ProtocolState(inf, inf, inf, inf, inf, z, f, f, z)
+        return ProtocolState(inf, inf, inf, inf, inf, z, f, f, z, f)
 
 
 @struct.dataclass

@@ -213,6 +213,10 @@ def no_lights(cap_t: int = CAP_T) -> TrafficLights:
                          valid=jnp.zeros((cap_t,), bool))  # fmt: skip
 
 
+_BOOL_FIELDS = ("is_route_a", "warning_enabled", "clear_on_ego_stop", "despawn_on_clear",
+                "force_event", "late_onset")  # fmt: skip
+
+
 def scenario_params(**overrides) -> ScenarioParams:
     """Neutral scenario parameters (no hazard behaviour unless overridden)."""
     d = dict(
@@ -231,8 +235,7 @@ def scenario_params(**overrides) -> ScenarioParams:
               "template_id": jnp.int32, "text_id": jnp.int32, "noise_seed": jnp.uint32}  # fmt: skip
     out = {}
     for k, v in d.items():
-        if isinstance(v, bool) or k in ("is_route_a", "warning_enabled", "clear_on_ego_stop",
-                                         "despawn_on_clear", "force_event", "late_onset"):  # fmt: skip
+        if isinstance(v, bool) or k in _BOOL_FIELDS:
             out[k] = jnp.asarray(bool(v))
         else:
             out[k] = jnp.asarray(v, dtypes.get(k, jnp.float32))

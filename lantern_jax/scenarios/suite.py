@@ -310,6 +310,9 @@ def write_manifest(manifest: dict, path: str | Path) -> None:
     with os.fdopen(fd, "w") as fh:
         json.dump(manifest, fh, indent=1, sort_keys=False)
         fh.write("\n")
+    mask = os.umask(0)
+    os.umask(mask)
+    os.chmod(tmp, 0o666 & ~mask)  # mkstemp creates files 0o600
     os.replace(tmp, path)
 
 

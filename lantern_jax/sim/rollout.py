@@ -20,7 +20,14 @@ import jax
 import jax.numpy as jnp
 
 from lantern_jax.constants import DT
-from lantern_jax.sim.step import SimState, TickRecord, init_state, tick
+from lantern_jax.sim.step import (
+    SimState,
+    TickRecord,
+    from_carry,
+    init_state,
+    tick_carry,
+    to_carry,
+)
 from lantern_jax.world import World
 
 Array = jax.Array
@@ -55,12 +62,12 @@ def rollout(
     """
     temperature = jnp.asarray(temperature, jnp.float32)
 
-    def body(state, _):
-        new, rec = tick(act, params, state, temperature)
+    def body(carry, _):
+        new, rec = tick_carry(act, params, world, carry, temperature)
         return new, (rec if record else None)
 
-    final, recs = jax.lax.scan(body, init_state(world), None, length=num_ticks)
-    return final, recs
+    final, recs = jax.lax.scan(body, to_carry(init_state(world)), None, length=num_ticks)
+    return from_carry(world, final), recs
 
 
 def rollout_batch(
@@ -87,22 +94,22 @@ def rollout_batch(
     temperature = jnp.asarray(temperature, jnp.float32)
     n_chunks = -(-max_ticks // chunk)
 
-    def run_chunk(state: SimState) -> SimState:
-        def body(s, _):
-            return tick(act, params, s, temperature)[0], None
+    def run_chunk(world: World, carry):
+        def body(c, _):
+            return tick_carry(act, params, world, c, temperature)[0], None
 
-        return jax.lax.scan(body, state, None, length=chunk)[0]
+        return jax.lax.scan(body, carry, None, length=chunk)[0]
 
     batched_chunk = jax.vmap(run_chunk)
 
-    def cond(carry):
-        i, state = carry
-        return (i < n_chunks) & ~jnp.all(state.done)
+    def cond(loop):
+        i, carry = loop
+        return (i < n_chunks) & ~jnp.all(carry.done)
 
-    def body(carry):
-        i, state = carry
-        return i + 1, batched_chunk(state)
+    def body(loop):
+        i, carry = loop
+        return i + 1, batched_chunk(worlds, carry)
 
-    state0 = jax.vmap(init_state)(worlds)
-    _, final = jax.lax.while_loop(cond, body, (jnp.asarray(0, jnp.int32), state0))
-    return final
+    carry0 = jax.vmap(lambda w: to_carry(init_state(w)))(worlds)
+    _, final = jax.lax.while_loop(cond, body, (jnp.asarray(0, jnp.int32), carry0))
+    return jax.vmap(from_carry)(worlds, final)

@@ -67,7 +67,13 @@ class SimState:
 
 @struct.dataclass
 class TickRecord:
-    """What is kept per tick when full trajectories are recorded (for plots)."""
+    """What is kept per tick when full trajectories are recorded (for plots).
+
+    State fields (``t``, ego, actors, visibility) are those at the END of the tick; the policy
+    fields (``warning_active``, ``warning_pos``, ``waypoints``) are what the policy saw and
+    returned at the START of it.  After an execution has ended, records repeat its final state
+    (``done`` True) with the policy fields zeroed.
+    """
 
     t: Array  # () s
     ego_xy: Array  # (2,) m
@@ -83,6 +89,39 @@ class TickRecord:
     waypoints: Array  # (10, 2) m, ego frame
     light: Array  # () int32
     done: Array  # () bool
+
+
+@struct.dataclass
+class Carry:
+    """The part of :class:`SimState` that changes over time (the scan carry).
+
+    Static scenario data (map, route, lights, actor scripts, parameters) is closed over rather
+    than carried, so that freezing finished executions and the scan's loop state never copy it.
+    """
+
+    t: Array  # () s
+    tick: Array  # () int32
+    ego: Any  # EgoState
+    actors: Any  # Actors
+    protocol: Any  # ProtocolState
+    percept: Percept
+    telemetry: Telemetry
+    done: Array  # () bool
+    fault: Array  # () bool
+
+
+def to_carry(state: SimState) -> Carry:
+    """The dynamic part of a :class:`SimState`."""
+    w = state.world
+    return Carry(w.t, w.tick, w.ego, w.actors, w.protocol, state.percept, state.telemetry,
+                 state.done, state.fault)  # fmt: skip
+
+
+def from_carry(static: World, c: Carry) -> SimState:
+    """Re-attach the static world to a carry."""
+    world = static.replace(t=c.t, tick=c.tick, ego=c.ego, actors=c.actors, protocol=c.protocol)
+    return SimState(world=world, percept=c.percept, telemetry=c.telemetry, done=c.done,
+                    fault=c.fault)  # fmt: skip
 
 
 def init_state(world: World) -> SimState:
@@ -115,33 +154,57 @@ def _corridor_ahead(world: World, ego_arc: Array, extra_margin: float) -> tuple[
 
 
 def outside_lanes(world: World) -> Array:
-    """() bool: the ego centre is in no driving lane, or drives its lane the wrong way."""
-    ln, ego = world.lanes, world.ego
+    """() bool: the ego centre is in no lane (half width + 0.5 m), or drives its lane the wrong way.
 
-    def one(center, s, pv, width):
-        _, _, heading, dist = polyline.project(center, s, pv, ego.xy)
-        wrong = jnp.abs(geometry.wrap_angle(ego.yaw - heading)) > WRONG_WAY
+    Wrong way = heading more than 120 deg from the lane's direction (the leaderboard's junction
+    threshold, used everywhere here).
+    """
+    ln, ego = world.lanes, world.ego
+    heading = jnp.stack([jnp.cos(ego.yaw), jnp.sin(ego.yaw)])
+
+    def one(center, pv, width):
+        dist, direction = polyline.nearest_segment(center, pv, ego.xy)
+        norm = jnp.sqrt(jnp.maximum(jnp.sum(direction * direction), 1e-12))
+        wrong = jnp.sum(direction * heading) < jnp.cos(WRONG_WAY) * norm
         return (dist <= 0.5 * width + LANE_MARGIN) & ~wrong
 
-    inside = jax.vmap(one)(ln.center, ln.s, ln.point_valid, ln.width)
+    inside = jax.vmap(one)(ln.center, ln.point_valid, ln.width)
     return ~jnp.any(inside & ln.valid)
 
 
 def tick(
     act: Callable[[Any, Any], Array], params: Any, state: SimState, temperature: Array
 ) -> tuple[SimState, TickRecord]:
+    """Advance one execution by one tick (a :class:`SimState` wrapper of :func:`tick_carry`)."""
+    carry, rec = tick_carry(act, params, state.world, to_carry(state), temperature)
+    return from_carry(state.world, carry), rec
+
+
+def tick_carry(
+    act: Callable[[Any, Any], Array],
+    params: Any,
+    static: World,
+    carry: Carry,
+    temperature: Array,
+) -> tuple[Carry, TickRecord]:
     """Advance one execution by one tick (see the module docstring for the order).
 
     Args:
         act: the policy's ``act(params, obs) -> (10, 2)`` waypoints.
         params: the policy parameters.
-        state: the carry.
+        static: the execution's world (its static fields are used; the dynamic ones come from
+            ``carry``).
+        carry: the dynamic state.
         temperature: () soft-score temperature for the telemetry's smooth accumulators.
 
     Returns:
-        (new carry — identical to ``state`` when the execution had already ended, record).
+        (new carry — identical to ``carry`` when the execution had already ended, record).
     """
-    world, percept = state.world, state.percept
+    state = carry
+    world = static.replace(
+        t=carry.t, tick=carry.tick, ego=carry.ego, actors=carry.actors, protocol=carry.protocol
+    )
+    percept = carry.percept
     p = world.params
     obs = observe(world, percept)
     wps = act(params, obs)
@@ -184,8 +247,14 @@ def tick(
     world = world.replace(actors=actors, protocol=proto)
 
     new_percept = sense(world, percept.progress)
-    proto = protocol.advance_hazard(
-        proto, p, t_next, new_percept.visible[h] & actors.present[h], actors.s[h], ego.speed
+    hazard_visible = new_percept.visible[h] & actors.present[h]
+    proto = protocol.advance_hazard(proto, p, t_next, hazard_visible, actors.s[h], ego.speed)
+    first_warn = protocol.happened(proto.t_warn_point) & ~protocol.happened(
+        carry.protocol.t_warn_point
+    )
+    proto = proto.replace(
+        t_warn_on=protocol.warning_onset(proto, p),
+        hazard_visible_at_warn=jnp.where(first_warn, hazard_visible, proto.hazard_visible_at_warn),
     )
     cleared_now = protocol.happened(proto.t_clear) & p.despawn_on_clear
     actors = actors.replace(active=actors.active.at[h].set(actors.active[h] & ~cleared_now))
@@ -236,27 +305,33 @@ def tick(
         | (new_percept.dist_to_route >= SEVERE_DEVIATION)
         | (proto.ego_still_time >= STALL_END)
     )
-    new = SimState(
-        world=world,
+    new = Carry(
+        t=world.t,
+        tick=world.tick,
+        ego=world.ego,
+        actors=world.actors,
+        protocol=world.protocol,
         percept=new_percept,
         telemetry=tel,
         done=ended,
         fault=state.fault | fault,
     )
     new = jax.tree.map(lambda n, o: jnp.where(state.done, o, n), new, state)
+    # Records of ticks after the end repeat the frozen state (the run's last real tick).
+    live = ~state.done
     rec = TickRecord(
-        t=t_next,
-        ego_xy=ego.xy,
-        ego_yaw=ego.yaw,
-        ego_speed=ego.speed,
-        ego_accel=ego.accel,
-        actor_xy=a.xy,
-        actor_yaw=a.yaw,
-        actor_present=a.present,
-        visible=new_percept.visible & a.present,
-        warning_active=obs.warning_active,
-        warning_pos=obs.warning_pos,
-        waypoints=wps_safe,
+        t=new.t,
+        ego_xy=new.ego.xy,
+        ego_yaw=new.ego.yaw,
+        ego_speed=new.ego.speed,
+        ego_accel=new.ego.accel,
+        actor_xy=new.actors.xy,
+        actor_yaw=new.actors.yaw,
+        actor_present=new.actors.present,
+        visible=new.percept.visible & new.actors.present,
+        warning_active=obs.warning_active & live,
+        warning_pos=jnp.where(live, obs.warning_pos, 0.0),
+        waypoints=jnp.where(live, wps_safe, 0.0),
         light=light,
         done=new.done,
     )

@@ -1,0 +1,165 @@
+"""Bird's-eye views, condition timelines, animations and PNG output of recorded executions."""
+
+from __future__ import annotations
+
+import types
+import warnings
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from matplotlib.lines import Line2D
+from matplotlib.patches import Polygon, Rectangle
+from matplotlib.text import Text
+from PIL import Image
+
+from lantern_jax.policies.base import get_policy
+from lantern_jax.scenarios.families import build_pair, sample_params
+from lantern_jax.scenarios.warnings import render_warning
+from lantern_jax.sim.rollout import rollout
+from lantern_jax.viz import (
+    bev_plot,
+    num_valid_ticks,
+    save_animation,
+    save_figure,
+    timeline_plot,
+    warning_interval,
+)
+
+NUM_TICKS = 300
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.fixture(scope="module")
+def pe_runs():
+    """A PE pair rolled out with the cooperative policy in both conditions (one compilation)."""
+    world, _, _ = build_pair(sample_params("PE", np.random.default_rng(0), "clear_day"))
+    world_nw = world.replace(params=world.params.replace(warning_enabled=jnp.asarray(False)))
+    pol = get_policy("coop")
+    params = pol.init(jax.random.PRNGKey(0))
+    run = jax.jit(lambda w: rollout(w, pol.act, params, NUM_TICKS, record=True))
+    final_w, rec_w = run(world)
+    final_nw, rec_nw = run(world_nw)
+    return types.SimpleNamespace(
+        world=world,
+        world_nw=world_nw,
+        rec_w=jax.device_get(rec_w),
+        rec_nw=jax.device_get(rec_nw),
+        proto_w=jax.device_get(final_w.world.protocol),
+        proto_nw=jax.device_get(final_nw.world.protocol),
+    )
+
+
+def _assert_png(path, min_bytes=10_000):
+    data = path.read_bytes()
+    assert data[:8] == PNG_MAGIC
+    assert len(data) > min_bytes
+    with Image.open(path) as im:
+        im.verify()
+    with Image.open(path) as im:
+        assert im.format == "PNG" and min(im.size) >= 300
+
+
+def _actor_patches(ax):
+    return [p for p in ax.patches if isinstance(p, (Rectangle, Polygon))]
+
+
+def _norm(s: str) -> str:
+    return " ".join(s.split())
+
+
+def test_bev_with_active_warning(pe_runs, tmp_path):
+    rec, world = pe_runs.rec_w, pe_runs.world
+    active = np.nonzero(np.asarray(rec.warning_active[: num_valid_ticks(rec)]))[0]
+    assert active.size > 0, "the warning run never delivered a warning"
+    t = int(active[active.size // 2])
+    fig = bev_plot(world, rec, t)
+    ax = fig.axes[0]
+
+    expected = render_warning(int(world.params.text_id), rec.warning_pos[t])
+    texts = [_norm(x.get_text()) for x in fig.findobj(Text)]
+    assert expected in texts
+
+    present = np.asarray(rec.actor_present[t]) & np.asarray(world.actors.valid)
+    patches = _actor_patches(ax)
+    assert len(patches) == int(present.sum()) + 1
+    gids = sorted(p.get_gid() for p in patches)
+    assert gids == sorted(["ego"] + [f"actor:{a}" for a in np.nonzero(present)[0]])
+
+    # equal aspect, ego-centred window, time and speed in the title
+    x0, x1 = ax.get_xlim()
+    y0, y1 = ax.get_ylim()
+    assert x1 - x0 == pytest.approx(70.0) and y1 - y0 == pytest.approx(70.0)
+    assert 0.5 * (x0 + x1) == pytest.approx(float(rec.ego_xy[t, 0]), abs=1e-3)
+    assert ax.get_aspect() == 1.0
+    assert f"t = {float(rec.t[t]):.2f} s" in ax.get_title()
+
+    out = save_figure(fig, tmp_path / "nested" / "bev.png")
+    _assert_png(out)
+    assert [p.name for p in out.parent.iterdir()] == ["bev.png"]  # no temporary left behind
+
+
+def test_bev_redraw_on_given_axes(pe_runs):
+    rec, world = pe_runs.rec_w, pe_runs.world
+    fig = bev_plot(world, rec, 0)
+    ax = fig.axes[0]
+    fig2 = bev_plot(world, rec, NUM_TICKS - 1, ax=ax, show_rays=False, title="again")
+    assert fig2 is fig and len(fig.axes) == 1
+    present = np.asarray(rec.actor_present[NUM_TICKS - 1]) & np.asarray(world.actors.valid)
+    assert len(_actor_patches(ax)) == int(present.sum()) + 1
+    assert ax.get_title().startswith("again")
+    # no warning at the end of the run: no warning text box
+    assert not any(t.get_gid() == "warning" for t in ax.texts)
+    with pytest.raises(IndexError):
+        bev_plot(world, rec, NUM_TICKS)
+
+
+def test_timeline(pe_runs, tmp_path):
+    fig = timeline_plot(
+        pe_runs.rec_w, pe_runs.rec_nw, pe_runs.proto_w, pe_runs.proto_nw, title="PE coop"
+    )
+    assert len(fig.axes) == 2
+    ax_v, ax_a = fig.axes
+    for ax, kind in ((ax_v, "speed"), (ax_a, "accel")):
+        gids = {ln.get_gid() for ln in ax.lines}
+        assert {f"{kind}:warning", f"{kind}:nowarning"} <= gids
+        assert all(isinstance(ln, Line2D) for ln in ax.lines)
+    speed_w = next(ln for ln in ax_v.lines if ln.get_gid() == "speed:warning")
+    n = num_valid_ticks(pe_runs.rec_w)
+    np.testing.assert_allclose(speed_w.get_ydata(), np.asarray(pe_runs.rec_w.ego_speed[:n]))
+
+    for key, proto in (("warning", pe_runs.proto_w), ("nowarning", pe_runs.proto_nw)):
+        line = next(ln for ln in ax_v.lines if ln.get_gid() == f"t_event:{key}")
+        assert float(line.get_xdata()[0]) == pytest.approx(float(proto.t_event))
+    start, end = warning_interval(pe_runs.rec_w, pe_runs.proto_w)
+    assert start == pytest.approx(float(pe_runs.proto_w.t_warn_point))
+    assert end == pytest.approx(float(pe_runs.proto_w.t_warn_off))
+    assert warning_interval(pe_runs.rec_nw, pe_runs.proto_nw) is None
+    assert any(p.get_gid() == "warning_span" for p in ax_v.patches)
+    _assert_png(save_figure(fig, tmp_path / "timeline.png"))
+
+
+def test_gif(pe_runs, tmp_path):
+    out = save_animation(pe_runs.world, pe_runs.rec_w, tmp_path / "bev.gif", fps=10, stride=15)
+    assert out.exists() and out.stat().st_size > 10_000
+    with Image.open(out) as im:
+        assert im.format == "GIF"
+        assert im.n_frames >= 10
+    assert [p.name for p in tmp_path.iterdir()] == ["bev.gif"]
+
+
+def test_mp4_request(pe_runs, tmp_path):
+    short = jax.tree.map(lambda x: x[:12], pe_runs.rec_w)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        out = save_animation(pe_runs.world, short, tmp_path / "clip.mp4", stride=6)
+    assert out.exists() and out.suffix in (".mp4", ".gif")
+    assert out.stat().st_size > 1000
+
+
+def test_num_valid_ticks():
+    rec = types.SimpleNamespace(done=np.array([False, False, True, True]))
+    assert num_valid_ticks(rec) == 3
+    rec = types.SimpleNamespace(done=np.zeros(5, bool))
+    assert num_valid_ticks(rec) == 5
