@@ -1,0 +1,79 @@
+"""Whole-suite evaluation timing for one policy: compile, wall time after compile,
+scenario-ticks/s and peak memory.
+
+The timed call is exactly what ``evaluate`` runs: every pair of the suite under Route A with
+warning, Route A without warning and Route B (3 x 120 executions for ``lantern-v1``) in one
+jitted, vmapped rollout that stops when every execution has ended.
+
+Usage::
+
+    python benchmarks/bench_evaluate.py [--policy coop] [--suite lantern-v1] [--repeats 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import resource
+import time
+
+import jax
+import numpy as np
+
+from lantern_jax.evaluate import build_executions, compiled_rollout
+from lantern_jax.policies.base import get_policy
+from lantern_jax.scenarios.suite import load_suite
+
+
+def peak_rss_mb() -> float:
+    """Peak resident memory of this process, MB (Linux ru_maxrss is in kB)."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--policy", default="coop")
+    ap.add_argument("--suite", default="lantern-v1")
+    ap.add_argument("--repeats", type=int, default=3)
+    args = ap.parse_args()
+
+    suite = load_suite(args.suite)
+    t0 = time.perf_counter()
+    execs = build_executions(suite)
+    t_build = time.perf_counter() - t0
+    policy = get_policy(args.policy)
+    params = policy.init(jax.random.PRNGKey(0))
+    fn = compiled_rollout(policy.act, execs.max_ticks)
+
+    t0 = time.perf_counter()
+    exe = fn.lower(execs.worlds, params).compile()
+    t_compile = time.perf_counter() - t0
+    final = exe(execs.worlds, params)
+    jax.block_until_ready(final)
+    walls = []
+    for _ in range(args.repeats):
+        t0 = time.perf_counter()
+        final = exe(execs.worlds, params)
+        jax.block_until_ready(final)
+        walls.append(time.perf_counter() - t0)
+    wall = float(np.min(walls))
+    ticks = np.asarray(final.world.tick)
+    stepped = int(ticks.max())  # the batch advances in lockstep until its last execution ends
+    n = ticks.shape[0]
+
+    print(f"machine: {platform.machine()} {os.cpu_count()} cores, {platform.platform()}")
+    print(f"jax {jax.__version__} on {jax.default_backend()}")
+    print(f"suite {suite.suite_id}: {len(suite.pairs)} pairs, {n} executions, policy {args.policy}")
+    print(f"build worlds        {t_build:8.2f} s")
+    print(f"compile             {t_compile:8.2f} s")
+    print(f"wall after compile  {wall:8.2f} s  (best of {args.repeats}: "
+          f"{', '.join(f'{w:.2f}' for w in walls)})")  # fmt: skip
+    print(f"ticks stepped       {stepped:8d}   (horizon cap {execs.max_ticks})")
+    print(f"scenario-ticks/s    {n * stepped / wall:8,.0f}   (batch {n} x {stepped} ticks)")
+    print(f"useful ticks/s      {int(ticks.sum()) / wall:8,.0f}   (ticks before each execution ended)")
+    print(f"peak memory         {peak_rss_mb():8.0f} MB (process RSS)")
+
+
+if __name__ == "__main__":
+    main()

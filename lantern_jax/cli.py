@@ -1,0 +1,374 @@
+"""The ``lantern-jax`` command line.
+
+::
+
+    lantern-jax evaluate                 # built-in suite, reference policies expert, ego, coop
+    lantern-jax evaluate --policy coop --ablation late_onset --pairs-per-family 2 --out runs/x
+    lantern-jax suite --list             # pairs, suite hash, generation report
+    lantern-jax suite --verify           # regenerate lantern-v1 from its seed, compare hashes
+    lantern-jax suite --regenerate suite.json
+    lantern-jax policies
+    lantern-jax ablations
+
+Exit codes: 0 success, 1 failure (e.g. a suite that does not regenerate), 2 usage errors
+(unknown policy, ablation, suite or pair; malformed arguments).
+"""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+import time
+from collections.abc import Sequence
+
+REFERENCE_POLICIES = ("expert", "ego", "coop")
+
+ABLATION_DESCRIPTIONS = {
+    "none": "the standard protocol",
+    "late_onset": "warning delivered from the physical event on, not from the warning point",
+    "warning_beyond_termination": "warning held 10 s beyond its termination",
+    "no_anti_deadlock": "no anti-deadlock countdown: the event waits for the ego indefinitely",
+    "noisy_position": "Gaussian noise (sigma 2 m) on the grounded hazard position",
+    "held_out_paraphrase": "every warning text replaced by its held-out paraphrase",
+}
+
+
+class UsageError(Exception):
+    """A user error that ends the command with exit code 2."""
+
+
+def _stage(args: argparse.Namespace, msg: str) -> None:
+    if not getattr(args, "quiet", False):
+        print(f"[lantern-jax] {msg}", file=sys.stderr, flush=True)
+
+
+def suite_to_manifest(suite, suite_id: str | None = None) -> dict:
+    """A suite manifest dict (the format :func:`~lantern_jax.scenarios.suite.load_suite` reads)
+    of a loaded :class:`~lantern_jax.scenarios.suite.Suite` (e.g. a ``select``-ed part of one).
+
+    Args:
+        suite: the suite.
+        suite_id: id stored in the manifest (default: the suite's id).
+    """
+    return dict(
+        suite_id=suite_id or suite.suite_id,
+        format_version=1,
+        seed=suite.seed,
+        pairs=[
+            dict(
+                pair_id=p.pair_id,
+                family=p.family,
+                weather=p.weather,
+                sha256=p.sha256,
+                params=p.params,
+            )
+            for p in suite.pairs
+        ],
+        suite_sha256=suite.suite_sha256,
+        generation_report=suite.report,
+    )
+
+
+def resolve_policies(names: Sequence[str] | None) -> list[str]:
+    """Expand ``all`` and comma-separated lists; check every name against the registry.
+
+    Raises:
+        UsageError: naming the unknown policy and listing the known ones.
+    """
+    from lantern_jax.policies.base import get_policy, policy_names
+
+    out: list[str] = []
+    for item in names or ["all"]:
+        for name in (n.strip() for n in item.split(",")):
+            if not name:
+                continue
+            expanded = list(REFERENCE_POLICIES) if name == "all" else [name]
+            for n in expanded:
+                try:
+                    get_policy(n)
+                except KeyError:
+                    raise UsageError(
+                        f"unknown policy {n!r}; known policies: {', '.join(policy_names())} "
+                        f"(or 'all' = {', '.join(REFERENCE_POLICIES)})"
+                    ) from None
+                if n not in out:
+                    out.append(n)
+    if not out:
+        raise UsageError("no policy given")
+    return out
+
+
+def _load_suite(args: argparse.Namespace):
+    from lantern_jax.scenarios.suite import load_suite
+
+    try:
+        suite = load_suite(args.suite)
+    except FileNotFoundError as e:
+        raise UsageError(str(e).strip("'\"")) from None
+    except ValueError as e:
+        raise UsageError(f"invalid suite {args.suite!r}: {e}") from None
+    pairs = [p.strip() for item in getattr(args, "pairs", None) or [] for p in item.split(",")]
+    pairs = [p for p in pairs if p]
+    if pairs:
+        try:
+            suite = suite.select(pairs)
+        except KeyError as e:
+            raise UsageError(str(e).strip("'\"")) from None
+    n = getattr(args, "pairs_per_family", None)
+    if n is not None:
+        if n < 1:
+            raise UsageError(f"--pairs-per-family must be >= 1 (got {n})")
+        suite = suite.subset(n)
+    if len(suite) == 0:
+        raise UsageError(f"suite {suite.suite_id!r} has no pairs")
+    return suite
+
+
+# ---------------------------------------------------------------------------------------------
+# commands
+# ---------------------------------------------------------------------------------------------
+def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
+    """``lantern-jax evaluate``: run, print the tables, write the files."""
+    from lantern_jax.evaluate import ablation_names
+
+    policies = resolve_policies(args.policy)
+    if args.ablation not in ablation_names():
+        raise UsageError(
+            f"unknown ablation {args.ablation!r}; valid ablations: {', '.join(ablation_names())}"
+        )
+    _stage(args, f"loading suite {args.suite}")
+    suite = _load_suite(args)
+    _stage(
+        args,
+        f"suite {suite.suite_id}: {len(suite)} pairs (hash {suite.suite_sha256[:12]}); "
+        f"building {3 * len(suite)} executions per policy (ablation {args.ablation}); "
+        f"policies: {', '.join(policies)}",
+    )
+    from lantern_jax.evaluate import evaluate
+    from lantern_jax.report import (
+        format_decomposition,
+        format_family_table,
+        ordered_tables,
+        write_outputs,
+    )
+
+    t0 = time.perf_counter()
+    result = evaluate(policies, suite=suite, ablation=args.ablation, progress=not args.quiet)
+    for run in result.manifest["policies"]:
+        _stage(
+            args,
+            f"{run['name']}: compile {run['seconds_compile']:.1f} s, "
+            f"rollout {run['seconds_run']:.2f} s",
+        )
+    _stage(args, f"evaluation done in {time.perf_counter() - t0:.1f} s; writing {args.out}")
+    try:
+        files = write_outputs(
+            result,
+            args.out,
+            extra_manifest={"command": shlex.join(["lantern-jax", *argv])},
+        )
+    except OSError as e:
+        print(f"lantern-jax: error: cannot write results to {args.out}: {e}", file=sys.stderr)
+        return 1
+    m = result.manifest
+    fam, dec = ordered_tables(result)
+    print(
+        f"Per-family CUS  (suite {m['suite_id']}, {m['num_pairs']} pairs, "
+        f"ablation {m['ablation']}; warning gain = warning - no-warning)"
+    )
+    print(format_family_table(fam))
+    print()
+    print("CUS decomposition  (components: mean x 100; Gate Pass and gate failures: % of pairs)")
+    print(format_decomposition(dec))
+    print()
+    print(f"Wrote {len(files)} files:")
+    for path in files.values():
+        print(f"  {path}")
+    return 0
+
+
+def _print_suite(suite) -> None:
+    from tabulate import tabulate
+
+    from lantern_jax.constants import FAMILIES
+
+    rows = [
+        [
+            p.pair_id,
+            p.family,
+            p.weather,
+            f"{float(p.params.get('route_length', float('nan'))):.1f}",
+            p.sha256[:12],
+        ]
+        for p in suite.pairs
+    ]
+    print(
+        tabulate(
+            rows,
+            headers=["pair", "family", "weather", "route (m)", "sha256"],
+            disable_numparse=True,
+            colalign=("left", "left", "left", "right", "left"),
+        )
+    )
+    print()
+    counts = {f: sum(p.family == f for p in suite.pairs) for f in FAMILIES}
+    per_family = ", ".join(f"{f} {n}" for f, n in counts.items())
+    print(f"suite {suite.suite_id}: {len(suite)} pairs ({per_family})")
+    print(f"suite sha256: {suite.suite_sha256}")
+    print(f"seed: {suite.seed}")
+    rep = suite.report or {}
+    rate = rep.get("expert_pass_rate")
+    if rate:
+        tried = rep.get("dynamic_tried", {})
+        print("generation report: expert pass rate before filtering (candidates run)")
+        for f in FAMILIES:
+            if f in rate:
+                print(f"  {f:<4} {100.0 * float(rate[f]):5.1f} %  ({tried.get(f, '?')})")
+        rejected = rep.get("static_rejected")
+        if rejected:
+            print("  static rejects: " + ", ".join(f"{f} {rejected.get(f, 0)}" for f in FAMILIES))
+    else:
+        print("generation report: none in the manifest")
+
+
+def cmd_suite(args: argparse.Namespace, argv: Sequence[str]) -> int:
+    """``lantern-jax suite``: list, verify or regenerate a suite."""
+    del argv
+    from lantern_jax.scenarios.suite import (
+        DEFAULT_SEED,
+        generate_suite,
+        verify_regeneration,
+        write_manifest,
+    )
+
+    rc = 0
+    do_list = args.list or not (args.verify or args.regenerate)
+    if do_list:
+        _print_suite(_load_suite(args))
+    if args.regenerate:
+        seed = DEFAULT_SEED if args.seed is None else args.seed
+        _stage(args, f"generating a suite from seed {seed} (runs the expert on every candidate)")
+        manifest = generate_suite(seed, progress=not args.quiet)
+        write_manifest(manifest, args.regenerate)
+        print(f"wrote {args.regenerate}: {len(manifest['pairs'])} pairs, "
+              f"suite sha256 {manifest['suite_sha256']}")  # fmt: skip
+    if args.verify:
+        _load_suite(args)  # hash check of the manifest itself
+        _stage(args, f"regenerating {args.suite} from its seed and comparing hashes")
+        ok, msg = verify_regeneration(args.suite)
+        print(f"{'OK' if ok else 'MISMATCH'}: {args.suite}: {msg}")
+        rc = 0 if ok else 1
+    return rc
+
+
+def cmd_policies(args: argparse.Namespace, argv: Sequence[str]) -> int:
+    """``lantern-jax policies``: registered policies with descriptions."""
+    del args, argv
+    from lantern_jax.policies.base import get_policy, policy_names
+
+    rows = []
+    for name in policy_names():
+        p = get_policy(name)
+        flags = [f for f, on in (("privileged", p.privileged), ("warnings", p.uses_warning)) if on]
+        rows.append([name, ", ".join(flags) or "-", p.description])
+    from tabulate import tabulate
+
+    print(tabulate(rows, headers=["policy", "uses", "description"], disable_numparse=True))
+    return 0
+
+
+def cmd_ablations(args: argparse.Namespace, argv: Sequence[str]) -> int:
+    """``lantern-jax ablations``: the protocol ablations."""
+    del args, argv
+    from tabulate import tabulate
+
+    from lantern_jax.evaluate import ablation_names
+
+    rows = [[n, ABLATION_DESCRIPTIONS.get(n, "")] for n in ablation_names()]
+    print(tabulate(rows, headers=["ablation", "description"], disable_numparse=True))
+    return 0
+
+
+# ---------------------------------------------------------------------------------------------
+# parser
+# ---------------------------------------------------------------------------------------------
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``lantern-jax``."""
+    parser = argparse.ArgumentParser(
+        prog="lantern-jax",
+        description="LANTERN cooperative-warning driving benchmark (JAX, batched).",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+
+    ev = sub.add_parser(
+        "evaluate",
+        help="evaluate policies on a suite and write the result tables",
+        description="Evaluate policies on a suite (Route A with and without warning, Route B), "
+        "print the per-family CUS and decomposition tables and write them with the route-level "
+        "CSV, its schema and a reproducibility manifest.",
+    )
+    ev.add_argument(
+        "--policy",
+        action="append",
+        metavar="NAME",
+        help="policy name, comma-separated names or 'all' (= expert, ego, coop; the default); "
+        "may be repeated",
+    )
+    ev.add_argument("--ablation", default="none", metavar="NAME", help="protocol ablation")
+    ev.add_argument(
+        "--suite", default="lantern-v1", metavar="ID|PATH", help="suite id or manifest path"
+    )
+    ev.add_argument(
+        "--pairs-per-family", type=int, metavar="N", help="only the first N pairs of each family"
+    )
+    ev.add_argument("--pairs", action="append", metavar="ID[,ID...]", help="only these pair ids")
+    ev.add_argument("--out", default="results", metavar="DIR", help="output folder")
+    ev.add_argument("--quiet", action="store_true", help="no progress bar or stage lines")
+    ev.set_defaults(func=cmd_evaluate)
+
+    su = sub.add_parser(
+        "suite",
+        help="list, verify or regenerate a suite",
+        description="Inspect a suite manifest (default: list its pairs), check that it "
+        "regenerates from its seed, or generate a fresh manifest.",
+    )
+    su.add_argument("--list", action="store_true", help="list pairs, hash and generation report")
+    su.add_argument(
+        "--verify", action="store_true", help="regenerate from the seed and compare every hash"
+    )
+    su.add_argument("--regenerate", metavar="PATH", help="write a freshly generated manifest")
+    su.add_argument("--seed", type=int, help="generation seed for --regenerate")
+    su.add_argument(
+        "--suite", default="lantern-v1", metavar="ID|PATH", help="suite id or manifest path"
+    )
+    su.add_argument("--quiet", action="store_true", help="no stage lines")
+    su.set_defaults(func=cmd_suite)
+
+    po = sub.add_parser("policies", help="list registered policies")
+    po.set_defaults(func=cmd_policies)
+    ab = sub.add_parser("ablations", help="list protocol ablations")
+    ab.set_defaults(func=cmd_ablations)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; returns the exit code."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as e:  # --help, or an argparse usage error (already printed)
+        return e.code if isinstance(e.code, int) else (0 if e.code is None else 2)
+    try:
+        return args.func(args, argv)
+    except UsageError as e:
+        print(f"lantern-jax {args.command}: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("lantern-jax: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

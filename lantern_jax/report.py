@@ -1,0 +1,293 @@
+"""Tables and files of an evaluation (DESIGN §9).
+
+* :func:`format_family_table` / :func:`format_decomposition` render the per-family CUS table
+  (with each model's paired warning gain) and the CUS decomposition for the terminal (or, with
+  ``tablefmt="github"``, as Markdown).
+* :func:`write_outputs` writes every file of an evaluation atomically into one folder:
+
+  ==================================  =========================================================
+  ``route_level_results.csv``         one row per (model, condition, pair), schema order
+  ``route_level_results.schema.json`` units, dtypes and missing-value rules of that CSV
+  ``family_cus.csv`` / ``.md``        per-family CUS and Overall, warning-gain rows included
+  ``decomposition.csv`` / ``.md``     components, Gate Pass and per-gate failure rates (%)
+  ``reproducibility_manifest.json``   suite hash, seeds, policy parameter hashes, package
+                                      versions, ablation, and the SHA-256 of every file above
+  ==================================  =========================================================
+
+CSV and Markdown files depend only on the results (fixed float format, no timestamps), so the
+same inputs give byte-identical files.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import tempfile
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import pandas as pd
+from tabulate import tabulate
+
+from lantern_jax.constants import FAMILIES
+from lantern_jax.scoring.aggregate import DECOMPOSITION_COLUMNS
+from lantern_jax.scoring.table import schema_path_for, write_route_table
+
+if TYPE_CHECKING:
+    from lantern_jax.evaluate import EvalResult
+
+ROUTE_CSV = "route_level_results.csv"
+FAMILY_CSV = "family_cus.csv"
+DECOMPOSITION_CSV = "decomposition.csv"
+FAMILY_MD = "family_cus.md"
+DECOMPOSITION_MD = "decomposition.md"
+MANIFEST_JSON = "reproducibility_manifest.json"
+
+#: Every file :func:`write_outputs` writes, in writing order.
+OUTPUT_FILES = (
+    ROUTE_CSV,
+    schema_path_for(ROUTE_CSV).name,
+    FAMILY_CSV,
+    DECOMPOSITION_CSV,
+    FAMILY_MD,
+    DECOMPOSITION_MD,
+    MANIFEST_JSON,
+)
+
+FAMILY_COLUMNS = (*FAMILIES, "Overall")
+GAIN_CONDITION = "warning gain"
+CONDITION_ORDER = ("warning", "no-warning", GAIN_CONDITION)
+CSV_FLOAT_FORMAT = "%.6f"
+MISSING = "-"
+
+
+# ---------------------------------------------------------------------------------------------
+# terminal / Markdown tables
+# ---------------------------------------------------------------------------------------------
+def _fmt(value: Any, signed: bool = False) -> str:
+    if value is None or (isinstance(value, float | np.floating) and math.isnan(value)):
+        return MISSING
+    v = round(float(value), 1) + 0.0  # + 0.0 turns -0.0 into 0.0
+    return f"{v:+.1f}" if signed else f"{v:.1f}"
+
+
+def _with_keys(df: pd.DataFrame) -> pd.DataFrame:
+    """``df`` with ``model`` and ``condition`` as columns (they may be the index)."""
+    if "model" not in df.columns or "condition" not in df.columns:
+        df = df.reset_index()
+    missing = [c for c in ("model", "condition") if c not in df.columns]
+    if missing:
+        raise ValueError(f"table: missing column(s) {missing}")
+    return df
+
+
+def order_rows(df: pd.DataFrame, models: list[str] | None = None) -> pd.DataFrame:
+    """Rows grouped by model (``models`` order, else first appearance), conditions in the order
+    warning, no-warning, warning gain, then any others alphabetically."""
+    df = _with_keys(df)
+    if models is None:
+        models = list(dict.fromkeys(df["model"]))
+    models = [*models, *sorted(set(df["model"]) - set(models))]
+    m_rank = {m: i for i, m in enumerate(models)}
+    others = sorted(set(df["condition"]) - set(CONDITION_ORDER))
+    c_rank = {c: i for i, c in enumerate((*CONDITION_ORDER, *others))}
+    if len(df) == 0:
+        return df.reset_index(drop=True)
+    pairs = zip(df["model"], df["condition"], strict=True)
+    key = np.asarray([(m_rank[m], c_rank[c]) for m, c in pairs])
+    order = np.lexsort((key[:, 1], key[:, 0]))
+    return df.iloc[order].reset_index(drop=True)
+
+
+def ordered_tables(result: EvalResult) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """The family table and the decomposition of ``result`` with models in evaluation order and
+    conditions as in :func:`order_rows` (the order of the printed and written tables)."""
+    models = list(dict.fromkeys(result.route_table["model"]))
+    fam = order_rows(result.family_table, models)[["model", "condition", *FAMILY_COLUMNS]]
+    dec = order_rows(result.decomposition, models)[["model", "condition", *DECOMPOSITION_COLUMNS]]
+    return fam, dec
+
+
+def _label(model: str, condition: str) -> str:
+    return f"{model} ({condition})"
+
+
+def format_family_table(df: pd.DataFrame, tablefmt: str = "simple") -> str:
+    """Per-family CUS table as text.
+
+    Args:
+        df: :attr:`EvalResult.family_table` (columns ``model, condition, PE, VC, OR, LWW, RWW,
+            RTY, Overall``; CUS points 0..100).
+        tablefmt: a tabulate format (``"simple"`` for the terminal, ``"github"`` for Markdown).
+
+    Returns:
+        One row per ``model (condition)``, one decimal; ``warning gain`` rows carry a sign;
+        ``-`` marks a family without pairs.
+    """
+    df = _with_keys(df)
+    missing = [c for c in FAMILY_COLUMNS if c not in df.columns]
+    if missing:
+        raise ValueError(f"family table: missing column(s) {missing}")
+    rows = []
+    for r in df.itertuples(index=False):
+        rec = dict(zip(df.columns, r, strict=True))
+        signed = rec["condition"] == GAIN_CONDITION
+        rows.append(
+            [_label(rec["model"], rec["condition"])]
+            + [_fmt(rec[c], signed) for c in FAMILY_COLUMNS]
+        )
+    return tabulate(
+        rows,
+        headers=["Model (condition)", *FAMILY_COLUMNS],
+        tablefmt=tablefmt,
+        disable_numparse=True,
+        colalign=("left", *["right"] * len(FAMILY_COLUMNS)),
+    )
+
+
+def format_decomposition(df: pd.DataFrame, tablefmt: str = "simple") -> str:
+    """CUS decomposition table as text.
+
+    Args:
+        df: :attr:`EvalResult.decomposition` (``model, condition`` as columns or index, then
+            ``A-Prog. TTC Clear. Ant. Rec. B-Prog.`` (means x 100), ``Gate Pass`` (%) and the
+            failure rates ``Coll.-A RD-A LC-A Rule-A Block-A False Brake-B`` (%)).
+        tablefmt: a tabulate format.
+
+    Returns:
+        One row per ``model (condition)`` (warning first), one decimal; ``-`` marks a component
+        that no pair has.
+    """
+    df = order_rows(df)
+    missing = [c for c in DECOMPOSITION_COLUMNS if c not in df.columns]
+    if missing:
+        raise ValueError(f"decomposition table: missing column(s) {missing}")
+    rows = [
+        [_label(m, c)] + [_fmt(v) for v in vals]
+        for m, c, *vals in df[["model", "condition", *DECOMPOSITION_COLUMNS]].itertuples(
+            index=False
+        )
+    ]
+    return tabulate(
+        rows,
+        headers=["Model (condition)", *DECOMPOSITION_COLUMNS],
+        tablefmt=tablefmt,
+        disable_numparse=True,
+        colalign=("left", *["right"] * len(DECOMPOSITION_COLUMNS)),
+    )
+
+
+# ---------------------------------------------------------------------------------------------
+# files
+# ---------------------------------------------------------------------------------------------
+def _atomic_write_bytes(path: Path, data: bytes) -> None:
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+        mask = os.umask(0)
+        os.umask(mask)
+        os.chmod(tmp, 0o666 & ~mask)  # mkstemp creates files 0o600
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def _csv_bytes(df: pd.DataFrame) -> bytes:
+    df = df.copy()
+    for c in df.columns:
+        if pd.api.types.is_float_dtype(df[c]):
+            df[c] = df[c] + 0.0  # no "-0.000000"
+    return df.to_csv(index=False, float_format=CSV_FLOAT_FORMAT, lineterminator="\n").encode()
+
+
+def _jsonable(x: Any) -> Any:
+    if isinstance(x, np.generic):
+        return x.item()
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    if isinstance(x, Path):
+        return str(x)
+    raise TypeError(f"manifest: value of type {type(x).__name__} is not JSON-serialisable")
+
+
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def _markdown(title: str, note: str, table: str) -> bytes:
+    return f"# {title}\n\n{note}\n\n{table}\n".encode()
+
+
+def write_outputs(
+    result: EvalResult, out_dir: str | os.PathLike, extra_manifest: dict | None = None
+) -> dict[str, Path]:
+    """Write every file of an evaluation (see the module docstring) atomically.
+
+    Args:
+        result: from :func:`lantern_jax.evaluate.evaluate`.
+        out_dir: output folder (created if needed; files of the same names are replaced).
+        extra_manifest: more entries for the reproducibility manifest (e.g. the command line).
+
+    Returns:
+        File name -> path, for every file written (:data:`OUTPUT_FILES`).
+
+    Raises:
+        ValueError: when the route-level table does not satisfy its schema.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    written: dict[str, Path] = {}
+
+    route = write_route_table(result.route_table, out / ROUTE_CSV)
+    written[ROUTE_CSV] = route
+    schema = schema_path_for(route)
+    written[schema.name] = schema
+
+    fam, dec = ordered_tables(result)
+    for name, df in ((FAMILY_CSV, fam), (DECOMPOSITION_CSV, dec)):
+        _atomic_write_bytes(out / name, _csv_bytes(df))
+        written[name] = out / name
+
+    m = result.manifest
+    where = (
+        f"Suite `{m.get('suite_id', '?')}` ({m.get('num_pairs', '?')} pairs), "
+        f"ablation `{m.get('ablation', 'none')}`."
+    )
+    _atomic_write_bytes(
+        out / FAMILY_MD,
+        _markdown(
+            "Per-family CUS",
+            f"{where} Mean CUS (0-100) per family; Overall is the macro-average over families. "
+            "`warning gain` = warning - no-warning.",
+            format_family_table(fam, tablefmt="github"),
+        ),
+    )
+    written[FAMILY_MD] = out / FAMILY_MD
+    _atomic_write_bytes(
+        out / DECOMPOSITION_MD,
+        _markdown(
+            "CUS decomposition",
+            f"{where} Components are means x 100 over available pairs; Gate Pass and the "
+            "gate columns (-A: Route A, -B: Route B) are percentages of pairs.",
+            format_decomposition(dec, tablefmt="github"),
+        ),
+    )
+    written[DECOMPOSITION_MD] = out / DECOMPOSITION_MD
+
+    manifest = dict(result.manifest)
+    manifest.update(extra_manifest or {})
+    manifest["files"] = [
+        dict(name=name, sha256=_sha256(p), bytes=p.stat().st_size) for name, p in written.items()
+    ]
+    text = json.dumps(manifest, indent=2, default=_jsonable, allow_nan=False) + "\n"
+    _atomic_write_bytes(out / MANIFEST_JSON, text.encode())
+    written[MANIFEST_JSON] = out / MANIFEST_JSON
+    return written

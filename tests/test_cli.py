@@ -1,0 +1,205 @@
+"""The ``lantern-jax`` command line on a two-pair suite (one PE pair, one LWW pair).
+
+The evaluation batch has the same shape as the one in ``test_evaluate.py``, so in one pytest
+process both modules share one compiled rollout.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import io
+import json
+import subprocess
+import sys
+import types
+
+import jax
+import pandas as pd
+import pytest
+
+from lantern_jax import cli
+from lantern_jax.constants import FAMILIES
+from lantern_jax.evaluate import ablation_names, params_hash
+from lantern_jax.policies.base import get_policy, policy_names
+from lantern_jax.report import OUTPUT_FILES
+from lantern_jax.scenarios.suite import load_suite, write_manifest
+from lantern_jax.scoring.aggregate import DECOMPOSITION_COLUMNS
+from lantern_jax.scoring.table import read_route_table, schema_columns, validate_route_table
+
+PAIRS = ["pe_0001", "lww_0001"]
+
+
+def run_cli(argv: list[str]) -> types.SimpleNamespace:
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        rc = cli.main(argv)
+    return types.SimpleNamespace(rc=rc, out=out.getvalue(), err=err.getvalue())
+
+
+@pytest.fixture(scope="module")
+def manifest_path(tmp_path_factory):
+    suite = load_suite().select(PAIRS)
+    path = tmp_path_factory.mktemp("suite") / "two-pairs.json"
+    write_manifest(cli.suite_to_manifest(suite, "two-pairs"), path)
+    return path
+
+
+@pytest.fixture(scope="module")
+def evaluated(manifest_path, tmp_path_factory):
+    out_dir = tmp_path_factory.mktemp("results")
+    argv = ["evaluate", "--policy", "coop", "--suite", str(manifest_path)]
+    argv += ["--pairs-per-family", "1", "--out", str(out_dir)]
+    res = run_cli(argv)
+    res.out_dir = out_dir
+    return res
+
+
+def test_evaluate_exits_zero_and_writes_every_file(evaluated):
+    assert evaluated.rc == 0, evaluated.err
+    for name in OUTPUT_FILES:
+        assert (evaluated.out_dir / name).is_file(), name
+
+
+def test_route_csv(evaluated):
+    path = evaluated.out_dir / "route_level_results.csv"
+    header = path.read_text().splitlines()[0].split(",")
+    assert header == [c for c, _ in schema_columns()]
+    df = validate_route_table(read_route_table(path))
+    assert len(df) == 2 * 2
+    assert set(zip(df["condition"], df["pair_id"], strict=True)) == {
+        (c, p) for c in ("warning", "no-warning") for p in PAIRS
+    }
+    assert set(df["model"]) == {"coop"}
+    schema = json.loads((evaluated.out_dir / "route_level_results.schema.json").read_text())
+    assert [c["name"] for c in schema["columns"]] == header
+
+
+def test_family_and_decomposition_csv(evaluated):
+    fam = pd.read_csv(evaluated.out_dir / "family_cus.csv")
+    assert list(fam.columns) == ["model", "condition", *FAMILIES, "Overall"]
+    assert list(fam["condition"]) == ["warning", "no-warning", "warning gain"]
+    gain = fam.iloc[2]
+    assert gain["PE"] == pytest.approx(fam.iloc[0]["PE"] - fam.iloc[1]["PE"], abs=2e-6)
+    dec = pd.read_csv(evaluated.out_dir / "decomposition.csv")
+    assert list(dec.columns) == ["model", "condition", *DECOMPOSITION_COLUMNS]
+    assert list(dec["condition"]) == ["warning", "no-warning"]
+    md = (evaluated.out_dir / "family_cus.md").read_text()
+    assert "| Model (condition)" in md and "coop (warning gain)" in md
+
+
+def test_manifest(evaluated, manifest_path):
+    m = json.loads((evaluated.out_dir / "reproducibility_manifest.json").read_text())
+    suite = load_suite(manifest_path)
+    assert m["suite_sha256"] == suite.suite_sha256
+    assert m["suite_id"].startswith("two-pairs")
+    assert m["ablation"] == "none"
+    assert {"jax", "jaxlib", "numpy", "pandas", "python"} <= set(m["packages"])
+    coop = get_policy("coop")
+    assert m["policies"][0]["name"] == "coop"
+    assert m["policies"][0]["params_sha256"] == params_hash(coop.init(jax.random.PRNGKey(0)))
+    assert m["command"].startswith("lantern-jax evaluate --policy coop")
+    listed = {f["name"]: f["sha256"] for f in m["files"]}
+    assert set(listed) == set(OUTPUT_FILES) - {"reproducibility_manifest.json"}
+    for name, digest in listed.items():
+        assert hashlib.sha256((evaluated.out_dir / name).read_bytes()).hexdigest() == digest
+
+
+def test_printed_tables(evaluated):
+    out = evaluated.out
+    for word in ("Model (condition)", *FAMILIES, "Overall", *DECOMPOSITION_COLUMNS):
+        assert word in out, word
+    assert "coop (warning gain)" in out and "coop (no-warning)" in out
+    for name in OUTPUT_FILES:
+        assert name in out
+    assert "[lantern-jax] loading suite" in evaluated.err
+
+
+def test_pairs_option_gives_the_same_rows(evaluated, tmp_path):
+    res = run_cli(
+        ["evaluate", "--policy", "coop", "--pairs", ",".join(PAIRS), "--out", str(tmp_path)]
+        + ["--quiet"]
+    )
+    assert res.rc == 0, res.err
+    assert "[lantern-jax]" not in res.err
+    name = "route_level_results.csv"
+    assert (tmp_path / name).read_bytes() == (evaluated.out_dir / name).read_bytes()
+
+
+def test_unknown_policy_exits_2_listing_names(capsys):
+    assert cli.main(["evaluate", "--policy", "nosuch"]) == 2
+    err = capsys.readouterr().err
+    assert "nosuch" in err
+    for name in policy_names():
+        assert name in err
+
+
+def test_unknown_ablation_exits_2_listing_names(capsys):
+    assert cli.main(["evaluate", "--policy", "coop", "--ablation", "nosuch"]) == 2
+    err = capsys.readouterr().err
+    assert "nosuch" in err
+    for name in ablation_names():
+        assert name in err
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["evaluate", "--pairs", "xx_0001"],
+        ["evaluate", "--pairs-per-family", "0"],
+        ["evaluate", "--suite", "no-such-suite"],
+        ["evaluate", "--bogus"],
+        [],
+    ],
+)
+def test_usage_errors_exit_2(argv, capsys):
+    assert cli.main(argv) == 2
+    assert capsys.readouterr().err
+
+
+def test_suite_list(capsys):
+    suite = load_suite()
+    assert cli.main(["suite", "--list"]) == 0
+    out = capsys.readouterr().out
+    assert suite.suite_sha256 in out
+    assert "expert pass rate" in out
+    for p in suite.pairs:
+        assert p.pair_id in out and p.sha256[:12] in out
+
+
+def test_suite_list_of_a_manifest(manifest_path, capsys):
+    assert cli.main(["suite", "--suite", str(manifest_path)]) == 0
+    out = capsys.readouterr().out
+    assert "two-pairs: 2 pairs" in out
+    assert all(p in out for p in PAIRS)
+
+
+def test_policies_and_ablations(capsys):
+    assert cli.main(["policies"]) == 0
+    out = capsys.readouterr().out
+    for name in policy_names():
+        assert name in out
+    assert cli.main(["ablations"]) == 0
+    out = capsys.readouterr().out
+    for name in ablation_names():
+        assert name in out
+
+
+def test_python_dash_m():
+    res = subprocess.run(
+        [sys.executable, "-m", "lantern_jax", "ablations"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert res.returncode == 0, res.stderr
+    assert "late_onset" in res.stdout
+
+
+@pytest.mark.slow
+def test_suite_regenerates(tmp_path, capsys):
+    path = tmp_path / "fresh.json"
+    assert cli.main(["suite", "--regenerate", str(path), "--verify", "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "OK: lantern-v1" in out
+    assert load_suite(path).suite_sha256 == load_suite().suite_sha256

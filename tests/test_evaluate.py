@@ -1,0 +1,280 @@
+"""The one-call evaluator: batch invariance, determinism, reference-policy invariants, policy
+output failures, ablations.
+
+Every test runs on a two-pair suite (one PE pair, one LWW pair) or on one of its pairs alone.
+The reference policies share one act function, so ``expert``, ``ego`` and ``coop`` and every
+ablation reuse one compiled rollout per batch shape; module-scoped fixtures share the runs.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pandas as pd
+import pytest
+
+from lantern_jax.constants import FAMILIES
+from lantern_jax.evaluate import (
+    CONDITIONS,
+    ablation_names,
+    build_executions,
+    evaluate,
+    params_hash,
+)
+from lantern_jax.policies.base import Policy, get_policy
+from lantern_jax.policies.reference import reference_act
+from lantern_jax.report import OUTPUT_FILES, write_outputs
+from lantern_jax.scenarios.suite import load_suite
+from lantern_jax.scenarios.warnings import paraphrase_text_id
+from lantern_jax.scoring.table import schema_columns, validate_route_table
+
+PAIRS = ["pe_0001", "lww_0001"]  # v_ref 8.45 m/s and 6.29 m/s
+ALONE = "lww_0001"  # shorter timeout than pe_0001: alone it runs a shorter horizon
+V_SPLIT = 7.5  # m/s, between the two pairs' reference speeds
+KEYS = ["model", "condition", "pair_id"]
+
+
+@pytest.fixture(scope="module")
+def shipped():
+    return load_suite()
+
+
+@pytest.fixture(scope="module")
+def suite2(shipped):
+    return shipped.select(PAIRS)
+
+
+@pytest.fixture(scope="module")
+def base(suite2):
+    """The three reference policies on the two-pair suite (one compile)."""
+    return evaluate(["expert", "ego", "coop"], suite=suite2, progress=False)
+
+
+def rows(df: pd.DataFrame, model: str | None = None, condition: str | None = None, drop=()):
+    """Rows of a route table (optionally one model / condition) sorted by pair, keys dropped
+    where asked, index reset."""
+    sel = df
+    if model is not None:
+        sel = sel[sel["model"] == model]
+    if condition is not None:
+        sel = sel[sel["condition"] == condition]
+    return sel.sort_values("pair_id").drop(columns=list(drop)).reset_index(drop=True)
+
+
+# ---------------------------------------------------------------------------------------------
+# basic shape of the result
+# ---------------------------------------------------------------------------------------------
+def test_result_tables(base, suite2):
+    rt = base.route_table
+    validate_route_table(rt)
+    assert list(rt.columns) == [c for c, _ in schema_columns()]
+    assert len(rt) == 3 * len(CONDITIONS) * len(PAIRS)
+    assert list(dict.fromkeys(rt["model"])) == ["expert", "ego", "coop"]
+    ft = base.family_table
+    assert list(ft.columns) == ["model", "condition", *FAMILIES, "Overall"]
+    assert len(ft) == 3 * 3  # warning, no-warning, warning gain per model
+    # Families without pairs are NaN and left out of Overall.
+    present = ["PE", "LWW"]
+    absent = [f for f in FAMILIES if f not in present]
+    assert ft[absent].isna().all().all()
+    np.testing.assert_allclose(ft["Overall"], ft[present].mean(axis=1), rtol=0, atol=1e-9)
+    assert len(base.decomposition) == 3 * len(CONDITIONS)
+    m = base.manifest
+    assert m["suite_sha256"] == suite2.suite_sha256
+    assert m["num_pairs"] == 2 and m["ablation"] == "none"
+    assert m["executions_per_policy"] == 6
+    coop = get_policy("coop")
+    by_name = {p["name"]: p for p in m["policies"]}
+    assert by_name["coop"]["params_sha256"] == params_hash(coop.init(jax.random.PRNGKey(0)))
+    assert {"jax", "jaxlib", "numpy", "python"} <= set(m["packages"])
+
+
+# ---------------------------------------------------------------------------------------------
+# (a) batch invariance
+# ---------------------------------------------------------------------------------------------
+def test_pair_alone_equals_pair_in_suite(base, shipped):
+    alone = evaluate(["coop"], suite=shipped.select([ALONE]), progress=False)
+    # Alone, the batch is smaller and its horizon shorter; the pair's rows must not change.
+    assert alone.manifest["max_ticks"] < base.manifest["max_ticks"]
+    got = rows(alone.route_table, "coop")
+    want = rows(base.route_table[base.route_table["pair_id"] == ALONE], "coop")
+    assert len(got) == len(CONDITIONS)
+    pd.testing.assert_frame_equal(got, want, check_exact=True)  # NaN == NaN here
+
+
+# ---------------------------------------------------------------------------------------------
+# (b) determinism
+# ---------------------------------------------------------------------------------------------
+def test_same_inputs_give_identical_files(base, suite2, tmp_path):
+    r1 = evaluate(["coop"], suite=suite2, progress=False)
+    r2 = evaluate(["coop"], suite=suite2, progress=False)
+    coop_rows = base.route_table[base.route_table["model"] == "coop"].reset_index(drop=True)
+    pd.testing.assert_frame_equal(r1.route_table, coop_rows, check_exact=True)
+    f1 = write_outputs(r1, tmp_path / "one")
+    f2 = write_outputs(r2, tmp_path / "two")
+    assert list(f1) == list(OUTPUT_FILES) == list(f2)
+    for name in OUTPUT_FILES:
+        if name.endswith((".csv", ".md")) or name.endswith(".schema.json"):
+            assert f1[name].read_bytes() == f2[name].read_bytes(), name
+
+
+# ---------------------------------------------------------------------------------------------
+# (c) policies that ignore warnings gain nothing from them
+# ---------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("model", ["ego", "expert"])
+def test_warning_blind_policies_have_zero_gain(base, model):
+    ft = base.family_table
+    gain = ft[(ft["model"] == model) & (ft["condition"] == "warning gain")]
+    assert len(gain) == 1
+    values = gain[["PE", "LWW", "Overall"]].to_numpy(float)
+    assert np.all(values == 0.0), values
+    # Their Route A executions with and without warning are identical.
+    differ = ["condition", "t_warn_on_s"]
+    warned = rows(base.route_table, model, "warning")
+    silent = rows(base.route_table, model, "no-warning")
+    pd.testing.assert_frame_equal(
+        warned.drop(columns=differ), silent.drop(columns=differ), check_exact=True
+    )
+    assert warned["t_warn_on_s"].notna().all() and silent["t_warn_on_s"].isna().all()
+
+
+def test_coop_gains_from_warnings(base):
+    ft = base.family_table
+    gain = ft[(ft["model"] == "coop") & (ft["condition"] == "warning gain")]
+    assert float(gain["Overall"].iloc[0]) > 0.0
+
+
+# ---------------------------------------------------------------------------------------------
+# (d), (e) malformed policy outputs
+# ---------------------------------------------------------------------------------------------
+def test_wrong_output_shape_is_a_clear_error(shipped):
+    bad = Policy("bad", lambda key: jnp.zeros(()), lambda params, obs: jnp.zeros((5, 2)))
+    with pytest.raises(ValueError, match=r"'bad'.*\(5, 2\).*expected .*\(10, 2\)"):
+        evaluate([bad], suite=shipped.select([ALONE]), progress=False)
+
+
+def test_nan_waypoints_are_recorded_failures(base, suite2):
+    """NaN waypoints in one execution of the batch fail that row's block gate (CUS 0); every
+    other row equals the run of the intact policy."""
+    v_ref = {p.pair_id: p.params["v_ref"] for p in suite2.pairs}
+    assert v_ref["pe_0001"] > V_SPLIT > v_ref["lww_0001"]
+    coop = get_policy("coop")
+
+    def act(params, obs):
+        wps = reference_act(params, obs)
+        return jnp.where(obs.warning_active & (obs.v_ref > V_SPLIT), jnp.nan, wps)
+
+    nan_policy = Policy("coop-nan", coop.init, act)
+    r = evaluate([nan_policy], suite=suite2, progress=False)
+    validate_route_table(r.route_table)
+    got = r.route_table.set_index(["condition", "pair_id"]).drop(columns="model")
+    want = (
+        base.route_table[base.route_table["model"] == "coop"]
+        .set_index(["condition", "pair_id"])
+        .drop(columns="model")
+    )
+    hit = ("warning", "pe_0001")
+    row = got.loc[hit]
+    assert row["controller_fault"] == 1
+    assert row["gate_block"] == 0
+    assert row["CUS"] == 0.0
+    assert want.loc[hit, "controller_fault"] == 0 and want.loc[hit, "CUS"] > 0
+    others = [k for k in want.index if k != hit]
+    assert len(others) == 3
+    pd.testing.assert_frame_equal(got.loc[others], want.loc[others], check_exact=True)
+    assert not r.family_table[["PE", "LWW", "Overall"]].isna().any().any()
+
+
+# ---------------------------------------------------------------------------------------------
+# (f), (g) ablations
+# ---------------------------------------------------------------------------------------------
+def test_unknown_ablation_lists_valid_ones(suite2):
+    with pytest.raises(ValueError, match="unknown ablation 'nope'.*late_onset.*no_anti_deadlock"):
+        evaluate(["coop"], suite=suite2, ablation="nope", progress=False)
+    with pytest.raises(ValueError, match="held_out_paraphrase"):
+        build_executions(suite2, "nope")
+
+
+@pytest.fixture(scope="module")
+def ablated(base, suite2):
+    """coop under every ablation on the two-pair suite (shares the compile of ``base``)."""
+    out = {}
+    for name in ablation_names():
+        if name != "none":
+            out[name] = evaluate(["coop"], suite=suite2, ablation=name, progress=False)
+    return out
+
+
+def _route_a_params(suite, ablation):
+    """Scenario parameters of every execution (``[A warning | A no-warning | B]`` x pairs) and
+    the number of pairs; ablations change the Route A executions."""
+    ex = build_executions(suite, ablation)
+    return ex.worlds.params, ex.num_pairs
+
+
+def test_ablations_are_recorded_and_valid(ablated):
+    assert set(ablated) == set(ablation_names()) - {"none"}
+    for name, r in ablated.items():
+        assert r.manifest["ablation"] == name
+        validate_route_table(r.route_table)
+
+
+def test_late_onset(base, ablated):
+    rt = ablated["late_onset"].route_table
+    warned = rows(rt, "coop", "warning")
+    np.testing.assert_array_equal(warned["t_warn_on_s"], warned["t_event_s"])
+    base_warned = rows(base.route_table, "coop", "warning")
+    assert (base_warned["t_warn_on_s"] < base_warned["t_event_s"]).all()
+    pd.testing.assert_frame_equal(
+        rows(rt, "coop", "no-warning"), rows(base.route_table, "coop", "no-warning")
+    )
+
+
+def test_warning_beyond_termination(base, ablated, suite2):
+    params, n = _route_a_params(suite2, "warning_beyond_termination")
+    np.testing.assert_array_equal(np.asarray(params.warn_hold_extra)[: 2 * n], 10.0)
+    rt = ablated["warning_beyond_termination"].route_table
+    # coop keeps yielding to a hazard that is gone: recovery takes longer.
+    new = rows(rt, "coop", "warning")["recovery_latency_s"].to_numpy()
+    old = rows(base.route_table, "coop", "warning")["recovery_latency_s"].to_numpy()
+    assert np.all(new >= old) and np.any(new > old)
+    pd.testing.assert_frame_equal(
+        rows(rt, "coop", "no-warning"), rows(base.route_table, "coop", "no-warning")
+    )
+
+
+def test_no_anti_deadlock(ablated, suite2):
+    params, n = _route_a_params(suite2, "no_anti_deadlock")
+    assert not np.any(np.asarray(params.force_event)[: 2 * n])
+    rt = ablated["no_anti_deadlock"].route_table
+    assert len(rt) == len(CONDITIONS) * len(PAIRS)
+    assert rt["CUS"].between(0.0, 100.0).all()
+
+
+def test_noisy_position(base, ablated, suite2):
+    params, n = _route_a_params(suite2, "noisy_position")
+    sigma = np.asarray(params.pos_noise_sigma)
+    np.testing.assert_array_equal(sigma[: 2 * n], 2.0)
+    rt = ablated["noisy_position"].route_table
+    pd.testing.assert_frame_equal(
+        rows(rt, "coop", "no-warning"), rows(base.route_table, "coop", "no-warning")
+    )
+    new = rows(rt, "coop", "warning").select_dtypes("float")
+    old = rows(base.route_table, "coop", "warning").select_dtypes("float")
+    assert not new.equals(old)
+
+
+def test_held_out_paraphrase(ablated, suite2):
+    params, n = _route_a_params(suite2, "held_out_paraphrase")
+    fam = np.asarray(params.family)[:n]
+    want = [paraphrase_text_id(int(f)) for f in fam]
+    np.testing.assert_array_equal(np.asarray(params.text_id)[:n], want)
+    # coop was built for the canonical wording: a paraphrased warning changes nothing.
+    rt = ablated["held_out_paraphrase"].route_table
+    differ = ["condition", "t_warn_on_s"]
+    pd.testing.assert_frame_equal(
+        rows(rt, "coop", "warning", drop=differ),
+        rows(rt, "coop", "no-warning", drop=differ),
+        check_exact=True,
+    )
