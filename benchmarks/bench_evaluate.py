@@ -71,7 +71,8 @@ def main() -> None:
           f"{', '.join(f'{w:.2f}' for w in walls)})")  # fmt: skip
     print(f"ticks stepped       {stepped:8d}   (horizon cap {execs.max_ticks})")
     print(f"scenario-ticks/s    {n * stepped / wall:8,.0f}   (batch {n} x {stepped} ticks)")
-    print(f"useful ticks/s      {int(ticks.sum()) / wall:8,.0f}   (ticks before each execution ended)")
+    useful = int(ticks.sum()) / wall
+    print(f"useful ticks/s      {useful:8,.0f}   (ticks before each execution ended)")
     print(f"peak memory         {peak_rss_mb():8.0f} MB (process RSS)")
 
 

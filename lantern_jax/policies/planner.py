@@ -205,7 +205,8 @@ def actor_constraints(
     f_dist = dists_all[n_act:].reshape(n_act, FORECAST_STEPS)
     tang = jax.vmap(lambda s: route_tangent(route, s))(arc)
     cos = jnp.abs(jnp.sum(obs.actor_dir * tang, -1))
-    sin = jnp.sqrt(jnp.maximum(1.0 - cos**2, 0.0))
+    # |cross| rather than sqrt(1 - cos^2): finite gradient for aligned actors.
+    sin = jnp.abs(obs.actor_dir[:, 0] * tang[:, 1] - obs.actor_dir[:, 1] * tang[:, 0])
     half_across = hl * sin + hw * cos
     half_along = hl * cos + hw * sin
 

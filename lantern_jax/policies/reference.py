@@ -89,10 +89,10 @@ def warning_constraints(
     obstacle = stop_constraint(p, arc - 1.0, (sem == SEM_LANE_OBSTACLE) & ahead)
 
     # Cut-in: a leader at the grounded position, with a matched seen actor's speed.
-    d = jnp.linalg.norm(obs.actor_xy - obs.warning_pos[None, :], axis=-1)
-    d = jnp.where(seen, d, BIG)
+    rel = obs.actor_xy - obs.warning_pos[None, :]
+    d = jnp.where(seen, jnp.sum(rel * rel, axis=-1), BIG)  # squared distance (no sqrt)
     j = jnp.argmin(d)
-    matched = d[j] < 3.0
+    matched = d[j] < 9.0  # within 3 m
     v_match = jnp.where(matched, jnp.maximum(obs.actor_vel[j, 0], 0.0), 0.0)
     cut_gap = jnp.where((sem == SEM_CUT_IN) & ahead, jnp.maximum(arc - 2.0 * 2.45, 0.0), BIG)
     cut = Constraints(gap=cut_gap[None], speed=v_match[None], s0=jnp.full((1,), 2.0))

@@ -1,0 +1,159 @@
+"""Shared closed-loop runners for the rollout and protocol tests.
+
+Compiling a rollout dominates the cost of these tests, so a handful of jitted runners are built
+once per session and every test feeds them worlds of the same shapes:
+
+* ``sim.batch(worlds, modes, values)`` — ``jit(vmap(rollout(..., record=True)))`` over a batch
+  padded to :data:`BATCH` executions, :data:`HORIZON` ticks;
+* ``sim.single(world, mode, value)`` — ``jit(rollout(..., record=True))`` of one execution;
+* ``sim.evaluate(worlds, mode, value)`` — ``jit(rollout_batch(...))`` (early-exit driver).
+
+All three drive the same *probe* policy: its parameters ``(mode, value)`` pick one of the
+reference policies or a small scripted test behaviour (see ``MODE_*``), so one compilation serves
+every policy the tests need.  Under ``vmap`` each execution of a batch has its own mode.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from lantern_jax.constants import NUM_WAYPOINTS, WAYPOINT_DT
+from lantern_jax.policies.base import get_policy
+from lantern_jax.sim.rollout import rollout, rollout_batch
+from lantern_jax.world import tree_stack
+
+HORIZON = 600  # ticks (30 s) of the shared runners
+BATCH = 12  # executions per call of the shared batched runner
+
+MODE_EXPERT = 0  # the reference ``expert``
+MODE_EGO = 1  # the reference ``ego``
+MODE_COOP = 2  # the reference ``coop``
+MODE_NAN_BELOW = 3  # expert, but NaN waypoints whenever ego_speed < value
+MODE_STOP_PAST = 4  # constant speed v_ref, all-zero waypoints once dist_to_route_end < value
+MODE_CONST = 5  # straight waypoints at a constant speed of ``value`` m/s
+
+
+def constant_speed_waypoints(speed: jax.Array) -> jax.Array:
+    """(10, 2) ego-frame waypoints straight ahead at ``speed`` m/s."""
+    k = jnp.arange(1, NUM_WAYPOINTS + 1, dtype=jnp.float32) * WAYPOINT_DT
+    return jnp.stack([k * speed, jnp.zeros_like(k)], axis=-1)
+
+
+def _make_probe_act():
+    policies = [get_policy(n) for n in ("expert", "ego", "coop")]
+    act = policies[0].act
+    # The reference policies share one act function and differ only in their parameters, so
+    # a per-execution choice among them is a choice of parameters.
+    assert all(p.act is act for p in policies), "reference policies no longer share act"
+    ref_params = [p.init(jax.random.PRNGKey(0)) for p in policies]
+
+    def probe_act(params, obs):
+        mode, value = params
+        ref = jnp.clip(mode, 0, 2)  # the scripted behaviours wrap the expert
+        ref = jnp.where(mode > MODE_COOP, MODE_EXPERT, ref)
+        chosen = jax.tree.map(lambda *xs: jnp.stack(xs)[ref], *ref_params)
+        planned = act(chosen, obs).astype(jnp.float32)
+        cruise = constant_speed_waypoints(obs.v_ref)
+        out = jnp.where(mode == MODE_NAN_BELOW, jnp.where(obs.ego_speed < value, jnp.nan, planned),
+                        planned)  # fmt: skip
+        out = jnp.where(mode == MODE_STOP_PAST,
+                        jnp.where(obs.dist_to_route_end < value, 0.0, cruise), out)  # fmt: skip
+        out = jnp.where(mode == MODE_CONST, constant_speed_waypoints(value), out)
+        return out
+
+    return probe_act
+
+
+def to_numpy(tree):
+    return jax.tree.map(np.asarray, tree)
+
+
+class Sim:
+    """Jitted runners built once; ``traces`` counts how often each one was traced."""
+
+    def __init__(self) -> None:
+        self.traces = {"single": 0, "batch": 0, "evaluate": 0}
+        act = _make_probe_act()
+        self.act = act
+
+        def one(world, mode, value, counter=None):
+            if counter is not None:
+                self.traces[counter] += 1
+            return rollout(world, act, (mode, value), HORIZON, record=True)
+
+        def single(world, mode, value):
+            return one(world, mode, value, "single")
+
+        def batch(worlds, modes, values):
+            self.traces["batch"] += 1
+            return jax.vmap(one)(worlds, modes, values)
+
+        def evaluate(worlds, mode, value):
+            self.traces["evaluate"] += 1
+            return rollout_batch(worlds, act, (mode, value), HORIZON)
+
+        self.single_fn = jax.jit(single)
+        self.batch_fn = jax.jit(batch)
+        self.evaluate_fn = jax.jit(evaluate)
+
+    def single(self, world, mode=MODE_EXPERT, value=0.0):
+        """(final SimState, TickRecord) of one execution, as numpy."""
+        out = self.single_fn(world, jnp.int32(mode), jnp.float32(value))
+        return to_numpy(out)
+
+    def batch(self, worlds, modes=MODE_EXPERT, values=0.0):
+        """(final SimState, TickRecord) of up to BATCH executions, as numpy (unpadded)."""
+        n = len(worlds)
+        if not 1 <= n <= BATCH:
+            raise ValueError(f"batch of {n} executions; the shared runner takes 1..{BATCH}")
+        modes = np.broadcast_to(np.asarray(modes, np.int32), (n,))
+        values = np.broadcast_to(np.asarray(values, np.float32), (n,))
+        pad = BATCH - n
+        stacked = tree_stack(list(worlds) + [worlds[-1]] * pad)
+        m = jnp.asarray(np.concatenate([modes, np.repeat(modes[-1:], pad)]))
+        v = jnp.asarray(np.concatenate([values, np.repeat(values[-1:], pad)]))
+        out = to_numpy(self.batch_fn(stacked, m, v))
+        return jax.tree.map(lambda x: x[:n], out)
+
+    def evaluate(self, worlds, mode=MODE_EXPERT, value=0.0):
+        """Final batched SimState of ``rollout_batch`` over BATCH worlds, as numpy."""
+        if len(worlds) != BATCH:
+            raise ValueError(f"rollout_batch runner takes exactly {BATCH} worlds")
+        out = self.evaluate_fn(tree_stack(list(worlds)), jnp.int32(mode), jnp.float32(value))
+        return to_numpy(out)
+
+
+@pytest.fixture(scope="session")
+def sim() -> Sim:
+    return Sim()
+
+
+def select(tree, i):
+    """Element ``i`` of a batched numpy pytree."""
+    return jax.tree.map(lambda x: x[i], tree)
+
+
+@pytest.fixture(scope="session")
+def family_pairs():
+    """One (world_a, world_b, meta) pair per family, fixed seeds, varied weather."""
+    from lantern_jax.constants import FAMILIES, WEATHERS
+    from lantern_jax.scenarios.families import build_pair, sample_params
+
+    out = {}
+    for i, fam in enumerate(FAMILIES):
+        params = sample_params(fam, np.random.default_rng(1000 + i), WEATHERS[i % len(WEATHERS)])
+        out[fam] = build_pair(params)
+    return out
+
+
+@pytest.fixture(scope="session")
+def family_runs(sim, family_pairs):
+    """The six pairs under the expert: (worlds, (final, records)); index 2 i is Route A of
+    family i, 2 i + 1 its Route B."""
+    from lantern_jax.constants import FAMILIES
+
+    worlds = [w for f in FAMILIES for w in family_pairs[f][:2]]
+    return worlds, sim.batch(worlds, MODE_EXPERT)
