@@ -8,6 +8,7 @@ jitted, vmapped rollout that stops when every execution has ended.
 Usage::
 
     python benchmarks/bench_evaluate.py [--policy coop] [--suite lantern-v1] [--repeats 3]
+    LANTERN_JAX_CPU_DEVICES=1 python benchmarks/bench_evaluate.py   # one device only
 """
 
 from __future__ import annotations
@@ -18,12 +19,16 @@ import platform
 import resource
 import time
 
-import jax
-import numpy as np
+from lantern_jax.cli import expose_cpu_cores
 
-from lantern_jax.evaluate import build_executions, compiled_rollout
-from lantern_jax.policies.base import get_policy
-from lantern_jax.scenarios.suite import load_suite
+expose_cpu_cores()  # one XLA CPU device per core (LANTERN_JAX_CPU_DEVICES=1 to disable)
+
+import jax  # noqa: E402
+import numpy as np  # noqa: E402
+
+from lantern_jax.evaluate import build_executions, compiled_rollout  # noqa: E402
+from lantern_jax.policies.base import get_policy  # noqa: E402
+from lantern_jax.scenarios.suite import load_suite  # noqa: E402
 
 
 def peak_rss_mb() -> float:
@@ -63,7 +68,7 @@ def main() -> None:
     n = ticks.shape[0]
 
     print(f"machine: {platform.machine()} {os.cpu_count()} cores, {platform.platform()}")
-    print(f"jax {jax.__version__} on {jax.default_backend()}")
+    print(f"jax {jax.__version__} on {jax.default_backend()}, {jax.device_count()} device(s)")
     print(f"suite {suite.suite_id}: {len(suite.pairs)} pairs, {n} executions, policy {args.policy}")
     print(f"build worlds        {t_build:8.2f} s")
     print(f"compile             {t_compile:8.2f} s")

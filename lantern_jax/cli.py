@@ -34,6 +34,24 @@ ABLATION_DESCRIPTIONS = {
 }
 
 
+def expose_cpu_cores() -> None:
+    """Expose one XLA CPU device per core, so that the evaluator can split its batch over them.
+
+    Only possible before JAX starts; skipped when JAX is already imported, when ``XLA_FLAGS``
+    already sets a device count, or when ``LANTERN_JAX_CPU_DEVICES`` says otherwise (e.g. 1).
+    """
+    import os
+
+    if "jax" in sys.modules:
+        return
+    flags = os.environ.get("XLA_FLAGS", "")
+    if "xla_force_host_platform_device_count" in flags:
+        return
+    n = int(os.environ.get("LANTERN_JAX_CPU_DEVICES", os.cpu_count() or 1))
+    if n > 1:
+        os.environ["XLA_FLAGS"] = f"{flags} --xla_force_host_platform_device_count={n}".strip()
+
+
 class UsageError(Exception):
     """A user error that ends the command with exit code 2."""
 
@@ -354,6 +372,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit code."""
+    expose_cpu_cores()
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser()
     try:

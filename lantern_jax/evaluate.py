@@ -35,7 +35,7 @@ from lantern_jax.scenarios.warnings import paraphrase_text_id
 from lantern_jax.scoring.aggregate import decomposition_table, family_scores
 from lantern_jax.scoring.metrics import finalize
 from lantern_jax.scoring.table import build_route_table
-from lantern_jax.sim.rollout import rollout_batch
+from lantern_jax.sim.rollout import rollout_batch_parallel
 from lantern_jax.world import World, tree_stack
 
 CONDITIONS = ("warning", "no-warning")
@@ -114,11 +114,15 @@ _COMPILED: dict[tuple, Any] = {}
 
 
 def compiled_rollout(act, max_ticks: int):
-    """The jitted batched rollout for a policy ``act`` (cached: repeated calls reuse it)."""
+    """The jitted batched rollout for a policy ``act`` (cached: repeated calls reuse it).
+
+    Split over every local device (:func:`~lantern_jax.sim.rollout.rollout_batch_parallel`);
+    the command line exposes one CPU device per core.
+    """
     key = (act, max_ticks)
     if key not in _COMPILED:
         _COMPILED[key] = jax.jit(
-            lambda worlds, params: rollout_batch(worlds, act, params, max_ticks)
+            lambda worlds, params: rollout_batch_parallel(worlds, act, params, max_ticks)
         )
     return _COMPILED[key]
 

@@ -405,10 +405,15 @@ def segments_hit_boxes(
     yaws, extents = _f32(yaws), _f32(extents)
     ca, sa = jnp.cos(yaws), jnp.sin(yaws)
     ex, ey = extents[:, 0], extents[:, 1]
-    rs = starts[..., None, :] - centers
-    re = ends[:, None, :] - centers  # (N, A, 2)
-    ax, ay = _to_box_frame(rs[..., 0], rs[..., 1], ca, sa)
-    bx, by = _to_box_frame(re[..., 0], re[..., 1], ca, sa)
+    # Materialise the per-box and per-segment inputs (x and y split) before the (N, A) test so
+    # that the compiler does not re-evaluate trigonometry and divisions inside the big fusion.
+    sx, sy = starts[..., 0], starts[..., 1]
+    qx, qy = ends[:, 0], ends[:, 1]
+    ca, sa, cx, cy, sx, sy, qx, qy = jax.lax.optimization_barrier(
+        (ca, sa, centers[:, 0], centers[:, 1], sx, sy, qx, qy)
+    )
+    ax, ay = _to_box_frame(sx[..., None] - cx, sy[..., None] - cy, ca, sa)
+    bx, by = _to_box_frame(qx[:, None] - cx, qy[:, None] - cy, ca, sa)
     gx, gy = bx - ax, by - ay
     separated = (
         (jnp.minimum(ax, bx) > ex)

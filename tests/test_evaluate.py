@@ -100,7 +100,13 @@ def test_pair_alone_equals_pair_in_suite(base, shipped):
     got = rows(alone.route_table, "coop")
     want = rows(base.route_table[base.route_table["pair_id"] == ALONE], "coop")
     assert len(got) == len(CONDITIONS)
-    pd.testing.assert_frame_equal(got, want, check_exact=True)  # NaN == NaN here
+    # Gates, ids and every discrete outcome are identical; continuous columns agree to float32
+    # rounding (a batch of 1 and a batch of 2 are differently shaped compiled programs, and
+    # XLA does not promise bit-identical rounding across shapes).
+    pd.testing.assert_frame_equal(got, want, check_exact=False, rtol=1e-5, atol=1e-5)
+    for col in got.columns:
+        if col.startswith("gate_") or got[col].dtype.kind in "iOUb" or col.endswith("_id"):
+            assert got[col].tolist() == want[col].tolist(), col
 
 
 # ---------------------------------------------------------------------------------------------

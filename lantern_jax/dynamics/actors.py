@@ -42,7 +42,13 @@ from lantern_jax.constants import (
     MOTION_IDM,
 )
 from lantern_jax.dynamics.bicycle import longitudinal_step
-from lantern_jax.dynamics.idm import DEFAULT_IDM, IDMParams, idm_accel
+from lantern_jax.dynamics.idm import (
+    DEFAULT_IDM,
+    IDMParams,
+    free_road_term,
+    idm_from_terms,
+    interaction_term,
+)
 from lantern_jax.dynamics.scripted import scripted_pose, trigger_time
 from lantern_jax.polyline import interpolate
 from lantern_jax.world import Actors, ActorScript
@@ -148,8 +154,10 @@ def _idm_update(
 
     gaps = jnp.concatenate([gap, gap_light[:, None], gap_end[:, None]], axis=1)
     leads_v = jnp.concatenate([v_lead, jnp.zeros((v.shape[0], 2), v.dtype)], axis=1)
-    acc = idm_accel(v[:, None], script.v_pre[:, None], gaps, v[:, None] - leads_v, params)
-    acc = jnp.min(acc, axis=1)
+    # The IDM acceleration is monotone in the interaction term: take its max over leaders and
+    # evaluate the free-road power once per actor.
+    inter = jnp.max(interaction_term(v[:, None], gaps, v[:, None] - leads_v, params), axis=1)
+    acc = idm_from_terms(free_road_term(v, script.v_pre, params), inter, script.v_pre, params)
 
     distance, v_next = longitudinal_step(v, acc, dt)
     s_next = actors.s + distance

@@ -48,8 +48,35 @@ def desired_gap(v: Array, dv: Array, params: IDMParams = DEFAULT_IDM) -> Array:
     return params.s0 + jnp.maximum(dyn, 0.0)
 
 
+def free_road_term(v: Array, v0: Array, params: IDMParams = DEFAULT_IDM) -> Array:
+    """``(v / v0)^delta`` (0 where ``v0 <= 0``); the default ``delta = 4`` uses two squarings."""
+    moving = v0 > _MIN_V0
+    ratio = jnp.abs(v / jnp.where(moving, v0, 1.0))
+    if isinstance(params.delta, int | float) and float(params.delta) == 4.0:
+        r2 = ratio * ratio
+        return jnp.where(moving, r2 * r2, 0.0)
+    return jnp.where(moving, ratio**params.delta, 0.0)
+
+
+def interaction_term(v: Array, gap: Array, dv: Array, params: IDMParams = DEFAULT_IDM) -> Array:
+    """``(s*(v, dv) / gap)^2`` with the gap floored at 0.01 m."""
+    s_star = desired_gap(v, dv, params)
+    return (s_star / jnp.maximum(gap, _MIN_GAP)) ** 2
+
+
+def idm_from_terms(free: Array, inter: Array, v0: Array, params: IDMParams = DEFAULT_IDM) -> Array:
+    """Combine the terms into the clipped IDM acceleration (full braking where ``v0 <= 0``)."""
+    acc = params.accel * (1.0 - free - inter)
+    acc = jnp.where(v0 > _MIN_V0, acc, -params.max_brake)
+    return jnp.clip(acc, -params.max_brake, params.accel)
+
+
 def idm_accel(v: Array, v0: Array, gap: Array, dv: Array, params: IDMParams = DEFAULT_IDM) -> Array:
     """IDM acceleration ``a (1 - (v / v0)^delta - (s* / gap)^2)``, clipped to physical limits.
+
+    For several leaders, prefer ``idm_from_terms(free_road_term(v, v0), max over leaders of
+    interaction_term(...), v0)``: the acceleration is monotone in the interaction term, so this
+    equals the minimum over leaders without evaluating the free-road power per leader.
 
     Args:
         v: (...) float32, m/s, own speed (>= 0).
@@ -62,11 +89,5 @@ def idm_accel(v: Array, v0: Array, gap: Array, dv: Array, params: IDMParams = DE
     Returns:
         (...) float32, m/s^2, in ``[-params.max_brake, params.accel]``.
     """
-    moving = v0 > _MIN_V0
-    ratio = v / jnp.where(moving, v0, 1.0)
-    free = jnp.abs(ratio) ** params.delta
-    s_star = desired_gap(v, dv, params)
-    inter = (s_star / jnp.maximum(gap, _MIN_GAP)) ** 2
-    acc = params.accel * (1.0 - free - inter)
-    acc = jnp.where(moving, acc, -params.max_brake)
-    return jnp.clip(acc, -params.max_brake, params.accel)
+    free = free_road_term(v, v0, params)
+    return idm_from_terms(free, interaction_term(v, gap, dv, params), v0, params)

@@ -134,10 +134,16 @@ def visible_actors(
     far = dist > OCCLUSION_EPS
     frac = jnp.where(far, 1.0 - OCCLUSION_EPS / jnp.where(far, dist, 1.0), 0.0)
     ends = cam_xy + rel * frac[..., None]
-    hits = segments_hit_boxes(cam_xy, ends.reshape(-1, 2), centers, yaws, extents)
-    hits = hits.reshape(num, NUM_SAMPLE_POINTS, num)  # (target, point, blocker)
     blockers = present[None, :] & ~jnp.eye(num, dtype=bool)  # (target, blocker)
-    blocked = jnp.any(hits & blockers[:, None, :], axis=-1) & far
+
+    # One target per loop step: the loop boundary makes the compiler materialise the sight-line
+    # ends and box data once instead of re-deriving them for every (point, blocker) element.
+    def one_target(args):
+        ends_t, blockers_t = args  # (9, 2), (A,)
+        hits = segments_hit_boxes(cam_xy, ends_t, centers, yaws, extents)  # (9, A)
+        return jnp.any(hits & blockers_t[None, :], axis=-1)
+
+    blocked = jax.lax.map(one_target, (ends, blockers)) & far
     return present & jnp.any(in_view & ~blocked, axis=-1)
 
 

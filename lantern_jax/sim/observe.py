@@ -33,12 +33,15 @@ class Percept:
     progress: Array  # () float32, m, furthest route arc reached (monotone, clipped to length)
 
 
-def sense(world: World, progress_prev: Array) -> Percept:
+def sense(
+    world: World, progress_prev: Array, route_proj: tuple[Array, Array] | None = None
+) -> Percept:
     """Compute the percept of the current world (camera visibility, range image, route).
 
     Args:
         world: the scenario at the current tick.
         progress_prev: () m, progress before this tick (progress is monotone).
+        route_proj: the ego's (route arc, distance from the route) when already computed.
     """
     a = world.actors
     cam_xy, cam_yaw = camera_pose(world.ego.xy, world.ego.yaw)
@@ -48,7 +51,10 @@ def sense(world: World, progress_prev: Array) -> Percept:
         cam_xy, cam_yaw, a.xy, a.yaw, a.extent, a.present, FRONT_CAMERA_FOV, NUM_RANGE_RAYS, rng
     )
     r = world.route
-    arc, _, _, dist = polyline.project(r.xy, r.s, r.valid, world.ego.xy)
+    if route_proj is None:
+        arc, _, _, dist = polyline.project(r.xy, r.s, r.valid, world.ego.xy)
+    else:
+        arc, dist = route_proj
     progress = jnp.maximum(progress_prev, jnp.clip(arc, 0.0, r.length))
     return Percept(visible=vis, ranges=ranges, route_arc=arc, dist_to_route=dist, progress=progress)
 

@@ -113,3 +113,43 @@ def rollout_batch(
     carry0 = jax.vmap(lambda w: to_carry(init_state(w)))(worlds)
     _, final = jax.lax.while_loop(cond, body, (jnp.asarray(0, jnp.int32), carry0))
     return jax.vmap(from_carry)(worlds, final)
+
+
+def rollout_batch_parallel(
+    worlds: World,
+    act: ActFn,
+    params: Any,
+    max_ticks: int,
+    chunk: int = 40,
+    temperature: float | Array = 0.05,
+) -> SimState:
+    """:func:`rollout_batch` split over all local devices (e.g. the CPU cores exposed with
+    ``--xla_force_host_platform_device_count``), each shard stopping independently.
+
+    The batch is padded to a multiple of the device count with copies of its first execution
+    and cut back afterwards; every execution is independent, so results do not depend on the
+    split.  With one device this is :func:`rollout_batch`.
+    """
+    n_dev = jax.device_count()
+    if n_dev == 1:
+        return rollout_batch(worlds, act, params, max_ticks, chunk, temperature)
+    from jax.sharding import PartitionSpec
+
+    n = jax.tree.leaves(worlds)[0].shape[0]
+    pad = (-n) % n_dev
+    if pad:
+        worlds = jax.tree.map(
+            lambda x: jnp.concatenate([x, jnp.repeat(x[:1], pad, axis=0)]), worlds
+        )
+    mesh = jax.make_mesh((n_dev,), ("batch",), axis_types=(jax.sharding.AxisType.Auto,))
+    spec = jax.sharding.NamedSharding(mesh, PartitionSpec("batch"))
+    worlds = jax.lax.with_sharding_constraint(worlds, spec)
+    run = jax.shard_map(
+        lambda w: rollout_batch(w, act, params, max_ticks, chunk, temperature),
+        mesh=mesh,
+        in_specs=PartitionSpec("batch"),
+        out_specs=PartitionSpec("batch"),
+        check_vma=False,
+    )
+    final = run(worlds)
+    return jax.tree.map(lambda x: x[:n], final)

@@ -36,6 +36,7 @@ from lantern_jax.dynamics.actors import step_actors
 from lantern_jax.dynamics.bicycle import bicycle_step, sanitize_controls
 from lantern_jax.dynamics.controller import track_waypoints
 from lantern_jax.dynamics.lights import light_states
+from lantern_jax.policies.planner import project_points_on_route
 from lantern_jax.scenarios import protocol
 from lantern_jax.scoring.sample import TickSample
 from lantern_jax.scoring.telemetry import Telemetry, init_telemetry, update_telemetry
@@ -136,21 +137,20 @@ def init_state(world: World) -> SimState:
     )
 
 
-def _route_frame(world: World, xy: Array) -> tuple[Array, Array]:
-    """Route arc and distance of a world point (vectorised over leading axes by vmap)."""
-    r = world.route
-    arc, _, _, dist = polyline.project(r.xy, r.s, r.valid, xy)
-    return arc, dist
+def corridor_gaps(obs) -> tuple[Array, Array]:
+    """Route gap ahead of the ego and lateral distance from the route of every actor.
 
+    Uses the observation of the tick (its route points ahead of the ego and the actors in the
+    ego frame), so the projection runs on the 24 observed route points rather than the whole
+    route.
 
-def _corridor_ahead(world: World, ego_arc: Array, extra_margin: float) -> tuple[Array, Array]:
-    """(A,) route gap ahead of the ego and in-corridor flag for every actor."""
-    a, r = world.actors, world.route
-    arcs, _, _, dists = polyline.project_many(r.xy, r.s, r.valid, a.xy)
-    half = jnp.max(a.extent, axis=-1)
-    in_corr = dists < EGO_HALF_WIDTH + half + extra_margin
-    gap = arcs - ego_arc - EGO_HALF_LENGTH - half
-    return gap, in_corr & a.present
+    Returns:
+        gap: (A,) m, route distance from the ego front to the actor's nearest point.
+        lateral: (A,) m, distance of the actor centre from the route minus its half size.
+    """
+    arc, dist = project_points_on_route(obs.route, obs.actor_xy)
+    half = jnp.max(obs.actor_extent, axis=-1)
+    return arc - EGO_HALF_LENGTH - half, dist - half
 
 
 def outside_lanes(world: World) -> Array:
@@ -220,14 +220,17 @@ def tick_carry(
     world = world.replace(ego=ego, t=t_next, tick=world.tick + 1)
 
     # Route progress and what holds the ego (for the anti-deadlock pause).
-    arc_now, _ = _route_frame(world, ego.xy)
+    r = world.route
+    arc_now, _, _, dist_now = polyline.project(r.xy, r.s, r.valid, ego.xy)
     progress = jnp.maximum(percept.progress, jnp.clip(arc_now, 0.0, world.route.length))
     light = ego_light(world, t_next)
     to_stop = p.ego_stop_s - arc_now
     held_light = (light != LIGHT_GREEN) & (to_stop > -1.0) & (to_stop < HOLD_LIGHT_DIST)
-    gap, in_corr = _corridor_ahead(world, arc_now, 0.5)
+    gap, lateral = corridor_gaps(obs)
+    present = world.actors.present
     queue = (
-        in_corr
+        present
+        & (lateral < EGO_HALF_WIDTH + 0.5)
         & (world.actors.role == ROLE_BACKGROUND)
         & (gap > -1.0)
         & (gap < QUEUE_DIST)
@@ -246,7 +249,7 @@ def tick_carry(
     actors = actors.replace(active=actors.active.at[h].set(actors.active[h] & ~despawn))
     world = world.replace(actors=actors, protocol=proto)
 
-    new_percept = sense(world, percept.progress)
+    new_percept = sense(world, percept.progress, (arc_now, dist_now))
     hazard_visible = new_percept.visible[h] & actors.present[h]
     proto = protocol.advance_hazard(proto, p, t_next, hazard_visible, actors.s[h], ego.speed)
     first_warn = protocol.happened(proto.t_warn_point) & ~protocol.happened(
@@ -270,8 +273,8 @@ def tick_carry(
     hz_vel = a.speed[h] * jnp.stack([jnp.cos(a.yaw[h]), jnp.sin(a.yaw[h])])
     crossed_stop = (percept.route_arc < p.ego_stop_s) & (arc_now >= p.ego_stop_s)
     red_violation = crossed_stop & (light == LIGHT_RED)
-    gap2, in_corr2 = _corridor_ahead(world, arc_now, 1.0)
-    lead = jnp.any(in_corr2 & (gap2 > -2.0) & (gap2 < JUSTIFY_LEAD_DIST))
+    in_corr = present & (lateral < EGO_HALF_WIDTH + 1.0)
+    lead = jnp.any(in_corr & (gap > -2.0) & (gap < JUSTIFY_LEAD_DIST))
     justified = held_light | lead | (world.route.length - arc_now < ROUTE_END_DIST)
     sample = TickSample(
         t=t_next,
