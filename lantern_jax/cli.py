@@ -200,6 +200,9 @@ def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
     print("CUS decomposition  (components: mean x 100; Gate Pass and gate failures: % of pairs)")
     print(format_decomposition(dec))
     print()
+    print("Hazard not visible to the front camera at the warning point (% of Route A executions)")
+    print(result.hidden_at_warning.to_string(index=False, float_format=lambda x: f"{x:.1f}"))
+    print()
     print(f"Wrote {len(files)} files:")
     for path in files.values():
         print(f"  {path}")

@@ -246,6 +246,27 @@ def family_table(route_table: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(out)[cols]
 
 
+def hidden_at_warning(runs: list[PolicyRun], execs_pairs: int, families: list[str]) -> pd.DataFrame:
+    """Share (%) of Route A executions whose hazard the front camera could NOT see at the
+    warning point — the benchmark's premise — per model and family (warning condition).
+
+    Columns: ``model, PE, VC, OR, LWW, RWW, RTY, Overall`` (Overall pools all pairs).
+    """
+    rows = []
+    fam = np.asarray(families)
+    for r in runs:
+        vis = np.asarray(r.protocol["hazard_visible_at_warn"][:execs_pairs], bool)
+        reached = np.asarray(r.protocol["t_warn_point"][:execs_pairs]) < 1e8
+        hidden = ~vis & reached
+        row = {"model": r.policy}
+        for f in FAMILIES:
+            m = (fam == f) & reached
+            row[f] = 100.0 * hidden[m].mean() if m.any() else np.nan
+        row["Overall"] = 100.0 * hidden[reached].mean() if reached.any() else np.nan
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
 @dataclasses.dataclass
 class EvalResult:
     """Everything an evaluation produces."""
@@ -255,6 +276,7 @@ class EvalResult:
     decomposition: pd.DataFrame
     manifest: dict
     runs: list[PolicyRun]
+    hidden_at_warning: pd.DataFrame  # % of Route A executions with the hazard unseen at onset
 
 
 def evaluate(
@@ -329,4 +351,5 @@ def evaluate(
         decomposition=decomposition_table(route).reset_index(),
         manifest=manifest,
         runs=runs,
+        hidden_at_warning=hidden_at_warning(runs, execs.num_pairs, execs.families),
     )

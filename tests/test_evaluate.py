@@ -284,3 +284,13 @@ def test_held_out_paraphrase(ablated, suite2):
         rows(rt, "coop", "no-warning", drop=differ),
         check_exact=True,
     )
+
+
+def test_hidden_at_warning_table(base):
+    """The premise table: the PE pedestrian is hidden behind its occluder at the warning point."""
+    t = base.hidden_at_warning.set_index("model")
+    assert list(t.index) == ["expert", "ego", "coop"]
+    assert list(t.columns) == [*FAMILIES, "Overall"]
+    assert (t["PE"] == 100.0).all()
+    vals = t.to_numpy(dtype=float)
+    assert np.all((vals[np.isfinite(vals)] >= 0) & (vals[np.isfinite(vals)] <= 100))
