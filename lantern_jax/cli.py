@@ -146,10 +146,66 @@ def _load_suite(args: argparse.Namespace):
 # ---------------------------------------------------------------------------------------------
 # commands
 # ---------------------------------------------------------------------------------------------
+#: Keys of an ``evaluate`` experiment file and their accepted types.
+CONFIG_KEYS = {
+    "policy": (str, list),
+    "ablation": (str,),
+    "suite": (str,),
+    "pairs_per_family": (int,),
+    "pairs": (list,),
+    "out": (str,),
+}
+
+
+def load_config(path: str) -> dict:
+    """Read an ``evaluate`` experiment file (TOML, table ``[evaluate]`` or top level).
+
+    Raises:
+        UsageError: naming the file and the offending key for unknown keys or wrong types.
+    """
+    import tomllib
+
+    try:
+        with open(path, "rb") as fh:
+            raw = tomllib.load(fh)
+    except OSError as e:
+        raise UsageError(f"cannot read config {path}: {e}") from e
+    except tomllib.TOMLDecodeError as e:
+        raise UsageError(f"config {path}: not valid TOML ({e})") from e
+    cfg = raw.get("evaluate", raw)
+    for key, value in cfg.items():
+        if key not in CONFIG_KEYS:
+            raise UsageError(
+                f"config {path}: unknown key {key!r}; valid keys: {', '.join(CONFIG_KEYS)}"
+            )
+        types = CONFIG_KEYS[key]
+        if isinstance(value, bool) or not isinstance(value, types):
+            want = " or ".join(t.__name__ for t in types)
+            raise UsageError(f"config {path}: {key} must be {want}, got {value!r}")
+        if isinstance(value, list) and not all(isinstance(v, str) for v in value):
+            raise UsageError(f"config {path}: {key} must be a list of strings, got {value!r}")
+    return cfg
+
+
+def _apply_config(args: argparse.Namespace, argv: Sequence[str]) -> None:
+    """Fill the options not given on the command line from ``--config``."""
+    cfg = load_config(args.config)
+    given = {a.split("=")[0] for a in argv if a.startswith("--")}
+    for key, value in cfg.items():
+        flag = "--" + key.replace("_", "-")
+        if flag in given:
+            continue
+        if key in ("policy", "pairs"):
+            value = [value] if isinstance(value, str) else [",".join(value)]
+        setattr(args, key, value)
+
+
 def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
     """``lantern-jax evaluate``: run, print the tables, write the files."""
     from lantern_jax.evaluate import ablation_names
 
+    if args.config:
+        _apply_config(args, argv)
     policies = resolve_policies(args.policy)
     if args.ablation not in ablation_names():
         raise UsageError(
@@ -346,6 +402,11 @@ def build_parser() -> argparse.ArgumentParser:
     ev.add_argument("--pairs", action="append", metavar="ID[,ID...]", help="only these pair ids")
     ev.add_argument("--out", default="results", metavar="DIR", help="output folder")
     ev.add_argument("--quiet", action="store_true", help="no progress bar or stage lines")
+    ev.add_argument(
+        "--config",
+        metavar="TOML",
+        help="experiment file (e.g. configs/quick.toml); command-line flags override it",
+    )
     ev.set_defaults(func=cmd_evaluate)
 
     su = sub.add_parser(

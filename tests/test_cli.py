@@ -203,3 +203,24 @@ def test_suite_regenerates(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "OK: lantern-v1" in out
     assert load_suite(path).suite_sha256 == load_suite().suite_sha256
+
+
+def test_shipped_configs_parse_and_bad_configs_name_the_field(tmp_path):
+    """Every file in configs/ is a valid experiment; a bad key or type is named in the error."""
+    from pathlib import Path
+
+    from lantern_jax.cli import CONFIG_KEYS, UsageError, load_config
+
+    root = Path(__file__).resolve().parents[1] / "configs"
+    files = sorted(root.glob("*.toml"))
+    assert files, "configs/ holds the experiment files"
+    for f in files:
+        cfg = load_config(str(f))
+        assert set(cfg) <= set(CONFIG_KEYS), f.name
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[evaluate]\npairs_per_family = "two"\n')
+    with pytest.raises(UsageError, match="pairs_per_family must be int"):
+        load_config(str(bad))
+    bad.write_text('[evaluate]\nablaton = "none"\n')
+    with pytest.raises(UsageError, match="unknown key 'ablaton'"):
+        load_config(str(bad))
