@@ -1,0 +1,133 @@
+"""The frozen suite lantern-v1: composition, hashes, tamper detection, static validation."""
+
+from __future__ import annotations
+
+import collections
+import copy
+import json
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from lantern_jax.constants import FAMILIES, WEATHERS
+from lantern_jax.scenarios.families import build_pair
+from lantern_jax.scenarios.spec import content_hash
+from lantern_jax.scenarios.suite import (
+    SUITE_ID,
+    _shipped_path,
+    load_suite,
+    static_check,
+    suite_hash,
+    write_manifest,
+)
+
+
+@pytest.fixture(scope="module")
+def suite():
+    return load_suite()
+
+
+@pytest.fixture(scope="module")
+def raw():
+    return json.loads(_shipped_path(SUITE_ID).read_text())
+
+
+def test_composition(suite):
+    """120 pairs: 20 per family; five weather profiles x 24 pairs, 4 per family per profile."""
+    assert len(suite) == 120
+    by_family = collections.Counter(p.family for p in suite.pairs)
+    assert by_family == {f: 20 for f in FAMILIES}
+    by_weather = collections.Counter(p.weather for p in suite.pairs)
+    assert by_weather == {w: 24 for w in WEATHERS}
+    cell = collections.Counter((p.family, p.weather) for p in suite.pairs)
+    assert set(cell.values()) == {4}
+    assert len({p.sha256 for p in suite.pairs}) == 120
+    assert len({p.pair_id for p in suite.pairs}) == 120
+
+
+def test_hashes_reproduce_from_parameters(suite, raw):
+    for p in suite.pairs:
+        assert content_hash(p.params) == p.sha256
+    assert suite_hash(suite.pairs) == raw["suite_sha256"] == suite.suite_sha256
+
+
+def test_tampered_manifest_names_the_first_mismatching_pair(raw, tmp_path):
+    bad = copy.deepcopy(raw)
+    bad["pairs"][7]["params"]["v_ref"] += 0.5
+    bad["pairs"][9]["params"]["v_ref"] += 0.5
+    path = tmp_path / "tampered.json"
+    write_manifest(bad, path)
+    first = raw["pairs"][7]["pair_id"]
+    with pytest.raises(ValueError, match=rf"pair {first} does not match its manifest hash"):
+        load_suite(path)
+
+
+def test_manifest_structure_errors(raw, tmp_path):
+    bad = copy.deepcopy(raw)
+    del bad["pairs"][3]["sha256"]
+    path = tmp_path / "missing.json"
+    write_manifest(bad, path)
+    with pytest.raises(ValueError, match=r"pairs\[3\] lacks field 'sha256'"):
+        load_suite(path)
+    reordered = copy.deepcopy(raw)
+    reordered["pairs"][0], reordered["pairs"][1] = reordered["pairs"][1], reordered["pairs"][0]
+    path = tmp_path / "reordered.json"
+    write_manifest(reordered, path)
+    with pytest.raises(ValueError, match="suite hash mismatch"):
+        load_suite(path)
+    with pytest.raises(FileNotFoundError, match="lantern-v1"):
+        load_suite("lantern-v9")
+
+
+def test_every_shipped_pair_passes_static_validation(suite):
+    seen: set[str] = set()
+    for p in suite.pairs[::7]:  # a spread of pairs over every family (keeps the test short)
+        _, _, meta = static_check(p.params, seen)
+        seen.add(meta["content_hash"])
+    with pytest.raises(ValueError, match="duplicate content hash"):
+        static_check(suite.pairs[0].params, {suite.pairs[0].sha256})
+
+
+def test_static_validation_rejects_a_short_recovery(suite):
+    p = next(q for q in suite.pairs if q.family == "PE")
+    params = dict(p.params)
+    params["route_length"] = 68.0
+    params["conflict_s"] = 48.0
+    with pytest.raises(ValueError):
+        static_check(params, set())
+
+
+def test_subset_and_select(suite):
+    sub = suite.subset(2)
+    assert len(sub) == 12
+    assert collections.Counter(p.family for p in sub.pairs) == {f: 2 for f in FAMILIES}
+    sel = suite.select(["rty_0003", "pe_0001"])
+    assert [p.pair_id for p in sel.pairs] == ["rty_0003", "pe_0001"]
+    with pytest.raises(KeyError, match="nope_0001"):
+        suite.select(["nope_0001"])
+
+
+def test_soft_cus_gradient_through_a_short_rollout(suite):
+    """d(soft CUS)/d(pedestrian crossing speed) through Route A and B rollouts is finite."""
+    from lantern_jax.policies.base import get_policy
+    from lantern_jax.scoring.cus import soft_pair_cus
+    from lantern_jax.sim.rollout import rollout
+
+    p = next(q for q in suite.pairs if q.family == "PE")
+    a, b, _ = build_pair(p.params)
+    pol = get_policy("coop")
+    params = pol.init(jax.random.PRNGKey(0))
+    h = int(a.params.hazard_index)
+    temp = 0.1
+
+    def score(v_post):
+        wa = a.replace(script=a.script.replace(v_post=a.script.v_post.at[h].set(v_post)))
+        fa, _ = rollout(wa, pol.act, params, 260, temperature=temp)
+        fb, _ = rollout(b, pol.act, params, 260, temperature=temp)
+        return soft_pair_cus(fa.telemetry, fb.telemetry, a.params.d_safe, temp)
+
+    value, grad = jax.jit(jax.value_and_grad(score))(jnp.float32(3.0))
+    assert np.isfinite(float(value)) and 0.0 <= float(value) <= 100.0
+    assert np.isfinite(float(grad))
