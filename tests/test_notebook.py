@@ -1,0 +1,73 @@
+"""The quickstart notebook (``notebooks/quickstart.py``) runs top to bottom in a fresh kernel.
+
+It is executed in its small configuration (``LANTERN_NOTEBOOK_SMALL=1``: one pair per family)
+with a kernel spec that points at this interpreter, from an empty working directory.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+jupytext = pytest.importorskip("jupytext")
+nbclient = pytest.importorskip("nbclient")
+pytest.importorskip("ipykernel")
+
+NOTEBOOK = Path(__file__).resolve().parents[1] / "notebooks" / "quickstart.py"
+KERNEL_NAME = "lantern"
+
+
+def _install_kernelspec(root: Path) -> Path:
+    """A kernel spec named :data:`KERNEL_NAME` that runs ipykernel with this interpreter."""
+    share = root / "share" / "jupyter"
+    kdir = share / "kernels" / KERNEL_NAME
+    kdir.mkdir(parents=True)
+    spec = {
+        "argv": [sys.executable, "-m", "ipykernel_launcher", "-f", "{connection_file}"],
+        "display_name": "lantern_jax (test)",
+        "language": "python",
+    }
+    (kdir / "kernel.json").write_text(json.dumps(spec))
+    return share
+
+
+def _outputs(nb) -> list[dict]:
+    return [out for cell in nb.cells if cell.cell_type == "code" for out in cell.get("outputs", [])]
+
+
+def _text(out: dict) -> str:
+    if out.get("output_type") == "stream":
+        return out.get("text", "")
+    return str(out.get("data", {}).get("text/plain", ""))
+
+
+def test_quickstart_notebook_runs(tmp_path, monkeypatch):
+    share = _install_kernelspec(tmp_path / "kernel")
+    monkeypatch.setenv("JUPYTER_PATH", str(share))
+    monkeypatch.setenv("LANTERN_NOTEBOOK_SMALL", "1")
+    monkeypatch.delenv("MPLBACKEND", raising=False)  # let ipykernel pick its inline backend
+    workdir = tmp_path / "work"
+    workdir.mkdir()
+
+    nb = jupytext.read(NOTEBOOK)
+    client = nbclient.NotebookClient(
+        nb,
+        timeout=900,
+        kernel_name=KERNEL_NAME,
+        resources={"metadata": {"path": str(workdir)}},
+    )
+    client.execute()
+
+    outputs = _outputs(nb)
+    errors = [o for o in outputs if o.get("output_type") == "error"]
+    assert not errors, [f"{e.get('ename')}: {e.get('evalue')}" for e in errors]
+    text = "\n".join(_text(o) for o in outputs)
+    assert "Overall" in text
+    assert "Model (condition)" in text  # the text tables of lantern_jax.report
+    assert "SMALL = True" in text
+    assert "d soft CUS / d crossing speed" in text
+    images = [o for o in outputs if "image/png" in o.get("data", {})]
+    assert len(images) >= 3, f"{len(images)} PNG outputs (bird's-eye views and timeline expected)"
