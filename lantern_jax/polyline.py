@@ -19,24 +19,11 @@ import jax
 import jax.numpy as jnp
 
 from lantern_jax.constants import BIG
+from lantern_jax.geometry import safe_norm
 
 Array = jax.Array
 
 _EPS2 = 1e-12  # m^2, squared lengths at or below this count as zero
-
-
-def safe_norm(v: Array) -> Array:
-    """Euclidean norm over the last axis with a finite gradient at zero.
-
-    Args:
-        v: (..., 2) float32.
-
-    Returns:
-        (...,) float32, >= 0 (exactly 0, with zero gradient, for a zero vector).
-    """
-    d2 = jnp.sum(v * v, axis=-1)
-    ok = d2 > _EPS2
-    return jnp.where(ok, jnp.sqrt(jnp.where(ok, d2, 1.0)), 0.0)
 
 
 def safe_atan2(y: Array, x: Array) -> Array:

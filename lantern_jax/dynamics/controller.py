@@ -47,7 +47,8 @@ import jax.numpy as jnp
 
 from lantern_jax.constants import EGO_MAX_ACCEL, EGO_MAX_STEER, EGO_WHEELBASE, WAYPOINT_DT
 from lantern_jax.dynamics.bicycle import EGO_LR, brake_limit
-from lantern_jax.polyline import arc_length, interpolate, safe_atan2, safe_norm
+from lantern_jax.geometry import safe_norm
+from lantern_jax.polyline import arc_length, interpolate, safe_atan2
 from lantern_jax.world import EgoState
 
 Array = jax.Array

@@ -23,7 +23,8 @@ import jax
 import jax.numpy as jnp
 
 from lantern_jax.constants import INF_TIME, TRIGGER_CLOCK, TRIGGER_EVENT
-from lantern_jax.polyline import interpolate, left_normal, safe_atan2, safe_norm
+from lantern_jax.geometry import safe_norm
+from lantern_jax.polyline import interpolate, left_normal, safe_atan2
 
 Array = jax.Array
 
