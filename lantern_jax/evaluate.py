@@ -112,19 +112,87 @@ def build_executions(suite: Suite, ablation: str = "none") -> Executions:
 
 _COMPILED: dict[tuple, Any] = {}
 
+#: Two-phase evaluation of large batches: every execution runs up to ``COMPACT_AFTER_TICKS``;
+#: the few that are still going continue in groups of ``COMPACT_GROUP``, so that the whole batch
+#: does not step in lockstep behind its longest executions.  Batches smaller than
+#: ``COMPACT_MIN_BATCH`` run in one phase.
+COMPACT_AFTER_TICKS = 400
+COMPACT_GROUP = 96
+COMPACT_MIN_BATCH = 256
 
-def compiled_rollout(act, max_ticks: int):
+
+def compiled_rollout(act, max_ticks: int, start: bool = False):
     """The jitted batched rollout for a policy ``act`` (cached: repeated calls reuse it).
 
     Split over every local device (:func:`~lantern_jax.sim.rollout.rollout_batch_parallel`);
-    the command line exposes one CPU device per core.
+    the command line exposes one CPU device per core.  With ``start=True`` the function takes a
+    third argument, the batched states to continue.
     """
-    key = (act, max_ticks)
+    key = (act, max_ticks, start)
     if key not in _COMPILED:
-        _COMPILED[key] = jax.jit(
-            lambda worlds, params: rollout_batch_parallel(worlds, act, params, max_ticks)
-        )
+        if start:
+            fn = jax.jit(
+                lambda worlds, params, s: rollout_batch_parallel(
+                    worlds, act, params, max_ticks, start=s
+                )
+            )
+        else:
+            fn = jax.jit(
+                lambda worlds, params: rollout_batch_parallel(worlds, act, params, max_ticks)
+            )
+        _COMPILED[key] = fn
     return _COMPILED[key]
+
+
+def _executable(fn, *args):
+    """AOT-compile ``fn`` for ``args`` once (cached by function and argument shapes)."""
+    shapes = jax.tree.map(lambda x: (tuple(x.shape), str(x.dtype)), args)
+    key = ("exe", fn, jax.tree.structure(args), str(jax.tree.leaves(shapes)))
+    if key not in _COMPILED:
+        _COMPILED[key] = fn.lower(*args).compile()
+    return _COMPILED[key]
+
+
+def _take(tree, idx):
+    return jax.tree.map(lambda x: x[idx], tree)
+
+
+def run_executions(act, worlds: World, params: Any, max_ticks: int, compact: bool | None = None):
+    """Roll out a batch of executions until all have ended; returns (final SimState, seconds
+    spent compiling).
+
+    Large batches run in two phases (see ``COMPACT_*``): results are the same executions,
+    continued from their exact state, only grouped differently.
+    """
+    n = jax.tree.leaves(worlds)[0].shape[0]
+    if compact is None:
+        compact = n >= COMPACT_MIN_BATCH and max_ticks > COMPACT_AFTER_TICKS
+    t0 = time.perf_counter()
+    if not compact:
+        exe = _executable(compiled_rollout(act, max_ticks), worlds, params)
+        return exe(worlds, params), time.perf_counter() - t0
+    first = compiled_rollout(act, COMPACT_AFTER_TICKS)
+    rest = compiled_rollout(act, max_ticks - COMPACT_AFTER_TICKS, start=True)
+    exe1 = _executable(first, worlds, params)
+    group = min(COMPACT_GROUP, n)
+    w_g = _take(worlds, np.arange(group))
+    key = ("warm", rest, group)
+    if key not in _COMPILED:
+        # Compile the second phase now: a call on finished (done) states runs no tick.
+        s_shape = jax.eval_shape(first, worlds, params)
+        dummy = jax.tree.map(lambda x: jnp.zeros((group, *x.shape[1:]), x.dtype), s_shape)
+        dummy = dummy.replace(done=jnp.ones((group,), bool))
+        jax.block_until_ready(rest(w_g, params, dummy))
+        _COMPILED[key] = True
+    t_compile = time.perf_counter() - t0
+    state = exe1(worlds, params)
+    todo = np.flatnonzero(~np.asarray(state.done))
+    for k in range(0, len(todo), group):
+        ids = todo[k : k + group]
+        padded = np.concatenate([ids, np.full(group - len(ids), ids[0])])
+        part = rest(_take(worlds, padded), params, _take(state, padded))
+        state = jax.tree.map(lambda full, p, ids=ids: full.at[ids].set(p[: len(ids)]), state, part)
+    return state, t_compile
 
 
 def params_hash(params: Any) -> str:
@@ -180,17 +248,11 @@ def run_policy(
 
     w0 = jax.tree.map(lambda x: x[0], execs.worlds)
     check_policy_output(pol, params, jax.eval_shape(lambda w: observe(w, sense(w, 0.0)), w0))
-    fn = compiled_rollout(pol.act, execs.max_ticks)
     t0 = time.perf_counter()
-    lowered = fn.lower(execs.worlds, params)
-    key = ("exe", pol.act, execs.max_ticks, jax.tree.structure(params), execs.num_pairs)
-    if key not in _COMPILED:
-        _COMPILED[key] = lowered.compile()
-    exe = _COMPILED[key]
-    t1 = time.perf_counter()
-    final = exe(execs.worlds, params)
+    final, t_compile = run_executions(pol.act, execs.worlds, params, execs.max_ticks)
     jax.block_until_ready(final)
     t2 = time.perf_counter()
+    t1 = t0 + t_compile
     m_struct = jax.tree.map(np.asarray, finalize(final.telemetry))
     metrics = {f.name: getattr(m_struct, f.name) for f in dataclasses.fields(m_struct)}
     proto = jax.tree.map(np.asarray, final.world.protocol)

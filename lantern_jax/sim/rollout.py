@@ -77,6 +77,7 @@ def rollout_batch(
     max_ticks: int,
     chunk: int = 40,
     temperature: float | Array = 0.05,
+    start: SimState | None = None,
 ) -> SimState:
     """Roll a batch of executions (leading axis on every leaf) until all have ended.
 
@@ -87,6 +88,8 @@ def rollout_batch(
         max_ticks: static upper bound of the horizon (rounded up to whole chunks).
         chunk: ticks per scanned chunk between checks of the batch's ``done`` mask.
         temperature: soft-score temperature.
+        start: continue these batched states (from an earlier call) instead of starting at
+            ``worlds``' initial state.
 
     Returns:
         The batched final carry.
@@ -110,7 +113,10 @@ def rollout_batch(
         i, carry = loop
         return i + 1, batched_chunk(worlds, carry)
 
-    carry0 = jax.vmap(lambda w: to_carry(init_state(w)))(worlds)
+    if start is None:
+        carry0 = jax.vmap(lambda w: to_carry(init_state(w)))(worlds)
+    else:
+        carry0 = jax.vmap(to_carry)(start)
     _, final = jax.lax.while_loop(cond, body, (jnp.asarray(0, jnp.int32), carry0))
     return jax.vmap(from_carry)(worlds, final)
 
@@ -122,6 +128,7 @@ def rollout_batch_parallel(
     max_ticks: int,
     chunk: int = 40,
     temperature: float | Array = 0.05,
+    start: SimState | None = None,
 ) -> SimState:
     """:func:`rollout_batch` split over all local devices (e.g. the CPU cores exposed with
     ``--xla_force_host_platform_device_count``), each shard stopping independently.
@@ -132,24 +139,28 @@ def rollout_batch_parallel(
     """
     n_dev = jax.device_count()
     if n_dev == 1:
-        return rollout_batch(worlds, act, params, max_ticks, chunk, temperature)
+        return rollout_batch(worlds, act, params, max_ticks, chunk, temperature, start)
     from jax.sharding import PartitionSpec
 
     n = jax.tree.leaves(worlds)[0].shape[0]
     pad = (-n) % n_dev
+    def pad_tree(tree):
+        return jax.tree.map(lambda x: jnp.concatenate([x, jnp.repeat(x[:1], pad, axis=0)]), tree)
+
     if pad:
-        worlds = jax.tree.map(
-            lambda x: jnp.concatenate([x, jnp.repeat(x[:1], pad, axis=0)]), worlds
-        )
+        worlds = pad_tree(worlds)
+        start = None if start is None else pad_tree(start)
     mesh = jax.make_mesh((n_dev,), ("batch",), axis_types=(jax.sharding.AxisType.Auto,))
     spec = jax.sharding.NamedSharding(mesh, PartitionSpec("batch"))
     worlds = jax.lax.with_sharding_constraint(worlds, spec)
+    if start is not None:
+        start = jax.lax.with_sharding_constraint(start, spec)
     run = jax.shard_map(
-        lambda w: rollout_batch(w, act, params, max_ticks, chunk, temperature),
+        lambda w, s: rollout_batch(w, act, params, max_ticks, chunk, temperature, s),
         mesh=mesh,
-        in_specs=PartitionSpec("batch"),
+        in_specs=(PartitionSpec("batch"), PartitionSpec("batch") if start is not None else None),
         out_specs=PartitionSpec("batch"),
         check_vma=False,
     )
-    final = run(worlds)
+    final = run(worlds, start)
     return jax.tree.map(lambda x: x[:n], final)
