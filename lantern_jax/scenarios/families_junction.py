@@ -173,6 +173,21 @@ def build_junction(p: dict):
     )
 
 
+def _event_car(spawn, direction, length: float, v: float) -> fc.ActorSpec:
+    """The hazard car: waits at ``spawn``, drives ``length`` m along ``direction`` at ``v`` from
+    the event on and despawns at the end of its path."""
+    return fc.ActorSpec(
+        fc.straight_path(spawn, direction, length),
+        fc.CAR_EXTENT,
+        KIND_VEHICLE,
+        ROLE_HAZARD,
+        v_pre=0.0,
+        v_post=v,
+        trigger=TRIGGER_EVENT,
+        despawn_at_end=True,
+    )
+
+
 def _wrong_way_actors(fam, road, exit_lane, near, d_line, v):
     """LWW / RWW actors.
 
@@ -190,16 +205,7 @@ def _wrong_way_actors(fam, road, exit_lane, near, d_line, v):
     spawn = near - off * dw
     if np.max(np.abs(spawn)) < road.half_size + fc.CAR_EXTENT[0]:
         raise ValueError(f"{fam}: wrong-way spawn {spawn.tolist()} inside the junction box")
-    car = fc.ActorSpec(
-        fc.straight_path(spawn, dw, off + clear + PATH_TAIL),
-        fc.CAR_EXTENT,
-        KIND_VEHICLE,
-        ROLE_HAZARD,
-        v_pre=0.0,
-        v_post=v,
-        trigger=TRIGGER_EVENT,
-        despawn_at_end=True,
-    )
+    car = _event_car(spawn, dw, off + clear + PATH_TAIL, v)
     s_sp, _ = rd.project(exit_lane.center, spawn)
     legal = fc.ActorSpec(
         fc.straight_path(spawn, d_line, exit_lane.length - s_sp),
@@ -231,16 +237,7 @@ def _rty_actors(p, near, d_line, v):
     d = float(p["source_dist"])
     spawn = near - d * d_line
     clear = d + fc.CAR_EXTENT[0] + RTY_CLEAR_PAST
-    car = fc.ActorSpec(
-        fc.straight_path(spawn, d_line, clear + PATH_TAIL),
-        fc.CAR_EXTENT,
-        KIND_VEHICLE,
-        ROLE_HAZARD,
-        v_pre=0.0,
-        v_post=v,
-        trigger=TRIGGER_EVENT,
-        despawn_at_end=True,
-    )
+    car = _event_car(spawn, d_line, clear + PATH_TAIL, v)
     yaw = float(np.arctan2(d_line[1], d_line[0]))
     ctx = fc.static_actor(spawn, yaw, fc.CAR_EXTENT, KIND_VEHICLE, ROLE_CONTEXT)
     rules = dict(
