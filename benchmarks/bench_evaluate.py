@@ -28,7 +28,7 @@ import jax  # noqa: E402
 import numpy as np  # noqa: E402
 
 from lantern_jax.evaluate import build_executions, run_executions  # noqa: E402
-from lantern_jax.policies.base import get_policy  # noqa: E402
+from lantern_jax.policies.registry import get_policy  # noqa: E402
 from lantern_jax.scenarios.suite import load_suite  # noqa: E402
 
 
@@ -51,16 +51,16 @@ def main() -> None:
     policy = get_policy(args.policy)
     params = policy.init(jax.random.PRNGKey(0))
     t0 = time.perf_counter()
-    final, t_compile = run_executions(policy.act, execs.worlds, params, execs.max_ticks)
+    final, t_compile = run_executions(policy.act, execs.scenarios, params, execs.max_ticks)
     jax.block_until_ready(final)
     walls = []
     for _ in range(args.repeats):
         t0 = time.perf_counter()
-        final, _ = run_executions(policy.act, execs.worlds, params, execs.max_ticks)
+        final, _ = run_executions(policy.act, execs.scenarios, params, execs.max_ticks)
         jax.block_until_ready(final)
         walls.append(time.perf_counter() - t0)
     wall = float(np.min(walls))
-    ticks = np.asarray(final.world.tick)
+    ticks = np.asarray(final.tick)
     stepped = int(ticks.max())
     n = ticks.shape[0]
 

@@ -30,7 +30,7 @@ from lantern_jax.constants import (  # noqa: E402
     ROLE_OCCLUDER,
     TRIGGER_EVENT,
 )
-from lantern_jax.policies.base import get_policy  # noqa: E402
+from lantern_jax.policies.registry import get_policy  # noqa: E402
 from lantern_jax.scenarios.handmade import ActorSpec, straight_scene  # noqa: E402
 from lantern_jax.sim.rollout import rollout_batch_parallel  # noqa: E402
 from lantern_jax.world import tree_stack  # noqa: E402

@@ -94,7 +94,7 @@ def resolve_policies(names: Sequence[str] | None) -> list[str]:
     Raises:
         UsageError: naming the unknown policy and listing the known ones.
     """
-    from lantern_jax.policies.base import get_policy, policy_names
+    from lantern_jax.policies.registry import get_policy, policy_names
 
     out: list[str] = []
     for item in names or ["all"]:
@@ -342,7 +342,7 @@ def cmd_suite(args: argparse.Namespace, argv: Sequence[str]) -> int:
 def cmd_policies(args: argparse.Namespace, argv: Sequence[str]) -> int:
     """``lantern-jax policies``: registered policies with descriptions."""
     del args, argv
-    from lantern_jax.policies.base import get_policy, policy_names
+    from lantern_jax.policies.registry import get_policy, policy_names
 
     rows = []
     for name in policy_names():

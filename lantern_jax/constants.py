@@ -33,6 +33,7 @@ KIND_VEHICLE = 0
 KIND_PEDESTRIAN = 1
 KIND_STATIC = 2
 KIND_NAMES = ("vehicle", "pedestrian", "static")
+NUM_ACTOR_KINDS = len(KIND_NAMES)
 
 # --- actor roles ------------------------------------------------------------------------------
 ROLE_HAZARD = 0  # the controlled scenario actor (TTC, clearance, warning termination)
@@ -40,6 +41,7 @@ ROLE_OCCLUDER = 1  # scenery kept in Route B (parked truck, lead van)
 ROLE_CONTEXT = 2  # scenario context actor (Route B stand-in, cross-traffic context)
 ROLE_BACKGROUND = 3  # ordinary traffic
 ROLE_NAMES = ("hazard", "occluder", "context", "background")
+NUM_ROLES = len(ROLE_NAMES)
 
 # --- actor motion models ----------------------------------------------------------------------
 MOTION_SCRIPTED = 0  # path + speed profile + trigger time (closed form in time)

@@ -29,28 +29,30 @@ import numpy as np
 import pandas as pd
 
 from lantern_jax.constants import DT, FAMILIES
-from lantern_jax.policies.base import Policy, check_policy_output, get_policy
+from lantern_jax.policies.base import Policy, check_policy_output
+from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.suite import Suite, build_suite_worlds, load_suite
 from lantern_jax.scenarios.warnings import paraphrase_text_id
 from lantern_jax.scoring.aggregate import decomposition_table, family_scores
 from lantern_jax.scoring.metrics import finalize
 from lantern_jax.scoring.table import build_route_table
 from lantern_jax.sim.rollout import rollout_batch_parallel
-from lantern_jax.world import World, tree_stack
+from lantern_jax.times import happened, time_or_nan
+from lantern_jax.world import Scenario, tree_stack
 
 CONDITIONS = ("warning", "no-warning")
 
 
 def _ablate(field: str, value):
-    def apply(p, family):
-        del family
-        return p.replace(**{field: jnp.full_like(getattr(p, field), value)})
+    def apply(config):
+        return config.replace(**{field: jnp.full_like(getattr(config, field), value)})
 
     return apply
 
 
-def _paraphrase(p, family):
-    return p.replace(text_id=jnp.asarray(family * 0 + paraphrase_text_id(0), jnp.int32) + family)
+def _paraphrase(config):
+    offset = jnp.asarray(config.family * 0 + paraphrase_text_id(0), jnp.int32)
+    return config.replace(text_id=offset + config.family)
 
 
 #: Ablations of the temporal protocol and the warning (paper Table "Sensitivity ...").
@@ -73,7 +75,7 @@ def ablation_names() -> list[str]:
 class Executions:
     """The batched executions of a suite: ``[A warning | A no-warning | B]`` x pairs."""
 
-    worlds: World  # leaves with leading axis 3 * num_pairs
+    scenarios: Scenario  # leaves with leading axis 3 * num_pairs
     num_pairs: int
     pair_ids: list[str]
     families: list[str]
@@ -82,26 +84,27 @@ class Executions:
 
 
 def build_executions(suite: Suite, ablation: str = "none") -> Executions:
-    """Build the batched worlds of every execution of a suite under an ablation.
+    """Build the batched scenarios of every execution of a suite under an ablation.
 
     Raises:
         ValueError: listing the valid ablations for an unknown name.
     """
     if ablation not in ABLATIONS:
         raise ValueError(f"unknown ablation {ablation!r}; valid: {', '.join(ABLATIONS)}")
-    wa, wb, _ = build_suite_worlds(suite)
-    a = tree_stack(wa)
-    b = tree_stack(wb)
-    a_warn = a.replace(params=a.params.replace(warning_enabled=jnp.ones_like(a.params.is_route_a)))
-    a_none = a.replace(params=a.params.replace(warning_enabled=jnp.zeros_like(a.params.is_route_a)))
+    sa, sb, _ = build_suite_worlds(suite)
+    a = tree_stack(sa)
+    b = tree_stack(sb)
+    on, off = jnp.ones_like(a.config.is_route_a), jnp.zeros_like(a.config.is_route_a)
+    a_warn = a.replace(config=a.config.replace(warning_enabled=on))
+    a_none = a.replace(config=a.config.replace(warning_enabled=off))
     fn = ABLATIONS[ablation]
     if fn is not None:
-        a_warn = a_warn.replace(params=fn(a_warn.params, a_warn.params.family))
-        a_none = a_none.replace(params=fn(a_none.params, a_none.params.family))
-    worlds = jax.tree.map(lambda *x: jnp.concatenate(x), a_warn, a_none, b)
-    max_ticks = int(np.ceil(float(np.max(np.asarray(worlds.params.timeout_s))) / DT))
+        a_warn = a_warn.replace(config=fn(a_warn.config))
+        a_none = a_none.replace(config=fn(a_none.config))
+    scenarios = jax.tree.map(lambda *x: jnp.concatenate(x), a_warn, a_none, b)
+    max_ticks = int(np.ceil(float(np.max(np.asarray(scenarios.config.timeout_s))) / DT))
     return Executions(
-        worlds=worlds,
+        scenarios=scenarios,
         num_pairs=len(suite.pairs),
         pair_ids=[p.pair_id for p in suite.pairs],
         families=[p.family for p in suite.pairs],
@@ -132,13 +135,15 @@ def compiled_rollout(act, max_ticks: int, start: bool = False):
     if key not in _COMPILED:
         if start:
             fn = jax.jit(
-                lambda worlds, params, s: rollout_batch_parallel(
-                    worlds, act, params, max_ticks, start=s
+                lambda scenarios, policy_params, s: rollout_batch_parallel(
+                    scenarios, act, policy_params, max_ticks, start=s
                 )
             )
         else:
             fn = jax.jit(
-                lambda worlds, params: rollout_batch_parallel(worlds, act, params, max_ticks)
+                lambda scenarios, policy_params: rollout_batch_parallel(
+                    scenarios, act, policy_params, max_ticks
+                )
             )
         _COMPILED[key] = fn
     return _COMPILED[key]
@@ -157,40 +162,42 @@ def _take(tree, idx):
     return jax.tree.map(lambda x: x[idx], tree)
 
 
-def run_executions(act, worlds: World, params: Any, max_ticks: int, compact: bool | None = None):
-    """Roll out a batch of executions until all have ended; returns (final SimState, seconds
+def run_executions(
+    act, scenarios: Scenario, policy_params: Any, max_ticks: int, compact: bool | None = None
+):
+    """Roll out a batch of executions until all have ended; returns (final states, seconds
     spent compiling).
 
     Large batches run in two phases (see ``COMPACT_*``): results are the same executions,
     continued from their exact state, only grouped differently.
     """
-    n = jax.tree.leaves(worlds)[0].shape[0]
+    n = jax.tree.leaves(scenarios)[0].shape[0]
     if compact is None:
         compact = n >= COMPACT_MIN_BATCH and max_ticks > COMPACT_AFTER_TICKS
     t0 = time.perf_counter()
     if not compact:
-        exe = _executable(compiled_rollout(act, max_ticks), worlds, params)
-        return exe(worlds, params), time.perf_counter() - t0
+        exe = _executable(compiled_rollout(act, max_ticks), scenarios, policy_params)
+        return exe(scenarios, policy_params), time.perf_counter() - t0
     first = compiled_rollout(act, COMPACT_AFTER_TICKS)
     rest = compiled_rollout(act, max_ticks - COMPACT_AFTER_TICKS, start=True)
-    exe1 = _executable(first, worlds, params)
+    exe1 = _executable(first, scenarios, policy_params)
     group = min(COMPACT_GROUP, n)
-    w_g = _take(worlds, np.arange(group))
+    sc_g = _take(scenarios, np.arange(group))
     key = ("warm", rest, group)
     if key not in _COMPILED:
         # Compile the second phase now: a call on finished (done) states runs no tick.
-        s_shape = jax.eval_shape(first, worlds, params)
+        s_shape = jax.eval_shape(first, scenarios, policy_params)
         dummy = jax.tree.map(lambda x: jnp.zeros((group, *x.shape[1:]), x.dtype), s_shape)
         dummy = dummy.replace(done=jnp.ones((group,), bool))
-        jax.block_until_ready(rest(w_g, params, dummy))
+        jax.block_until_ready(rest(sc_g, policy_params, dummy))
         _COMPILED[key] = True
     t_compile = time.perf_counter() - t0
-    state = exe1(worlds, params)
+    state = exe1(scenarios, policy_params)
     todo = np.flatnonzero(~np.asarray(state.done))
     for k in range(0, len(todo), group):
         ids = todo[k : k + group]
         padded = np.concatenate([ids, np.full(group - len(ids), ids[0])])
-        part = rest(_take(worlds, padded), params, _take(state, padded))
+        part = rest(_take(scenarios, padded), policy_params, _take(state, padded))
         state = jax.tree.map(lambda full, p, ids=ids: full.at[ids].set(p[: len(ids)]), state, part)
     return state, t_compile
 
@@ -244,25 +251,27 @@ def run_policy(
     pol = get_policy(policy) if isinstance(policy, str) else policy
     if params is None:
         params = pol.init(jax.random.PRNGKey(0))
-    from lantern_jax.sim.observe import observe, sense
+    from lantern_jax.sim.observe import observe
+    from lantern_jax.sim.state import init_state
 
-    w0 = jax.tree.map(lambda x: x[0], execs.worlds)
-    check_policy_output(pol, params, jax.eval_shape(lambda w: observe(w, sense(w, 0.0)), w0))
+    sc0 = jax.tree.map(lambda x: x[0], execs.scenarios)
+    check_policy_output(pol, params, jax.eval_shape(lambda sc: observe(sc, init_state(sc)), sc0))
     t0 = time.perf_counter()
-    final, t_compile = run_executions(pol.act, execs.worlds, params, execs.max_ticks)
+    final, t_compile = run_executions(pol.act, execs.scenarios, params, execs.max_ticks)
     jax.block_until_ready(final)
     t2 = time.perf_counter()
     t1 = t0 + t_compile
     m_struct = jax.tree.map(np.asarray, finalize(final.telemetry))
     metrics = {f.name: getattr(m_struct, f.name) for f in dataclasses.fields(m_struct)}
-    proto = jax.tree.map(np.asarray, final.world.protocol)
+    proto = jax.tree.map(np.asarray, final.protocol)
     proto = {f.name: getattr(proto, f.name) for f in dataclasses.fields(proto)}
     n = execs.num_pairs
     rows = []
     from lantern_jax.scenarios.protocol import warning_onset
 
-    onset = np.asarray(jax.vmap(warning_onset)(final.world.protocol, final.world.params))
-    onset = np.where(onset < 1e8, onset, np.nan)
+    onset = np.asarray(jax.vmap(warning_onset)(final.protocol, execs.scenarios.config))
+    d_safe = np.asarray(execs.scenarios.config.d_safe)
+    onset = np.asarray(time_or_nan(onset))
     for ci, cond in enumerate(CONDITIONS):
         sl = slice(ci * n, (ci + 1) * n)
         rows.append(
@@ -275,6 +284,7 @@ def run_policy(
                 families=execs.families,
                 weathers=execs.weathers,
                 t_warn_on=onset[sl],
+                d_safe=d_safe[sl],
             )
         )
     table = pd.concat(rows, ignore_index=True)
@@ -318,7 +328,7 @@ def hidden_at_warning(runs: list[PolicyRun], execs_pairs: int, families: list[st
     fam = np.asarray(families)
     for r in runs:
         vis = np.asarray(r.protocol["hazard_visible_at_warn"][:execs_pairs], bool)
-        reached = np.asarray(r.protocol["t_warn_point"][:execs_pairs]) < 1e8
+        reached = np.asarray(happened(r.protocol["t_warn_point"][:execs_pairs]))
         hidden = ~vis & reached
         row = {"model": r.policy}
         for f in FAMILIES:

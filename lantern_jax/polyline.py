@@ -151,67 +151,40 @@ def nearest_segment(points: Array, valid: Array, query: Array) -> tuple[Array, A
     return jnp.where(pos, jnp.sqrt(jnp.where(pos, best, 1.0)), 0.0), direction
 
 
-def project_many(
-    points: Array, s: Array, valid: Array, queries: Array
-) -> tuple[Array, Array, Array, Array]:
-    """Project many points onto one padded polyline (nearest segment), vectorised.
+def project_uniform(points: Array, step: float, qs: Array) -> tuple[Array, Array]:
+    """Project many points onto a polyline whose points are ``step`` m apart (no padding).
 
-    Same semantics as :func:`project` for every query.  The work is laid out segments-major /
-    queries-minor with x and y split and the nearest segment selected by a one-hot mask instead
-    of a gather, which XLA on CPU runs many times faster than a (queries, segments, 2) layout.
+    The policy observation's route (points a fixed arc step apart, starting at the ego's
+    projection) is such a polyline, so the arc of segment ``k`` starts at ``k * step``.  Laid
+    out segments-major / points-minor with x and y split, which XLA on CPU vectorises far better
+    than a (points, segments, 2) layout.  Ties go to the furthest segment; queries behind the
+    first point get negative arcs along the first segment's line.
 
     Args:
-        points: (P, 2) float32, m.
-        s: (P,) float32, m, cumulative arc length.
-        valid: (P,) bool, prefix mask.
-        queries: (M, 2) float32, m.
+        points: (N, 2) float32, m, polyline points ``step`` apart.
+        step: static float, m, arc length between consecutive points.
+        qs: (M, 2) float32, m, query points.
 
     Returns:
-        arc (M,), lateral (M,), heading (M,), distance (M,) — as in :func:`project`.
+        arc: (M,) float32, m along the polyline from its first point (negative behind it).
+        dist: (M,) float32, m, distance from the polyline.
     """
-    n = num_valid(valid)
-    nseg = points.shape[0] - 1
-    d = points[1:] - points[:-1]  # (P-1, 2)
-    seg_valid = valid[1:] & valid[:-1]
-    len2 = jnp.sum(d * d, axis=-1)
-    nonzero = seg_valid & (len2 > _EPS2)
-    inv_len2 = jnp.where(nonzero, 1.0 / jnp.where(nonzero, len2, 1.0), 0.0)
-    length = safe_norm(d)
-    inv_len = jnp.where(nonzero, 1.0 / jnp.where(nonzero, length, 1.0), 0.0)
-    heading_seg = jnp.where(nonzero, safe_atan2(d[:, 1], d[:, 0]), 0.0)
-    col = lambda x: x[:, None]  # noqa: E731
-    dx, dy = col(d[:, 0]), col(d[:, 1])
-    rx = queries[None, :, 0] - col(points[:-1, 0])  # (P-1, M)
-    ry = queries[None, :, 1] - col(points[:-1, 1])
-    t_raw = (rx * dx + ry * dy) * col(inv_len2)
-    t_clip = jnp.clip(t_raw, 0.0, 1.0)
-    ex, ey = rx - t_clip * dx, ry - t_clip * dy
-    dist2 = jnp.where(col(seg_valid), ex * ex + ey * ey, BIG)
-    # First nearest segment without argmin (a variadic reduce, slow on CPU): min, then the
-    # smallest segment index attaining it.
-    best = jnp.min(dist2, axis=0)
-    iota = jnp.arange(nseg, dtype=jnp.int32)[:, None]
-    first = jnp.min(jnp.where(dist2 <= best[None, :], iota, nseg), axis=0)
-    onehot = iota == first[None, :]
-    k = jnp.arange(nseg)
-    lo = jnp.where(k == 0, -jnp.inf, 0.0)
-    hi = jnp.where(k == jnp.maximum(n - 2, 0), jnp.inf, 1.0)
-    t_ext = jnp.clip(t_raw, col(lo), col(hi))
-    arc_seg = col(s[:-1]) + t_ext * col(length)
-    lat_seg = (dx * ry - dy * rx) * col(inv_len)
-    pick = lambda x: jnp.sum(jnp.where(onehot, x, 0.0), axis=0)  # noqa: E731
-    arc = pick(arc_seg)
-    lateral = pick(lat_seg)
-    heading = pick(jnp.broadcast_to(col(heading_seg), onehot.shape))
-    d2_best = pick(ex * ex + ey * ey)
-    pos = d2_best > _EPS2
-    distance = jnp.where(pos, jnp.sqrt(jnp.where(pos, d2_best, 1.0)), 0.0)
-    single = n < 2
-    distance = jnp.where(single, safe_norm(queries - points[0][None, :]), distance)
-    arc = jnp.where(single, 0.0, arc)
-    lateral = jnp.where(single, 0.0, lateral)
-    heading = jnp.where(single, 0.0, heading)
-    return arc, lateral, heading, distance
+    a = points[:-1]
+    ab = points[1:] - a
+    inv = 1.0 / jnp.maximum(jnp.sum(ab * ab, -1), 1e-6)  # (N-1,)
+    ax, ay, bx, by = a[:, 0:1], a[:, 1:2], ab[:, 0:1], ab[:, 1:2]
+    rx, ry = qs[None, :, 0] - ax, qs[None, :, 1] - ay  # (N-1, M)
+    along = (rx * bx + ry * by) * inv[:, None]
+    u = jnp.clip(along, 0.0, 1.0)
+    dx, dy = rx - u * bx, ry - u * by
+    d2 = dx * dx + dy * dy
+    m = jnp.min(d2, axis=0)
+    k = jnp.arange(a.shape[0], dtype=jnp.float32)[:, None]
+    arc = jnp.max(jnp.where(d2 <= m[None, :], (k + u) * step, -BIG), axis=0)
+    # Behind the first point: extend the first segment backwards (negative arcs).
+    back = along[0] * step
+    arc = jnp.where((arc <= 0.0) & (back < 0.0), back, arc)
+    return arc, jnp.sqrt(jnp.maximum(m, 1e-12))
 
 
 def project(

@@ -1,4 +1,14 @@
-"""World state of ONE scenario execution, as ``flax.struct`` pytrees.
+"""The world of ONE scenario execution, as ``flax.struct`` pytrees: a static :class:`Scenario`
+and the dynamic pieces that the simulator's :class:`~lantern_jax.sim.state.State` carries.
+
+* :class:`Scenario` — everything that never changes during an execution: the map
+  (:class:`Lanes`), the ego :class:`Route`, the :class:`TrafficLights`, what every actor slot is
+  and how it moves (:class:`ActorScript`), the execution's markers, condition, rules and weather
+  (:class:`ExecutionConfig`) and the initial conditions (``ego0``, ``actors0``).  It is closed
+  over (one execution) or broadcast along the batch axis (``vmap``), never carried.
+* :class:`EgoState`, :class:`ActorState`, :class:`ProtocolState` — what changes tick by tick;
+  the simulator's ``State`` (in :mod:`lantern_jax.sim.state`) composes them with the sensing
+  results and the scoring accumulators.
 
 Every function in the package takes and returns a single scenario; batches are made with
 ``jax.vmap`` outside.  Capacities (``A`` actors, ``P`` path points, ``L`` lanes, ``Q`` lane
@@ -8,7 +18,7 @@ padded slots carry a ``valid`` mask.
 Frames: world frame x east / y north / yaw counter-clockwise (see :mod:`lantern_jax.constants`).
 
 Each struct has a ``validate()`` method that runs **outside** ``jit`` on concrete arrays and raises
-:class:`ValueError` naming the offending field (``"Actors.extent: ..."``).
+:class:`ValueError` naming the offending field (``"ActorScript.extent: ..."``).
 """
 
 from __future__ import annotations
@@ -20,7 +30,8 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
-from lantern_jax.constants import INF_TIME
+from lantern_jax.constants import FAMILIES, NUM_ACTOR_KINDS, NUM_ROLES
+from lantern_jax.times import NEVER
 
 Array = jax.Array
 
@@ -74,7 +85,7 @@ def check_nonneg(name: str, x: Any, mask: Any = None) -> None:
 
 
 # ---------------------------------------------------------------------------------------------
-# state structs
+# dynamic pieces
 # ---------------------------------------------------------------------------------------------
 @struct.dataclass
 class EgoState:
@@ -97,54 +108,72 @@ class EgoState:
 
 
 @struct.dataclass
-class Actors:
-    """Dynamic state and boxes of a fixed-capacity padded actor set (A slots)."""
+class ActorState:
+    """Dynamic state of a fixed-capacity padded actor set (A slots).
+
+    Whether a slot holds an actor at all (``ActorScript.valid``) and its box are static; an actor
+    exists in the world right now when it is valid and ``active`` (see :func:`present`).
+    """
 
     xy: Array  # (A, 2) float32, m, world frame, box centre
     yaw: Array  # (A,) float32, rad, CCW from +x
     speed: Array  # (A,) float32, m/s, signed along the heading
-    extent: Array  # (A, 2) float32, m, (half length, half width), >= 0
-    kind: Array  # (A,) int32, KIND_* (vehicle, pedestrian, static)
-    role: Array  # (A,) int32, ROLE_* (hazard, occluder, context, background)
-    valid: Array  # (A,) bool, slot holds an actor of this execution (padding = False)
-    active: Array  # (A,) bool, actor currently in the world (False after despawn)
     s: Array  # (A,) float32, m, arc length along the actor's path
     lat: Array  # (A,) float32, m, lateral offset from the path, + = left of travel
+    active: Array  # (A,) bool, actor currently in the world (False after despawn)
 
     @property
     def num(self) -> int:
         """Static capacity A."""
         return self.xy.shape[-2]
 
-    @property
-    def present(self) -> Array:
-        """(A,) bool: valid and active — the actors that exist in the world right now."""
-        return self.valid & self.active
-
-    def validate(self) -> Actors:
-        xy = check_shape("Actors.xy", self.xy, (None, 2))
+    def validate(self, valid: Any = None) -> ActorState:
+        """Check shapes, and finiteness of the slots marked ``valid`` (all slots when None)."""
+        xy = check_shape("ActorState.xy", self.xy, (None, 2))
         n = xy.shape[0]
-        for f in ("yaw", "speed", "kind", "role", "valid", "active", "s", "lat"):
-            check_shape(f"Actors.{f}", getattr(self, f), (n,))
-        check_shape("Actors.extent", self.extent, (n, 2))
-        v = np.asarray(self.valid, bool)
+        for f in ("yaw", "speed", "s", "lat", "active"):
+            check_shape(f"ActorState.{f}", getattr(self, f), (n,))
+        v = np.ones(n, bool) if valid is None else np.asarray(valid, bool)
         for f in ("xy", "yaw", "speed", "s", "lat"):
-            check_finite(f"Actors.{f}", getattr(self, f), v)
-        check_nonneg("Actors.extent", self.extent, v)
-        kind = np.asarray(self.kind)
-        if np.any(v & ((kind < 0) | (kind > 2))):
-            raise ValueError("Actors.kind: must be 0 (vehicle), 1 (pedestrian) or 2 (static)")
-        role = np.asarray(self.role)
-        if np.any(v & ((role < 0) | (role > 3))):
-            raise ValueError("Actors.role: must be 0..3 (hazard, occluder, context, background)")
+            check_finite(f"ActorState.{f}", getattr(self, f), v)
         return self
 
 
 @struct.dataclass
-class ActorScript:
-    """How each actor moves (static over an execution).
+class ProtocolState:
+    """Temporal-protocol times of one execution; ``times.NEVER`` until the transition happens."""
 
-    Scripted actors (``motion == MOTION_SCRIPTED``) move in closed form in time::
+    t_warn_point: Array  # () float32, s, ego reached the warning point (= t_ref)
+    t_warn_on: Array  # () float32, s, warning delivery starts (NEVER in the no-warning
+    #                   condition and on Route B)
+    t_event: Array  # () float32, s, physical event onset
+    t_warn_off: Array  # () float32, s, warning termination (hazard seen after the event)
+    t_clear: Array  # () float32, s, hazard clearance
+    countdown: Array  # () float32, s, anti-deadlock time accumulated since the warning point
+    event_forced: Array  # () bool, the event was started by the anti-deadlock rule
+    clear_by_limit: Array  # () bool, clearance came from a safety/stop limit
+    ego_still_time: Array  # () float32, s, continuous time the ego has been (almost) still
+    hazard_visible_at_warn: Array  # () bool, the hazard was camera-visible at the warning point
+
+    @staticmethod
+    def initial() -> ProtocolState:
+        """All transitions pending."""
+        never = jnp.asarray(NEVER, jnp.float32)
+        z = jnp.asarray(0.0, jnp.float32)
+        f = jnp.asarray(False)
+        return ProtocolState(never, never, never, never, never, z, f, f, z, f)
+
+
+# ---------------------------------------------------------------------------------------------
+# static pieces
+# ---------------------------------------------------------------------------------------------
+@struct.dataclass
+class ActorScript:
+    """What every actor slot is and how it moves (static over an execution).
+
+    Body: ``extent``, ``kind``, ``role`` and ``valid`` (padding slots are ``valid = False``).
+
+    Motion: scripted actors (``motion == MOTION_SCRIPTED``) move in closed form in time::
 
         trigger time   tau = trigger_delay            (TRIGGER_CLOCK)
                        tau = t_event + trigger_delay  (TRIGGER_EVENT; inf until the event)
@@ -158,6 +187,10 @@ class ActorScript:
     the light ``light_index`` is not green.
     """
 
+    extent: Array  # (A, 2) float32, m, (half length, half width), >= 0
+    kind: Array  # (A,) int32, KIND_* (vehicle, pedestrian, static)
+    role: Array  # (A,) int32, ROLE_* (hazard, occluder, context, background)
+    valid: Array  # (A,) bool, slot holds an actor of this execution (padding = False)
     motion: Array  # (A,) int32, MOTION_*
     path: Array  # (A, P, 2) float32, m, world-frame polyline followed by the actor
     path_s: Array  # (A, P) float32, m, cumulative arc length of ``path`` (0 at the first point)
@@ -175,12 +208,28 @@ class ActorScript:
     light_index: Array  # (A,) int32, traffic light governing an IDM actor (-1 = none)
     stop_s: Array  # (A,) float32, m, arc of that light's stop line on the actor's path
 
-    def validate(self, num_actors: int | None = None) -> ActorScript:
-        motion = check_shape("ActorScript.motion", self.motion, (num_actors,))
-        n = motion.shape[0]
+    @property
+    def num(self) -> int:
+        """Static capacity A."""
+        return self.extent.shape[-2]
+
+    def validate(self, num_lights: int | None = None) -> ActorScript:
+        ext = check_shape("ActorScript.extent", self.extent, (None, 2))
+        n = ext.shape[0]
+        for f in ("kind", "role", "valid", "motion"):
+            check_shape(f"ActorScript.{f}", getattr(self, f), (n,))
+        v = np.asarray(self.valid, bool)
+        check_nonneg("ActorScript.extent", self.extent, v)
+        kind, role = np.asarray(self.kind), np.asarray(self.role)
+        if np.any(v & ((kind < 0) | (kind >= NUM_ACTOR_KINDS))):
+            raise ValueError("ActorScript.kind: must be 0 (vehicle), 1 (pedestrian) or 2 (static)")
+        if np.any(v & ((role < 0) | (role >= NUM_ROLES))):
+            raise ValueError(
+                "ActorScript.role: must be 0..3 (hazard, occluder, context, background)"
+            )
         path = check_shape("ActorScript.path", self.path, (n, None, 2))
         p = path.shape[1]
-        check_shape("ActorScript.path_s", self.path_s, (n, p))
+        path_s = check_shape("ActorScript.path_s", self.path_s, (n, p))
         pv = check_shape("ActorScript.path_valid", self.path_valid, (n, p)).astype(bool)
         check_finite("ActorScript.path", self.path, pv)
         check_finite("ActorScript.path_s", self.path_s, pv)
@@ -196,6 +245,12 @@ class ActorScript:
             raise ValueError("ActorScript.lat_duration: must be > 0")
         if np.any(pv.sum(-1) < 1):
             raise ValueError("ActorScript.path_valid: every actor path needs at least one point")
+        both = pv[:, 1:] & pv[:, :-1] & v[:, None]
+        if np.any(both & (np.diff(path_s, axis=-1) < 0)):
+            raise ValueError("ActorScript.path_s: arc length must not decrease along a path")
+        li = np.asarray(self.light_index)
+        if num_lights is not None and np.any(v & (li >= num_lights)):
+            raise ValueError(f"ActorScript.light_index: must be -1 or < {num_lights} light slots")
         return self
 
 
@@ -225,6 +280,9 @@ class Lanes:
         return self
 
 
+ROUTE_LENGTH_TOL = 1e-3  # m, Route.length must match the last valid arc length to this
+
+
 @struct.dataclass
 class Route:
     """The ego route: a padded polyline with cumulative arc length."""
@@ -244,9 +302,15 @@ class Route:
             raise ValueError(f"Route.xy: a route needs at least two points, got {int(v.sum())}")
         check_finite("Route.xy", self.xy, v)
         check_finite("Route.s", self.s, v)
+        check_finite("Route.length", self.length)
         s = np.asarray(self.s)[v]
         if np.any(np.diff(s) <= 0):
             raise ValueError("Route.s: arc length must be strictly increasing (duplicate points?)")
+        length = float(self.length)
+        if length <= 0 or abs(length - float(s[-1])) > ROUTE_LENGTH_TOL:
+            raise ValueError(
+                f"Route.length: {length!r} must equal the last valid arc length {float(s[-1])!r}"
+            )
         return self
 
 
@@ -261,6 +325,11 @@ class TrafficLights:
     stop_xy: Array  # (T, 2) float32, m, centre of the stop line (for drawing)
     valid: Array  # (T,) bool
 
+    @property
+    def num(self) -> int:
+        """Static capacity T."""
+        return self.valid.shape[-1]
+
     def validate(self) -> TrafficLights:
         g = check_shape("TrafficLights.green", self.green, (None,))
         n = g.shape[0]
@@ -271,12 +340,16 @@ class TrafficLights:
         for f in ("green", "yellow", "red"):
             check_nonneg(f"TrafficLights.{f}", getattr(self, f), v)
         check_finite("TrafficLights.offset", self.offset, v)
+        cycle = np.asarray(self.green) + np.asarray(self.yellow) + np.asarray(self.red)
+        if np.any(v & (cycle <= 0)):
+            i = int(np.argwhere(v & (cycle <= 0))[0, 0])
+            raise ValueError(f"TrafficLights.green: light {i} has an empty cycle (all phases 0)")
         return self
 
 
 @struct.dataclass
-class ScenarioParams:
-    """Per-execution scenario parameters: markers, condition, clearance rule, weather, ablations.
+class ExecutionConfig:
+    """Markers, condition, clearance rules, weather and ablation switches of one execution.
 
     Distances along the route are arc lengths of :class:`Route`.  Everything here is data, so
     the condition (warning / no-warning) and the route variant (A / B) never branch in Python.
@@ -309,79 +382,71 @@ class ScenarioParams:
     pos_noise_sigma: Array  # () float32, m, ablation: Gaussian noise on the grounded position
     noise_seed: Array  # () uint32, seed of that noise
 
-    def validate(self) -> ScenarioParams:
+    def validate(self) -> ExecutionConfig:
         for f in self.__dataclass_fields__:
-            check_shape(f"ScenarioParams.{f}", getattr(self, f), ())
-            check_finite(f"ScenarioParams.{f}", getattr(self, f))
+            check_shape(f"ExecutionConfig.{f}", getattr(self, f), ())
+            check_finite(f"ExecutionConfig.{f}", getattr(self, f))
         for f in ("d_safe", "v_ref", "friction", "sensing_range", "timeout_s", "force_delay"):
             if float(getattr(self, f)) <= 0:
-                raise ValueError(f"ScenarioParams.{f}: must be > 0, got {float(getattr(self, f))}")
-        check_nonneg("ScenarioParams.pos_noise_sigma", self.pos_noise_sigma)
-        check_nonneg("ScenarioParams.warn_hold_extra", self.warn_hold_extra)
+                raise ValueError(f"ExecutionConfig.{f}: must be > 0, got {float(getattr(self, f))}")
+        check_nonneg("ExecutionConfig.pos_noise_sigma", self.pos_noise_sigma)
+        check_nonneg("ExecutionConfig.warn_hold_extra", self.warn_hold_extra)
+        fam = int(self.family)
+        if not 0 <= fam < len(FAMILIES):
+            raise ValueError(f"ExecutionConfig.family: {fam} outside 0..{len(FAMILIES) - 1}")
         if not float(self.s_warn) <= float(self.s_event) <= float(self.s_conflict):
             raise ValueError(
-                "ScenarioParams.s_warn/s_event/s_conflict: need s_warn <= s_event <= s_conflict, "
-                f"got {float(self.s_warn)}, {float(self.s_event)}, {float(self.s_conflict)}"
+                "ExecutionConfig.s_warn/s_event/s_conflict: need s_warn <= s_event <= "
+                f"s_conflict, got {float(self.s_warn)}, {float(self.s_event)}, "
+                f"{float(self.s_conflict)}"
             )
         return self
 
 
 @struct.dataclass
-class ProtocolState:
-    """Temporal-protocol times of one execution; INF_TIME until the transition happens."""
+class Scenario:
+    """Everything that stays fixed during one execution, initial conditions included.
 
-    t_warn_point: Array  # () float32, s, ego reached the warning point (= t_ref)
-    t_warn_on: Array  # () float32, s, warning delivery starts (INF_TIME in the no-warning
-    #                   condition and on Route B)
-    t_event: Array  # () float32, s, physical event onset
-    t_warn_off: Array  # () float32, s, warning termination (hazard seen after the event)
-    t_clear: Array  # () float32, s, hazard clearance
-    countdown: Array  # () float32, s, anti-deadlock time accumulated since the warning point
-    event_forced: Array  # () bool, the event was started by the anti-deadlock rule
-    clear_by_limit: Array  # () bool, clearance came from a safety/stop limit
-    ego_still_time: Array  # () float32, s, continuous time the ego has been (almost) still
-    hazard_visible_at_warn: Array  # () bool, the hazard was camera-visible at the warning point
+    Closed over by the scan of one execution (or broadcast along the batch axis); the dynamic
+    :class:`~lantern_jax.sim.state.State` starts from ``ego0`` and ``actors0``.
+    """
 
-    @staticmethod
-    def initial() -> ProtocolState:
-        """All transitions pending."""
-        inf = jnp.asarray(INF_TIME, jnp.float32)
-        z = jnp.asarray(0.0, jnp.float32)
-        f = jnp.asarray(False)
-        return ProtocolState(inf, inf, inf, inf, inf, z, f, f, z, f)
-
-
-@struct.dataclass
-class World:
-    """Everything the simulator steps for one scenario execution."""
-
-    t: Array  # () float32, s, simulation clock
-    tick: Array  # () int32, ticks since start
-    ego: EgoState
-    actors: Actors
-    script: ActorScript
     lanes: Lanes
     route: Route
     lights: TrafficLights
-    params: ScenarioParams
-    protocol: ProtocolState
+    actors: ActorScript
+    config: ExecutionConfig
+    ego0: EgoState  # the ego at t = 0
+    actors0: ActorState  # the actors at t = 0
 
-    def validate(self) -> World:
+    def validate(self) -> Scenario:
         """Validate every component (outside jit) and their mutual consistency."""
-        self.ego.validate()
-        self.actors.validate()
-        self.script.validate(self.actors.num)
         self.lanes.validate()
         self.route.validate()
         self.lights.validate()
-        self.params.validate()
-        h = int(self.params.hazard_index)
-        if not 0 <= h < self.actors.num:
-            raise ValueError(f"ScenarioParams.hazard_index: {h} outside 0..{self.actors.num - 1}")
-        el = int(self.params.ego_light)
-        if el >= self.lights.valid.shape[0]:
-            raise ValueError(f"ScenarioParams.ego_light: {el} >= number of light slots")
+        self.actors.validate(num_lights=self.lights.num)
+        self.config.validate()
+        self.ego0.validate()
+        self.actors0.validate(self.actors.valid)
+        n = self.actors.num
+        if self.actors0.num != n:
+            raise ValueError(f"ActorState.xy: {self.actors0.num} slots, ActorScript has {n}")
+        h = int(self.config.hazard_index)
+        if not 0 <= h < n:
+            raise ValueError(f"ExecutionConfig.hazard_index: {h} outside 0..{n - 1}")
+        el = int(self.config.ego_light)
+        if el >= self.lights.num:
+            raise ValueError(
+                f"ExecutionConfig.ego_light: {el} >= number of light slots {self.lights.num}"
+            )
+        if el >= 0 and not bool(np.asarray(self.lights.valid)[el]):
+            raise ValueError(f"ExecutionConfig.ego_light: light slot {el} is not valid")
         return self
+
+
+def present(actors: ActorScript, state: ActorState) -> Array:
+    """(A,) bool: the actors that exist in the world right now (valid and active)."""
+    return actors.valid & state.active
 
 
 def tree_stack(items: list) -> Any:

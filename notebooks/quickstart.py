@@ -42,9 +42,10 @@ import pandas as pd
 from IPython.display import display
 
 from lantern_jax.evaluate import evaluate
-from lantern_jax.policies.base import get_policy
+from lantern_jax.policies.registry import get_policy
 from lantern_jax.report import format_decomposition, format_family_table, ordered_tables
 from lantern_jax.scenarios.families import build_pair
+from lantern_jax.scenarios.knobs import get_knobs, set_knobs
 from lantern_jax.scenarios.suite import load_suite
 from lantern_jax.scoring.cus import soft_pair_cus
 from lantern_jax.sim.rollout import horizon_ticks, rollout
@@ -122,28 +123,28 @@ result.route_table.head()
 #
 # A pedestrian hidden behind a parked truck steps into the ego lane. We roll out `coop` on
 # Route A with and without the warning, recording every tick. `rollout` is a plain function of
-# the world, so one jitted function serves both conditions: only `params.warning_enabled`
+# the scenario, so one jitted function serves both conditions: only `config.warning_enabled`
 # differs.
 
 # %%
 pair = next(p for p in small.pairs if p.family == "PE")
 world_a, world_b, _ = build_pair(pair.params)
-world_a_nowarn = world_a.replace(params=world_a.params.replace(warning_enabled=jnp.asarray(False)))
+world_a_nowarn = world_a.replace(config=world_a.config.replace(warning_enabled=jnp.asarray(False)))
 
 coop = get_policy("coop")
 coop_params = coop.init(jax.random.PRNGKey(0))
-num_ticks = horizon_ticks(float(world_a.params.timeout_s))  # the route's timeout
+num_ticks = horizon_ticks(float(world_a.config.timeout_s))  # the route's timeout
 run = jax.jit(lambda w: rollout(w, coop.act, coop_params, num_ticks, record=True))
 
 final_w, rec_w = jax.device_get(run(world_a))
 final_nw, rec_nw = jax.device_get(run(world_a_nowarn))
-proto_w, proto_nw = final_w.world.protocol, final_nw.world.protocol
+proto_w, proto_nw = final_w.protocol, final_nw.protocol
 
 print(f"pair {pair.pair_id} ({pair.weather}), horizon {num_ticks} ticks")
 for name, final, rec in (("warning", final_w, rec_w), ("no warning", final_nw, rec_nw)):
     print(
         f"{name:>10}: ends after {num_valid_ticks(rec)} ticks, "
-        f"event onset t = {float(final.world.protocol.t_event):.2f} s, "
+        f"event onset t = {float(final.protocol.t_event):.2f} s, "
         f"collision: {bool(final.telemetry.collided)}"
     )
 
@@ -175,27 +176,26 @@ display(timeline_plot(rec_w, rec_nw, proto_w, proto_nw, title=f"{pair.pair_id}: 
 #
 # The soft CUS replaces hard gates and minima by smooth ones, so the whole rollout can be
 # differentiated. Here: the derivative of one pair's soft CUS with respect to the pedestrian's
-# crossing speed (`script.v_post` of the hazard slot). Both routes are rolled out for a fixed
-# 400 ticks (20 s, enough for both executions of this pair to end; an unfinished route fails the
-# completion gate and scores 0). Compiling the reverse pass takes longer than the forward one.
+# crossing speed (the `hazard_speed` knob of `lantern_jax.scenarios.knobs`). Both routes are
+# rolled out for a fixed 400 ticks (20 s, enough for both executions of this pair to end; an
+# unfinished route fails the completion gate and scores 0). Compiling the reverse pass takes
+# longer than the forward one.
 
 # %%
 GRAD_TICKS = 400
 TEMPERATURE = 0.05
-hazard = int(world_a.params.hazard_index)
 
 
 def soft_cus(crossing_speed):
-    v_post = world_a.script.v_post.at[hazard].set(crossing_speed)
-    w_a = world_a.replace(script=world_a.script.replace(v_post=v_post))
+    w_a = set_knobs(world_a, hazard_speed=crossing_speed)
     final_a, _ = rollout(w_a, coop.act, coop_params, GRAD_TICKS, temperature=TEMPERATURE)
     final_b, _ = rollout(world_b, coop.act, coop_params, GRAD_TICKS, temperature=TEMPERATURE)
-    cus = soft_pair_cus(final_a.telemetry, final_b.telemetry, world_a.params.d_safe, TEMPERATURE)
+    cus = soft_pair_cus(final_a.telemetry, final_b.telemetry, world_a.config.d_safe, TEMPERATURE)
     return cus, (final_a.done, final_b.done)
 
 
 grad_fn = jax.jit(jax.value_and_grad(soft_cus, has_aux=True))
-speed = world_a.script.v_post[hazard]
+speed = get_knobs(world_a)["hazard_speed"]
 (cus, (done_a, done_b)), dcus = grad_fn(speed)
 print(f"crossing speed {float(speed):.2f} m/s, routes ended: A {bool(done_a)}, B {bool(done_b)}")
 print(f"soft CUS = {float(cus):.2f}")

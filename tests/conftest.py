@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 from lantern_jax.constants import NUM_WAYPOINTS, WAYPOINT_DT
-from lantern_jax.policies.base import get_policy
+from lantern_jax.policies.registry import get_policy
 from lantern_jax.sim.rollout import rollout, rollout_batch
 from lantern_jax.world import tree_stack
 

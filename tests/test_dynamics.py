@@ -49,7 +49,14 @@ from lantern_jax.dynamics.controller import track_waypoints, waypoints_fault
 from lantern_jax.dynamics.idm import IDMParams, idm_accel
 from lantern_jax.dynamics.lights import light_states
 from lantern_jax.dynamics.scripted import scripted_pose, trigger_time
-from lantern_jax.world import Actors, ActorScript, EgoState, TrafficLights, tree_index, tree_stack
+from lantern_jax.world import (
+    ActorScript,
+    ActorState,
+    EgoState,
+    TrafficLights,
+    tree_index,
+    tree_stack,
+)
 
 try:  # tests/ as a rootdir-relative folder or as a package
     import reference_numpy_dynamics as ref
@@ -484,7 +491,7 @@ def _path_x(y=0.0, x0=0.0, x1=400.0):
 
 
 def make_scene(specs: list[dict], num_slots: int | None = None):
-    """Actors + script from per-actor dicts; slots beyond len(specs) are junk padding."""
+    """Actor states + scripts from per-actor dicts; slots beyond len(specs) are junk padding."""
     num = num_slots or len(specs)
     rng = np.random.default_rng(7)
     cols = {
@@ -534,6 +541,10 @@ def make_scene(specs: list[dict], num_slots: int | None = None):
         cols["s"].append(x)
     valid = np.arange(num) < len(specs)
     script = ActorScript(
+        extent=_f(np.asarray(cols["extent"], np.float32)),
+        kind=jnp.asarray(cols["kind"], jnp.int32),
+        role=jnp.full((num,), ROLE_BACKGROUND, jnp.int32),
+        valid=jnp.asarray(valid),
         motion=jnp.asarray(cols["motion"], jnp.int32),
         path=_f(np.stack(cols["path"])),
         path_s=_f(np.stack(cols["path_s"])),
@@ -551,17 +562,13 @@ def make_scene(specs: list[dict], num_slots: int | None = None):
         light_index=jnp.asarray(cols["light_index"], jnp.int32),
         stop_s=_f(cols["stop_s"]),
     )
-    actors = Actors(
+    actors = ActorState(
         xy=_f(np.asarray(cols["xy"], np.float32)),
         yaw=_f(cols["yaw"]),
         speed=_f(cols["speed"]),
-        extent=_f(np.asarray(cols["extent"], np.float32)),
-        kind=jnp.asarray(cols["kind"], jnp.int32),
-        role=jnp.full((num,), ROLE_BACKGROUND, jnp.int32),
-        valid=jnp.asarray(valid),
-        active=jnp.ones((num,), bool),
         s=_f(cols["s"]),
         lat=jnp.zeros((num,), F32),
+        active=jnp.ones((num,), bool),
     )
     return actors, script
 
@@ -854,7 +861,7 @@ def test_vmap_equals_single_and_padding_changes_nothing():
 
     def hazard_y(floats):
         out = step_actors(a8, s8.replace(**floats), _f(1.5), _f(1.0), ls, *ego)
-        return out.xy[1, 1] + jnp.sum(jnp.where(a8.valid[:, None], out.xy, 0.0))
+        return out.xy[1, 1] + jnp.sum(jnp.where(s8.valid[:, None], out.xy, 0.0))
 
     grads = jax.jit(jax.grad(hazard_y))({k: getattr(s8, k) for k in names})
     assert _finite(grads)  # NaN padding included: masked on the input, not only the output

@@ -24,8 +24,9 @@ from lantern_jax.evaluate import (
     evaluate,
     params_hash,
 )
-from lantern_jax.policies.base import Policy, get_policy
+from lantern_jax.policies.base import Policy
 from lantern_jax.policies.reference import reference_act
+from lantern_jax.policies.registry import get_policy
 from lantern_jax.report import OUTPUT_FILES, write_outputs
 from lantern_jax.scenarios.suite import load_suite
 from lantern_jax.scenarios.warnings import paraphrase_text_id
@@ -218,7 +219,7 @@ def _route_a_params(suite, ablation):
     """Scenario parameters of every execution (``[A warning | A no-warning | B]`` x pairs) and
     the number of pairs; ablations change the Route A executions."""
     ex = build_executions(suite, ablation)
-    return ex.worlds.params, ex.num_pairs
+    return ex.scenarios.config, ex.num_pairs
 
 
 def test_ablations_are_recorded_and_valid(ablated):
@@ -309,9 +310,9 @@ def test_two_phase_evaluation_matches_one_phase(shipped, monkeypatch):
     execs = build_executions(shipped.select(["pe_0001", "rty_0001", "or_0001"]))
     pol = get_policy("coop")
     params = pol.init(jax.random.PRNGKey(0))
-    one, _ = ev.run_executions(pol.act, execs.worlds, params, execs.max_ticks, compact=False)
-    two, _ = ev.run_executions(pol.act, execs.worlds, params, execs.max_ticks, compact=True)
-    assert int(np.max(np.asarray(one.world.tick))) > 160  # some executions needed phase two
+    one, _ = ev.run_executions(pol.act, execs.scenarios, params, execs.max_ticks, compact=False)
+    two, _ = ev.run_executions(pol.act, execs.scenarios, params, execs.max_ticks, compact=True)
+    assert int(np.max(np.asarray(one.tick))) > 160  # some executions needed phase two
     assert np.asarray(two.done).all()
     m1, m2 = finalize(one.telemetry), finalize(two.telemetry)
     for f in dataclasses.fields(m1):

@@ -16,6 +16,7 @@ from conftest import (
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from lantern_jax import times
 from lantern_jax.constants import (
     DT,
     FAMILIES,
@@ -37,10 +38,11 @@ from lantern_jax.scenarios.families_straight import (
     pe_geometry,
 )
 from lantern_jax.scenarios.handmade import ActorSpec, no_lights, straight_scene
-from lantern_jax.sim.observe import observe, sense
+from lantern_jax.sim.observe import observe
+from lantern_jax.sim.sense import locate_on_route, sense
+from lantern_jax.sim.state import init_state
 from lantern_jax.world import ProtocolState, TrafficLights
 
-HAPPENED = 0.5e9  # protocol times below this have happened
 HAZARD = 0  # hazard slot of every scene here
 
 
@@ -152,7 +154,7 @@ def runs(sim):
 # helpers
 # ---------------------------------------------------------------------------------------------
 def happened(t) -> bool:
-    return float(t) < HAPPENED
+    return bool(times.happened(float(t)))
 
 
 def live_ticks(rec) -> int:
@@ -177,7 +179,7 @@ def check_warning_window(rec, t_on: float, t_off: float, label: str):
     assert bad.size == 0, f"{label}: warning activity wrong at t = {t_obs[bad[:5]]}"
     assert (~expected & (t_obs < t_on)).any(), f"{label}: no tick before the onset"
     assert expected.any(), f"{label}: the warning was never active"
-    if t_off < HAPPENED:
+    if happened(t_off):
         assert (t_obs >= t_off).any(), f"{label}: run ended before the warning ended"
 
 
@@ -196,7 +198,7 @@ def test_warning_point_time_is_interpolated_inside_the_tick(runs, name, s_warn):
     _, final, rec = runs[name]
     n = int(round(s_warn / 8.0 / DT)) + 5
     np.testing.assert_allclose(rec.ego_speed[:n], 8.0, atol=1e-4)  # constant 8 m/s
-    np.testing.assert_allclose(final.world.protocol.t_warn_point, s_warn / 8.0, atol=1e-3)
+    np.testing.assert_allclose(final.protocol.t_warn_point, s_warn / 8.0, atol=1e-3)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -204,40 +206,40 @@ def test_warning_point_time_is_interpolated_inside_the_tick(runs, name, s_warn):
 # ---------------------------------------------------------------------------------------------
 def test_anti_deadlock_forces_the_event_two_seconds_after_the_warning_point(runs):
     world, final, rec = runs["deadlock"]
-    p = final.world.protocol
+    p = final.protocol
     assert happened(p.t_warn_point) and happened(p.t_event)
     np.testing.assert_allclose(p.t_event, p.t_warn_point + 2.0, atol=1e-3)
     assert bool(p.event_forced)
     # The ego had stopped short of the event point when the event was forced.
     k = int(np.searchsorted(rec.t, p.t_event))
     assert rec.ego_speed[k] < 0.1
-    assert rec.ego_xy[k, 0] < float(world.params.s_event) - 5.0
+    assert rec.ego_xy[k, 0] < float(world.config.s_event) - 5.0
     # Exposure: the hazard moves after the event.
-    assert final.world.actors.s[HAZARD] > 5.0
+    assert final.actors.s[HAZARD] > 5.0
 
 
 def test_without_anti_deadlock_the_event_never_happens(runs):
     world, final, rec = runs["deadlock_no_force"]
-    p = final.world.protocol
+    p = final.protocol
     assert happened(p.t_warn_point)
     assert not happened(p.t_event) and not bool(p.event_forced)
     assert not happened(p.t_warn_off) and not happened(p.t_clear)
     # The hazard never started.
     np.testing.assert_array_equal(
         rec.actor_xy[:, HAZARD],
-        np.broadcast_to(np.asarray(world.actors.xy[HAZARD]), rec.actor_xy[:, HAZARD].shape),
+        np.broadcast_to(np.asarray(world.actors0.xy[HAZARD]), rec.actor_xy[:, HAZARD].shape),
     )
-    assert final.world.actors.s[HAZARD] == 0.0
+    assert final.actors.s[HAZARD] == 0.0
 
 
 def test_countdown_pauses_while_a_red_light_holds_the_ego(runs):
     _, free, _ = runs["no_light"]
-    pf = free.world.protocol
+    pf = free.protocol
     np.testing.assert_allclose(pf.t_event, pf.t_warn_point + 2.0, atol=1e-3)
     assert bool(pf.event_forced)
 
     _, final, rec = runs["red_light"]
-    p = final.world.protocol
+    p = final.protocol
     t_wp, t_ev = float(p.t_warn_point), float(p.t_event)
     assert happened(t_wp) and happened(t_ev) and bool(p.event_forced)
     assert t_wp < RED_UNTIL - 1.0, "the ego should reach the warning point during the red phase"
@@ -263,7 +265,7 @@ def test_countdown_pauses_while_a_red_light_holds_the_ego(runs):
 # ---------------------------------------------------------------------------------------------
 def test_warning_active_from_warning_point_to_termination(runs):
     _, final, rec = runs["warn"]
-    p = final.world.protocol
+    p = final.protocol
     assert happened(p.t_warn_point) and happened(p.t_event) and happened(p.t_warn_off)
     assert p.t_warn_point < p.t_event < p.t_warn_off
     assert p.t_warn_on == p.t_warn_point
@@ -273,15 +275,15 @@ def test_warning_active_from_warning_point_to_termination(runs):
 @pytest.mark.parametrize("name", ["warn_disabled", "route_b"])
 def test_warning_never_delivered_without_warning_condition(runs, name):
     _, final, rec = runs[name]
-    assert happened(final.world.protocol.t_warn_point)  # the markers still run
-    assert not happened(final.world.protocol.t_warn_on)
+    assert happened(final.protocol.t_warn_point)  # the markers still run
+    assert not happened(final.protocol.t_warn_on)
     assert not np.asarray(rec.warning_active).any()
     assert (np.asarray(rec.warning_pos) == 0.0).all()
 
 
 def test_late_onset_starts_the_warning_at_the_event(runs):
     _, final, rec = runs["late_onset"]
-    p = final.world.protocol
+    p = final.protocol
     assert p.t_warn_point < p.t_event
     assert p.t_warn_on == p.t_event
     check_warning_window(rec, float(p.t_event), float(p.t_warn_off), "late onset")
@@ -289,18 +291,18 @@ def test_late_onset_starts_the_warning_at_the_event(runs):
 
 def test_warning_held_ten_seconds_beyond_termination(runs):
     _, final, rec = runs["hold_10"]
-    p = final.world.protocol
+    p = final.protocol
     check_warning_window(rec, float(p.t_warn_point), float(p.t_warn_off) + 10.0, "hold")
     # The termination time itself is unchanged by the ablation.
     _, base, _ = runs["warn"]
-    np.testing.assert_allclose(p.t_warn_off, base.world.protocol.t_warn_off, atol=1e-5)
+    np.testing.assert_allclose(p.t_warn_off, base.protocol.t_warn_off, atol=1e-5)
 
 
 def test_route_b_of_every_family_never_delivers_a_warning(family_runs):
     worlds, (final, rec) = family_runs
     for i, fam in enumerate(FAMILIES):
         a_rec, b_rec = select(rec, 2 * i), select(rec, 2 * i + 1)
-        pa = select(final.world.protocol, 2 * i)
+        pa = select(final.protocol, 2 * i)
         assert not np.asarray(b_rec.warning_active).any(), fam
         check_warning_window(a_rec, float(pa.t_warn_point), float(pa.t_warn_off), fam)
 
@@ -317,7 +319,7 @@ def first_visible_at_or_after_event(rec, t_event: float) -> float:
 @pytest.mark.parametrize("name", ["warn", "deadlock"])
 def test_warning_ends_at_first_visible_tick_after_event(runs, name):
     _, final, rec = runs[name]
-    p = final.world.protocol
+    p = final.protocol
     assert happened(p.t_event)
     expected = first_visible_at_or_after_event(rec, float(p.t_event))
     np.testing.assert_allclose(p.t_warn_off, expected, atol=1e-6)
@@ -331,7 +333,7 @@ def test_family_warning_termination_matches_visibility(family_runs):
     worlds, (final, rec) = family_runs
     for i, fam in enumerate(FAMILIES):
         r = select(rec, 2 * i)
-        p = select(final.world.protocol, 2 * i)
+        p = select(final.protocol, 2 * i)
         vis = np.asarray(r.visible)[:, HAZARD] & (np.asarray(r.t) >= p.t_event)
         first_vis = float(r.t[np.argmax(vis)]) if vis.any() else np.inf
         expected = min(first_vis, float(p.t_clear))
@@ -340,7 +342,7 @@ def test_family_warning_termination_matches_visibility(family_runs):
 
 def test_never_visible_hazard_ends_the_warning_at_clearance(runs):
     _, final, rec = runs["never_visible"]
-    p = final.world.protocol
+    p = final.protocol
     assert happened(p.t_event) and happened(p.t_clear)
     assert not np.asarray(rec.visible)[:, HAZARD].any()
     np.testing.assert_allclose(p.t_warn_off, p.t_clear, atol=1e-6)
@@ -355,23 +357,30 @@ def test_warning_position_in_observation_matches_hand_computation():
     world = occluded_pedestrian_scene()
     hazard = np.array([37.5, -6.4])
     ego_xy, ego_yaw = np.array([12.0, 1.5]), 0.3
-    world = world.replace(
+    state = init_state(world)
+    state = state.replace(
         t=jnp.float32(1.0),
-        ego=world.ego.replace(xy=jnp.asarray(ego_xy, jnp.float32), yaw=jnp.float32(ego_yaw)),
-        actors=world.actors.replace(
-            xy=world.actors.xy.at[HAZARD].set(jnp.asarray(hazard, jnp.float32))
+        ego=state.ego.replace(xy=jnp.asarray(ego_xy, jnp.float32), yaw=jnp.float32(ego_yaw)),
+        actors=state.actors.replace(
+            xy=state.actors.xy.at[HAZARD].set(jnp.asarray(hazard, jnp.float32))
         ),
         protocol=ProtocolState.initial().replace(t_warn_point=jnp.float32(0.5)),
     )
-    obs_fn = jax.jit(lambda w: observe(w, sense(w, jnp.float32(0.0))))
-    obs = obs_fn(world)
+
+    @jax.jit
+    def obs_fn(st):
+        arc, dist, progress = locate_on_route(world.route, st.ego.xy, jnp.float32(0.0))
+        st = st.replace(percept=sense(world, st.ego, st.actors, arc, dist, progress))
+        return observe(world, st)
+
+    obs = obs_fn(state)
     assert bool(obs.warning_active)
-    assert int(obs.warning_text_id) == int(world.params.text_id)
+    assert int(obs.warning_text_id) == int(world.config.text_id)
     expected = ego_frame(hazard, ego_xy, ego_yaw)
     assert expected[1] > 0.0  # to the right of the ego
     np.testing.assert_allclose(np.asarray(obs.warning_pos), expected, atol=1e-4)
-    # Same world before the warning point: nothing delivered.
-    early = world.replace(protocol=world.protocol.replace(t_warn_point=jnp.float32(2.0)))
+    # Same state before the warning point: nothing delivered.
+    early = state.replace(protocol=state.protocol.replace(t_warn_point=jnp.float32(2.0)))
     obs = obs_fn(early)
     assert not bool(obs.warning_active) and int(obs.warning_text_id) == -1
     np.testing.assert_array_equal(np.asarray(obs.warning_pos), 0.0)
@@ -380,7 +389,7 @@ def test_warning_position_in_observation_matches_hand_computation():
 def test_warning_position_along_a_rotated_family_rollout(family_runs):
     worlds, (final, rec) = family_runs
     r = select(rec, 2 * PE)
-    assert abs(np.sin(float(worlds[2 * PE].ego.yaw))) > 1e-3, "pick a rotated pair"
+    assert abs(np.sin(float(worlds[2 * PE].ego0.yaw))) > 1e-3, "pick a rotated pair"
     n = live_ticks(r)
     ticks = [k for k in range(1, n) if r.warning_active[k]]
     assert len(ticks) > 10
@@ -399,7 +408,7 @@ def test_pedestrian_clears_when_the_crossing_is_done_and_despawns(runs, family_r
     else:
         _, (f, r) = family_runs
         final, rec = select(f, 2 * PE), select(r, 2 * PE)
-    p = final.world.protocol
+    p = final.protocol
     assert happened(p.t_event) and happened(p.t_clear)
     crossing = PED_CROSSING / PED_SPEED
     assert p.t_event + crossing - 1e-4 <= p.t_clear <= p.t_event + crossing + DT + 1e-4
@@ -410,7 +419,7 @@ def test_pedestrian_clears_when_the_crossing_is_done_and_despawns(runs, family_r
     assert present[:n][t[:n] < p.t_clear].all()
     assert not present[:n][t[:n] >= p.t_clear].any()
     assert (t[:n] >= p.t_clear).any()
-    assert not bool(final.world.actors.active[HAZARD])
+    assert not bool(final.actors.active[HAZARD])
 
 
 # ---------------------------------------------------------------------------------------------
@@ -429,7 +438,7 @@ def test_marker_order_for_every_family(sim, seed, weather):
         worlds += [a, b]
     final, rec = sim.batch(worlds, MODE_EXPERT)
     for i, fam in enumerate(FAMILIES):
-        p = select(final.world.protocol, 2 * i)
+        p = select(final.protocol, 2 * i)
         t_wp, t_ev, t_off = float(p.t_warn_point), float(p.t_event), float(p.t_warn_off)
         label = f"{fam} seed {seed} {weather}: {t_wp:.3f} {t_ev:.3f} {t_off:.3f}"
         assert happened(t_wp) and happened(t_ev) and happened(t_off), label

@@ -26,11 +26,13 @@ from lantern_jax.constants import (
     ROLE_OCCLUDER,
     TRIGGER_EVENT,
 )
-from lantern_jax.policies.base import get_policy
+from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.handmade import ActorSpec, straight_scene
+from lantern_jax.scenarios.knobs import set_knobs
 from lantern_jax.scoring.metrics import finalize
-from lantern_jax.sim.observe import observe, sense
+from lantern_jax.sim.observe import observe
 from lantern_jax.sim.rollout import rollout
+from lantern_jax.sim.state import init_state
 
 GRAD_TICKS = 200
 
@@ -100,14 +102,14 @@ def with_garbage_padding(world, seed: int = 0):
     """The same world with random (finite, validate-clean) values in every padding slot:
     actors, actor scripts, lanes, lane points, route points and traffic lights."""
     rng = np.random.default_rng(seed)
-    a, sc, ln, r, lt = world.actors, world.script, world.lanes, world.route, world.lights
+    a, sc, ln, r, lt = world.actors0, world.actors, world.lanes, world.route, world.lights
 
     def fill(x, mask, garbage):
         x = np.array(x)
         m = np.asarray(mask, bool).reshape(mask.shape + (1,) * (x.ndim - np.ndim(mask)))
         return jnp.asarray(np.where(m, np.asarray(garbage).astype(x.dtype), x))
 
-    pad = ~np.asarray(a.valid)
+    pad = ~np.asarray(sc.valid)
     n_a, n_p = sc.path.shape[:2]
     xy = rng.uniform(-200.0, 200.0, (n_a, 2))
     # A few invisible actors right in front of the ego, in its lane.
@@ -117,9 +119,6 @@ def with_garbage_padding(world, seed: int = 0):
         xy=fill(a.xy, pad, xy),
         yaw=fill(a.yaw, pad, rng.uniform(-3.0, 3.0, n_a)),
         speed=fill(a.speed, pad, rng.uniform(0.0, 20.0, n_a)),
-        extent=fill(a.extent, pad, rng.uniform(0.2, 5.0, (n_a, 2))),
-        kind=fill(a.kind, pad, rng.integers(0, 3, n_a)),
-        role=fill(a.role, pad, rng.integers(0, 4, n_a)),
         active=fill(a.active, pad, np.ones(n_a, bool)),
         s=fill(a.s, pad, rng.uniform(0.0, 50.0, n_a)),
         lat=fill(a.lat, pad, rng.uniform(-2.0, 2.0, n_a)),
@@ -129,6 +128,9 @@ def with_garbage_padding(world, seed: int = 0):
     path = rng.uniform(-100.0, 100.0, (n_a, n_p, 2))
     path[first, :, 1] = 0.0  # paths along the ego lane
     script = sc.replace(
+        extent=fill(sc.extent, pad, rng.uniform(0.2, 5.0, (n_a, 2))),
+        kind=fill(sc.kind, pad, rng.integers(0, 3, n_a)),
+        role=fill(sc.role, pad, rng.integers(0, 4, n_a)),
         motion=fill(sc.motion, pad, rng.integers(0, 2, n_a)),
         path=fill(sc.path, pad, path),
         path_s=fill(sc.path_s, pad, np.cumsum(rng.uniform(0.5, 5.0, (n_a, n_p)), -1)),
@@ -169,7 +171,7 @@ def with_garbage_padding(world, seed: int = 0):
         offset=fill(lt.offset, l_pad, rng.uniform(0.0, 10.0, lt.green.shape)),
         stop_xy=fill(lt.stop_xy, l_pad, rng.uniform(0.0, 60.0, lt.stop_xy.shape)),
     )
-    out = world.replace(actors=actors, script=script, lanes=lanes, route=route, lights=lights)
+    out = world.replace(actors0=actors, actors=script, lanes=lanes, route=route, lights=lights)
     return out.validate()
 
 
@@ -183,8 +185,8 @@ def test_vmap_equals_single_rollout(sim, family_pairs):
         final_1, _ = sim.single(w)
         got = select(final_b, i)
         assert_trees_close(got.telemetry, final_1.telemetry, what=f"[{i}] telemetry")
-        assert_trees_close(got.world.protocol, final_1.world.protocol, what=f"[{i}] protocol")
-        assert_trees_close(got.world.ego, final_1.world.ego, what=f"[{i}] ego")
+        assert_trees_close(got.protocol, final_1.protocol, what=f"[{i}] protocol")
+        assert_trees_close(got.ego, final_1.ego, what=f"[{i}] ego")
 
 
 def test_padding_slots_change_nothing(sim):
@@ -195,16 +197,16 @@ def test_padding_slots_change_nothing(sim):
     final, rec = sim.batch([clean, dirty])
     c, d = select(final, 0), select(final, 1)
     # The scene actually exercised the hazard.
-    assert c.world.protocol.t_event < 1e3 and c.world.protocol.t_clear < 1e3
+    assert c.protocol.t_event < 1e3 and c.protocol.t_clear < 1e3
     assert_trees_equal(d.telemetry, c.telemetry, "telemetry")
-    assert_trees_equal(d.world.ego, c.world.ego, "ego")
-    assert_trees_equal(d.world.protocol, c.world.protocol, "protocol")
+    assert_trees_equal(d.ego, c.ego, "ego")
+    assert_trees_equal(d.protocol, c.protocol, "protocol")
     assert_trees_equal(
-        (d.world.t, d.world.tick, d.done, d.fault), (c.world.t, c.world.tick, c.done, c.fault)
+        (d.t, d.tick, d.done, d.fault), (c.t, c.tick, c.done, c.fault)
     )
     for f in ("xy", "yaw", "speed", "active", "s", "lat"):
         np.testing.assert_array_equal(
-            getattr(d.world.actors, f)[:n_valid], getattr(c.world.actors, f)[:n_valid], f
+            getattr(d.actors, f)[:n_valid], getattr(c.actors, f)[:n_valid], f
         )
     np.testing.assert_array_equal(d.percept.visible[:n_valid], c.percept.visible[:n_valid])
     for f in ("ranges", "route_arc", "dist_to_route", "progress"):
@@ -217,7 +219,7 @@ def test_padding_slots_change_nothing(sim):
     pad = ~np.asarray(dirty.actors.valid)
     for f in ("xy", "yaw", "speed", "s", "lat"):
         np.testing.assert_array_equal(
-            getattr(d.world.actors, f)[pad], np.asarray(getattr(dirty.actors, f))[pad], f
+            getattr(d.actors, f)[pad], np.asarray(getattr(dirty.actors0, f))[pad], f
         )
     assert not d.percept.visible[pad].any()
     assert not rd.visible[:, pad].any() and not rd.actor_present[:, pad].any()
@@ -258,9 +260,9 @@ def test_rollout_batch_traces_once_and_matches_fixed_horizon(sim, family_pairs):
     for i in range(BATCH):
         e, f = select(early, i), select(fixed, i)
         assert_trees_close(e.telemetry, f.telemetry, what=f"[{i}] telemetry", **tol)
-        assert_trees_close(e.world.protocol, f.world.protocol, what=f"[{i}] protocol", **tol)
-        assert_trees_close(e.world.ego, f.world.ego, what=f"[{i}] ego", **tol)
-        assert int(e.world.tick) == int(f.world.tick)
+        assert_trees_close(e.protocol, f.protocol, what=f"[{i}] protocol", **tol)
+        assert_trees_close(e.ego, f.ego, what=f"[{i}] ego", **tol)
+        assert int(e.tick) == int(f.tick)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -270,11 +272,9 @@ def _soft_clearance_grad(act):
     """``jit(value_and_grad)`` of the soft clearance accumulator of :func:`crossing_scene` with
     respect to the pedestrian's crossing speed ``v_post`` (3 m/s), over GRAD_TICKS ticks."""
     world = crossing_scene()
-    h = int(world.params.hazard_index)
 
     def soft_clearance(v_post):
-        script = world.script.replace(v_post=world.script.v_post.at[h].set(v_post))
-        final, _ = rollout(world.replace(script=script), act, None, GRAD_TICKS)
+        final, _ = rollout(set_knobs(world, hazard_speed=v_post), act, None, GRAD_TICKS)
         return final.telemetry.clear_lse
 
     value, grad = jax.jit(jax.value_and_grad(soft_clearance))(jnp.float32(3.0))
@@ -294,7 +294,7 @@ def test_expert_plan_gradient_wrt_observation_is_finite():
     expert = get_policy("expert")
     pp = expert.init(jax.random.PRNGKey(0))
     world = crossing_scene()
-    obs = jax.jit(lambda w: observe(w, sense(w, jnp.float32(0.0))))(world)
+    obs = jax.jit(lambda w: observe(w, init_state(w)))(world)
 
     def plan_sum(route, actor_dir):
         return jnp.sum(expert.act(pp, obs.replace(route=route, actor_dir=actor_dir)))
@@ -342,7 +342,7 @@ def test_nan_waypoints_are_a_recorded_fault_and_isolated(sim):
     assert not bool(finalize(fast_final.telemetry).controller_fault)
     alone, _ = sim.single(fast, MODE_NAN_BELOW, 2.5)
     assert_trees_close(fast_final.telemetry, alone.telemetry, what="telemetry")
-    assert_trees_close(fast_final.world.ego, alone.world.ego, what="ego")
+    assert_trees_close(fast_final.ego, alone.ego, what="ego")
 
 
 @pytest.mark.parametrize("scene", ["family_pe", "empty_road"])
@@ -354,17 +354,17 @@ def test_done_freezes_the_state(sim, family_pairs, scene):
     k = int(np.argmax(rec.done))  # tick at which the execution ended
     assert k < rec.done.shape[0] - 10
     assert rec.done[k:].all()
-    assert int(final.world.tick) == k + 1
+    assert int(final.tick) == k + 1
     assert int(final.telemetry.n_ticks) == k + 1
-    np.testing.assert_allclose(final.world.t, (k + 1) * DT, atol=1e-4)
+    np.testing.assert_allclose(final.t, (k + 1) * DT, atol=1e-4)
     if scene == "empty_road":
-        assert final.world.ego.speed > 1.0
+        assert final.ego.speed > 1.0
     # Records after the end repeat the frozen state; the policy no longer acts.
     for f in ("t", "ego_xy", "ego_yaw", "ego_speed", "actor_xy", "actor_present"):
         got = getattr(rec, f)[k:]
         np.testing.assert_array_equal(got, np.broadcast_to(got[0], got.shape), err_msg=f)
-    np.testing.assert_array_equal(rec.ego_xy[k], final.world.ego.xy)
-    np.testing.assert_array_equal(rec.actor_xy[k], final.world.actors.xy)
+    np.testing.assert_array_equal(rec.ego_xy[k], final.ego.xy)
+    np.testing.assert_array_equal(rec.actor_xy[k], final.actors.xy)
     assert not rec.warning_active[k + 1 :].any()
     assert (rec.waypoints[k + 1 :] == 0.0).all()
 
@@ -373,8 +373,8 @@ def _check_no_nan_and_forward_motion(final, rec, label):
     assert_all_finite(final, label)
     assert np.isfinite(rec.ego_xy).all() and np.isfinite(rec.ego_speed).all(), label
     assert (rec.ego_speed >= 0.0).all(), label
-    present = final.world.actors.valid & final.world.actors.active
-    assert (final.world.actors.speed[present] >= 0.0).all(), label
+    present = final.actors.active  # padding slots are never active
+    assert (final.actors.speed[present] >= 0.0).all(), label
     # Never reversing: every tick's displacement points along the previous heading.
     step = np.diff(rec.ego_xy, axis=-2)
     yaw = rec.ego_yaw[..., :-1]
@@ -393,7 +393,7 @@ def test_all_families_all_policies_stay_finite(sim, family_pairs, mode):
 def test_plan_behind_the_ego_never_reverses_it(sim):
     """Waypoints straight behind the ego: speeds stay >= 0 and the ego never backs up."""
     standing = straight_scene([], speed=8.0)
-    standing = standing.replace(ego=standing.ego.replace(speed=jnp.float32(0.0)))
+    standing = standing.replace(ego0=standing.ego0.replace(speed=jnp.float32(0.0)))
     worlds = [straight_scene([], speed=8.0), standing]
     final, rec = sim.batch(worlds, MODE_CONST, -8.0)
     for i in range(2):

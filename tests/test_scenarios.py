@@ -73,9 +73,9 @@ def lane_polylines(world):
     return out
 
 
-def actor_box(world, i):
-    a = world.actors
-    return (np.asarray(a.xy[i], np.float64), float(a.yaw[i]), tuple(np.asarray(a.extent[i])))
+def actor_box(scenario, i):
+    a, ext = scenario.actors0, scenario.actors.extent
+    return (np.asarray(a.xy[i], np.float64), float(a.yaw[i]), tuple(np.asarray(ext[i])))
 
 
 def segment_hits_box(p0, p1, box) -> bool:
@@ -118,7 +118,7 @@ def test_pair_is_valid_and_matched(family, seed, weather):
     wa.validate()
     wb.validate()
     a, b = np_tree(wa), np_tree(wb)
-    pa = a.params
+    pa = a.config
 
     # markers: order (equality of warn/event only for RTY), on the route, 29 m of recovery
     s_warn, s_event, s_conf = float(pa.s_warn), float(pa.s_event), float(pa.s_conflict)
@@ -136,13 +136,13 @@ def test_pair_is_valid_and_matched(family, seed, weather):
     assert spacing.max() <= rd.ROUTE_SPACING + 1e-4 and spacing.min() > 0.5
 
     # A/B agreement: everything but the route flag, the warning flag and the scenario slots
-    for name in ("route", "lanes", "lights", "ego", "protocol"):
+    for name in ("route", "lanes", "lights", "ego0"):
         for x, y in zip(
             jax.tree.leaves(getattr(a, name)), jax.tree.leaves(getattr(b, name)), strict=True
         ):
             np.testing.assert_array_equal(x, y, err_msg=name)
     for f in type(pa).__dataclass_fields__:
-        x, y = getattr(pa, f), getattr(b.params, f)
+        x, y = getattr(pa, f), getattr(b.config, f)
         if f in ("is_route_a", "warning_enabled"):
             assert bool(x) and not bool(y)
         else:
@@ -152,7 +152,7 @@ def test_pair_is_valid_and_matched(family, seed, weather):
     scen = meta["scenario_slots"]
     others = np.setdiff1d(np.arange(rd.MAX_ACTORS), scen)
     differs = np.zeros(rd.MAX_ACTORS, bool)
-    for part in ("actors", "script"):
+    for part in ("actors", "actors0"):
         for x, y in zip(
             jax.tree.leaves(getattr(a, part)), jax.tree.leaves(getattr(b, part)), strict=True
         ):
@@ -163,7 +163,7 @@ def test_pair_is_valid_and_matched(family, seed, weather):
     assert int(a.actors.role[int(pa.hazard_index)]) == ROLE_HAZARD
     assert bool(a.actors.valid[int(pa.hazard_index)])
 
-    # ScenarioParams conventions
+    # ExecutionConfig conventions
     assert int(pa.family) == FAMILIES.index(family) == int(pa.template_id) == int(pa.text_id)
     assert bool(pa.force_event) == (family != "RTY")
     assert float(pa.force_delay) == 2.0
@@ -183,19 +183,18 @@ def test_pair_is_valid_and_matched(family, seed, weather):
 
 def _check_initial_state(w, route):
     """Ego at the route start on a lane centre; actors at their closed-form t = 0 state."""
-    assert float(w.t) == 0.0 and int(w.tick) == 0
-    np.testing.assert_allclose(w.ego.xy, route[0], atol=1e-4)
+    np.testing.assert_allclose(w.ego0.xy, route[0], atol=1e-4)
     d = route[1] - route[0]
-    assert abs(math.remainder(float(w.ego.yaw) - math.atan2(d[1], d[0]), 2 * math.pi)) < 1e-5
-    assert float(w.ego.speed) == pytest.approx(float(w.params.v_ref))
-    assert float(w.ego.steer) == 0.0 and float(w.ego.accel) == 0.0
+    assert abs(math.remainder(float(w.ego0.yaw) - math.atan2(d[1], d[0]), 2 * math.pi)) < 1e-5
+    assert float(w.ego0.speed) == pytest.approx(float(w.config.v_ref))
+    assert float(w.ego0.steer) == 0.0 and float(w.ego0.accel) == 0.0
     lanes = lane_polylines(w)
     assert min(rd.project(c, route[0])[1] for c, _, _ in lanes) < 1e-3
     for p in route:  # the ego route always lies inside some lane
         assert any(rd.project(c, p)[1] <= wd / 2 + 1e-3 for c, wd, k in lanes if k != 1)
-    a, sc = w.actors, w.script
-    np.testing.assert_array_equal(a.active, a.valid)
-    for i in np.flatnonzero(a.valid):
+    a, sc = w.actors0, w.actors
+    np.testing.assert_array_equal(a.active, sc.valid)
+    for i in np.flatnonzero(sc.valid):
         path = np.asarray(sc.path[i], np.float64)[np.asarray(sc.path_valid[i])]
         s0 = float(a.s[i])
         np.testing.assert_allclose(a.xy[i], rd.point_at(path, s0), atol=1e-3)
@@ -213,31 +212,31 @@ def _check_initial_state(w, route):
 
 def _check_background(w, meta):
     """Background traffic: IDM, 7-11 m/s, off the ego's lanes, no overlap at t = 0."""
-    a, sc = w.actors, w.script
-    bg = np.flatnonzero(a.valid & (a.role == ROLE_BACKGROUND))
+    sc = w.actors
+    bg = np.flatnonzero(sc.valid & (sc.role == ROLE_BACKGROUND))
     assert len(bg) == meta["num_background"] <= 5
-    ego = (np.asarray(w.ego.xy, np.float64), float(w.ego.yaw), (2.4508, 1.0642))
+    ego = (np.asarray(w.ego0.xy, np.float64), float(w.ego0.yaw), (2.4508, 1.0642))
     route = route_np(w)
     for i in bg:
         assert int(sc.motion[i]) == MOTION_IDM
         assert 7.0 <= float(sc.v_pre[i]) <= 11.0
         box = actor_box(w, i)
         assert not boxes_overlap(box, ego)
-        for j in np.flatnonzero(a.valid):
+        for j in np.flatnonzero(sc.valid):
             assert j == i or not boxes_overlap(box, actor_box(w, j))
         # never in the ego's lane ahead: no point of its remaining path runs along the route
         path = np.asarray(sc.path[i], np.float64)[np.asarray(sc.path_valid[i])]
         s_path = rd.arc_length(path)
-        for s in np.linspace(float(a.s[i]), s_path[-1], 12):
+        for s in np.linspace(float(w.actors0.s[i]), s_path[-1], 12):
             p = rd.point_at(path, s)
             s_r, dist = rd.project(route, p)
             along = abs(
                 math.remainder(rd.heading_at(path, s) - rd.heading_at(route, s_r), 2 * math.pi)
             )
             assert not (dist < 1.8 and along < math.radians(35)), "background in ego corridor"
-    for i in np.flatnonzero(a.valid & (sc.motion == MOTION_SCRIPTED)):
-        assert int(a.role[i]) != ROLE_BACKGROUND
-    valid = np.flatnonzero(a.valid)
+    for i in np.flatnonzero(sc.valid & (sc.motion == MOTION_SCRIPTED)):
+        assert int(sc.role[i]) != ROLE_BACKGROUND
+    valid = np.flatnonzero(sc.valid)
     for i in valid:  # nothing starts overlapping the ego or another actor
         assert not boxes_overlap(actor_box(w, i), ego)
         assert not any(boxes_overlap(actor_box(w, i), actor_box(w, j)) for j in valid if j > i)
@@ -250,7 +249,7 @@ def _assert_pe_hidden(wa):
     route = route_np(wa)
     ped, truck = actor_box(wa, 0), actor_box(wa, 1)
     targets = list(box_corners(*ped)) + [ped[0]]
-    for s in np.linspace(0.0, float(wa.params.s_event), 80):
+    for s in np.linspace(0.0, float(wa.config.s_event), 80):
         cam = camera_at(route, s)
         for t in targets:
             assert segment_hits_box(cam, t, truck), f"pedestrian visible from route arc {s:.1f}"
@@ -275,7 +274,7 @@ def test_pe_hidden_at_range_extremes(conflict_s, rotation_deg):
 def test_or_object_hidden_behind_van_before_the_lane_change(seed):
     _, wa, _, _ = make_pair("OR", seed)
     route = route_np(wa)
-    sc = wa.script
+    sc = wa.actors
     obj = actor_box(wa, 0)
     targets = list(box_corners(*obj)) + [obj[0]]
     path = np.asarray(sc.path[1], np.float64)[np.asarray(sc.path_valid[1])]
@@ -285,7 +284,7 @@ def test_or_object_hidden_behind_van_before_the_lane_change(seed):
         van_xy = rd.point_at(path, s_van)
         van = (van_xy, rd.heading_at(path, s_van), extent)
         s_van_route, _ = rd.project(route, van_xy)
-        s_max = min(float(wa.params.s_event), s_van_route - gap)
+        s_max = min(float(wa.config.s_event), s_van_route - gap)
         for s in np.linspace(0.0, s_max, 12):
             cam = camera_at(route, s)
             assert all(segment_hits_box(cam, t, van) for t in targets)
@@ -305,17 +304,17 @@ def test_vc_nominal_gap_at_event():
     params, wa, _, meta = make_pair("VC", 7)
     v_ref, v_cut = params["v_ref"], meta["canonical"]["v_cut"]
     assert v_cut == pytest.approx(max(6.5, params["cut_frac"] * v_ref))
-    t_event = float(wa.params.s_event) / v_ref  # ego at v_ref from arc 0
+    t_event = float(wa.config.s_event) / v_ref  # ego at v_ref from arc 0
     gap = 21.0 - (v_ref - v_cut) * t_event
     assert gap == pytest.approx(params["gap_event"], abs=1e-3)
-    assert float(wa.params.s_conflict) - float(wa.params.s_event) == pytest.approx(4.0, abs=1e-4)
+    assert float(wa.config.s_conflict) - float(wa.config.s_event) == pytest.approx(4.0, abs=1e-4)
 
 
 @pytest.mark.parametrize("family", ["LWW", "RWW", "RTY"])
 def test_junction_conflict_is_corridor_entry(family):
     params, wa, wb, meta = make_pair(family, 11)
     route = route_np(wa)
-    sc = wa.script
+    sc = wa.actors
     thr = 2.4508 + 1.0 + 0.5
     path = np.asarray(sc.path[0], np.float64)[np.asarray(sc.path_valid[0])]
     d_line = (path[-1] - path[0]) / np.linalg.norm(path[-1] - path[0])
@@ -324,25 +323,25 @@ def test_junction_conflict_is_corridor_entry(family):
     def dist(s):
         return abs((rd.point_at(route, s) - path[0]) @ nrm)
 
-    s_c = float(wa.params.s_conflict)
+    s_c = float(wa.config.s_conflict)
     assert dist(s_c) == pytest.approx(thr, abs=1e-3)
     assert all(dist(s) > thr for s in np.linspace(0.0, s_c - 0.05, 50))
     near_s, _ = rd.project(path, meta["conflict_xy"])
     if family == "RTY":
         assert near_s == pytest.approx(params["source_dist"], abs=1e-3)
-        assert float(wa.params.clear_s) == pytest.approx(near_s + 2.3 + 5.0, abs=1e-3)
-        assert int(wb.script.trigger[0]) == 2 and float(wb.actors.speed[0]) == 0.0
-        np.testing.assert_allclose(wa.actors.xy[0], wb.actors.xy[0], atol=1e-5)
+        assert float(wa.config.clear_s) == pytest.approx(near_s + 2.3 + 5.0, abs=1e-3)
+        assert int(wb.actors.trigger[0]) == 2 and float(wb.actors0.speed[0]) == 0.0
+        np.testing.assert_allclose(wa.actors0.xy[0], wb.actors0.xy[0], atol=1e-5)
     else:
         off, clear = (25.0, 15.0) if family == "LWW" else (20.0, 20.0)
         assert near_s == pytest.approx(off, abs=1e-3)
-        assert float(wa.params.clear_s) == pytest.approx(off + clear, abs=1e-3)
+        assert float(wa.config.clear_s) == pytest.approx(off + clear, abs=1e-3)
         # Route B: same spawn point, legal direction (away from the junction), moving at t = 0
-        np.testing.assert_allclose(wa.actors.xy[0], wb.actors.xy[0], atol=1e-4)
-        dyaw = math.remainder(float(wa.actors.yaw[0]) - float(wb.actors.yaw[0]), 2 * math.pi)
+        np.testing.assert_allclose(wa.actors0.xy[0], wb.actors0.xy[0], atol=1e-4)
+        dyaw = math.remainder(float(wa.actors0.yaw[0]) - float(wb.actors0.yaw[0]), 2 * math.pi)
         assert abs(abs(dyaw) - math.pi) < 1e-4
-        assert float(wb.actors.speed[0]) == pytest.approx(params["actor_speed"])
-        assert np.linalg.norm(wb.actors.xy[0]) < np.linalg.norm(wb.script.path[0, -1])
+        assert float(wb.actors0.speed[0]) == pytest.approx(params["actor_speed"])
+        assert np.linalg.norm(wb.actors0.xy[0]) < np.linalg.norm(wb.actors.path[0, -1])
 
 
 def test_signal_plan_red_then_green():
@@ -375,12 +374,12 @@ def test_worlds_batch_across_families():
         _, wa, wb, _ = make_pair(fam, 3)
         worlds += [wa, wb]
     batch = tree_stack(worlds)
-    assert batch.actors.xy.shape == (12, rd.MAX_ACTORS, 2)
-    assert batch.script.path.shape == (12, rd.MAX_ACTORS, rd.PATH_POINTS, 2)
+    assert batch.actors0.xy.shape == (12, rd.MAX_ACTORS, 2)
+    assert batch.actors.path.shape == (12, rd.MAX_ACTORS, rd.PATH_POINTS, 2)
     assert batch.lanes.center.shape == (12, rd.MAX_LANES, rd.LANE_POINTS, 2)
     assert batch.route.xy.shape == (12, rd.ROUTE_POINTS, 2)
     assert batch.lights.valid.shape == (12, rd.MAX_LIGHTS)
-    assert batch.params.noise_seed.dtype == jnp.uint32
+    assert batch.config.noise_seed.dtype == jnp.uint32
     assert batch.actors.kind.dtype == jnp.int32 and batch.actors.valid.dtype == jnp.bool_
 
 
@@ -506,19 +505,19 @@ def test_route_b_controls():
     assert int(wb.actors.kind[1]) == int(wa.actors.kind[1]) == 0
     # VC: the same car at the same speed, never merging
     _, wa, wb, _ = make_pair("VC", 2)
-    assert float(wa.script.lat_shift[0]) == 3.5 and float(wb.script.lat_shift[0]) == 0.0
-    assert int(wb.script.trigger[0]) == TRIGGER_NEVER
-    assert float(wb.script.v_pre[0]) == float(wa.script.v_pre[0]) == float(wb.script.v_post[0])
-    np.testing.assert_array_equal(wa.actors.xy[0], wb.actors.xy[0])
+    assert float(wa.actors.lat_shift[0]) == 3.5 and float(wb.actors.lat_shift[0]) == 0.0
+    assert int(wb.actors.trigger[0]) == TRIGGER_NEVER
+    assert float(wb.actors.v_pre[0]) == float(wa.actors.v_pre[0]) == float(wb.actors.v_post[0])
+    np.testing.assert_array_equal(wa.actors0.xy[0], wb.actors0.xy[0])
     # OR: no object; the van keeps leading (no hold, no lane change, never triggered)
     _, wa, wb, _ = make_pair("OR", 2)
     assert bool(wa.actors.valid[0]) and not bool(wb.actors.valid[0])
-    assert float(wa.script.s_hold[1]) < 1e3 <= float(wb.script.s_hold[1])
-    assert float(wb.script.lat_shift[1]) == 0.0 and int(wb.script.trigger[1]) == TRIGGER_NEVER
+    assert float(wa.actors.s_hold[1]) < 1e3 <= float(wb.actors.s_hold[1])
+    assert float(wb.actors.lat_shift[1]) == 0.0 and int(wb.actors.trigger[1]) == TRIGGER_NEVER
     # RTY: a stationary context vehicle
     _, wa, wb, _ = make_pair("RTY", 2)
-    assert int(wb.actors.role[0]) == ROLE_CONTEXT and int(wb.script.trigger[0]) == TRIGGER_NEVER
-    assert float(wb.script.v_pre[0]) == float(wb.script.v_post[0]) == 0.0
+    assert int(wb.actors.role[0]) == ROLE_CONTEXT and int(wb.actors.trigger[0]) == TRIGGER_NEVER
+    assert float(wb.actors.v_pre[0]) == float(wb.actors.v_post[0]) == 0.0
 
 
 def test_meta_is_json_and_describes_the_pair():
@@ -526,7 +525,7 @@ def test_meta_is_json_and_describes_the_pair():
         params, wa, _, meta = make_pair(fam, 9)
         again = json.loads(json.dumps(meta))
         assert again["family"] == fam and again["params"] == json.loads(json.dumps(params))
-        assert meta["s_conflict"] == pytest.approx(float(wa.params.s_conflict), abs=1e-4)
+        assert meta["s_conflict"] == pytest.approx(float(wa.config.s_conflict), abs=1e-4)
         assert meta["lanes"] and meta["route_lanes"][0] in meta["lanes"]
 
 

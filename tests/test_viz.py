@@ -14,7 +14,7 @@ from matplotlib.patches import Polygon, Rectangle
 from matplotlib.text import Text
 from PIL import Image
 
-from lantern_jax.policies.base import get_policy
+from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.families import build_pair, sample_params
 from lantern_jax.scenarios.warnings import render_warning
 from lantern_jax.sim.rollout import rollout
@@ -35,7 +35,7 @@ PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 def pe_runs():
     """A PE pair rolled out with the cooperative policy in both conditions (one compilation)."""
     world, _, _ = build_pair(sample_params("PE", np.random.default_rng(0), "clear_day"))
-    world_nw = world.replace(params=world.params.replace(warning_enabled=jnp.asarray(False)))
+    world_nw = world.replace(config=world.config.replace(warning_enabled=jnp.asarray(False)))
     pol = get_policy("coop")
     params = pol.init(jax.random.PRNGKey(0))
     run = jax.jit(lambda w: rollout(w, pol.act, params, NUM_TICKS, record=True))
@@ -46,8 +46,8 @@ def pe_runs():
         world_nw=world_nw,
         rec_w=jax.device_get(rec_w),
         rec_nw=jax.device_get(rec_nw),
-        proto_w=jax.device_get(final_w.world.protocol),
-        proto_nw=jax.device_get(final_nw.world.protocol),
+        proto_w=jax.device_get(final_w.protocol),
+        proto_nw=jax.device_get(final_nw.protocol),
     )
 
 
@@ -77,7 +77,7 @@ def test_bev_with_active_warning(pe_runs, tmp_path):
     fig = bev_plot(world, rec, t)
     ax = fig.axes[0]
 
-    expected = render_warning(int(world.params.text_id), rec.warning_pos[t])
+    expected = render_warning(int(world.config.text_id), rec.warning_pos[t])
     texts = [_norm(x.get_text()) for x in fig.findobj(Text)]
     assert expected in texts
 

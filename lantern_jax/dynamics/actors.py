@@ -51,7 +51,8 @@ from lantern_jax.dynamics.idm import (
 )
 from lantern_jax.dynamics.scripted import scripted_pose, trigger_time
 from lantern_jax.polyline import interpolate
-from lantern_jax.world import Actors, ActorScript
+from lantern_jax.times import NEVER
+from lantern_jax.world import ActorScript, ActorState, present
 
 Array = jax.Array
 
@@ -70,8 +71,8 @@ def _zero_where_invalid(x: Array, valid: Array) -> Array:
 
 
 def _idm_candidates(
-    actors: Actors,
-    script: ActorScript,
+    actors: ActorState,
+    extent: Array,
     present: Array,
     ego_xy: Array,
     ego_yaw: Array,
@@ -85,6 +86,12 @@ def _idm_candidates(
     O(A^2) per tick instead of projecting every candidate onto every path; on a curved path it
     approximates the path by its tangent over the look-ahead.
 
+    Args:
+        actors: (A,) actor states.
+        extent: (A, 2) float32, m, half extents.
+        present: (A,) bool, the actors that exist now.
+        ego_xy, ego_yaw, ego_speed: the ego (m, rad, m/s).
+
     Returns:
         gap: (A, A + 1) float32, m, bumper-to-bumper gap (BIG if c does not lead i).
         v_lead: (A, A + 1) float32, m/s, candidate speed along i's heading (>= 0).
@@ -94,7 +101,7 @@ def _idm_candidates(
     cand_y = jnp.concatenate([actors.xy[:, 1], ego_xy[1:2]])
     cand_yaw = jnp.concatenate([actors.yaw, jnp.reshape(ego_yaw, (1,))])
     cand_speed = jnp.concatenate([actors.speed, jnp.reshape(ego_speed, (1,))])
-    cand_half = jnp.concatenate([actors.extent[:, 0], jnp.full((1,), EGO_HALF_LENGTH)])
+    cand_half = jnp.concatenate([extent[:, 0], jnp.full((1,), EGO_HALF_LENGTH)])
     cand_ok = jnp.concatenate([present, jnp.ones((1,), bool)])
 
     hx, hy = jnp.cos(actors.yaw)[:, None], jnp.sin(actors.yaw)[:, None]  # (A, 1)
@@ -110,7 +117,7 @@ def _idm_candidates(
         & (lon < LEADER_RANGE)
         & (jnp.abs(lat) < LEADER_LATERAL)
     )
-    gap = lon - actors.extent[:, 0:1] - cand_half[None, :]
+    gap = lon - extent[:, 0:1] - cand_half[None, :]
     gap = jnp.where(leads, gap, BIG)
     v_lead = jnp.maximum(
         cand_speed[None, :] * jnp.cos(cand_yaw[None, :] - actors.yaw[:, None]), 0.0
@@ -120,7 +127,7 @@ def _idm_candidates(
 
 
 def _idm_update(
-    actors: Actors,
+    actors: ActorState,
     script: ActorScript,
     present: Array,
     light_state: Array,
@@ -132,8 +139,8 @@ def _idm_update(
 ) -> tuple[Array, Array, Array]:
     """New (s, speed, active) of every slot integrated as an IDM actor, each (A,)."""
     v = jnp.maximum(actors.speed, 0.0)
-    half = actors.extent[:, 0]
-    gap, v_lead = _idm_candidates(actors, script, present, ego_xy, ego_yaw, ego_speed)
+    half = script.extent[:, 0]
+    gap, v_lead = _idm_candidates(actors, script.extent, present, ego_xy, ego_yaw, ego_speed)
 
     # traffic light stop line as a stopped leader
     num_lights = light_state.shape[0]
@@ -168,47 +175,23 @@ def _idm_update(
     return s_next, v_next, active
 
 
-def step_actors(
-    actors: Actors,
-    script: ActorScript,
-    t_next: Array,
-    t_event: Array,
-    light_state: Array,
-    ego_xy: Array,
-    ego_yaw: Array,
-    ego_speed: Array,
-    dt: float = DT,
-    idm_params: IDMParams = DEFAULT_IDM,
-) -> Actors:
-    """Advance every actor of one scenario to time ``t_next``.
+def scripted_states(
+    script: ActorScript, t: Array, t_event: Array
+) -> tuple[Array, Array, Array, Array, Array, Array]:
+    """Closed-form state of every slot at time ``t`` as if it were a scripted actor.
 
     Args:
-        actors: current actor states, (A,) slots.
-        script: the actors' motion scripts, (A,) slots.
-        t_next: () float32, s, time of the new state (scripted poses are closed form in it).
-        t_event: () float32, s, physical event onset (``INF_TIME`` while pending).
-        light_state: (T,) int32, LIGHT_* state of every traffic light at this tick.
-        ego_xy: (2,) float32, m, world-frame ego box centre.
-        ego_yaw: () float32, rad, ego heading.
-        ego_speed: () float32, m/s, ego speed (>= 0).
-        dt: s, tick used to integrate the IDM actors.
-        idm_params: IDM parameters of the IDM actors.
+        script: (A,) slots.
+        t: () float32, s.
+        t_event: () float32, s, physical event onset (``times.NEVER`` while pending).
 
     Returns:
-        The actors at ``t_next``: new ``xy``, ``yaw``, ``speed``, ``s``, ``lat`` and ``active``;
-        ``extent``, ``kind``, ``role`` and ``valid`` unchanged; slots that are not present are
-        returned unchanged.
+        s (A,) m, lat (A,) m, speed (A,) m/s, xy (A, 2) m, yaw (A,) rad, active (A,) bool — see
+        :func:`lantern_jax.dynamics.scripted.scripted_pose`.
     """
-    valid = actors.valid
-    present = actors.present
-    clean = jax.tree.map(lambda x: _zero_where_invalid(x, valid), actors)
-    script = jax.tree.map(lambda x: _zero_where_invalid(x, valid), script)
-    t_next = jnp.asarray(t_next, jnp.float32)
-
-    # scripted: closed form
     tau = trigger_time(script.trigger, script.trigger_delay, t_event)
     pose = jax.vmap(scripted_pose, in_axes=(0,) * 11 + (None, 0))
-    sc_s, sc_lat, sc_speed, sc_xy, sc_yaw, sc_active = pose(
+    return pose(
         script.path,
         script.path_s,
         script.path_valid,
@@ -220,13 +203,86 @@ def step_actors(
         script.lat_shift,
         script.lat_duration,
         script.despawn_at_end,
-        t_next,
+        t,
         tau,
     )
 
+
+def start_state(script: ActorScript) -> ActorState:
+    """The actors at ``t = 0`` implied by their scripts (float32, jittable, differentiable).
+
+    Scripted slots take their closed form at ``t = 0`` (the event has not happened); IDM slots
+    stand at ``s_init`` on their path at their desired speed ``v_pre``.  Padding slots are
+    zero and inactive.  The scenario builders compute the same state in float64 NumPy
+    (:func:`lantern_jax.scenarios.assemble.pack_actors`); this is the run-time twin used when
+    a scenario's scripts are changed after it was built (:mod:`lantern_jax.scenarios.knobs`).
+    """
+    zero = jnp.zeros((), jnp.float32)
+    s, lat, speed, xy, yaw, _ = scripted_states(script, zero, jnp.asarray(NEVER, jnp.float32))
+    id_xy, id_yaw = jax.vmap(interpolate)(
+        script.path, script.path_s, script.path_valid, script.s_init
+    )
+    is_idm = script.motion == MOTION_IDM
+
+    def pick(idm_value, scripted_value):
+        return _where_slot(script.valid, _where_slot(is_idm, idm_value, scripted_value), 0.0)
+
+    return ActorState(
+        xy=pick(id_xy, xy),
+        yaw=pick(id_yaw, yaw),
+        speed=pick(script.v_pre, speed),
+        s=pick(script.s_init, s),
+        lat=pick(jnp.zeros_like(lat), lat),
+        active=script.valid,
+    )
+
+
+def _where_slot(mask: Array, a: Array, b) -> Array:
+    """``where(mask, a, b)`` with an (A,) slot mask broadcast over ``a``'s trailing axes."""
+    return jnp.where(mask.reshape(mask.shape + (1,) * (a.ndim - 1)), a, b)
+
+
+def step_actors(
+    actors: ActorState,
+    script: ActorScript,
+    t_next: Array,
+    t_event: Array,
+    light_state: Array,
+    ego_xy: Array,
+    ego_yaw: Array,
+    ego_speed: Array,
+    dt: float = DT,
+    idm_params: IDMParams = DEFAULT_IDM,
+) -> ActorState:
+    """Advance every actor of one scenario to time ``t_next``.
+
+    Args:
+        actors: current actor states, (A,) slots.
+        script: what each slot is and how it moves, (A,) slots.
+        t_next: () float32, s, time of the new state (scripted poses are closed form in it).
+        t_event: () float32, s, physical event onset (``INF_TIME`` while pending).
+        light_state: (T,) int32, LIGHT_* state of every traffic light at this tick.
+        ego_xy: (2,) float32, m, world-frame ego box centre.
+        ego_yaw: () float32, rad, ego heading.
+        ego_speed: () float32, m/s, ego speed (>= 0).
+        dt: s, tick used to integrate the IDM actors.
+        idm_params: IDM parameters of the IDM actors.
+
+    Returns:
+        The actors at ``t_next`` (``xy``, ``yaw``, ``speed``, ``s``, ``lat``, ``active``); slots
+        that are not present are returned unchanged.
+    """
+    valid = script.valid
+    is_present = present(script, actors)
+    clean = jax.tree.map(lambda x: _zero_where_invalid(x, valid), actors)
+    script = jax.tree.map(lambda x: _zero_where_invalid(x, valid), script)
+    t_next = jnp.asarray(t_next, jnp.float32)
+
+    sc_s, sc_lat, sc_speed, sc_xy, sc_yaw, sc_active = scripted_states(script, t_next, t_event)
+
     # IDM: integrate along the path
     id_s, id_speed, id_active = _idm_update(
-        clean, script, present, light_state, ego_xy, ego_yaw, ego_speed, dt, idm_params
+        clean, script, is_present, light_state, ego_xy, ego_yaw, ego_speed, dt, idm_params
     )
     id_xy, id_yaw = jax.vmap(interpolate)(script.path, script.path_s, script.path_valid, id_s)
 
@@ -239,7 +295,7 @@ def step_actors(
     active = actors.active & jnp.where(is_idm, id_active, sc_active)
 
     def keep(new, old):
-        mask = present.reshape(present.shape + (1,) * (old.ndim - 1))
+        mask = is_present.reshape(is_present.shape + (1,) * (old.ndim - 1))
         return jnp.where(mask, new.astype(old.dtype), old)
 
     return actors.replace(

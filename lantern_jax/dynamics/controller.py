@@ -45,8 +45,8 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from lantern_jax.constants import EGO_MAX_ACCEL, EGO_MAX_STEER, EGO_WHEELBASE, WAYPOINT_DT
-from lantern_jax.dynamics.bicycle import EGO_LR, brake_limit
+from lantern_jax.constants import BIG, EGO_MAX_ACCEL, EGO_MAX_STEER, EGO_WHEELBASE, WAYPOINT_DT
+from lantern_jax.dynamics.bicycle import EGO_LR, bicycle_step, brake_limit, sanitize_controls
 from lantern_jax.geometry import safe_norm
 from lantern_jax.polyline import arc_length, interpolate, safe_atan2
 from lantern_jax.world import EgoState
@@ -149,3 +149,31 @@ def track_waypoints(ego: EgoState, waypoints: Array, friction: Array) -> tuple[A
 
     nan = jnp.float32(jnp.nan)
     return jnp.where(fault, nan, steer), jnp.where(fault, nan, accel)
+
+
+def follow_plan(
+    ego: EgoState, waypoints: Array, friction: Array
+) -> tuple[EgoState, Array, Array]:
+    """One tick of the ego driving a plan: controller, fault handling, bicycle.
+
+    Non-finite waypoints (or controls) are a controller fault: the ego brakes fully (friction
+    limited) and keeps its wheel angle; the fault is returned, never propagated as NaN.
+
+    Args:
+        ego: the ego at the start of the tick.
+        waypoints: (10, 2) float32, m, ego frame (x forward, y right), as the policy returned them.
+        friction: () float32, tyre-road friction coefficient.
+
+    Returns:
+        ego: the ego at the end of the tick.
+        fault: () bool, the plan or the controls were not finite.
+        safe_waypoints: (10, 2) float32, m, the waypoints with a faulty plan replaced by zeros.
+    """
+    wp_fault = ~jnp.all(jnp.isfinite(waypoints))
+    safe = jnp.where(wp_fault, 0.0, waypoints)
+    steer_cmd, accel_cmd = track_waypoints(ego, safe, friction)
+    steer_cmd, accel_cmd, ctl_fault = sanitize_controls(steer_cmd, accel_cmd)
+    fault = wp_fault | ctl_fault
+    accel_cmd = jnp.where(fault, -BIG, accel_cmd)  # full (friction-limited) braking
+    steer_cmd = jnp.where(fault, ego.steer, steer_cmd)
+    return bicycle_step(ego, steer_cmd, accel_cmd, friction), fault, safe

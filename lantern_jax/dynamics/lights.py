@@ -1,4 +1,4 @@
-"""Fixed-cycle traffic lights."""
+"""Fixed-cycle traffic lights, and what a light means for the ego at its stop line."""
 
 from __future__ import annotations
 
@@ -35,3 +35,37 @@ def light_states(lights: TrafficLights, t: Array) -> Array:
         jnp.where(phase < lights.green + lights.yellow, LIGHT_YELLOW, LIGHT_RED),
     )
     return jnp.where(ok, state, LIGHT_GREEN).astype(jnp.int32)
+
+
+def ego_light_state(lights: TrafficLights, ego_light: Array, t: Array) -> Array:
+    """() int32 LIGHT_* state of the ego's traffic light at ``t`` (GREEN when it has none).
+
+    Args:
+        lights: the scenario's lights, (T,) slots.
+        ego_light: () int32, slot of the light governing the ego (-1 = none).
+        t: () float32, s.
+    """
+    states = light_states(lights, t)
+    idx = jnp.clip(ego_light, 0, states.shape[0] - 1)
+    return jnp.where(ego_light >= 0, states[idx], LIGHT_GREEN).astype(jnp.int32)
+
+
+LIGHT_HOLD_DIST = 30.0  # m, a red or yellow light whose stop line is this close ahead holds the ego
+LIGHT_HOLD_BEHIND = -1.0  # m, ... or up to 1 m past the line (the ego stopped on it)
+
+
+def light_holds_ego(light: Array, dist_to_stop_line: Array) -> Array:
+    """() bool: a non-green ego light with its stop line just ahead legitimately holds the ego.
+
+    Used by the protocol (it pauses the anti-deadlock countdown) and by the scoring (it
+    justifies a Route B stop).
+
+    Args:
+        light: () int32, LIGHT_* state of the ego's light.
+        dist_to_stop_line: () float32, m, route arc of the stop line minus the ego's arc.
+    """
+    return (
+        (light != LIGHT_GREEN)
+        & (dist_to_stop_line > LIGHT_HOLD_BEHIND)
+        & (dist_to_stop_line < LIGHT_HOLD_DIST)
+    )

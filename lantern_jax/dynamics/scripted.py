@@ -12,9 +12,9 @@ For one actor with trigger time ``tau``::
 with ``smoothstep(x) = 3 x^2 - 2 x^3`` on ``[0, 1]`` (0 below, 1 above).  Everything is a
 piecewise-smooth function of the script parameters and of ``tau``, so the position has finite
 gradients with respect to ``v_pre``, ``v_post``, ``s_init``, ``lat_shift``, ``lat_duration`` and
-the trigger time (hence ``trigger_delay`` and ``t_event``).  A trigger time at or above
-``INF_TIME / 2`` means "not (yet) triggered": it is replaced by ``t`` before any arithmetic, so
-no huge number ever enters a value or a gradient.
+the trigger time (hence ``trigger_delay`` and ``t_event``).  A trigger time that has not
+happened (``times.NEVER``) means "not (yet) triggered": it is replaced by ``t`` before any
+arithmetic, so no huge number ever enters a value or a gradient.
 """
 
 from __future__ import annotations
@@ -22,14 +22,12 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from lantern_jax.constants import INF_TIME, TRIGGER_CLOCK, TRIGGER_EVENT
+from lantern_jax.constants import TRIGGER_CLOCK, TRIGGER_EVENT
 from lantern_jax.geometry import safe_norm
 from lantern_jax.polyline import interpolate, left_normal, safe_atan2
+from lantern_jax.times import NEVER, happened
 
 Array = jax.Array
-
-PENDING_TIME = 0.5 * INF_TIME  # s, trigger times at or above this have not happened
-
 
 def trigger_time(trigger: Array, trigger_delay: Array, t_event: Array) -> Array:
     """Trigger time of a scripted actor.
@@ -37,19 +35,19 @@ def trigger_time(trigger: Array, trigger_delay: Array, t_event: Array) -> Array:
     Args:
         trigger: (...) int32, TRIGGER_* source.
         trigger_delay: (...) float32, s, delay after the source.
-        t_event: () or (...) float32, s, physical event onset (``INF_TIME`` until it happens).
+        t_event: () or (...) float32, s, physical event onset (``times.NEVER`` until it happens).
 
     Returns:
         (...) float32, s: ``trigger_delay`` (clock), ``t_event + trigger_delay`` (event; stays
-        ``INF_TIME`` while the event is pending), ``INF_TIME`` (never).
+        ``NEVER`` while the event is pending), ``NEVER`` (never).
     """
-    event_pending = t_event >= PENDING_TIME
+    event_pending = ~happened(t_event)
     t_ev = jnp.where(event_pending, 0.0, t_event)
-    tau_event = jnp.where(event_pending, INF_TIME, t_ev + trigger_delay)
+    tau_event = jnp.where(event_pending, NEVER, t_ev + trigger_delay)
     tau = jnp.where(
         trigger == TRIGGER_CLOCK,
         trigger_delay,
-        jnp.where(trigger == TRIGGER_EVENT, tau_event, INF_TIME),
+        jnp.where(trigger == TRIGGER_EVENT, tau_event, NEVER),
     )
     return tau.astype(jnp.float32)
 
@@ -97,7 +95,7 @@ def scripted_pose(
         lat_duration: () float32, s, duration of the lateral manoeuvre (> 0).
         despawn_at_end: () bool, the actor leaves the world when it reaches ``s_end``.
         t: () float32, s, time.
-        t_trigger: () float32, s, trigger time ``tau`` (>= INF_TIME / 2 = not triggered).
+        t_trigger: () float32, s, trigger time ``tau`` (``NEVER`` = not triggered).
 
     Returns:
         s: () float32, m, arc along the path.
@@ -107,7 +105,7 @@ def scripted_pose(
         yaw: () float32, rad, CCW from +x.
         active: () bool, False once ``s_end`` is reached when ``despawn_at_end``.
     """
-    pending = t_trigger >= PENDING_TIME
+    pending = ~happened(t_trigger)
     tau = jnp.where(pending, t, t_trigger)
     t_pre = jnp.minimum(t, tau)  # time spent in the pre-trigger phase
     fired = (~pending) & (t >= tau)

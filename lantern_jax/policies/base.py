@@ -1,4 +1,4 @@
-"""The policy interface and the registry of policies by name.
+"""The policy interface (the registry of policies by name is :mod:`lantern_jax.policies.registry`).
 
 A policy is a pure pair::
 
@@ -18,7 +18,7 @@ import jax
 import jax.numpy as jnp
 
 from lantern_jax.constants import NUM_WAYPOINTS
-from lantern_jax.policies.observation import Observation
+from lantern_jax.observation import Observation
 
 InitFn = Callable[[jax.Array], Any]
 ActFn = Callable[[Any, Observation], jax.Array]
@@ -34,37 +34,6 @@ class Policy:
     description: str = ""
     privileged: bool = False
     uses_warning: bool = False
-
-
-_REGISTRY: dict[str, Callable[[], Policy]] = {}
-
-
-def register_policy(name: str, factory: Callable[[], Policy]) -> None:
-    """Register a policy factory under ``name``; a duplicate name is an error."""
-    if name in _REGISTRY:
-        raise ValueError(f"policy {name!r} is already registered; known: {sorted(_REGISTRY)}")
-    _REGISTRY[name] = factory
-
-
-def get_policy(name: str) -> Policy:
-    """Return the policy registered as ``name``.
-
-    Raises:
-        KeyError: listing the known policy names when ``name`` is unknown.
-    """
-    # Importing the reference module registers the built-in policies.
-    from lantern_jax.policies import reference  # noqa: F401
-
-    if name not in _REGISTRY:
-        raise KeyError(f"unknown policy {name!r}; known policies: {', '.join(sorted(_REGISTRY))}")
-    return _REGISTRY[name]()
-
-
-def policy_names() -> list[str]:
-    """Names of all registered policies."""
-    from lantern_jax.policies import reference  # noqa: F401
-
-    return sorted(_REGISTRY)
 
 
 def check_policy_output(policy: Policy, params: Any, obs: Observation) -> None:

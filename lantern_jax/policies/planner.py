@@ -40,7 +40,8 @@ from lantern_jax.constants import (
     NUM_WAYPOINTS,
     WAYPOINT_DT,
 )
-from lantern_jax.policies.observation import ROUTE_STEP, Observation
+from lantern_jax.observation import ROUTE_STEP, Observation
+from lantern_jax.polyline import project_uniform
 
 Array = jax.Array
 
@@ -49,7 +50,7 @@ FORECAST_DT = 0.5  # s
 
 
 @struct.dataclass
-class PlannerParams:
+class PlannerConfig:
     """Continuous planner parameters (a pytree: sweepable and differentiable)."""
 
     idm_a: Array  # () m/s^2, IDM maximum acceleration
@@ -66,10 +67,10 @@ class PlannerParams:
     yield_setback: Array  # () m, distance before the turn entry at which a yield stop is held
 
 
-def default_planner_params() -> PlannerParams:
+def default_planner_config() -> PlannerConfig:
     """Defaults from PDM-Lite where it is specific (reference/parameters.md)."""
     f = lambda x: jnp.asarray(x, jnp.float32)  # noqa: E731
-    return PlannerParams(
+    return PlannerConfig(
         idm_a=f(2.0),
         idm_b=f(3.5),
         idm_s0=f(4.0),
@@ -92,41 +93,9 @@ def _route_arcs(route: Array) -> Array:
     return jnp.arange(route.shape[0], dtype=jnp.float32) * ROUTE_STEP
 
 
-def project_points_on_route(route: Array, qs: Array) -> tuple[Array, Array]:
-    """Project many points onto the observed route polyline at once.
-
-    Laid out segments-major / points-minor with x and y split, which XLA on CPU vectorises
-    far better than a (points, segments, 2) layout.
-
-    Args:
-        route: (N, 2) m, ego-frame route points ROUTE_STEP apart.
-        qs: (M, 2) m, ego-frame query points.
-
-    Returns:
-        (arc (M,), m along the route from its first point, negative behind it;
-         dist (M,), m distance from the polyline).
-    """
-    a = route[:-1]
-    ab = route[1:] - a
-    inv = 1.0 / jnp.maximum(jnp.sum(ab * ab, -1), 1e-6)  # (N-1,)
-    ax, ay, bx, by = a[:, 0:1], a[:, 1:2], ab[:, 0:1], ab[:, 1:2]
-    rx, ry = qs[None, :, 0] - ax, qs[None, :, 1] - ay  # (N-1, M)
-    along = (rx * bx + ry * by) * inv[:, None]
-    u = jnp.clip(along, 0.0, 1.0)
-    dx, dy = rx - u * bx, ry - u * by
-    d2 = dx * dx + dy * dy
-    m = jnp.min(d2, axis=0)
-    k = jnp.arange(a.shape[0], dtype=jnp.float32)[:, None]
-    arc = jnp.max(jnp.where(d2 <= m[None, :], (k + u) * ROUTE_STEP, -BIG), axis=0)
-    # Behind the first point: extend the first segment backwards (negative arcs).
-    back = along[0] * ROUTE_STEP
-    arc = jnp.where((arc <= 0.0) & (back < 0.0), back, arc)
-    return arc, jnp.sqrt(jnp.maximum(m, 1e-12))
-
-
 def project_on_route(route: Array, q: Array) -> tuple[Array, Array]:
-    """Project one point onto the observed route (see :func:`project_points_on_route`)."""
-    arc, dist = project_points_on_route(route, q[None, :])
+    """Project one point onto the observed route (:func:`lantern_jax.polyline.project_uniform`)."""
+    arc, dist = project_uniform(route, ROUTE_STEP, q[None, :])
     return arc[0], dist[0]
 
 
@@ -178,7 +147,7 @@ class Constraints:
 
 
 def actor_constraints(
-    p: PlannerParams, obs: Observation, seen: Array, ego_speed: Array
+    p: PlannerConfig, obs: Observation, seen: Array, ego_speed: Array
 ) -> tuple[Constraints, Array]:
     """Leaders, forecast overlaps and pedestrian caution from the perceived actors.
 
@@ -197,8 +166,9 @@ def actor_constraints(
     n_act = obs.actor_xy.shape[0]
     taus = jnp.arange(FORECAST_STEPS, dtype=jnp.float32) * FORECAST_DT
     fut = obs.actor_xy[:, None, :] + obs.actor_vel[:, None, :] * taus[None, :, None]  # (A,F,2)
-    arcs_all, dists_all = project_points_on_route(
-        route, jnp.concatenate([obs.actor_xy, fut.reshape(-1, 2)], axis=0)
+    arcs_all, dists_all = project_uniform(
+        route,
+        ROUTE_STEP, jnp.concatenate([obs.actor_xy, fut.reshape(-1, 2)], axis=0)
     )
     arc, dist = arcs_all[:n_act], dists_all[:n_act]
     f_arc = arcs_all[n_act:].reshape(n_act, FORECAST_STEPS)
@@ -254,7 +224,7 @@ def actor_constraints(
     return Constraints(gap=gap, speed=speed, s0=s0), caution
 
 
-def light_constraint(p: PlannerParams, obs: Observation) -> Constraints:
+def light_constraint(p: PlannerConfig, obs: Observation) -> Constraints:
     """The ego's stop line as a stopped leader while its light is red (or yellow and stoppable)."""
     to_line = obs.dist_to_stop - EGO_HALF_LENGTH
     stoppable = to_line > obs.ego_speed**2 / (2.0 * p.idm_b * 1.5)
@@ -265,7 +235,7 @@ def light_constraint(p: PlannerParams, obs: Observation) -> Constraints:
     return Constraints(gap=gap[None], speed=z, s0=jnp.full((1,), p.light_s0))
 
 
-def stop_constraint(p: PlannerParams, arc: Array, active: Array) -> Constraints:
+def stop_constraint(p: PlannerConfig, arc: Array, active: Array) -> Constraints:
     """A virtual stopped obstacle whose rear is at ``arc`` m along the route (when ``active``)."""
     gap = jnp.where(active, jnp.maximum(arc - EGO_HALF_LENGTH, 0.0), BIG)
     return Constraints(gap=gap[None], speed=jnp.zeros((1,)), s0=jnp.full((1,), 1.0))
@@ -276,7 +246,7 @@ def merge(*cs: Constraints) -> Constraints:
     return jax.tree.map(lambda *xs: jnp.concatenate(xs), *cs)
 
 
-def idm_accel(p: PlannerParams, v: Array, v0: Array, c: Constraints) -> Array:
+def idm_accel(p: PlannerConfig, v: Array, v0: Array, c: Constraints) -> Array:
     """() m/s^2, the minimum IDM acceleration over free road and all constraints."""
     v0 = jnp.maximum(v0, 0.1)
     free = p.idm_a * (1.0 - (v / v0) ** 4)
@@ -289,7 +259,7 @@ def idm_accel(p: PlannerParams, v: Array, v0: Array, c: Constraints) -> Array:
 
 
 def plan(
-    p: PlannerParams, obs: Observation, seen: Array, extra: Constraints | None = None
+    p: PlannerConfig, obs: Observation, seen: Array, extra: Constraints | None = None
 ) -> tuple[Array, Array]:
     """Plan 10 ego-frame waypoints.
 

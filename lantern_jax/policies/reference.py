@@ -24,33 +24,37 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
-from lantern_jax.constants import BIG, LWW, OR, PE, RTY, RWW, VC
-from lantern_jax.policies.base import Policy, register_policy
-from lantern_jax.policies.observation import Observation
+from lantern_jax.constants import BIG
+from lantern_jax.observation import Observation
+from lantern_jax.policies.base import Policy
 from lantern_jax.policies.planner import (
     Constraints,
-    PlannerParams,
-    default_planner_params,
+    PlannerConfig,
+    default_planner_config,
     merge,
     plan,
     project_on_route,
     stop_constraint,
     turn_entry_arc,
 )
+from lantern_jax.scenarios.families import (
+    RESPONSE_CUT_IN,
+    RESPONSE_LANE_OBSTACLE,
+    RESPONSE_YIELD_TURN,
+    family,
+)
+from lantern_jax.scenarios.warnings import TEXT_BANK
 
-# Response semantics of a warning text.
+# Response semantics of a warning text, as integer codes for the jitted policy.
 SEM_NONE = -1  # not understood / not actionable
 SEM_LANE_OBSTACLE = 0  # a stopped obstacle in the ego lane at the grounded position
 SEM_CUT_IN = 1  # a vehicle entering the ego lane at the grounded position
 SEM_YIELD_TURN = 2  # yield before the turn
 
-_FAMILY_SEMANTICS = {
-    PE: SEM_LANE_OBSTACLE,
-    OR: SEM_LANE_OBSTACLE,
-    VC: SEM_CUT_IN,
-    LWW: SEM_YIELD_TURN,
-    RWW: SEM_YIELD_TURN,
-    RTY: SEM_YIELD_TURN,
+_RESPONSE_CODES = {
+    RESPONSE_LANE_OBSTACLE: SEM_LANE_OBSTACLE,
+    RESPONSE_CUT_IN: SEM_CUT_IN,
+    RESPONSE_YIELD_TURN: SEM_YIELD_TURN,
 }
 
 
@@ -61,17 +65,15 @@ def text_semantics(understood_kinds: tuple[str, ...] = ("canonical",)) -> np.nda
         understood_kinds: text kinds whose wording the policy was built for; other texts (e.g.
             held-out paraphrases, non-actionable messages) map to ``SEM_NONE``.
     """
-    from lantern_jax.scenarios.warnings import TEXT_BANK
-
     out = np.full((len(TEXT_BANK),), SEM_NONE, np.int32)
     for entry in TEXT_BANK:
         if entry.kind in understood_kinds:
-            out[entry.text_id] = _FAMILY_SEMANTICS[entry.family]
+            out[entry.text_id] = _RESPONSE_CODES[family(entry.family).response]
     return out
 
 
 def warning_constraints(
-    p: PlannerParams, obs: Observation, semantics: jax.Array, seen: jax.Array
+    p: PlannerConfig, obs: Observation, semantics: jax.Array, seen: jax.Array
 ) -> Constraints:
     """Virtual constraints from the active warning (all inactive when there is none).
 
@@ -111,7 +113,7 @@ class ReferenceParams:
     these (traced) flags, evaluating all three reuses one compiled rollout.
     """
 
-    planner: PlannerParams
+    planner: PlannerConfig
     privileged: jax.Array  # () bool, plan over every present actor (else: camera-visible only)
     use_warning: jax.Array  # () bool, turn active warnings into virtual constraints
 
@@ -146,7 +148,7 @@ def _make_init(privileged: bool, use_warning: bool):
     def init(key: jax.Array) -> ReferenceParams:
         del key
         return ReferenceParams(
-            planner=default_planner_params(),
+            planner=default_planner_config(),
             privileged=jnp.asarray(privileged),
             use_warning=jnp.asarray(use_warning),
         )
@@ -185,7 +187,3 @@ def coop_policy() -> Policy:
         uses_warning=True,
     )
 
-
-register_policy("expert", expert_policy)
-register_policy("ego", ego_policy)
-register_policy("coop", coop_policy)

@@ -1,13 +1,17 @@
-"""The six LANTERN scenario families as matched Route A / Route B worlds.
+"""The six LANTERN scenario families, one record each, and matched Route A / Route B pairs.
 
 Usage::
 
     rng = np.random.default_rng(0)
-    params = sample_params("PE", rng, "wet_day")      # flat, JSON-friendly dict
-    world_a, world_b, meta = build_pair(params)        # World pytrees at t = 0
+    params = sample_params("PE", rng, "wet_day")           # flat, JSON-friendly dict
+    scenario_a, scenario_b, meta = build_pair(params)       # Scenario pytrees
 
 A frozen suite stores only the parameter dicts (and their
 :func:`~lantern_jax.scenarios.spec.content_hash`); building is deterministic.
+
+Every family is one :class:`Family` record in :data:`FAMILY_RECORDS` — its sampler, cross-field
+feasibility check, builder, documented parameter ranges, canonical warning text and what that
+warning asks the ego to do — so a new family is one record and one builder.
 
 Shared conventions of every family:
 
@@ -29,57 +33,107 @@ Family geometry is documented in :mod:`~lantern_jax.scenarios.families_straight`
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
 import numpy as np
 
-from lantern_jax.constants import FAMILIES, WEATHERS
-from lantern_jax.scenarios import families_junction as fj
-from lantern_jax.scenarios import families_straight as fs
-from lantern_jax.scenarios.spec import family_of, validate_params
-from lantern_jax.world import World
+from lantern_jax.constants import FAMILIES, FAMILY_NAMES, WEATHERS
+from lantern_jax.scenarios import families_junction as junction
+from lantern_jax.scenarios import families_straight as straight
+from lantern_jax.scenarios.spec import PARAM_RANGES, validate_params
+from lantern_jax.scenarios.warnings import TEMPLATES
+from lantern_jax.world import Scenario
 
-_SAMPLERS = {
-    "PE": fs.sample_pe,
-    "VC": fs.sample_vc,
-    "OR": fs.sample_or,
-    "LWW": lambda rng, w: fj.sample_junction("LWW", rng, w),
-    "RWW": lambda rng, w: fj.sample_junction("RWW", rng, w),
-    "RTY": lambda rng, w: fj.sample_junction("RTY", rng, w),
-}
-_CHECKS = {
-    "PE": fs.check_pe,
-    "VC": fs.check_vc,
-    "OR": fs.check_or,
-    "LWW": fj.check_junction,
-    "RWW": fj.check_junction,
-    "RTY": fj.check_junction,
-}
-_BUILDERS = {
-    "PE": fs.build_pe,
-    "VC": fs.build_vc,
-    "OR": fs.build_or,
-    "LWW": fj.build_junction,
-    "RWW": fj.build_junction,
-    "RTY": fj.build_junction,
-}
+# What a family's warning asks the ego to do (read by warning-aware policies).
+RESPONSE_LANE_OBSTACLE = "lane_obstacle"  # a stopped obstacle in the ego lane at the position
+RESPONSE_CUT_IN = "cut_in"  # a vehicle entering the ego lane at the position
+RESPONSE_YIELD_TURN = "yield_turn"  # yield before the turn
+RESPONSES = (RESPONSE_LANE_OBSTACLE, RESPONSE_CUT_IN, RESPONSE_YIELD_TURN)
+
+Sampler = Callable[[np.random.Generator, str], dict]
+Builder = Callable[[dict], tuple[Scenario, Scenario, dict]]
 
 
-def family_name(family: int | str) -> str:
-    """Family abbreviation from an index or an abbreviation."""
-    if isinstance(family, str):
-        if family not in FAMILIES:
-            raise ValueError(f"family: {family!r} not one of {{{', '.join(FAMILIES)}}}")
-        return family
-    i = int(family)
+@dataclass(frozen=True)
+class Family:
+    """One scenario family: how to sample, check and build it, and what its warning means."""
+
+    code: str  # "PE", ...
+    name: str  # "Pedestrian Emergence", ...
+    sample: Sampler  # (rng, weather) -> parameter dict
+    check: Callable[[dict], None]  # cross-field feasibility; ValueError naming the field
+    build: Builder  # parameter dict -> (Route A, Route B, meta)
+    response: str  # one of RESPONSES
+
+    @property
+    def index(self) -> int:
+        """Index in ``constants.FAMILIES`` (the paper's order)."""
+        return FAMILIES.index(self.code)
+
+    @property
+    def ranges(self) -> dict[str, Any]:
+        """The documented parameter ranges (:data:`~lantern_jax.scenarios.spec.PARAM_RANGES`)."""
+        return PARAM_RANGES[self.code]
+
+    @property
+    def template(self) -> str:
+        """The canonical warning template (paper, warning-template table)."""
+        return TEMPLATES[self.index]
+
+
+def _junction_sampler(code: str) -> Sampler:
+    return functools.partial(junction.sample_junction, code)
+
+
+FAMILY_RECORDS: dict[str, Family] = {
+    f.code: f
+    for f in (
+        Family("PE", FAMILY_NAMES[0], straight.sample_pe, straight.check_pe, straight.build_pe,
+               RESPONSE_LANE_OBSTACLE),
+        Family("VC", FAMILY_NAMES[1], straight.sample_vc, straight.check_vc, straight.build_vc,
+               RESPONSE_CUT_IN),
+        Family("OR", FAMILY_NAMES[2], straight.sample_or, straight.check_or, straight.build_or,
+               RESPONSE_LANE_OBSTACLE),
+        Family("LWW", FAMILY_NAMES[3], _junction_sampler("LWW"), junction.check_junction,
+               junction.build_junction, RESPONSE_YIELD_TURN),
+        Family("RWW", FAMILY_NAMES[4], _junction_sampler("RWW"), junction.check_junction,
+               junction.build_junction, RESPONSE_YIELD_TURN),
+        Family("RTY", FAMILY_NAMES[5], _junction_sampler("RTY"), junction.check_junction,
+               junction.build_junction, RESPONSE_YIELD_TURN),
+    )  # fmt: skip
+}
+assert tuple(FAMILY_RECORDS) == FAMILIES
+
+
+def family(code_or_index: int | str) -> Family:
+    """The record of a family given by abbreviation (``"PE"``) or index.
+
+    Raises:
+        ValueError: naming the valid families.
+    """
+    if isinstance(code_or_index, str):
+        if code_or_index not in FAMILY_RECORDS:
+            raise ValueError(f"family: {code_or_index!r} not one of {{{', '.join(FAMILIES)}}}")
+        return FAMILY_RECORDS[code_or_index]
+    i = int(code_or_index)
     if not 0 <= i < len(FAMILIES):
         raise ValueError(f"family: {i} outside 0..{len(FAMILIES) - 1}")
-    return FAMILIES[i]
+    return FAMILY_RECORDS[FAMILIES[i]]
 
 
-def sample_params(family: int | str, rng: np.random.Generator, weather: str = "clear_day") -> dict:
+def family_name(code_or_index: int | str) -> str:
+    """Family abbreviation from an index or an abbreviation."""
+    return family(code_or_index).code
+
+
+def sample_params(family_: int | str, rng: np.random.Generator, weather: str = "clear_day") -> dict:
     """Sample a valid parameter dict of one family.
 
     Args:
-        family: index or abbreviation (``"PE"``, ...).
+        family_: index or abbreviation (``"PE"``, ...).
         rng: NumPy generator; the same generator state gives the same dict.
         weather: one of ``constants.WEATHERS``.
 
@@ -88,33 +142,34 @@ def sample_params(family: int | str, rng: np.random.Generator, weather: str = "c
         ``route_length`` and the family's fields of ``spec.PARAM_RANGES``), floats rounded to
         1e-3.
     """
-    fam = family_name(family)
+    rec = family(family_)
     if weather not in WEATHERS:
         raise ValueError(f"weather: {weather!r} not one of {{{', '.join(WEATHERS)}}}")
-    params = _SAMPLERS[fam](rng, weather)
+    params = rec.sample(rng, weather)
     validate_params(params)
     return params
 
 
 def check_feasible(params: dict) -> None:
     """Cross-field feasibility of a range-checked parameter dict (``ValueError`` naming a field)."""
-    _CHECKS[family_of(params)](params)
+    family(params.get("family")).check(params)
 
 
-def build_pair(params: dict) -> tuple[World, World, dict]:
-    """Build the Route A and Route B worlds of one scenario pair.
+def build_pair(params: dict) -> tuple[Scenario, Scenario, dict]:
+    """Build the Route A and Route B scenarios of one pair.
 
     Args:
         params: a parameter dict (as from :func:`sample_params`); validated first.
 
     Returns:
-        ``(world_a, world_b, meta)``: two :class:`World` pytrees with identical shapes (capacities
-        of :mod:`lantern_jax.scenarios.road`) and a JSON-friendly dict with the family, the
-        content hash, the markers, the conflict point (world frame), the lane names, the number
-        of background vehicles and family-specific canonical-frame details.
+        ``(scenario_a, scenario_b, meta)``: two :class:`~lantern_jax.world.Scenario` pytrees with
+        identical shapes (capacities of :mod:`lantern_jax.scenarios.road`) and a JSON-friendly
+        dict with the family, the content hash, the markers, the conflict point (world frame),
+        the lane names, the number of background vehicles and family-specific canonical-frame
+        details.
 
     Raises:
         ValueError: naming the offending field for invalid or infeasible parameters.
     """
     validate_params(params)
-    return _BUILDERS[params["family"]](params)
+    return family(params["family"]).build(params)

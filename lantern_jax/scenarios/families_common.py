@@ -1,9 +1,9 @@
-"""Shared machinery of the family builders: actor specs, background traffic, World assembly.
+"""Shared machinery of the family builders: actor helpers, background traffic, pair assembly.
 
 Builders work in NumPy in a canonical frame (:mod:`lantern_jax.scenarios.road`) and describe each
-actor slot with an :class:`ActorSpec`; :func:`assemble_world` rotates the scene, packs every
-piece into the fixed capacities and returns a :class:`~lantern_jax.world.World` whose actor state
-at ``t = 0`` is the closed form of :class:`~lantern_jax.world.ActorScript` evaluated at 0.
+actor slot with an :class:`~lantern_jax.scenarios.assemble.ActorSpec`; :func:`finish_pair` adds
+the background traffic and packs Route A and Route B with
+:func:`~lantern_jax.scenarios.assemble.assemble_scenario`.
 
 Actor slot layout (identical for every family, so Route A/B and all scenarios line up):
 
@@ -20,7 +20,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
-import jax.numpy as jnp
 import numpy as np
 
 from lantern_jax.constants import (
@@ -30,24 +29,12 @@ from lantern_jax.constants import (
     FAMILIES,
     KIND_VEHICLE,
     MOTION_IDM,
-    MOTION_SCRIPTED,
     ROLE_BACKGROUND,
-    TRIGGER_CLOCK,
-    TRIGGER_NEVER,
 )
 from lantern_jax.scenarios import road as rd
-from lantern_jax.scenarios.spec import WEATHER_PROFILES, content_hash
-from lantern_jax.world import (
-    Actors,
-    ActorScript,
-    EgoState,
-    Lanes,
-    ProtocolState,
-    Route,
-    ScenarioParams,
-    TrafficLights,
-    World,
-)
+from lantern_jax.scenarios.assemble import ActorSpec, assemble_scenario, initial_pose
+from lantern_jax.scenarios.spec import PARAM_RANGES, SEED_MAX, WEATHER_PROFILES, content_hash
+from lantern_jax.world import Scenario
 
 HAZARD_SLOT = 0
 SCENE_SLOT = 1
@@ -58,39 +45,6 @@ CAR_EXTENT = (2.3, 1.0)  # m, half length / half width of an ordinary car
 BG_SPEED = (7.0, 11.0)  # m/s, desired speed range of background vehicles
 BG_MARGIN = 1.0  # m, clearance of a background vehicle's box from any other box at t = 0
 BG_SPACING_MARGIN = 3.0  # m, extra clearance between two background vehicles
-
-
-@dataclass
-class ActorSpec:
-    """One actor slot in the canonical frame (see :class:`~lantern_jax.world.ActorScript`)."""
-
-    path: np.ndarray  # (n, 2) float64, m, n >= 2
-    extent: tuple[float, float]  # m, half length, half width
-    kind: int
-    role: int
-    motion: int = MOTION_SCRIPTED
-    s_init: float = 0.0
-    v_pre: float = 0.0
-    v_post: float = 0.0
-    s_hold: float = BIG
-    s_end: float | None = None  # None = path length
-    trigger: int = TRIGGER_NEVER
-    trigger_delay: float = 0.0
-    lat_shift: float = 0.0
-    lat_duration: float = 1.0
-    despawn_at_end: bool = False
-    light_index: int = -1
-    stop_s: float = BIG
-
-    def initial_state(self) -> tuple[float, float]:
-        """``(s, speed)`` at ``t = 0`` from the scripted closed form (IDM: s_init, v_pre)."""
-        if self.motion == MOTION_IDM:
-            return self.s_init, self.v_pre
-        if self.trigger == TRIGGER_CLOCK and self.trigger_delay <= 0.0:
-            return self.s_init, self.v_post
-        if self.s_init >= self.s_hold:
-            return self.s_hold, 0.0
-        return self.s_init, self.v_pre
 
 
 def static_actor(xy, yaw: float, extent, kind: int, role: int) -> ActorSpec:
@@ -112,12 +66,6 @@ def straight_path(p0, direction, length: float) -> np.ndarray:
 def fit_path(xy: np.ndarray) -> np.ndarray:
     """A polyline reduced to at most ``PATH_POINTS`` points (uniform resampling)."""
     return xy if len(xy) <= rd.PATH_POINTS else rd.resample(xy, rd.PATH_POINTS)
-
-
-def initial_pose(spec: ActorSpec) -> tuple[np.ndarray, float, float, float]:
-    """``(xy, yaw, s, speed)`` of an actor at ``t = 0`` (canonical frame)."""
-    s, v = spec.initial_state()
-    return rd.point_at(spec.path, s), rd.heading_at(spec.path, s), s, v
 
 
 # ------------------------------------------------------------------------------------------------
@@ -232,126 +180,6 @@ def spec_box(spec: ActorSpec | None) -> tuple | None:
     return (xy, yaw, spec.extent)
 
 
-# ------------------------------------------------------------------------------------------------
-# packing
-# ------------------------------------------------------------------------------------------------
-_SCRIPT_FIELDS = (
-    "motion", "s_init", "v_pre", "v_post", "s_hold", "trigger", "trigger_delay", "lat_shift",
-    "lat_duration", "despawn_at_end", "light_index", "stop_s",
-)  # fmt: skip
-
-
-def pack_actors(slots: list[ActorSpec | None], rot: np.ndarray) -> tuple[dict, dict]:
-    """Pack actor slots into the fields of :class:`Actors` and :class:`ActorScript` (NumPy)."""
-    a_n, p_n = rd.MAX_ACTORS, rd.PATH_POINTS
-    if len(slots) > a_n:
-        raise ValueError(f"Actors.valid: {len(slots)} actors exceed capacity {a_n}")
-    f32 = lambda *shape: np.zeros(shape, np.float32)  # noqa: E731
-    act = dict(
-        xy=f32(a_n, 2), yaw=f32(a_n), speed=f32(a_n), extent=f32(a_n, 2),
-        kind=np.zeros(a_n, np.int32), role=np.zeros(a_n, np.int32),
-        valid=np.zeros(a_n, bool), active=np.zeros(a_n, bool), s=f32(a_n), lat=f32(a_n),
-    )  # fmt: skip
-    scr = dict(
-        motion=np.zeros(a_n, np.int32), path=f32(a_n, p_n, 2), path_s=f32(a_n, p_n),
-        path_valid=np.zeros((a_n, p_n), bool), s_init=f32(a_n), v_pre=f32(a_n), v_post=f32(a_n),
-        s_hold=np.full(a_n, BIG, np.float32), s_end=f32(a_n),
-        trigger=np.full(a_n, TRIGGER_NEVER, np.int32), trigger_delay=f32(a_n),
-        lat_shift=f32(a_n), lat_duration=np.ones(a_n, np.float32),
-        despawn_at_end=np.zeros(a_n, bool), light_index=np.full(a_n, -1, np.int32),
-        stop_s=np.full(a_n, BIG, np.float32),
-    )  # fmt: skip
-    scr["path_valid"][:, 0] = True  # padded slots: a single point (validate() needs one)
-    for i, sp in enumerate(slots):
-        if sp is None:
-            continue
-        path = np.asarray(sp.path, np.float64)
-        if len(path) < 2 or len(path) > p_n:
-            raise ValueError(f"ActorScript.path: slot {i} has {len(path)} points (2..{p_n})")
-        xy, yaw, s0, v0 = initial_pose(sp)
-        n = len(path)
-        wp = path @ rot.T
-        cs = rd.arc_length(path)
-        scr["path"][i, :n], scr["path"][i, n:] = wp, wp[-1]
-        scr["path_s"][i, :n], scr["path_s"][i, n:] = cs, cs[-1]
-        scr["path_valid"][i, :n] = True
-        for k in _SCRIPT_FIELDS:
-            scr[k][i] = getattr(sp, k)
-        scr["s_end"][i] = cs[-1] if sp.s_end is None else sp.s_end
-        act["xy"][i] = rot @ xy
-        act["yaw"][i] = math.remainder(yaw + math.atan2(rot[1, 0], rot[0, 0]), 2 * math.pi)
-        act["speed"][i], act["s"][i], act["lat"][i] = v0, s0, 0.0
-        act["extent"][i] = sp.extent
-        act["kind"][i], act["role"][i] = sp.kind, sp.role
-        act["valid"][i] = act["active"][i] = True
-    return act, scr
-
-
-_PARAM_DTYPES = {
-    "family": jnp.int32, "hazard_index": jnp.int32, "ego_light": jnp.int32,
-    "template_id": jnp.int32, "text_id": jnp.int32, "noise_seed": jnp.uint32,
-    "is_route_a": jnp.bool_, "warning_enabled": jnp.bool_, "clear_on_ego_stop": jnp.bool_,
-    "despawn_on_clear": jnp.bool_, "force_event": jnp.bool_, "late_onset": jnp.bool_,
-}  # fmt: skip
-
-
-def _jnp_tree(d: dict) -> dict:
-    return {k: jnp.asarray(v) for k, v in d.items()}
-
-
-def assemble_world(
-    road: rd.RoadMap,
-    route_xy: np.ndarray,
-    slots: list[ActorSpec | None],
-    params: dict,
-    rotation_deg: float,
-) -> World:
-    """Rotate and pack a canonical scene into a :class:`World` at ``t = 0``.
-
-    The ego starts at the route start, on the route, heading along it, at ``params["v_ref"]``
-    (runs start in motion), with zero steer and acceleration.
-
-    Args:
-        road: the map (canonical frame).
-        route_xy: (n, 2) route polyline (canonical frame).
-        slots: actor specs per slot (None = empty), at most ``MAX_ACTORS``.
-        params: every field of :class:`ScenarioParams` as Python values.
-        rotation_deg: rigid rotation applied to the whole scene.
-    """
-    rot = rd.rotation(rotation_deg)
-    route = rd.pack_route(route_xy, rot)
-    act, scr = pack_actors(slots, rot)
-    ego_yaw = math.remainder(rd.heading_at(route_xy, 0.0) + math.radians(rotation_deg), 2 * math.pi)
-    ego = EgoState(
-        xy=jnp.asarray(route["xy"][0]),
-        yaw=jnp.float32(ego_yaw),
-        speed=jnp.float32(params["v_ref"]),
-        steer=jnp.float32(0.0),
-        accel=jnp.float32(0.0),
-    )
-    missing = set(ScenarioParams.__dataclass_fields__) - set(params)
-    if missing:
-        raise ValueError(f"ScenarioParams: missing fields {sorted(missing)}")
-    sp = ScenarioParams(
-        **{
-            k: jnp.asarray(params[k], _PARAM_DTYPES.get(k, jnp.float32))
-            for k in ScenarioParams.__dataclass_fields__
-        }
-    )
-    return World(
-        t=jnp.float32(0.0),
-        tick=jnp.int32(0),
-        ego=ego,
-        actors=Actors(**_jnp_tree(act)),
-        script=ActorScript(**_jnp_tree(scr)),
-        lanes=Lanes(**_jnp_tree(rd.pack_lanes(road, rot))),
-        route=Route(**_jnp_tree(route)),
-        lights=TrafficLights(**_jnp_tree(rd.pack_lights(road.lights, rot))),
-        params=sp,
-        protocol=ProtocolState.initial(),
-    )
-
-
 def pair_params(
     *,
     family: int,
@@ -371,7 +199,8 @@ def pair_params(
     route_length: float,
     seed: int,
 ) -> tuple[dict, dict]:
-    """ScenarioParams field values for Route A (warning enabled) and Route B.
+    """:class:`~lantern_jax.world.ExecutionConfig` field values for Route A (warning enabled)
+    and Route B.
 
     Route B differs only in ``is_route_a`` and ``warning_enabled`` (False): the markers are kept
     so that Route B's matched warning-to-event interval is defined.
@@ -402,6 +231,38 @@ def with_changes(spec: ActorSpec, **kw) -> ActorSpec:
     return replace(spec, **kw)
 
 
+def draw(
+    rng: np.random.Generator,
+    family: str,
+    key: str,
+    at_least: float | None = None,
+    at_most: float | None = None,
+) -> float:
+    """Sample field ``key`` of a family uniformly within its documented range
+    (:data:`~lantern_jax.scenarios.spec.PARAM_RANGES`), optionally narrowed to
+    ``[at_least, at_most]`` by the family's cross-field rules; rounded to 1e-3."""
+    rng_def = PARAM_RANGES[family][key]
+    lo = rng_def.lo if at_least is None else max(rng_def.lo, at_least)
+    hi = rng_def.hi if at_most is None else min(rng_def.hi, at_most)
+    return uniform(rng, lo, hi)
+
+
+def choose(rng: np.random.Generator, family: str, key: str, options: tuple | None = None):
+    """Pick one of the documented options of field ``key`` (or of ``options``, a subset)."""
+    return rng.choice(list(PARAM_RANGES[family][key].options if options is None else options))
+
+
+def common_fields(rng: np.random.Generator, family: str, weather: str) -> dict:
+    """The fields every family samples first: seeds, weather and the scene rotation."""
+    return dict(
+        family=family,
+        seed=int(rng.integers(0, SEED_MAX)),
+        bg_seed=int(rng.integers(0, SEED_MAX)),
+        weather=weather,
+        rotation_deg=draw(rng, family, "rotation_deg"),
+    )
+
+
 def uniform(rng: np.random.Generator, lo: float, hi: float, nd: int = 3) -> float:
     """A uniform sample rounded to ``nd`` decimals that stays inside ``[lo, hi]``."""
     q = 10.0**nd
@@ -423,7 +284,7 @@ def finish_pair(
     rules: dict,
     extra: dict,
     exclusion: list[tuple[np.ndarray, float]] = (),
-) -> tuple[World, World, dict]:
+) -> tuple[Scenario, Scenario, dict]:
     """Add background traffic, pack Route A and Route B and describe the pair.
 
     Args:
@@ -439,7 +300,7 @@ def finish_pair(
         extra: family-specific metadata (canonical frame; ``conflict_xy`` required).
 
     Returns:
-        ``(world_a, world_b, meta)``.
+        ``(scenario_a, scenario_b, meta)``.
     """
     weather = WEATHER_PROFILES[p["weather"]]
     occupied = [ego_box(route.xy)]
@@ -468,8 +329,8 @@ def finish_pair(
         **rules,
     )
     rot = float(p["rotation_deg"])
-    world_a = assemble_world(road, route.xy, slot_list(slots_a), fields_a, rot)
-    world_b = assemble_world(road, route.xy, slot_list(slots_b), fields_b, rot)
+    scenario_a = assemble_scenario(road, route.xy, slot_list(slots_a), fields_a, rot)
+    scenario_b = assemble_scenario(road, route.xy, slot_list(slots_b), fields_b, rot)
     r = rd.rotation(rot)
     s_warn, s_event, s_conflict = markers
     meta = dict(
@@ -494,4 +355,4 @@ def finish_pair(
         text_id=family,
         canonical=extra,
     )
-    return world_a, world_b, meta
+    return scenario_a, scenario_b, meta

@@ -36,7 +36,9 @@ from lantern_jax.constants import (
 )
 from lantern_jax.scenarios import families_common as fc
 from lantern_jax.scenarios import road as rd
+from lantern_jax.scenarios.assemble import ActorSpec
 from lantern_jax.scenarios.spec import PARAM_RANGES
+from lantern_jax.scoring.thresholds import D_SAFE_LARGE_M
 
 TURN = {"LWW": "left", "RWW": "right", "RTY": "right"}
 EGO_LANES = {"left": (0, "W", 0), "right": (1, "E", 1)}  # (lane in, exit arm, lane out)
@@ -51,6 +53,7 @@ APPROACH_MIN = {"left": 12.0, "right": 15.0}  # m (warning point >= ~10 m into t
 APPROACH_MIN_SIGNALIZED = 20.0  # m, room to stop for the initial red
 RECOVERY = 29.0  # m of route after the conflict point
 PATH_TAIL = 10.0  # m of path beyond the clearance point
+SIGNALIZED_SHARE = 1.0 / 3.0  # share of sampled junctions with traffic lights
 
 
 @functools.cache
@@ -80,29 +83,24 @@ def _approach_min(fam: str, signalized: bool) -> float:
 
 def sample_junction(fam: str, rng: np.random.Generator, weather: str) -> dict:
     """Sample LWW / RWW / RTY parameters (about a third signalized)."""
-    tab = PARAM_RANGES[fam]
-    p = dict(
-        family=fam,
-        seed=int(rng.integers(0, 2**31 - 1)),
-        bg_seed=int(rng.integers(0, 2**31 - 1)),
-        weather=weather,
-        rotation_deg=fc.uniform(rng, 0.0, 360.0),
+    p = fc.common_fields(rng, fam, weather)
+    p["num_arms"] = int(fc.choose(rng, fam, "num_arms"))
+    p["missing_arm"] = (
+        str(fc.choose(rng, fam, "missing_arm", ALLOWED_MISSING[fam]))
+        if p["num_arms"] == 3
+        else "none"
     )
-    p["num_arms"] = int(rng.choice([3, 4]))
-    p["missing_arm"] = str(rng.choice(ALLOWED_MISSING[fam])) if p["num_arms"] == 3 else "none"
-    p["signalized"] = bool(rng.random() < 1.0 / 3.0)
-    p["red_s"] = fc.uniform(rng, 2.0, 8.0)
-    p["v_ref"] = fc.uniform(rng, 6.0, 8.0)
-    sp = tab["actor_speed"]
-    p["actor_speed"] = fc.uniform(rng, sp.lo, sp.hi)
+    p["signalized"] = bool(rng.random() < SIGNALIZED_SHARE)
+    p["red_s"] = fc.draw(rng, fam, "red_s")
+    p["v_ref"] = fc.draw(rng, fam, "v_ref")
+    p["actor_speed"] = fc.draw(rng, fam, "actor_speed")
     if fam == "RTY":
-        p["source_dist"] = fc.uniform(rng, 10.0, 50.0)
+        p["source_dist"] = fc.draw(rng, fam, "source_dist")
     _, off = turn_layout(TURN[fam])
     a_min = _approach_min(fam, p["signalized"])
-    lr = tab["route_length"]
-    p["route_length"] = fc.uniform(rng, max(lr.lo, a_min + off + RECOVERY + 0.5), lr.hi)
-    a_hi = min(tab["approach"].hi, p["route_length"] - off - RECOVERY - 0.5)
-    p["approach"] = fc.uniform(rng, a_min, a_hi)
+    p["route_length"] = fc.draw(rng, fam, "route_length", a_min + off + RECOVERY + 0.5)
+    a_hi = p["route_length"] - off - RECOVERY - 0.5
+    p["approach"] = fc.uniform(rng, a_min, min(PARAM_RANGES[fam]["approach"].hi, a_hi))
     return p
 
 
@@ -173,10 +171,10 @@ def build_junction(p: dict):
     )
 
 
-def _event_car(spawn, direction, length: float, v: float) -> fc.ActorSpec:
+def _event_car(spawn, direction, length: float, v: float) -> ActorSpec:
     """The hazard car: waits at ``spawn``, drives ``length`` m along ``direction`` at ``v`` from
     the event on and despawns at the end of its path."""
-    return fc.ActorSpec(
+    return ActorSpec(
         fc.straight_path(spawn, direction, length),
         fc.CAR_EXTENT,
         KIND_VEHICLE,
@@ -207,7 +205,7 @@ def _wrong_way_actors(fam, road, exit_lane, near, d_line, v):
         raise ValueError(f"{fam}: wrong-way spawn {spawn.tolist()} inside the junction box")
     car = _event_car(spawn, dw, off + clear + PATH_TAIL, v)
     s_sp, _ = rd.project(exit_lane.center, spawn)
-    legal = fc.ActorSpec(
+    legal = ActorSpec(
         fc.straight_path(spawn, d_line, exit_lane.length - s_sp),
         fc.CAR_EXTENT,
         KIND_VEHICLE,
@@ -220,7 +218,7 @@ def _wrong_way_actors(fam, road, exit_lane, near, d_line, v):
     )
     rules = dict(
         clear_s=off + clear, clear_time_limit=SAFETY_LIMIT_S, clear_on_ego_stop=False,
-        despawn_on_clear=True, force_event=True, d_safe=3.0,
+        despawn_on_clear=True, force_event=True, d_safe=D_SAFE_LARGE_M,
     )  # fmt: skip
     return {fc.HAZARD_SLOT: car}, {fc.HAZARD_SLOT: legal}, rules, spawn
 
@@ -242,6 +240,6 @@ def _rty_actors(p, near, d_line, v):
     ctx = fc.static_actor(spawn, yaw, fc.CAR_EXTENT, KIND_VEHICLE, ROLE_CONTEXT)
     rules = dict(
         clear_s=clear, clear_time_limit=SAFETY_LIMIT_S, clear_on_ego_stop=False,
-        despawn_on_clear=True, force_event=False, d_safe=3.0,
+        despawn_on_clear=True, force_event=False, d_safe=D_SAFE_LARGE_M,
     )  # fmt: skip
     return {fc.HAZARD_SLOT: car}, {fc.HAZARD_SLOT: ctx}, rules, spawn

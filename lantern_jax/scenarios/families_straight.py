@@ -27,6 +27,8 @@ from lantern_jax.constants import (
 )
 from lantern_jax.scenarios import families_common as fc
 from lantern_jax.scenarios import road as rd
+from lantern_jax.scenarios.assemble import ActorSpec
+from lantern_jax.scoring.thresholds import D_SAFE_LARGE_M, D_SAFE_SMALL_M
 
 ROAD_MARGIN = 60.0  # m of road before the route start and after the route end
 
@@ -55,17 +57,9 @@ OR_LANE_CHANGE_S = 2.5
 OR_STOP_LIMIT_S = 8.0
 OR_VAN_TRAVEL_MIN = 10.0  # m the van drives before reaching C
 OR_VAN_ZONE = 14.0  # m, no background vehicle starts this close to the van
+OR_REVEAL_SAMPLED = (35.0, 80.0)  # m, where the sampler puts C (a part of the admissible range)
 
 RECOVERY = 29.0  # m of route after the conflict point (all families)
-
-
-def _common(rng: np.random.Generator, weather: str) -> dict:
-    return dict(
-        seed=int(rng.integers(0, 2**31 - 1)),
-        bg_seed=int(rng.integers(0, 2**31 - 1)),
-        weather=weather,
-        rotation_deg=fc.uniform(rng, 0.0, 360.0),
-    )
 
 
 def _road_and_route(p: dict, fwd: int, back: int, shoulder: bool, ego_lane: str):
@@ -90,10 +84,10 @@ def _opposing_sections(road: rd.RoadMap, x_lo: float, x_hi: float) -> list[fc.La
 # ================================================================================================
 def sample_pe(rng: np.random.Generator, weather: str) -> dict:
     """Sample PE parameters (conflict first, then a route with >= 30 m of recovery)."""
-    p = dict(family="PE", **_common(rng, weather))
-    p["v_ref"] = fc.uniform(rng, 8.0, 10.0)
-    p["conflict_s"] = fc.uniform(rng, 33.0, 48.0)
-    p["route_length"] = fc.uniform(rng, max(68.0, p["conflict_s"] + PE_RECOVERY + 0.5), 135.0)
+    p = fc.common_fields(rng, "PE", weather)
+    p["v_ref"] = fc.draw(rng, "PE", "v_ref")
+    p["conflict_s"] = fc.draw(rng, "PE", "conflict_s")
+    p["route_length"] = fc.draw(rng, "PE", "route_length", p["conflict_s"] + PE_RECOVERY + 0.5)
     return p
 
 
@@ -130,7 +124,7 @@ def build_pe(p: dict):
     road, route = _road_and_route(p, 1, 1, True, "fwd_0")
     g = pe_geometry(p["conflict_s"])
     truck = fc.static_actor(g["truck"], 0.0, TRUCK_EXTENT, KIND_VEHICLE, ROLE_OCCLUDER)
-    ped = fc.ActorSpec(
+    ped = ActorSpec(
         fc.straight_path(g["ped"], (0.0, 1.0), PED_CROSSING),
         PED_EXTENT,
         KIND_PEDESTRIAN,
@@ -148,7 +142,7 @@ def build_pe(p: dict):
     slots_b = {fc.SCENE_SLOT: truck}
     rules = dict(
         clear_s=PED_CROSSING, clear_time_limit=BIG, clear_on_ego_stop=False,
-        despawn_on_clear=True, force_event=True, d_safe=2.0,
+        despawn_on_clear=True, force_event=True, d_safe=D_SAFE_SMALL_M,
     )  # fmt: skip
     extra = dict(conflict_xy=[sc, -0.5 * rd.LANE_WIDTH], ped_xy=g["ped"].tolist())
     return fc.finish_pair(p, PE, road, route, slots_a, slots_b, sections, markers, rules, extra)
@@ -175,14 +169,14 @@ def vc_conflict_s(v_ref: float, cut_frac: float, gap_event: float) -> float:
 
 def sample_vc(rng: np.random.Generator, weather: str) -> dict:
     """Sample VC parameters (route long enough for 29 m of recovery)."""
-    p = dict(family="VC", **_common(rng, weather))
-    p["v_ref"] = fc.uniform(rng, 9.0, 11.0)
-    p["cut_frac"] = fc.uniform(rng, 0.80, 0.85)
-    p["gap_event"] = fc.uniform(rng, 6.0, 10.0)
-    p["warn_lead"] = float(rng.choice([10.0, 17.0]))
-    p["num_opposing"] = int(rng.choice([1, 2]))
+    p = fc.common_fields(rng, "VC", weather)
+    p["v_ref"] = fc.draw(rng, "VC", "v_ref")
+    p["cut_frac"] = fc.draw(rng, "VC", "cut_frac")
+    p["gap_event"] = fc.draw(rng, "VC", "gap_event")
+    p["warn_lead"] = float(fc.choose(rng, "VC", "warn_lead"))
+    p["num_opposing"] = int(fc.choose(rng, "VC", "num_opposing"))
     sc = vc_conflict_s(p["v_ref"], p["cut_frac"], p["gap_event"])
-    p["route_length"] = fc.uniform(rng, max(58.0, sc + RECOVERY + 0.5), 164.0)
+    p["route_length"] = fc.draw(rng, "VC", "route_length", sc + RECOVERY + 0.5)
     return p
 
 
@@ -215,7 +209,7 @@ def build_vc(p: dict):
     v_cut = vc_cut_speed(p["v_ref"], p["cut_frac"])
     start = np.array([VC_START_GAP, -1.5 * rd.LANE_WIDTH])
     length = p["route_length"] + ROAD_MARGIN - VC_START_GAP
-    car = fc.ActorSpec(
+    car = ActorSpec(
         fc.straight_path(start, (1.0, 0.0), length),
         fc.CAR_EXTENT,
         KIND_VEHICLE,
@@ -233,7 +227,7 @@ def build_vc(p: dict):
     sections = _opposing_sections(road, -ROAD_MARGIN + 10.0, p["route_length"] + 50.0)
     rules = dict(
         clear_s=BIG, clear_time_limit=VC_LANE_CHANGE_S, clear_on_ego_stop=False,
-        despawn_on_clear=False, force_event=True, d_safe=3.0,
+        despawn_on_clear=False, force_event=True, d_safe=D_SAFE_LARGE_M,
     )  # fmt: skip
     extra = dict(conflict_xy=[sc, -0.5 * rd.LANE_WIDTH], v_cut=v_cut)
     return fc.finish_pair(
@@ -247,14 +241,15 @@ def build_vc(p: dict):
 # ================================================================================================
 def sample_or(rng: np.random.Generator, weather: str) -> dict:
     """Sample OR parameters (C after a >= 10 m van drive, route >= C + 29 m)."""
-    p = dict(family="OR", **_common(rng, weather))
-    p["v_ref"] = fc.uniform(rng, 8.0, 10.0)
-    p["lead_speed_kmh"] = fc.uniform(rng, 12.0, 20.0)
-    p["lead_gap"] = fc.uniform(rng, 15.0, 25.0)
-    p["object_ahead"] = fc.uniform(rng, 12.0, 16.0)
-    p["num_opposing"] = int(rng.choice([1, 2]))
-    p["reveal_s"] = fc.uniform(rng, max(35.0, p["lead_gap"] + OR_VAN_TRAVEL_MIN), 80.0)
-    p["route_length"] = fc.uniform(rng, max(66.0, p["reveal_s"] + RECOVERY + 0.5), 133.0)
+    p = fc.common_fields(rng, "OR", weather)
+    p["v_ref"] = fc.draw(rng, "OR", "v_ref")
+    p["lead_speed_kmh"] = fc.draw(rng, "OR", "lead_speed_kmh")
+    p["lead_gap"] = fc.draw(rng, "OR", "lead_gap")
+    p["object_ahead"] = fc.draw(rng, "OR", "object_ahead")
+    p["num_opposing"] = int(fc.choose(rng, "OR", "num_opposing"))
+    reveal_lo = max(OR_REVEAL_SAMPLED[0], p["lead_gap"] + OR_VAN_TRAVEL_MIN)
+    p["reveal_s"] = fc.draw(rng, "OR", "reveal_s", reveal_lo, OR_REVEAL_SAMPLED[1])
+    p["route_length"] = fc.draw(rng, "OR", "route_length", p["reveal_s"] + RECOVERY + 0.5)
     return p
 
 
@@ -292,7 +287,7 @@ def build_or(p: dict):
     y = -1.5 * rd.LANE_WIDTH
     c, g0 = float(p["reveal_s"]), float(p["lead_gap"])
     v_lead = float(p["lead_speed_kmh"]) / 3.6
-    van = fc.ActorSpec(
+    van = ActorSpec(
         fc.straight_path((g0, y), (1.0, 0.0), p["route_length"] + ROAD_MARGIN - g0),
         VAN_EXTENT,
         KIND_VEHICLE,
@@ -313,7 +308,7 @@ def build_or(p: dict):
     exclusion = [(np.array([g0, y]), OR_VAN_ZONE)]
     rules = dict(
         clear_s=BIG, clear_time_limit=OR_STOP_LIMIT_S, clear_on_ego_stop=True,
-        despawn_on_clear=True, force_event=True, d_safe=2.0,
+        despawn_on_clear=True, force_event=True, d_safe=D_SAFE_SMALL_M,
     )  # fmt: skip
     extra = dict(conflict_xy=[c, y], object_xy=obj_xy.tolist(), v_lead=v_lead)
     return fc.finish_pair(

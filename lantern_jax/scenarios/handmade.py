@@ -1,10 +1,10 @@
 """Hand-built scenes: a small constructor for tests, benchmarks and notebook experiments.
 
-:func:`straight_scene` builds a complete, valid :class:`~lantern_jax.world.World` on a straight
-road from a short list of actor descriptions; everything not given gets a neutral default (no
-hazard behaviour, no lights, dry weather).  Actors are packed by the same code as the scenario
-families (:func:`lantern_jax.scenarios.families_common.pack_actors`); the frozen suite uses the
-family builders in :mod:`lantern_jax.scenarios.families`.
+:func:`straight_scene` builds a complete, valid :class:`~lantern_jax.world.Scenario` on a
+straight road from a short list of actor descriptions; everything not given gets a neutral
+default (no hazard behaviour, no lights, dry weather).  It uses the same assembler as the
+scenario families (:func:`lantern_jax.scenarios.assemble.assemble_scenario`); the frozen suite
+uses the family builders in :mod:`lantern_jax.scenarios.families`.
 """
 
 from __future__ import annotations
@@ -15,25 +15,15 @@ import jax.numpy as jnp
 import numpy as np
 
 from lantern_jax.constants import BIG, KIND_VEHICLE, PE, ROLE_BACKGROUND
-from lantern_jax.scenarios import families_common as fc
+from lantern_jax.scenarios import assemble
 from lantern_jax.scenarios import road as rd
-from lantern_jax.world import (
-    Actors,
-    ActorScript,
-    EgoState,
-    Lanes,
-    ProtocolState,
-    Route,
-    ScenarioParams,
-    TrafficLights,
-    World,
-)
+from lantern_jax.world import ActorScript, ActorState, Lanes, Route, Scenario, TrafficLights
 
 CAP_T = rd.MAX_LIGHTS
 
 
 @dataclasses.dataclass
-class ActorSpec(fc.ActorSpec):
+class ActorSpec(assemble.ActorSpec):
     """One actor of a hand-built scene (world frame, metres, seconds).
 
     The family builders' actor description with defaults for a parked car: a one-point ``path``
@@ -46,18 +36,16 @@ class ActorSpec(fc.ActorSpec):
     lat_duration: float = 2.0
 
 
-def _as_family_spec(sp: ActorSpec) -> fc.ActorSpec:
+def _as_family_spec(sp: ActorSpec) -> assemble.ActorSpec:
     path = np.asarray(sp.path, np.float64).reshape(-1, 2)
     if len(path) == 1:
         path = np.concatenate([path, path + np.array([[1.0, 0.0]])])
     return dataclasses.replace(sp, path=path)
 
 
-def pack_actors(specs: list[ActorSpec]) -> tuple[Actors, ActorScript]:
-    """Pack actor specs into padded (Actors, ActorScript) at t = 0."""
-    act, scr = fc.pack_actors([_as_family_spec(sp) for sp in specs], np.eye(2))
-    return (Actors(**{k: jnp.asarray(v) for k, v in act.items()}),
-            ActorScript(**{k: jnp.asarray(v) for k, v in scr.items()}))  # fmt: skip
+def pack_actors(specs: list[ActorSpec]) -> tuple[ActorScript, ActorState]:
+    """Pack actor specs into the padded static script and the actor state at t = 0."""
+    return assemble.pack_actors([_as_family_spec(sp) for sp in specs], np.eye(2))
 
 
 def resample(points: np.ndarray, step: float) -> np.ndarray:
@@ -67,25 +55,35 @@ def resample(points: np.ndarray, step: float) -> np.ndarray:
     return rd.resample(points, n)
 
 
-def pack_lanes(centers: list[np.ndarray], widths: list[float],
-               kinds: list[int] | None = None) -> Lanes:  # fmt: skip
-    """Pack lane centre lines (travel direction = point order) into padded :class:`Lanes`."""
+def road_map(centers: list[np.ndarray], widths: list[float],
+             kinds: list[int] | None = None) -> rd.RoadMap:  # fmt: skip
+    """A map of the given lane centre lines (travel direction = point order), no lights."""
     kinds = kinds or [rd.LANE_DRIVING] * len(centers)
-    road = rd.RoadMap(kind="straight", lanes=[
+    return rd.RoadMap(kind="straight", lanes=[
         rd.LaneSpec(f"lane_{i}", np.asarray(c, np.float64), float(w), int(k))
         for i, (c, w, k) in enumerate(zip(centers, widths, kinds, strict=True))
     ])  # fmt: skip
-    return Lanes(**{k: jnp.asarray(v) for k, v in rd.pack_lanes(road, np.eye(2)).items()})
+
+
+def pack_lanes(centers: list[np.ndarray], widths: list[float],
+               kinds: list[int] | None = None) -> Lanes:  # fmt: skip
+    """Pack lane centre lines (travel direction = point order) into padded :class:`Lanes`."""
+    packed = rd.pack_lanes(road_map(centers, widths, kinds), np.eye(2))
+    return Lanes(**{k: jnp.asarray(v) for k, v in packed.items()})
+
+
+def route_points(points: np.ndarray) -> np.ndarray:
+    """A route polyline resampled at 2 m (what :func:`pack_route` packs)."""
+    pts = np.asarray(points, np.float64)
+    if len(pts) < 2:
+        raise ValueError(f"Route.xy: a route needs at least two points, got {len(pts)}")
+    return resample(pts, 2.0)
 
 
 def pack_route(points: np.ndarray) -> Route:
     """Pack the ego route polyline (resampled at 2 m) into a padded :class:`Route`."""
-    pts = np.asarray(points, np.float64)
-    if len(pts) < 2:
-        raise ValueError(f"Route.xy: a route needs at least two points, got {len(pts)}")
-    return Route(
-        **{k: jnp.asarray(v) for k, v in rd.pack_route(resample(pts, 2.0), np.eye(2)).items()}
-    )
+    packed = rd.pack_route(route_points(points), np.eye(2))
+    return Route(**{k: jnp.asarray(v) for k, v in packed.items()})
 
 
 def no_lights(cap_t: int = CAP_T) -> TrafficLights:
@@ -96,33 +94,23 @@ def no_lights(cap_t: int = CAP_T) -> TrafficLights:
                          valid=jnp.zeros((cap_t,), bool))  # fmt: skip
 
 
-_BOOL_FIELDS = ("is_route_a", "warning_enabled", "clear_on_ego_stop", "despawn_on_clear",
-                "force_event", "late_onset")  # fmt: skip
+#: Neutral execution configuration of a hand-built scene (no hazard behaviour).
+NEUTRAL_CONFIG = dict(
+    family=PE, is_route_a=True, warning_enabled=True, s_warn=BIG * 0.9, s_event=BIG * 0.9,
+    s_conflict=BIG * 0.9, hazard_index=0, clear_s=BIG, clear_time_limit=BIG,
+    clear_on_ego_stop=False, despawn_on_clear=False, force_event=True, force_delay=2.0,
+    ego_light=-1, ego_stop_s=BIG, d_safe=2.0, v_ref=8.0, friction=1.0, sensing_range=100.0,
+    template_id=0, text_id=0, timeout_s=60.0, late_onset=False, warn_hold_extra=0.0,
+    pos_noise_sigma=0.0, noise_seed=0,
+)  # fmt: skip
 
 
-def scenario_params(**overrides) -> ScenarioParams:
-    """Neutral scenario parameters (no hazard behaviour unless overridden)."""
-    d = dict(
-        family=PE, is_route_a=True, warning_enabled=True, s_warn=BIG * 0.9, s_event=BIG * 0.9,
-        s_conflict=BIG * 0.9, hazard_index=0, clear_s=BIG, clear_time_limit=BIG,
-        clear_on_ego_stop=False, despawn_on_clear=False, force_event=True, force_delay=2.0,
-        ego_light=-1, ego_stop_s=BIG, d_safe=2.0, v_ref=8.0, friction=1.0, sensing_range=100.0,
-        template_id=0, text_id=0, timeout_s=60.0, late_onset=False, warn_hold_extra=0.0,
-        pos_noise_sigma=0.0, noise_seed=0,
-    )  # fmt: skip
-    unknown = set(overrides) - set(d)
+def config_fields(**overrides) -> dict:
+    """:data:`NEUTRAL_CONFIG` with ``overrides`` (unknown fields are an error)."""
+    unknown = set(overrides) - set(NEUTRAL_CONFIG)
     if unknown:
-        raise ValueError(f"ScenarioParams: unknown fields {sorted(unknown)}")
-    d.update(overrides)
-    dtypes = {"family": jnp.int32, "hazard_index": jnp.int32, "ego_light": jnp.int32,
-              "template_id": jnp.int32, "text_id": jnp.int32, "noise_seed": jnp.uint32}  # fmt: skip
-    out = {}
-    for k, v in d.items():
-        if isinstance(v, bool) or k in _BOOL_FIELDS:
-            out[k] = jnp.asarray(bool(v))
-        else:
-            out[k] = jnp.asarray(v, dtypes.get(k, jnp.float32))
-    return ScenarioParams(**out)
+        raise ValueError(f"ExecutionConfig: unknown fields {sorted(unknown)}")
+    return {**NEUTRAL_CONFIG, **overrides}
 
 
 def straight_scene(
@@ -130,8 +118,8 @@ def straight_scene(
     length: float = 120.0,
     speed: float = 8.0,
     lights: TrafficLights | None = None,
-    **param_overrides,
-) -> World:
+    **config_overrides,
+) -> Scenario:
     """A straight road along +x: ego lane y = 0 (eastbound), a second eastbound lane at
     y = -3.5 and a westbound lane at y = +3.5; the ego starts at x = 0 at ``speed``.
 
@@ -140,10 +128,9 @@ def straight_scene(
         length: route length, m.
         speed: initial ego speed and default reference speed, m/s.
         lights: optional traffic lights.
-        **param_overrides: :class:`ScenarioParams` fields to override.
+        **config_overrides: :class:`~lantern_jax.world.ExecutionConfig` fields to override.
     """
-    route = pack_route(np.array([[0.0, 0.0], [length, 0.0]]))
-    lanes = pack_lanes(
+    lanes = road_map(
         [
             resample(np.array([[-50.0, 0.0], [length + 50.0, 0.0]]), 10.0),
             resample(np.array([[-50.0, -3.5], [length + 50.0, -3.5]]), 10.0),
@@ -151,18 +138,12 @@ def straight_scene(
         ],
         [3.5, 3.5, 3.5],
     )
-    a, script = pack_actors(actors)
-    params = scenario_params(v_ref=speed, **param_overrides)
-    ego = EgoState(
-        xy=jnp.zeros((2,), jnp.float32),
-        yaw=jnp.asarray(0.0, jnp.float32),
-        speed=jnp.asarray(speed, jnp.float32),
-        steer=jnp.asarray(0.0, jnp.float32),
-        accel=jnp.asarray(0.0, jnp.float32),
+    scenario = assemble.assemble_scenario(
+        lanes,
+        route_points(np.array([[0.0, 0.0], [length, 0.0]])),
+        [_as_family_spec(sp) for sp in actors],
+        config_fields(v_ref=speed, **config_overrides),
+        ego_speed=speed,
     )
-    world = World(
-        t=jnp.asarray(0.0, jnp.float32), tick=jnp.asarray(0, jnp.int32), ego=ego, actors=a,
-        script=script, lanes=lanes, route=route, lights=lights or no_lights(), params=params,
-        protocol=ProtocolState.initial(),
-    )  # fmt: skip
-    return world.validate()
+    scenario = scenario.replace(lights=lights or no_lights())
+    return scenario.validate()

@@ -1,7 +1,7 @@
 """The LANTERN temporal protocol as masked state transitions (paper §3.2 and appendix D).
 
 Every transition is a ``jnp.where`` on flags and times — no Python control flow — so the
-protocol batches under ``vmap`` and traces once.  Times start at ``INF_TIME`` and are written
+protocol batches under ``vmap`` and traces once.  Times start at ``NEVER`` and are written
 once.  Per execution:
 
 * ``t_warn_point`` — the ego reaches the route-relative warning point (both conditions and both
@@ -31,19 +31,51 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from lantern_jax.constants import BIG, DT, INF_TIME
-from lantern_jax.world import ProtocolState, ScenarioParams
+from lantern_jax.constants import BIG, DT, EGO_HALF_WIDTH, ROLE_BACKGROUND
+from lantern_jax.dynamics.lights import light_holds_ego
+from lantern_jax.times import NEVER, happened
+from lantern_jax.world import ActorState, ExecutionConfig, ProtocolState
 
 Array = jax.Array
 
-_HALF_INF = INF_TIME * 0.5
 STILL_SPEED = 0.1  # m/s, "stopped"
 STILL_TIME_FOR_CLEAR = 1.0  # s, ego response that lets the Obstacle Reveal object be removed
+QUEUE_DIST = 12.0  # m, a slow background vehicle this close ahead in the corridor is a queue
+QUEUE_BEHIND = -1.0  # m, ... or overlapping the ego front by up to 1 m
+QUEUE_LATERAL = EGO_HALF_WIDTH + 0.5  # m, corridor half width for a queue
+QUEUE_SPEED = 1.0  # m/s, a queueing vehicle is slower than this
 
 
-def happened(t_mark: Array) -> Array:
-    """() bool: a protocol time has been written (is not INF_TIME)."""
-    return t_mark < _HALF_INF
+def ego_held(
+    light: Array,
+    dist_to_stop_line: Array,
+    gap: Array,
+    lateral: Array,
+    present: Array,
+    role: Array,
+    speed: Array,
+) -> Array:
+    """() bool: a red/yellow light or a queue legitimately holds the ego (pauses the countdown).
+
+    Args:
+        light: () int32, LIGHT_* state of the ego's light.
+        dist_to_stop_line: () float32, m, route arc of the ego's stop line minus the ego's arc.
+        gap: (A,) float32, m, route gap from the ego front to each actor
+            (:func:`lantern_jax.observation.corridor_gaps`).
+        lateral: (A,) float32, m, each actor's distance from the route minus its half size.
+        present: (A,) bool, actors in the world.
+        role: (A,) int32, ROLE_*; only ordinary (background) traffic forms a queue.
+        speed: (A,) float32, m/s.
+    """
+    queue = (
+        present
+        & (lateral < QUEUE_LATERAL)
+        & (role == ROLE_BACKGROUND)
+        & (gap > QUEUE_BEHIND)
+        & (gap < QUEUE_DIST)
+        & (speed < QUEUE_SPEED)
+    )
+    return light_holds_ego(light, dist_to_stop_line) | jnp.any(queue)
 
 
 def crossing_time(t_next: Array, prev: Array, cur: Array, threshold: Array, dt: float) -> Array:
@@ -67,7 +99,7 @@ def crossing_time(t_next: Array, prev: Array, cur: Array, threshold: Array, dt: 
 
 def advance_markers(
     proto: ProtocolState,
-    params: ScenarioParams,
+    config: ExecutionConfig,
     t_next: Array,
     progress_prev: Array,
     progress: Array,
@@ -78,7 +110,7 @@ def advance_markers(
 
     Args:
         proto: protocol state at the start of the tick.
-        params: scenario parameters.
+        config: the execution's markers, rules and switches.
         t_next: () s, time at the end of the tick.
         progress_prev: () m, route progress at the start of the tick.
         progress: () m, route progress at the end of the tick.
@@ -88,25 +120,25 @@ def advance_markers(
     Returns:
         The protocol state with ``t_warn_point``, ``countdown`` and ``t_event`` updated.
     """
-    reach_warn = (~happened(proto.t_warn_point)) & (progress >= params.s_warn)
+    reach_warn = (~happened(proto.t_warn_point)) & (progress >= config.s_warn)
     t_warn_point = jnp.where(
         reach_warn,
-        crossing_time(t_next, progress_prev, progress, params.s_warn, dt),
+        crossing_time(t_next, progress_prev, progress, config.s_warn, dt),
         proto.t_warn_point,
     )
     event_pending = ~happened(proto.t_event)
-    counting = happened(t_warn_point) & event_pending & params.force_event & ~ego_held
+    counting = happened(t_warn_point) & event_pending & config.force_event & ~ego_held
     # Seconds of this tick that lie after the warning point (sub-tick on the first tick).
     tick_share = jnp.clip(t_next - jnp.maximum(t_warn_point, t_next - dt), 0.0, dt)
     countdown = proto.countdown + jnp.where(counting, tick_share, 0.0)
 
-    geom = event_pending & (progress >= params.s_event)
-    t_geom = crossing_time(t_next, progress_prev, progress, params.s_event, dt)
+    geom = event_pending & (progress >= config.s_event)
+    t_geom = crossing_time(t_next, progress_prev, progress, config.s_event, dt)
     # RTY: the event point is the warning point, so the event coincides with it exactly.
-    t_geom = jnp.where(params.s_event <= params.s_warn, t_warn_point, t_geom)
-    forced = event_pending & counting & (countdown >= params.force_delay)
-    t_forced = t_next - (countdown - params.force_delay)
-    t_new = jnp.minimum(jnp.where(geom, t_geom, INF_TIME), jnp.where(forced, t_forced, INF_TIME))
+    t_geom = jnp.where(config.s_event <= config.s_warn, t_warn_point, t_geom)
+    forced = event_pending & counting & (countdown >= config.force_delay)
+    t_forced = t_next - (countdown - config.force_delay)
+    t_new = jnp.minimum(jnp.where(geom, t_geom, NEVER), jnp.where(forced, t_forced, NEVER))
     forced = forced & ~(geom & (t_geom <= t_forced))
     t_event = jnp.where(geom | forced, t_new, proto.t_event)
     return proto.replace(
@@ -119,7 +151,7 @@ def advance_markers(
 
 def advance_hazard(
     proto: ProtocolState,
-    params: ScenarioParams,
+    config: ExecutionConfig,
     t_next: Array,
     hazard_visible: Array,
     hazard_s: Array,
@@ -130,7 +162,7 @@ def advance_hazard(
 
     Args:
         proto: protocol state after :func:`advance_markers`.
-        params: scenario parameters.
+        config: the execution's markers, rules and switches.
         t_next: () s, time at the end of the tick.
         hazard_visible: () bool, the hazard is visible to the front camera now.
         hazard_s: () m, the hazard's arc along its own path.
@@ -142,14 +174,14 @@ def advance_hazard(
     still = jnp.where(ego_speed < STILL_SPEED, proto.ego_still_time + dt, 0.0)
     after_event = happened(proto.t_event) & (t_next >= proto.t_event)
     pending = ~happened(proto.t_clear)
-    geometric = hazard_s >= params.clear_s
-    by_limit = (t_next - proto.t_event) >= params.clear_time_limit
+    geometric = hazard_s >= config.clear_s
+    by_limit = (t_next - proto.t_event) >= config.clear_time_limit
     by_stop = (
-        params.clear_on_ego_stop & happened(proto.t_warn_off) & (still >= STILL_TIME_FOR_CLEAR)
+        config.clear_on_ego_stop & happened(proto.t_warn_off) & (still >= STILL_TIME_FOR_CLEAR)
     )
     clear_now = pending & after_event & (geometric | by_limit | by_stop)
     t_clear = jnp.where(clear_now, t_next, proto.t_clear)
-    limit_flag = clear_now & by_limit & ~geometric & ~by_stop & (params.clear_s < BIG * 0.5)
+    limit_flag = clear_now & by_limit & ~geometric & ~by_stop & (config.clear_s < BIG * 0.5)
 
     seen = after_event & hazard_visible & ~happened(proto.t_warn_off)
     t_warn_off = jnp.where(seen, t_next, proto.t_warn_off)
@@ -163,21 +195,49 @@ def advance_hazard(
     )
 
 
-def warning_onset(proto: ProtocolState, params: ScenarioParams) -> Array:
-    """() s, start of warning delivery (INF_TIME when no warning is delivered at all)."""
-    t_on = jnp.where(params.late_onset, proto.t_event, proto.t_warn_point)
-    delivered = params.warning_enabled & params.is_route_a
-    return jnp.where(delivered, t_on, INF_TIME)
+def record_onset(
+    proto: ProtocolState, before: ProtocolState, config: ExecutionConfig, hazard_visible: Array
+) -> ProtocolState:
+    """Warning onset time and whether the hazard was camera-visible at the warning point.
+
+    Args:
+        proto: protocol state after this tick's transitions.
+        before: protocol state at the start of the tick (to see whether the warning point was
+            crossed during it).
+        config: the execution's switches.
+        hazard_visible: () bool, the front camera sees the hazard now.
+    """
+    first = happened(proto.t_warn_point) & ~happened(before.t_warn_point)
+    return proto.replace(
+        t_warn_on=warning_onset(proto, config),
+        hazard_visible_at_warn=jnp.where(first, hazard_visible, proto.hazard_visible_at_warn),
+    )
 
 
-def warning_active(proto: ProtocolState, params: ScenarioParams, t: Array) -> Array:
+def despawn_cleared(
+    actors: ActorState, proto: ProtocolState, config: ExecutionConfig
+) -> ActorState:
+    """Remove the hazard actor once it has cleared, where the family says so."""
+    h = config.hazard_index
+    gone = happened(proto.t_clear) & config.despawn_on_clear
+    return actors.replace(active=actors.active.at[h].set(actors.active[h] & ~gone))
+
+
+def warning_onset(proto: ProtocolState, config: ExecutionConfig) -> Array:
+    """() s, start of warning delivery (NEVER when no warning is delivered at all)."""
+    t_on = jnp.where(config.late_onset, proto.t_event, proto.t_warn_point)
+    delivered = config.warning_enabled & config.is_route_a
+    return jnp.where(delivered, t_on, NEVER)
+
+
+def warning_active(proto: ProtocolState, config: ExecutionConfig, t: Array) -> Array:
     """() bool: the warning text is delivered to the policy at time ``t``.
 
-    Active on ``[t_on, t_warn_off + warn_hold_extra)``; ``t_warn_off`` is INF_TIME until the
+    Active on ``[t_on, t_warn_off + warn_hold_extra)``; ``t_warn_off`` is NEVER until the
     hazard is seen, so the interval stays open until then.
     """
-    t_on = warning_onset(proto, params)
+    t_on = warning_onset(proto, config)
     t_off = jnp.where(
-        happened(proto.t_warn_off), proto.t_warn_off + params.warn_hold_extra, INF_TIME
+        happened(proto.t_warn_off), proto.t_warn_off + config.warn_hold_extra, NEVER
     )
     return happened(t_on) & (t >= t_on) & (t < t_off)

@@ -34,10 +34,11 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from lantern_jax.constants import BIG, FAMILIES, WEATHERS
+from lantern_jax.constants import FAMILIES, WEATHERS
 from lantern_jax.scenarios.families import build_pair, check_feasible, sample_params
 from lantern_jax.scenarios.spec import content_hash, validate_params
-from lantern_jax.world import World, tree_stack
+from lantern_jax.times import happened
+from lantern_jax.world import Scenario, tree_stack
 
 SUITE_ID = "lantern-v1"
 DEFAULT_SEED = 20260611
@@ -108,14 +109,14 @@ def _tree_equal(a, b) -> bool:
     )
 
 
-def _heading_change(world: World) -> float:
-    r = np.asarray(world.route.xy)[np.asarray(world.route.valid)]
+def _heading_change(scenario: Scenario) -> float:
+    r = np.asarray(scenario.route.xy)[np.asarray(scenario.route.valid)]
     d = np.diff(r, axis=0)
     h = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
     return float(h[-1] - h[0])
 
 
-def static_check(params: dict, seen_hashes: set[str]) -> tuple[World, World, dict]:
+def static_check(params: dict, seen_hashes: set[str]) -> tuple[Scenario, Scenario, dict]:
     """Static validation of one candidate; returns the built pair.
 
     Raises:
@@ -127,7 +128,7 @@ def static_check(params: dict, seen_hashes: set[str]) -> tuple[World, World, dic
     a.validate()
     b.validate()
     fam = meta["family"]
-    pa = a.params
+    pa = a.config
     s_warn, s_event, s_conflict = float(pa.s_warn), float(pa.s_event), float(pa.s_conflict)
     if fam == "RTY":
         if not (s_warn == s_event < s_conflict or s_warn == s_event == s_conflict):
@@ -153,14 +154,14 @@ def static_check(params: dict, seen_hashes: set[str]) -> tuple[World, World, dic
             raise ValueError(f"{fam}: Route A and Route B differ in {name}")
     for f in ("s_warn", "s_event", "s_conflict", "friction", "sensing_range", "v_ref",
               "timeout_s", "ego_light", "ego_stop_s", "family"):  # fmt: skip
-        if float(getattr(a.params, f)) != float(getattr(b.params, f)):
+        if float(getattr(a.config, f)) != float(getattr(b.config, f)):
             raise ValueError(f"{fam}: Route A and Route B differ in {f}")
-    if not _tree_equal(a.ego, b.ego):
+    if not _tree_equal(a.ego0, b.ego0):
         raise ValueError(f"{fam}: Route A and Route B differ in the ego start")
     shared = [i for i in range(a.actors.num) if i not in meta["scenario_slots"]]
     for i in shared:
-        if not _tree_equal(jax.tree.map(lambda x, i=i: x[i], (a.actors, a.script)),
-                           jax.tree.map(lambda x, i=i: x[i], (b.actors, b.script))):  # fmt: skip
+        if not _tree_equal(jax.tree.map(lambda x, i=i: x[i], (a.actors, a.actors0)),
+                           jax.tree.map(lambda x, i=i: x[i], (b.actors, b.actors0))):  # fmt: skip
             raise ValueError(f"{fam}: Route A and Route B differ in actor slot {i}")
     h = content_hash(params)
     if h in seen_hashes:
@@ -168,25 +169,27 @@ def static_check(params: dict, seen_hashes: set[str]) -> tuple[World, World, dic
     return a, b, meta
 
 
-def dynamic_check(worlds_a: list[World], worlds_b: list[World], max_ticks: int | None = None):
+def dynamic_check(
+    scenarios_a: list[Scenario], scenarios_b: list[Scenario], max_ticks: int | None = None
+):
     """Run the expert on Route A (warning) and Route B of many pairs in one batched call.
 
     Returns:
         (accepted (N,) bool, reasons list[str] — "" for accepted pairs).
     """
-    from lantern_jax.policies.base import get_policy
+    from lantern_jax.policies.registry import get_policy
     from lantern_jax.scoring.metrics import finalize
     from lantern_jax.sim.rollout import rollout_batch
 
     expert = get_policy("expert")
     params = expert.init(jax.random.PRNGKey(0))
-    n = len(worlds_a)
-    batch = tree_stack(list(worlds_a) + list(worlds_b))
+    n = len(scenarios_a)
+    batch = tree_stack(list(scenarios_a) + list(scenarios_b))
     if max_ticks is None:
-        max_ticks = int(np.ceil(float(np.max(np.asarray(batch.params.timeout_s))) / 0.05))
-    final = jax.jit(lambda w: rollout_batch(w, expert.act, params, max_ticks))(batch)
+        max_ticks = int(np.ceil(float(np.max(np.asarray(batch.config.timeout_s))) / 0.05))
+    final = jax.jit(lambda sc: rollout_batch(sc, expert.act, params, max_ticks))(batch)
     m = jax.tree.map(np.asarray, finalize(final.telemetry))
-    proto = jax.tree.map(np.asarray, final.world.protocol)
+    proto = jax.tree.map(np.asarray, final.protocol)
     gates = ("gate_collision", "gate_route_deviation", "gate_lane", "gate_rule", "gate_block")
     ok, reasons = np.ones(n, bool), [""] * n
     for i in range(n):
@@ -200,7 +203,7 @@ def dynamic_check(worlds_a: list[World], worlds_b: list[World], max_ticks: int |
         if not bool(m.gate_false_brake[n + i]):
             why.append("B: false brake")
         for f in ("t_warn_point", "t_event", "t_warn_off", "t_clear"):
-            if not getattr(proto, f)[i] < BIG:
+            if not happened(getattr(proto, f)[i]):
                 why.append(f"A: {f} not recorded")
         if bool(proto.clear_by_limit[i]):
             why.append("A: clearance by safety limit")
@@ -379,8 +382,8 @@ def verify_regeneration(name: str = SUITE_ID) -> tuple[bool, str]:
     return fresh["suite_sha256"] == shipped.suite_sha256, "suite hash " + fresh["suite_sha256"]
 
 
-def build_suite_worlds(suite: Suite) -> tuple[list[World], list[World], list[dict]]:
-    """Build Route A and Route B worlds of every pair (in suite order)."""
+def build_suite_worlds(suite: Suite) -> tuple[list[Scenario], list[Scenario], list[dict]]:
+    """Build Route A and Route B scenarios of every pair (in suite order)."""
     wa, wb, metas = [], [], []
     for p in suite.pairs:
         a, b, meta = build_pair(p.params)

@@ -113,17 +113,6 @@ def get_text(text_id: int) -> WarningText:
     return TEXT_BANK[i]
 
 
-def texts_for(family: int | str, kind: str | None = None) -> list[WarningText]:
-    """All bank entries of a family (optionally of one kind), in id order."""
-    f = _family_index(family)
-    return [e for e in TEXT_BANK if e.family == f and (kind is None or e.kind == kind)]
-
-
-def canonical_text_id(family: int | str) -> int:
-    """Text id of a family's canonical template (equal to the family index)."""
-    return _family_index(family)
-
-
 def format_position(pos_ego_xy) -> str:
     """``"(x, y)"`` with one decimal (``-0.0`` printed as ``0.0``)."""
     p = np.asarray(pos_ego_xy, np.float64).reshape(-1)

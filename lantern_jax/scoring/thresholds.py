@@ -7,6 +7,8 @@ tick counts are what the accumulators compare against (``duration = ticks * DT``
 
 from __future__ import annotations
 
+import math
+
 from lantern_jax.constants import DT, FAMILIES, INF_TIME
 
 # --- time bookkeeping --------------------------------------------------------------------------
@@ -72,3 +74,12 @@ W_ROUTE_B = 0.15
 W_PROGRESS_A = 0.40
 W_SAFETY_A = 0.35
 W_TEMPORAL_A = 0.25
+
+# --- per-tick measurement (scoring/measure.py) -------------------------------------------------
+LANE_MARGIN_M = 0.5  # m, outside every lane: centre farther than half a lane width + this
+WRONG_WAY_RAD = 2.0 * math.pi / 3.0  # rad, heading difference that counts as driving a lane
+#                                      backwards (the leaderboard's junction threshold, 120 deg)
+JUSTIFY_LEAD_DIST_M = 15.0  # m, an actor this close ahead in the corridor justifies a stop
+JUSTIFY_LEAD_BEHIND_M = -2.0  # m, ... or overlapping the ego front by up to 2 m
+JUSTIFY_LATERAL_MARGIN_M = 1.0  # m, corridor = ego half width + this, beyond the actor's half size
+JUSTIFY_ROUTE_END_M = 10.0  # m, standing this close to the route end is justified

@@ -1,5 +1,8 @@
 """Closed-loop rollouts: one execution with ``lax.scan``, a batch with ``vmap`` outside.
 
+The scan carries only the dynamic :class:`~lantern_jax.sim.state.State`; the static
+:class:`~lantern_jax.world.Scenario` is closed over (one execution) or vmapped alongside.
+
 Two drivers:
 
 * :func:`rollout` — a fixed-horizon ``lax.scan`` of one execution; differentiable end to end
@@ -20,15 +23,10 @@ import jax
 import jax.numpy as jnp
 
 from lantern_jax.constants import DT
-from lantern_jax.sim.step import (
-    SimState,
-    TickRecord,
-    from_carry,
-    init_state,
-    tick_carry,
-    to_carry,
-)
-from lantern_jax.world import World
+from lantern_jax.sim.record import TickRecord
+from lantern_jax.sim.state import State, init_state
+from lantern_jax.sim.step import step
+from lantern_jax.world import Scenario
 
 Array = jax.Array
 ActFn = Callable[[Any, Any], Array]
@@ -40,96 +38,91 @@ def horizon_ticks(seconds: float) -> int:
 
 
 def rollout(
-    world: World,
+    scenario: Scenario,
     act: ActFn,
-    params: Any,
+    policy_params: Any,
     num_ticks: int,
     record: bool = False,
     temperature: float | Array = 0.05,
-) -> tuple[SimState, TickRecord | None]:
+) -> tuple[State, TickRecord | None]:
     """Roll one execution forward for ``num_ticks`` ticks (frozen once it has ended).
 
     Args:
-        world: the initial world of one execution.
-        act: policy ``act(params, obs) -> (10, 2)``.
-        params: policy parameters.
+        scenario: the execution's static scenario (closed over by the scan).
+        act: policy ``act(policy_params, obs) -> (10, 2)``.
+        policy_params: policy parameters.
         num_ticks: static horizon.
         record: also return the per-tick :class:`TickRecord` (leading axis ``num_ticks``).
         temperature: soft-score temperature for the smooth telemetry accumulators.
 
     Returns:
-        (final carry, records or None).
+        (final state, records or None).
     """
     temperature = jnp.asarray(temperature, jnp.float32)
 
-    def body(carry, _):
-        new, rec = tick_carry(act, params, world, carry, temperature)
+    def body(state, _):
+        new, rec = step(act, policy_params, scenario, state, temperature)
         return new, (rec if record else None)
 
-    final, recs = jax.lax.scan(body, to_carry(init_state(world)), None, length=num_ticks)
-    return from_carry(world, final), recs
+    return jax.lax.scan(body, init_state(scenario), None, length=num_ticks)
 
 
 def rollout_batch(
-    worlds: World,
+    scenarios: Scenario,
     act: ActFn,
-    params: Any,
+    policy_params: Any,
     max_ticks: int,
     chunk: int = 40,
     temperature: float | Array = 0.05,
-    start: SimState | None = None,
-) -> SimState:
+    start: State | None = None,
+) -> State:
     """Roll a batch of executions (leading axis on every leaf) until all have ended.
 
     Args:
-        worlds: batched initial worlds, (B, ...) leaves.
-        act: policy ``act(params, obs)`` for ONE scenario; it is vmapped here.
-        params: policy parameters shared by the batch.
+        scenarios: batched scenarios, (B, ...) leaves.
+        act: policy ``act(policy_params, obs)`` for ONE scenario; it is vmapped here.
+        policy_params: policy parameters shared by the batch.
         max_ticks: static upper bound of the horizon (rounded up to whole chunks).
         chunk: ticks per scanned chunk between checks of the batch's ``done`` mask.
         temperature: soft-score temperature.
         start: continue these batched states (from an earlier call) instead of starting at
-            ``worlds``' initial state.
+            the scenarios' initial state.
 
     Returns:
-        The batched final carry.
+        The batched final states.
     """
     temperature = jnp.asarray(temperature, jnp.float32)
     n_chunks = -(-max_ticks // chunk)
 
-    def run_chunk(world: World, carry):
-        def body(c, _):
-            return tick_carry(act, params, world, c, temperature)[0], None
+    def run_chunk(scenario: Scenario, state: State) -> State:
+        def body(s, _):
+            return step(act, policy_params, scenario, s, temperature)[0], None
 
-        return jax.lax.scan(body, carry, None, length=chunk)[0]
+        return jax.lax.scan(body, state, None, length=chunk)[0]
 
     batched_chunk = jax.vmap(run_chunk)
 
     def cond(loop):
-        i, carry = loop
-        return (i < n_chunks) & ~jnp.all(carry.done)
+        i, states = loop
+        return (i < n_chunks) & ~jnp.all(states.done)
 
     def body(loop):
-        i, carry = loop
-        return i + 1, batched_chunk(worlds, carry)
+        i, states = loop
+        return i + 1, batched_chunk(scenarios, states)
 
-    if start is None:
-        carry0 = jax.vmap(lambda w: to_carry(init_state(w)))(worlds)
-    else:
-        carry0 = jax.vmap(to_carry)(start)
-    _, final = jax.lax.while_loop(cond, body, (jnp.asarray(0, jnp.int32), carry0))
-    return jax.vmap(from_carry)(worlds, final)
+    states = jax.vmap(init_state)(scenarios) if start is None else start
+    return jax.lax.while_loop(cond, body, (jnp.asarray(0, jnp.int32), states))[1]
 
 
 def rollout_batch_parallel(
-    worlds: World,
+    scenarios: Scenario,
     act: ActFn,
-    params: Any,
+    policy_params: Any,
     max_ticks: int,
     chunk: int = 40,
     temperature: float | Array = 0.05,
-    start: SimState | None = None,
-) -> SimState:
+    start: State | None = None,
+) -> State:
     """:func:`rollout_batch` split over all local devices (e.g. the CPU cores exposed with
     ``--xla_force_host_platform_device_count``), each shard stopping independently.
 
@@ -139,28 +132,28 @@ def rollout_batch_parallel(
     """
     n_dev = jax.device_count()
     if n_dev == 1:
-        return rollout_batch(worlds, act, params, max_ticks, chunk, temperature, start)
+        return rollout_batch(scenarios, act, policy_params, max_ticks, chunk, temperature, start)
     from jax.sharding import PartitionSpec
 
-    n = jax.tree.leaves(worlds)[0].shape[0]
+    n = jax.tree.leaves(scenarios)[0].shape[0]
     pad = (-n) % n_dev
     def pad_tree(tree):
         return jax.tree.map(lambda x: jnp.concatenate([x, jnp.repeat(x[:1], pad, axis=0)]), tree)
 
     if pad:
-        worlds = pad_tree(worlds)
+        scenarios = pad_tree(scenarios)
         start = None if start is None else pad_tree(start)
     mesh = jax.make_mesh((n_dev,), ("batch",), axis_types=(jax.sharding.AxisType.Auto,))
     spec = jax.sharding.NamedSharding(mesh, PartitionSpec("batch"))
-    worlds = jax.lax.with_sharding_constraint(worlds, spec)
+    scenarios = jax.lax.with_sharding_constraint(scenarios, spec)
     if start is not None:
         start = jax.lax.with_sharding_constraint(start, spec)
     run = jax.shard_map(
-        lambda w, s: rollout_batch(w, act, params, max_ticks, chunk, temperature, s),
+        lambda sc, s: rollout_batch(sc, act, policy_params, max_ticks, chunk, temperature, s),
         mesh=mesh,
         in_specs=(PartitionSpec("batch"), PartitionSpec("batch") if start is not None else None),
         out_specs=PartitionSpec("batch"),
         check_vma=False,
     )
-    final = run(worlds, start)
+    final = run(scenarios, start)
     return jax.tree.map(lambda x: x[:n], final)

@@ -32,7 +32,7 @@ def save_animation(
     and moved into place when complete.
 
     Args:
-        world: the initial :class:`~lantern_jax.world.World` of the execution.
+        world: the initial :class:`~lantern_jax.world.Scenario` of the execution.
         record: its ``TickRecord`` with a leading time axis.
         path: destination; ``.mp4`` is written with ffmpeg when available, otherwise (with a
             warning) a GIF is written next to it with the suffix ``.gif``; every other suffix

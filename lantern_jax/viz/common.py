@@ -11,16 +11,14 @@ import jax
 import numpy as np
 from matplotlib.figure import Figure
 
-from lantern_jax.constants import INF_TIME
-
-_HALF_INF = 0.5 * INF_TIME  # protocol times at or above this have not happened
+from lantern_jax import times
 
 
 def to_numpy(tree: Any) -> Any:
     """Convert every leaf of a pytree (JAX or NumPy arrays, scalars) to a NumPy array.
 
     Args:
-        tree: any pytree, e.g. a :class:`~lantern_jax.world.World` or a ``TickRecord``.
+        tree: any pytree, e.g. a :class:`~lantern_jax.world.Scenario` or a ``TickRecord``.
 
     Returns:
         The same structure with ``np.ndarray`` leaves.
@@ -43,8 +41,8 @@ def num_valid_ticks(record: Any) -> int:
 
 
 def happened(t: Any) -> bool:
-    """Whether a protocol time (``INF_TIME`` = not happened) has been written."""
-    return bool(np.isfinite(float(t)) and float(t) < _HALF_INF)
+    """Host-side :func:`lantern_jax.times.happened` of one concrete time (NaN: not happened)."""
+    return bool(np.isfinite(float(t)) and times.happened(float(t)))
 
 
 def save_figure(fig: Figure, path: str | os.PathLike, dpi: int = 110) -> Path:

@@ -112,7 +112,7 @@ def _draw_lanes(ax, lanes: Any) -> None:
 
 
 def _draw_route(ax, world: Any) -> None:
-    r, p = world.route, world.params
+    r, p = world.route, world.config
     v = np.asarray(r.valid, bool)
     ax.plot(r.xy[v, 0], r.xy[v, 1], color=ROUTE_COLOR, lw=2.0, alpha=0.8, zorder=2, label="route")
     for field, label, marker, color in MARKERS:
@@ -188,7 +188,7 @@ def bev_plot(
     ``Wedge`` (``gid="frustum"``); lanes are collections.
 
     Args:
-        world: the initial :class:`~lantern_jax.world.World` of the execution (static data:
+        world: the initial :class:`~lantern_jax.world.Scenario` of the execution (static data:
             lanes, route, lights, extents, roles, markers, text id, initial ego pose).
         record: its ``TickRecord`` with a leading time axis (``rollout(..., record=True)``).
         tick_index: entry of ``record`` to draw (negative counts from the end); entries past the
@@ -214,7 +214,7 @@ def bev_plot(
 
     ego_xy, ego_yaw = rec.ego_xy[i], float(rec.ego_yaw[i])
     prev_xy, prev_yaw = (
-        (rec.ego_xy[i - 1], float(rec.ego_yaw[i - 1])) if i > 0 else (w.ego.xy, float(w.ego.yaw))
+        (rec.ego_xy[i - 1], float(rec.ego_yaw[i - 1])) if i > 0 else (w.ego0.xy, float(w.ego0.yaw))
     )
     t = float(rec.t[i])
 
@@ -244,7 +244,7 @@ def bev_plot(
     ax.plot(wps[:, 0], wps[:, 1], ".", color=EGO_COLOR, ms=3.5, zorder=3.5, label="waypoints")
     fwd, _ = rot(ego_yaw)
     cam = np.asarray(ego_xy, float) - CAMERA_BACK_OFFSET * fwd
-    rng = min(float(w.params.sensing_range), FRUSTUM_DRAW_RANGE)
+    rng = min(float(w.config.sensing_range), FRUSTUM_DRAW_RANGE)
     half_fov = 0.5 * FRONT_CAMERA_FOV
     yaw_deg = np.degrees(ego_yaw)
     ax.add_patch(
@@ -314,7 +314,7 @@ def bev_plot(
 
     # active warning
     if bool(rec.warning_active[i]):
-        text = render_warning(int(w.params.text_id), rec.warning_pos[i])
+        text = render_warning(int(w.config.text_id), rec.warning_pos[i])
         gp = ego_frame_to_world(rec.warning_pos[i], prev_xy, prev_yaw)[0]
         ax.plot(
             *gp,
@@ -350,9 +350,9 @@ def bev_plot(
     ax.set_ylabel("y (m, north)")
     ax.tick_params(labelsize=7)
     if title is None:
-        fam = FAMILIES[int(w.params.family)] if 0 <= int(w.params.family) < len(FAMILIES) else "?"
-        route = "A" if bool(w.params.is_route_a) else "B"
-        cond = "warning" if bool(w.params.warning_enabled) else "no warning"
+        fam = FAMILIES[int(w.config.family)] if 0 <= int(w.config.family) < len(FAMILIES) else "?"
+        route = "A" if bool(w.config.is_route_a) else "B"
+        cond = "warning" if bool(w.config.warning_enabled) else "no warning"
         title = f"{fam} route {route}, {cond}"
     ax.set_title(f"{title}  |  t = {t:.2f} s, v = {float(rec.ego_speed[i]):.1f} m/s", fontsize=10)
     _bev_legend(ax)

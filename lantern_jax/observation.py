@@ -1,5 +1,8 @@
 """What a policy observes at one tick (one scenario).
 
+The simulator (:mod:`lantern_jax.sim.observe`) produces it and every policy reads it, so the type
+lives below both.
+
 All positions and vectors are in the **ego frame of the paper: x forward, y to the right**,
 metres, relative to the ego box centre.  Perception masks:
 
@@ -11,7 +14,11 @@ metres, relative to the ego box centre.  Perception masks:
 from __future__ import annotations
 
 import jax
+import jax.numpy as jnp
 from flax import struct
+
+from lantern_jax.constants import EGO_HALF_LENGTH
+from lantern_jax.polyline import project_uniform
 
 Array = jax.Array
 
@@ -45,3 +52,18 @@ class Observation:
     warning_active: Array  # () bool, a cooperative warning is being delivered now
     warning_text_id: Array  # () int32, text-bank id of the warning (-1 when inactive)
     warning_pos: Array  # (2,) float32, m, grounded <FRONT_CAR_POS> (zeros when inactive)
+
+
+def corridor_gaps(obs: Observation) -> tuple[Array, Array]:
+    """Route gap ahead of the ego and lateral distance from the route of every actor.
+
+    Uses the observation's route points ahead of the ego and the actors in the ego frame, so the
+    projection runs on the ``NUM_ROUTE_POINTS`` observed route points rather than the whole route.
+
+    Returns:
+        gap: (A,) float32, m, route distance from the ego front to the actor's nearest point.
+        lateral: (A,) float32, m, distance of the actor centre from the route minus its half size.
+    """
+    arc, dist = project_uniform(obs.route, ROUTE_STEP, obs.actor_xy)
+    half = jnp.max(obs.actor_extent, axis=-1)
+    return arc - EGO_HALF_LENGTH - half, dist - half

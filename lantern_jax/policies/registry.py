@@ -1,0 +1,44 @@
+"""Policies by name: the built-in reference policies and any a user registers.
+
+    from lantern_jax.policies.registry import get_policy, register_policy
+    register_policy("mine", lambda: Policy("mine", init, act, "my planner"))
+    policy = get_policy("mine")
+
+A duplicate or unknown name is an error that lists the known names.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from lantern_jax.policies import reference
+from lantern_jax.policies.base import Policy
+
+_REGISTRY: dict[str, Callable[[], Policy]] = {
+    "expert": reference.expert_policy,
+    "ego": reference.ego_policy,
+    "coop": reference.coop_policy,
+}
+
+
+def register_policy(name: str, factory: Callable[[], Policy]) -> None:
+    """Register a policy factory under ``name``; a duplicate name is an error."""
+    if name in _REGISTRY:
+        raise ValueError(f"policy {name!r} is already registered; known: {sorted(_REGISTRY)}")
+    _REGISTRY[name] = factory
+
+
+def get_policy(name: str) -> Policy:
+    """Return the policy registered as ``name``.
+
+    Raises:
+        KeyError: listing the known policy names when ``name`` is unknown.
+    """
+    if name not in _REGISTRY:
+        raise KeyError(f"unknown policy {name!r}; known policies: {', '.join(sorted(_REGISTRY))}")
+    return _REGISTRY[name]()
+
+
+def policy_names() -> list[str]:
+    """Names of all registered policies."""
+    return sorted(_REGISTRY)

@@ -1,0 +1,153 @@
+"""Per-tick measurement of one execution: what the scorer needs to know about a tick.
+
+The simulator calls :func:`measure` once per tick, after the world has been stepped, and folds
+the resulting :class:`~lantern_jax.scoring.sample.TickSample` into the telemetry; it calls
+:func:`execution_ended` to know when the execution is over.  Everything a gate or a component
+looks at is decided here, with thresholds from :mod:`lantern_jax.scoring.thresholds`:
+
+* collision: the ego box overlaps a present actor while the ego moves at >= 0.1 m/s (the
+  leaderboard ignores contacts at standstill);
+* outside the lanes: the ego centre is in no lane (half width + 0.5 m) or drives its lane the
+  wrong way (more than 120 deg from the lane direction);
+* red-light violation: the ego crossed its stop line during the tick while its light was red;
+* justified stop (the Route B false-brake excuse): a red/yellow light holds the ego, an actor
+  is in the corridor within 15 m ahead, or the route end is within 10 m;
+* the controlled hazard's relative position and velocity and box distance (TTC, clearance).
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+from lantern_jax import geometry, polyline
+from lantern_jax.constants import EGO_HALF_LENGTH, EGO_HALF_WIDTH, LIGHT_RED
+from lantern_jax.scoring import thresholds as th
+from lantern_jax.scoring.sample import TickSample
+from lantern_jax.world import ActorState, EgoState, Lanes, ProtocolState, Scenario
+
+Array = jax.Array
+
+EGO_EXTENT = (EGO_HALF_LENGTH, EGO_HALF_WIDTH)  # m, half length and half width of the ego box
+
+
+def outside_lanes(lanes: Lanes, ego: EgoState) -> Array:
+    """() bool: the ego centre is in no lane (half width + 0.5 m), or drives its lane the wrong way.
+
+    Wrong way = heading more than 120 deg from the lane's direction (the leaderboard's junction
+    threshold, used everywhere here).
+    """
+    heading = jnp.stack([jnp.cos(ego.yaw), jnp.sin(ego.yaw)])
+
+    def one(center, pv, width):
+        dist, direction = polyline.nearest_segment(center, pv, ego.xy)
+        norm = jnp.sqrt(jnp.maximum(jnp.sum(direction * direction), 1e-12))
+        wrong = jnp.sum(direction * heading) < jnp.cos(th.WRONG_WAY_RAD) * norm
+        return (dist <= 0.5 * width + th.LANE_MARGIN_M) & ~wrong
+
+    inside = jax.vmap(one)(lanes.center, lanes.point_valid, lanes.width)
+    return ~jnp.any(inside & lanes.valid)
+
+
+def justified_stop(
+    light_holds: Array, gap: Array, lateral: Array, present: Array, dist_to_end: Array
+) -> Array:
+    """() bool: standing still now would be justified (light, lead actor, route end).
+
+    Args:
+        light_holds: () bool, a red/yellow light holds the ego at its stop line.
+        gap: (A,) float32, m, route gap from the ego front to each actor.
+        lateral: (A,) float32, m, each actor's distance from the route minus its half size.
+        present: (A,) bool, actors in the world.
+        dist_to_end: () float32, m, route length minus the ego's route arc.
+    """
+    in_corr = present & (lateral < EGO_HALF_WIDTH + th.JUSTIFY_LATERAL_MARGIN_M)
+    lead = jnp.any(
+        in_corr & (gap > th.JUSTIFY_LEAD_BEHIND_M) & (gap < th.JUSTIFY_LEAD_DIST_M)
+    )
+    return light_holds | lead | (dist_to_end < th.JUSTIFY_ROUTE_END_M)
+
+
+def measure(
+    scenario: Scenario,
+    ego: EgoState,
+    actors: ActorState,
+    present: Array,
+    protocol: ProtocolState,
+    t: Array,
+    progress: Array,
+    dist_to_route: Array,
+    arc_before: Array,
+    arc_now: Array,
+    light: Array,
+    justified: Array,
+    fault: Array,
+) -> TickSample:
+    """The tick's :class:`TickSample` (one execution, after the world was stepped).
+
+    Args:
+        scenario: the execution's static scenario.
+        ego, actors: the world at the end of the tick.
+        present: (A,) bool, actors in the world at the end of the tick.
+        protocol: protocol times after the tick.
+        t: () float32, s, time at the end of the tick.
+        progress: () float32, m, furthest route arc reached.
+        dist_to_route: () float32, m, ego centre distance from the route.
+        arc_before, arc_now: () float32, m, the ego's route arc at the start and end of the tick.
+        light: () int32, LIGHT_* state of the ego's light at ``t``.
+        justified: () bool, from :func:`justified_stop`.
+        fault: () bool, controller fault this tick.
+    """
+    cfg = scenario.config
+    h = cfg.hazard_index
+    ext = scenario.actors.extent
+    ego_ext = jnp.asarray(EGO_EXTENT, jnp.float32)
+    overlap = geometry.overlap_with_boxes(ego.xy, ego.yaw, ego_ext, actors.xy, actors.yaw, ext)
+    collision = jnp.any(overlap & present) & (ego.speed >= th.COLLISION_MIN_SPEED_MPS)
+    dists = geometry.distance_to_boxes(ego.xy, ego.yaw, ego_ext, actors.xy, actors.yaw, ext)
+    ego_vel = ego.speed * jnp.stack([jnp.cos(ego.yaw), jnp.sin(ego.yaw)])
+    hz_vel = actors.speed[h] * jnp.stack([jnp.cos(actors.yaw[h]), jnp.sin(actors.yaw[h])])
+    crossed_stop = (arc_before < cfg.ego_stop_s) & (arc_now >= cfg.ego_stop_s)
+    return TickSample(
+        t=t,
+        ego_speed=ego.speed,
+        ego_accel=ego.accel,
+        progress=progress,
+        route_length=scenario.route.length,
+        dist_to_route=dist_to_route,
+        outside_lanes=outside_lanes(scenario.lanes, ego),
+        red_light_violation=crossed_stop & (light == LIGHT_RED),
+        collision=collision,
+        hazard_present=present[h] & cfg.is_route_a,
+        hazard_rel=actors.xy[h] - ego.xy,
+        hazard_rel_vel=hz_vel - ego_vel,
+        hazard_box_dist=dists[h],
+        justified_stop=justified,
+        controller_fault=fault,
+        t_warn_point=protocol.t_warn_point,
+        t_event=protocol.t_event,
+        t_warn_off=protocol.t_warn_off,
+        t_clear=protocol.t_clear,
+        is_route_a=cfg.is_route_a,
+        coincident_onset=cfg.s_event <= cfg.s_warn,
+    )
+
+
+def execution_ended(
+    scenario: Scenario, t: Array, progress: Array, dist_to_route: Array, still_time: Array
+) -> Array:
+    """() bool: the execution is over — route completed, timed out, deviated 30 m or blocked 20 s.
+
+    Args:
+        scenario: the execution's static scenario.
+        t: () float32, s, time at the end of the tick.
+        progress: () float32, m, furthest route arc reached.
+        dist_to_route: () float32, m.
+        still_time: () float32, s, continuous time the ego has been still.
+    """
+    return (
+        (progress >= th.completion_length(scenario.route.length))
+        | (t >= scenario.config.timeout_s)
+        | (dist_to_route >= th.ROUTE_DEVIATION_M)
+        | (still_time >= th.BLOCK_STILL_S)
+    )

@@ -1,0 +1,55 @@
+"""The dynamic state of one execution — the scan carry — and how it starts.
+
+A rollout is ``State -> State`` under a fixed :class:`~lantern_jax.world.Scenario` (closed over,
+never carried).  :func:`init_state` derives the first state from the scenario's initial
+conditions; :func:`freeze` keeps an execution that has ended exactly as it was.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+from flax import struct
+
+from lantern_jax.scoring.telemetry import Telemetry, init_telemetry
+from lantern_jax.sim.sense import Percept, locate_on_route, sense
+from lantern_jax.world import ActorState, EgoState, ProtocolState, Scenario
+
+Array = jax.Array
+
+
+@struct.dataclass
+class State:
+    """Everything that changes during one execution."""
+
+    t: Array  # () float32, s, simulation clock
+    tick: Array  # () int32, ticks since start
+    ego: EgoState
+    actors: ActorState
+    protocol: ProtocolState
+    percept: Percept  # sensing and route place of the current tick
+    telemetry: Telemetry  # scoring accumulators
+    done: Array  # () bool, the execution has ended (state frozen)
+    fault: Array  # () bool, a controller fault happened at some tick
+
+
+def init_state(scenario: Scenario) -> State:
+    """The state at ``t = 0``: the scenario's initial ego and actors, sensed; empty telemetry."""
+    zero = jnp.asarray(0.0, jnp.float32)
+    arc, dist, progress = locate_on_route(scenario.route, scenario.ego0.xy, zero)
+    return State(
+        t=zero,
+        tick=jnp.asarray(0, jnp.int32),
+        ego=scenario.ego0,
+        actors=scenario.actors0,
+        protocol=ProtocolState.initial(),
+        percept=sense(scenario, scenario.ego0, scenario.actors0, arc, dist, progress),
+        telemetry=init_telemetry(),
+        done=jnp.asarray(False),
+        fault=jnp.asarray(False),
+    )
+
+
+def freeze(old: State, new: State) -> State:
+    """``old`` unchanged where it had already ended, else ``new`` (one execution)."""
+    return jax.tree.map(lambda n, o: jnp.where(old.done, o, n), new, old)
