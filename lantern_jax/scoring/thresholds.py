@@ -7,10 +7,7 @@ tick counts are what the accumulators compare against (``duration = ticks * DT``
 
 from __future__ import annotations
 
-from lantern_jax.constants import DT, FAMILIES, INF_TIME
-
-# --- time bookkeeping --------------------------------------------------------------------------
-HAPPENED_BELOW = 0.5 * INF_TIME  # s, a protocol time below this has happened
+from lantern_jax.constants import DT, FAMILIES
 
 
 # --- tick bookkeeping --------------------------------------------------------------------------
