@@ -78,14 +78,33 @@ def init() -> AnticipationState:
 
 
 def _soft_flag(accel: Array, speed: Array, v_ref: Array, temp: Array) -> Array:
-    """(...) float32: soft ``accel <= -0.5 m/s^2 or speed <= v_ref - 1 m/s`` (m/s^2, m/s)."""
+    """Soft response flag ``accel <= -0.5 m/s^2 or speed <= v_ref - 1 m/s``.
+
+    Args:
+        accel: (...) float32, m/s^2.
+        speed: (...) float32, m/s.
+        v_ref: () float32, m/s, reference speed.
+        temp: () float32, temperature.
+
+    Returns:
+        (...) float32 in [0, 1].
+    """
     return 1.0 - (1.0 - jax.nn.sigmoid((th.REACT_ACCEL_MPS2 - accel) / temp)) * (
         1.0 - jax.nn.sigmoid((v_ref - th.REACT_SPEED_DROP_MPS - speed) / temp)
     )
 
 
 def _window_pass(full: Array, soft_flags: Array, temp: Array) -> Array:
-    """() float32: soft ``at least REACT_MIN_COUNT of the window's flags`` (0 if not ``full``)."""
+    """Soft ``at least REACT_MIN_COUNT flags set`` of one window.
+
+    Args:
+        full: () bool, the window is complete.
+        soft_flags: (W,) float32, soft flags of the window.
+        temp: () float32, temperature (in flags).
+
+    Returns:
+        () float32 in [0, 1]; 0 for an incomplete window.
+    """
     margin = jnp.sum(soft_flags) - (th.REACT_MIN_COUNT - th.COUNT_HALF)
     return jnp.where(full, jax.nn.sigmoid(margin / temp), 0.0)
 
@@ -139,23 +158,47 @@ def _at_event(state: AnticipationState, tick: Tick, temp: Array) -> dict[str, Ar
 def update(
     state: AnticipationState, sample: TickSample, tick: Tick, temperature: Array
 ) -> AnticipationState:
-    """Fold one tick (``temperature``: () float32, of the soft flags and window tests)."""
+    """Fold one tick.
+
+    Args:
+        state: accumulators before the tick.
+        sample: the tick's measurement (unused: speed and acceleration come with ``tick``).
+        tick: shared per-tick context.
+        temperature: () float32, m/s^2 and m/s (soft flags), flags (window tests).
+
+    Returns:
+        The accumulators after the tick.
+    """
     return AnticipationState(
         **_sustained(state, tick, temperature), **_at_event(state, tick, temperature)
     )
 
 
 def valid(state: AnticipationState, ctx: Context, t_fail: Array) -> Array:
-    """() bool: ``t_ref`` happened no later than ``t_fail`` (s) and ``t_event`` happened."""
+    """() bool: ``t_ref`` happened no later than ``t_fail`` and ``t_event`` happened.
+
+    Args:
+        state: final accumulators.
+        ctx: final shared context.
+        t_fail: () float32, s, first Route A gate failure (``NEVER`` if none).
+    """
     return opened_by(ctx.t_warn_point, t_fail) & happened(ctx.t_event)
 
 
 def hard(state: AnticipationState, ctx: Context, t_fail: Array) -> tuple[Array, Array]:
-    """``(t_react, valid)``: () float32, s (NaN = no sustained response), () bool.
+    """Hard reaction time.
 
     With coincident onset, ``t_react`` is the start of the window ending at the event tick when
     that window met the criterion, otherwise the first sustained response at/after ``t_ref``
     (which is >= ``t_event`` and scores 0).
+
+    Args:
+        state: final accumulators.
+        ctx: final shared context.
+        t_fail: () float32, s, first Route A gate failure (``NEVER`` if none).
+
+    Returns:
+        ``(t_react, valid)``: () float32, s (``NaN`` = no sustained response); () bool.
     """
     at_event = ctx.coincident_onset & state.response_at_event
     t_react = jnp.where(at_event, state.t_response_start, state.t_react)
@@ -165,15 +208,19 @@ def hard(state: AnticipationState, ctx: Context, t_fail: Array) -> tuple[Array, 
 def score(
     t_ref: Any, t_event: Any, t_react: Any, available: Any = True, coincident: Any = None
 ) -> Array:
-    """``S_ant`` elementwise.
+    """``S_ant = clip((t_event - t_react) / (t_event - t_ref))``, elementwise.
 
     Args:
-        t_ref, t_event: float32, s; ``NaN`` makes the component unavailable.
-        t_react: float32, s; ``NaN`` or ``inf`` = no sustained response (scores 0).
-        available: bool, ``False`` -> ``NaN``.
-        coincident: bool, coincident warning/event onset; ``None`` means ``t_event <= t_ref``.
-            Coincident onset scores 1 iff ``t_react < t_event`` (a response was already present
-            at the event), else 0.
+        t_ref: (...) float32, s; ``NaN`` makes the component unavailable.
+        t_event: (...) float32, s; ``NaN`` makes the component unavailable.
+        t_react: (...) float32, s; ``NaN`` or ``inf`` = no sustained response (scores 0).
+        available: (...) bool, ``False`` -> ``NaN``.
+        coincident: (...) bool, coincident warning/event onset; ``None`` means
+            ``t_event <= t_ref``.  Coincident onset scores 1 iff ``t_react < t_event`` (a
+            response was already present at the event), else 0.
+
+    Returns:
+        (...) float32 in [0, 1]; ``NaN`` where unavailable.
     """
     f32 = jnp.float32
     t_ref, t_event, t_react = (jnp.asarray(x, f32) for x in (t_ref, t_event, t_react))
@@ -191,9 +238,19 @@ def score(
 def soft(
     state: AnticipationState, ctx: Context, t_fail: Array, temperature: Array
 ) -> tuple[Array, Array]:
-    """``(smooth S_ant, valid)``: ``P(response) * clip((t_event - E[t_react | response]) /
-    (t_event - t_ref))`` with a smooth clip at ``temperature``; with coincident onset the soft
-    ``response_at_event``.  () float32 in [0, 1], () bool."""
+    """Smooth ``S_ant``: ``P(response) * clip((t_event - E[t_react | response]) /
+    (t_event - t_ref))`` with a smooth clip; with coincident onset the soft
+    ``response_at_event``.
+
+    Args:
+        state: final accumulators.
+        ctx: final shared context.
+        t_fail: () float32, s, first Route A gate failure (``NEVER`` if none).
+        temperature: () float32, temperature of the smooth clip.
+
+    Returns:
+        ``(s_ant, valid)``: () float32 in [0, 1]; () bool (the hard availability).
+    """
     ok = valid(state, ctx, t_fail)
     has = state.p > th.PROB_EPS
     e_react = state.pt / jnp.where(has, state.p, 1.0)

@@ -51,15 +51,25 @@ def init() -> BlockState:
 
 
 def update(state: BlockState, sample: TickSample, tick: Tick, temperature: Array) -> BlockState:
-    """Fold one tick (``temperature`` unused)."""
+    """Fold one tick.
+
+    Args:
+        state: record before the tick.
+        sample: the tick's measurement (``controller_fault``).
+        tick: shared per-tick context.
+        temperature: unused (the soft gate is decoded from the final record).
+
+    Returns:
+        The record after the tick.
+    """
     unfinished = ~is_completed(tick.progress, tick.route_length)
     still_run = run(state.still_run, (tick.speed < th.STILL_SPEED_MPS) & unfinished)
-    stalled = still_run >= th.BLOCK_STILL
+    stall_now = still_run >= th.BLOCK_STILL
     fault = jnp.asarray(sample.controller_fault, bool)
     return BlockState(
         still_run=still_run,
         max_still_run=jnp.maximum(state.max_still_run, still_run),
-        t_stall=first_time(happened(state.t_stall), stalled, tick.t, state.t_stall),
+        t_stall=first_time(happened(state.t_stall), stall_now, tick.t, state.t_stall),
         fault=state.fault | fault,
         t_fault=first_time(state.fault, fault, tick.t, state.t_fault),
     )
@@ -76,22 +86,46 @@ def max_still_s(state: BlockState) -> Array:
 
 
 def failure_times(state: BlockState, ctx: Context) -> tuple[Array, ...]:
-    """``(t_stall, t_fault, t_timeout)``: () float32, s each (NEVER = that cause did not fail);
-    the timeout fails at the last folded tick."""
+    """Failure time(s) for the first Route A gate failure.
+
+    Args:
+        state: final record.
+        ctx: final shared context.
+
+    Returns:
+        ``(t_stall, t_fault, t_timeout)``: () float32, s each (``NEVER`` = that cause
+        did not fail); the timeout fails at the last folded tick.
+    """
     completed = is_completed(ctx.progress_m, ctx.route_length_m)
     return state.t_stall, state.t_fault, jnp.where(completed, NEVER, ctx.t_last)
 
 
 def hard(state: BlockState, ctx: Context) -> tuple[Array, Array]:
-    """``(passed, valid)``: () bool (no 20 s standstill, route completed, no controller fault),
-    () bool (always True)."""
+    """Hard gate.
+
+    Args:
+        state: final record.
+        ctx: final shared context.
+
+    Returns:
+        ``(passed, valid)``: () bool, no 20 s standstill, route completed, no controller
+        fault; () bool (always True).
+    """
     completed = is_completed(ctx.progress_m, ctx.route_length_m)
     return ~stalled(state) & completed & ~state.fault, jnp.asarray(True)
 
 
 def soft(state: BlockState, ctx: Context, temperature: Array) -> tuple[Array, Array]:
-    """``(smooth pass, valid)``: () float32 in [0, 1] at ``temperature`` (s for the standstill,
-    m for the completion margin), () bool (always True)."""
+    """Smooth gate.
+
+    Args:
+        state: final record.
+        ctx: final shared context.
+        temperature: () float32, s (standstill margin) and m (completion margin).
+
+    Returns:
+        ``(passed, valid)``: () float32 in [0, 1]; () bool (always True).
+    """
     max_still = state.max_still_run.astype(jnp.float32)
     still_margin = (th.BLOCK_STILL - th.COUNT_HALF - max_still) * DT
     completion_margin = ctx.progress_m - (ctx.route_length_m - th.COMPLETION_TOL_M)

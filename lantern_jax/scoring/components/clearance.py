@@ -48,7 +48,17 @@ def init() -> ClearanceState:
 def update(
     state: ClearanceState, sample: TickSample, tick: Tick, temperature: Array
 ) -> ClearanceState:
-    """Fold one tick (``temperature``: () float32, m, of the soft minimum)."""
+    """Fold one tick.
+
+    Args:
+        state: accumulators before the tick.
+        sample: the tick's measurement (unused: the distances come with ``tick``).
+        tick: shared per-tick context.
+        temperature: () float32, m, of the soft minimum.
+
+    Returns:
+        The accumulators after the tick.
+    """
     in_window = tick.post_event & tick.before_clear
     sampled = in_window & (tick.present | tick.collision)
     d = jnp.where(tick.collision, 0.0, tick.hazard_dist)
@@ -60,17 +70,40 @@ def update(
 
 
 def valid(state: ClearanceState, ctx: Context, t_fail: Array) -> Array:
-    """() bool: the window opened (``t_event``) no later than ``t_fail`` (s) and held a sample."""
+    """() bool: the window opened (``t_event``) no later than ``t_fail`` and held a sample.
+
+    Args:
+        state: final accumulators.
+        ctx: final shared context.
+        t_fail: () float32, s, first Route A gate failure (``NEVER`` if none).
+    """
     return opened_by(ctx.t_event, t_fail) & state.any_sample
 
 
 def hard(state: ClearanceState, ctx: Context, t_fail: Array) -> tuple[Array, Array]:
-    """``(d_min, valid)``: () float32, m, () bool."""
+    """Hard minimum clearance.
+
+    Args:
+        state: final accumulators.
+        ctx: final shared context.
+        t_fail: () float32, s, first Route A gate failure (``NEVER`` if none).
+
+    Returns:
+        ``(d_min, valid)``: () float32, m; () bool.
+    """
     return state.min_m, valid(state, ctx, t_fail)
 
 
 def score(clearance_min_m: Any, d_safe: Any) -> Array:
-    """``S_clear = clip(d_min / d_safe)`` elementwise (m / m); ``NaN`` (unavailable) stays."""
+    """``S_clear = clip(d_min / d_safe)``, elementwise.
+
+    Args:
+        clearance_min_m: (...) float32, m; ``NaN`` = unavailable.
+        d_safe: (...) float32, m, the family's normaliser.
+
+    Returns:
+        (...) float32 in [0, 1]; ``NaN`` where unavailable.
+    """
     x = jnp.asarray(clearance_min_m, jnp.float32)
     d_safe = jnp.asarray(d_safe, jnp.float32)
     return jnp.where(jnp.isnan(x), jnp.nan, jnp.clip(x / d_safe, 0.0, 1.0))
@@ -79,7 +112,18 @@ def score(clearance_min_m: Any, d_safe: Any) -> Array:
 def soft(
     state: ClearanceState, ctx: Context, t_fail: Array, temperature: Array, d_safe: Array
 ) -> tuple[Array, Array]:
-    """``(smooth S_clear, valid)``: the soft minimum (decoded with ``ctx.temperature``, capped at
-    ``d_safe`` (() float32, m)) through a smooth clip at ``temperature``; () float32, () bool."""
+    """Smooth ``S_clear``: the soft minimum, decoded with the accumulator temperature
+    ``ctx.temperature`` and capped at ``d_safe``, through a smooth clip.
+
+    Args:
+        state: final accumulators.
+        ctx: final shared context.
+        t_fail: () float32, s, first Route A gate failure (``NEVER`` if none).
+        temperature: () float32, temperature of the smooth clip.
+        d_safe: () float32, m, the family's normaliser.
+
+    Returns:
+        ``(s_clear, valid)``: () float32 in [0, 1]; () bool (the hard availability).
+    """
     d_min = softmin_decode(state.lse, ctx.temperature, cap=d_safe)
     return smooth_clip01(d_min / d_safe, temperature), valid(state, ctx, t_fail)

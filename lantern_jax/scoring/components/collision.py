@@ -46,7 +46,18 @@ def init() -> CollisionState:
 def update(
     state: CollisionState, sample: TickSample, tick: Tick, temperature: Array
 ) -> CollisionState:
-    """Fold one tick (``temperature`` unused: the soft gate is decoded from the margin)."""
+    """Fold one tick.
+
+    Args:
+        state: record before the tick.
+        sample: the tick's measurement (unused: collision, hazard distance and speed come
+            with ``tick``).
+        tick: shared per-tick context.
+        temperature: unused (the soft gate is decoded from the final record).
+
+    Returns:
+        The record after the tick.
+    """
     slow_touch = th.COLLISION_MIN_SPEED_MPS - tick.speed
     margin = jnp.where(tick.present, jnp.maximum(tick.hazard_dist, slow_touch), BIG)
     return CollisionState(
@@ -57,16 +68,41 @@ def update(
 
 
 def failure_times(state: CollisionState, ctx: Context) -> tuple[Array, ...]:
-    """``(t_collision,)``: () float32, s (NEVER = the gate passed)."""
+    """Failure time(s) for the first Route A gate failure.
+
+    Args:
+        state: final record.
+        ctx: final shared context.
+
+    Returns:
+        ``(t_collision,)``: () float32, s (``NEVER`` = no collision).
+    """
     return (state.t_collision,)
 
 
 def hard(state: CollisionState, ctx: Context) -> tuple[Array, Array]:
-    """``(passed, valid)``: () bool (no collision), () bool (always True)."""
+    """Hard gate.
+
+    Args:
+        state: final record.
+        ctx: final shared context.
+
+    Returns:
+        ``(passed, valid)``: () bool, no collision; () bool (always True).
+    """
     return ~state.collided, jnp.asarray(True)
 
 
 def soft(state: CollisionState, ctx: Context, temperature: Array) -> tuple[Array, Array]:
-    """``(smooth pass, valid)``: () float32 in [0, 1] at ``temperature`` (m), () bool."""
+    """Smooth gate.
+
+    Args:
+        state: final record.
+        ctx: final shared context.
+        temperature: () float32, m, of the sigmoid of the margin.
+
+    Returns:
+        ``(passed, valid)``: () float32 in [0, 1]; () bool (always True).
+    """
     no_collision = 1.0 - state.collided.astype(jnp.float32)
     return no_collision * soft_gate(state.margin, temperature), jnp.asarray(True)

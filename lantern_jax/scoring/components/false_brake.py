@@ -43,7 +43,17 @@ def init() -> FalseBrakeState:
 def update(
     state: FalseBrakeState, sample: TickSample, tick: Tick, temperature: Array
 ) -> FalseBrakeState:
-    """Fold one tick (``temperature`` unused)."""
+    """Fold one tick.
+
+    Args:
+        state: record before the tick.
+        sample: the tick's measurement (``justified_stop``).
+        tick: shared per-tick context.
+        temperature: unused (the soft gate is decoded from the final record).
+
+    Returns:
+        The record after the tick.
+    """
     in_window = tick.post_ref & (tick.t <= tick.t_event)
     stopped = tick.speed <= th.FALSE_BRAKE_SPEED_MPS
     n_run = run(state.run, in_window & stopped & ~jnp.asarray(sample.justified_stop, bool))
@@ -61,11 +71,29 @@ def max_stop_s(state: FalseBrakeState) -> Array:
 
 
 def hard(state: FalseBrakeState, ctx: Context) -> tuple[Array, Array]:
-    """``(passed, valid)``: () bool (no unjustified 1 s stop), () bool (always True)."""
+    """Hard gate.
+
+    Args:
+        state: final record.
+        ctx: final shared context.
+
+    Returns:
+        ``(passed, valid)``: () bool, no unjustified 1 s stop in ``[t_ref, t_event]``;
+        () bool (always True).
+    """
     return state.max_run < th.FALSE_BRAKE, jnp.asarray(True)
 
 
 def soft(state: FalseBrakeState, ctx: Context, temperature: Array) -> tuple[Array, Array]:
-    """``(smooth pass, valid)``: () float32 in [0, 1] at ``temperature`` (s), () bool (True)."""
+    """Smooth gate.
+
+    Args:
+        state: final record.
+        ctx: final shared context.
+        temperature: () float32, s, of the sigmoid of the margin.
+
+    Returns:
+        ``(passed, valid)``: () float32 in [0, 1]; () bool (always True).
+    """
     margin = (th.FALSE_BRAKE - th.COUNT_HALF - state.max_run.astype(jnp.float32)) * DT
     return soft_gate(margin, temperature), jnp.asarray(True)

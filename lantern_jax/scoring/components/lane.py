@@ -37,7 +37,17 @@ def init() -> LaneState:
 
 
 def update(state: LaneState, sample: TickSample, tick: Tick, temperature: Array) -> LaneState:
-    """Fold one tick (``temperature`` unused)."""
+    """Fold one tick.
+
+    Args:
+        state: record before the tick.
+        sample: the tick's measurement (``outside_lanes``).
+        tick: shared per-tick context.
+        temperature: unused (the soft gate is decoded from the final record).
+
+    Returns:
+        The record after the tick.
+    """
     n_outside = count(state.n_outside, jnp.asarray(sample.outside_lanes, bool))
     failed = n_outside >= th.LANE_DEBOUNCE
     return LaneState(
@@ -52,16 +62,41 @@ def outside_s(state: LaneState) -> Array:
 
 
 def failure_times(state: LaneState, ctx: Context) -> tuple[Array, ...]:
-    """``(t_fail,)``: () float32, s (NEVER = the gate passed)."""
+    """Failure time(s) for the first Route A gate failure.
+
+    Args:
+        state: final record.
+        ctx: final shared context.
+
+    Returns:
+        ``(t_fail,)``: () float32, s (``NEVER`` = the gate passed).
+    """
     return (state.t_fail,)
 
 
 def hard(state: LaneState, ctx: Context) -> tuple[Array, Array]:
-    """``(passed, valid)``: () bool (< 1 s in total outside the lanes), () bool (True)."""
+    """Hard gate.
+
+    Args:
+        state: final record.
+        ctx: final shared context.
+
+    Returns:
+        ``(passed, valid)``: () bool, < 1 s in total outside the lanes; () bool (always True).
+    """
     return state.n_outside < th.LANE_DEBOUNCE, jnp.asarray(True)
 
 
 def soft(state: LaneState, ctx: Context, temperature: Array) -> tuple[Array, Array]:
-    """``(smooth pass, valid)``: () float32 in [0, 1] at ``temperature`` (s), () bool."""
+    """Smooth gate.
+
+    Args:
+        state: final record.
+        ctx: final shared context.
+        temperature: () float32, s, of the sigmoid of the margin.
+
+    Returns:
+        ``(passed, valid)``: () float32 in [0, 1]; () bool (always True).
+    """
     margin = (th.LANE_DEBOUNCE - th.COUNT_HALF - state.n_outside.astype(jnp.float32)) * DT
     return soft_gate(margin, temperature), jnp.asarray(True)

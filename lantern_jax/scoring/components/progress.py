@@ -22,20 +22,42 @@ Array = jax.Array
 
 
 def is_completed(progress_m: Array, route_length_m: Array) -> Array:
-    """(...) bool: progress (m) reached the end zone of a route of ``route_length_m`` (m)."""
+    """Whether the ego reached the route's end zone.
+
+    Args:
+        progress_m: (...) float32, m, furthest route arc reached.
+        route_length_m: (...) float32, m.
+
+    Returns:
+        (...) bool: ``progress_m >= route_length_m - 2 m``.
+    """
     return progress_m >= route_length_m - th.COMPLETION_TOL_M
 
 
 def hard(ctx: Context) -> tuple[Array, Array]:
-    """``(P, valid)``: () float32 in [0, 1], () bool (always True)."""
+    """Hard route completion.
+
+    Args:
+        ctx: final shared context (progress and route length).
+
+    Returns:
+        ``(p, valid)``: () float32 in [0, 1]; () bool (always True).
+    """
     span = th.completion_length(ctx.route_length_m)
     frac = jnp.where(span > 0, ctx.progress_m / jnp.where(span > 0, span, 1.0), 0.0)
     return jnp.clip(frac, 0.0, 1.0), jnp.asarray(True)
 
 
 def soft(ctx: Context, temperature: Array) -> tuple[Array, Array]:
-    """``(smooth P, valid)``: the ratio through a smooth clip at ``temperature`` (() float32);
-    () float32, () bool (always True)."""
+    """Smooth route completion: the ratio through a smooth clip.
+
+    Args:
+        ctx: final shared context (progress and route length).
+        temperature: () float32, temperature of the smooth clip.
+
+    Returns:
+        ``(p, valid)``: () float32 in [0, 1]; () bool (always True).
+    """
     span = th.completion_length(ctx.route_length_m)
     safe_len = jnp.where(span > 0, span, 1.0)
     p = jnp.where(span > 0, smooth_clip01(ctx.progress_m / safe_len, temperature), 0.0)

@@ -56,7 +56,15 @@ def init() -> RecoveryState:
 
 
 def release_time(t_warn_off: Array, t_clear: Array) -> Array:
-    """(...) float32, s: ``max(t_warn_off, t_clear)`` once both happened, else ``NEVER``."""
+    """Release time ``max(t_warn_off, t_clear)`` once both happened.
+
+    Args:
+        t_warn_off: (...) float32, s, warning termination (``NEVER`` = not happened).
+        t_clear: (...) float32, s, hazard clearance (``NEVER`` = not happened).
+
+    Returns:
+        (...) float32, s; ``NEVER`` until both happened.
+    """
     both = happened(t_warn_off) & happened(t_clear)
     return jnp.where(both, jnp.maximum(t_warn_off, t_clear), NEVER)
 
@@ -64,7 +72,17 @@ def release_time(t_warn_off: Array, t_clear: Array) -> Array:
 def update(
     state: RecoveryState, sample: TickSample, tick: Tick, temperature: Array
 ) -> RecoveryState:
-    """Fold one tick (``temperature``: () float32, of the speed and progress sigmoids)."""
+    """Fold one tick.
+
+    Args:
+        state: accumulators before the tick.
+        sample: the tick's measurement (unused: speed and progress come with ``tick``).
+        tick: shared per-tick context.
+        temperature: () float32, m/s (speed test) and m (progress test).
+
+    Returns:
+        The accumulators after the tick.
+    """
     t_release = release_time(tick.t_warn_off, tick.t_clear)
     post_rel = happened(t_release) & (tick.t >= t_release)
     v_thr = jnp.maximum(th.RECOVER_MIN_SPEED_MPS, th.RECOVER_PRE_FRACTION * tick.v_pre)
@@ -89,25 +107,55 @@ def update(
 
 
 def valid(state: RecoveryState, ctx: Context, t_fail: Array) -> Array:
-    """() bool: ``t_release`` happened no later than ``t_fail`` (s)."""
+    """() bool: ``t_release`` happened no later than ``t_fail``.
+
+    Args:
+        state: final accumulators.
+        ctx: final shared context.
+        t_fail: () float32, s, first Route A gate failure (``NEVER`` if none).
+    """
     return opened_by(release_time(ctx.t_warn_off, ctx.t_clear), t_fail)
 
 
 def recovered_at(state: RecoveryState, ctx: Context, t_fail: Array) -> tuple[Array, Array]:
-    """``(t_recover, valid)``: () float32, s, start of the first recovery window (NaN = no
-    recovery), () bool."""
+    """Start of the first recovery window.
+
+    Args:
+        state: final accumulators.
+        ctx: final shared context.
+        t_fail: () float32, s, first Route A gate failure (``NEVER`` if none).
+
+    Returns:
+        ``(t_recover, valid)``: () float32, s (``NaN`` = no recovery); () bool.
+    """
     return time_or_nan(state.t_recover), valid(state, ctx, t_fail)
 
 
 def hard(state: RecoveryState, ctx: Context, t_fail: Array) -> tuple[Array, Array]:
-    """``(RL, valid)``: () float32, s, recovery latency (NaN = no recovery), () bool."""
+    """Hard recovery latency ``RL = t_recover - t_release``.
+
+    Args:
+        state: final accumulators.
+        ctx: final shared context.
+        t_fail: () float32, s, first Route A gate failure (``NEVER`` if none).
+
+    Returns:
+        ``(latency, valid)``: () float32, s (``NaN`` = no recovery); () bool.
+    """
     latency = state.t_recover - release_time(ctx.t_warn_off, ctx.t_clear)
     return jnp.where(happened(state.t_recover), latency, jnp.nan), valid(state, ctx, t_fail)
 
 
 def score(recovery_latency_s: Any, available: Any = True) -> Array:
-    """``S_rec = clip(1 - RL / 8 s)`` elementwise; ``NaN``/``inf`` latency = no recovery (0);
-    unavailable -> ``NaN``."""
+    """``S_rec = clip(1 - RL / 8 s)``, elementwise.
+
+    Args:
+        recovery_latency_s: (...) float32, s; ``NaN`` or ``inf`` = no recovery (scores 0).
+        available: (...) bool, ``False`` -> ``NaN``.
+
+    Returns:
+        (...) float32 in [0, 1]; ``NaN`` where unavailable.
+    """
     rl = jnp.asarray(recovery_latency_s, jnp.float32)
     value = jnp.where(jnp.isfinite(rl), jnp.clip(1.0 - rl / th.RECOVER_CAP_S, 0.0, 1.0), 0.0)
     return jnp.where(jnp.asarray(available, bool), value, jnp.nan)
@@ -116,8 +164,18 @@ def score(recovery_latency_s: Any, available: Any = True) -> Array:
 def soft(
     state: RecoveryState, ctx: Context, t_fail: Array, temperature: Array
 ) -> tuple[Array, Array]:
-    """``(smooth S_rec, valid)``: ``P(recovered) * clip(1 - (E[t_recover | recovered] -
-    t_release) / 8 s)`` with a smooth clip at ``temperature``; () float32 in [0, 1], () bool."""
+    """Smooth ``S_rec``: ``P(recovered) * clip(1 - (E[t_recover | recovered] - t_release) /
+    8 s)`` with a smooth clip.
+
+    Args:
+        state: final accumulators.
+        ctx: final shared context.
+        t_fail: () float32, s, first Route A gate failure (``NEVER`` if none).
+        temperature: () float32, temperature of the smooth clip.
+
+    Returns:
+        ``(s_rec, valid)``: () float32 in [0, 1]; () bool (the hard availability).
+    """
     ok = valid(state, ctx, t_fail)
     has = state.p > th.PROB_EPS
     e_rec = state.pt / jnp.where(has, state.p, 1.0)

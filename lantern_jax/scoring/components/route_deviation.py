@@ -39,7 +39,17 @@ def init() -> RouteDeviationState:
 def update(
     state: RouteDeviationState, sample: TickSample, tick: Tick, temperature: Array
 ) -> RouteDeviationState:
-    """Fold one tick (``temperature`` unused)."""
+    """Fold one tick.
+
+    Args:
+        state: record before the tick.
+        sample: the tick's measurement (``dist_to_route``).
+        tick: shared per-tick context.
+        temperature: unused (the soft gate is decoded from the final record).
+
+    Returns:
+        The record after the tick.
+    """
     dist = jnp.asarray(sample.dist_to_route, jnp.float32)
     deviated = dist >= th.ROUTE_DEVIATION_M
     return RouteDeviationState(
@@ -49,15 +59,40 @@ def update(
 
 
 def failure_times(state: RouteDeviationState, ctx: Context) -> tuple[Array, ...]:
-    """``(t_deviation,)``: () float32, s (NEVER = the gate passed)."""
+    """Failure time(s) for the first Route A gate failure.
+
+    Args:
+        state: final record.
+        ctx: final shared context.
+
+    Returns:
+        ``(t_deviation,)``: () float32, s (``NEVER`` = no deviation).
+    """
     return (state.t_deviation,)
 
 
 def hard(state: RouteDeviationState, ctx: Context) -> tuple[Array, Array]:
-    """``(passed, valid)``: () bool (distance to route always < 30 m), () bool (True)."""
+    """Hard gate.
+
+    Args:
+        state: final record.
+        ctx: final shared context.
+
+    Returns:
+        ``(passed, valid)``: () bool, distance to the route always < 30 m; () bool (always True).
+    """
     return ~happened(state.t_deviation), jnp.asarray(True)
 
 
 def soft(state: RouteDeviationState, ctx: Context, temperature: Array) -> tuple[Array, Array]:
-    """``(smooth pass, valid)``: () float32 in [0, 1] at ``temperature`` (m), () bool."""
+    """Smooth gate.
+
+    Args:
+        state: final record.
+        ctx: final shared context.
+        temperature: () float32, m, of the sigmoid of the margin.
+
+    Returns:
+        ``(passed, valid)``: () float32 in [0, 1]; () bool (always True).
+    """
     return soft_gate(th.ROUTE_DEVIATION_M - state.max_dist, temperature), jnp.asarray(True)

@@ -33,7 +33,17 @@ def init() -> RuleState:
 
 
 def update(state: RuleState, sample: TickSample, tick: Tick, temperature: Array) -> RuleState:
-    """Fold one tick (``temperature`` unused)."""
+    """Fold one tick.
+
+    Args:
+        state: record before the tick.
+        sample: the tick's measurement (``red_light_violation``).
+        tick: shared per-tick context.
+        temperature: unused (the soft gate is decoded from the final record).
+
+    Returns:
+        The record after the tick.
+    """
     red = jnp.asarray(sample.red_light_violation, bool)
     return RuleState(
         red_light=state.red_light | red,
@@ -42,15 +52,40 @@ def update(state: RuleState, sample: TickSample, tick: Tick, temperature: Array)
 
 
 def failure_times(state: RuleState, ctx: Context) -> tuple[Array, ...]:
-    """``(t_violation,)``: () float32, s (NEVER = the gate passed)."""
+    """Failure time(s) for the first Route A gate failure.
+
+    Args:
+        state: final record.
+        ctx: final shared context.
+
+    Returns:
+        ``(t_violation,)``: () float32, s (``NEVER`` = no violation).
+    """
     return (state.t_violation,)
 
 
 def hard(state: RuleState, ctx: Context) -> tuple[Array, Array]:
-    """``(passed, valid)``: () bool (no red-light violation), () bool (always True)."""
+    """Hard gate.
+
+    Args:
+        state: final record.
+        ctx: final shared context.
+
+    Returns:
+        ``(passed, valid)``: () bool, no red-light violation; () bool (always True).
+    """
     return ~state.red_light, jnp.asarray(True)
 
 
 def soft(state: RuleState, ctx: Context, temperature: Array) -> tuple[Array, Array]:
-    """``(pass, valid)``: () float32 in {0, 1} (not relaxed), () bool (always True)."""
+    """The gate as a float (not relaxed).
+
+    Args:
+        state: final record.
+        ctx: final shared context.
+        temperature: unused.
+
+    Returns:
+        ``(passed, valid)``: () float32 in {0, 1}; () bool (always True).
+    """
     return 1.0 - state.red_light.astype(jnp.float32), jnp.asarray(True)

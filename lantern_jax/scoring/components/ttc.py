@@ -15,6 +15,8 @@ Available (valid) when ``t_ref`` happened no later than the first Route A gate f
 
 from __future__ import annotations
 
+from typing import Any
+
 import jax
 import jax.numpy as jnp
 from flax import struct
@@ -60,7 +62,17 @@ def closing_speed(rel: Array, rel_vel: Array) -> Array:
 
 
 def update(state: TTCState, sample: TickSample, tick: Tick, temperature: Array) -> TTCState:
-    """Fold one tick (``temperature``: () float32, s, of the soft minimum and weights)."""
+    """Fold one tick.
+
+    Args:
+        state: accumulators before the tick.
+        sample: the tick's measurement (``hazard_rel``, ``hazard_rel_vel``).
+        tick: shared per-tick context.
+        temperature: () float32, s (soft minimum) and m/s (sample weights).
+
+    Returns:
+        The accumulators after the tick.
+    """
     f32 = jnp.float32
     v_close = closing_speed(
         jnp.asarray(sample.hazard_rel, f32), jnp.asarray(sample.hazard_rel_vel, f32)
@@ -83,24 +95,55 @@ def update(state: TTCState, sample: TickSample, tick: Tick, temperature: Array) 
 
 
 def valid(state: TTCState, ctx: Context, t_fail: Array) -> Array:
-    """() bool: the TTC window opened (``t_ref``) no later than ``t_fail`` (s)."""
+    """() bool: the TTC window opened (``t_ref``) no later than ``t_fail``.
+
+    Args:
+        state: final accumulators.
+        ctx: final shared context.
+        t_fail: () float32, s, first Route A gate failure (``NEVER`` if none).
+    """
     return opened_by(ctx.t_warn_point, t_fail)
 
 
 def hard(state: TTCState, ctx: Context, t_fail: Array) -> tuple[Array, Array]:
-    """``(TTC_min, valid)``: () float32, s (``inf`` = no closing trend), () bool."""
+    """Hard minimum TTC.
+
+    Args:
+        state: final accumulators.
+        ctx: final shared context.
+        t_fail: () float32, s, first Route A gate failure (``NEVER`` if none).
+
+    Returns:
+        ``(ttc_min, valid)``: () float32, s (``inf`` = no closing trend); () bool.
+    """
     return jnp.where(state.any_sample, state.min_s, jnp.inf), valid(state, ctx, t_fail)
 
 
-def score(ttc_min_s) -> Array:
-    """``S_TTC = clip(TTC_min / 3 s)`` elementwise; ``inf`` -> 1; ``NaN`` (unavailable) stays."""
+def score(ttc_min_s: Any) -> Array:
+    """``S_TTC = clip(TTC_min / 3 s)``, elementwise.
+
+    Args:
+        ttc_min_s: (...) float32, s; ``inf`` = no closing trend (scores 1), ``NaN`` = unavailable.
+
+    Returns:
+        (...) float32 in [0, 1]; ``NaN`` where unavailable.
+    """
     x = jnp.asarray(ttc_min_s, jnp.float32)
     return jnp.where(jnp.isnan(x), jnp.nan, jnp.clip(x / th.TTC_NORM_S, 0.0, 1.0))
 
 
 def soft(state: TTCState, ctx: Context, t_fail: Array, temperature: Array) -> tuple[Array, Array]:
-    """``(smooth S_TTC, valid)``: the soft minimum (decoded with the accumulator temperature
-    ``ctx.temperature``, capped at 3 s) through a smooth clip at ``temperature``; () float32 in
-    [0, 1], () bool."""
+    """Smooth ``S_TTC``: the soft minimum, decoded with the accumulator temperature
+    ``ctx.temperature`` and capped at 3 s, through a smooth clip.
+
+    Args:
+        state: final accumulators.
+        ctx: final shared context.
+        t_fail: () float32, s, first Route A gate failure (``NEVER`` if none).
+        temperature: () float32, temperature of the smooth clip.
+
+    Returns:
+        ``(s_ttc, valid)``: () float32 in [0, 1]; () bool (the hard availability).
+    """
     ttc = softmin_decode(state.lse, ctx.temperature, cap=th.TTC_NORM_S)
     return smooth_clip01(ttc / th.TTC_NORM_S, temperature), valid(state, ctx, t_fail)
