@@ -145,7 +145,7 @@ for name, final, rec in (("warning", final_w, rec_w), ("no warning", final_nw, r
     print(
         f"{name:>10}: ends after {num_valid_ticks(rec)} ticks, "
         f"event onset t = {float(final.protocol.t_event):.2f} s, "
-        f"collision: {bool(final.telemetry.collided)}"
+        f"collision: {bool(final.telemetry.collision.collided)}"
     )
 
 # %% [markdown]

@@ -275,7 +275,7 @@ def _soft_clearance_grad(act):
 
     def soft_clearance(v_post):
         final, _ = rollout(set_knobs(world, hazard_speed=v_post), act, None, GRAD_TICKS)
-        return final.telemetry.clear_lse
+        return final.telemetry.clearance.lse
 
     value, grad = jax.jit(jax.value_and_grad(soft_clearance))(jnp.float32(3.0))
     return float(value), float(grad)
@@ -355,7 +355,7 @@ def test_done_freezes_the_state(sim, family_pairs, scene):
     assert k < rec.done.shape[0] - 10
     assert rec.done[k:].all()
     assert int(final.tick) == k + 1
-    assert int(final.telemetry.n_ticks) == k + 1
+    assert int(final.telemetry.context.n_ticks) == k + 1
     np.testing.assert_allclose(final.t, (k + 1) * DT, atol=1e-4)
     if scene == "empty_road":
         assert final.ego.speed > 1.0

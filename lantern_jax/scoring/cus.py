@@ -15,8 +15,12 @@ A component that is unavailable (``NaN``) contributes 0 inside the formula and s
 the returned components.  Every hard function is elementwise, so it works on scalars and on
 batched arrays alike.
 
-The soft score (:func:`soft_pair_cus`) uses the same formula with sigmoid gates of signed margins,
-soft minima and softplus clips; it converges to the hard score as the temperature goes to 0.
+The components themselves live in :mod:`lantern_jax.scoring.components` (one module each); this
+module composes them: the hard score from the per-execution outputs of
+:func:`~lantern_jax.scoring.metrics.finalize` through each component's ``score``, the soft score
+(:func:`soft_pair_cus`) from each component's ``soft`` -- the same formula with sigmoid gates of
+signed margins, soft minima and softplus clips, converging to the hard score as the temperature
+goes to 0.
 """
 
 from __future__ import annotations
@@ -26,10 +30,18 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
-from lantern_jax.constants import DT, FAMILIES
+from lantern_jax.constants import FAMILIES
 from lantern_jax.scoring import thresholds as th
-from lantern_jax.scoring.metrics import ExecutionMetrics, availability, release_time
-from lantern_jax.scoring.smooth import smooth_clip01, soft_gate, softmin_decode
+from lantern_jax.scoring.components import (
+    ROUTE_A_GATES,
+    anticipation,
+    clearance,
+    false_brake,
+    progress,
+    recovery,
+    ttc,
+)
+from lantern_jax.scoring.metrics import ExecutionMetrics, first_failure_time
 from lantern_jax.scoring.telemetry import Telemetry
 
 Array = jax.Array
@@ -68,48 +80,11 @@ def _nz(x: Array) -> Array:
     return jnp.where(jnp.isnan(x), 0.0, x)
 
 
-def s_ttc(ttc_min_s: Any) -> Array:
-    """``clip(TTC_min / 3 s)``; ``inf`` (no closing trend) -> 1; ``NaN`` (unavailable) stays."""
-    x = _f(ttc_min_s)
-    return jnp.where(jnp.isnan(x), jnp.nan, jnp.clip(x / th.TTC_NORM_S, 0.0, 1.0))
-
-
-def s_clear(clearance_min_m: Any, d_safe: Any) -> Array:
-    """``clip(d_min / d_safe)``; ``NaN`` (unavailable) stays ``NaN``."""
-    x = _f(clearance_min_m)
-    return jnp.where(jnp.isnan(x), jnp.nan, jnp.clip(x / _f(d_safe), 0.0, 1.0))
-
-
-def s_ant(
-    t_ref: Any, t_event: Any, t_react: Any, available: Any = True, coincident: Any = None
-) -> Array:
-    """Anticipation ``clip((t_event - t_react) / (t_event - t_ref))``.
-
-    Args:
-        t_ref, t_event: s; ``NaN`` makes the component unavailable.
-        t_react: s; ``NaN`` or ``inf`` = no sustained response (scores 0).
-        available: bool, ``False`` -> ``NaN``.
-        coincident: bool, coincident warning/event onset; ``None`` means ``t_event <= t_ref``.
-            Coincident onset scores 1 iff ``t_react < t_event`` (a response was already present
-            at the event), else 0.
-    """
-    t_ref, t_event, t_react = _f(t_ref), _f(t_event), _f(t_react)
-    span = t_event - t_ref
-    coinc = (span <= 0.0) if coincident is None else jnp.asarray(coincident, bool)
-    responded = jnp.isfinite(t_react)
-    safe_span = jnp.where(span > 0.0, span, 1.0)
-    regular = jnp.clip((t_event - t_react) / safe_span, 0.0, 1.0)
-    value = jnp.where(coinc, (t_react < t_event).astype(jnp.float32), regular)
-    value = jnp.where(responded, value, 0.0)
-    ok = jnp.asarray(available, bool) & ~jnp.isnan(t_ref) & ~jnp.isnan(t_event)
-    return jnp.where(ok, value, jnp.nan)
-
-
-def s_rec(recovery_latency_s: Any, available: Any = True) -> Array:
-    """``clip(1 - RL / 8 s)``; ``NaN``/``inf`` latency = no recovery (0); unavailable -> ``NaN``."""
-    rl = _f(recovery_latency_s)
-    value = jnp.where(jnp.isfinite(rl), jnp.clip(1.0 - rl / th.RECOVER_CAP_S, 0.0, 1.0), 0.0)
-    return jnp.where(jnp.asarray(available, bool), value, jnp.nan)
+# the components' elementwise hard scores (see their modules for the definitions)
+s_ttc = ttc.score
+s_clear = clearance.score
+s_ant = anticipation.score
+s_rec = recovery.score
 
 
 def combine(
@@ -130,7 +105,7 @@ def combine(
     t_a = 0.5 * (_nz(_f(s_ant_)) + _nz(_f(s_rec_)))
     q_a = th.W_PROGRESS_A * _nz(_f(p_a)) + th.W_SAFETY_A * s_a + th.W_TEMPORAL_A * t_a
     quality = th.W_ROUTE_A * q_a + th.W_ROUTE_B * _nz(_f(p_b))
-    return {"S_A": s_a, "T_A": t_a, "Q_A": q_a, "CUS": 100.0 * _f(gate_product) * quality}
+    return {"S_A": s_a, "T_A": t_a, "Q_A": q_a, "CUS": th.CUS_SCALE * _f(gate_product) * quality}
 
 
 def components_from_values(
@@ -223,69 +198,44 @@ def pair_components(
 # ---------------------------------------------------------------------------------------------
 # soft (differentiable) score
 # ---------------------------------------------------------------------------------------------
+def _or_zero(value_valid: tuple[Array, Array]) -> Array:
+    """A soft ``(value, valid)`` pair as one value; an unavailable component contributes 0."""
+    value, valid = value_valid
+    return jnp.where(valid, value, 0.0)
+
+
 def soft_execution_terms(tel: Telemetry, d_safe: Any, temperature: Any = None) -> dict[str, Array]:
     """Smooth components and gates of one execution.
 
-    The log-sum-exp and first-crossing accumulators were built with ``tel.temperature`` and are
-    decoded with it; ``temperature`` (default ``tel.temperature``) sets the smooth clips and the
-    gate sigmoids.  Availability masks are the hard ones (an unavailable component contributes 0).
+    The log-sum-exp and first-crossing accumulators were built with the accumulator temperature
+    ``tel.context.temperature`` and are decoded with it; ``temperature`` (default: the same)
+    sets the smooth clips and the gate sigmoids.  Availability masks are the hard ones (an
+    unavailable component contributes 0).
+
+    Args:
+        tel: final telemetry of one execution.
+        d_safe: () float32, m, clearance normaliser.
+        temperature: () float32 for gates and clips.
 
     Returns:
         dict of () float32: ``P, S_ttc, S_clear, S_ant, S_rec`` and the six soft gates
         ``gate_collision, gate_route_deviation, gate_lane, gate_rule, gate_block,
         gate_false_brake`` in [0, 1].
     """
-    t_acc = tel.temperature
-    t = t_acc if temperature is None else jnp.asarray(temperature, jnp.float32)
-    d_safe = _f(d_safe)
-    avail = availability(tel)
-    length = tel.route_length_m
-    span = th.completion_length(length)
-    safe_len = jnp.where(span > 0, span, 1.0)
-    p = jnp.where(span > 0, smooth_clip01(tel.progress_m / safe_len, t), 0.0)
-
-    ttc = softmin_decode(tel.ttc_lse, t_acc, cap=th.TTC_NORM_S)
-    s_ttc_ = jnp.where(avail["ttc"], smooth_clip01(ttc / th.TTC_NORM_S, t), 0.0)
-    d_min = softmin_decode(tel.clear_lse, t_acc, cap=d_safe)
-    s_clear_ = jnp.where(avail["clearance"], smooth_clip01(d_min / d_safe, t), 0.0)
-
-    # anticipation: P(response) * clip((t_event - E[t_react | response]) / (t_event - t_ref))
-    p_resp = tel.react_p
-    has = p_resp > 1e-12
-    e_react = tel.react_pt / jnp.where(has, p_resp, 1.0)
-    span = tel.t_event - tel.t_warn_point
-    safe_span = jnp.where(avail["anticipation"] & (span > 0), span, 1.0)
-    regular = jnp.where(has, p_resp * smooth_clip01((tel.t_event - e_react) / safe_span, t), 0.0)
-    s_ant_ = jnp.where(tel.coincident_onset, tel.soft_response_at_event, regular)
-    s_ant_ = jnp.where(avail["anticipation"], s_ant_, 0.0)
-
-    # recovery: P(recovered) * clip(1 - (E[t_recover | recovered] - t_release) / 8 s)
-    p_rec = tel.rec_p
-    has_r = p_rec > 1e-12
-    e_rec = tel.rec_pt / jnp.where(has_r, p_rec, 1.0)
-    t_rel = jnp.where(avail["recovery"], release_time(tel), 0.0)
-    rl = e_rec - t_rel
-    s_rec_ = jnp.where(has_r, p_rec * smooth_clip01(1.0 - rl / th.RECOVER_CAP_S, t), 0.0)
-    s_rec_ = jnp.where(avail["recovery"], s_rec_, 0.0)
-
-    still_margin = (th.BLOCK_STILL - 0.5 - tel.max_still_run.astype(jnp.float32)) * DT
-    completion_margin = tel.progress_m - (length - th.COMPLETION_TOL_M)
-    lane_margin = (th.LANE_DEBOUNCE - 0.5 - tel.n_outside.astype(jnp.float32)) * DT
-    fb_margin = (th.FALSE_BRAKE - 0.5 - tel.fb_max_run.astype(jnp.float32)) * DT
-    no_fault = 1.0 - tel.fault.astype(jnp.float32)
-    return {
-        "P": p,
-        "S_ttc": s_ttc_,
-        "S_clear": s_clear_,
-        "S_ant": s_ant_,
-        "S_rec": s_rec_,
-        "gate_collision": (1.0 - tel.collided.astype(jnp.float32)) * soft_gate(tel.coll_margin, t),
-        "gate_route_deviation": soft_gate(th.ROUTE_DEVIATION_M - tel.max_route_dist, t),
-        "gate_lane": soft_gate(lane_margin, t),
-        "gate_rule": 1.0 - tel.red_light.astype(jnp.float32),
-        "gate_block": soft_gate(still_margin, t) * soft_gate(completion_margin, t) * no_fault,
-        "gate_false_brake": soft_gate(fb_margin, t),
+    ctx = tel.context
+    t = ctx.temperature if temperature is None else jnp.asarray(temperature, jnp.float32)
+    t_fail = first_failure_time(tel)
+    terms = {
+        "P": progress.soft(ctx, t)[0],
+        "S_ttc": _or_zero(ttc.soft(tel.ttc, ctx, t_fail, t)),
+        "S_clear": _or_zero(clearance.soft(tel.clearance, ctx, t_fail, t, _f(d_safe))),
+        "S_ant": _or_zero(anticipation.soft(tel.anticipation, ctx, t_fail, t)),
+        "S_rec": _or_zero(recovery.soft(tel.recovery, ctx, t_fail, t)),
     }
+    for name, gate in ROUTE_A_GATES.items():
+        terms["gate_" + name] = gate.soft(getattr(tel, name), ctx, t)[0]
+    terms["gate_false_brake"] = false_brake.soft(tel.false_brake, ctx, t)[0]
+    return terms
 
 
 def soft_pair_components(

@@ -33,9 +33,9 @@ class TickSample:
     justified_stop: Array  # () bool, a light, lead vehicle, obstacle, conflict or route end
     #                         justifies standing still (Route B false-brake excuse)
     controller_fault: Array  # () bool, the policy produced NaN/inf waypoints this tick
-    t_warn_point: Array  # () s, protocol: ego reached the warning point (t_ref); INF_TIME if not
-    t_event: Array  # () s, protocol: physical-event onset; INF_TIME if not yet
-    t_warn_off: Array  # () s, protocol: warning termination; INF_TIME if not yet
-    t_clear: Array  # () s, protocol: hazard clearance; INF_TIME if not yet
+    t_warn_point: Array  # () s, protocol: ego reached the warning point (t_ref); NEVER if not
+    t_event: Array  # () s, protocol: physical-event onset; NEVER if not yet
+    t_warn_off: Array  # () s, protocol: warning termination; NEVER if not yet
+    t_clear: Array  # () s, protocol: hazard clearance; NEVER if not yet
     is_route_a: Array  # () bool
     coincident_onset: Array  # () bool, warning and event points coincide (Right-Turn Yield)

@@ -9,20 +9,25 @@ from __future__ import annotations
 
 import math
 
-from lantern_jax.constants import DT, FAMILIES, INF_TIME
-
-# --- time bookkeeping --------------------------------------------------------------------------
-HAPPENED_BELOW = 0.5 * INF_TIME  # s, a protocol time below this has happened
+from lantern_jax.constants import DT, FAMILIES
 
 
+# --- tick bookkeeping --------------------------------------------------------------------------
 def ticks(seconds: float) -> int:
     """Number of 20 Hz ticks spanning ``seconds`` (``round(seconds / DT)``)."""
     return int(round(seconds / DT))
 
 
+COUNT_CAP = 2**30  # ticks, saturation of every tick counter (no int32 overflow on long runs)
+COUNT_HALF = 0.5  # ticks, a soft threshold on an integer count sits half a tick below the count
+#                   that fails (e.g. 7.5 of 10 flags for "at least 8", 19.5 ticks for "20 ticks")
+PROB_EPS = 1e-12  # a soft first-crossing probability at or below this counts as "never crossed"
+
+
 # --- time-to-collision -------------------------------------------------------------------------
 TTC_NORM_S = 3.0  # s, S_TTC = clip(TTC_min / 3 s)
 CLOSING_MIN_MPS = 0.05  # m/s, a TTC sample needs a closing speed above this
+COINCIDENT_SQ_M2 = 1e-12  # m^2, |r|^2 at or below this: coincident centres, no closing speed
 
 # --- clearance ---------------------------------------------------------------------------------
 D_SAFE_SMALL_M = 2.0  # m, Pedestrian Emergence and Obstacle Reveal
@@ -74,6 +79,7 @@ W_ROUTE_B = 0.15
 W_PROGRESS_A = 0.40
 W_SAFETY_A = 0.35
 W_TEMPORAL_A = 0.25
+CUS_SCALE = 100.0  # the CUS is reported in points, 0..100
 
 # --- per-tick measurement (scoring/measure.py) -------------------------------------------------
 LANE_MARGIN_M = 0.5  # m, outside every lane: centre farther than half a lane width + this

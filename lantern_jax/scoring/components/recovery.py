@@ -1,0 +1,184 @@
+"""Recovery component ``S_rec`` (paper appendix "Complete Cooperative Unified Score", paragraph
+"Recovery")::
+
+    RL = t_recover - t_release         S_rec = clip(1 - RL / 8 s)        no recovery -> 0
+
+``t_release = max(t_warn_off, t_clear)`` once both happened.  With the threshold
+``v_thr = max(2 m/s, 0.5 v_pre)``, ``t_recover`` is the start of the first 20-tick (1 s) window
+whose ticks all lie at/after ``t_release`` with speed above ``v_thr`` and whose progress gain
+(last tick minus first tick of the window) is >= 0.5 m.
+
+Soft (a soft first crossing): window ``k`` passes with probability ``sigma_k``, the product of
+``sigmoid((v - v_thr) / T)`` over its ticks times ``sigmoid((gain - 0.5) / T)``;
+``p_k = sigma_k prod_{j<k} (1 - sigma_j)``.  The state holds ``sum p_k`` and ``sum p_k t_k``; the
+score uses the expected ``t_recover`` given a recovery, times the probability of a recovery.
+
+Available (valid) when ``t_release`` happened no later than the first Route A gate failure.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+from flax import struct
+
+from lantern_jax.scoring import thresholds as th
+from lantern_jax.scoring.components.accumulate import first_time, push, run
+from lantern_jax.scoring.components.context import RING, Context, Tick, opened_by
+from lantern_jax.scoring.sample import TickSample
+from lantern_jax.scoring.smooth import smooth_clip01
+from lantern_jax.times import NEVER, happened, time_or_nan
+
+Array = jax.Array
+
+
+@struct.dataclass
+class RecoveryState:
+    """Accumulators of the recovery criterion (scalars unless a shape is given)."""
+
+    run: Array  # () int32, consecutive ticks after release with speed above the threshold
+    t_recover: Array  # () float32, s, start of the first recovery window (NEVER)
+    log_ok: Array  # (RING,) float32, log sigmoid((v - v_thr) / T) of the last ticks
+    surv: Array  # () float32, soft probability that no window has passed yet
+    p: Array  # () float32, soft probability that some window passed, sum_k p_k
+    pt: Array  # () float32, s, sum_k p_k t_k
+
+
+def init() -> RecoveryState:
+    """No tick yet."""
+    f = lambda v: jnp.asarray(v, jnp.float32)  # noqa: E731
+    return RecoveryState(
+        run=jnp.asarray(0, jnp.int32), t_recover=f(NEVER), log_ok=jnp.zeros(RING, jnp.float32),
+        surv=f(1.0), p=f(0.0), pt=f(0.0),
+    )  # fmt: skip
+
+
+def release_time(t_warn_off: Array, t_clear: Array) -> Array:
+    """Release time ``max(t_warn_off, t_clear)`` once both happened.
+
+    Args:
+        t_warn_off: (...) float32, s, warning termination (``NEVER`` = not happened).
+        t_clear: (...) float32, s, hazard clearance (``NEVER`` = not happened).
+
+    Returns:
+        (...) float32, s; ``NEVER`` until both happened.
+    """
+    both = happened(t_warn_off) & happened(t_clear)
+    return jnp.where(both, jnp.maximum(t_warn_off, t_clear), NEVER)
+
+
+def update(
+    state: RecoveryState, sample: TickSample, tick: Tick, temperature: Array
+) -> RecoveryState:
+    """Fold one tick.
+
+    Args:
+        state: accumulators before the tick.
+        sample: the tick's measurement (unused: speed and progress come with ``tick``).
+        tick: shared per-tick context.
+        temperature: () float32, m/s (speed test) and m (progress test).
+
+    Returns:
+        The accumulators after the tick.
+    """
+    t_release = release_time(tick.t_warn_off, tick.t_clear)
+    post_rel = happened(t_release) & (tick.t >= t_release)
+    v_thr = jnp.maximum(th.RECOVER_MIN_SPEED_MPS, th.RECOVER_PRE_FRACTION * tick.v_pre)
+    n_run = run(state.run, post_rel & (tick.speed > v_thr))
+    window_start = tick.time_ring[0]
+    gain = tick.progress - tick.progress_ring[0]
+    ok = (n_run >= th.RECOVER_WINDOW) & (gain >= th.RECOVER_MIN_PROGRESS_M)
+
+    log_ok = push(state.log_ok, jax.nn.log_sigmoid((tick.speed - v_thr) / temperature))
+    complete = post_rel & (tick.n_ticks >= th.RECOVER_WINDOW) & (window_start >= t_release)
+    gain_ok = jax.nn.sigmoid((gain - th.RECOVER_MIN_PROGRESS_M) / temperature)
+    sigma = jnp.where(complete, jnp.exp(jnp.sum(log_ok)) * gain_ok, 0.0)
+    p_k = state.surv * sigma
+    return RecoveryState(
+        run=n_run,
+        t_recover=first_time(happened(state.t_recover), ok, window_start, state.t_recover),
+        log_ok=log_ok,
+        surv=state.surv * (1.0 - sigma),
+        p=state.p + p_k,
+        pt=state.pt + p_k * window_start,
+    )
+
+
+def valid(state: RecoveryState, ctx: Context, t_fail: Array) -> Array:
+    """() bool: ``t_release`` happened no later than ``t_fail``.
+
+    Args:
+        state: final accumulators.
+        ctx: final shared context.
+        t_fail: () float32, s, first Route A gate failure (``NEVER`` if none).
+    """
+    return opened_by(release_time(ctx.t_warn_off, ctx.t_clear), t_fail)
+
+
+def recovered_at(state: RecoveryState, ctx: Context, t_fail: Array) -> tuple[Array, Array]:
+    """Start of the first recovery window.
+
+    Args:
+        state: final accumulators.
+        ctx: final shared context.
+        t_fail: () float32, s, first Route A gate failure (``NEVER`` if none).
+
+    Returns:
+        ``(t_recover, valid)``: () float32, s (``NaN`` = no recovery); () bool.
+    """
+    return time_or_nan(state.t_recover), valid(state, ctx, t_fail)
+
+
+def hard(state: RecoveryState, ctx: Context, t_fail: Array) -> tuple[Array, Array]:
+    """Hard recovery latency ``RL = t_recover - t_release``.
+
+    Args:
+        state: final accumulators.
+        ctx: final shared context.
+        t_fail: () float32, s, first Route A gate failure (``NEVER`` if none).
+
+    Returns:
+        ``(latency, valid)``: () float32, s (``NaN`` = no recovery); () bool.
+    """
+    latency = state.t_recover - release_time(ctx.t_warn_off, ctx.t_clear)
+    return jnp.where(happened(state.t_recover), latency, jnp.nan), valid(state, ctx, t_fail)
+
+
+def score(recovery_latency_s: Any, available: Any = True) -> Array:
+    """``S_rec = clip(1 - RL / 8 s)``, elementwise.
+
+    Args:
+        recovery_latency_s: (...) float32, s; ``NaN`` or ``inf`` = no recovery (scores 0).
+        available: (...) bool, ``False`` -> ``NaN``.
+
+    Returns:
+        (...) float32 in [0, 1]; ``NaN`` where unavailable.
+    """
+    rl = jnp.asarray(recovery_latency_s, jnp.float32)
+    value = jnp.where(jnp.isfinite(rl), jnp.clip(1.0 - rl / th.RECOVER_CAP_S, 0.0, 1.0), 0.0)
+    return jnp.where(jnp.asarray(available, bool), value, jnp.nan)
+
+
+def soft(
+    state: RecoveryState, ctx: Context, t_fail: Array, temperature: Array
+) -> tuple[Array, Array]:
+    """Smooth ``S_rec``: ``P(recovered) * clip(1 - (E[t_recover | recovered] - t_release) /
+    8 s)`` with a smooth clip.
+
+    Args:
+        state: final accumulators.
+        ctx: final shared context.
+        t_fail: () float32, s, first Route A gate failure (``NEVER`` if none).
+        temperature: () float32, temperature of the smooth clip.
+
+    Returns:
+        ``(s_rec, valid)``: () float32 in [0, 1]; () bool (the hard availability).
+    """
+    ok = valid(state, ctx, t_fail)
+    has = state.p > th.PROB_EPS
+    e_rec = state.pt / jnp.where(has, state.p, 1.0)
+    t_rel = jnp.where(ok, release_time(ctx.t_warn_off, ctx.t_clear), 0.0)
+    clipped = smooth_clip01(1.0 - (e_rec - t_rel) / th.RECOVER_CAP_S, temperature)
+    return jnp.where(has, state.p * clipped, 0.0), ok

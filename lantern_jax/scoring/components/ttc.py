@@ -1,0 +1,149 @@
+"""Time-to-collision component ``S_TTC`` (paper appendix "Complete Cooperative Unified Score",
+paragraph "Time-to-collision")::
+
+    v_close = -r . (v_hazard - v_ego) / |r|        TTC = d_box / v_close
+    S_TTC = clip(TTC_min / 3 s)                     no closing trend -> 1, overlap -> 0
+
+Only the controlled hazard counts, over ``[t_ref, t_clear]``.  A tick of that window with the
+hazard present is a sample if the boxes overlap (TTC 0) or ``v_close > 0.05 m/s``; the hard state
+is a running minimum plus an "any sample" flag.  The soft state is a weighted log-sum-exp soft
+minimum in which every window tick counts with weight ``sigmoid((v_close - 0.05) / T)`` (1 for an
+overlap) instead of the hard inclusion test.
+
+Available (valid) when ``t_ref`` happened no later than the first Route A gate failure.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+from flax import struct
+
+from lantern_jax.constants import BIG
+from lantern_jax.scoring import thresholds as th
+from lantern_jax.scoring.components.context import Context, Tick, opened_by
+from lantern_jax.scoring.sample import TickSample
+from lantern_jax.scoring.smooth import LSE_EMPTY, lse_add, smooth_clip01, softmin_decode
+
+Array = jax.Array
+
+
+@struct.dataclass
+class TTCState:
+    """Accumulators of the TTC window (scalars)."""
+
+    min_s: Array  # () float32, s, hard minimum TTC (BIG before any sample)
+    any_sample: Array  # () bool, at least one TTC sample (closing or overlapping)
+    lse: Array  # () float32, soft-min accumulator log sum w exp(-TTC / T)
+
+
+def init() -> TTCState:
+    """No sample yet."""
+    return TTCState(
+        min_s=jnp.asarray(BIG, jnp.float32),
+        any_sample=jnp.asarray(False),
+        lse=jnp.asarray(LSE_EMPTY, jnp.float32),
+    )
+
+
+def closing_speed(rel: Array, rel_vel: Array) -> Array:
+    """() float32, m/s: ``-r . v_rel / |r|`` (0 when the centres coincide).
+
+    Args:
+        rel: (2,) float32, m, hazard centre minus ego centre.
+        rel_vel: (2,) float32, m/s, hazard velocity minus ego velocity.
+    """
+    rr = jnp.sum(rel * rel)
+    r_ok = rr > th.COINCIDENT_SQ_M2
+    r_norm = jnp.sqrt(jnp.where(r_ok, rr, 1.0))
+    return jnp.where(r_ok, -jnp.sum(rel * rel_vel) / r_norm, 0.0)
+
+
+def update(state: TTCState, sample: TickSample, tick: Tick, temperature: Array) -> TTCState:
+    """Fold one tick.
+
+    Args:
+        state: accumulators before the tick.
+        sample: the tick's measurement (``hazard_rel``, ``hazard_rel_vel``).
+        tick: shared per-tick context.
+        temperature: () float32, s (soft minimum) and m/s (sample weights).
+
+    Returns:
+        The accumulators after the tick.
+    """
+    f32 = jnp.float32
+    v_close = closing_speed(
+        jnp.asarray(sample.hazard_rel, f32), jnp.asarray(sample.hazard_rel_vel, f32)
+    )
+    d_box = tick.hazard_dist
+    overlap = d_box <= 0.0
+    closing = v_close > th.CLOSING_MIN_MPS
+    in_window = tick.post_ref & tick.before_clear & tick.present
+    ttc = jnp.where(overlap, 0.0, d_box / jnp.where(closing, v_close, 1.0))
+    sampled = in_window & (overlap | closing)
+    ttc_soft = jnp.where(overlap, 0.0, d_box / jnp.maximum(v_close, th.CLOSING_MIN_MPS))
+    log_w = jnp.where(
+        overlap, 0.0, jax.nn.log_sigmoid((v_close - th.CLOSING_MIN_MPS) / temperature)
+    )
+    return TTCState(
+        min_s=jnp.where(sampled, jnp.minimum(state.min_s, ttc), state.min_s),
+        any_sample=state.any_sample | sampled,
+        lse=jnp.where(in_window, lse_add(state.lse, ttc_soft, temperature, log_w), state.lse),
+    )
+
+
+def valid(state: TTCState, ctx: Context, t_fail: Array) -> Array:
+    """() bool: the TTC window opened (``t_ref``) no later than ``t_fail``.
+
+    Args:
+        state: final accumulators.
+        ctx: final shared context.
+        t_fail: () float32, s, first Route A gate failure (``NEVER`` if none).
+    """
+    return opened_by(ctx.t_warn_point, t_fail)
+
+
+def hard(state: TTCState, ctx: Context, t_fail: Array) -> tuple[Array, Array]:
+    """Hard minimum TTC.
+
+    Args:
+        state: final accumulators.
+        ctx: final shared context.
+        t_fail: () float32, s, first Route A gate failure (``NEVER`` if none).
+
+    Returns:
+        ``(ttc_min, valid)``: () float32, s (``inf`` = no closing trend); () bool.
+    """
+    return jnp.where(state.any_sample, state.min_s, jnp.inf), valid(state, ctx, t_fail)
+
+
+def score(ttc_min_s: Any) -> Array:
+    """``S_TTC = clip(TTC_min / 3 s)``, elementwise.
+
+    Args:
+        ttc_min_s: (...) float32, s; ``inf`` = no closing trend (scores 1), ``NaN`` = unavailable.
+
+    Returns:
+        (...) float32 in [0, 1]; ``NaN`` where unavailable.
+    """
+    x = jnp.asarray(ttc_min_s, jnp.float32)
+    return jnp.where(jnp.isnan(x), jnp.nan, jnp.clip(x / th.TTC_NORM_S, 0.0, 1.0))
+
+
+def soft(state: TTCState, ctx: Context, t_fail: Array, temperature: Array) -> tuple[Array, Array]:
+    """Smooth ``S_TTC``: the soft minimum, decoded with the accumulator temperature
+    ``ctx.temperature`` and capped at 3 s, through a smooth clip.
+
+    Args:
+        state: final accumulators.
+        ctx: final shared context.
+        t_fail: () float32, s, first Route A gate failure (``NEVER`` if none).
+        temperature: () float32, temperature of the smooth clip.
+
+    Returns:
+        ``(s_ttc, valid)``: () float32 in [0, 1]; () bool (the hard availability).
+    """
+    ttc = softmin_decode(state.lse, ctx.temperature, cap=th.TTC_NORM_S)
+    return smooth_clip01(ttc / th.TTC_NORM_S, temperature), valid(state, ctx, t_fail)
