@@ -26,8 +26,6 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-import os
-import tempfile
 from importlib import resources
 from pathlib import Path
 
@@ -35,6 +33,7 @@ import jax
 import numpy as np
 
 from lantern_jax.constants import BIG, FAMILIES, WEATHERS
+from lantern_jax.files import atomic_write
 from lantern_jax.scenarios.families import build_pair, check_feasible, sample_params
 from lantern_jax.scenarios.spec import content_hash, validate_params
 from lantern_jax.world import World, tree_stack
@@ -303,17 +302,12 @@ def generate_suite(
 
 
 def write_manifest(manifest: dict, path: str | Path) -> None:
-    """Write a manifest atomically (temporary file + rename)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
-    with os.fdopen(fd, "w") as fh:
-        json.dump(manifest, fh, indent=1, sort_keys=False)
-        fh.write("\n")
-    mask = os.umask(0)
-    os.umask(mask)
-    os.chmod(tmp, 0o666 & ~mask)  # mkstemp creates files 0o600
-    os.replace(tmp, path)
+    """Write a manifest atomically (:func:`lantern_jax.files.atomic_write`).
+
+    Raises:
+        IsADirectoryError: when ``path`` is a folder (nothing is written).
+    """
+    atomic_write(path, json.dumps(manifest, indent=1, sort_keys=False) + "\n")
 
 
 # ---------------------------------------------------------------------------------------------
