@@ -243,7 +243,7 @@ def _canon(v: Any) -> Any:
         f = float(v)
         if not math.isfinite(f):
             raise ValueError(f"canonical_json: non-finite value {f}")
-        return round(f, 6) + 0.0  # + 0.0 turns -0.0 into 0.0
+        return f + 0.0  # exact (shortest round-trip repr); + 0.0 turns -0.0 into 0.0
     if isinstance(v, dict):
         return {str(k): _canon(x) for k, x in v.items()}
     if isinstance(v, (list, tuple, np.ndarray)):
@@ -252,7 +252,13 @@ def _canon(v: Any) -> Any:
 
 
 def canonical_json(params: dict) -> str:
-    """Canonical JSON of a parameter dict: sorted keys, compact, floats rounded to 1e-6."""
+    """Canonical JSON of a parameter dict: sorted keys, compact, floats exact.
+
+    Floats are written with Python's shortest round-trip representation, so two dicts have
+    the same canonical form exactly when they hold the same values (``-0.0`` counts as ``0.0``)
+    and therefore build the same worlds; a value with at most six decimals is written as the
+    earlier, 1e-6-rounded form wrote it, so existing content hashes are unchanged.
+    """
     return json.dumps(_canon(params), sort_keys=True, separators=(",", ":"), allow_nan=False)
 
 
