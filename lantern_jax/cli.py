@@ -17,12 +17,14 @@ Exit codes: 0 success, 1 failure (e.g. a suite that does not regenerate), 2 usag
 from __future__ import annotations
 
 import argparse
+import os
 import shlex
 import sys
 import time
 from collections.abc import Sequence
 
 REFERENCE_POLICIES = ("expert", "ego", "coop")
+EXIT_INTERRUPTED = 130
 
 ABLATION_DESCRIPTIONS = {
     "none": "the standard protocol",
@@ -434,23 +436,44 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Run the command line; returns the exit code."""
+def _interrupted(exit_process: bool) -> int:
+    print("lantern-jax: interrupted", file=sys.stderr)
+    if exit_process:
+        # XLA compiles on its own threads; a Ctrl-C unwinds Python while a compile is still
+        # running there, and normal interpreter shutdown then destroys the XLA client under
+        # that thread (a segmentation fault).  Leave without the shutdown: nothing of ours is
+        # left to flush (a staged result set was already discarded on the way out).
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(EXIT_INTERRUPTED)
+    return EXIT_INTERRUPTED
+
+
+def main(argv: Sequence[str] | None = None, exit_on_interrupt: bool | None = None) -> int:
+    """Run the command line; returns the exit code.
+
+    Args:
+        argv: the arguments (default: ``sys.argv[1:]``).
+        exit_on_interrupt: on Ctrl-C, end the process at once with exit code 130 instead of
+            returning it (default: when ``argv`` is not given, i.e. when run as the program).
+    """
     expose_cpu_cores()
+    if exit_on_interrupt is None:
+        exit_on_interrupt = argv is None
     argv = list(sys.argv[1:] if argv is None else argv)
-    parser = build_parser()
     try:
-        args = parser.parse_args(argv)
-    except SystemExit as e:  # --help, or an argparse usage error (already printed)
-        return e.code if isinstance(e.code, int) else (0 if e.code is None else 2)
-    try:
-        return args.func(args, argv)
-    except UsageError as e:
-        print(f"lantern-jax {args.command}: error: {e}", file=sys.stderr)
-        return 2
+        parser = build_parser()
+        try:
+            args = parser.parse_args(argv)
+        except SystemExit as e:  # --help, or an argparse usage error (already printed)
+            return e.code if isinstance(e.code, int) else (0 if e.code is None else 2)
+        try:
+            return args.func(args, argv)
+        except UsageError as e:
+            print(f"lantern-jax {args.command}: error: {e}", file=sys.stderr)
+            return 2
     except KeyboardInterrupt:
-        print("lantern-jax: interrupted", file=sys.stderr)
-        return 130
+        return _interrupted(exit_on_interrupt)
 
 
 if __name__ == "__main__":
