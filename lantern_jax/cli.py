@@ -10,19 +10,38 @@
     lantern-jax policies
     lantern-jax ablations
 
-Exit codes: 0 success, 1 failure (e.g. a suite that does not regenerate), 2 usage errors
-(unknown policy, ablation, suite or pair; malformed arguments).
+Options may also come from an experiment file (``--config``, TOML, one ``[evaluate]`` table; see
+:func:`load_config`); an option given on the command line always wins over the file.  Options
+must be spelled out in full (no abbreviations).
+
+Exit codes: 0 success, 1 failure (a policy that fails, results that cannot be written, a suite
+that does not regenerate), 2 usage errors (unknown policy, ablation, suite or pair; an invalid
+suite file or config; an empty selection; an output folder that cannot be written — all found
+before anything is compiled), 130 interrupted (Ctrl-C).
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import shlex
 import sys
 import time
 from collections.abc import Sequence
 
 REFERENCE_POLICIES = ("expert", "ego", "coop")
+EXIT_INTERRUPTED = 130
+
+#: Defaults of the ``evaluate`` options an experiment file may set (used when neither the
+#: command line nor the file gives one).
+EVALUATE_DEFAULTS = {
+    "policy": None,  # all reference policies
+    "ablation": "none",
+    "suite": "lantern-v1",
+    "pairs_per_family": None,  # every pair
+    "pairs": None,  # every pair
+    "out": "results",
+}
 
 ABLATION_DESCRIPTIONS = {
     "none": "the standard protocol",
@@ -118,21 +137,26 @@ def resolve_policies(names: Sequence[str] | None) -> list[str]:
 
 
 def _load_suite(args: argparse.Namespace):
-    from lantern_jax.scenarios.suite import load_suite
+    from lantern_jax.scenarios.suite import SuiteError, load_suite
 
     try:
         suite = load_suite(args.suite)
     except FileNotFoundError as e:
         raise UsageError(str(e).strip("'\"")) from None
-    except ValueError as e:
-        raise UsageError(f"invalid suite {args.suite!r}: {e}") from None
-    pairs = [p.strip() for item in getattr(args, "pairs", None) or [] for p in item.split(",")]
-    pairs = [p for p in pairs if p]
-    if pairs:
+    except SuiteError as e:
+        raise UsageError(str(e)) from None
+    given = getattr(args, "pairs", None)
+    if given is not None:
+        pairs = [p.strip() for item in given for p in item.split(",")]
+        pairs = [p for p in pairs if p]
+        if not pairs:
+            raise UsageError("--pairs: no pair id given (leave the option out for every pair)")
         try:
             suite = suite.select(pairs)
         except KeyError as e:
             raise UsageError(str(e).strip("'\"")) from None
+        except ValueError as e:
+            raise UsageError(f"--pairs: {e}") from None
     n = getattr(args, "pairs_per_family", None)
     if n is not None:
         if n < 1:
@@ -157,11 +181,28 @@ CONFIG_KEYS = {
 }
 
 
+CONFIG_TABLE = "evaluate"
+
+
 def load_config(path: str) -> dict:
-    """Read an ``evaluate`` experiment file (TOML, table ``[evaluate]`` or top level).
+    """Read an ``evaluate`` experiment file.
+
+    The one layout: a TOML file with a single ``[evaluate]`` table whose keys are those of
+    :data:`CONFIG_KEYS` (the long option names with ``_`` for ``-``)::
+
+        [evaluate]
+        suite = "lantern-v1"
+        policy = ["expert", "coop"]      # or one name, or "all"
+        pairs_per_family = 2             # or pairs = ["pe_0001", "vc_0002"]
+        ablation = "none"
+        out = "results/quick"
+
+    Returns:
+        The ``[evaluate]`` table as a dict.
 
     Raises:
-        UsageError: naming the file and the offending key for unknown keys or wrong types.
+        UsageError: naming the file and the offending key for a key outside the table, an
+            unknown key, a wrong type or an empty selection.
     """
     import tomllib
 
@@ -172,11 +213,22 @@ def load_config(path: str) -> dict:
         raise UsageError(f"cannot read config {path}: {e}") from e
     except tomllib.TOMLDecodeError as e:
         raise UsageError(f"config {path}: not valid TOML ({e})") from e
-    cfg = raw.get("evaluate", raw)
+    outside = [k for k in raw if k != CONFIG_TABLE]
+    if outside:
+        raise UsageError(
+            f"config {path}: key(s) {', '.join(map(repr, outside))} outside the "
+            f"[{CONFIG_TABLE}] table; every option goes under [{CONFIG_TABLE}]"
+        )
+    if CONFIG_TABLE not in raw:
+        raise UsageError(f"config {path}: no [{CONFIG_TABLE}] table")
+    cfg = raw[CONFIG_TABLE]
+    if not isinstance(cfg, dict):
+        raise UsageError(f"config {path}: {CONFIG_TABLE} must be a table ([{CONFIG_TABLE}])")
     for key, value in cfg.items():
         if key not in CONFIG_KEYS:
             raise UsageError(
-                f"config {path}: unknown key {key!r}; valid keys: {', '.join(CONFIG_KEYS)}"
+                f"config {path}: unknown key {key!r} in [{CONFIG_TABLE}]; "
+                f"valid keys: {', '.join(CONFIG_KEYS)}"
             )
         types = CONFIG_KEYS[key]
         if isinstance(value, bool) or not isinstance(value, types):
@@ -184,33 +236,54 @@ def load_config(path: str) -> dict:
             raise UsageError(f"config {path}: {key} must be {want}, got {value!r}")
         if isinstance(value, list) and not all(isinstance(v, str) for v in value):
             raise UsageError(f"config {path}: {key} must be a list of strings, got {value!r}")
+        items = value if isinstance(value, list) else [value] if isinstance(value, str) else []
+        names = [n.strip() for v in items for n in v.split(",")]
+        if isinstance(value, str | list) and not any(names):
+            raise UsageError(f"config {path}: {key} is empty (leave the key out for the default)")
     return cfg
 
 
-def _apply_config(args: argparse.Namespace, argv: Sequence[str]) -> None:
-    """Fill the options not given on the command line from ``--config``."""
-    cfg = load_config(args.config)
-    given = {a.split("=")[0] for a in argv if a.startswith("--")}
-    for key, value in cfg.items():
-        flag = "--" + key.replace("_", "-")
-        if flag in given:
+def _apply_config(args: argparse.Namespace) -> None:
+    """Fill the ``evaluate`` options the command line did not give: from ``--config`` when it
+    sets them, else from :data:`EVALUATE_DEFAULTS`.
+
+    Options are parsed with ``None`` as their default, so an option given on the command line
+    (even with its default value) always wins over the file.
+    """
+    cfg = load_config(args.config) if args.config else {}
+    for key, default in EVALUATE_DEFAULTS.items():
+        if getattr(args, key) is not None:
             continue
-        if key in ("policy", "pairs"):
+        value = cfg.get(key, default)
+        if key in ("policy", "pairs") and value is not None:
             value = [value] if isinstance(value, str) else [",".join(value)]
         setattr(args, key, value)
+
+
+def _check_out(out: str) -> None:
+    """Refuse an output folder that cannot receive the result set, before evaluating."""
+    from lantern_jax.files import OutputFolderError
+    from lantern_jax.report import check_output_folder
+
+    try:
+        check_output_folder(out)
+    except OutputFolderError as e:
+        raise UsageError(f"--out: {e}") from None
 
 
 def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
     """``lantern-jax evaluate``: run, print the tables, write the files."""
     from lantern_jax.evaluate import ablation_names
 
-    if args.config:
-        _apply_config(args, argv)
+    _apply_config(args)
+    if args.policy is not None and not any(n.strip() for v in args.policy for n in v.split(",")):
+        raise UsageError("--policy: no policy name given (leave the option out for 'all')")
     policies = resolve_policies(args.policy)
     if args.ablation not in ablation_names():
         raise UsageError(
             f"unknown ablation {args.ablation!r}; valid ablations: {', '.join(ablation_names())}"
         )
+    _check_out(args.out)
     _stage(args, f"loading suite {args.suite}")
     suite = _load_suite(args)
     _stage(
@@ -219,7 +292,7 @@ def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
         f"building {3 * len(suite)} executions per policy (ablation {args.ablation}); "
         f"policies: {', '.join(policies)}",
     )
-    from lantern_jax.evaluate import evaluate
+    from lantern_jax.evaluate import PolicyError, evaluate
     from lantern_jax.report import (
         format_decomposition,
         format_family_table,
@@ -228,7 +301,11 @@ def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
     )
 
     t0 = time.perf_counter()
-    result = evaluate(policies, suite=suite, ablation=args.ablation, progress=not args.quiet)
+    try:
+        result = evaluate(policies, suite=suite, ablation=args.ablation, progress=not args.quiet)
+    except PolicyError as e:
+        print(f"lantern-jax evaluate: error: {e}", file=sys.stderr)
+        return 1
     for run in result.manifest["policies"]:
         _stage(
             args,
@@ -320,6 +397,12 @@ def cmd_suite(args: argparse.Namespace, argv: Sequence[str]) -> int:
     )
 
     rc = 0
+    if args.regenerate is not None:
+        where = os.path.dirname(os.path.abspath(args.regenerate))
+        if not args.regenerate.strip() or os.path.isdir(args.regenerate):
+            raise UsageError(f"--regenerate {args.regenerate!r}: give the path of a file to write")
+        if os.path.exists(where) and not os.path.isdir(where):
+            raise UsageError(f"--regenerate {args.regenerate}: {where} is a file, not a folder")
     do_list = args.list or not (args.verify or args.regenerate)
     if do_list:
         _print_suite(_load_suite(args))
@@ -327,7 +410,11 @@ def cmd_suite(args: argparse.Namespace, argv: Sequence[str]) -> int:
         seed = DEFAULT_SEED if args.seed is None else args.seed
         _stage(args, f"generating a suite from seed {seed} (runs the expert on every candidate)")
         manifest = generate_suite(seed, progress=not args.quiet)
-        write_manifest(manifest, args.regenerate)
+        try:
+            write_manifest(manifest, args.regenerate)
+        except OSError as e:
+            print(f"lantern-jax suite: error: cannot write {args.regenerate}: {e}", file=sys.stderr)
+            return 1
         print(f"wrote {args.regenerate}: {len(manifest['pairs'])} pairs, "
               f"suite sha256 {manifest['suite_sha256']}")  # fmt: skip
     if args.verify:
@@ -375,11 +462,13 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="lantern-jax",
         description="LANTERN cooperative-warning driving benchmark (JAX, batched).",
+        allow_abbrev=False,
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
 
     ev = sub.add_parser(
         "evaluate",
+        allow_abbrev=False,
         help="evaluate policies on a suite and write the result tables",
         description="Evaluate policies on a suite (Route A with and without warning, Route B), "
         "print the per-family CUS and decomposition tables and write them with the route-level "
@@ -392,25 +481,32 @@ def build_parser() -> argparse.ArgumentParser:
         help="policy name, comma-separated names or 'all' (= expert, ego, coop; the default); "
         "may be repeated",
     )
-    ev.add_argument("--ablation", default="none", metavar="NAME", help="protocol ablation")
+    ev.add_argument("--ablation", metavar="NAME", help="protocol ablation (default: none)")
     ev.add_argument(
-        "--suite", default="lantern-v1", metavar="ID|PATH", help="suite id or manifest path"
+        "--suite", metavar="ID|PATH", help="suite id or manifest path (default: lantern-v1)"
     )
     ev.add_argument(
         "--pairs-per-family", type=int, metavar="N", help="only the first N pairs of each family"
     )
     ev.add_argument("--pairs", action="append", metavar="ID[,ID...]", help="only these pair ids")
-    ev.add_argument("--out", default="results", metavar="DIR", help="output folder")
+    ev.add_argument(
+        "--out",
+        metavar="DIR",
+        help="output folder (default: results); the result set replaces an earlier one there "
+        "as a whole, other entries of the folder are kept",
+    )
     ev.add_argument("--quiet", action="store_true", help="no progress bar or stage lines")
     ev.add_argument(
         "--config",
         metavar="TOML",
-        help="experiment file (e.g. configs/quick.toml); command-line flags override it",
+        help="experiment file with an [evaluate] table (e.g. configs/quick.toml); options "
+        "given on the command line win over it",
     )
     ev.set_defaults(func=cmd_evaluate)
 
     su = sub.add_parser(
         "suite",
+        allow_abbrev=False,
         help="list, verify or regenerate a suite",
         description="Inspect a suite manifest (default: list its pairs), check that it "
         "regenerates from its seed, or generate a fresh manifest.",
@@ -427,30 +523,51 @@ def build_parser() -> argparse.ArgumentParser:
     su.add_argument("--quiet", action="store_true", help="no stage lines")
     su.set_defaults(func=cmd_suite)
 
-    po = sub.add_parser("policies", help="list registered policies")
+    po = sub.add_parser("policies", help="list registered policies", allow_abbrev=False)
     po.set_defaults(func=cmd_policies)
-    ab = sub.add_parser("ablations", help="list protocol ablations")
+    ab = sub.add_parser("ablations", help="list protocol ablations", allow_abbrev=False)
     ab.set_defaults(func=cmd_ablations)
     return parser
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Run the command line; returns the exit code."""
+def _interrupted(exit_process: bool) -> int:
+    print("lantern-jax: interrupted", file=sys.stderr)
+    if exit_process:
+        # XLA compiles on its own threads; a Ctrl-C unwinds Python while a compile is still
+        # running there, and normal interpreter shutdown then destroys the XLA client under
+        # that thread (a segmentation fault).  Leave without the shutdown: nothing of ours is
+        # left to flush (a staged result set was already discarded on the way out).
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(EXIT_INTERRUPTED)
+    return EXIT_INTERRUPTED
+
+
+def main(argv: Sequence[str] | None = None, exit_on_interrupt: bool | None = None) -> int:
+    """Run the command line; returns the exit code.
+
+    Args:
+        argv: the arguments (default: ``sys.argv[1:]``).
+        exit_on_interrupt: on Ctrl-C, end the process at once with exit code 130 instead of
+            returning it (default: when ``argv`` is not given, i.e. when run as the program).
+    """
     expose_cpu_cores()
+    if exit_on_interrupt is None:
+        exit_on_interrupt = argv is None
     argv = list(sys.argv[1:] if argv is None else argv)
-    parser = build_parser()
     try:
-        args = parser.parse_args(argv)
-    except SystemExit as e:  # --help, or an argparse usage error (already printed)
-        return e.code if isinstance(e.code, int) else (0 if e.code is None else 2)
-    try:
-        return args.func(args, argv)
-    except UsageError as e:
-        print(f"lantern-jax {args.command}: error: {e}", file=sys.stderr)
-        return 2
+        parser = build_parser()
+        try:
+            args = parser.parse_args(argv)
+        except SystemExit as e:  # --help, or an argparse usage error (already printed)
+            return e.code if isinstance(e.code, int) else (0 if e.code is None else 2)
+        try:
+            return args.func(args, argv)
+        except UsageError as e:
+            print(f"lantern-jax {args.command}: error: {e}", file=sys.stderr)
+            return 2
     except KeyboardInterrupt:
-        print("lantern-jax: interrupted", file=sys.stderr)
-        return 130
+        return _interrupted(exit_on_interrupt)
 
 
 if __name__ == "__main__":

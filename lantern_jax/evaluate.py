@@ -339,6 +339,11 @@ def hidden_at_warning(runs: list[PolicyRun], execs_pairs: int, families: list[st
     return pd.DataFrame(rows)
 
 
+class PolicyError(ValueError):
+    """A policy that cannot be evaluated: its ``act`` failed while being traced, compiled or
+    run, or returned the wrong shape; the message names the policy."""
+
+
 @dataclasses.dataclass
 class EvalResult:
     """Everything an evaluation produces."""
@@ -370,9 +375,26 @@ def evaluate(
     Returns:
         :class:`EvalResult` with the route-level table, the family table (with paired warning
         gains), the decomposition table and the reproducibility manifest.
+
+    Raises:
+        ValueError: for no policies, a policy given twice (rows are keyed by policy name), or
+            a suite without pairs.
+        PolicyError: naming the policy whose ``act`` failed while traced or run.
     """
     if isinstance(policies, str | Policy):
         policies = [policies]
+    policies = list(policies)
+    if not policies:
+        raise ValueError("evaluate: no policies given")
+    names = [p if isinstance(p, str) else getattr(p, "name", repr(p)) for p in policies]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise ValueError(
+            f"evaluate: policy name(s) {', '.join(map(repr, twice))} given more than once; "
+            "results are keyed by policy name"
+        )
+    if isinstance(suite, Suite) and not suite.pairs:
+        raise ValueError(f"evaluate: suite {suite.suite_id!r} has no pairs")
     pols = [get_policy(p) if isinstance(p, str) else p for p in policies]
     if params is None:
         params = [None] * len(pols)
@@ -389,7 +411,15 @@ def evaluate(
     for pol, par in zip(pols, params, strict=True):
         if bar is not None:
             bar.set_postfix_str(f"{pol.name}: compile + {3 * execs.num_pairs} executions")
-        runs.append(run_policy(pol, execs, par))
+        try:
+            runs.append(run_policy(pol, execs, par))
+        except Exception as e:
+            lines = str(e).strip().splitlines() or [""]
+            why = lines[0] if len(lines) == 1 else f"{lines[0]} ... {lines[-1]}"
+            raise PolicyError(
+                f"policy {pol.name!r} failed while being traced or run on suite {s.suite_id}: "
+                f"{type(e).__name__}: {why}"
+            ) from e
         if bar is not None:
             bar.update(1)
     if bar is not None:

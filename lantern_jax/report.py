@@ -3,7 +3,9 @@
 * :func:`format_family_table` / :func:`format_decomposition` render the per-family CUS table
   (with each model's paired warning gain) and the CUS decomposition for the terminal (or, with
   ``tablefmt="github"``, as Markdown).
-* :func:`write_outputs` writes every file of an evaluation atomically into one folder:
+* :func:`write_outputs` writes every file of an evaluation into one folder as a whole set
+  (staged beside the folder and moved into place together, so a reader or a kill never sees a
+  mix of two runs' files; :mod:`lantern_jax.files`):
 
   ==================================  =========================================================
   ``route_level_results.csv``         one row per (model, condition, pair), schema order
@@ -24,7 +26,6 @@ import hashlib
 import json
 import math
 import os
-import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -33,6 +34,7 @@ import pandas as pd
 from tabulate import tabulate
 
 from lantern_jax.constants import FAMILIES
+from lantern_jax.files import StagedFolder, atomic_write, check_target_folder
 from lantern_jax.scoring.aggregate import DECOMPOSITION_COLUMNS
 from lantern_jax.scoring.table import schema_path_for, write_route_table
 
@@ -183,23 +185,6 @@ def format_decomposition(df: pd.DataFrame, tablefmt: str = "simple") -> str:
 # ---------------------------------------------------------------------------------------------
 # files
 # ---------------------------------------------------------------------------------------------
-def _atomic_write_bytes(path: Path, data: bytes) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
-        mask = os.umask(0)
-        os.umask(mask)
-        os.chmod(tmp, 0o666 & ~mask)  # mkstemp creates files 0o600
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
 def _csv_bytes(df: pd.DataFrame) -> bytes:
     df = df.copy()
     for c in df.columns:
@@ -226,68 +211,96 @@ def _markdown(title: str, note: str, table: str) -> bytes:
     return f"# {title}\n\n{note}\n\n{table}\n".encode()
 
 
-def write_outputs(
-    result: EvalResult, out_dir: str | os.PathLike, extra_manifest: dict | None = None
-) -> dict[str, Path]:
-    """Write every file of an evaluation (see the module docstring) atomically.
+def check_output_folder(out_dir: str | os.PathLike) -> Path:
+    """Check that ``out_dir`` can receive a result set, before an evaluation is started.
+
+    Nothing existing is changed (a probe folder is created and removed beside it).
 
     Args:
-        result: from :func:`lantern_jax.evaluate.evaluate`.
-        out_dir: output folder (created if needed; files of the same names are replaced).
-        extra_manifest: more entries for the reproducibility manifest (e.g. the command line).
+        out_dir: the output folder (may not exist yet).
 
     Returns:
-        File name -> path, for every file written (:data:`OUTPUT_FILES`).
+        The resolved folder path.
 
     Raises:
-        ValueError: when the route-level table does not satisfy its schema.
+        lantern_jax.files.OutputFolderError: when it is a file, lies under a file, or cannot be
+            written.
     """
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    written: dict[str, Path] = {}
+    return check_target_folder(out_dir)
 
+
+def _write_set(result: EvalResult, out: Path, extra_manifest: dict | None) -> None:
+    """Write every file of a result set into the (staging) folder ``out``."""
     route = write_route_table(result.route_table, out / ROUTE_CSV)
-    written[ROUTE_CSV] = route
-    schema = schema_path_for(route)
-    written[schema.name] = schema
+    written = [route, schema_path_for(route)]
 
     fam, dec = ordered_tables(result)
     for name, df in ((FAMILY_CSV, fam), (DECOMPOSITION_CSV, dec)):
-        _atomic_write_bytes(out / name, _csv_bytes(df))
-        written[name] = out / name
+        written.append(atomic_write(out / name, _csv_bytes(df)))
 
     m = result.manifest
     where = (
         f"Suite `{m.get('suite_id', '?')}` ({m.get('num_pairs', '?')} pairs), "
         f"ablation `{m.get('ablation', 'none')}`."
     )
-    _atomic_write_bytes(
-        out / FAMILY_MD,
-        _markdown(
-            "Per-family CUS",
-            f"{where} Mean CUS (0-100) per family; Overall is the macro-average over families. "
-            "`warning gain` = warning - no-warning.",
-            format_family_table(fam, tablefmt="github"),
-        ),
+    written.append(
+        atomic_write(
+            out / FAMILY_MD,
+            _markdown(
+                "Per-family CUS",
+                f"{where} Mean CUS (0-100) per family; Overall is the macro-average over "
+                "families. `warning gain` = warning - no-warning.",
+                format_family_table(fam, tablefmt="github"),
+            ),
+        )
     )
-    written[FAMILY_MD] = out / FAMILY_MD
-    _atomic_write_bytes(
-        out / DECOMPOSITION_MD,
-        _markdown(
-            "CUS decomposition",
-            f"{where} Components are means x 100 over available pairs; Gate Pass and the "
-            "gate columns (-A: Route A, -B: Route B) are percentages of pairs.",
-            format_decomposition(dec, tablefmt="github"),
-        ),
+    written.append(
+        atomic_write(
+            out / DECOMPOSITION_MD,
+            _markdown(
+                "CUS decomposition",
+                f"{where} Components are means x 100 over available pairs; Gate Pass and the "
+                "gate columns (-A: Route A, -B: Route B) are percentages of pairs.",
+                format_decomposition(dec, tablefmt="github"),
+            ),
+        )
     )
-    written[DECOMPOSITION_MD] = out / DECOMPOSITION_MD
 
     manifest = dict(result.manifest)
     manifest.update(extra_manifest or {})
     manifest["files"] = [
-        dict(name=name, sha256=_sha256(p), bytes=p.stat().st_size) for name, p in written.items()
+        dict(name=p.name, sha256=_sha256(p), bytes=p.stat().st_size) for p in written
     ]
     text = json.dumps(manifest, indent=2, default=_jsonable, allow_nan=False) + "\n"
-    _atomic_write_bytes(out / MANIFEST_JSON, text.encode())
-    written[MANIFEST_JSON] = out / MANIFEST_JSON
-    return written
+    atomic_write(out / MANIFEST_JSON, text.encode())
+
+
+def write_outputs(
+    result: EvalResult, out_dir: str | os.PathLike, extra_manifest: dict | None = None
+) -> dict[str, Path]:
+    """Write every file of an evaluation (see the module docstring) as one whole set.
+
+    The files are written into a hidden staging folder beside ``out_dir`` and moved into place
+    together (:class:`lantern_jax.files.StagedFolder`): ``out_dir`` holds either the previous
+    complete set or the new one, even if the process is killed.  The result files of an
+    existing ``out_dir`` are replaced; its other entries (other files, sub-folders) are kept.
+    Leftovers of an interrupted earlier write are cleaned first.
+
+    Args:
+        result: from :func:`lantern_jax.evaluate.evaluate`.
+        out_dir: output folder (created if needed).
+        extra_manifest: more entries for the reproducibility manifest (e.g. the command line).
+
+    Returns:
+        File name -> path, for every file written (:data:`OUTPUT_FILES`).
+
+    Raises:
+        ValueError: when the route-level table does not satisfy its schema (nothing is
+            written).
+        lantern_jax.files.OutputFolderError: when ``out_dir`` cannot receive the set.
+    """
+    with StagedFolder(out_dir, OUTPUT_FILES) as stage:
+        _write_set(result, stage.path, extra_manifest)
+        stage.commit()
+    out = Path(out_dir)
+    return {name: out / name for name in OUTPUT_FILES}

@@ -60,7 +60,7 @@ def test_tampered_manifest_names_the_first_mismatching_pair(raw, tmp_path):
     path = tmp_path / "tampered.json"
     write_manifest(bad, path)
     first = raw["pairs"][7]["pair_id"]
-    with pytest.raises(ValueError, match=rf"pair {first} does not match its manifest hash"):
+    with pytest.raises(ValueError, match=rf"pair {first}: sha256: does not match its parameters"):
         load_suite(path)
 
 
@@ -69,7 +69,8 @@ def test_manifest_structure_errors(raw, tmp_path):
     del bad["pairs"][3]["sha256"]
     path = tmp_path / "missing.json"
     write_manifest(bad, path)
-    with pytest.raises(ValueError, match=r"pairs\[3\] lacks field 'sha256'"):
+    pid = raw["pairs"][3]["pair_id"]
+    with pytest.raises(ValueError, match=rf"pair {pid}: sha256: missing"):
         load_suite(path)
     reordered = copy.deepcopy(raw)
     reordered["pairs"][0], reordered["pairs"][1] = reordered["pairs"][1], reordered["pairs"][0]

@@ -80,8 +80,12 @@ class FloatRange:
     def check(self, name: str, v: Any) -> None:
         if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, float, np.number)):
             raise ValueError(f"{name}: expected a number, got {v!r}")
-        if not math.isfinite(float(v)) or not self.lo <= float(v) <= self.hi:
-            raise ValueError(f"{name}: {float(v)!r} outside [{_num(self.lo)}, {_num(self.hi)}]")
+        try:
+            f = float(v)
+        except OverflowError:  # an integer beyond the float range
+            f = math.inf if v > 0 else -math.inf
+        if not math.isfinite(f) or not self.lo <= f <= self.hi:
+            raise ValueError(f"{name}: {f!r} outside [{_num(self.lo)}, {_num(self.hi)}]")
 
 
 @dataclass(frozen=True)
@@ -197,9 +201,53 @@ assert tuple(PARAM_RANGES) == FAMILIES
 def family_of(params: dict) -> str:
     """The family abbreviation of a parameter dict, validated."""
     fam = params.get("family") if isinstance(params, dict) else None
-    if fam not in PARAM_RANGES:
+    if not isinstance(fam, str) or fam not in PARAM_RANGES:
         raise ValueError(f"family: {fam!r} not one of {{{', '.join(FAMILIES)}}}")
     return fam
+
+
+def param_errors(params: Any, feasibility: bool = True) -> list[str]:
+    """Every problem of a scenario parameter dict, each naming its field.
+
+    Checks the JSON type (a dict), the family, unknown and missing fields, each field's type and
+    range (:data:`PARAM_RANGES`; NaN and infinities are out of every range) and, when all of
+    those pass and ``feasibility`` is set, the family's cross-field geometry checks.
+
+    Args:
+        params: flat dict with ``family`` and the fields of ``PARAM_RANGES[family]``.
+        feasibility: also run the family's cross-field checks.
+
+    Returns:
+        Messages such as ``"PE.route_length: 150.0 outside [68, 135]"``; empty when valid.
+    """
+    if not isinstance(params, dict):
+        return [f"params: expected a JSON object, got {type(params).__name__} {params!r}"]
+    try:
+        fam = family_of(params)
+    except ValueError as e:
+        return [str(e)]
+    table = PARAM_RANGES[fam]
+    errors = [
+        f"{fam}.{key}: unknown parameter (known: {', '.join(table)})"
+        for key in params
+        if key != "family" and key not in table
+    ]
+    for key, rng in table.items():
+        if key not in params:
+            errors.append(f"{fam}.{key}: missing")
+            continue
+        try:
+            rng.check(f"{fam}.{key}", params[key])
+        except ValueError as e:
+            errors.append(str(e))
+    if feasibility and not errors:
+        from lantern_jax.scenarios.families import check_feasible
+
+        try:
+            check_feasible(params)
+        except ValueError as e:
+            errors.append(str(e))
+    return errors
 
 
 def validate_params(params: dict, feasibility: bool = True) -> dict:
@@ -211,21 +259,12 @@ def validate_params(params: dict, feasibility: bool = True) -> dict:
             the recovery, marker ordering, arm layout...).
 
     Raises:
-        ValueError: naming the field (``"PE.route_length: 150.0 outside [68, 135]"``).
+        ValueError: naming the field of the first problem of :func:`param_errors`
+            (``"PE.route_length: 150.0 outside [68, 135]"``).
     """
-    fam = family_of(params)
-    table = PARAM_RANGES[fam]
-    for key in params:
-        if key != "family" and key not in table:
-            raise ValueError(f"{fam}.{key}: unknown parameter (known: {', '.join(table)})")
-    for key, rng in table.items():
-        if key not in params:
-            raise ValueError(f"{fam}.{key}: missing")
-        rng.check(f"{fam}.{key}", params[key])
-    if feasibility:
-        from lantern_jax.scenarios.families import check_feasible
-
-        check_feasible(params)
+    errors = param_errors(params, feasibility)
+    if errors:
+        raise ValueError(errors[0])
     return params
 
 
@@ -243,7 +282,7 @@ def _canon(v: Any) -> Any:
         f = float(v)
         if not math.isfinite(f):
             raise ValueError(f"canonical_json: non-finite value {f}")
-        return round(f, 6) + 0.0  # + 0.0 turns -0.0 into 0.0
+        return f + 0.0  # exact (shortest round-trip repr); + 0.0 turns -0.0 into 0.0
     if isinstance(v, dict):
         return {str(k): _canon(x) for k, x in v.items()}
     if isinstance(v, (list, tuple, np.ndarray)):
@@ -252,7 +291,13 @@ def _canon(v: Any) -> Any:
 
 
 def canonical_json(params: dict) -> str:
-    """Canonical JSON of a parameter dict: sorted keys, compact, floats rounded to 1e-6."""
+    """Canonical JSON of a parameter dict: sorted keys, compact, floats exact.
+
+    Floats are written with Python's shortest round-trip representation, so two dicts have
+    the same canonical form exactly when they hold the same values (``-0.0`` counts as ``0.0``)
+    and therefore build the same worlds; a value with at most six decimals is written as the
+    earlier, 1e-6-rounded form wrote it, so existing content hashes are unchanged.
+    """
     return json.dumps(_canon(params), sort_keys=True, separators=(",", ":"), allow_nan=False)
 
 

@@ -27,7 +27,6 @@ import dataclasses
 import hashlib
 import json
 import os
-import tempfile
 from importlib import resources
 from pathlib import Path
 
@@ -35,8 +34,9 @@ import jax
 import numpy as np
 
 from lantern_jax.constants import FAMILIES, WEATHERS
+from lantern_jax.files import atomic_write
 from lantern_jax.scenarios.families import build_pair, check_feasible, sample_params
-from lantern_jax.scenarios.spec import content_hash, validate_params
+from lantern_jax.scenarios.spec import SEED_MAX, content_hash, param_errors, validate_params
 from lantern_jax.times import happened
 from lantern_jax.world import Scenario, tree_stack
 
@@ -73,7 +73,13 @@ class Suite:
         return len(self.pairs)
 
     def subset(self, n_per_family: int) -> Suite:
-        """The first ``n_per_family`` pairs of every family (for quick runs and tests)."""
+        """The first ``n_per_family`` pairs of every family (for quick runs and tests).
+
+        Raises:
+            ValueError: when ``n_per_family`` is not a positive integer.
+        """
+        if isinstance(n_per_family, bool) or not isinstance(n_per_family, int) or n_per_family < 1:
+            raise ValueError(f"pairs per family must be an integer >= 1, got {n_per_family!r}")
         keep, count = [], {f: 0 for f in FAMILIES}
         for p in self.pairs:
             if count[p.family] < n_per_family:
@@ -84,7 +90,19 @@ class Suite:
         )
 
     def select(self, pair_ids: list[str]) -> Suite:
-        """The pairs with the given ids, in the given order."""
+        """The pairs with the given ids, in the given order.
+
+        Raises:
+            ValueError: for an empty selection or an id given more than once.
+            KeyError: listing the ids that are not in the suite.
+        """
+        if isinstance(pair_ids, str):
+            pair_ids = [pair_ids]
+        if not pair_ids:
+            raise ValueError(f"no pair ids given (suite {self.suite_id} has {len(self)} pairs)")
+        twice = sorted({i for i in pair_ids if list(pair_ids).count(i) > 1})
+        if twice:
+            raise ValueError(f"pair ids given more than once: {', '.join(twice)}")
         by_id = {p.pair_id: p for p in self.pairs}
         missing = [i for i in pair_ids if i not in by_id]
         if missing:
@@ -306,17 +324,12 @@ def generate_suite(
 
 
 def write_manifest(manifest: dict, path: str | Path) -> None:
-    """Write a manifest atomically (temporary file + rename)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".tmp")
-    with os.fdopen(fd, "w") as fh:
-        json.dump(manifest, fh, indent=1, sort_keys=False)
-        fh.write("\n")
-    mask = os.umask(0)
-    os.umask(mask)
-    os.chmod(tmp, 0o666 & ~mask)  # mkstemp creates files 0o600
-    os.replace(tmp, path)
+    """Write a manifest atomically (:func:`lantern_jax.files.atomic_write`).
+
+    Raises:
+        IsADirectoryError: when ``path`` is a folder (nothing is written).
+    """
+    atomic_write(path, json.dumps(manifest, indent=1, sort_keys=False) + "\n")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -326,43 +339,241 @@ def _shipped_path(name: str):
     return resources.files("lantern_jax") / "data" / f"{name}.json"
 
 
-def load_suite(name_or_path: str | Path = SUITE_ID) -> Suite:
-    """Load a suite manifest (a shipped suite id or a JSON path) and check every hash.
+class SuiteError(ValueError):
+    """A suite file that is not valid.
 
-    Raises:
-        ValueError: naming the first pair whose parameters do not match its hash, or the suite
-            hash mismatch.
-        FileNotFoundError: for an unknown suite name.
+    Attributes:
+        source: the file (or shipped suite id) as the caller named it.
+        errors: every problem found, each a full message naming the file, the pair (where
+            there is one) and the field, e.g.
+            ``"suite my.json: pair pe_0003: PE.route_length: 150.0 outside [68, 135]"``.
     """
-    p = Path(name_or_path)
-    if p.suffix == ".json" and p.exists():
-        text = p.read_text()
-    else:
-        res = _shipped_path(str(name_or_path))
-        if not res.is_file():
-            raise FileNotFoundError(f"unknown suite {name_or_path!r}; shipped suites: {SUITE_ID}")
-        text = res.read_text()
-    raw = json.loads(text)
-    for key in ("suite_id", "pairs", "suite_sha256"):
-        if key not in raw:
-            raise ValueError(f"suite manifest: missing field {key!r}")
-    pairs = []
-    for i, d in enumerate(raw["pairs"]):
-        for key in ("pair_id", "family", "weather", "params", "sha256"):
-            if key not in d:
-                raise ValueError(f"suite manifest: pairs[{i}] lacks field {key!r}")
-        h = content_hash(d["params"])
-        if h != d["sha256"]:
-            raise ValueError(
-                f"suite {raw['suite_id']}: pair {d['pair_id']} does not match its manifest hash "
-                f"(manifest {d['sha256'][:12]}..., content {h[:12]}...)"
-            )
-        pairs.append(PairSpec(d["pair_id"], d["family"], d["weather"], d["params"], d["sha256"]))
+
+    MAX_SHOWN = 20
+
+    def __init__(self, source: str, errors: list[str]) -> None:
+        self.source = source
+        self.errors = list(errors)
+        shown = self.errors[: self.MAX_SHOWN]
+        more = len(self.errors) - len(shown)
+        text = "\n".join(shown) + (f"\n... and {more} more" if more else "")
+        super().__init__(text)
+
+
+#: Fields of a suite manifest: name -> required.
+MANIFEST_FIELDS = {
+    "suite_id": True,
+    "format_version": False,
+    "seed": False,
+    "pairs": True,
+    "suite_sha256": True,
+    "generation_report": False,
+}
+PAIR_FIELDS = ("pair_id", "family", "weather", "params", "sha256")
+_HEX = set("0123456789abcdef")
+
+
+class _JsonObject(dict):
+    """A JSON object that remembers the keys it held more than once."""
+
+    duplicates: tuple[str, ...] = ()
+
+
+def _json_object(items: list[tuple[str, object]]) -> _JsonObject:
+    obj = _JsonObject(items)
+    if len(obj) != len(items):
+        seen: set[str] = set()
+        obj.duplicates = tuple(k for k, _ in items if k in seen or seen.add(k))
+    return obj
+
+
+def _type_name(v: object) -> str:
+    names = {dict: "object", _JsonObject: "object", list: "array", str: "string", bool: "bool"}
+    return "null" if v is None else names.get(type(v), type(v).__name__)
+
+
+def _is_int(v: object) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def _is_sha256(v: object) -> bool:
+    return isinstance(v, str) and len(v) == 64 and set(v) <= _HEX
+
+
+def _valid_pair_id(v: object) -> bool:
+    return (
+        isinstance(v, str)
+        and v != ""
+        and all(c.isascii() and (c.isalnum() or c in "_-.") for c in v)
+    )
+
+
+def _pair_errors(d: object, i: int) -> tuple[str, list[str], PairSpec | None]:
+    """Problems of ``pairs[i]`` (each prefixed ``"pair <id>: "``) and its spec when valid."""
+    if not isinstance(d, dict):
+        return f"pairs[{i}]", [f"pairs[{i}]: expected a JSON object, got {_type_name(d)}"], None
+    pid = d.get("pair_id")
+    label = f"pair {pid}" if _valid_pair_id(pid) else f"pairs[{i}]"
+    errs: list[str] = []
+
+    def err(field: str, msg: str) -> None:
+        errs.append(f"{label}: {field}: {msg}")
+
+    for key in getattr(d, "duplicates", ()):
+        err(key, "given more than once")
+    for key in d:
+        if key not in PAIR_FIELDS:
+            err(key, f"unknown field (known: {', '.join(PAIR_FIELDS)})")
+    for key in PAIR_FIELDS:
+        if key not in d:
+            err(key, "missing")
+    if "pair_id" in d and not _valid_pair_id(pid):
+        err("pair_id", f"expected a non-empty string of letters, digits, '_', '-' or '.', "
+                       f"got {_type_name(pid)} {pid!r}")  # fmt: skip
+    fam, weather, params, sha = (d.get(k) for k in ("family", "weather", "params", "sha256"))
+    if "family" in d and (not isinstance(fam, str) or fam not in FAMILIES):
+        err("family", f"{fam!r} not one of {{{', '.join(FAMILIES)}}}")
+    if "weather" in d and (not isinstance(weather, str) or weather not in WEATHERS):
+        err("weather", f"{weather!r} not one of {{{', '.join(WEATHERS)}}}")
+    if "sha256" in d and not _is_sha256(sha):
+        err("sha256", f"expected a 64-digit lowercase hex string, got {_type_name(sha)} {sha!r}")
+    if "params" in d:
+        if not isinstance(params, dict):
+            err("params", f"expected a JSON object, got {_type_name(params)}")
+        else:
+            for key in getattr(params, "duplicates", ()):
+                err(f"params.{key}", "given more than once")
+            pfam, pweather = params.get("family"), params.get("weather")
+            if not isinstance(pfam, str) or pfam not in FAMILIES:
+                err("params.family", f"{pfam!r} not one of {{{', '.join(FAMILIES)}}}")
+            elif isinstance(fam, str) and fam in FAMILIES and fam != pfam:
+                # the parameters are checked against their own family only once the label
+                # agrees; otherwise every field would be reported against the wrong table
+                err("family", f"label {fam!r} disagrees with params.family {pfam!r}")
+            else:
+                if isinstance(weather, str) and "weather" in params and weather != pweather:
+                    err("weather", f"label {weather!r} disagrees with params.weather {pweather!r}")
+                errs.extend(f"{label}: {m}" for m in param_errors(params))
+            if _is_sha256(sha):
+                try:
+                    h = content_hash(params)
+                except ValueError:
+                    h = None  # a non-finite or unsupported value, reported above
+                if h is not None and h != sha:
+                    err("sha256", f"does not match its parameters (manifest {sha[:12]}..., "
+                                  f"content {h[:12]}...)")  # fmt: skip
+    if errs:
+        return label, errs, None
+    return label, [], PairSpec(pid, fam, weather, params, sha)
+
+
+def _manifest_errors(raw: object) -> tuple[list[str], Suite | None]:
+    """Every problem of a parsed manifest (without the file prefix) and the suite when valid."""
+    if not isinstance(raw, dict):
+        return [f"expected a JSON object at the top level, got {_type_name(raw)}"], None
+    errs = [f"{k}: given more than once" for k in getattr(raw, "duplicates", ())]
+    for key in raw:
+        if key not in MANIFEST_FIELDS:
+            errs.append(f"{key}: unknown field (known: {', '.join(MANIFEST_FIELDS)})")
+    for key, required in MANIFEST_FIELDS.items():
+        if required and key not in raw:
+            errs.append(f"{key}: missing")
+    sid = raw.get("suite_id")
+    if "suite_id" in raw and not (isinstance(sid, str) and sid.strip()):
+        errs.append(f"suite_id: expected a non-empty string, got {_type_name(sid)} {sid!r}")
+    if "format_version" in raw and (not _is_int(raw["format_version"])
+                                    or raw["format_version"] != 1):  # fmt: skip
+        errs.append(f"format_version: {raw['format_version']!r} not supported (expected 1)")
+    seed = raw.get("seed", -1)
+    if "seed" in raw and not (_is_int(seed) and 0 <= seed <= SEED_MAX):
+        errs.append(f"seed: expected an integer in [0, {SEED_MAX}], got {_type_name(seed)} "
+                    f"{seed!r}")  # fmt: skip
+    report = raw.get("generation_report", {})
+    if not isinstance(report, dict):
+        errs.append(f"generation_report: expected a JSON object, got {_type_name(report)}")
+    if "suite_sha256" in raw and not _is_sha256(raw["suite_sha256"]):
+        got = raw["suite_sha256"]
+        errs.append(f"suite_sha256: expected a 64-digit lowercase hex string, got "
+                    f"{_type_name(got)} {got!r}")  # fmt: skip
+    pairs_raw = raw.get("pairs", [])
+    if not isinstance(pairs_raw, list):
+        errs.append(f"pairs: expected a JSON array, got {_type_name(pairs_raw)}")
+        pairs_raw = []
+    elif "pairs" in raw and not pairs_raw:
+        errs.append("pairs: empty (a suite needs at least one pair)")
+    pairs: list[PairSpec] = []
+    first_at: dict[str, str] = {}
+    first_hash: dict[str, str] = {}
+    for i, d in enumerate(pairs_raw):
+        label, perrs, spec = _pair_errors(d, i)
+        errs.extend(perrs)
+        pid = d.get("pair_id") if isinstance(d, dict) else None
+        if _valid_pair_id(pid):
+            if pid in first_at:
+                errs.append(f"{label}: pair_id: duplicate (also pairs[{first_at[pid]}])")
+            else:
+                first_at[pid] = str(i)
+        if spec is not None:
+            if spec.sha256 in first_hash:
+                errs.append(f"{label}: params: same parameters (content hash) as pair "
+                            f"{first_hash[spec.sha256]}")  # fmt: skip
+            else:
+                first_hash[spec.sha256] = spec.pair_id
+            pairs.append(spec)
+    if errs:
+        return errs, None
     got = suite_hash(pairs)
     if got != raw["suite_sha256"]:
-        raise ValueError(f"suite {raw['suite_id']}: suite hash mismatch ({got[:12]}...)")
-    return Suite(raw["suite_id"], tuple(pairs), got, int(raw.get("seed", -1)),
-                 raw.get("generation_report", {}))  # fmt: skip
+        return [f"suite_sha256: suite hash mismatch (manifest {raw['suite_sha256'][:12]}..., "
+                f"pairs give {got[:12]}...)"], None  # fmt: skip
+    return [], Suite(sid, tuple(pairs), got, int(seed), dict(report))
+
+
+def load_suite(name_or_path: str | Path = SUITE_ID) -> Suite:
+    """Load a suite manifest (a shipped suite id or a JSON path) and validate all of it.
+
+    Before anything is built, every field is checked: JSON types of the manifest and of every
+    pair, known family and weather labels that agree with the parameters, every parameter's
+    type and range and the family's feasibility rules (:func:`~lantern_jax.scenarios.spec.
+    param_errors`), duplicate keys, pair ids and scenarios, each pair's content hash and the
+    suite hash.
+
+    Args:
+        name_or_path: a shipped suite id (``"lantern-v1"``) or the path of a manifest file.
+
+    Returns:
+        The :class:`Suite`.
+
+    Raises:
+        SuiteError: listing every problem, each naming the file, the pair and the field
+            (``"suite my.json: pair pe_0003: PE.route_length: 150.0 outside [68, 135]"``).
+        FileNotFoundError: for an unknown suite name or a missing file.
+    """
+    p = Path(name_or_path)
+    source = str(name_or_path)
+    looks_like_path = p.suffix == ".json" or os.sep in source or "/" in source
+    if looks_like_path and not p.exists():
+        raise FileNotFoundError(f"suite file {source} not found")
+    try:
+        if looks_like_path:
+            text = p.read_text(encoding="utf-8")
+        else:
+            res = _shipped_path(source)
+            if not res.is_file():
+                raise FileNotFoundError(f"unknown suite {source!r}; shipped suites: {SUITE_ID}")
+            text = res.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as e:
+        if isinstance(e, FileNotFoundError):
+            raise
+        raise SuiteError(source, [f"suite {source}: cannot read ({e})"]) from None
+    try:
+        raw = json.loads(text, object_pairs_hook=_json_object)
+    except json.JSONDecodeError as e:
+        raise SuiteError(source, [f"suite {source}: not valid JSON ({e})"]) from None
+    errs, suite = _manifest_errors(raw)
+    if errs:
+        raise SuiteError(source, [f"suite {source}: {m}" for m in errs])
+    return suite
 
 
 def verify_regeneration(name: str = SUITE_ID) -> tuple[bool, str]:

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 from collections.abc import Sequence
 from importlib import resources
 from pathlib import Path
@@ -20,6 +19,7 @@ import numpy as np
 import pandas as pd
 
 from lantern_jax.constants import FAMILIES
+from lantern_jax.files import atomic_write
 from lantern_jax.scoring.cus import GATE_NAMES, d_safe_for_family, pair_components
 from lantern_jax.scoring.metrics import ExecutionMetrics
 
@@ -212,28 +212,6 @@ def validate_route_table(df: pd.DataFrame, require_same_pairs: bool = True) -> p
     return df
 
 
-def _file_mode() -> int:
-    """0o666 minus the process umask (``mkstemp`` creates files 0o600)."""
-    mask = os.umask(0)
-    os.umask(mask)
-    return 0o666 & ~mask
-
-
-def _atomic_write_text(path: Path, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.chmod(tmp, _file_mode())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
 def schema_path_for(path: str | os.PathLike) -> Path:
     """Where :func:`write_route_table` puts the schema: ``<name>.schema.json`` next to the CSV."""
     p = Path(path)
@@ -249,8 +227,8 @@ def write_route_table(df: pd.DataFrame, path: str | os.PathLike) -> Path:
     validate_route_table(df)
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
-    _atomic_write_text(p, df.to_csv(index=False))
-    _atomic_write_text(schema_path_for(p), json.dumps(load_schema(), indent=2) + "\n")
+    atomic_write(p, df.to_csv(index=False))
+    atomic_write(schema_path_for(p), json.dumps(load_schema(), indent=2) + "\n")
     return p
 
 
