@@ -389,12 +389,8 @@ def _print_suite(suite) -> None:
 def cmd_suite(args: argparse.Namespace, argv: Sequence[str]) -> int:
     """``lantern-jax suite``: list, verify or regenerate a suite."""
     del argv
-    from lantern_jax.scenarios.suite import (
-        DEFAULT_SEED,
-        generate_suite,
-        verify_regeneration,
-        write_manifest,
-    )
+    from lantern_jax.generate import DEFAULT_SEED, generate_suite, verify_regeneration
+    from lantern_jax.scenarios.suite import write_manifest
 
     rc = 0
     if args.regenerate is not None:

@@ -31,12 +31,14 @@ import pandas as pd
 from lantern_jax.constants import DT, FAMILIES
 from lantern_jax.policies.base import Policy, check_policy_output
 from lantern_jax.policies.registry import get_policy
-from lantern_jax.scenarios.suite import Suite, build_suite_worlds, load_suite
+from lantern_jax.scenarios.suite import Suite, build_suite_scenarios, load_suite
 from lantern_jax.scenarios.warnings import paraphrase_text_id
 from lantern_jax.scoring.aggregate import decomposition_table, family_scores
 from lantern_jax.scoring.metrics import finalize
 from lantern_jax.scoring.table import build_route_table
+from lantern_jax.sim.observe import observe
 from lantern_jax.sim.rollout import rollout_batch_parallel
+from lantern_jax.sim.state import init_state
 from lantern_jax.times import happened, time_or_nan
 from lantern_jax.world import Scenario, tree_stack
 
@@ -91,7 +93,7 @@ def build_executions(suite: Suite, ablation: str = "none") -> Executions:
     """
     if ablation not in ABLATIONS:
         raise ValueError(f"unknown ablation {ablation!r}; valid: {', '.join(ABLATIONS)}")
-    sa, sb, _ = build_suite_worlds(suite)
+    sa, sb, _ = build_suite_scenarios(suite)
     a = tree_stack(sa)
     b = tree_stack(sb)
     on, off = jnp.ones_like(a.config.is_route_a), jnp.zeros_like(a.config.is_route_a)
@@ -215,7 +217,7 @@ def params_hash(params: Any) -> str:
 def package_versions() -> dict[str, str]:
     """Versions of the packages that determine the results."""
     out = {"python": sys.version.split()[0], "platform": platform.platform()}
-    for name in ("lantern-jax", "jax", "jaxlib", "flax", "numpy", "pandas", "optax"):
+    for name in ("lantern-jax", "jax", "jaxlib", "flax", "numpy", "pandas"):
         try:
             out[name] = md.version(name)
         except md.PackageNotFoundError:
@@ -238,22 +240,18 @@ class PolicyRun:
 
 
 def run_policy(
-    policy: Policy | str, execs: Executions, params: Any = None, model: str | None = None
+    policy: Policy | str, execs: Executions, policy_params: Any = None, model: str | None = None
 ) -> PolicyRun:
     """Run one policy on prepared executions and build its route-level rows.
 
     Args:
         policy: a :class:`Policy` or a registered name.
         execs: from :func:`build_executions`.
-        params: policy parameters (default ``policy.init(PRNGKey(0))``).
+        policy_params: policy parameters (default ``policy.init(PRNGKey(0))``).
         model: name used in the tables (default: the policy name).
     """
     pol = get_policy(policy) if isinstance(policy, str) else policy
-    if params is None:
-        params = pol.init(jax.random.PRNGKey(0))
-    from lantern_jax.sim.observe import observe
-    from lantern_jax.sim.state import init_state
-
+    params = pol.init(jax.random.PRNGKey(0)) if policy_params is None else policy_params
     sc0 = jax.tree.map(lambda x: x[0], execs.scenarios)
     check_policy_output(pol, params, jax.eval_shape(lambda sc: observe(sc, init_state(sc)), sc0))
     t0 = time.perf_counter()
@@ -267,11 +265,8 @@ def run_policy(
     proto = {f.name: getattr(proto, f.name) for f in dataclasses.fields(proto)}
     n = execs.num_pairs
     rows = []
-    from lantern_jax.scenarios.protocol import warning_onset
-
-    onset = np.asarray(jax.vmap(warning_onset)(final.protocol, execs.scenarios.config))
+    onset = np.asarray(time_or_nan(final.protocol.t_warn_on))
     d_safe = np.asarray(execs.scenarios.config.d_safe)
-    onset = np.asarray(time_or_nan(onset))
     for ci, cond in enumerate(CONDITIONS):
         sl = slice(ci * n, (ci + 1) * n)
         rows.append(
@@ -356,31 +351,8 @@ class EvalResult:
     hidden_at_warning: pd.DataFrame  # % of Route A executions with the hazard unseen at onset
 
 
-def evaluate(
-    policies: Sequence[str | Policy] | str | Policy = ("expert", "ego", "coop"),
-    params: Sequence[Any] | None = None,
-    suite: Suite | str = "lantern-v1",
-    ablation: str = "none",
-    progress: bool = True,
-) -> EvalResult:
-    """Evaluate policies on a suite: one jitted, vmapped rollout call per policy, then score.
-
-    Args:
-        policies: policy names / objects (one or several).
-        params: parameters per policy (default: each policy's ``init``).
-        suite: a :class:`Suite` or a suite id / manifest path.
-        ablation: one of :func:`ablation_names`.
-        progress: show a progress bar.
-
-    Returns:
-        :class:`EvalResult` with the route-level table, the family table (with paired warning
-        gains), the decomposition table and the reproducibility manifest.
-
-    Raises:
-        ValueError: for no policies, a policy given twice (rows are keyed by policy name), or
-            a suite without pairs.
-        PolicyError: naming the policy whose ``act`` failed while traced or run.
-    """
+def _policies_to_run(policies, suite) -> list[Policy]:
+    """Resolve policy names and refuse inputs that cannot give a well-keyed result."""
     if isinstance(policies, str | Policy):
         policies = [policies]
     policies = list(policies)
@@ -395,37 +367,43 @@ def evaluate(
         )
     if isinstance(suite, Suite) and not suite.pairs:
         raise ValueError(f"evaluate: suite {suite.suite_id!r} has no pairs")
-    pols = [get_policy(p) if isinstance(p, str) else p for p in policies]
-    if params is None:
-        params = [None] * len(pols)
-    if len(params) != len(pols):
-        raise ValueError(f"params: {len(params)} entries for {len(pols)} policies")
-    s = load_suite(suite) if isinstance(suite, str) else suite
-    execs = build_executions(s, ablation)
-    runs: list[PolicyRun] = []
+    return [get_policy(p) if isinstance(p, str) else p for p in policies]
+
+
+def _run_all(
+    pols: list[Policy], policy_params: list, execs: Executions, suite_id: str, progress: bool
+) -> list[PolicyRun]:
+    """Run every policy (progress bar per policy); a failing policy raises :class:`PolicyError`."""
     bar = None
     if progress:
         from tqdm.auto import tqdm
 
-        bar = tqdm(total=len(pols), desc=f"evaluating on {s.suite_id}", unit="policy")
-    for pol, par in zip(pols, params, strict=True):
+        bar = tqdm(total=len(pols), desc=f"evaluating on {suite_id}", unit="policy")
+    runs: list[PolicyRun] = []
+    try:
+        for pol, par in zip(pols, policy_params, strict=True):
+            if bar is not None:
+                bar.set_postfix_str(f"{pol.name}: compile + {3 * execs.num_pairs} executions")
+            try:
+                runs.append(run_policy(pol, execs, par))
+            except Exception as e:
+                lines = str(e).strip().splitlines() or [""]
+                why = lines[0] if len(lines) == 1 else f"{lines[0]} ... {lines[-1]}"
+                raise PolicyError(
+                    f"policy {pol.name!r} failed while being traced or run on suite {suite_id}: "
+                    f"{type(e).__name__}: {why}"
+                ) from e
+            if bar is not None:
+                bar.update(1)
+    finally:
         if bar is not None:
-            bar.set_postfix_str(f"{pol.name}: compile + {3 * execs.num_pairs} executions")
-        try:
-            runs.append(run_policy(pol, execs, par))
-        except Exception as e:
-            lines = str(e).strip().splitlines() or [""]
-            why = lines[0] if len(lines) == 1 else f"{lines[0]} ... {lines[-1]}"
-            raise PolicyError(
-                f"policy {pol.name!r} failed while being traced or run on suite {s.suite_id}: "
-                f"{type(e).__name__}: {why}"
-            ) from e
-        if bar is not None:
-            bar.update(1)
-    if bar is not None:
-        bar.close()
-    route = pd.concat([r.route_table for r in runs], ignore_index=True)
-    manifest = dict(
+            bar.close()
+    return runs
+
+
+def _manifest(s: Suite, ablation: str, execs: Executions, runs: list[PolicyRun]) -> dict:
+    """The reproducibility manifest of an evaluation."""
+    return dict(
         suite_id=s.suite_id,
         suite_sha256=s.suite_sha256,
         suite_seed=s.seed,
@@ -447,11 +425,47 @@ def evaluate(
         policy_init_seed=0,
         packages=package_versions(),
     )
+
+
+def evaluate(
+    policies: Sequence[str | Policy] | str | Policy = ("expert", "ego", "coop"),
+    policy_params: Sequence[Any] | None = None,
+    suite: Suite | str = "lantern-v1",
+    ablation: str = "none",
+    progress: bool = True,
+) -> EvalResult:
+    """Evaluate policies on a suite: one jitted, vmapped rollout call per policy, then score.
+
+    Args:
+        policies: policy names / objects (one or several).
+        policy_params: parameters per policy (default: each policy's ``init``).
+        suite: a :class:`Suite` or a suite id / manifest path.
+        ablation: one of :func:`ablation_names`.
+        progress: show a progress bar.
+
+    Returns:
+        :class:`EvalResult` with the route-level table, the family table (with paired warning
+        gains), the decomposition table and the reproducibility manifest.
+
+    Raises:
+        ValueError: for no policies, a policy given twice (rows are keyed by policy name), or
+            a suite without pairs.
+        PolicyError: naming the policy whose ``act`` failed while traced or run.
+    """
+    pols = _policies_to_run(policies, suite)
+    if policy_params is None:
+        policy_params = [None] * len(pols)
+    if len(policy_params) != len(pols):
+        raise ValueError(f"policy_params: {len(policy_params)} entries for {len(pols)} policies")
+    s = load_suite(suite) if isinstance(suite, str) else suite
+    execs = build_executions(s, ablation)
+    runs = _run_all(pols, list(policy_params), execs, s.suite_id, progress)
+    route = pd.concat([r.route_table for r in runs], ignore_index=True)
     return EvalResult(
         route_table=route,
         family_table=family_table(route),
         decomposition=decomposition_table(route).reset_index(),
-        manifest=manifest,
+        manifest=_manifest(s, ablation, execs, runs),
         runs=runs,
         hidden_at_warning=hidden_at_warning(runs, execs.num_pairs, execs.families),
     )

@@ -452,7 +452,7 @@ def test_manifest_onto_a_folder(base_manifest, tmp_path, monkeypatch):
     def refuse(*a, **k):
         raise AssertionError("generated although the target is a folder")
 
-    monkeypatch.setattr("lantern_jax.scenarios.suite.generate_suite", refuse)
+    monkeypatch.setattr("lantern_jax.generate.generate_suite", refuse)
     res = run_cli(["suite", "--regenerate", str(folder)])
     assert res.rc == 2 and "give the path of a file" in res.err
 

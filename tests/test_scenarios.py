@@ -25,14 +25,13 @@ from lantern_jax.constants import (
     WEATHERS,
 )
 from lantern_jax.scenarios import road as rd
-from lantern_jax.scenarios.families import build_pair, sample_params
+from lantern_jax.scenarios.families import build_pair, sample_params, validate_params
 from lantern_jax.scenarios.families_common import box_corners, boxes_overlap
 from lantern_jax.scenarios.spec import (
     PARAM_RANGES,
     WEATHER_PROFILES,
     canonical_json,
     content_hash,
-    validate_params,
 )
 from lantern_jax.scenarios.warnings import (
     TEMPLATES,

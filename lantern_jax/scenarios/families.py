@@ -43,7 +43,7 @@ import numpy as np
 from lantern_jax.constants import FAMILIES, FAMILY_NAMES, WEATHERS
 from lantern_jax.scenarios import families_junction as junction
 from lantern_jax.scenarios import families_straight as straight
-from lantern_jax.scenarios.spec import PARAM_RANGES, validate_params
+from lantern_jax.scenarios.spec import PARAM_RANGES, range_errors
 from lantern_jax.scenarios.warnings import TEMPLATES
 from lantern_jax.world import Scenario
 
@@ -153,6 +153,37 @@ def sample_params(family_: int | str, rng: np.random.Generator, weather: str = "
 def check_feasible(params: dict) -> None:
     """Cross-field feasibility of a range-checked parameter dict (``ValueError`` naming a field)."""
     family(params.get("family")).check(params)
+
+
+def param_errors(params: Any, feasibility: bool = True) -> list[str]:
+    """Every problem of a scenario parameter dict, each naming its field: types and ranges
+    (:func:`~lantern_jax.scenarios.spec.range_errors`) and, when those pass and ``feasibility``
+    is set, the family's cross-field geometry checks."""
+    errors = range_errors(params)
+    if feasibility and not errors:
+        try:
+            check_feasible(params)
+        except ValueError as e:
+            errors.append(str(e))
+    return errors
+
+
+def validate_params(params: dict, feasibility: bool = True) -> dict:
+    """Check a scenario parameter dict; return it unchanged.
+
+    Args:
+        params: flat dict with ``family`` and the fields of ``PARAM_RANGES[family]``.
+        feasibility: also run the family's cross-field geometry checks (route long enough for
+            the recovery, marker ordering, arm layout...).
+
+    Raises:
+        ValueError: naming the field of the first problem of :func:`param_errors`
+            (``"PE.route_length: 150.0 outside [68, 135]"``).
+    """
+    errors = param_errors(params, feasibility)
+    if errors:
+        raise ValueError(errors[0])
+    return params
 
 
 def build_pair(params: dict) -> tuple[Scenario, Scenario, dict]:

@@ -31,7 +31,7 @@ from lantern_jax.constants import (
     MOTION_IDM,
     ROLE_BACKGROUND,
 )
-from lantern_jax.scenarios import road as rd
+from lantern_jax.scenarios import road
 from lantern_jax.scenarios.assemble import ActorSpec, assemble_scenario, initial_pose
 from lantern_jax.scenarios.spec import PARAM_RANGES, SEED_MAX, WEATHER_PROFILES, content_hash
 from lantern_jax.world import Scenario
@@ -59,13 +59,13 @@ def straight_path(p0, direction, length: float) -> np.ndarray:
     d = np.asarray(direction, np.float64)
     d = d / np.linalg.norm(d)
     p0 = np.asarray(p0, np.float64)
-    n = min(rd.PATH_POINTS, max(2, int(math.ceil(length / 4.0)) + 1))
+    n = min(road.PATH_POINTS, max(2, int(math.ceil(length / 4.0)) + 1))
     return p0 + np.linspace(0.0, length, n)[:, None] * d
 
 
 def fit_path(xy: np.ndarray) -> np.ndarray:
     """A polyline reduced to at most ``PATH_POINTS`` points (uniform resampling)."""
-    return xy if len(xy) <= rd.PATH_POINTS else rd.resample(xy, rd.PATH_POINTS)
+    return xy if len(xy) <= road.PATH_POINTS else road.resample(xy, road.PATH_POINTS)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -101,7 +101,7 @@ def boxes_overlap(a: tuple, b: tuple, margin: float = 0.0) -> bool:
 class LaneSection:
     """Where background vehicles may start: arc interval ``[s_lo, s_hi]`` of a lane."""
 
-    lane: rd.LaneSpec
+    lane: road.LaneSpec
     s_lo: float
     s_hi: float
 
@@ -138,8 +138,8 @@ def place_background(
             s0 = float(rng.uniform(sec.s_lo, sec.s_hi))
             v = round(float(rng.uniform(*BG_SPEED)), 3)
             path = fit_path(sec.lane.center)
-            xy = rd.point_at(path, s0)
-            box = (xy, rd.heading_at(path, s0), CAR_EXTENT)
+            xy = road.point_at(path, s0)
+            box = (xy, road.heading_at(path, s0), CAR_EXTENT)
             if any(boxes_overlap(box, o, BG_MARGIN) for o in occupied):
                 continue
             if any(boxes_overlap(box, o, BG_SPACING_MARGIN) for o in boxes):
@@ -169,7 +169,7 @@ def place_background(
 
 def ego_box(route_xy: np.ndarray) -> tuple:
     """The ego box ``(xy, yaw, extent)`` at the route start."""
-    return (route_xy[0], rd.heading_at(route_xy, 0.0), (EGO_HALF_LENGTH, EGO_HALF_WIDTH))
+    return (route_xy[0], road.heading_at(route_xy, 0.0), (EGO_HALF_LENGTH, EGO_HALF_WIDTH))
 
 
 def spec_box(spec: ActorSpec | None) -> tuple | None:
@@ -217,6 +217,45 @@ def pair_params(
         pos_noise_sigma=0.0, noise_seed=np.uint32(int(seed) & 0xFFFFFFFF),
     )  # fmt: skip
     return a, replace_dict(a, is_route_a=False, warning_enabled=False)
+
+
+def _pair_meta(
+    p: dict,
+    family: int,
+    road_map: road.RoadMap,
+    route: road.RouteSpec,
+    slots_a: dict[int, ActorSpec],
+    slots_b: dict[int, ActorSpec],
+    markers: tuple[float, float, float],
+    num_background: int,
+    extra: dict,
+) -> dict:
+    """The JSON-friendly description of a built pair (see :func:`finish_pair`)."""
+    r = road.rotation(float(p["rotation_deg"]))
+    s_warn, s_event, s_conflict = markers
+    signalized = bool(road_map.lights)
+    return dict(
+        family=FAMILIES[family],
+        family_index=family,
+        content_hash=content_hash(p),
+        params=dict(p),
+        route_length=route.length,
+        s_warn=s_warn,
+        s_event=s_event,
+        s_conflict=s_conflict,
+        conflict_xy=(r @ np.asarray(extra.pop("conflict_xy"))).tolist(),
+        hazard_index=HAZARD_SLOT,
+        scenario_slots=[
+            k for k in sorted(set(slots_a) | set(slots_b)) if slots_a.get(k) is not slots_b.get(k)
+        ],
+        num_background=num_background,
+        signalized=signalized,
+        ego_stop_s=route.stop_s if signalized else BIG,
+        lanes=road_map.names,
+        route_lanes=list(route.lanes),
+        text_id=family,
+        canonical=extra,
+    )
 
 
 def replace_dict(d: dict, **kw) -> dict:
@@ -275,8 +314,8 @@ def uniform(rng: np.random.Generator, lo: float, hi: float, nd: int = 3) -> floa
 def finish_pair(
     p: dict,
     family: int,
-    road: rd.RoadMap,
-    route: rd.RouteSpec,
+    road_map: road.RoadMap,
+    route: road.RouteSpec,
     slots_a: dict[int, ActorSpec],
     slots_b: dict[int, ActorSpec],
     sections: list[LaneSection],
@@ -309,12 +348,12 @@ def finish_pair(
     common = dict(zip(BACKGROUND_SLOTS[: len(bg)], bg, strict=True))
 
     def slot_list(d: dict[int, ActorSpec]) -> list[ActorSpec | None]:
-        out: list[ActorSpec | None] = [None] * rd.MAX_ACTORS
+        out: list[ActorSpec | None] = [None] * road.MAX_ACTORS
         for k, v in {**d, **common}.items():
             out[k] = v
         return out
 
-    signalized = bool(road.lights)
+    signalized = bool(road_map.lights)
     fields_a, fields_b = pair_params(
         family=family,
         markers=markers,
@@ -329,30 +368,7 @@ def finish_pair(
         **rules,
     )
     rot = float(p["rotation_deg"])
-    scenario_a = assemble_scenario(road, route.xy, slot_list(slots_a), fields_a, rot)
-    scenario_b = assemble_scenario(road, route.xy, slot_list(slots_b), fields_b, rot)
-    r = rd.rotation(rot)
-    s_warn, s_event, s_conflict = markers
-    meta = dict(
-        family=FAMILIES[family],
-        family_index=family,
-        content_hash=content_hash(p),
-        params=dict(p),
-        route_length=route.length,
-        s_warn=s_warn,
-        s_event=s_event,
-        s_conflict=s_conflict,
-        conflict_xy=(r @ np.asarray(extra.pop("conflict_xy"))).tolist(),
-        hazard_index=HAZARD_SLOT,
-        scenario_slots=[
-            k for k in sorted(set(slots_a) | set(slots_b)) if slots_a.get(k) is not slots_b.get(k)
-        ],
-        num_background=len(bg),
-        signalized=signalized,
-        ego_stop_s=route.stop_s if signalized else BIG,
-        lanes=road.names,
-        route_lanes=list(route.lanes),
-        text_id=family,
-        canonical=extra,
-    )
+    scenario_a = assemble_scenario(road_map, route.xy, slot_list(slots_a), fields_a, rot)
+    scenario_b = assemble_scenario(road_map, route.xy, slot_list(slots_b), fields_b, rot)
+    meta = _pair_meta(p, family, road_map, route, slots_a, slots_b, markers, len(bg), extra)
     return scenario_a, scenario_b, meta

@@ -34,10 +34,21 @@ from lantern_jax.constants import (
     TRIGGER_CLOCK,
     TRIGGER_EVENT,
 )
-from lantern_jax.scenarios import families_common as fc
-from lantern_jax.scenarios import road as rd
+from lantern_jax.scenarios import road
 from lantern_jax.scenarios.assemble import ActorSpec
-from lantern_jax.scenarios.spec import PARAM_RANGES
+from lantern_jax.scenarios.families_common import (
+    CAR_EXTENT,
+    HAZARD_SLOT,
+    LaneSection,
+    choose,
+    common_fields,
+    draw,
+    finish_pair,
+    static_actor,
+    straight_path,
+    uniform,
+)
+from lantern_jax.scenarios.spec import MIN_RECOVERY_M, PARAM_RANGES
 from lantern_jax.scoring.thresholds import D_SAFE_LARGE_M
 
 TURN = {"LWW": "left", "RWW": "right", "RTY": "right"}
@@ -51,7 +62,6 @@ SAFETY_LIMIT_S = 12.0  # s after the event (wrong-way and cross-traffic actors)
 CORRIDOR_MARGIN = 0.5  # m
 APPROACH_MIN = {"left": 12.0, "right": 15.0}  # m (warning point >= ~10 m into the route)
 APPROACH_MIN_SIGNALIZED = 20.0  # m, room to stop for the initial red
-RECOVERY = 29.0  # m of route after the conflict point
 PATH_TAIL = 10.0  # m of path beyond the clearance point
 SIGNALIZED_SHARE = 1.0 / 3.0  # share of sampled junctions with traffic lights
 
@@ -64,17 +74,17 @@ def turn_layout(turn: str) -> tuple[float, float]:
     not depend on the approach length, the arm count or the lights).
     """
     k_in, arm, k_out = EGO_LANES[turn]
-    road = rd.junction(4, 2, False)
-    probe = rd.turn_route(road, "S", k_in, arm, k_out, 20.0, 100.0)
-    conn = float(rd.arc_length(road.lane(probe.lanes[1]).center)[-1])
-    return conn, _conflict_s(road, probe, arm, k_out) - probe.box_in_s
+    road_map = road.junction(4, 2, False)
+    probe = road.turn_route(road_map, "S", k_in, arm, k_out, 20.0, 100.0)
+    conn = float(road.arc_length(road_map.lane(probe.lanes[1]).center)[-1])
+    return conn, _conflict_s(road_map, probe, arm, k_out) - probe.box_in_s
 
 
-def _conflict_s(road: rd.RoadMap, route: rd.RouteSpec, arm: str, k_out: int) -> float:
-    name, s_out = rd.outbound_lane(road, arm, k_out)
-    p_line = rd.point_at(road.lane(name).center, s_out)
-    thr = EGO_HALF_LENGTH + fc.CAR_EXTENT[1] + CORRIDOR_MARGIN
-    return rd.corridor_entry(route.xy, p_line, rd.ARM_DIR[arm], thr)
+def _conflict_s(road_map: road.RoadMap, route: road.RouteSpec, arm: str, k_out: int) -> float:
+    name, s_out = road.outbound_lane(road_map, arm, k_out)
+    p_line = road.point_at(road_map.lane(name).center, s_out)
+    thr = EGO_HALF_LENGTH + CAR_EXTENT[1] + CORRIDOR_MARGIN
+    return road.corridor_entry(route.xy, p_line, road.ARM_DIR[arm], thr)
 
 
 def _approach_min(fam: str, signalized: bool) -> float:
@@ -83,24 +93,24 @@ def _approach_min(fam: str, signalized: bool) -> float:
 
 def sample_junction(fam: str, rng: np.random.Generator, weather: str) -> dict:
     """Sample LWW / RWW / RTY parameters (about a third signalized)."""
-    p = fc.common_fields(rng, fam, weather)
-    p["num_arms"] = int(fc.choose(rng, fam, "num_arms"))
+    p = common_fields(rng, fam, weather)
+    p["num_arms"] = int(choose(rng, fam, "num_arms"))
     p["missing_arm"] = (
-        str(fc.choose(rng, fam, "missing_arm", ALLOWED_MISSING[fam]))
+        str(choose(rng, fam, "missing_arm", ALLOWED_MISSING[fam]))
         if p["num_arms"] == 3
         else "none"
     )
     p["signalized"] = bool(rng.random() < SIGNALIZED_SHARE)
-    p["red_s"] = fc.draw(rng, fam, "red_s")
-    p["v_ref"] = fc.draw(rng, fam, "v_ref")
-    p["actor_speed"] = fc.draw(rng, fam, "actor_speed")
+    p["red_s"] = draw(rng, fam, "red_s")
+    p["v_ref"] = draw(rng, fam, "v_ref")
+    p["actor_speed"] = draw(rng, fam, "actor_speed")
     if fam == "RTY":
-        p["source_dist"] = fc.draw(rng, fam, "source_dist")
+        p["source_dist"] = draw(rng, fam, "source_dist")
     _, off = turn_layout(TURN[fam])
     a_min = _approach_min(fam, p["signalized"])
-    p["route_length"] = fc.draw(rng, fam, "route_length", a_min + off + RECOVERY + 0.5)
-    a_hi = p["route_length"] - off - RECOVERY - 0.5
-    p["approach"] = fc.uniform(rng, a_min, min(PARAM_RANGES[fam]["approach"].hi, a_hi))
+    p["route_length"] = draw(rng, fam, "route_length", a_min + off + MIN_RECOVERY_M + 0.5)
+    a_hi = p["route_length"] - off - MIN_RECOVERY_M - 0.5
+    p["approach"] = uniform(rng, a_min, min(PARAM_RANGES[fam]["approach"].hi, a_hi))
     return p
 
 
@@ -121,11 +131,11 @@ def check_junction(p: dict) -> None:
             f"{fam}.approach: {float(p['approach'])!r} below {a_min:g} ({why} junction)"
         )
     _, off = turn_layout(TURN[fam])
-    need = float(p["approach"]) + off + RECOVERY
+    need = float(p["approach"]) + off + MIN_RECOVERY_M
     if p["route_length"] < need:
         raise ValueError(
             f"{fam}.route_length: {float(p['route_length'])!r} too short, needs >= approach + "
-            f"{off:.3f} + {RECOVERY:g} = {need:.3f}"
+            f"{off:.3f} + {MIN_RECOVERY_M:g} = {need:.3f}"
         )
 
 
@@ -134,40 +144,43 @@ def build_junction(p: dict):
     fam = p["family"]
     turn = TURN[fam]
     k_in, arm, k_out = EGO_LANES[turn]
-    road = rd.junction(
+    road_map = road.junction(
         int(p["num_arms"]),
         2,
         bool(p["signalized"]),
         missing_arm=p["missing_arm"],
         ego_red_s=float(p["red_s"]),
     )
-    route = rd.turn_route(road, "S", k_in, arm, k_out, float(p["approach"]), p["route_length"])
-    s_c = _conflict_s(road, route, arm, k_out)
-    name, s_out = rd.outbound_lane(road, arm, k_out)
-    exit_lane = road.lane(name)
-    d_line = np.asarray(rd.ARM_DIR[arm])
-    p_line = rd.point_at(exit_lane.center, s_out)
-    c_xy = rd.point_at(route.xy, s_c)
+    approach, length = float(p["approach"]), p["route_length"]
+    route = road.turn_route(road_map, "S", k_in, arm, k_out, approach, length)
+    s_c = _conflict_s(road_map, route, arm, k_out)
+    name, s_out = road.outbound_lane(road_map, arm, k_out)
+    exit_lane = road_map.lane(name)
+    d_line = np.asarray(road.ARM_DIR[arm])
+    p_line = road.point_at(exit_lane.center, s_out)
+    c_xy = road.point_at(route.xy, s_c)
     near = p_line + float((c_xy - p_line) @ d_line) * d_line
     v = float(p["actor_speed"])
     if fam == "RTY":
         slots_a, slots_b, rules, spawn = _rty_actors(p, near, d_line, v)
     else:
-        slots_a, slots_b, rules, spawn = _wrong_way_actors(fam, road, exit_lane, near, d_line, v)
+        slots_a, slots_b, rules, spawn = _wrong_way_actors(
+            fam, road_map, exit_lane, near, d_line, v
+        )
     warn, event = LEADS[fam]
     markers = (s_c - warn, s_c - event, s_c)
     sections = []
-    for x in road.arms:
-        for k in range(road.lanes_per_direction):
-            ln_name, s_dep = rd.outbound_lane(road, x, k)
+    for x in road_map.arms:
+        for k in range(road_map.lanes_per_direction):
+            ln_name, s_dep = road.outbound_lane(road_map, x, k)
             if ln_name in route.lanes:
                 continue
-            lane = road.lane(ln_name)
-            sections.append(fc.LaneSection(lane, s_dep + 5.0, lane.length - 15.0))
+            lane = road_map.lane(ln_name)
+            sections.append(LaneSection(lane, s_dep + 5.0, lane.length - 15.0))
     extra = dict(conflict_xy=c_xy.tolist(), near_xy=near.tolist(), spawn_xy=spawn.tolist(),
                  turn=turn, box_in_s=route.box_in_s, box_out_s=route.box_out_s)  # fmt: skip
-    return fc.finish_pair(
-        p, FAMILIES.index(fam), road, route, slots_a, slots_b, sections, markers, rules, extra
+    return finish_pair(
+        p, FAMILIES.index(fam), road_map, route, slots_a, slots_b, sections, markers, rules, extra
     )
 
 
@@ -175,8 +188,8 @@ def _event_car(spawn, direction, length: float, v: float) -> ActorSpec:
     """The hazard car: waits at ``spawn``, drives ``length`` m along ``direction`` at ``v`` from
     the event on and despawns at the end of its path."""
     return ActorSpec(
-        fc.straight_path(spawn, direction, length),
-        fc.CAR_EXTENT,
+        straight_path(spawn, direction, length),
+        CAR_EXTENT,
         KIND_VEHICLE,
         ROLE_HAZARD,
         v_pre=0.0,
@@ -186,7 +199,7 @@ def _event_car(spawn, direction, length: float, v: float) -> ActorSpec:
     )
 
 
-def _wrong_way_actors(fam, road, exit_lane, near, d_line, v):
+def _wrong_way_actors(fam, road_map, exit_lane, near, d_line, v):
     """LWW / RWW actors.
 
     Route A: the wrong-way vehicle waits (v_pre 0) in the ego's exit lane facing the junction,
@@ -201,13 +214,13 @@ def _wrong_way_actors(fam, road, exit_lane, near, d_line, v):
     dw = -d_line
     off, clear = SPAWN_OFFSET[fam], CLEAR_TARGET[fam]
     spawn = near - off * dw
-    if np.max(np.abs(spawn)) < road.half_size + fc.CAR_EXTENT[0]:
+    if np.max(np.abs(spawn)) < road_map.half_size + CAR_EXTENT[0]:
         raise ValueError(f"{fam}: wrong-way spawn {spawn.tolist()} inside the junction box")
     car = _event_car(spawn, dw, off + clear + PATH_TAIL, v)
-    s_sp, _ = rd.project(exit_lane.center, spawn)
+    s_sp, _ = road.project(exit_lane.center, spawn)
     legal = ActorSpec(
-        fc.straight_path(spawn, d_line, exit_lane.length - s_sp),
-        fc.CAR_EXTENT,
+        straight_path(spawn, d_line, exit_lane.length - s_sp),
+        CAR_EXTENT,
         KIND_VEHICLE,
         ROLE_CONTEXT,
         v_pre=v,
@@ -220,7 +233,7 @@ def _wrong_way_actors(fam, road, exit_lane, near, d_line, v):
         clear_s=off + clear, clear_time_limit=SAFETY_LIMIT_S, clear_on_ego_stop=False,
         despawn_on_clear=True, force_event=True, d_safe=D_SAFE_LARGE_M,
     )  # fmt: skip
-    return {fc.HAZARD_SLOT: car}, {fc.HAZARD_SLOT: legal}, rules, spawn
+    return {HAZARD_SLOT: car}, {HAZARD_SLOT: legal}, rules, spawn
 
 
 def _rty_actors(p, near, d_line, v):
@@ -234,12 +247,12 @@ def _rty_actors(p, near, d_line, v):
     """
     d = float(p["source_dist"])
     spawn = near - d * d_line
-    clear = d + fc.CAR_EXTENT[0] + RTY_CLEAR_PAST
+    clear = d + CAR_EXTENT[0] + RTY_CLEAR_PAST
     car = _event_car(spawn, d_line, clear + PATH_TAIL, v)
     yaw = float(np.arctan2(d_line[1], d_line[0]))
-    ctx = fc.static_actor(spawn, yaw, fc.CAR_EXTENT, KIND_VEHICLE, ROLE_CONTEXT)
+    ctx = static_actor(spawn, yaw, CAR_EXTENT, KIND_VEHICLE, ROLE_CONTEXT)
     rules = dict(
         clear_s=clear, clear_time_limit=SAFETY_LIMIT_S, clear_on_ego_stop=False,
         despawn_on_clear=True, force_event=False, d_safe=D_SAFE_LARGE_M,
     )  # fmt: skip
-    return {fc.HAZARD_SLOT: car}, {fc.HAZARD_SLOT: ctx}, rules, spawn
+    return {HAZARD_SLOT: car}, {HAZARD_SLOT: ctx}, rules, spawn

@@ -25,9 +25,22 @@ from lantern_jax.constants import (
     TRIGGER_NEVER,
     VC,
 )
-from lantern_jax.scenarios import families_common as fc
-from lantern_jax.scenarios import road as rd
+from lantern_jax.scenarios import road
 from lantern_jax.scenarios.assemble import ActorSpec
+from lantern_jax.scenarios.families_common import (
+    CAR_EXTENT,
+    HAZARD_SLOT,
+    SCENE_SLOT,
+    LaneSection,
+    choose,
+    common_fields,
+    draw,
+    finish_pair,
+    static_actor,
+    straight_path,
+    with_changes,
+)
+from lantern_jax.scenarios.spec import MIN_RECOVERY_M
 from lantern_jax.scoring.thresholds import D_SAFE_LARGE_M, D_SAFE_SMALL_M
 
 ROAD_MARGIN = 60.0  # m of road before the route start and after the route end
@@ -40,7 +53,7 @@ PED_CROSSING = 22.0  # m
 PED_BEYOND_TRUCK = 0.5  # m, pedestrian centre beyond the truck's far (kerb-side) face
 TRUCK_EXTENT = (4.0, 1.25)
 TRUCK_FRONT_GAP = 0.3  # m, between the truck's front face and the pedestrian's box
-PE_RECOVERY = 30.0  # m of route after the conflict point
+PE_RECOVERY = 30.0  # m of route after the conflict point (paper: PE has a 30-m recovery)
 
 # --- VC geometry -------------------------------------------------------------------------------
 VC_START_GAP = 21.0  # m, cut-in vehicle ahead of the ego at t = 0 (centre to centre)
@@ -59,23 +72,22 @@ OR_VAN_TRAVEL_MIN = 10.0  # m the van drives before reaching C
 OR_VAN_ZONE = 14.0  # m, no background vehicle starts this close to the van
 OR_REVEAL_SAMPLED = (35.0, 80.0)  # m, where the sampler puts C (a part of the admissible range)
 
-RECOVERY = 29.0  # m of route after the conflict point (all families)
 
 
 def _road_and_route(p: dict, fwd: int, back: int, shoulder: bool, ego_lane: str):
     length = float(p["route_length"])
-    road = rd.straight_road(fwd, back, length + 2 * ROAD_MARGIN, shoulder, -ROAD_MARGIN)
-    route = rd.lane_route(road, ego_lane, ROAD_MARGIN, length)
-    return road, route
+    road_map = road.straight_road(fwd, back, length + 2 * ROAD_MARGIN, shoulder, -ROAD_MARGIN)
+    route = road.lane_route(road_map, ego_lane, ROAD_MARGIN, length)
+    return road_map, route
 
 
-def _opposing_sections(road: rd.RoadMap, x_lo: float, x_hi: float) -> list[fc.LaneSection]:
+def _opposing_sections(road_map: road.RoadMap, x_lo: float, x_hi: float) -> list[LaneSection]:
     """Sections of the backward lanes with x in ``[x_lo, x_hi]`` (lanes run from high x)."""
     out = []
-    for ln in road.lanes:
+    for ln in road_map.lanes:
         if ln.name.startswith("back_"):
             x_start = ln.center[0, 0]
-            out.append(fc.LaneSection(ln, x_start - x_hi, x_start - x_lo))
+            out.append(LaneSection(ln, x_start - x_hi, x_start - x_lo))
     return out
 
 
@@ -84,10 +96,10 @@ def _opposing_sections(road: rd.RoadMap, x_lo: float, x_hi: float) -> list[fc.La
 # ================================================================================================
 def sample_pe(rng: np.random.Generator, weather: str) -> dict:
     """Sample PE parameters (conflict first, then a route with >= 30 m of recovery)."""
-    p = fc.common_fields(rng, "PE", weather)
-    p["v_ref"] = fc.draw(rng, "PE", "v_ref")
-    p["conflict_s"] = fc.draw(rng, "PE", "conflict_s")
-    p["route_length"] = fc.draw(rng, "PE", "route_length", p["conflict_s"] + PE_RECOVERY + 0.5)
+    p = common_fields(rng, "PE", weather)
+    p["v_ref"] = draw(rng, "PE", "v_ref")
+    p["conflict_s"] = draw(rng, "PE", "conflict_s")
+    p["route_length"] = draw(rng, "PE", "route_length", p["conflict_s"] + PE_RECOVERY + 0.5)
     return p
 
 
@@ -102,10 +114,10 @@ def check_pe(p: dict) -> None:
 
 def pe_geometry(conflict_s: float) -> dict:
     """Canonical PE actor poses: pedestrian centre, truck centre and the sidewalk edge (m)."""
-    kerb = -(rd.LANE_WIDTH + rd.PARKING_WIDTH)  # far edge of the parking lane
+    kerb = -(road.LANE_WIDTH + road.PARKING_WIDTH)  # far edge of the parking lane
     ped = np.array([conflict_s, kerb - PED_BEYOND_TRUCK])
     truck_x = conflict_s - PED_EXTENT[0] - TRUCK_FRONT_GAP - TRUCK_EXTENT[0]
-    truck = np.array([truck_x, -rd.LANE_WIDTH - 0.5 * rd.PARKING_WIDTH])
+    truck = np.array([truck_x, -road.LANE_WIDTH - 0.5 * road.PARKING_WIDTH])
     return dict(ped=ped, truck=truck, kerb=kerb)
 
 
@@ -121,11 +133,11 @@ def build_pe(p: dict):
     walks a straight 22-m crossing at 3 m/s perpendicular to the road and despawns at its end; the
     crossing done is the clearance.  Route B keeps the truck, without the pedestrian.
     """
-    road, route = _road_and_route(p, 1, 1, True, "fwd_0")
+    road_map, route = _road_and_route(p, 1, 1, True, "fwd_0")
     g = pe_geometry(p["conflict_s"])
-    truck = fc.static_actor(g["truck"], 0.0, TRUCK_EXTENT, KIND_VEHICLE, ROLE_OCCLUDER)
+    truck = static_actor(g["truck"], 0.0, TRUCK_EXTENT, KIND_VEHICLE, ROLE_OCCLUDER)
     ped = ActorSpec(
-        fc.straight_path(g["ped"], (0.0, 1.0), PED_CROSSING),
+        straight_path(g["ped"], (0.0, 1.0), PED_CROSSING),
         PED_EXTENT,
         KIND_PEDESTRIAN,
         ROLE_HAZARD,
@@ -137,15 +149,15 @@ def build_pe(p: dict):
     )
     sc = float(p["conflict_s"])
     markers = (sc - PE_WARN_LEAD, sc - PE_EVENT_LEAD, sc)
-    sections = _opposing_sections(road, -ROAD_MARGIN + 10.0, sc - 10.0)
-    slots_a = {fc.HAZARD_SLOT: ped, fc.SCENE_SLOT: truck}
-    slots_b = {fc.SCENE_SLOT: truck}
+    sections = _opposing_sections(road_map, -ROAD_MARGIN + 10.0, sc - 10.0)
+    slots_a = {HAZARD_SLOT: ped, SCENE_SLOT: truck}
+    slots_b = {SCENE_SLOT: truck}
     rules = dict(
         clear_s=PED_CROSSING, clear_time_limit=BIG, clear_on_ego_stop=False,
         despawn_on_clear=True, force_event=True, d_safe=D_SAFE_SMALL_M,
     )  # fmt: skip
-    extra = dict(conflict_xy=[sc, -0.5 * rd.LANE_WIDTH], ped_xy=g["ped"].tolist())
-    return fc.finish_pair(p, PE, road, route, slots_a, slots_b, sections, markers, rules, extra)
+    extra = dict(conflict_xy=[sc, -0.5 * road.LANE_WIDTH], ped_xy=g["ped"].tolist())
+    return finish_pair(p, PE, road_map, route, slots_a, slots_b, sections, markers, rules, extra)
 
 
 # ================================================================================================
@@ -169,14 +181,14 @@ def vc_conflict_s(v_ref: float, cut_frac: float, gap_event: float) -> float:
 
 def sample_vc(rng: np.random.Generator, weather: str) -> dict:
     """Sample VC parameters (route long enough for 29 m of recovery)."""
-    p = fc.common_fields(rng, "VC", weather)
-    p["v_ref"] = fc.draw(rng, "VC", "v_ref")
-    p["cut_frac"] = fc.draw(rng, "VC", "cut_frac")
-    p["gap_event"] = fc.draw(rng, "VC", "gap_event")
-    p["warn_lead"] = float(fc.choose(rng, "VC", "warn_lead"))
-    p["num_opposing"] = int(fc.choose(rng, "VC", "num_opposing"))
+    p = common_fields(rng, "VC", weather)
+    p["v_ref"] = draw(rng, "VC", "v_ref")
+    p["cut_frac"] = draw(rng, "VC", "cut_frac")
+    p["gap_event"] = draw(rng, "VC", "gap_event")
+    p["warn_lead"] = float(choose(rng, "VC", "warn_lead"))
+    p["num_opposing"] = int(choose(rng, "VC", "num_opposing"))
     sc = vc_conflict_s(p["v_ref"], p["cut_frac"], p["gap_event"])
-    p["route_length"] = fc.draw(rng, "VC", "route_length", sc + RECOVERY + 0.5)
+    p["route_length"] = draw(rng, "VC", "route_length", sc + MIN_RECOVERY_M + 0.5)
     return p
 
 
@@ -187,10 +199,10 @@ def check_vc(p: dict) -> None:
             f"VC.gap_event: warning point at {sc - p['warn_lead']:.2f} m, needs >= "
             f"{VC_MIN_WARN_S:g}"
         )
-    if p["route_length"] < sc + RECOVERY:
+    if p["route_length"] < sc + MIN_RECOVERY_M:
         raise ValueError(
             f"VC.route_length: {float(p['route_length'])!r} too short, needs >= s_conflict + "
-            f"{RECOVERY:g} = {sc + RECOVERY:.3f}"
+            f"{MIN_RECOVERY_M:g} = {sc + MIN_RECOVERY_M:.3f}"
         )
 
 
@@ -205,33 +217,33 @@ def build_vc(p: dict):
     protocol records it as a limit clearance.  Route B: the same vehicle at the same speed,
     never merging (role context).
     """
-    road, route = _road_and_route(p, 2, int(p["num_opposing"]), False, "fwd_0")
+    road_map, route = _road_and_route(p, 2, int(p["num_opposing"]), False, "fwd_0")
     v_cut = vc_cut_speed(p["v_ref"], p["cut_frac"])
-    start = np.array([VC_START_GAP, -1.5 * rd.LANE_WIDTH])
+    start = np.array([VC_START_GAP, -1.5 * road.LANE_WIDTH])
     length = p["route_length"] + ROAD_MARGIN - VC_START_GAP
     car = ActorSpec(
-        fc.straight_path(start, (1.0, 0.0), length),
-        fc.CAR_EXTENT,
+        straight_path(start, (1.0, 0.0), length),
+        CAR_EXTENT,
         KIND_VEHICLE,
         ROLE_HAZARD,
         v_pre=v_cut,
         v_post=v_cut,
         trigger=TRIGGER_EVENT,
-        lat_shift=rd.LANE_WIDTH,
+        lat_shift=road.LANE_WIDTH,
         lat_duration=VC_LANE_CHANGE_S,
         despawn_at_end=True,
     )
-    car_b = fc.with_changes(car, role=ROLE_CONTEXT, trigger=TRIGGER_NEVER, lat_shift=0.0)
+    car_b = with_changes(car, role=ROLE_CONTEXT, trigger=TRIGGER_NEVER, lat_shift=0.0)
     sc = vc_conflict_s(p["v_ref"], p["cut_frac"], p["gap_event"])
     markers = (sc - float(p["warn_lead"]), sc - VC_EVENT_LEAD, sc)
-    sections = _opposing_sections(road, -ROAD_MARGIN + 10.0, p["route_length"] + 50.0)
+    sections = _opposing_sections(road_map, -ROAD_MARGIN + 10.0, p["route_length"] + 50.0)
     rules = dict(
         clear_s=BIG, clear_time_limit=VC_LANE_CHANGE_S, clear_on_ego_stop=False,
         despawn_on_clear=False, force_event=True, d_safe=D_SAFE_LARGE_M,
     )  # fmt: skip
-    extra = dict(conflict_xy=[sc, -0.5 * rd.LANE_WIDTH], v_cut=v_cut)
-    return fc.finish_pair(
-        p, VC, road, route, {fc.HAZARD_SLOT: car}, {fc.HAZARD_SLOT: car_b}, sections, markers,
+    extra = dict(conflict_xy=[sc, -0.5 * road.LANE_WIDTH], v_cut=v_cut)
+    return finish_pair(
+        p, VC, road_map, route, {HAZARD_SLOT: car}, {HAZARD_SLOT: car_b}, sections, markers,
         rules, extra,
     )  # fmt: skip
 
@@ -241,15 +253,15 @@ def build_vc(p: dict):
 # ================================================================================================
 def sample_or(rng: np.random.Generator, weather: str) -> dict:
     """Sample OR parameters (C after a >= 10 m van drive, route >= C + 29 m)."""
-    p = fc.common_fields(rng, "OR", weather)
-    p["v_ref"] = fc.draw(rng, "OR", "v_ref")
-    p["lead_speed_kmh"] = fc.draw(rng, "OR", "lead_speed_kmh")
-    p["lead_gap"] = fc.draw(rng, "OR", "lead_gap")
-    p["object_ahead"] = fc.draw(rng, "OR", "object_ahead")
-    p["num_opposing"] = int(fc.choose(rng, "OR", "num_opposing"))
+    p = common_fields(rng, "OR", weather)
+    p["v_ref"] = draw(rng, "OR", "v_ref")
+    p["lead_speed_kmh"] = draw(rng, "OR", "lead_speed_kmh")
+    p["lead_gap"] = draw(rng, "OR", "lead_gap")
+    p["object_ahead"] = draw(rng, "OR", "object_ahead")
+    p["num_opposing"] = int(choose(rng, "OR", "num_opposing"))
     reveal_lo = max(OR_REVEAL_SAMPLED[0], p["lead_gap"] + OR_VAN_TRAVEL_MIN)
-    p["reveal_s"] = fc.draw(rng, "OR", "reveal_s", reveal_lo, OR_REVEAL_SAMPLED[1])
-    p["route_length"] = fc.draw(rng, "OR", "route_length", p["reveal_s"] + RECOVERY + 0.5)
+    p["reveal_s"] = draw(rng, "OR", "reveal_s", reveal_lo, OR_REVEAL_SAMPLED[1])
+    p["route_length"] = draw(rng, "OR", "route_length", p["reveal_s"] + MIN_RECOVERY_M + 0.5)
     return p
 
 
@@ -259,10 +271,10 @@ def check_or(p: dict) -> None:
             f"OR.reveal_s: {float(p['reveal_s'])!r} must be >= lead_gap + {OR_VAN_TRAVEL_MIN:g} "
             f"= {p['lead_gap'] + OR_VAN_TRAVEL_MIN:g}"
         )
-    if p["route_length"] < p["reveal_s"] + RECOVERY:
+    if p["route_length"] < p["reveal_s"] + MIN_RECOVERY_M:
         raise ValueError(
             f"OR.route_length: {float(p['route_length'])!r} too short, needs >= reveal_s + "
-            f"{RECOVERY:g} = {p['reveal_s'] + RECOVERY:g}"
+            f"{MIN_RECOVERY_M:g} = {p['reveal_s'] + MIN_RECOVERY_M:g}"
         )
 
 
@@ -283,12 +295,12 @@ def build_or(p: dict):
     ego has stopped after the event, or at the 8-s stop limit.  Route B: no object, and the van
     neither holds nor changes lane; it stays the lead vehicle.
     """
-    road, route = _road_and_route(p, 2, int(p["num_opposing"]), False, "fwd_1")
-    y = -1.5 * rd.LANE_WIDTH
+    road_map, route = _road_and_route(p, 2, int(p["num_opposing"]), False, "fwd_1")
+    y = -1.5 * road.LANE_WIDTH
     c, g0 = float(p["reveal_s"]), float(p["lead_gap"])
     v_lead = float(p["lead_speed_kmh"]) / 3.6
     van = ActorSpec(
-        fc.straight_path((g0, y), (1.0, 0.0), p["route_length"] + ROAD_MARGIN - g0),
+        straight_path((g0, y), (1.0, 0.0), p["route_length"] + ROAD_MARGIN - g0),
         VAN_EXTENT,
         KIND_VEHICLE,
         ROLE_OCCLUDER,
@@ -296,22 +308,22 @@ def build_or(p: dict):
         v_post=v_lead,
         s_hold=c - g0,
         trigger=TRIGGER_EVENT,
-        lat_shift=rd.LANE_WIDTH,
+        lat_shift=road.LANE_WIDTH,
         lat_duration=OR_LANE_CHANGE_S,
         despawn_at_end=True,
     )
-    van_b = fc.with_changes(van, s_hold=BIG, lat_shift=0.0, trigger=TRIGGER_NEVER)
+    van_b = with_changes(van, s_hold=BIG, lat_shift=0.0, trigger=TRIGGER_NEVER)
     obj_xy = np.array([c + float(p["object_ahead"]), y])
-    obj = fc.static_actor(obj_xy, 0.0, OBJECT_EXTENT, KIND_STATIC, ROLE_HAZARD)
+    obj = static_actor(obj_xy, 0.0, OBJECT_EXTENT, KIND_STATIC, ROLE_HAZARD)
     markers = (c - OR_WARN_LEAD, c - OR_EVENT_LEAD, c)
-    sections = _opposing_sections(road, -ROAD_MARGIN + 10.0, p["route_length"] + 50.0)
+    sections = _opposing_sections(road_map, -ROAD_MARGIN + 10.0, p["route_length"] + 50.0)
     exclusion = [(np.array([g0, y]), OR_VAN_ZONE)]
     rules = dict(
         clear_s=BIG, clear_time_limit=OR_STOP_LIMIT_S, clear_on_ego_stop=True,
         despawn_on_clear=True, force_event=True, d_safe=D_SAFE_SMALL_M,
     )  # fmt: skip
     extra = dict(conflict_xy=[c, y], object_xy=obj_xy.tolist(), v_lead=v_lead)
-    return fc.finish_pair(
-        p, OR, road, route, {fc.HAZARD_SLOT: obj, fc.SCENE_SLOT: van}, {fc.SCENE_SLOT: van_b},
+    return finish_pair(
+        p, OR, road_map, route, {HAZARD_SLOT: obj, SCENE_SLOT: van}, {SCENE_SLOT: van_b},
         sections, markers, rules, extra, exclusion=exclusion,
     )  # fmt: skip

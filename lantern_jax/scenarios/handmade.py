@@ -15,11 +15,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from lantern_jax.constants import BIG, KIND_VEHICLE, PE, ROLE_BACKGROUND
-from lantern_jax.scenarios import assemble
-from lantern_jax.scenarios import road as rd
+from lantern_jax.scenarios import assemble, road
 from lantern_jax.world import ActorScript, ActorState, Lanes, Route, Scenario, TrafficLights
 
-CAP_T = rd.MAX_LIGHTS
+CAP_T = road.MAX_LIGHTS
 
 
 @dataclasses.dataclass
@@ -51,16 +50,16 @@ def pack_actors(specs: list[ActorSpec]) -> tuple[ActorScript, ActorState]:
 def resample(points: np.ndarray, step: float) -> np.ndarray:
     """Resample a polyline at (about) ``step`` metres, keeping both ends."""
     points = np.asarray(points, np.float64)
-    n = max(int(np.ceil(rd.arc_length(points)[-1] / step)), 1) + 1
-    return rd.resample(points, n)
+    n = max(int(np.ceil(road.arc_length(points)[-1] / step)), 1) + 1
+    return road.resample(points, n)
 
 
-def road_map(centers: list[np.ndarray], widths: list[float],
-             kinds: list[int] | None = None) -> rd.RoadMap:  # fmt: skip
+def make_road_map(centers: list[np.ndarray], widths: list[float],
+             kinds: list[int] | None = None) -> road.RoadMap:  # fmt: skip
     """A map of the given lane centre lines (travel direction = point order), no lights."""
-    kinds = kinds or [rd.LANE_DRIVING] * len(centers)
-    return rd.RoadMap(kind="straight", lanes=[
-        rd.LaneSpec(f"lane_{i}", np.asarray(c, np.float64), float(w), int(k))
+    kinds = kinds or [road.LANE_DRIVING] * len(centers)
+    return road.RoadMap(kind="straight", lanes=[
+        road.LaneSpec(f"lane_{i}", np.asarray(c, np.float64), float(w), int(k))
         for i, (c, w, k) in enumerate(zip(centers, widths, kinds, strict=True))
     ])  # fmt: skip
 
@@ -68,7 +67,7 @@ def road_map(centers: list[np.ndarray], widths: list[float],
 def pack_lanes(centers: list[np.ndarray], widths: list[float],
                kinds: list[int] | None = None) -> Lanes:  # fmt: skip
     """Pack lane centre lines (travel direction = point order) into padded :class:`Lanes`."""
-    packed = rd.pack_lanes(road_map(centers, widths, kinds), np.eye(2))
+    packed = road.pack_lanes(make_road_map(centers, widths, kinds), np.eye(2))
     return Lanes(**{k: jnp.asarray(v) for k, v in packed.items()})
 
 
@@ -82,7 +81,7 @@ def route_points(points: np.ndarray) -> np.ndarray:
 
 def pack_route(points: np.ndarray) -> Route:
     """Pack the ego route polyline (resampled at 2 m) into a padded :class:`Route`."""
-    packed = rd.pack_route(route_points(points), np.eye(2))
+    packed = road.pack_route(route_points(points), np.eye(2))
     return Route(**{k: jnp.asarray(v) for k, v in packed.items()})
 
 
@@ -130,7 +129,7 @@ def straight_scene(
         lights: optional traffic lights.
         **config_overrides: :class:`~lantern_jax.world.ExecutionConfig` fields to override.
     """
-    lanes = road_map(
+    lanes = make_road_map(
         [
             resample(np.array([[-50.0, 0.0], [length + 50.0, 0.0]]), 10.0),
             resample(np.array([[-50.0, -3.5], [length + 50.0, -3.5]]), 10.0),

@@ -2,9 +2,10 @@
 
 A scenario pair is fully described by a flat, JSON-friendly parameter dict (what a frozen suite
 stores); :func:`lantern_jax.scenarios.families.build_pair` turns it into the Route A / Route B
-worlds.  Every family's admissible ranges live in :data:`PARAM_RANGES`; :func:`validate_params`
-checks a dict against them (and against the family's cross-field feasibility rules) and raises a
-``ValueError`` that names the field, e.g. ``"PE.route_length: 150.0 outside [68, 135]"``.
+scenarios.  Every family's admissible ranges live in :data:`PARAM_RANGES`; :func:`range_errors`
+checks a dict against them, naming each bad field, e.g. ``"PE.route_length: 150.0 outside [68,
+135]"`` (:func:`lantern_jax.scenarios.families.validate_params` adds each family's cross-field
+feasibility rules).
 
 Ranges follow the paper's "Detailed Scenario Specifications" table; route lengths are the
 closed-loop ranges of its data-collection appendix as rounded in DESIGN.md section 5 (PE 68-135 m,
@@ -129,6 +130,7 @@ class Flag:
 
 
 SEED_MAX = 2**31 - 1
+MIN_RECOVERY_M = 29.0  # m of route after the conflict point, every family (paper appendix A)
 
 _COMMON = {
     "seed": IntRange(0, SEED_MAX),  # pair seed: position-noise seed of the ablation
@@ -206,16 +208,16 @@ def family_of(params: dict) -> str:
     return fam
 
 
-def param_errors(params: Any, feasibility: bool = True) -> list[str]:
-    """Every problem of a scenario parameter dict, each naming its field.
+def range_errors(params: Any) -> list[str]:
+    """Every type and range problem of a scenario parameter dict, each naming its field.
 
-    Checks the JSON type (a dict), the family, unknown and missing fields, each field's type and
-    range (:data:`PARAM_RANGES`; NaN and infinities are out of every range) and, when all of
-    those pass and ``feasibility`` is set, the family's cross-field geometry checks.
+    Checks the JSON type (a dict), the family, unknown and missing fields, and each field's type
+    and range (:data:`PARAM_RANGES`; NaN and infinities are out of every range).  The families'
+    cross-field feasibility rules are checked on top of this by
+    :func:`lantern_jax.scenarios.families.param_errors`.
 
     Args:
         params: flat dict with ``family`` and the fields of ``PARAM_RANGES[family]``.
-        feasibility: also run the family's cross-field checks.
 
     Returns:
         Messages such as ``"PE.route_length: 150.0 outside [68, 135]"``; empty when valid.
@@ -240,32 +242,7 @@ def param_errors(params: Any, feasibility: bool = True) -> list[str]:
             rng.check(f"{fam}.{key}", params[key])
         except ValueError as e:
             errors.append(str(e))
-    if feasibility and not errors:
-        from lantern_jax.scenarios.families import check_feasible
-
-        try:
-            check_feasible(params)
-        except ValueError as e:
-            errors.append(str(e))
     return errors
-
-
-def validate_params(params: dict, feasibility: bool = True) -> dict:
-    """Check a scenario parameter dict; return it unchanged.
-
-    Args:
-        params: flat dict with ``family`` and the fields of ``PARAM_RANGES[family]``.
-        feasibility: also run the family's cross-field geometry checks (route long enough for
-            the recovery, marker ordering, arm layout...).
-
-    Raises:
-        ValueError: naming the field of the first problem of :func:`param_errors`
-            (``"PE.route_length: 150.0 outside [68, 135]"``).
-    """
-    errors = param_errors(params, feasibility)
-    if errors:
-        raise ValueError(errors[0])
-    return params
 
 
 # ------------------------------------------------------------------------------------------------

@@ -31,7 +31,7 @@ import jax
 import jax.numpy as jnp
 
 from lantern_jax.constants import FAMILIES
-from lantern_jax.scoring import thresholds as th
+from lantern_jax.scoring import thresholds
 from lantern_jax.scoring.components import (
     ROUTE_A_GATES,
     anticipation,
@@ -63,8 +63,8 @@ def d_safe_for_family(family: Any) -> Array:
         family: family index (int or int array, ``constants.FAMILIES`` order) or code string.
     """
     if isinstance(family, str):
-        return jnp.asarray(th.D_SAFE_BY_FAMILY[FAMILIES.index(family)], jnp.float32)
-    table = jnp.asarray(th.D_SAFE_BY_FAMILY, jnp.float32)
+        return jnp.asarray(thresholds.D_SAFE_BY_FAMILY[FAMILIES.index(family)], jnp.float32)
+    table = jnp.asarray(thresholds.D_SAFE_BY_FAMILY, jnp.float32)
     return table[jnp.asarray(family, jnp.int32)]
 
 
@@ -103,9 +103,18 @@ def combine(
     """
     s_a = 0.5 * (_nz(_f(s_ttc_)) + _nz(_f(s_clear_)))
     t_a = 0.5 * (_nz(_f(s_ant_)) + _nz(_f(s_rec_)))
-    q_a = th.W_PROGRESS_A * _nz(_f(p_a)) + th.W_SAFETY_A * s_a + th.W_TEMPORAL_A * t_a
-    quality = th.W_ROUTE_A * q_a + th.W_ROUTE_B * _nz(_f(p_b))
-    return {"S_A": s_a, "T_A": t_a, "Q_A": q_a, "CUS": th.CUS_SCALE * _f(gate_product) * quality}
+    q_a = (
+        thresholds.W_PROGRESS_A * _nz(_f(p_a))
+        + thresholds.W_SAFETY_A * s_a
+        + thresholds.W_TEMPORAL_A * t_a
+    )
+    quality = thresholds.W_ROUTE_A * q_a + thresholds.W_ROUTE_B * _nz(_f(p_b))
+    return {
+        "S_A": s_a,
+        "T_A": t_a,
+        "Q_A": q_a,
+        "CUS": thresholds.CUS_SCALE * _f(gate_product) * quality,
+    }
 
 
 def components_from_values(

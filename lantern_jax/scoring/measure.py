@@ -22,7 +22,7 @@ import jax.numpy as jnp
 
 from lantern_jax import geometry, polyline
 from lantern_jax.constants import EGO_HALF_LENGTH, EGO_HALF_WIDTH, LIGHT_RED
-from lantern_jax.scoring import thresholds as th
+from lantern_jax.scoring import thresholds
 from lantern_jax.scoring.sample import TickSample
 from lantern_jax.world import ActorState, EgoState, Lanes, ProtocolState, Scenario
 
@@ -42,8 +42,8 @@ def outside_lanes(lanes: Lanes, ego: EgoState) -> Array:
     def one(center, pv, width):
         dist, direction = polyline.nearest_segment(center, pv, ego.xy)
         norm = jnp.sqrt(jnp.maximum(jnp.sum(direction * direction), 1e-12))
-        wrong = jnp.sum(direction * heading) < jnp.cos(th.WRONG_WAY_RAD) * norm
-        return (dist <= 0.5 * width + th.LANE_MARGIN_M) & ~wrong
+        wrong = jnp.sum(direction * heading) < jnp.cos(thresholds.WRONG_WAY_RAD) * norm
+        return (dist <= 0.5 * width + thresholds.LANE_MARGIN_M) & ~wrong
 
     inside = jax.vmap(one)(lanes.center, lanes.point_valid, lanes.width)
     return ~jnp.any(inside & lanes.valid)
@@ -61,11 +61,11 @@ def justified_stop(
         present: (A,) bool, actors in the world.
         dist_to_end: () float32, m, route length minus the ego's route arc.
     """
-    in_corr = present & (lateral < EGO_HALF_WIDTH + th.JUSTIFY_LATERAL_MARGIN_M)
+    in_corr = present & (lateral < EGO_HALF_WIDTH + thresholds.JUSTIFY_LATERAL_MARGIN_M)
     lead = jnp.any(
-        in_corr & (gap > th.JUSTIFY_LEAD_BEHIND_M) & (gap < th.JUSTIFY_LEAD_DIST_M)
+        in_corr & (gap > thresholds.JUSTIFY_LEAD_BEHIND_M) & (gap < thresholds.JUSTIFY_LEAD_DIST_M)
     )
-    return light_holds | lead | (dist_to_end < th.JUSTIFY_ROUTE_END_M)
+    return light_holds | lead | (dist_to_end < thresholds.JUSTIFY_ROUTE_END_M)
 
 
 def measure(
@@ -103,7 +103,7 @@ def measure(
     ext = scenario.actors.extent
     ego_ext = jnp.asarray(EGO_EXTENT, jnp.float32)
     overlap = geometry.overlap_with_boxes(ego.xy, ego.yaw, ego_ext, actors.xy, actors.yaw, ext)
-    collision = jnp.any(overlap & present) & (ego.speed >= th.COLLISION_MIN_SPEED_MPS)
+    collision = jnp.any(overlap & present) & (ego.speed >= thresholds.COLLISION_MIN_SPEED_MPS)
     dists = geometry.distance_to_boxes(ego.xy, ego.yaw, ego_ext, actors.xy, actors.yaw, ext)
     ego_vel = ego.speed * jnp.stack([jnp.cos(ego.yaw), jnp.sin(ego.yaw)])
     hz_vel = actors.speed[h] * jnp.stack([jnp.cos(actors.yaw[h]), jnp.sin(actors.yaw[h])])
@@ -146,8 +146,8 @@ def execution_ended(
         still_time: () float32, s, continuous time the ego has been still.
     """
     return (
-        (progress >= th.completion_length(scenario.route.length))
+        (progress >= thresholds.completion_length(scenario.route.length))
         | (t >= scenario.config.timeout_s)
-        | (dist_to_route >= th.ROUTE_DEVIATION_M)
-        | (still_time >= th.BLOCK_STILL_S)
+        | (dist_to_route >= thresholds.ROUTE_DEVIATION_M)
+        | (still_time >= thresholds.BLOCK_STILL_S)
     )

@@ -15,7 +15,7 @@ from lantern_jax.viz.plots import bev_figure, bev_plot
 
 
 def save_animation(
-    world: Any,
+    scenario: Any,
     record: Any,
     path: str | os.PathLike,
     fps: int = 10,
@@ -32,7 +32,7 @@ def save_animation(
     and moved into place when complete.
 
     Args:
-        world: the initial :class:`~lantern_jax.world.Scenario` of the execution.
+        scenario: the :class:`~lantern_jax.world.Scenario` of the execution.
         record: its ``TickRecord`` with a leading time axis.
         path: destination; ``.mp4`` is written with ffmpeg when available, otherwise (with a
             warning) a GIF is written next to it with the suffix ``.gif``; every other suffix
@@ -48,7 +48,7 @@ def save_animation(
     """
     if stride < 1 or fps < 1:
         raise ValueError(f"stride and fps must be >= 1, got stride={stride}, fps={fps}")
-    w, rec = to_numpy(world), to_numpy(record)
+    w, rec = to_numpy(scenario), to_numpy(record)
     n = num_valid_ticks(rec)
     frames = list(range(0, n, stride))
     if frames[-1] != n - 1:

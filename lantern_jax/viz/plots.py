@@ -111,8 +111,8 @@ def _draw_lanes(ax, lanes: Any) -> None:
             ax.add_collection(PolyCollection(polys[k], zorder=zo, **style[k]))
 
 
-def _draw_route(ax, world: Any) -> None:
-    r, p = world.route, world.config
+def _draw_route(ax, scenario: Any) -> None:
+    r, p = scenario.route, scenario.config
     v = np.asarray(r.valid, bool)
     ax.plot(r.xy[v, 0], r.xy[v, 1], color=ROUTE_COLOR, lw=2.0, alpha=0.8, zorder=2, label="route")
     for field, label, marker, color in MARKERS:
@@ -165,8 +165,132 @@ def _draw_box(ax, xy, yaw, extent, face, edge, lw, alpha, gid, zorder, heading=T
         ax.plot(corners[[0, 3], 0], corners[[0, 3], 1], color="white", lw=1.6, zorder=zorder + 0.1)
 
 
+def _draw_lights(ax, lights: Any, t: float) -> None:
+    """Traffic lights at their stop lines, coloured by their state at ``t``."""
+    lv = np.nonzero(lights.valid)[0]
+    for n, (j, stv) in enumerate(zip(lv, np.asarray(light_states(lights, t))[lv], strict=True)):
+        ax.plot(
+            *lights.stop_xy[j],
+            marker="o",
+            ms=10,
+            color=LIGHT_COLORS[int(stv)],
+            mec="black",
+            mew=1.0,
+            ls="none",
+            zorder=7,
+            label="traffic light" if n == 0 else None,
+        )
+
+
+def _draw_frustum(ax, cam: np.ndarray, ego_yaw: float, sensing_range: float) -> None:
+    """The front camera's 110-degree field of view (``gid="frustum"``)."""
+    rng = min(sensing_range, FRUSTUM_DRAW_RANGE)
+    half_fov = 0.5 * FRONT_CAMERA_FOV
+    yaw_deg = np.degrees(ego_yaw)
+    ax.add_patch(
+        Wedge(
+            cam,
+            rng,
+            yaw_deg - half_fov,
+            yaw_deg + half_fov,
+            facecolor="#fff3b0",
+            alpha=0.35,
+            edgecolor="#c9a227",
+            linewidth=0.8,
+            linestyle="--",
+            gid="frustum",
+            zorder=2.5,
+        )
+    )
+
+
+def _draw_actors(ax, sc: Any, rec: Any, i: int, cam: np.ndarray, show_rays: bool) -> None:
+    """Present actors coloured by role; visible ones outlined, with sight lines."""
+    present, visible = rec.actor_present[i] & sc.actors.valid, rec.visible[i]
+    axy, ayaw = rec.actor_xy[i], rec.actor_yaw[i]
+    for a in np.nonzero(present)[0]:
+        role = int(sc.actors.role[a])
+        vis = bool(visible[a])
+        _draw_box(
+            ax,
+            axy[a],
+            float(ayaw[a]),
+            sc.actors.extent[a],
+            face=ROLE_COLORS[role],
+            edge=VISIBLE_EDGE if vis else "black",
+            lw=2.2 if vis else 0.7,
+            alpha=0.9,
+            gid=f"actor:{a}",
+            zorder=5,
+            heading=int(sc.actors.kind[a]) != KIND_STATIC and sc.actors.extent[a, 0] > 0.5,
+        )
+        if int(sc.actors.kind[a]) == KIND_PEDESTRIAN:  # tiny box: ring it so it can be seen
+            ax.plot(
+                *axy[a], marker="o", ms=11, mfc="none", mec=ROLE_COLORS[role], mew=1.5, zorder=5.4
+            )
+        if vis:
+            if show_rays:
+                ax.plot(
+                    [cam[0], axy[a, 0]],
+                    [cam[1], axy[a, 1]],
+                    color=RAY_COLOR,
+                    lw=0.9,
+                    ls="--",
+                    alpha=0.85,
+                    zorder=5.3,
+                )
+            ax.plot(*axy[a], marker="o", ms=3, color=VISIBLE_EDGE, zorder=5.5)
+
+
+def _draw_warning(ax, fig: Figure, text: str, grounded_xy: np.ndarray) -> None:
+    """The active warning text (wrapped to the axes width, ``gid="warning"``) and its grounded
+    position."""
+    ax.plot(
+        *grounded_xy,
+        marker="x",
+        ms=10,
+        mew=2.2,
+        color="#ff006e",
+        ls="none",
+        zorder=8,
+        label="grounded position",
+    )
+    pos = ax.get_position()  # square axes (equal aspect): the smaller side is the width
+    side_in = min(pos.width * fig.get_figwidth(), pos.height * fig.get_figheight())
+    chars = max(30, int(side_in * 72.0 / (8 * 0.62)))
+    ax.text(
+        0.015,
+        0.985,
+        textwrap.fill(text, chars),
+        transform=ax.transAxes,
+        ha="left",
+        va="top",
+        fontsize=8,
+        zorder=10,
+        gid="warning",
+        bbox=dict(boxstyle="round,pad=0.4", fc="#fffbe6", ec="#e09f3e", alpha=0.95),
+    )
+
+
+def _default_title(config: Any) -> str:
+    fam = FAMILIES[int(config.family)] if 0 <= int(config.family) < len(FAMILIES) else "?"
+    route = "A" if bool(config.is_route_a) else "B"
+    cond = "warning" if bool(config.warning_enabled) else "no warning"
+    return f"{fam} route {route}, {cond}"
+
+
+def _frame_view(ax, centre: np.ndarray) -> None:
+    ax.set_xlim(centre[0] - VIEW_HALF, centre[0] + VIEW_HALF)
+    ax.set_ylim(centre[1] - VIEW_HALF, centre[1] + VIEW_HALF)
+    ax.set_aspect("equal", adjustable="box")
+    ax.set_facecolor("#f7f7f2")
+    ax.set_xlabel("x (m, east)")
+    ax.set_ylabel("y (m, north)")
+    ax.tick_params(labelsize=7)
+
+
 def bev_plot(
-    world: Any,
+    scenario: Any,
     record: Any,
     tick_index: int,
     ax: Any = None,
@@ -188,7 +312,7 @@ def bev_plot(
     ``Wedge`` (``gid="frustum"``); lanes are collections.
 
     Args:
-        world: the initial :class:`~lantern_jax.world.Scenario` of the execution (static data:
+        scenario: the :class:`~lantern_jax.world.Scenario` of the execution (static data:
             lanes, route, lights, extents, roles, markers, text id, initial ego pose).
         record: its ``TickRecord`` with a leading time axis (``rollout(..., record=True)``).
         tick_index: entry of ``record`` to draw (negative counts from the end); entries past the
@@ -201,7 +325,7 @@ def bev_plot(
     Returns:
         The figure holding the axes.
     """
-    w, rec = to_numpy(world), to_numpy(record)
+    sc, rec = to_numpy(scenario), to_numpy(record)
     n_all = int(rec.t.shape[0])
     if not -n_all <= tick_index < n_all:
         raise IndexError(f"tick_index: {tick_index} outside the record's {n_all} entries")
@@ -213,30 +337,15 @@ def bev_plot(
         _clear_axes(ax)
 
     ego_xy, ego_yaw = rec.ego_xy[i], float(rec.ego_yaw[i])
-    prev_xy, prev_yaw = (
-        (rec.ego_xy[i - 1], float(rec.ego_yaw[i - 1])) if i > 0 else (w.ego0.xy, float(w.ego0.yaw))
-    )
+    if i > 0:
+        prev_xy, prev_yaw = rec.ego_xy[i - 1], float(rec.ego_yaw[i - 1])
+    else:
+        prev_xy, prev_yaw = sc.ego0.xy, float(sc.ego0.yaw)
     t = float(rec.t[i])
-
-    _draw_lanes(ax, w.lanes)
-    _draw_route(ax, w)
-
-    # traffic lights
-    lv = np.nonzero(w.lights.valid)[0]
-    for n, (j, stv) in enumerate(zip(lv, np.asarray(light_states(w.lights, t))[lv], strict=True)):
-        ax.plot(
-            *w.lights.stop_xy[j],
-            marker="o",
-            ms=10,
-            color=LIGHT_COLORS[int(stv)],
-            mec="black",
-            mew=1.0,
-            ls="none",
-            zorder=7,
-            label="traffic light" if n == 0 else None,
-        )
-
-    # ego trail, planned waypoints, camera frustum
+    _draw_lanes(ax, sc.lanes)
+    _draw_route(ax, sc)
+    _draw_lights(ax, sc.lights, t)
+    # ego trail and planned waypoints (the plan was made at the previous tick's pose)
     ax.plot(
         rec.ego_xy[: i + 1, 0], rec.ego_xy[: i + 1, 1], color=EGO_COLOR, lw=1.0, alpha=0.5, zorder=3
     )
@@ -244,116 +353,17 @@ def bev_plot(
     ax.plot(wps[:, 0], wps[:, 1], ".", color=EGO_COLOR, ms=3.5, zorder=3.5, label="waypoints")
     fwd, _ = rot(ego_yaw)
     cam = np.asarray(ego_xy, float) - CAMERA_BACK_OFFSET * fwd
-    rng = min(float(w.config.sensing_range), FRUSTUM_DRAW_RANGE)
-    half_fov = 0.5 * FRONT_CAMERA_FOV
-    yaw_deg = np.degrees(ego_yaw)
-    ax.add_patch(
-        Wedge(
-            cam,
-            rng,
-            yaw_deg - half_fov,
-            yaw_deg + half_fov,
-            facecolor="#fff3b0",
-            alpha=0.35,
-            edgecolor="#c9a227",
-            linewidth=0.8,
-            linestyle="--",
-            gid="frustum",
-            zorder=2.5,
-        )
-    )
-
-    # actors
-    present, visible = rec.actor_present[i] & w.actors.valid, rec.visible[i]
-    axy, ayaw = rec.actor_xy[i], rec.actor_yaw[i]
-    for a in np.nonzero(present)[0]:
-        role = int(w.actors.role[a])
-        vis = bool(visible[a])
-        _draw_box(
-            ax,
-            axy[a],
-            float(ayaw[a]),
-            w.actors.extent[a],
-            face=ROLE_COLORS[role],
-            edge=VISIBLE_EDGE if vis else "black",
-            lw=2.2 if vis else 0.7,
-            alpha=0.9,
-            gid=f"actor:{a}",
-            zorder=5,
-            heading=int(w.actors.kind[a]) != KIND_STATIC and w.actors.extent[a, 0] > 0.5,
-        )
-        if int(w.actors.kind[a]) == KIND_PEDESTRIAN:  # tiny box: ring it so it can be seen
-            ax.plot(
-                *axy[a], marker="o", ms=11, mfc="none", mec=ROLE_COLORS[role], mew=1.5, zorder=5.4
-            )
-        if vis:
-            if show_rays:
-                ax.plot(
-                    [cam[0], axy[a, 0]],
-                    [cam[1], axy[a, 1]],
-                    color=RAY_COLOR,
-                    lw=0.9,
-                    ls="--",
-                    alpha=0.85,
-                    zorder=5.3,
-                )
-            ax.plot(*axy[a], marker="o", ms=3, color=VISIBLE_EDGE, zorder=5.5)
-    _draw_box(
-        ax,
-        ego_xy,
-        ego_yaw,
-        (EGO_HALF_LENGTH, EGO_HALF_WIDTH),
-        face=EGO_COLOR,
-        edge="black",
-        lw=1.0,
-        alpha=0.95,
-        gid="ego",
-        zorder=5.2,
-    )
+    _draw_frustum(ax, cam, ego_yaw, float(sc.config.sensing_range))
+    _draw_actors(ax, sc, rec, i, cam, show_rays)
+    ego_extent = (EGO_HALF_LENGTH, EGO_HALF_WIDTH)
+    _draw_box(ax, ego_xy, ego_yaw, ego_extent, face=EGO_COLOR, edge="black", lw=1.0, alpha=0.95,
+              gid="ego", zorder=5.2)  # fmt: skip
     ax.plot(*cam, marker="^", ms=4, color="black", zorder=5.6)
-
-    # active warning
     if bool(rec.warning_active[i]):
-        text = render_warning(int(w.config.text_id), rec.warning_pos[i])
-        gp = ego_frame_to_world(rec.warning_pos[i], prev_xy, prev_yaw)[0]
-        ax.plot(
-            *gp,
-            marker="x",
-            ms=10,
-            mew=2.2,
-            color="#ff006e",
-            ls="none",
-            zorder=8,
-            label="grounded position",
-        )
-        pos = ax.get_position()  # square axes (equal aspect): the smaller side is the width
-        side_in = min(pos.width * fig.get_figwidth(), pos.height * fig.get_figheight())
-        chars = max(30, int(side_in * 72.0 / (8 * 0.62)))
-        ax.text(
-            0.015,
-            0.985,
-            textwrap.fill(text, chars),
-            transform=ax.transAxes,
-            ha="left",
-            va="top",
-            fontsize=8,
-            zorder=10,
-            gid="warning",
-            bbox=dict(boxstyle="round,pad=0.4", fc="#fffbe6", ec="#e09f3e", alpha=0.95),
-        )
-
-    ax.set_xlim(ego_xy[0] - VIEW_HALF, ego_xy[0] + VIEW_HALF)
-    ax.set_ylim(ego_xy[1] - VIEW_HALF, ego_xy[1] + VIEW_HALF)
-    ax.set_aspect("equal", adjustable="box")
-    ax.set_facecolor("#f7f7f2")
-    ax.set_xlabel("x (m, east)")
-    ax.set_ylabel("y (m, north)")
-    ax.tick_params(labelsize=7)
-    if title is None:
-        fam = FAMILIES[int(w.config.family)] if 0 <= int(w.config.family) < len(FAMILIES) else "?"
-        route = "A" if bool(w.config.is_route_a) else "B"
-        cond = "warning" if bool(w.config.warning_enabled) else "no warning"
-        title = f"{fam} route {route}, {cond}"
+        text = render_warning(int(sc.config.text_id), rec.warning_pos[i])
+        _draw_warning(ax, fig, text, ego_frame_to_world(rec.warning_pos[i], prev_xy, prev_yaw)[0])
+    _frame_view(ax, ego_xy)
+    title = _default_title(sc.config) if title is None else title
     ax.set_title(f"{title}  |  t = {t:.2f} s, v = {float(rec.ego_speed[i]):.1f} m/s", fontsize=10)
     _bev_legend(ax)
     return fig

@@ -9,7 +9,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from lantern_jax.scoring import thresholds as th
+from lantern_jax.scoring import thresholds
 
 Array = jax.Array
 
@@ -41,9 +41,9 @@ def first_time(already: Array, now: Array, t: Array, t_old: Array) -> Array:
 
 def count(n: Array, inc: Array) -> Array:
     """() int32, ticks: ``n + inc`` saturated at ``COUNT_CAP`` (``inc`` () bool)."""
-    return jnp.minimum(n + inc.astype(jnp.int32), th.COUNT_CAP)
+    return jnp.minimum(n + inc.astype(jnp.int32), thresholds.COUNT_CAP)
 
 
 def run(n: Array, cond: Array) -> Array:
     """() int32, ticks: length of the current run of ticks with ``cond`` (() bool), saturated."""
-    return jnp.where(cond, jnp.minimum(n + 1, th.COUNT_CAP), 0)
+    return jnp.where(cond, jnp.minimum(n + 1, thresholds.COUNT_CAP), 0)

@@ -37,7 +37,7 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from lantern_jax.scoring import thresholds as th
+from lantern_jax.scoring import thresholds
 from lantern_jax.scoring.components.accumulate import count, first_time, push
 from lantern_jax.scoring.components.context import RING, Context, Tick, opened_by
 from lantern_jax.scoring.sample import TickSample
@@ -46,7 +46,7 @@ from lantern_jax.times import NEVER, happened, time_or_nan
 
 Array = jax.Array
 
-W = th.REACT_WINDOW  # ticks per response window
+W = thresholds.REACT_WINDOW  # ticks per response window
 
 
 @struct.dataclass
@@ -89,8 +89,8 @@ def _soft_flag(accel: Array, speed: Array, v_ref: Array, temp: Array) -> Array:
     Returns:
         (...) float32 in [0, 1].
     """
-    return 1.0 - (1.0 - jax.nn.sigmoid((th.REACT_ACCEL_MPS2 - accel) / temp)) * (
-        1.0 - jax.nn.sigmoid((v_ref - th.REACT_SPEED_DROP_MPS - speed) / temp)
+    return 1.0 - (1.0 - jax.nn.sigmoid((thresholds.REACT_ACCEL_MPS2 - accel) / temp)) * (
+        1.0 - jax.nn.sigmoid((v_ref - thresholds.REACT_SPEED_DROP_MPS - speed) / temp)
     )
 
 
@@ -105,7 +105,7 @@ def _window_pass(full: Array, soft_flags: Array, temp: Array) -> Array:
     Returns:
         () float32 in [0, 1]; 0 for an incomplete window.
     """
-    margin = jnp.sum(soft_flags) - (th.REACT_MIN_COUNT - th.COUNT_HALF)
+    margin = jnp.sum(soft_flags) - (thresholds.REACT_MIN_COUNT - thresholds.COUNT_HALF)
     return jnp.where(full, jax.nn.sigmoid(margin / temp), 0.0)
 
 
@@ -113,13 +113,14 @@ def _sustained(state: AnticipationState, tick: Tick, temp: Array) -> dict[str, A
     """First sustained response at/after ``t_ref`` (hard and soft first crossing)."""
     accel, speed, post_ref = tick.accel, tick.speed, tick.post_ref
     flag = post_ref & (
-        (accel <= th.REACT_ACCEL_MPS2) | (speed <= tick.v_pre - th.REACT_SPEED_DROP_MPS)
+        (accel <= thresholds.REACT_ACCEL_MPS2)
+        | (speed <= tick.v_pre - thresholds.REACT_SPEED_DROP_MPS)
     )
     flags = push(state.flags, flag)
     n_post_ref = count(state.n_post_ref, post_ref)
     full = n_post_ref >= W
     window_start = tick.time_ring[RING - W]
-    ok = full & (jnp.sum(flags) >= th.REACT_MIN_COUNT)
+    ok = full & (jnp.sum(flags) >= thresholds.REACT_MIN_COUNT)
     soft_flag = jnp.where(post_ref, _soft_flag(accel, speed, tick.v_pre, temp), 0.0)
     soft_flags = push(state.soft_flags, soft_flag)
     sigma = _window_pass(full, soft_flags, temp)
@@ -140,10 +141,10 @@ def _at_event(state: AnticipationState, tick: Tick, temp: Array) -> dict[str, Ar
     now = tick.post_event & ~state.event_checked
     full = tick.n_ticks >= W
     v_start = tick.speed_ring[0]
-    flags = (tick.accel_ring <= th.REACT_ACCEL_MPS2) | (
-        tick.speed_ring <= v_start - th.REACT_SPEED_DROP_MPS
+    flags = (tick.accel_ring <= thresholds.REACT_ACCEL_MPS2) | (
+        tick.speed_ring <= v_start - thresholds.REACT_SPEED_DROP_MPS
     )
-    present = full & (jnp.sum(flags) >= th.REACT_MIN_COUNT)
+    present = full & (jnp.sum(flags) >= thresholds.REACT_MIN_COUNT)
     soft_present = _window_pass(
         full, _soft_flag(tick.accel_ring, tick.speed_ring, v_start, temp), temp
     )
@@ -252,7 +253,7 @@ def soft(
         ``(s_ant, valid)``: () float32 in [0, 1]; () bool (the hard availability).
     """
     ok = valid(state, ctx, t_fail)
-    has = state.p > th.PROB_EPS
+    has = state.p > thresholds.PROB_EPS
     e_react = state.pt / jnp.where(has, state.p, 1.0)
     span = ctx.t_event - ctx.t_warn_point
     safe_span = jnp.where(ok & (span > 0), span, 1.0)

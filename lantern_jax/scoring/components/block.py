@@ -20,7 +20,7 @@ import jax.numpy as jnp
 from flax import struct
 
 from lantern_jax.constants import DT
-from lantern_jax.scoring import thresholds as th
+from lantern_jax.scoring import thresholds
 from lantern_jax.scoring.components.accumulate import first_time, run
 from lantern_jax.scoring.components.context import Context, Tick
 from lantern_jax.scoring.components.progress import is_completed
@@ -63,8 +63,8 @@ def update(state: BlockState, sample: TickSample, tick: Tick, temperature: Array
         The record after the tick.
     """
     unfinished = ~is_completed(tick.progress, tick.route_length)
-    still_run = run(state.still_run, (tick.speed < th.STILL_SPEED_MPS) & unfinished)
-    stall_now = still_run >= th.BLOCK_STILL
+    still_run = run(state.still_run, (tick.speed < thresholds.STILL_SPEED_MPS) & unfinished)
+    stall_now = still_run >= thresholds.BLOCK_STILL
     fault = jnp.asarray(sample.controller_fault, bool)
     return BlockState(
         still_run=still_run,
@@ -77,7 +77,7 @@ def update(state: BlockState, sample: TickSample, tick: Tick, temperature: Array
 
 def stalled(state: BlockState) -> Array:
     """() bool: a standstill of >= 20 s with the route unfinished."""
-    return state.max_still_run >= th.BLOCK_STILL
+    return state.max_still_run >= thresholds.BLOCK_STILL
 
 
 def max_still_s(state: BlockState) -> Array:
@@ -127,8 +127,8 @@ def soft(state: BlockState, ctx: Context, temperature: Array) -> tuple[Array, Ar
         ``(passed, valid)``: () float32 in [0, 1]; () bool (always True).
     """
     max_still = state.max_still_run.astype(jnp.float32)
-    still_margin = (th.BLOCK_STILL - th.COUNT_HALF - max_still) * DT
-    completion_margin = ctx.progress_m - (ctx.route_length_m - th.COMPLETION_TOL_M)
+    still_margin = (thresholds.BLOCK_STILL - thresholds.COUNT_HALF - max_still) * DT
+    completion_margin = ctx.progress_m - (ctx.route_length_m - thresholds.COMPLETION_TOL_M)
     no_fault = 1.0 - state.fault.astype(jnp.float32)
     value = soft_gate(still_margin, temperature) * soft_gate(completion_margin, temperature)
     return value * no_fault, jnp.asarray(True)

@@ -14,7 +14,7 @@ import jax.numpy as jnp
 from flax import struct
 
 from lantern_jax.constants import BIG
-from lantern_jax.scoring import thresholds as th
+from lantern_jax.scoring import thresholds
 from lantern_jax.scoring.components.accumulate import first_time
 from lantern_jax.scoring.components.context import Context, Tick
 from lantern_jax.scoring.sample import TickSample
@@ -58,7 +58,7 @@ def update(
     Returns:
         The record after the tick.
     """
-    slow_touch = th.COLLISION_MIN_SPEED_MPS - tick.speed
+    slow_touch = thresholds.COLLISION_MIN_SPEED_MPS - tick.speed
     margin = jnp.where(tick.present, jnp.maximum(tick.hazard_dist, slow_touch), BIG)
     return CollisionState(
         collided=state.collided | tick.collision,

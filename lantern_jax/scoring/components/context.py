@@ -23,14 +23,16 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from lantern_jax.scoring import thresholds as th
+from lantern_jax.scoring import thresholds
 from lantern_jax.scoring.components.accumulate import count, push
 from lantern_jax.scoring.sample import TickSample
 from lantern_jax.times import NEVER, happened
 
 Array = jax.Array
 
-RING = max(th.REACT_WINDOW, th.RECOVER_WINDOW)  # ticks, length of the time / progress rings
+RING = max(
+    thresholds.REACT_WINDOW, thresholds.RECOVER_WINDOW
+)  # ticks, length of the time / progress rings
 
 
 @struct.dataclass
@@ -92,8 +94,8 @@ def init() -> Context:
         t_warn_point=f(NEVER), t_event=f(NEVER), t_warn_off=f(NEVER), t_clear=f(NEVER),
         progress_m=f(0.0), route_length_m=f(0.0),
         time_ring=jnp.zeros(RING, jnp.float32), progress_ring=jnp.zeros(RING, jnp.float32),
-        speed_ring=jnp.zeros(th.REACT_WINDOW, jnp.float32),
-        accel_ring=jnp.zeros(th.REACT_WINDOW, jnp.float32),
+        speed_ring=jnp.zeros(thresholds.REACT_WINDOW, jnp.float32),
+        accel_ring=jnp.zeros(thresholds.REACT_WINDOW, jnp.float32),
         v_pre=f(0.0), v_pre_set=jnp.asarray(False),
     )  # fmt: skip
 

@@ -15,7 +15,7 @@ import jax.numpy as jnp
 from flax import struct
 
 from lantern_jax.constants import DT
-from lantern_jax.scoring import thresholds as th
+from lantern_jax.scoring import thresholds
 from lantern_jax.scoring.components.accumulate import first_time, run
 from lantern_jax.scoring.components.context import Context, Tick
 from lantern_jax.scoring.sample import TickSample
@@ -55,9 +55,9 @@ def update(
         The record after the tick.
     """
     in_window = tick.post_ref & (tick.t <= tick.t_event)
-    stopped = tick.speed <= th.FALSE_BRAKE_SPEED_MPS
+    stopped = tick.speed <= thresholds.FALSE_BRAKE_SPEED_MPS
     n_run = run(state.run, in_window & stopped & ~jnp.asarray(sample.justified_stop, bool))
-    failed = n_run >= th.FALSE_BRAKE
+    failed = n_run >= thresholds.FALSE_BRAKE
     return FalseBrakeState(
         run=n_run,
         max_run=jnp.maximum(state.max_run, n_run),
@@ -81,7 +81,7 @@ def hard(state: FalseBrakeState, ctx: Context) -> tuple[Array, Array]:
         ``(passed, valid)``: () bool, no unjustified 1 s stop in ``[t_ref, t_event]``;
         () bool (always True).
     """
-    return state.max_run < th.FALSE_BRAKE, jnp.asarray(True)
+    return state.max_run < thresholds.FALSE_BRAKE, jnp.asarray(True)
 
 
 def soft(state: FalseBrakeState, ctx: Context, temperature: Array) -> tuple[Array, Array]:
@@ -95,5 +95,7 @@ def soft(state: FalseBrakeState, ctx: Context, temperature: Array) -> tuple[Arra
     Returns:
         ``(passed, valid)``: () float32 in [0, 1]; () bool (always True).
     """
-    margin = (th.FALSE_BRAKE - th.COUNT_HALF - state.max_run.astype(jnp.float32)) * DT
+    margin = (
+        thresholds.FALSE_BRAKE - thresholds.COUNT_HALF - state.max_run.astype(jnp.float32)
+    ) * DT
     return soft_gate(margin, temperature), jnp.asarray(True)

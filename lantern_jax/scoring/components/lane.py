@@ -13,7 +13,7 @@ import jax.numpy as jnp
 from flax import struct
 
 from lantern_jax.constants import DT
-from lantern_jax.scoring import thresholds as th
+from lantern_jax.scoring import thresholds
 from lantern_jax.scoring.components.accumulate import count, first_time
 from lantern_jax.scoring.components.context import Context, Tick
 from lantern_jax.scoring.sample import TickSample
@@ -49,7 +49,7 @@ def update(state: LaneState, sample: TickSample, tick: Tick, temperature: Array)
         The record after the tick.
     """
     n_outside = count(state.n_outside, jnp.asarray(sample.outside_lanes, bool))
-    failed = n_outside >= th.LANE_DEBOUNCE
+    failed = n_outside >= thresholds.LANE_DEBOUNCE
     return LaneState(
         n_outside=n_outside,
         t_fail=first_time(happened(state.t_fail), failed, tick.t, state.t_fail),
@@ -84,7 +84,7 @@ def hard(state: LaneState, ctx: Context) -> tuple[Array, Array]:
     Returns:
         ``(passed, valid)``: () bool, < 1 s in total outside the lanes; () bool (always True).
     """
-    return state.n_outside < th.LANE_DEBOUNCE, jnp.asarray(True)
+    return state.n_outside < thresholds.LANE_DEBOUNCE, jnp.asarray(True)
 
 
 def soft(state: LaneState, ctx: Context, temperature: Array) -> tuple[Array, Array]:
@@ -98,5 +98,7 @@ def soft(state: LaneState, ctx: Context, temperature: Array) -> tuple[Array, Arr
     Returns:
         ``(passed, valid)``: () float32 in [0, 1]; () bool (always True).
     """
-    margin = (th.LANE_DEBOUNCE - th.COUNT_HALF - state.n_outside.astype(jnp.float32)) * DT
+    margin = (
+        thresholds.LANE_DEBOUNCE - thresholds.COUNT_HALF - state.n_outside.astype(jnp.float32)
+    ) * DT
     return soft_gate(margin, temperature), jnp.asarray(True)

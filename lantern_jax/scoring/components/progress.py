@@ -14,7 +14,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from lantern_jax.scoring import thresholds as th
+from lantern_jax.scoring import thresholds
 from lantern_jax.scoring.components.context import Context
 from lantern_jax.scoring.smooth import smooth_clip01
 
@@ -31,7 +31,7 @@ def is_completed(progress_m: Array, route_length_m: Array) -> Array:
     Returns:
         (...) bool: ``progress_m >= route_length_m - 2 m``.
     """
-    return progress_m >= route_length_m - th.COMPLETION_TOL_M
+    return progress_m >= route_length_m - thresholds.COMPLETION_TOL_M
 
 
 def hard(ctx: Context) -> tuple[Array, Array]:
@@ -43,7 +43,7 @@ def hard(ctx: Context) -> tuple[Array, Array]:
     Returns:
         ``(p, valid)``: () float32 in [0, 1]; () bool (always True).
     """
-    span = th.completion_length(ctx.route_length_m)
+    span = thresholds.completion_length(ctx.route_length_m)
     frac = jnp.where(span > 0, ctx.progress_m / jnp.where(span > 0, span, 1.0), 0.0)
     return jnp.clip(frac, 0.0, 1.0), jnp.asarray(True)
 
@@ -58,7 +58,7 @@ def soft(ctx: Context, temperature: Array) -> tuple[Array, Array]:
     Returns:
         ``(p, valid)``: () float32 in [0, 1]; () bool (always True).
     """
-    span = th.completion_length(ctx.route_length_m)
+    span = thresholds.completion_length(ctx.route_length_m)
     safe_len = jnp.where(span > 0, span, 1.0)
     p = jnp.where(span > 0, smooth_clip01(ctx.progress_m / safe_len, temperature), 0.0)
     return p, jnp.asarray(True)

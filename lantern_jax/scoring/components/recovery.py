@@ -24,7 +24,7 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from lantern_jax.scoring import thresholds as th
+from lantern_jax.scoring import thresholds
 from lantern_jax.scoring.components.accumulate import first_time, push, run
 from lantern_jax.scoring.components.context import RING, Context, Tick, opened_by
 from lantern_jax.scoring.sample import TickSample
@@ -85,15 +85,17 @@ def update(
     """
     t_release = release_time(tick.t_warn_off, tick.t_clear)
     post_rel = happened(t_release) & (tick.t >= t_release)
-    v_thr = jnp.maximum(th.RECOVER_MIN_SPEED_MPS, th.RECOVER_PRE_FRACTION * tick.v_pre)
+    v_thr = jnp.maximum(
+        thresholds.RECOVER_MIN_SPEED_MPS, thresholds.RECOVER_PRE_FRACTION * tick.v_pre
+    )
     n_run = run(state.run, post_rel & (tick.speed > v_thr))
     window_start = tick.time_ring[0]
     gain = tick.progress - tick.progress_ring[0]
-    ok = (n_run >= th.RECOVER_WINDOW) & (gain >= th.RECOVER_MIN_PROGRESS_M)
+    ok = (n_run >= thresholds.RECOVER_WINDOW) & (gain >= thresholds.RECOVER_MIN_PROGRESS_M)
 
     log_ok = push(state.log_ok, jax.nn.log_sigmoid((tick.speed - v_thr) / temperature))
-    complete = post_rel & (tick.n_ticks >= th.RECOVER_WINDOW) & (window_start >= t_release)
-    gain_ok = jax.nn.sigmoid((gain - th.RECOVER_MIN_PROGRESS_M) / temperature)
+    complete = post_rel & (tick.n_ticks >= thresholds.RECOVER_WINDOW) & (window_start >= t_release)
+    gain_ok = jax.nn.sigmoid((gain - thresholds.RECOVER_MIN_PROGRESS_M) / temperature)
     sigma = jnp.where(complete, jnp.exp(jnp.sum(log_ok)) * gain_ok, 0.0)
     p_k = state.surv * sigma
     return RecoveryState(
@@ -157,7 +159,9 @@ def score(recovery_latency_s: Any, available: Any = True) -> Array:
         (...) float32 in [0, 1]; ``NaN`` where unavailable.
     """
     rl = jnp.asarray(recovery_latency_s, jnp.float32)
-    value = jnp.where(jnp.isfinite(rl), jnp.clip(1.0 - rl / th.RECOVER_CAP_S, 0.0, 1.0), 0.0)
+    value = jnp.where(
+        jnp.isfinite(rl), jnp.clip(1.0 - rl / thresholds.RECOVER_CAP_S, 0.0, 1.0), 0.0
+    )
     return jnp.where(jnp.asarray(available, bool), value, jnp.nan)
 
 
@@ -177,8 +181,8 @@ def soft(
         ``(s_rec, valid)``: () float32 in [0, 1]; () bool (the hard availability).
     """
     ok = valid(state, ctx, t_fail)
-    has = state.p > th.PROB_EPS
+    has = state.p > thresholds.PROB_EPS
     e_rec = state.pt / jnp.where(has, state.p, 1.0)
     t_rel = jnp.where(ok, release_time(ctx.t_warn_off, ctx.t_clear), 0.0)
-    clipped = smooth_clip01(1.0 - (e_rec - t_rel) / th.RECOVER_CAP_S, temperature)
+    clipped = smooth_clip01(1.0 - (e_rec - t_rel) / thresholds.RECOVER_CAP_S, temperature)
     return jnp.where(has, state.p * clipped, 0.0), ok

@@ -11,7 +11,7 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from lantern_jax.scoring import thresholds as th
+from lantern_jax.scoring import thresholds
 from lantern_jax.scoring.components.accumulate import first_time
 from lantern_jax.scoring.components.context import Context, Tick
 from lantern_jax.scoring.sample import TickSample
@@ -51,7 +51,7 @@ def update(
         The record after the tick.
     """
     dist = jnp.asarray(sample.dist_to_route, jnp.float32)
-    deviated = dist >= th.ROUTE_DEVIATION_M
+    deviated = dist >= thresholds.ROUTE_DEVIATION_M
     return RouteDeviationState(
         max_dist=jnp.maximum(state.max_dist, dist),
         t_deviation=first_time(happened(state.t_deviation), deviated, tick.t, state.t_deviation),
@@ -95,4 +95,4 @@ def soft(state: RouteDeviationState, ctx: Context, temperature: Array) -> tuple[
     Returns:
         ``(passed, valid)``: () float32 in [0, 1]; () bool (always True).
     """
-    return soft_gate(th.ROUTE_DEVIATION_M - state.max_dist, temperature), jnp.asarray(True)
+    return soft_gate(thresholds.ROUTE_DEVIATION_M - state.max_dist, temperature), jnp.asarray(True)

@@ -22,7 +22,7 @@ import jax.numpy as jnp
 from flax import struct
 
 from lantern_jax.constants import BIG
-from lantern_jax.scoring import thresholds as th
+from lantern_jax.scoring import thresholds
 from lantern_jax.scoring.components.context import Context, Tick, opened_by
 from lantern_jax.scoring.sample import TickSample
 from lantern_jax.scoring.smooth import LSE_EMPTY, lse_add, smooth_clip01, softmin_decode
@@ -56,7 +56,7 @@ def closing_speed(rel: Array, rel_vel: Array) -> Array:
         rel_vel: (2,) float32, m/s, hazard velocity minus ego velocity.
     """
     rr = jnp.sum(rel * rel)
-    r_ok = rr > th.COINCIDENT_SQ_M2
+    r_ok = rr > thresholds.COINCIDENT_SQ_M2
     r_norm = jnp.sqrt(jnp.where(r_ok, rr, 1.0))
     return jnp.where(r_ok, -jnp.sum(rel * rel_vel) / r_norm, 0.0)
 
@@ -79,13 +79,13 @@ def update(state: TTCState, sample: TickSample, tick: Tick, temperature: Array) 
     )
     d_box = tick.hazard_dist
     overlap = d_box <= 0.0
-    closing = v_close > th.CLOSING_MIN_MPS
+    closing = v_close > thresholds.CLOSING_MIN_MPS
     in_window = tick.post_ref & tick.before_clear & tick.present
     ttc = jnp.where(overlap, 0.0, d_box / jnp.where(closing, v_close, 1.0))
     sampled = in_window & (overlap | closing)
-    ttc_soft = jnp.where(overlap, 0.0, d_box / jnp.maximum(v_close, th.CLOSING_MIN_MPS))
+    ttc_soft = jnp.where(overlap, 0.0, d_box / jnp.maximum(v_close, thresholds.CLOSING_MIN_MPS))
     log_w = jnp.where(
-        overlap, 0.0, jax.nn.log_sigmoid((v_close - th.CLOSING_MIN_MPS) / temperature)
+        overlap, 0.0, jax.nn.log_sigmoid((v_close - thresholds.CLOSING_MIN_MPS) / temperature)
     )
     return TTCState(
         min_s=jnp.where(sampled, jnp.minimum(state.min_s, ttc), state.min_s),
@@ -129,7 +129,7 @@ def score(ttc_min_s: Any) -> Array:
         (...) float32 in [0, 1]; ``NaN`` where unavailable.
     """
     x = jnp.asarray(ttc_min_s, jnp.float32)
-    return jnp.where(jnp.isnan(x), jnp.nan, jnp.clip(x / th.TTC_NORM_S, 0.0, 1.0))
+    return jnp.where(jnp.isnan(x), jnp.nan, jnp.clip(x / thresholds.TTC_NORM_S, 0.0, 1.0))
 
 
 def soft(state: TTCState, ctx: Context, t_fail: Array, temperature: Array) -> tuple[Array, Array]:
@@ -145,5 +145,5 @@ def soft(state: TTCState, ctx: Context, t_fail: Array, temperature: Array) -> tu
     Returns:
         ``(s_ttc, valid)``: () float32 in [0, 1]; () bool (the hard availability).
     """
-    ttc = softmin_decode(state.lse, ctx.temperature, cap=th.TTC_NORM_S)
-    return smooth_clip01(ttc / th.TTC_NORM_S, temperature), valid(state, ctx, t_fail)
+    ttc = softmin_decode(state.lse, ctx.temperature, cap=thresholds.TTC_NORM_S)
+    return smooth_clip01(ttc / thresholds.TTC_NORM_S, temperature), valid(state, ctx, t_fail)
