@@ -266,6 +266,7 @@ def run_policy(
     n = execs.num_pairs
     rows = []
     onset = np.asarray(time_or_nan(final.protocol.t_warn_on))
+    shown = np.asarray(final.protocol.warning_ticks)
     d_safe = np.asarray(execs.scenarios.config.d_safe)
     for ci, cond in enumerate(CONDITIONS):
         sl = slice(ci * n, (ci + 1) * n)
@@ -280,6 +281,7 @@ def run_policy(
                 weathers=execs.weathers,
                 t_warn_on=onset[sl],
                 d_safe=d_safe[sl],
+                warning_ticks=shown[sl],
             )
         )
     table = pd.concat(rows, ignore_index=True)

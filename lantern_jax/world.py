@@ -154,6 +154,7 @@ class ProtocolState:
     clear_by_limit: Array  # () bool, clearance came from a safety/stop limit
     ego_still_time: Array  # () float32, s, continuous time the ego has been (almost) still
     hazard_visible_at_warn: Array  # () bool, the hazard was camera-visible at the warning point
+    warning_ticks: Array  # () int32, ticks at which the policy was shown an active warning
 
     @staticmethod
     def initial() -> ProtocolState:
@@ -161,7 +162,8 @@ class ProtocolState:
         never = jnp.asarray(NEVER, jnp.float32)
         z = jnp.asarray(0.0, jnp.float32)
         f = jnp.asarray(False)
-        return ProtocolState(never, never, never, never, never, z, f, f, z, f)
+        none = jnp.asarray(0, jnp.int32)
+        return ProtocolState(never, never, never, never, never, z, f, f, z, f, none)
 
 
 # ---------------------------------------------------------------------------------------------

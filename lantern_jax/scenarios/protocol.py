@@ -196,9 +196,14 @@ def advance_hazard(
 
 
 def record_onset(
-    proto: ProtocolState, before: ProtocolState, config: ExecutionConfig, hazard_visible: Array
+    proto: ProtocolState,
+    before: ProtocolState,
+    config: ExecutionConfig,
+    hazard_visible: Array,
+    shown: Array,
 ) -> ProtocolState:
-    """Warning onset time and whether the hazard was camera-visible at the warning point.
+    """Warning bookkeeping of a tick: onset time, whether the hazard was camera-visible at the
+    warning point, and how many ticks the policy has been shown the warning.
 
     Args:
         proto: protocol state after this tick's transitions.
@@ -206,11 +211,13 @@ def record_onset(
             crossed during it).
         config: the execution's switches.
         hazard_visible: () bool, the front camera sees the hazard now.
+        shown: () bool, the policy's observation of this tick carried an active warning.
     """
     first = happened(proto.t_warn_point) & ~happened(before.t_warn_point)
     return proto.replace(
         t_warn_on=warning_onset(proto, config),
         hazard_visible_at_warn=jnp.where(first, hazard_visible, proto.hazard_visible_at_warn),
+        warning_ticks=proto.warning_ticks + shown.astype(jnp.int32),
     )
 
 

@@ -89,6 +89,7 @@ class ExecutionMetrics:
     gate_block: Array  # () bool, passed (no 20 s standstill, route completed, no controller fault)
     gate_false_brake: Array  # () bool, passed (no unjustified 1 s stop in [t_ref, t_event])
     controller_fault: Array  # () bool, the policy produced NaN/inf waypoints on some tick
+    t_fault_s: Array  # float32, s, first controller fault (NaN none)
     stalled: Array  # () bool, standstill of >= 20 s with the route unfinished
     timed_out: Array  # () bool, route not completed at the end of the execution
     t_first_failure_s: Array  # () float32, s, first Route A gate failure (NaN none)
@@ -162,6 +163,7 @@ def finalize(tel: Telemetry) -> ExecutionMetrics:
         gate_block=block.hard(tel.block, ctx)[0],
         gate_false_brake=false_brake.hard(tel.false_brake, ctx)[0],
         controller_fault=tel.block.fault,
+        t_fault_s=time_or_nan(tel.block.t_fault),
         stalled=block.stalled(tel.block),
         timed_out=~completed,
         t_first_failure_s=time_or_nan(t_fail),

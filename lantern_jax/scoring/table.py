@@ -70,6 +70,7 @@ def build_route_table(
     weathers: Sequence[str],
     t_warn_on: Any = None,
     d_safe: Any = None,
+    warning_ticks: Any = None,
 ) -> pd.DataFrame:
     """Route-level DataFrame from batched per-execution metrics.
 
@@ -81,6 +82,8 @@ def build_route_table(
         t_warn_on: (n,) s, start of warning delivery (``NaN`` = none).  Default: ``t_ref_s`` for
             rows whose condition is ``"warning"``, ``NaN`` otherwise.
         d_safe: (n,) m, clearance normalisers; default from the family (2 m PE/OR, else 3 m).
+        warning_ticks: (n,) int, ticks at which the Route A policy was shown an active warning
+            (default 0).
 
     Returns:
         DataFrame with the schema's columns in order (see :func:`validate_route_table`).
@@ -106,6 +109,9 @@ def build_route_table(
         warned = np.asarray([c == WARNING_CONDITION for c in conds])
         t_warn_on = np.where(warned, t_ref, np.nan)
     f64 = lambda x: np.asarray(x, np.float64)  # noqa: E731
+    shown = np.broadcast_to(
+        np.asarray(0 if warning_ticks is None else warning_ticks, np.int64), (n,)
+    )
     data = {
         "model": [str(m) for m in _per_row("model", model, n)],
         "condition": conds,
@@ -131,8 +137,13 @@ def build_route_table(
         "CUS": comps["CUS"],
         "d_safe_m": d_safe.copy(),
         "controller_fault": np.asarray(a.controller_fault).astype(np.int64),
+        "t_fault_s": f64(a.t_fault_s),
+        "B_controller_fault": np.asarray(b.controller_fault).astype(np.int64),
+        "B_t_fault_s": f64(b.t_fault_s),
         "coincident_onset": np.asarray(a.coincident_onset).astype(np.int64),
         "t_first_failure_s": f64(a.t_first_failure_s),
+        "warning_ticks": shown,
+        "warning_delivered": (shown > 0).astype(np.int64),
     }
     df = pd.DataFrame(data)
     for name, dtype in schema_columns():
@@ -238,3 +249,53 @@ def read_route_table(path: str | os.PathLike) -> pd.DataFrame:
     dtypes = {c: (object if d == "string" else d) for c, d in cols}
     df = pd.read_csv(path, dtype=dtypes, keep_default_na=False, na_values=["", "NaN", "nan"])
     return df
+
+
+#: The reproducibility promise across batch composition (a pair alone or inside a larger suite,
+#: two-phase grouping) and CPU device count: ids, gates and every discrete column identical;
+#: CUS and every continuous column within this absolute tolerance (in the column's unit).  XLA
+#: compiles a differently shaped batch into a different program whose float32 rounding may
+#: differ in the last bits (measured on lantern-v1: at most 2e-6 on continuous columns and 8e-6
+#: CUS points).  The same batch on the same machine reproduces bit for bit.
+REPRODUCIBLE_ATOL = 1e-4
+
+ROW_KEYS = ("model", "condition", "pair_id")
+
+
+def compare_route_tables(
+    before: pd.DataFrame, after: pd.DataFrame, atol: float = REPRODUCIBLE_ATOL
+) -> tuple[bool, list[str]]:
+    """Compare two route tables row by row (keyed by model, condition, pair).
+
+    Returns:
+        ``(promise holds, report lines)``: the promise is that both have the same columns and
+        rows, identical text and integer (gate, flag, count) columns, NaN in the same places,
+        and float columns within ``atol``; the lines count the cells that differ at all.
+    """
+    if list(before.columns) != list(after.columns):
+        return False, [f"columns differ: {sorted(set(before.columns) ^ set(after.columns))}"]
+    b = before.set_index(list(ROW_KEYS)).sort_index()
+    a = after.set_index(list(ROW_KEYS)).sort_index()
+    if not b.index.equals(a.index):
+        return False, ["row keys (model, condition, pair_id) differ"]
+    ok, lines, differing = True, [], 0
+    for col in b.columns:
+        x, y = b[col], a[col]
+        if pd.api.types.is_float_dtype(x) or pd.api.types.is_float_dtype(y):
+            xv, yv = x.to_numpy(np.float64), y.to_numpy(np.float64)
+            nan_x, nan_y = np.isnan(xv), np.isnan(yv)
+            same = (xv == yv) | (nan_x & nan_y)
+            n_diff = int((~same).sum())
+            both = ~(nan_x | nan_y)
+            max_abs = float(np.max(np.abs(xv[both] - yv[both]), initial=0.0))
+            if n_diff:
+                lines.append(f"{col}: {n_diff} differ, max |diff| {max_abs:.3g}, "
+                             f"NaN mismatches {int((nan_x != nan_y).sum())}")  # fmt: skip
+            ok &= bool((nan_x == nan_y).all()) and max_abs <= atol
+        else:
+            n_diff = int((x.astype(str) != y.astype(str)).sum())
+            if n_diff:
+                lines.append(f"{col}: {n_diff} differ (exact column)")
+            ok &= n_diff == 0
+        differing += n_diff
+    return ok, [f"{differing} of {b.size} cells differ", *lines]

@@ -83,7 +83,7 @@ def step(
 
     hazard_visible = percept.visible[h] & present(script, actors)[h]
     proto = protocol.advance_hazard(proto, cfg, t, hazard_visible, actors.s[h], ego.speed)
-    proto = protocol.record_onset(proto, state.protocol, cfg, hazard_visible)
+    proto = protocol.record_onset(proto, state.protocol, cfg, hazard_visible, obs.warning_active)
     actors = protocol.despawn_cleared(actors, proto, cfg)
 
     justified = justified_stop(
