@@ -1,7 +1,7 @@
-"""The quickstart notebook (``notebooks/quickstart.py``) runs top to bottom in a fresh kernel.
+"""The notebooks run top to bottom in a fresh kernel.
 
-It is executed in its small configuration (``LANTERN_NOTEBOOK_SMALL=1``: one pair per family)
-with a kernel spec that points at this interpreter, from an empty working directory.
+Each is executed in its small configuration (``LANTERN_NOTEBOOK_SMALL=1``) with a kernel spec
+that points at this interpreter, from an empty working directory.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ jupytext = pytest.importorskip("jupytext")
 nbclient = pytest.importorskip("nbclient")
 pytest.importorskip("ipykernel")
 
-NOTEBOOK = Path(__file__).resolve().parents[1] / "notebooks" / "quickstart.py"
+NOTEBOOKS = Path(__file__).resolve().parents[1] / "notebooks"
 KERNEL_NAME = "lantern"
 
 
@@ -44,24 +44,27 @@ def _text(out: dict) -> str:
     return str(out.get("data", {}).get("text/plain", ""))
 
 
-def test_quickstart_notebook_runs(tmp_path, monkeypatch):
+def _run(name: str, tmp_path: Path, monkeypatch) -> list[dict]:
+    """Execute ``notebooks/<name>`` in its small configuration; returns every cell output."""
     share = _install_kernelspec(tmp_path / "kernel")
     monkeypatch.setenv("JUPYTER_PATH", str(share))
     monkeypatch.setenv("LANTERN_NOTEBOOK_SMALL", "1")
     monkeypatch.delenv("MPLBACKEND", raising=False)  # let ipykernel pick its inline backend
     workdir = tmp_path / "work"
     workdir.mkdir()
-
-    nb = jupytext.read(NOTEBOOK)
+    nb = jupytext.read(NOTEBOOKS / name)
     client = nbclient.NotebookClient(
         nb,
-        timeout=900,
+        timeout=1200,
         kernel_name=KERNEL_NAME,
         resources={"metadata": {"path": str(workdir)}},
     )
     client.execute()
+    return _outputs(nb)
 
-    outputs = _outputs(nb)
+
+def test_quickstart_notebook_runs(tmp_path, monkeypatch):
+    outputs = _run("quickstart.py", tmp_path, monkeypatch)
     errors = [o for o in outputs if o.get("output_type") == "error"]
     assert not errors, [f"{e.get('ename')}: {e.get('evalue')}" for e in errors]
     text = "\n".join(_text(o) for o in outputs)
@@ -71,3 +74,16 @@ def test_quickstart_notebook_runs(tmp_path, monkeypatch):
     assert "d soft CUS / d crossing speed" in text
     images = [o for o in outputs if "image/png" in o.get("data", {})]
     assert len(images) >= 3, f"{len(images)} PNG outputs (bird's-eye views and timeline expected)"
+
+
+@pytest.mark.slow
+def test_stress_testing_notebook_runs(tmp_path, monkeypatch):
+    outputs = _run("stress_testing.py", tmp_path, monkeypatch)
+    errors = [o for o in outputs if o.get("output_type") == "error"]
+    assert not errors, [f"{e.get('ename')}: {e.get('evalue')}" for e in errors]
+    text = "\n".join(_text(o) for o in outputs)
+    assert "SMALL = True" in text
+    assert "failure_rate" in text and "cmaes" in text  # the comparison table
+    assert "restart" in text and "CUS" in text  # the found failures
+    images = [o for o in outputs if "image/png" in o.get("data", {})]
+    assert len(images) >= 1, "the convergence plot"

@@ -27,6 +27,11 @@ Shared conventions of every family:
   otherwise, ``template_id = text_id = family index``, ``timeout_s = 20 + route_length / 3``,
   ablation fields off, ``noise_seed`` from ``params["seed"]``.
 
+A parameter dict may carry an optional ``knobs`` object (knob name -> value, inside the family's
+:data:`KNOB_RANGES`), applied to the built pair with
+:func:`~lantern_jax.scenarios.knobs.apply_knobs`: that is how a scenario found by stress testing
+is written as an ordinary suite pair, hashed and validated like any other.
+
 Family geometry is documented in :mod:`~lantern_jax.scenarios.families_straight` (PE, VC, OR) and
 :mod:`~lantern_jax.scenarios.families_junction` (LWW, RWW, RTY).
 """
@@ -43,7 +48,8 @@ import numpy as np
 from lantern_jax.constants import FAMILIES, FAMILY_NAMES, WEATHERS
 from lantern_jax.scenarios import families_junction as junction
 from lantern_jax.scenarios import families_straight as straight
-from lantern_jax.scenarios.spec import PARAM_RANGES, range_errors
+from lantern_jax.scenarios.knobs import apply_knobs
+from lantern_jax.scenarios.spec import PARAM_RANGES, content_hash, range_errors
 from lantern_jax.scenarios.warnings import TEMPLATES
 from lantern_jax.world import Scenario
 
@@ -67,6 +73,7 @@ class Family:
     check: Callable[[dict], None]  # cross-field feasibility; ValueError naming the field
     build: Builder  # parameter dict -> (Route A, Route B, meta)
     response: str  # one of RESPONSES
+    knobs: dict[str, tuple[float, float]]  # stress-testing search space: knob -> (lo, hi)
 
     @property
     def index(self) -> int:
@@ -88,21 +95,39 @@ def _junction_sampler(code: str) -> Sampler:
     return functools.partial(junction.sample_junction, code)
 
 
+#: Stress-testing search spaces (knob -> (lo, hi), units of :mod:`lantern_jax.scenarios.knobs`).
+#: Each range contains the paper's nominal value (the frozen suite's own value) and stays
+#: physically plausible: pedestrian speeds from a slow walk to a run (the paper: 3 m/s;
+#: Bench2Drive's walker: 2 m/s), cut-in speeds from the paper's 6.5 m/s floor to 85 % of the
+#: fastest reference speed, lane changes of 1.2-3 s (paper 2 s, Bench2Drive's static cut-in 3 s),
+#: the paper's 12-20 km/h lead van and 7-9 / 8-12 m/s junction actors, triggers up to 1.5 s after
+#: the event, and a junction actor starting up to 8 m further along its path (closer to the
+#: conflict than the paper's spawn offset).
+KNOB_RANGES: dict[str, dict[str, tuple[float, float]]] = {
+    "PE": {"hazard_speed": (1.5, 4.5), "hazard_delay": (0.0, 1.5)},
+    "VC": {"hazard_speed": (6.5, 9.5), "hazard_delay": (0.0, 1.0),
+           "hazard_manoeuvre": (1.2, 3.0)},
+    "OR": {"scene_speed": (12.0 / 3.6, 20.0 / 3.6)},
+    "LWW": {"hazard_speed": (7.0, 9.0), "hazard_delay": (0.0, 1.5), "hazard_start": (0.0, 8.0)},
+    "RWW": {"hazard_speed": (7.0, 9.0), "hazard_delay": (0.0, 1.5), "hazard_start": (0.0, 8.0)},
+    "RTY": {"hazard_speed": (8.0, 12.0), "hazard_delay": (0.0, 1.5), "hazard_start": (0.0, 8.0)},
+}  # fmt: skip
+
 FAMILY_RECORDS: dict[str, Family] = {
     f.code: f
     for f in (
         Family("PE", FAMILY_NAMES[0], straight.sample_pe, straight.check_pe, straight.build_pe,
-               RESPONSE_LANE_OBSTACLE),
+               RESPONSE_LANE_OBSTACLE, KNOB_RANGES["PE"]),
         Family("VC", FAMILY_NAMES[1], straight.sample_vc, straight.check_vc, straight.build_vc,
-               RESPONSE_CUT_IN),
+               RESPONSE_CUT_IN, KNOB_RANGES["VC"]),
         Family("OR", FAMILY_NAMES[2], straight.sample_or, straight.check_or, straight.build_or,
-               RESPONSE_LANE_OBSTACLE),
+               RESPONSE_LANE_OBSTACLE, KNOB_RANGES["OR"]),
         Family("LWW", FAMILY_NAMES[3], _junction_sampler("LWW"), junction.check_junction,
-               junction.build_junction, RESPONSE_YIELD_TURN),
+               junction.build_junction, RESPONSE_YIELD_TURN, KNOB_RANGES["LWW"]),
         Family("RWW", FAMILY_NAMES[4], _junction_sampler("RWW"), junction.check_junction,
-               junction.build_junction, RESPONSE_YIELD_TURN),
+               junction.build_junction, RESPONSE_YIELD_TURN, KNOB_RANGES["RWW"]),
         Family("RTY", FAMILY_NAMES[5], _junction_sampler("RTY"), junction.check_junction,
-               junction.build_junction, RESPONSE_YIELD_TURN),
+               junction.build_junction, RESPONSE_YIELD_TURN, KNOB_RANGES["RTY"]),
     )  # fmt: skip
 }
 assert tuple(FAMILY_RECORDS) == FAMILIES
@@ -155,11 +180,41 @@ def check_feasible(params: dict) -> None:
     family(params.get("family")).check(params)
 
 
+KNOBS_FIELD = "knobs"  # optional parameter: knob name -> value, applied after building
+
+
+def knob_errors(params: dict) -> list[str]:
+    """Problems of a parameter dict's optional ``knobs`` field: a JSON object mapping knobs of
+    the family's search space (:data:`KNOB_RANGES`) to finite numbers inside their ranges."""
+    if KNOBS_FIELD not in params:
+        return []
+    fam, knobs = params.get("family"), params[KNOBS_FIELD]
+    if not isinstance(knobs, dict) or not knobs:
+        return [f"{fam}.{KNOBS_FIELD}: expected a non-empty JSON object, got {knobs!r}"]
+    errors = []
+    space = KNOB_RANGES.get(fam, {})
+    for name, value in knobs.items():
+        where = f"{fam}.{KNOBS_FIELD}.{name}"
+        if name not in space:
+            errors.append(f"{where}: not a knob of {fam} (known: {', '.join(space)})")
+        elif isinstance(value, bool) or not isinstance(value, int | float):
+            errors.append(f"{where}: expected a number, got {value!r}")
+        elif not space[name][0] <= float(value) <= space[name][1]:
+            lo, hi = space[name]
+            errors.append(f"{where}: {float(value)!r} outside [{lo:g}, {hi:g}]")
+    return errors
+
+
 def param_errors(params: Any, feasibility: bool = True) -> list[str]:
     """Every problem of a scenario parameter dict, each naming its field: types and ranges
-    (:func:`~lantern_jax.scenarios.spec.range_errors`) and, when those pass and ``feasibility``
-    is set, the family's cross-field geometry checks."""
-    errors = range_errors(params)
+    (:func:`~lantern_jax.scenarios.spec.range_errors`), the optional knob overrides
+    (:func:`knob_errors`) and, when those pass and ``feasibility`` is set, the family's
+    cross-field geometry checks."""
+    if isinstance(params, dict) and KNOBS_FIELD in params:
+        errors = range_errors({k: v for k, v in params.items() if k != KNOBS_FIELD})
+        errors += knob_errors(params) if not errors else []
+    else:
+        errors = range_errors(params)
     if feasibility and not errors:
         try:
             check_feasible(params)
@@ -203,4 +258,12 @@ def build_pair(params: dict) -> tuple[Scenario, Scenario, dict]:
         ValueError: naming the offending field for invalid or infeasible parameters.
     """
     validate_params(params)
-    return family(params["family"]).build(params)
+    scene = {k: v for k, v in params.items() if k != KNOBS_FIELD}
+    a, b, meta = family(params["family"]).build(scene)
+    if KNOBS_FIELD in params:
+        values = {k: float(v) for k, v in params[KNOBS_FIELD].items()}
+        a, b = apply_knobs(a, b, values)
+        meta["content_hash"] = content_hash(params)
+        meta["params"] = dict(params)
+        meta["knobs"] = values
+    return a, b, meta

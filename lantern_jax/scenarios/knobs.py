@@ -45,6 +45,7 @@ class Knob:
     doc: str
     get: Callable[[Scenario], Array]  # () float32
     set: Callable[[Scenario, Array], Scenario]
+    shared: bool = False  # part of the scene both routes share (Route B gets it too)
 
 
 def _slot_of(scenario: Scenario, slot: int | None) -> Array:
@@ -74,7 +75,7 @@ def _script_knob(name: str, field: str, unit: str, doc: str, slot: int | None = 
     def set_(sc: Scenario, value: Array) -> Scenario:
         return _with_script(sc, _slot_of(sc, slot), **{field: value})
 
-    return Knob(name, unit, doc, get, set_)
+    return Knob(name, unit, doc, get, set_, shared=slot is not None)
 
 
 def _speed_knob(name: str, doc: str, slot: int | None) -> Knob:
@@ -89,7 +90,7 @@ def _speed_knob(name: str, doc: str, slot: int | None) -> Knob:
         v_pre = jnp.where(moving, value, sc.actors.v_pre[i])
         return _with_script(sc, i, v_post=value, v_pre=v_pre)
 
-    return Knob(name, "m/s", doc, get, set_)
+    return Knob(name, "m/s", doc, get, set_, shared=slot is not None)
 
 
 def _lead_knob(name: str, marker: str, doc: str) -> Knob:
@@ -100,7 +101,7 @@ def _lead_knob(name: str, marker: str, doc: str) -> Knob:
         arc = sc.config.s_conflict - jnp.asarray(value, jnp.float32)
         return sc.replace(config=sc.config.replace(**{marker: arc}))
 
-    return Knob(name, "m", doc, get, set_)
+    return Knob(name, "m", doc, get, set_, shared=True)
 
 
 KNOBS: dict[str, Knob] = {
@@ -114,6 +115,8 @@ KNOBS: dict[str, Knob] = {
                      "where the hazard starts along its path (its arc at t = 0)"),
         _script_knob("hazard_lateral", "lat_shift", "m",
                      "size of the hazard's lateral manoeuvre after its trigger (+ = left)"),
+        _script_knob("hazard_manoeuvre", "lat_duration", "s",
+                     "duration of the hazard's lateral manoeuvre (the cut-in lane change)"),
         _speed_knob("scene_speed", "speed of the family's scene actor (the OR lead van)",
                     SCENE_SLOT),
         _lead_knob("warn_lead", "s_warn", "warning point distance before the conflict point"),
@@ -136,6 +139,17 @@ def knob(name: str) -> Knob:
 def get_knobs(scenario: Scenario, names: tuple[str, ...] | list[str] | None = None) -> dict:
     """Current values of knobs (default: all), as () float32 arrays keyed by name."""
     return {n: knob(n).get(scenario) for n in (names or KNOBS)}
+
+
+def apply_knobs(scenario_a: Scenario, scenario_b: Scenario, values: dict) -> tuple:
+    """Set knobs on a matched pair: every knob on Route A, shared (scene, marker) knobs on Route
+    B too, so the pair keeps sharing everything but the hazard behaviour.
+
+    Returns:
+        ``(scenario_a, scenario_b)``.
+    """
+    shared = {n: v for n, v in values.items() if knob(n).shared}
+    return set_knobs(scenario_a, **values), set_knobs(scenario_b, **shared)
 
 
 def set_knobs(scenario: Scenario, **values: Array) -> Scenario:

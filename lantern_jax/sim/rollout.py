@@ -44,6 +44,7 @@ def rollout(
     num_ticks: int,
     record: bool = False,
     temperature: float | Array = 0.05,
+    remat: bool = False,
 ) -> tuple[State, TickRecord | None]:
     """Roll one execution forward for ``num_ticks`` ticks (frozen once it has ended).
 
@@ -54,6 +55,9 @@ def rollout(
         num_ticks: static horizon.
         record: also return the per-tick :class:`TickRecord` (leading axis ``num_ticks``).
         temperature: soft-score temperature for the smooth telemetry accumulators.
+        remat: recompute each tick's internals in the backward pass instead of storing them
+            (``jax.checkpoint``): reverse-mode memory then grows with the carried state only,
+            for a second forward pass of compute.
 
     Returns:
         (final state, records or None).
@@ -63,6 +67,9 @@ def rollout(
     def body(state, _):
         new, rec = step(act, policy_params, scenario, state, temperature)
         return new, (rec if record else None)
+
+    if remat:
+        body = jax.checkpoint(body)
 
     return jax.lax.scan(body, init_state(scenario), None, length=num_ticks)
 
