@@ -29,7 +29,9 @@ import sys
 import time
 from collections.abc import Sequence
 
-from lantern_jax.stress_cli import StressUsageError, add_stress_parser
+from lantern_jax.commands import CommandError
+from lantern_jax.commands import dataset as dataset_command
+from lantern_jax.commands import stress as stress_command
 
 REFERENCE_POLICIES = ("expert", "ego", "coop")
 EXIT_INTERRUPTED = 130
@@ -525,7 +527,8 @@ def build_parser() -> argparse.ArgumentParser:
     po.set_defaults(func=cmd_policies)
     ab = sub.add_parser("ablations", help="list protocol ablations", allow_abbrev=False)
     ab.set_defaults(func=cmd_ablations)
-    add_stress_parser(sub)
+    stress_command.add_parser(sub)
+    dataset_command.add_parser(sub)
     return parser
 
 
@@ -562,7 +565,7 @@ def main(argv: Sequence[str] | None = None, exit_on_interrupt: bool | None = Non
             return e.code if isinstance(e.code, int) else (0 if e.code is None else 2)
         try:
             return args.func(args, argv)
-        except (UsageError, StressUsageError) as e:
+        except (UsageError, CommandError) as e:
             print(f"lantern-jax {args.command}: error: {e}", file=sys.stderr)
             return 2
     except KeyboardInterrupt:

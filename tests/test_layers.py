@@ -24,9 +24,9 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("scenarios",),  # roads, families, protocol, warnings, suites (NumPy builders + JAX protocol)
     ("policies",),  # reference planners and the registry
     ("sim",),  # one tick and the rollouts
-    ("evaluate", "generate", "stress"),  # suite evaluation and generation, stress testing
+    ("evaluate", "generate", "stress", "dataset"),  # evaluation, suite generation, stress, data
     ("report", "viz"),  # tables, files, plots
-    ("cli", "stress_cli", "__main__"),  # the command line
+    ("cli", "commands", "__main__"),  # the command line
 )
 LAYER_OF = {name: i for i, names in enumerate(LAYERS) for name in names}
 

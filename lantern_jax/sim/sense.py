@@ -83,3 +83,41 @@ def sense(
         visible=vis, ranges=ranges, route_arc=route_arc, dist_to_route=dist_to_route,
         progress=progress,
     )  # fmt: skip
+
+
+FRONT_RAYS = NUM_RANGE_RAYS  # rays of the front camera's range image (110 deg)
+SURROUND_RAYS = 72  # rays of the six-camera rig's range image (6 cameras x 12 rays, 360 deg)
+NO_HIT = -1  # semantic class of a ray that hits nothing within range
+
+
+@struct.dataclass
+class CameraView:
+    """What one camera rig reports: visibility of every actor and a semantic range image."""
+
+    visible: Array  # (A,) bool, the rig sees the actor (field of view, range, occlusion)
+    ranges: Array  # (N,) float32, m, distance to the first hit along each ray (capped at range)
+    hit_class: Array  # (N,) int32, KIND_* of the first hit (NO_HIT: nothing within range)
+
+
+def camera_view(
+    scenario: Scenario, ego: EgoState, actors: ActorState, fov_deg: float, num_rays: int
+) -> CameraView:
+    """A camera rig's view of the current world (110 deg front camera or the 360 deg rig).
+
+    Args:
+        scenario: the execution's static scenario (actor boxes and kinds, sensing range).
+        ego: the ego now.
+        actors: the actors now.
+        fov_deg: static, horizontal field of view in degrees (``FRONT_CAMERA_FOV`` or 360).
+        num_rays: static, rays of the range image.
+    """
+    boxes = scenario.actors
+    on = present(boxes, actors)
+    cam_xy, cam_yaw = camera_pose(ego.xy, ego.yaw)
+    rng = scenario.config.sensing_range
+    vis = visible_actors(cam_xy, cam_yaw, actors.xy, actors.yaw, boxes.extent, on, fov_deg, rng)
+    ranges, hit = range_image(
+        cam_xy, cam_yaw, actors.xy, actors.yaw, boxes.extent, on, fov_deg, num_rays, rng
+    )
+    kind = jnp.where(hit >= 0, boxes.kind[jnp.clip(hit, 0, None)], NO_HIT).astype(jnp.int32)
+    return CameraView(visible=vis, ranges=ranges, hit_class=kind)

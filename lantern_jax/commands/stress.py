@@ -16,9 +16,7 @@ import argparse
 from collections.abc import Sequence
 from pathlib import Path
 
-
-class StressUsageError(Exception):
-    """A bad ``stress`` argument (exit code 2)."""
+from lantern_jax.commands import CommandError
 
 
 def _ranges(items: Sequence[str] | None) -> dict[str, tuple[float, float]]:
@@ -31,7 +29,7 @@ def _ranges(items: Sequence[str] | None) -> dict[str, tuple[float, float]]:
                 raise ValueError
             out[name.strip()] = (float(lo), float(hi))
         except ValueError:
-            raise StressUsageError(f"--range {item!r}: expected KNOB=LO:HI") from None
+            raise CommandError(f"--range {item!r}: expected KNOB=LO:HI") from None
     return out
 
 
@@ -47,23 +45,23 @@ def cmd_stress(args: argparse.Namespace, argv: Sequence[str]) -> int:
     from lantern_jax.viz.stress import convergence_plot
 
     if args.family not in FAMILIES:
-        raise StressUsageError(f"--family {args.family!r}: not one of {', '.join(FAMILIES)}")
+        raise CommandError(f"--family {args.family!r}: not one of {', '.join(FAMILIES)}")
     methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())
     bad = [m for m in methods if m not in search.METHODS]
     if bad or not methods:
-        raise StressUsageError(f"--methods: {bad or 'none'}; valid: {', '.join(search.METHODS)}")
+        raise CommandError(f"--methods: {bad or 'none'}; valid: {', '.join(search.METHODS)}")
     if not args.budget_s > 0:
-        raise StressUsageError(f"--budget-s: must be > 0, got {args.budget_s:g}")
+        raise CommandError(f"--budget-s: must be > 0, got {args.budget_s:g}")
     try:
         check_output_folder(args.out)
         suite = load_suite(args.suite) if args.suite else load_suite()
     except (OSError, ValueError) as e:
-        raise StressUsageError(str(e)) from None
+        raise CommandError(str(e)) from None
     pairs = [p for p in suite.pairs if p.family == args.family]
     if args.pair:
         pairs = [p for p in pairs if p.pair_id == args.pair]
         if not pairs:
-            raise StressUsageError(f"--pair {args.pair!r}: no {args.family} pair of that id")
+            raise CommandError(f"--pair {args.pair!r}: no {args.family} pair of that id")
     knobs = tuple(k.strip() for k in args.knobs.split(",") if k.strip()) if args.knobs else None
     cfg = report.StressConfig(
         budget_s=args.budget_s, restarts=args.restarts, samples=args.samples,
@@ -74,7 +72,7 @@ def cmd_stress(args: argparse.Namespace, argv: Sequence[str]) -> int:
         _, traces = report.stress_test(pairs[0], args.policy, cfg, suite, knobs,
                                        _ranges(args.range), progress=not args.quiet)  # fmt: skip
     except (ValueError, KeyError) as e:
-        raise StressUsageError(str(e).strip("'\"")) from None
+        raise CommandError(str(e).strip("'\"")) from None
     from lantern_jax.stress.space import search_space
 
     space = search_space(args.family, knobs, _ranges(args.range))
@@ -89,7 +87,7 @@ def cmd_stress(args: argparse.Namespace, argv: Sequence[str]) -> int:
     return 0
 
 
-def add_stress_parser(sub: argparse._SubParsersAction) -> None:
+def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``stress`` on the command line's sub-parsers."""
     st = sub.add_parser(
         "stress",

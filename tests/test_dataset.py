@@ -1,0 +1,216 @@
+"""The open-loop dataset: labels equal the expert's actual future, flags, determinism, resume,
+Route B controls, observation parity with the closed loop, and refused bad folders.
+
+One tiny dataset (one pair per family, two chunks) is generated once per module; compiling the
+recorder dominates the cost, so the module runs with the slow tests (CI runs them too).
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import jax
+import numpy as np
+import pytest
+
+from lantern_jax.constants import NUM_WAYPOINTS
+from lantern_jax.dataset import frames as fr
+from lantern_jax.dataset.generate import generate_dataset
+from lantern_jax.dataset.record import FRAME_TICKS, record
+from lantern_jax.dataset.scenes import build_scenes, plan_scenes
+from lantern_jax.dataset.store import (
+    CARD_JSON,
+    DatasetError,
+    column_array,
+    load_frames,
+    read_card,
+)
+from lantern_jax.policies.registry import get_policy
+from lantern_jax.sim.observe import observe
+from lantern_jax.sim.rollout import rollout
+
+pytestmark = pytest.mark.slow
+
+SEED = 11
+PAIRS = 1  # per family
+CHUNK = 3  # pairs per chunk: two chunks
+
+
+@pytest.fixture(scope="module")
+def made(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("ds") / "one"
+    card = generate_dataset(folder, pairs_per_family=PAIRS, seed=SEED, chunk_pairs=CHUNK,
+                            progress=False)  # fmt: skip
+    return folder, card
+
+
+def test_card_counts_add_up(made):
+    folder, card = made
+    assert card["chunks_done"] == card["chunks"] == 2
+    assert card["sequences_recorded"] == 12
+    assert card["sequences_accepted"] == card["route_a"] + card["route_b"]
+    assert card["sequences_accepted"] + sum(card["rejected"].values()) == 12
+    frames = load_frames(folder, include_crossing=True)
+    assert len(frames) == card["frames"] == sum(c["frames"] for c in card["counts"])
+    assert (folder / "dataset_card.md").read_text().startswith("# LANTERN open-loop dataset")
+
+
+def test_waypoints_are_the_experts_actual_future(made):
+    """Frame f's k-th waypoint is the expert's position at tick 5 (f + k), expressed in the ego
+    frame at tick 5 f — checked against an independent recorded rollout of the same scene."""
+    folder, _ = made
+    frames = load_frames(folder, include_crossing=True)
+    spec = plan_scenes(PAIRS, SEED)[0]
+    seq = f"{spec.family.lower()}_{spec.index:05d}_A"
+    mine = frames[frames["sequence_id"] == seq]
+    assert len(mine) > 5, "the first Route A sequence should have been accepted"
+    scenario = build_scenes([spec])[0][0]
+    expert = get_policy("expert")
+    n_ticks = FRAME_TICKS * (int(mine["frame"].max()) + NUM_WAYPOINTS + 1)
+    _, rec = jax.jit(lambda sc: rollout(sc, expert.act, expert.init(None), n_ticks, record=True))(
+        scenario
+    )
+    xy = np.concatenate([np.asarray(scenario.ego0.xy)[None], np.asarray(rec.ego_xy)])
+    yaw = np.concatenate([np.asarray(scenario.ego0.yaw)[None], np.asarray(rec.ego_yaw)])
+    wps = column_array(mine, "waypoints", [NUM_WAYPOINTS, 2])
+    for row, f in enumerate(mine["frame"].to_numpy()):
+        t0, future = FRAME_TICKS * f, FRAME_TICKS * (f + 1 + np.arange(NUM_WAYPOINTS))
+        c, s = np.cos(yaw[t0]), np.sin(yaw[t0])
+        rel = xy[future] - xy[t0]
+        want = np.stack([rel[:, 0] * c + rel[:, 1] * s, rel[:, 0] * s - rel[:, 1] * c], -1)
+        np.testing.assert_allclose(wps[row], want, atol=2e-3, err_msg=f"frame {f}")
+
+
+def test_horizon_crossing_frames_are_exactly_the_flagged_ones(made):
+    folder, _ = made
+    frames = load_frames(folder, include_crossing=True)
+    seqs = {}
+    for k in range(2):
+        import pandas as pd
+
+        seqs.update({r.sequence_id: r for r in pd.read_parquet(
+            folder / f"sequences-{k:05d}.parquet").itertuples()})  # fmt: skip
+    for sid, group in frames.groupby("sequence_id"):
+        r = seqs[sid]
+        t = group["t_s"].to_numpy(np.float64)
+        want = np.zeros(len(t), bool)
+        if r.route == "A":
+            for mark in (r.t_warn_on, r.t_warn_off):
+                want |= (t < mark) & (mark <= t + 2.5)
+        np.testing.assert_array_equal(group["horizon_crossing"].to_numpy(bool), want, sid)
+    assert frames["horizon_crossing"].any(), "some frame should straddle a warning boundary"
+    assert len(load_frames(folder)) == int((~frames["horizon_crossing"].astype(bool)).sum())
+
+
+def test_route_b_carries_no_warning_and_no_hazard(made):
+    folder, _ = made
+    frames = load_frames(folder, include_crossing=True)
+    b = frames[frames["route"] == "B"]
+    assert len(b) > 0
+    assert not b["obs.warning_active"].astype(bool).any()
+    assert (b["obs.warning_text_id"] == -1).all()
+    a = frames[frames["route"] == "A"]
+    assert a["obs.warning_active"].astype(bool).any()
+
+
+def test_same_seed_gives_identical_shards_and_resume_finishes_the_same(made, tmp_path):
+    """A second generation from the same seed writes the same bytes; one interrupted after its
+    first chunk (second chunk's files and card entry gone) resumes to the same result."""
+    folder, card = made
+    again = tmp_path / "again"
+    generate_dataset(again, pairs_per_family=PAIRS, seed=SEED, chunk_pairs=CHUNK, progress=False)
+    for shard in card["shards"]:
+        for key in ("frames", "sequences"):
+            assert (again / shard[key]).read_bytes() == (folder / shard[key]).read_bytes()
+    # interrupt: keep the first chunk only (as the card after chunk 0 would be)
+    cut = tmp_path / "cut"
+    shutil.copytree(again, cut)
+    first = json.loads((cut / CARD_JSON).read_text())
+    second = first["shards"][1]
+    (cut / second["frames"]).unlink()
+    (cut / second["sequences"]).unlink()
+    resumed = generate_dataset(cut, pairs_per_family=PAIRS, seed=SEED, chunk_pairs=CHUNK,
+                               progress=False)  # fmt: skip
+    assert [s["frames_sha256"] for s in resumed["shards"]] == [
+        s["frames_sha256"] for s in card["shards"]
+    ]
+
+
+def test_closed_loop_observation_equals_the_dataset_frame(made):
+    """The observation a policy gets in the closed loop at tick 5 f equals frame f's stored
+    observation, field by field (a policy trained on the data runs in the benchmark unchanged)."""
+    spec = plan_scenes(PAIRS, SEED)[0]
+    scenario = build_scenes([spec])[0][0]
+    expert = get_policy("expert")
+    params = expert.init(None)
+    recs, _ = jax.jit(lambda sc: record(sc, expert.act, params, 12))(scenario)
+    f = 8
+    final, _ = jax.jit(lambda sc: rollout(sc, expert.act, params, FRAME_TICKS * f))(scenario)
+    live = jax.jit(observe)(scenario, final)
+    stored = jax.tree.map(lambda x: x[f], recs.obs)
+    pairs = zip(jax.tree_util.tree_leaves_with_path(live),
+                jax.tree_util.tree_leaves_with_path(stored), strict=True)  # fmt: skip
+    for (path, a), (_, b) in pairs:
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-5, atol=1e-5,
+                                   err_msg=jax.tree_util.keystr(path))  # fmt: skip
+
+
+def test_acceptance_rules_on_hand_made_records():
+    """The timeline rule accepts RTY's coincident onset and rejects it elsewhere."""
+    assert fr.REASONS[4] == "timeline out of order"
+    t = np.arange(40) * 0.25
+    crossing = fr.horizon_crossing(t, 3.0, 6.1)
+    assert crossing[np.flatnonzero((t < 3.0) & (t + 2.5 >= 3.0))].all()
+    assert not crossing[t >= 6.1].any() and not crossing[t < 0.5].any()
+
+
+# ---------------------------------------------------------------------------------------------
+# bad dataset folders
+# ---------------------------------------------------------------------------------------------
+@pytest.fixture()
+def copy(made, tmp_path):
+    folder, _ = made
+    dst = tmp_path / "copy"
+    shutil.copytree(folder, dst)
+    return dst
+
+
+def test_missing_shard_is_named(copy):
+    card = read_card(copy)
+    (copy / card["shards"][0]["frames"]).unlink()
+    with pytest.raises(DatasetError, match=r"frames-00000.parquet: missing shard"):
+        load_frames(copy)
+
+
+def test_corrupted_shard_is_named(copy):
+    card = read_card(copy)
+    path = copy / card["shards"][1]["frames"]
+    data = bytearray(path.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    path.write_bytes(bytes(data))
+    with pytest.raises(DatasetError, match=r"frames-00001.parquet: content does not match"):
+        load_frames(copy)
+
+
+def test_schema_mismatch_is_named(copy):
+    card = json.loads((copy / CARD_JSON).read_text())
+    card["frame_columns"]["obs.new_field"] = [3]
+    (copy / CARD_JSON).write_text(json.dumps(card))
+    with pytest.raises(DatasetError, match=r"frames-00000.parquet: columns \['obs.new_field'\]"):
+        load_frames(copy)
+
+
+def test_incompatible_version_is_named(copy):
+    card = json.loads((copy / CARD_JSON).read_text())
+    card["format_version"] = 99
+    (copy / CARD_JSON).write_text(json.dumps(card))
+    with pytest.raises(DatasetError, match=r"dataset_card.json: format_version 99"):
+        load_frames(copy)
+
+
+def test_other_plan_is_refused(made):
+    folder, _ = made
+    with pytest.raises(DatasetError, match=r"written for another plan"):
+        generate_dataset(folder, pairs_per_family=PAIRS, seed=SEED + 1, chunk_pairs=CHUNK,
+                         progress=False)  # fmt: skip
