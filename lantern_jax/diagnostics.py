@@ -337,15 +337,17 @@ def distance_table(
     s = load_suite(suite) if isinstance(suite, str) else suite
     pol, params = _policy(policy, policy_params)
     pair_ids, scenarios = distance_scenarios(s, family, routes, window_s)
-    final, rec, metrics = run_recorded(pol, params, scenarios)
+    _, rec, metrics = run_recorded(pol, params, scenarios)
     live = live_mask(rec)
     conds = ("no-warning", "near", "far")
     n_win = int(round(window_s / DT))
     opened, closed = [], []
     for r, pid in enumerate(pair_ids):
         row = {"Route": f"Route {r + 1}", "pair": pid}
-        t_warn = float(final.protocol.t_warn_point[3 * r])
-        k0 = int(np.ceil(t_warn / DT - 1e-4)) if t_warn < 1e8 else None
+        # The frame: the first tick at which the near warning is delivered (the ego has just
+        # reached the warning point); the three runs are identical up to it.
+        onset = np.flatnonzero(rec.warning_active[3 * r + 1])
+        k0 = int(onset[0]) if onset.size else None
         for c, cond in enumerate(conds):
             i = 3 * r + c
             row[cond] = plan_length(rec.waypoints[i, k0]) if k0 is not None else np.nan

@@ -11,6 +11,7 @@ from conftest import MODE_COOP, MODE_EGO
 
 from lantern_jax import diagnostics as dg
 from lantern_jax.constants import DT
+from lantern_jax.scenarios.suite import load_suite
 from lantern_jax.scenarios.warnings import non_actionable_text_ids
 
 T = 200  # ticks of the hand-made trajectories (10 s)
@@ -135,6 +136,15 @@ def test_distance_table(shared_runner):
     shared_runner["mode"] = MODE_COOP
     opened, closed = dg.distance_table("coop", routes=2)
     assert list(opened["pair"]) == ["pe_0001", "pe_0002"]
+    # the frame is the first tick of the window, which opens at the ego's warning point: the
+    # runs agree before it, so the no-warning run's warning point falls in the tick before it
+    _, scenarios = dg.distance_scenarios(load_suite(), "PE", 2)
+    final, rec, _ = dg.run_recorded(None, None, scenarios)
+    for r in range(2):
+        k0 = int(np.flatnonzero(rec.warning_active[3 * r + 1])[0])
+        t_wp = float(final.protocol.t_warn_point[3 * r])
+        assert (k0 - 1) * DT - 1e-4 <= t_wp <= k0 * DT + 1e-4
+        np.testing.assert_array_equal(rec.ego_xy[3 * r, :k0], rec.ego_xy[3 * r + 2, :k0])
     for _, r in opened.iterrows():
         # cruising ~8 m/s: the 2.5 s plan covers ~20 m; a pedestrian 12 m ahead shortens it
         assert 15.0 < r["no-warning"] < 30.0
@@ -149,8 +159,6 @@ def test_distance_table(shared_runner):
 
 
 def test_distance_needs_a_known_family():
-    from lantern_jax.scenarios.suite import load_suite
-
     with pytest.raises(ValueError, match="family"):
         dg.distance_scenarios(load_suite(), family="XX")
 
