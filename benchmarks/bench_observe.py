@@ -47,8 +47,10 @@ def main() -> None:
         jax.block_until_ready(fn(sc, st))
         times.append(time.perf_counter() - t0)
     best, med = float(np.min(times)), float(np.median(times))
-    print(f"batch {args.batch}: compile {compile_s:.2f} s; observe per call best {1e3 * best:.3f} "
-          f"ms, median {1e3 * med:.3f} ms = {1e6 * med / args.batch:.3f} us per scenario-tick")
+    print(
+        f"batch {args.batch}: compile {compile_s:.2f} s; observe per call best {1e3 * best:.3f} "
+        f"ms, median {1e3 * med:.3f} ms = {1e6 * med / args.batch:.3f} us per scenario-tick"
+    )
 
 
 if __name__ == "__main__":

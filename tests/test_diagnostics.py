@@ -152,9 +152,10 @@ def test_distance_table(shared_runner):
         assert r["Retention (%)"] == pytest.approx(100.0 * r["far"] / r["no-warning"])
     c = closed.set_index(["pair", "condition"])
     for pid in opened["pair"]:
-        assert c.loc[(pid, "near"), "min speed in window (m/s)"] < c.loc[
-            (pid, "no-warning"), "min speed in window (m/s)"
-        ]
+        assert (
+            c.loc[(pid, "near"), "min speed in window (m/s)"]
+            < c.loc[(pid, "no-warning"), "min speed in window (m/s)"]
+        )
         assert c.loc[(pid, "no-warning"), "RC (%)"] == 100.0
 
 

@@ -64,8 +64,10 @@ def scenes(family_pairs):
             MODE_EXPERT,
         ),
         "a_early": (set_override(hand_a, LOW_PE, (20.0, -1.0), "ego", 0.52, 1.52), MODE_EXPERT),
-        "no_position": (set_override(empty_road(), HIGH_PE, (30.0, 2.0), "ego", 1.01, 3.01),
-                        MODE_EXPERT),  # fmt: skip
+        "no_position": (
+            set_override(empty_road(), HIGH_PE, (30.0, 2.0), "ego", 1.01, 3.01),
+            MODE_EXPERT,
+        ),  # fmt: skip
         "ego_frame": (set_override(empty_road(), 0, (12.0, 0.5), "ego", 1.01, 4.01), MODE_EXPERT),
         "none": (empty_road(), MODE_EXPERT),
         "coop_plain": (empty_road(), MODE_COOP),
