@@ -67,7 +67,7 @@ def scenes(family_pairs):
         "no_position": (
             set_override(empty_road(), HIGH_PE, (30.0, 2.0), "ego", 1.01, 3.01),
             MODE_EXPERT,
-        ),  # fmt: skip
+        ),
         "ego_frame": (set_override(empty_road(), 0, (12.0, 0.5), "ego", 1.01, 4.01), MODE_EXPERT),
         "none": (empty_road(), MODE_EXPERT),
         "coop_plain": (empty_road(), MODE_COOP),
