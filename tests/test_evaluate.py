@@ -166,7 +166,7 @@ def test_warning_blind_policies_have_zero_gain(base, model):
     values = gain[["PE", "LWW", "Overall"]].to_numpy(float)
     assert np.all(values == 0.0), values
     # Their Route A executions with and without warning are identical.
-    differ = ["condition", "t_warn_on_s"]
+    differ = ["condition", "t_warn_on_s", "warning_ticks", "warning_delivered"]
     warned = rows(base.route_table, model, "warning")
     silent = rows(base.route_table, model, "no-warning")
     pd.testing.assert_frame_equal(
@@ -359,7 +359,7 @@ def test_held_out_paraphrase(ablated, suite2):
     np.testing.assert_array_equal(text[n : 2 * n], text[:n])  # both Route A conditions
     # coop was built for the canonical wording: a paraphrased warning changes nothing.
     rt = ablated["held_out_paraphrase"].route_table
-    differ = ["condition", "t_warn_on_s"]
+    differ = ["condition", "t_warn_on_s", "warning_ticks", "warning_delivered"]
     pd.testing.assert_frame_equal(
         rows(rt, "coop", "warning", drop=differ),
         rows(rt, "coop", "no-warning", drop=differ),
