@@ -43,6 +43,13 @@ ROLE_BACKGROUND = 3  # ordinary traffic
 ROLE_NAMES = ("hazard", "occluder", "context", "background")
 NUM_ROLES = len(ROLE_NAMES)
 
+# --- static occluder kinds (map scenery that blocks camera rays) ------------------------------
+OCC_BUILDING = 0  # a building at a junction corner, set back from the kerb
+OCC_WALL = 1  # a wall or fence along the sidewalk
+OCC_PARKED_VEHICLE = 2  # a parked (or waiting) truck or van
+OCCLUDER_KIND_NAMES = ("building", "wall", "parked_vehicle")
+NUM_OCCLUDER_KINDS = len(OCCLUDER_KIND_NAMES)
+
 # --- actor motion models ----------------------------------------------------------------------
 MOTION_SCRIPTED = 0  # path + speed profile + trigger time (closed form in time)
 MOTION_IDM = 1  # intelligent-driver-model car following along the actor's path

@@ -2,7 +2,8 @@
 and the dynamic pieces that the simulator's :class:`~lantern_jax.sim.state.State` carries.
 
 * :class:`Scenario` — everything that never changes during an execution: the map
-  (:class:`Lanes`), the ego :class:`Route`, the :class:`TrafficLights`, what every actor slot is
+  (:class:`Lanes` and the static :class:`Occluders`), the ego :class:`Route`, the
+  :class:`TrafficLights`, what every actor slot is
   and how it moves (:class:`ActorScript`), the execution's markers, condition, rules and weather
   (:class:`ExecutionConfig`) and the initial conditions (``ego0``, ``actors0``).  It is closed
   over (one execution) or broadcast along the batch axis (``vmap``), never carried.
@@ -12,8 +13,8 @@ and the dynamic pieces that the simulator's :class:`~lantern_jax.sim.state.State
 
 Every function in the package takes and returns a single scenario; batches are made with
 ``jax.vmap`` outside.  Capacities (``A`` actors, ``P`` path points, ``L`` lanes, ``Q`` lane
-points, ``R`` route points, ``T`` traffic lights) are static and fixed by the arrays' shapes;
-padded slots carry a ``valid`` mask.
+points, ``R`` route points, ``T`` traffic lights, ``K`` occluders) are static and fixed by the
+arrays' shapes; padded slots carry a ``valid`` mask.
 
 Frames: world frame x east / y north / yaw counter-clockwise (see :mod:`lantern_jax.constants`).
 
@@ -30,7 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
-from lantern_jax.constants import FAMILIES, NUM_ACTOR_KINDS, NUM_ROLES
+from lantern_jax.constants import FAMILIES, NUM_ACTOR_KINDS, NUM_OCCLUDER_KINDS, NUM_ROLES
 from lantern_jax.times import NEVER
 
 Array = jax.Array
@@ -280,6 +281,47 @@ class Lanes:
         return self
 
 
+@struct.dataclass
+class Occluders:
+    """Static scenery boxes of the map (buildings, walls, parked trucks and vans), K slots.
+
+    They block camera rays (front camera, 360-degree rig and range image) and count as
+    collisions, but they are never "visible" targets themselves and never move; Route A and
+    Route B of a pair share them exactly.  Padded slots are ``valid = False``.
+    """
+
+    center: Array  # (K, 2) float32, m, world frame, box centre
+    yaw: Array  # (K,) float32, rad, CCW from +x, direction of the box's long axis
+    extent: Array  # (K, 2) float32, m, (half length, half width), > 0 for valid slots
+    kind: Array  # (K,) int32, OCC_* (building, wall, parked vehicle)
+    valid: Array  # (K,) bool, slot holds an occluder (padding = False)
+
+    @property
+    def num(self) -> int:
+        """Static capacity K."""
+        return self.valid.shape[-1]
+
+    def validate(self) -> Occluders:
+        c = check_shape("Occluders.center", self.center, (None, 2))
+        n = c.shape[0]
+        for f in ("yaw", "kind", "valid"):
+            check_shape(f"Occluders.{f}", getattr(self, f), (n,))
+        check_shape("Occluders.extent", self.extent, (n, 2))
+        v = np.asarray(self.valid, bool)
+        for f in ("center", "yaw", "extent"):
+            check_finite(f"Occluders.{f}", getattr(self, f), v)
+        ext = np.asarray(self.extent, np.float64)
+        if np.any(v[:, None] & (ext <= 0.0)):
+            i = int(np.argwhere(v[:, None] & (ext <= 0.0))[0, 0])
+            raise ValueError(f"Occluders.extent: occluder {i} needs positive half extents")
+        kind = np.asarray(self.kind)
+        if np.any(v & ((kind < 0) | (kind >= NUM_OCCLUDER_KINDS))):
+            raise ValueError(
+                "Occluders.kind: must be 0 (building), 1 (wall) or 2 (parked vehicle)"
+            )
+        return self
+
+
 ROUTE_LENGTH_TOL = 1e-3  # m, Route.length must match the last valid arc length to this
 
 
@@ -412,6 +454,7 @@ class Scenario:
     """
 
     lanes: Lanes
+    occluders: Occluders  # static scenery boxes of the map
     route: Route
     lights: TrafficLights
     actors: ActorScript
@@ -422,6 +465,7 @@ class Scenario:
     def validate(self) -> Scenario:
         """Validate every component (outside jit) and their mutual consistency."""
         self.lanes.validate()
+        self.occluders.validate()
         self.route.validate()
         self.lights.validate()
         self.actors.validate(num_lights=self.lights.num)

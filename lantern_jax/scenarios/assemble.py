@@ -25,6 +25,7 @@ from lantern_jax.world import (
     EgoState,
     ExecutionConfig,
     Lanes,
+    Occluders,
     Route,
     Scenario,
     TrafficLights,
@@ -190,6 +191,7 @@ def assemble_scenario(
     )
     return Scenario(
         lanes=Lanes(**_jnp_tree(road.pack_lanes(road_map, rot))),
+        occluders=Occluders(**_jnp_tree(road.pack_occluders(road_map.occluders, rot))),
         route=Route(**_jnp_tree(route)),
         lights=TrafficLights(**_jnp_tree(road.pack_lights(road_map.lights, rot))),
         actors=script,

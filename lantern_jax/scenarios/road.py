@@ -51,6 +51,7 @@ MAX_LANES = 16  # L
 LANE_POINTS = 48  # Q
 ROUTE_POINTS = 96  # R
 MAX_LIGHTS = 2  # T
+MAX_OCCLUDERS = 8  # K
 
 # --- lane kinds ---------------------------------------------------------------------------------
 LANE_DRIVING = 0
@@ -248,12 +249,24 @@ class LightSpec:
 
 
 @dataclass
+class OccluderSpec:
+    """A static scenery box of the map (canonical frame): building, wall or parked vehicle."""
+
+    xy: np.ndarray  # (2,) float64, m, box centre
+    yaw: float  # rad, direction of the long axis
+    extent: tuple[float, float]  # m, half length, half width (> 0)
+    kind: int  # OCC_* of lantern_jax.constants
+    name: str = ""  # what it is in the scene ("corner_SW", "truck", ...), for messages
+
+
+@dataclass
 class RoadMap:
-    """Lanes and lights of one procedural map (canonical frame)."""
+    """Lanes, lights and static occluders of one procedural map (canonical frame)."""
 
     kind: str  # "straight" or "junction"
     lanes: list[LaneSpec] = field(default_factory=list)
     lights: list[LightSpec] = field(default_factory=list)
+    occluders: list[OccluderSpec] = field(default_factory=list)
     arms: tuple[str, ...] = ()
     half_size: float = 0.0
     lanes_per_direction: int = 0
@@ -581,6 +594,26 @@ def pack_route(xy: np.ndarray, rot: np.ndarray) -> dict[str, np.ndarray]:
     s[n:] = cs[-1]
     valid = np.arange(ROUTE_POINTS) < n
     return dict(xy=out, s=s, valid=valid, length=np.float32(cs[-1]))
+
+
+def pack_occluders(occluders: list[OccluderSpec], rot: np.ndarray) -> dict[str, np.ndarray]:
+    """Pad the occluders to ``MAX_OCCLUDERS``; fields of :class:`Occluders` (rotation applied)."""
+    if len(occluders) > MAX_OCCLUDERS:
+        raise ValueError(f"Occluders.valid: {len(occluders)} occluders exceed {MAX_OCCLUDERS}")
+    out = dict(
+        center=np.zeros((MAX_OCCLUDERS, 2), np.float32),
+        yaw=np.zeros(MAX_OCCLUDERS, np.float32),
+        extent=np.zeros((MAX_OCCLUDERS, 2), np.float32),
+        kind=np.zeros(MAX_OCCLUDERS, np.int32),
+        valid=np.zeros(MAX_OCCLUDERS, bool),
+    )
+    turn = math.atan2(rot[1, 0], rot[0, 0])
+    for i, oc in enumerate(occluders):
+        out["center"][i] = rot @ np.asarray(oc.xy, np.float64)
+        out["yaw"][i] = math.remainder(oc.yaw + turn, 2 * math.pi)
+        out["extent"][i] = oc.extent
+        out["kind"][i], out["valid"][i] = oc.kind, True
+    return out
 
 
 def pack_lights(lights: list[LightSpec], rot: np.ndarray) -> dict[str, np.ndarray]:
