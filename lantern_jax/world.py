@@ -178,6 +178,7 @@ class ActorScript:
 
         trigger time   tau = trigger_delay            (TRIGGER_CLOCK)
                        tau = t_event + trigger_delay  (TRIGGER_EVENT; inf until the event)
+                       tau = min(tau, trigger_deadline)   (a deadline triggers it regardless)
         before tau     s(t) = min(s_init + v_pre * t, s_hold)
         after tau      s(t) = s(tau) + v_post * (t - tau)
                        lat(t) = lat_shift * smoothstep((t - tau) / lat_duration)
@@ -185,7 +186,10 @@ class ActorScript:
 
     A static object is ``v_pre = v_post = 0``.  IDM actors (``motion == MOTION_IDM``) integrate
     ``s`` with the intelligent driver model, desired speed ``v_pre``, stopping at ``stop_s`` while
-    the light ``light_index`` is not green.
+    the light ``light_index`` is not green.  A scripted actor with a finite ``handover_after``
+    is handed over to the IDM ``handover_after`` seconds after its trigger: from then on it
+    continues from its scripted arc and speed as IDM traffic with desired speed ``v_post``, its
+    lateral offset still following the script (the cut-in vehicle after its merge).
     """
 
     extent: Array  # (A, 2) float32, m, (half length, half width), >= 0
@@ -208,6 +212,8 @@ class ActorScript:
     despawn_at_end: Array  # (A,) bool, remove the actor when it reaches ``s_end``
     light_index: Array  # (A,) int32, traffic light governing an IDM actor (-1 = none)
     stop_s: Array  # (A,) float32, m, arc of that light's stop line on the actor's path
+    trigger_deadline: Array  # (A,) float32, s, latest trigger time (times.NEVER = none)
+    handover_after: Array  # (A,) float32, s after the trigger: scripted -> IDM (NEVER = never)
 
     @property
     def num(self) -> int:
@@ -237,10 +243,11 @@ class ActorScript:
         for f in (
             "s_init", "v_pre", "v_post", "s_hold", "s_end", "trigger", "trigger_delay",
             "lat_shift", "lat_duration", "despawn_at_end", "light_index", "stop_s",
+            "trigger_deadline", "handover_after",
         ):  # fmt: skip
             check_shape(f"ActorScript.{f}", getattr(self, f), (n,))
             check_finite(f"ActorScript.{f}", getattr(self, f))
-        for f in ("v_pre", "v_post", "trigger_delay"):
+        for f in ("v_pre", "v_post", "trigger_delay", "trigger_deadline", "handover_after"):
             check_nonneg(f"ActorScript.{f}", getattr(self, f))
         if np.any(np.asarray(self.lat_duration) <= 0):
             raise ValueError("ActorScript.lat_duration: must be > 0")
