@@ -155,6 +155,8 @@ class ProtocolState:
     clear_by_limit: Array  # () bool, clearance came from a safety/stop limit
     ego_still_time: Array  # () float32, s, continuous time the ego has been (almost) still
     hazard_visible_at_warn: Array  # () bool, the hazard was camera-visible at the warning point
+    hazard_seen_before_warn: Array  # () bool, the camera saw the hazard at some tick from t = 0
+    #                                 up to (and including) the one reaching the warning point
 
     @staticmethod
     def initial() -> ProtocolState:
@@ -162,7 +164,7 @@ class ProtocolState:
         never = jnp.asarray(NEVER, jnp.float32)
         z = jnp.asarray(0.0, jnp.float32)
         f = jnp.asarray(False)
-        return ProtocolState(never, never, never, never, never, z, f, f, z, f)
+        return ProtocolState(never, never, never, never, never, z, f, f, z, f, f)
 
 
 # ---------------------------------------------------------------------------------------------

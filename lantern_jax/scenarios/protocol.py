@@ -198,7 +198,8 @@ def advance_hazard(
 def record_onset(
     proto: ProtocolState, before: ProtocolState, config: ExecutionConfig, hazard_visible: Array
 ) -> ProtocolState:
-    """Warning onset time and whether the hazard was camera-visible at the warning point.
+    """Warning onset time, whether the hazard was camera-visible at the warning point, and
+    whether the camera saw it at any tick of the approach up to it.
 
     Args:
         proto: protocol state after this tick's transitions.
@@ -208,9 +209,11 @@ def record_onset(
         hazard_visible: () bool, the front camera sees the hazard now.
     """
     first = happened(proto.t_warn_point) & ~happened(before.t_warn_point)
+    approaching = ~happened(before.t_warn_point)  # this tick ends at or before the warning point
     return proto.replace(
         t_warn_on=warning_onset(proto, config),
         hazard_visible_at_warn=jnp.where(first, hazard_visible, proto.hazard_visible_at_warn),
+        hazard_seen_before_warn=proto.hazard_seen_before_warn | (approaching & hazard_visible),
     )
 
 
