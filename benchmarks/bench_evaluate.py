@@ -3,12 +3,12 @@ scenario-ticks/s and peak memory.
 
 The timed call is exactly what ``evaluate`` runs (:func:`lantern_jax.evaluate.run_executions`):
 every pair of the suite under Route A with warning, Route A without warning and Route B
-(3 x 120 executions for ``lantern-v1``) in one jitted, vmapped rollout that stops when every
+(3 x 120 executions for ``lantern-v2``) in one jitted, vmapped rollout that stops when every
 execution has ended (large batches: a second phase continues the few long executions).
 
 Usage::
 
-    python benchmarks/bench_evaluate.py [--policy coop] [--suite lantern-v1] [--repeats 3]
+    python benchmarks/bench_evaluate.py [--policy coop] [--suite lantern-v2] [--repeats 3]
     LANTERN_JAX_CPU_DEVICES=1 python benchmarks/bench_evaluate.py   # one device only
 """
 
@@ -40,7 +40,7 @@ def peak_rss_mb() -> float:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--policy", default="coop")
-    ap.add_argument("--suite", default="lantern-v1")
+    ap.add_argument("--suite", default="lantern-v2")
     ap.add_argument("--repeats", type=int, default=3)
     args = ap.parse_args()
 
