@@ -621,3 +621,18 @@ def test_road_helpers():
     line45 = np.array([[0.0, -10.0], [10.0, 0.0]])
     s = rd.corridor_entry(line45, (0.0, 0.0), (1.0, 0.0), 2.0)
     assert s == pytest.approx(8.0 * math.sqrt(2.0))
+
+
+def test_scene_deadline_knob_moves_the_reveal():
+    # The OR van's guard is a leaf of the scenario: the knob reads it, and setting it (here
+    # 1 s earlier) changes only that leaf; the van's start state is unchanged (deadline > 0).
+    from lantern_jax.scenarios.knobs import get_knobs, set_knobs
+
+    params, wa, _, _ = make_pair("OR", 4)
+    v = params["lead_speed_kmh"] / 3.6
+    t_guard = (params["reveal_s"] - params["lead_gap"]) / v
+    assert float(get_knobs(wa, ["scene_deadline"])["scene_deadline"]) == pytest.approx(t_guard)
+    moved = jax.jit(lambda sc, t: set_knobs(sc, scene_deadline=t))(wa, jnp.float32(t_guard - 1))
+    assert float(moved.actors.trigger_deadline[1]) == pytest.approx(t_guard - 1.0)
+    np.testing.assert_allclose(moved.actors0.xy, wa.actors0.xy, atol=1e-4)
+    np.testing.assert_array_equal(moved.actors.trigger_deadline[2:], wa.actors.trigger_deadline[2:])
