@@ -3,12 +3,12 @@ scenario-ticks/s and peak memory.
 
 The timed call is exactly what ``evaluate`` runs (:func:`lantern_jax.evaluate.run_executions`):
 every pair of the suite under Route A with warning, Route A without warning and Route B
-(3 x 120 executions for ``lantern-v1``) in one jitted, vmapped rollout that stops when every
+(3 x 120 executions for ``lantern-v2``) in one jitted, vmapped rollout that stops when every
 execution has ended (large batches: a second phase continues the few long executions).
 
 Usage::
 
-    python benchmarks/bench_evaluate.py [--policy coop] [--suite lantern-v1] [--repeats 3]
+    python benchmarks/bench_evaluate.py [--policy coop] [--suite lantern-v2] [--repeats 3]
     LANTERN_JAX_CPU_DEVICES=1 python benchmarks/bench_evaluate.py   # one device only
 """
 
@@ -40,7 +40,7 @@ def peak_rss_mb() -> float:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--policy", default="coop")
-    ap.add_argument("--suite", default="lantern-v1")
+    ap.add_argument("--suite", default="lantern-v2")
     ap.add_argument("--repeats", type=int, default=3)
     args = ap.parse_args()
 
@@ -53,12 +53,13 @@ def main() -> None:
     t0 = time.perf_counter()
     final, t_compile = run_executions(policy.act, execs.scenarios, params, execs.max_ticks)
     jax.block_until_ready(final)
-    walls = []
+    walls, cpus = [], []
     for _ in range(args.repeats):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         final, _ = run_executions(policy.act, execs.scenarios, params, execs.max_ticks)
         jax.block_until_ready(final)
         walls.append(time.perf_counter() - t0)
+        cpus.append(time.process_time() - c0)
     wall = float(np.min(walls))
     ticks = np.asarray(final.tick)
     stepped = int(ticks.max())
@@ -71,6 +72,8 @@ def main() -> None:
     print(f"compile             {t_compile:8.2f} s")
     print(f"wall after compile  {wall:8.2f} s  (best of {args.repeats}: "
           f"{', '.join(f'{w:.2f}' for w in walls)})")  # fmt: skip
+    print(f"CPU after compile   {float(np.min(cpus)):8.2f} s  (process CPU time, all threads; "
+          f"on a shared machine a steadier measure than wall time)")  # fmt: skip
     print(f"longest execution   {stepped:8d} ticks (horizon cap {execs.max_ticks})")
     useful = int(ticks.sum()) / wall
     print(f"useful ticks/s      {useful:8,.0f}   (ticks before each execution ended)")

@@ -5,7 +5,7 @@
     lantern-jax evaluate                 # built-in suite, reference policies expert, ego, coop
     lantern-jax evaluate --policy coop --ablation late_onset --pairs-per-family 2 --out runs/x
     lantern-jax suite --list             # pairs, suite hash, generation report
-    lantern-jax suite --verify           # regenerate lantern-v1 from its seed, compare hashes
+    lantern-jax suite --verify           # regenerate lantern-v2 from its seed, compare hashes
     lantern-jax suite --regenerate suite.json
     lantern-jax policies
     lantern-jax ablations
@@ -36,6 +36,7 @@ from lantern_jax.commands import CommandError
 from lantern_jax.commands import dataset as dataset_command
 from lantern_jax.commands import stress as stress_command
 from lantern_jax.constants import FAMILIES
+from lantern_jax.constants import SUITE_ID
 
 REFERENCE_POLICIES = ("expert", "ego", "coop")
 EXIT_INTERRUPTED = 130
@@ -45,7 +46,7 @@ EXIT_INTERRUPTED = 130
 EVALUATE_DEFAULTS = {
     "policy": None,  # all reference policies
     "ablation": "none",
-    "suite": "lantern-v1",
+    "suite": SUITE_ID,
     "pairs_per_family": None,  # every pair
     "pairs": None,  # every pair
     "out": "results",
@@ -97,20 +98,18 @@ def suite_to_manifest(suite, suite_id: str | None = None) -> dict:
         suite: the suite.
         suite_id: id stored in the manifest (default: the suite's id).
     """
+    def pair(p) -> dict:
+        d = dict(pair_id=p.pair_id, family=p.family, weather=p.weather, sha256=p.sha256,
+                 params=p.params)  # fmt: skip
+        if p.route_2m is not None:
+            d["route_2m"] = p.route_2m
+        return d
+
     return dict(
         suite_id=suite_id or suite.suite_id,
         format_version=1,
         seed=suite.seed,
-        pairs=[
-            dict(
-                pair_id=p.pair_id,
-                family=p.family,
-                weather=p.weather,
-                sha256=p.sha256,
-                params=p.params,
-            )
-            for p in suite.pairs
-        ],
+        pairs=[pair(p) for p in suite.pairs],
         suite_sha256=suite.suite_sha256,
         generation_report=suite.report,
     )
@@ -200,7 +199,7 @@ def load_config(path: str) -> dict:
     :data:`CONFIG_KEYS` (the long option names with ``_`` for ``-``)::
 
         [evaluate]
-        suite = "lantern-v1"
+        suite = SUITE_ID
         policy = ["expert", "coop"]      # or one name, or "all"
         pairs_per_family = 2             # or pairs = ["pe_0001", "vc_0002"]
         ablation = "none"
@@ -305,6 +304,7 @@ def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
     from lantern_jax.report import (
         format_decomposition,
         format_family_table,
+        format_premise_table,
         ordered_tables,
         write_outputs,
     )
@@ -342,8 +342,9 @@ def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
     print("CUS decomposition  (components: mean x 100; Gate Pass and gate failures: % of pairs)")
     print(format_decomposition(dec))
     print()
-    print("Hazard not visible to the front camera at the warning point (% of Route A executions)")
-    print(result.hidden_at_warning.to_string(index=False, float_format=lambda x: f"{x:.1f}"))
+    print("The premise: hazard hidden from the front camera (% of Route A executions, all "
+          "models and conditions)")  # fmt: skip
+    print(format_premise_table(result.premise))
     print()
     print(f"Wrote {len(files)} files:")
     for path in files.values():
@@ -388,9 +389,12 @@ def _print_suite(suite) -> None:
         for f in FAMILIES:
             if f in rate:
                 print(f"  {f:<4} {100.0 * float(rate[f]):5.1f} %  ({tried.get(f, '?')})")
-        rejected = rep.get("static_rejected")
-        if rejected:
-            print("  static rejects: " + ", ".join(f"{f} {rejected.get(f, 0)}" for f in FAMILIES))
+        for key, label in (("static_rejected", "static rejects"),
+                           ("premise_rejected", "premise rejects (hazard visible)"),
+                           ("near_duplicate_rejected", "near-duplicate rejects")):  # fmt: skip
+            counts = rep.get(key)
+            if counts:
+                print(f"  {label}: " + ", ".join(f"{f} {counts.get(f, 0)}" for f in FAMILIES))
     else:
         print("generation report: none in the manifest")
 
@@ -586,7 +590,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     ev.add_argument("--ablation", metavar="NAME", help="protocol ablation (default: none)")
     ev.add_argument(
-        "--suite", metavar="ID|PATH", help="suite id or manifest path (default: lantern-v1)"
+        "--suite", metavar="ID|PATH", help=f"suite id or manifest path (default: {SUITE_ID})"
     )
     ev.add_argument(
         "--pairs-per-family", type=int, metavar="N", help="only the first N pairs of each family"
@@ -621,7 +625,7 @@ def build_parser() -> argparse.ArgumentParser:
     su.add_argument("--regenerate", metavar="PATH", help="write a freshly generated manifest")
     su.add_argument("--seed", type=int, help="generation seed for --regenerate")
     su.add_argument(
-        "--suite", default="lantern-v1", metavar="ID|PATH", help="suite id or manifest path"
+        "--suite", default=SUITE_ID, metavar="ID|PATH", help="suite id or manifest path"
     )
     su.add_argument("--quiet", action="store_true", help="no stage lines")
     su.set_defaults(func=cmd_suite)

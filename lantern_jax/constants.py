@@ -43,6 +43,13 @@ ROLE_BACKGROUND = 3  # ordinary traffic
 ROLE_NAMES = ("hazard", "occluder", "context", "background")
 NUM_ROLES = len(ROLE_NAMES)
 
+# --- static occluder kinds (map scenery that blocks camera rays) ------------------------------
+OCC_BUILDING = 0  # a building at a junction corner, set back from the kerb
+OCC_WALL = 1  # a wall or fence along the sidewalk
+OCC_PARKED_VEHICLE = 2  # a parked (or waiting) truck or van
+OCCLUDER_KIND_NAMES = ("building", "wall", "parked_vehicle")
+NUM_OCCLUDER_KINDS = len(OCCLUDER_KIND_NAMES)
+
 # --- actor motion models ----------------------------------------------------------------------
 MOTION_SCRIPTED = 0  # path + speed profile + trigger time (closed form in time)
 MOTION_IDM = 1  # intelligent-driver-model car following along the actor's path
@@ -77,6 +84,9 @@ PE, VC, OR, LWW, RWW, RTY = range(6)
 
 # --- weather profiles of the frozen suite -----------------------------------------------------
 WEATHERS = ("clear_day", "cloudy_day", "wet_day", "light_rain", "dusk")
+
+# --- the built-in frozen suite ------------------------------------------------------------------
+SUITE_ID = "lantern-v2"  # lantern_jax/data/<SUITE_ID>.json
 
 BIG = 1.0e6  # finite stand-in for "infinitely far" distances (keeps gradients finite)
 INF_TIME = 1.0e9  # s, stand-in for "not yet happened" times

@@ -8,7 +8,7 @@ protocol data of the batch (:data:`ABLATIONS`).
 Example::
 
     from lantern_jax.evaluate import evaluate
-    result = evaluate(["expert", "ego", "coop"])          # built-in suite lantern-v1
+    result = evaluate(["expert", "ego", "coop"])          # built-in suite lantern-v2
     print(result.family_table)
 """
 
@@ -31,7 +31,7 @@ import pandas as pd
 from lantern_jax.constants import DT, FAMILIES
 from lantern_jax.policies.base import Policy, check_policy_output
 from lantern_jax.policies.registry import get_policy
-from lantern_jax.scenarios.suite import Suite, build_suite_scenarios, load_suite
+from lantern_jax.scenarios.suite import SUITE_ID, Suite, build_suite_scenarios, load_suite
 from lantern_jax.scenarios.warnings import paraphrase_text_ids
 from lantern_jax.scoring.aggregate import decomposition_table, family_scores
 from lantern_jax.scoring.metrics import finalize
@@ -270,6 +270,9 @@ def run_policy(
     onset = np.asarray(time_or_nan(final.protocol.t_warn_on))
     shown = np.asarray(final.protocol.warning_ticks)
     d_safe = np.asarray(execs.scenarios.config.d_safe)
+    reached = np.asarray(happened(proto["t_warn_point"]))
+    hidden_at = reached & ~np.asarray(proto["hazard_visible_at_warn"], bool)
+    hidden_before = reached & ~np.asarray(proto["hazard_seen_before_warn"], bool)
     for ci, cond in enumerate(CONDITIONS):
         sl = slice(ci * n, (ci + 1) * n)
         rows.append(
@@ -284,6 +287,8 @@ def run_policy(
                 t_warn_on=onset[sl],
                 d_safe=d_safe[sl],
                 warning_ticks=shown[sl],
+                hidden_at_warning=hidden_at[sl],
+                hidden_before_warning=hidden_before[sl],
             )
         )
     table = pd.concat(rows, ignore_index=True)
@@ -317,25 +322,32 @@ def family_table(route_table: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(out)[cols]
 
 
-def hidden_at_warning(runs: list[PolicyRun], execs_pairs: int, families: list[str]) -> pd.DataFrame:
-    """Share (%) of Route A executions whose hazard the front camera could NOT see at the
-    warning point — the benchmark's premise — per model and family (warning condition).
+PREMISE_ROWS = (
+    ("hazard_hidden_at_warning", "hidden at the warning point"),
+    ("hazard_hidden_before_warning", "hidden for the whole approach"),
+)
 
-    Columns: ``model, PE, VC, OR, LWW, RWW, RTY, Overall`` (Overall pools all pairs).
+
+def premise_table(route_table: pd.DataFrame) -> pd.DataFrame:
+    """The benchmark's premise, measured: per family, the share (%) of Route A executions
+    (every model and condition in ``route_table``) whose hazard the front camera could not see
+    at the warning point, and could not see at any tick of the approach up to it.
+
+    Columns: ``measure, PE, VC, OR, LWW, RWW, RTY, Overall`` (Overall pools all executions);
+    the last row, ``Route A executions``, counts them per family.
     """
     rows = []
-    fam = np.asarray(families)
-    for r in runs:
-        vis = np.asarray(r.protocol["hazard_visible_at_warn"][:execs_pairs], bool)
-        reached = np.asarray(happened(r.protocol["t_warn_point"][:execs_pairs]))
-        hidden = ~vis & reached
-        row = {"model": r.policy}
+    for col, label in PREMISE_ROWS:
+        row = {"measure": label}
         for f in FAMILIES:
-            m = (fam == f) & reached
-            row[f] = 100.0 * hidden[m].mean() if m.any() else np.nan
-        row["Overall"] = 100.0 * hidden[reached].mean() if reached.any() else np.nan
+            v = route_table.loc[route_table["family"] == f, col]
+            row[f] = 100.0 * float(v.mean()) if len(v) else np.nan
+        row["Overall"] = 100.0 * float(route_table[col].mean()) if len(route_table) else np.nan
         rows.append(row)
-    return pd.DataFrame(rows)
+    counts = {"measure": "Route A executions"}
+    counts.update({f: float((route_table["family"] == f).sum()) for f in FAMILIES})
+    counts["Overall"] = float(len(route_table))
+    return pd.DataFrame([*rows, counts])
 
 
 class PolicyError(ValueError):
@@ -352,7 +364,7 @@ class EvalResult:
     decomposition: pd.DataFrame
     manifest: dict
     runs: list[PolicyRun]
-    hidden_at_warning: pd.DataFrame  # % of Route A executions with the hazard unseen at onset
+    premise: pd.DataFrame  # % of Route A executions with the hazard unseen (:func:`premise_table`)
 
 
 def _policies_to_run(policies, suite) -> list[Policy]:
@@ -434,7 +446,7 @@ def _manifest(s: Suite, ablation: str, execs: Executions, runs: list[PolicyRun])
 def evaluate(
     policies: Sequence[str | Policy] | str | Policy = ("expert", "ego", "coop"),
     policy_params: Sequence[Any] | None = None,
-    suite: Suite | str = "lantern-v1",
+    suite: Suite | str = SUITE_ID,
     ablation: str = "none",
     progress: bool = True,
 ) -> EvalResult:
@@ -471,5 +483,5 @@ def evaluate(
         decomposition=decomposition_table(route).reset_index(),
         manifest=_manifest(s, ablation, execs, runs),
         runs=runs,
-        hidden_at_warning=hidden_at_warning(runs, execs.num_pairs, execs.families),
+        premise=premise_table(route),
     )

@@ -1,31 +1,44 @@
 """Suite generation: sample candidates, validate them statically and with the expert, select.
 
-Generation is deterministic from a seed:
+Generation is deterministic from a seed.  Every (weather, family) slot draws its candidates in
+order from its own generator seeded by ``(seed, weather index, family index)``, and the slots
+are filled in rounds of ``ROUND_SIZE`` candidates per unfilled slot:
 
-1. for every (weather, family) slot, candidates are sampled in order from a generator seeded by
-   ``(seed, weather index, family index)``;
-2. **static validation** (:func:`lantern_jax.scenarios.suite.static_check`) rejects candidates
-   whose parameters, markers, recovery stretch, junction or Route A/B agreement are wrong, or
-   whose content hash repeats;
-3. **dynamic validation** (:func:`dynamic_check`) runs the privileged ``expert`` on Route A
-   (warning condition) and Route B in one batched call and keeps a pair only when both routes
-   are completed without any gate failure, the warning starts and ends exactly once and the
-   physical event and its clearance are recorded on Route A;
-4. the first four accepted candidates of each slot form the suite.
+1. **static validation** (:func:`lantern_jax.scenarios.suite.static_check`) rejects candidates
+   whose parameters, occluders, markers, recovery stretch, junction or Route A/B agreement are
+   wrong, whose hazard the front camera sees at the warning point (the premise), or whose
+   content hash repeats; a candidate that is a **near duplicate** (paper rule, start-pose
+   frame, :mod:`lantern_jax.scenarios.duplicates`) of a pair already selected for its family is
+   rejected too;
+2. **dynamic validation** (:func:`dynamic_check`) runs the privileged ``expert`` on Route A
+   (warning condition) and Route B of the round's candidates in one batched call and keeps a
+   pair only when both routes are completed without any gate failure, the warning starts and
+   ends exactly once, and the physical event and its clearance are recorded on Route A (not by
+   a safety limit);
+3. **selection**: candidate ``k`` of every slot in turn (``k`` by ``k``, weathers in order),
+   each accepted when it passed both validations, its slot still needs pairs and it is not a
+   near duplicate of a pair selected before it.
 
-This is an evaluation-layer concern (it runs the simulator and a policy), so it lives above
-:mod:`lantern_jax.scenarios`.  :func:`verify_regeneration` regenerates a shipped suite from its
-seed and compares every hash.
+Rounds stop when every slot holds ``pairs_per_slot`` pairs.  The batch of every expert call is
+padded to one size, so one compilation serves all rounds.  This is an evaluation-layer concern
+(it runs the simulator and a policy), so it lives above :mod:`lantern_jax.scenarios`.
+:func:`verify_regeneration` regenerates a shipped suite from its seed and compares every hash
+and every recorded route.
 """
 
 from __future__ import annotations
+
+import collections
+import math
 
 import jax
 import numpy as np
 
 from lantern_jax.constants import DT, FAMILIES, WEATHERS
 from lantern_jax.policies.registry import get_policy
+from lantern_jax.scenarios.duplicates import near_duplicate, route_samples
 from lantern_jax.scenarios.families import sample_params
+from lantern_jax.scenarios.spec import PARAM_RANGES
 from lantern_jax.scenarios.suite import (
     SUITE_ID,
     PairSpec,
@@ -40,37 +53,57 @@ from lantern_jax.world import Scenario, tree_stack
 
 DEFAULT_SEED = 20260611
 PAIRS_PER_SLOT = 4  # per family per weather profile
-CANDIDATES_PER_SLOT = 8
+CANDIDATES_PER_SLOT = 64  # at most, per slot
+ROUND_SIZE = 8  # candidates per unfilled slot and round
 EXPERT_MIN_PROGRESS = 0.99  # route completion the expert must reach on both routes
+ROUTE_DECIMALS = 3  # the manifest's route samples are rounded to 1 mm
+#: Ticks of every expert call: the longest route timeout of any family (20 s + length / 3 m/s).
+MAX_TICKS = int(
+    math.ceil((20.0 + max(r["route_length"].hi for r in PARAM_RANGES.values()) / 3.0) / DT)
+)
+GATES = ("gate_collision", "gate_route_deviation", "gate_lane", "gate_rule", "gate_block")
+
+_EXPERT_RUN = {}
+
+
+def _expert_run():
+    """The jitted batched expert rollout (built once)."""
+    if "fn" not in _EXPERT_RUN:
+        expert = get_policy("expert")
+        params = expert.init(jax.random.PRNGKey(0))
+        _EXPERT_RUN["fn"] = jax.jit(lambda sc: rollout_batch(sc, expert.act, params, MAX_TICKS))
+    return _EXPERT_RUN["fn"]
 
 
 def dynamic_check(
-    scenarios_a: list[Scenario], scenarios_b: list[Scenario], max_ticks: int | None = None
-):
+    scenarios_a: list[Scenario], scenarios_b: list[Scenario], batch_size: int | None = None
+) -> tuple[np.ndarray, list[str]]:
     """Run the expert on Route A (warning) and Route B of many pairs in one batched call.
 
+    Args:
+        scenarios_a, scenarios_b: the pairs' Route A and Route B scenarios.
+        batch_size: pad the batch of ``2 n`` executions to this many (copies of the last one)
+            so that calls of different sizes share one compilation; None = no padding.
+
     Returns:
-        (accepted (N,) bool, reasons list[str] — "" for accepted pairs).
+        (accepted (n,) bool, reasons list[str] — "" for accepted pairs).
     """
-    expert = get_policy("expert")
-    params = expert.init(jax.random.PRNGKey(0))
     n = len(scenarios_a)
-    batch = tree_stack(list(scenarios_a) + list(scenarios_b))
-    if max_ticks is None:
-        max_ticks = int(np.ceil(float(np.max(np.asarray(batch.config.timeout_s))) / DT))
-    final = jax.jit(lambda sc: rollout_batch(sc, expert.act, params, max_ticks))(batch)
+    execs = list(scenarios_a) + list(scenarios_b)
+    if batch_size is not None:
+        if batch_size < len(execs):
+            raise ValueError(f"dynamic_check: {len(execs)} executions exceed batch {batch_size}")
+        execs += [execs[-1]] * (batch_size - len(execs))
+    final = _expert_run()(tree_stack(execs))
     m = jax.tree.map(np.asarray, finalize(final.telemetry))
     proto = jax.tree.map(np.asarray, final.protocol)
-    gates = ("gate_collision", "gate_route_deviation", "gate_lane", "gate_rule", "gate_block")
     ok, reasons = np.ones(n, bool), [""] * n
     for i in range(n):
         why = []
         for j, tag in ((i, "A"), (n + i, "B")):
             if m.progress[j] < EXPERT_MIN_PROGRESS:
                 why.append(f"{tag}: route not completed")
-            for g in gates:
-                if not bool(getattr(m, g)[j]):
-                    why.append(f"{tag}: {g} failed")
+            why += [f"{tag}: {g} failed" for g in GATES if not bool(getattr(m, g)[j])]
         if not bool(m.gate_false_brake[n + i]):
             why.append("B: false brake")
         for f in ("t_warn_point", "t_event", "t_warn_off", "t_clear"):
@@ -90,72 +123,83 @@ def _slot_rng(seed: int, w: int, f: int) -> np.random.Generator:
     return np.random.default_rng([seed, w, f])
 
 
-def _candidates(seed: int, candidates_per_slot: int) -> tuple[list[tuple], dict[str, int]]:
-    """Sample and statically check every slot's candidates, in slot order.
+class _Generation:
+    """The state of one generation run: slot generators, selected pairs, statistics."""
 
-    Returns:
-        (candidates ``(weather index, family index, k, params, scenario_a, scenario_b, meta)``,
-        static rejects per family).
-    """
-    cands, seen = [], set()
-    static_rejects: dict[str, int] = {f: 0 for f in FAMILIES}
-    for wi, weather in enumerate(WEATHERS):
-        for fi, fam in enumerate(FAMILIES):
-            rng = _slot_rng(seed, wi, fi)
-            for k in range(candidates_per_slot):
-                params = sample_params(fam, rng, weather)
+    def __init__(self, seed: int, pairs_per_slot: int, candidates_per_slot: int) -> None:
+        self.seed, self.need, self.max_k = seed, pairs_per_slot, candidates_per_slot
+        self.rngs = {(w, f): _slot_rng(seed, w, f) for w in range(len(WEATHERS))
+                     for f in range(len(FAMILIES))}  # fmt: skip
+        self.drawn = collections.Counter()  # candidates drawn per slot
+        self.filled = collections.Counter()  # pairs selected per slot
+        self.selected: dict[str, list[dict]] = {f: [] for f in FAMILIES}
+        self.seen: set[str] = set()
+        zero = {f: 0 for f in FAMILIES}
+        self.stats = dict(candidates=dict(zero), static_rejected=dict(zero),
+                          premise_rejected=dict(zero), near_duplicate_rejected=dict(zero),
+                          dynamic_tried=dict(zero), dynamic_passed=dict(zero))  # fmt: skip
+        self.reasons: dict[str, set[str]] = {f: set() for f in FAMILIES}
+
+    def open_slots(self) -> list[tuple[int, int]]:
+        return [s for s in self.rngs if self.filled[s] < self.need and self.drawn[s] < self.max_k]
+
+    def _is_duplicate(self, fam: str, route: np.ndarray) -> bool:
+        return any(near_duplicate(route, q["route"]) for q in self.selected[fam])
+
+    def draw_round(self) -> list[dict]:
+        """Draw and statically check the next ``ROUND_SIZE`` candidates of every open slot."""
+        out = []
+        for w, f in self.open_slots():
+            fam = FAMILIES[f]
+            for _ in range(min(ROUND_SIZE, self.max_k - self.drawn[(w, f)])):
+                k = self.drawn[(w, f)]
+                self.drawn[(w, f)] += 1
+                self.stats["candidates"][fam] += 1
+                params = sample_params(fam, self.rngs[(w, f)], WEATHERS[w])
                 try:
-                    a, b, meta = static_check(params, seen)
-                except ValueError:
-                    static_rejects[fam] += 1
+                    a, b, meta = static_check(params, self.seen)
+                except ValueError as e:
+                    key = "premise_rejected" if "premise" in str(e) else "static_rejected"
+                    self.stats[key][fam] += 1
                     continue
-                seen.add(meta["content_hash"])
-                cands.append((wi, fi, k, params, a, b, meta))
-    return cands, static_rejects
+                self.seen.add(meta["content_hash"])
+                route = route_samples(a)
+                if self._is_duplicate(fam, route):
+                    self.stats["near_duplicate_rejected"][fam] += 1
+                    continue
+                out.append(dict(w=w, f=f, k=k, params=params, a=a, b=b, meta=meta, route=route))
+        return out
+
+    def select(self, cands: list[dict], ok: np.ndarray, reasons: list[str]) -> None:
+        """Accept the round's candidates k by k, weathers in order (see the module docstring)."""
+        for c, good, why in zip(cands, ok, reasons, strict=True):
+            fam = FAMILIES[c["f"]]
+            self.stats["dynamic_tried"][fam] += 1
+            self.stats["dynamic_passed"][fam] += int(good)
+            c["ok"] = bool(good)
+            if not good:
+                self.reasons[fam].add(why)
+        for c in sorted(cands, key=lambda c: (c["k"], c["w"], c["f"])):
+            fam, slot = FAMILIES[c["f"]], (c["w"], c["f"])
+            if not c["ok"] or self.filled[slot] >= self.need:
+                continue
+            if self._is_duplicate(fam, c["route"]):
+                self.stats["near_duplicate_rejected"][fam] += 1
+                continue
+            self.filled[slot] += 1
+            self.selected[fam].append(c)
 
 
-def _select(cands: list[tuple], ok, reasons, pairs_per_slot: int) -> tuple[list[dict], dict]:
-    """The first ``pairs_per_slot`` accepted candidates of every slot, and counts per family.
-
-    Raises:
-        RuntimeError: naming the slots that could not be filled.
-    """
-    pairs, counters = [], {f: 0 for f in FAMILIES}
-    tried = {f: 0 for f in FAMILIES}
-    passed = {f: 0 for f in FAMILIES}
-    filled: dict[tuple[int, int], int] = {}
-    rejects: dict[str, list[str]] = {f: [] for f in FAMILIES}
-    for c, good, why in zip(cands, ok, reasons, strict=True):
-        wi, fi, _, params, _, _, meta = c
-        fam = FAMILIES[fi]
-        tried[fam] += 1
-        passed[fam] += int(good)
-        if not good:
-            rejects[fam].append(why)
-            continue
-        if filled.get((wi, fi), 0) >= pairs_per_slot:
-            continue
-        filled[(wi, fi)] = filled.get((wi, fi), 0) + 1
-        counters[fam] += 1
-        pair_id = f"{fam.lower()}_{counters[fam]:04d}"
-        pairs.append(dict(pair_id=pair_id, family=fam, weather=WEATHERS[wi],
-                          sha256=meta["content_hash"], params=params))  # fmt: skip
-    missing = [
-        (WEATHERS[w], FAMILIES[f])
-        for w in range(len(WEATHERS))
-        for f in range(len(FAMILIES))
-        if filled.get((w, f), 0) < pairs_per_slot
-    ]
-    if missing:
-        short = {k: v for k, v in filled.items() if v < pairs_per_slot}
-        raise RuntimeError(f"not enough valid candidates for slots {missing} ({short})")
-    pairs.sort(key=lambda p: (FAMILIES.index(p["family"]), p["pair_id"]))
-    stats = dict(
-        dynamic_tried=tried,
-        expert_pass_rate={f: passed[f] / max(tried[f], 1) for f in FAMILIES},
-        dynamic_reject_reasons={f: sorted(set(r))[:10] for f, r in rejects.items()},
-    )
-    return pairs, stats
+def _manifest_pairs(gen: _Generation) -> list[dict]:
+    pairs = []
+    for fam in FAMILIES:
+        chosen = sorted(gen.selected[fam], key=lambda c: (c["w"], c["k"]))
+        for i, c in enumerate(chosen, start=1):
+            route = np.round(c["route"], ROUTE_DECIMALS) + 0.0
+            pairs.append(dict(pair_id=f"{fam.lower()}_{i:04d}", family=fam,
+                              weather=WEATHERS[c["w"]], sha256=c["meta"]["content_hash"],
+                              params=c["params"], route_2m=route.tolist()))  # fmt: skip
+    return pairs
 
 
 def generate_suite(
@@ -168,16 +212,41 @@ def generate_suite(
 
     Args:
         seed: generation seed.
-        pairs_per_slot: accepted pairs per (weather, family) slot (4 for lantern-v1).
-        candidates_per_slot: candidates sampled per slot before filtering.
-        progress: print progress lines.
+        pairs_per_slot: accepted pairs per (weather, family) slot (4 for lantern-v2).
+        candidates_per_slot: most candidates drawn per slot.
+        progress: print one line per round.
+
+    Raises:
+        RuntimeError: naming the slots that could not be filled.
     """
-    cands, static_rejects = _candidates(seed, candidates_per_slot)
-    if progress:
-        print(f"[suite] {len(cands)} candidates passed static validation; running the expert")
-    ok, reasons = dynamic_check([c[4] for c in cands], [c[5] for c in cands])
-    pairs, stats = _select(cands, ok, reasons, pairs_per_slot)
-    report = dict(candidates_per_slot=candidates_per_slot, static_rejected=static_rejects, **stats)
+    gen = _Generation(seed, pairs_per_slot, candidates_per_slot)
+    batch = 2 * len(gen.rngs) * ROUND_SIZE
+    rounds = 0
+    while gen.open_slots():
+        cands = gen.draw_round()
+        rounds += 1
+        if cands:
+            ok, reasons = dynamic_check([c["a"] for c in cands], [c["b"] for c in cands], batch)
+            gen.select(cands, ok, reasons)
+        if progress:
+            done = sum(min(v, pairs_per_slot) for v in gen.filled.values())
+            print(f"[suite] round {rounds}: {len(cands)} candidates to the expert, "
+                  f"{done}/{pairs_per_slot * len(gen.rngs)} pairs selected")  # fmt: skip
+    missing = [(WEATHERS[w], FAMILIES[f]) for (w, f) in gen.rngs if gen.filled[(w, f)] < gen.need]
+    if missing:
+        raise RuntimeError(f"not enough valid candidates for slots {missing}; statistics per "
+                           f"family: {gen.stats}")  # fmt: skip
+    pairs = _manifest_pairs(gen)
+    st = gen.stats
+    report = dict(
+        candidates_per_slot_max=candidates_per_slot,
+        round_size=ROUND_SIZE,
+        rounds=rounds,
+        **st,
+        expert_pass_rate={f: st["dynamic_passed"][f] / max(st["dynamic_tried"][f], 1)
+                          for f in FAMILIES},  # fmt: skip
+        dynamic_reject_reasons={f: sorted(r)[:10] for f, r in gen.reasons.items()},
+    )
     specs = [PairSpec(p["pair_id"], p["family"], p["weather"], p["params"], p["sha256"])
              for p in pairs]  # fmt: skip
     return dict(
@@ -191,19 +260,20 @@ def generate_suite(
 
 
 def verify_regeneration(name: str = SUITE_ID) -> tuple[bool, str]:
-    """Regenerate a shipped suite from its seed and compare every pair hash and the suite hash."""
+    """Regenerate a shipped suite from its seed and compare every pair hash, every recorded
+    route and the suite hash."""
     shipped = load_suite(name)
     fresh = generate_suite(shipped.seed, progress=False)
-    got = [(p["pair_id"], p["sha256"]) for p in fresh["pairs"]]
-    want = [(p.pair_id, p.sha256) for p in shipped.pairs]
+    got = [(p["pair_id"], p["sha256"], p["route_2m"]) for p in fresh["pairs"]]
+    want = [(p.pair_id, p.sha256, p.route_2m) for p in shipped.pairs]
     for g, w in zip(got, want, strict=False):
-        if g != w:
+        if g[:2] != w[:2]:
             return (
                 False,
                 f"first mismatch at pair {w[0]}: shipped {w[1][:12]}, regenerated {g[1][:12]}",
             )
+        if w[2] is not None and g[2] != w[2]:
+            return False, f"pair {w[0]}: recorded route_2m differs from the regenerated route"
     if len(got) != len(want):
         return False, f"pair count differs: shipped {len(want)}, regenerated {len(got)}"
     return fresh["suite_sha256"] == shipped.suite_sha256, "suite hash " + fresh["suite_sha256"]
-
-

@@ -182,6 +182,21 @@ def format_decomposition(df: pd.DataFrame, tablefmt: str = "simple") -> str:
     )
 
 
+def format_premise_table(df: pd.DataFrame, tablefmt: str = "simple") -> str:
+    """The premise table (:func:`lantern_jax.evaluate.premise_table`) as text: one row per
+    measure (% with one decimal), then the execution counts."""
+    rows = []
+    for rec in df.to_dict("records"):
+        is_count = rec["measure"] == "Route A executions"
+        rows.append([rec["measure"]] + [
+            "-" if not math.isfinite(rec[c]) else (f"{rec[c]:.0f}" if is_count else
+                                                   f"{rec[c]:.1f}")
+            for c in FAMILY_COLUMNS
+        ])  # fmt: skip
+    return tabulate(rows, headers=["", *FAMILY_COLUMNS], tablefmt=tablefmt,
+                    disable_numparse=True, colalign=("left", *["right"] * len(FAMILY_COLUMNS)))
+
+
 # ---------------------------------------------------------------------------------------------
 # files
 # ---------------------------------------------------------------------------------------------

@@ -2,7 +2,8 @@
 and the dynamic pieces that the simulator's :class:`~lantern_jax.sim.state.State` carries.
 
 * :class:`Scenario` — everything that never changes during an execution: the map
-  (:class:`Lanes`), the ego :class:`Route`, the :class:`TrafficLights`, what every actor slot is
+  (:class:`Lanes` and the static :class:`Occluders`), the ego :class:`Route`, the
+  :class:`TrafficLights`, what every actor slot is
   and how it moves (:class:`ActorScript`), the execution's markers, condition, rules and weather
   (:class:`ExecutionConfig`) and the initial conditions (``ego0``, ``actors0``).  It is closed
   over (one execution) or broadcast along the batch axis (``vmap``), never carried.
@@ -12,8 +13,8 @@ and the dynamic pieces that the simulator's :class:`~lantern_jax.sim.state.State
 
 Every function in the package takes and returns a single scenario; batches are made with
 ``jax.vmap`` outside.  Capacities (``A`` actors, ``P`` path points, ``L`` lanes, ``Q`` lane
-points, ``R`` route points, ``T`` traffic lights) are static and fixed by the arrays' shapes;
-padded slots carry a ``valid`` mask.
+points, ``R`` route points, ``T`` traffic lights, ``K`` occluders) are static and fixed by the
+arrays' shapes; padded slots carry a ``valid`` mask.
 
 Frames: world frame x east / y north / yaw counter-clockwise (see :mod:`lantern_jax.constants`).
 
@@ -30,7 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
-from lantern_jax.constants import FAMILIES, NUM_ACTOR_KINDS, NUM_ROLES
+from lantern_jax.constants import FAMILIES, NUM_ACTOR_KINDS, NUM_OCCLUDER_KINDS, NUM_ROLES
 from lantern_jax.times import NEVER
 
 Array = jax.Array
@@ -155,6 +156,8 @@ class ProtocolState:
     ego_still_time: Array  # () float32, s, continuous time the ego has been (almost) still
     hazard_visible_at_warn: Array  # () bool, the hazard was camera-visible at the warning point
     warning_ticks: Array  # () int32, ticks at which the policy was shown an active warning
+    hazard_seen_before_warn: Array  # () bool, the camera saw the hazard at some tick from t = 0
+    #                                 up to (and including) the one reaching the warning point
 
     @staticmethod
     def initial() -> ProtocolState:
@@ -163,7 +166,7 @@ class ProtocolState:
         z = jnp.asarray(0.0, jnp.float32)
         f = jnp.asarray(False)
         none = jnp.asarray(0, jnp.int32)
-        return ProtocolState(never, never, never, never, never, z, f, f, z, f, none)
+        return ProtocolState(never, never, never, never, never, z, f, f, z, f, none, f)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -179,6 +182,7 @@ class ActorScript:
 
         trigger time   tau = trigger_delay            (TRIGGER_CLOCK)
                        tau = t_event + trigger_delay  (TRIGGER_EVENT; inf until the event)
+                       tau = min(tau, trigger_deadline)   (a deadline triggers it regardless)
         before tau     s(t) = min(s_init + v_pre * t, s_hold)
         after tau      s(t) = s(tau) + v_post * (t - tau)
                        lat(t) = lat_shift * smoothstep((t - tau) / lat_duration)
@@ -186,7 +190,10 @@ class ActorScript:
 
     A static object is ``v_pre = v_post = 0``.  IDM actors (``motion == MOTION_IDM``) integrate
     ``s`` with the intelligent driver model, desired speed ``v_pre``, stopping at ``stop_s`` while
-    the light ``light_index`` is not green.
+    the light ``light_index`` is not green.  A scripted actor with a finite ``handover_after``
+    is handed over to the IDM ``handover_after`` seconds after its trigger: from then on it
+    continues from its scripted arc and speed as IDM traffic with desired speed ``v_post``, its
+    lateral offset still following the script (the cut-in vehicle after its merge).
     """
 
     extent: Array  # (A, 2) float32, m, (half length, half width), >= 0
@@ -209,6 +216,8 @@ class ActorScript:
     despawn_at_end: Array  # (A,) bool, remove the actor when it reaches ``s_end``
     light_index: Array  # (A,) int32, traffic light governing an IDM actor (-1 = none)
     stop_s: Array  # (A,) float32, m, arc of that light's stop line on the actor's path
+    trigger_deadline: Array  # (A,) float32, s, latest trigger time (times.NEVER = none)
+    handover_after: Array  # (A,) float32, s after the trigger: scripted -> IDM (NEVER = never)
 
     @property
     def num(self) -> int:
@@ -238,10 +247,11 @@ class ActorScript:
         for f in (
             "s_init", "v_pre", "v_post", "s_hold", "s_end", "trigger", "trigger_delay",
             "lat_shift", "lat_duration", "despawn_at_end", "light_index", "stop_s",
+            "trigger_deadline", "handover_after",
         ):  # fmt: skip
             check_shape(f"ActorScript.{f}", getattr(self, f), (n,))
             check_finite(f"ActorScript.{f}", getattr(self, f))
-        for f in ("v_pre", "v_post", "trigger_delay"):
+        for f in ("v_pre", "v_post", "trigger_delay", "trigger_deadline", "handover_after"):
             check_nonneg(f"ActorScript.{f}", getattr(self, f))
         if np.any(np.asarray(self.lat_duration) <= 0):
             raise ValueError("ActorScript.lat_duration: must be > 0")
@@ -279,6 +289,47 @@ class Lanes:
         check_nonneg("Lanes.width", self.width, v)
         if np.any(v & (pv.sum(-1) < 2)):
             raise ValueError("Lanes.point_valid: every valid lane needs at least two points")
+        return self
+
+
+@struct.dataclass
+class Occluders:
+    """Static scenery boxes of the map (buildings, walls, parked trucks and vans), K slots.
+
+    They block camera rays (front camera, 360-degree rig and range image) and count as
+    collisions, but they are never "visible" targets themselves and never move; Route A and
+    Route B of a pair share them exactly.  Padded slots are ``valid = False``.
+    """
+
+    center: Array  # (K, 2) float32, m, world frame, box centre
+    yaw: Array  # (K,) float32, rad, CCW from +x, direction of the box's long axis
+    extent: Array  # (K, 2) float32, m, (half length, half width), > 0 for valid slots
+    kind: Array  # (K,) int32, OCC_* (building, wall, parked vehicle)
+    valid: Array  # (K,) bool, slot holds an occluder (padding = False)
+
+    @property
+    def num(self) -> int:
+        """Static capacity K."""
+        return self.valid.shape[-1]
+
+    def validate(self) -> Occluders:
+        c = check_shape("Occluders.center", self.center, (None, 2))
+        n = c.shape[0]
+        for f in ("yaw", "kind", "valid"):
+            check_shape(f"Occluders.{f}", getattr(self, f), (n,))
+        check_shape("Occluders.extent", self.extent, (n, 2))
+        v = np.asarray(self.valid, bool)
+        for f in ("center", "yaw", "extent"):
+            check_finite(f"Occluders.{f}", getattr(self, f), v)
+        ext = np.asarray(self.extent, np.float64)
+        if np.any(v[:, None] & (ext <= 0.0)):
+            i = int(np.argwhere(v[:, None] & (ext <= 0.0))[0, 0])
+            raise ValueError(f"Occluders.extent: occluder {i} needs positive half extents")
+        kind = np.asarray(self.kind)
+        if np.any(v & ((kind < 0) | (kind >= NUM_OCCLUDER_KINDS))):
+            raise ValueError(
+                "Occluders.kind: must be 0 (building), 1 (wall) or 2 (parked vehicle)"
+            )
         return self
 
 
@@ -448,6 +499,7 @@ class Scenario:
     """
 
     lanes: Lanes
+    occluders: Occluders  # static scenery boxes of the map
     route: Route
     lights: TrafficLights
     actors: ActorScript
@@ -458,6 +510,7 @@ class Scenario:
     def validate(self) -> Scenario:
         """Validate every component (outside jit) and their mutual consistency."""
         self.lanes.validate()
+        self.occluders.validate()
         self.route.validate()
         self.lights.validate()
         self.actors.validate(num_lights=self.lights.num)

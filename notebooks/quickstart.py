@@ -57,7 +57,7 @@ print("jax", jax.__version__, "on", jax.default_backend(), "| SMALL =", SMALL)
 # %% [markdown]
 # ## 1. The built-in suite
 #
-# `lantern-v1` has 120 pairs (20 per family). Loading it checks every pair against its SHA-256
+# `lantern-v2` has 120 pairs (20 per family). Loading it checks every pair against its SHA-256
 # content hash. The generation report records how often the privileged `expert` passed the
 # dynamic validation of a candidate pair before the suite was filtered.
 
@@ -150,8 +150,9 @@ for name, final, rec in (("warning", final_w, rec_w), ("no warning", final_nw, r
 
 # %% [markdown]
 # Bird's-eye view at the first tick with an active warning: the pedestrian (red, ringed) is
-# still hidden behind the truck (dark grey), the warning text and its grounded position (pink x)
-# are shown, and the planned waypoints (purple dots) already slow down.
+# still hidden behind the parked truck (a dark grey occluder of the map), the warning text and
+# its grounded position (pink x) are shown, and the planned waypoints (purple dots) already slow
+# down.
 
 # %%
 i_warn = int(np.argmax(rec_w.warning_active))

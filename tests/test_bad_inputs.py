@@ -1,16 +1,18 @@
 """A catalogue of bad inputs and faults: each gets a clear error naming what is wrong, or a
 defined outcome, never a silent wrong result, a raw traceback or a mixed set of files.
 
-Catalogue (79 bad inputs and faults):
+Catalogue (87 bad inputs and faults):
 
-* suite files (33: 31 in ``SUITE_CASES``, a duplicated JSON key, broken JSON): family and
+* suite files (41: 39 in ``SUITE_CASES``, a duplicated JSON key, broken JSON): family and
   weather labels that disagree with the parameters; a 4e-7 change and a larger one under the
   old hash; out-of-range, negative, missing, string, boolean, unknown, NaN, inf and infeasible
-  parameters (hashes recomputed); wrong JSON types of pair id, seed (null, ``"abc"``), pair
-  hash, report, suite id, pairs and params; a parameter seed ``"abc"``; unknown family (label
-  and parameters); duplicate pair ids and scenarios; missing and unknown fields; no pairs; a
-  wrong suite hash; an unsupported format version — each refused by ``load_suite`` with a line
-  naming file, pair and field, and by the CLI with exit code 2 before anything is built;
+  parameters (hashes recomputed); occluder and road-geometry fields missing, NaN, infinite or
+  placing a parked truck in the route corridor; a recorded route with a NaN point or of the
+  wrong type; wrong JSON types of pair id, seed (null, ``"abc"``), pair hash, report, suite id,
+  pairs and params; a parameter seed ``"abc"``; unknown family (label and parameters);
+  duplicate pair ids and scenarios; missing and unknown fields; no pairs; a wrong suite hash;
+  an unsupported format version — each refused by ``load_suite`` with a line naming file, pair
+  and field, and by the CLI with exit code 2 before anything is built;
 * suite selections (4): ``select([])``, an id twice, ``subset(0)``, a missing file;
 * result sets (10): ``kill -9`` at five points of a write (into a fresh folder; with every file
   staged; between the exchange and moving the folder's other entries back; between the two
@@ -72,7 +74,7 @@ from lantern_jax.scenarios.suite import (
 from lantern_jax.scoring.aggregate import decomposition_table
 from lantern_jax.scoring.table import schema_columns
 
-PAIRS = ["pe_0001", "vc_0001"]
+PAIRS = ["pe_0001", "lww_0001"]
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -149,7 +151,7 @@ def _swap(m):
 
 
 def _dup_id(m):
-    m["pairs"][1]["pair_id"] = "pe_0001"
+    m["pairs"][1]["pair_id"] = "pe_0001"  # the LWW pair takes the PE pair's id
 
 
 def _dup_scenario(m):
@@ -160,11 +162,16 @@ def _infeasible(m):  # in range, but the route ends before the recovery stretch
     _pe(m)["params"].update(conflict_s=48.0, route_length=68.0)
 
 
+def _truck_in_corridor(m):  # every field in range, but the widest truck in the narrowest
+    # parking lane beside the narrowest lane reaches within 1.0 m of the route (needs 1.56)
+    _pe(m)["params"].update(lane_width=3.0, parking_width=2.2, truck_width=2.6)
+
+
 P = ("pairs", 0, "params")
 SUITE_CASES = [
     # (id, mutation, recompute hashes?, expected message after "suite <file>: ")
     ("family-label", _set(("pairs", 1, "family"), "PE"), True,
-     r"pair vc_0001: family: label 'PE' disagrees with params.family 'VC'"),
+     r"pair lww_0001: family: label 'PE' disagrees with params.family 'LWW'"),
     ("weather-label", _set(("pairs", 0, "weather"), "dusk"), True,
      r"pair pe_0001: weather: label 'dusk' disagrees with params.weather 'clear_day'"),
     ("4e-7-change", _nudge, False, r"pair pe_0001: sha256: does not match its parameters"),
@@ -185,6 +192,21 @@ SUITE_CASES = [
     ("inf-param", _set((*P, "route_length"), math.inf), True,
      r"pair pe_0001: PE.route_length: inf outside \[68, 135\]"),
     ("infeasible", _infeasible, True, r"pair pe_0001: PE.route_length: 68.0 too short"),
+    ("occluder-in-corridor", _truck_in_corridor, True,
+     r"pair pe_0001: PE.truck_width: occluder truck overlaps the route corridor"),
+    ("occluder-missing", _del((*P, "truck_length")), True,
+     r"pair pe_0001: PE.truck_length: missing"),
+    ("occluder-nan", _set((*P, "truck_width"), math.nan), True,
+     r"pair pe_0001: PE.truck_width: nan outside \[2.2, 2.6\]"),
+    ("geometry-missing", _del((*P, "lane_width")), True, r"pair pe_0001: PE.lane_width: missing"),
+    ("geometry-inf", _set((*P, "curvature_1"), math.inf), True,
+     r"pair pe_0001: PE.curvature_1: inf outside"),
+    ("junction-nan", _set(("pairs", 1, "params", "kerb_radius"), math.nan), True,
+     r"pair lww_0001: LWW.kerb_radius: nan outside \[6.5, 8.5\]"),
+    ("route-nan", _set(("pairs", 0, "route_2m", 0), [math.nan, 0.0]), False,
+     r"pair pe_0001: route_2m: point 0: expected \[x, y\] with finite numbers"),
+    ("route-type", _set(("pairs", 0, "route_2m"), "none"), False,
+     r"pair pe_0001: route_2m: expected a JSON array of at least two"),
     ("param-seed-abc", _set((*P, "seed"), "abc"), True,
      r"pair pe_0001: PE.seed: expected an integer, got 'abc'"),
     ("seed-abc", _set(("seed",), "abc"), True,
@@ -248,18 +270,18 @@ def test_duplicate_json_key_and_broken_json(base_manifest, tmp_path, no_evaluati
 def test_every_error_is_collected(base_manifest, tmp_path):
     m = copy.deepcopy(base_manifest)
     m["pairs"][0]["params"]["v_ref"] = 99.0
-    m["pairs"][1]["params"]["cut_frac"] = "x"
+    m["pairs"][1]["params"]["actor_speed"] = "x"
     path = tmp_path / "two.json"
     path.write_text(json.dumps(rehash(m)))
     with pytest.raises(SuiteError) as e:
         load_suite(path)
-    assert [line.split(": ")[1] for line in e.value.errors] == ["pair pe_0001", "pair vc_0001"]
+    assert [line.split(": ")[1] for line in e.value.errors] == ["pair pe_0001", "pair lww_0001"]
 
 
 def test_hash_is_exact_and_shipped_hashes_unchanged():
     shipped = load_suite()
     assert shipped.suite_sha256 == (
-        "385403416b7f45b6d5c0d6211194d8af453b3b404ef3bc3b6a4bfed98f7a01b0"
+        "ecdd72c44d9cdf6ff1c66b5c40c005a5541c9649d8663017ea397ab24cc80d68"
     )
     p = dict(shipped.pairs[0].params)
     assert content_hash(p) == shipped.pairs[0].sha256
@@ -311,7 +333,7 @@ def synthetic_result(cus: float) -> ev.EvalResult:
         decomposition=decomposition_table(route).reset_index(),
         manifest=manifest,
         runs=[],
-        hidden_at_warning=pd.DataFrame(),
+        premise=pd.DataFrame(),
     )
 
 

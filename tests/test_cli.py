@@ -105,10 +105,20 @@ def test_manifest(evaluated, manifest_path):
         assert hashlib.sha256((evaluated.out_dir / name).read_bytes()).hexdigest() == digest
 
 
+def _shipped_text() -> str:
+    from lantern_jax.constants import SUITE_ID
+    from lantern_jax.scenarios.suite import _shipped_path
+
+    return _shipped_path(SUITE_ID).read_text()
+
+
 def test_printed_tables(evaluated):
     out = evaluated.out
     for word in ("Model (condition)", *FAMILIES, "Overall", *DECOMPOSITION_COLUMNS):
         assert word in out, word
+    for label in ("hidden at the warning point", "hidden for the whole approach",
+                  "Route A executions"):  # fmt: skip
+        assert label in out, label
     assert "coop (warning gain)" in out and "coop (no-warning)" in out
     for name in OUTPUT_FILES:
         assert name in out
@@ -201,8 +211,11 @@ def test_suite_regenerates(tmp_path, capsys):
     path = tmp_path / "fresh.json"
     assert cli.main(["suite", "--regenerate", str(path), "--verify", "--quiet"]) == 0
     out = capsys.readouterr().out
-    assert "OK: lantern-v1" in out
-    assert load_suite(path).suite_sha256 == load_suite().suite_sha256
+    assert "OK: lantern-v2" in out
+    fresh, shipped = load_suite(path), load_suite()
+    assert fresh.suite_sha256 == shipped.suite_sha256
+    assert [p.route_2m for p in fresh.pairs] == [p.route_2m for p in shipped.pairs]
+    assert path.read_text() == _shipped_text()  # the whole manifest, bit for bit
 
 
 def test_shipped_configs_parse_and_bad_configs_name_the_field(tmp_path):

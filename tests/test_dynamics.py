@@ -499,7 +499,7 @@ def make_scene(specs: list[dict], num_slots: int | None = None):
         for k in (
             "motion path path_s path_valid s_init v_pre v_post s_hold s_end trigger "
             "trigger_delay lat_shift lat_duration despawn_at_end light_index stop_s "
-            "xy yaw speed extent kind s"
+            "trigger_deadline handover_after xy yaw speed extent kind s"
         ).split()
     }
     for i in range(num):
@@ -508,7 +508,8 @@ def make_scene(specs: list[dict], num_slots: int | None = None):
                 motion=MOTION_SCRIPTED, y=0.0, s_init=0.0, v_pre=0.0, v_post=0.0, s_hold=BIG,
                 s_end=BIG, trigger=TRIGGER_NEVER, trigger_delay=0.0, lat_shift=0.0,
                 lat_duration=1.0, despawn_at_end=False, light_index=-1, stop_s=BIG, speed=None,
-                extent=(2.0, 0.9), kind=KIND_VEHICLE,
+                extent=(2.0, 0.9), kind=KIND_VEHICLE, trigger_deadline=INF_TIME,
+                handover_after=INF_TIME,
             )  # fmt: skip
             d.update(specs[i])
             pts, s, valid = _path_x(d["y"])
@@ -520,7 +521,7 @@ def make_scene(specs: list[dict], num_slots: int | None = None):
                 motion=int(rng.integers(0, 2)), s_init=np.nan, v_pre=3.0, v_post=np.nan,
                 s_hold=0.0, s_end=-5.0, trigger=TRIGGER_CLOCK, trigger_delay=0.0,
                 lat_shift=np.nan, lat_duration=0.0, despawn_at_end=True, light_index=0,
-                stop_s=1.0, kind=KIND_VEHICLE,
+                stop_s=1.0, kind=KIND_VEHICLE, trigger_deadline=0.0, handover_after=0.0,
             )  # fmt: skip
             pts = rng.normal(0, 30, (P, 2)).astype(np.float32)
             pts[2] = np.nan
@@ -532,7 +533,8 @@ def make_scene(specs: list[dict], num_slots: int | None = None):
         cols["path_s"].append(s)
         cols["path_valid"].append(valid)
         for k in ("s_init v_pre v_post s_hold s_end trigger trigger_delay lat_shift "
-                  "lat_duration despawn_at_end light_index stop_s kind").split():  # fmt: skip
+                  "lat_duration despawn_at_end light_index stop_s kind trigger_deadline "
+                  "handover_after").split():  # fmt: skip
             cols[k].append(d[k])
         cols["xy"].append(xy)
         cols["yaw"].append(yaw)
@@ -561,6 +563,8 @@ def make_scene(specs: list[dict], num_slots: int | None = None):
         despawn_at_end=jnp.asarray(cols["despawn_at_end"], bool),
         light_index=jnp.asarray(cols["light_index"], jnp.int32),
         stop_s=_f(cols["stop_s"]),
+        trigger_deadline=_f(cols["trigger_deadline"]),
+        handover_after=_f(cols["handover_after"]),
     )
     actors = ActorState(
         xy=_f(np.asarray(cols["xy"], np.float32)),
@@ -728,6 +732,41 @@ def test_trigger_time_sources():
     delay = _f([1.5, 0.5, 0.5, 0.0])
     np.testing.assert_allclose(trigger_time(trig, delay, _f(3.0)), [1.5, 3.5, 3.5, INF_TIME])
     assert float(trigger_time(trig, delay, _f(INF_TIME))[1]) >= INF_TIME / 2
+
+
+def test_trigger_deadline_fires_before_a_late_source():
+    # event source with a 4-s deadline: the event at 3 s triggers at 3 s, one at 6 s (or none)
+    # is overtaken by the deadline at 4 s
+    trig = jnp.array([TRIGGER_EVENT, TRIGGER_EVENT, TRIGGER_NEVER], jnp.int32)
+    delay, deadline = _f([0.0, 0.0, 0.0]), _f([4.0, 4.0, INF_TIME])
+    np.testing.assert_allclose(trigger_time(trig, delay, _f(3.0), deadline), [3.0, 3.0, INF_TIME])
+    np.testing.assert_allclose(trigger_time(trig, delay, _f(6.0), deadline), [4.0, 4.0, INF_TIME])
+    np.testing.assert_allclose(
+        trigger_time(trig, delay, _f(INF_TIME), deadline), [4.0, 4.0, INF_TIME]
+    )
+
+
+def test_handover_continues_as_idm_with_its_lateral_offset():
+    # A scripted car at 10 m/s changes lane (lat 3.5 m over 2 s) on a clock trigger at 1 s and
+    # is handed over 2 s after it, i.e. at t = 3 s with x = 30, lat = 3.5.  A static car stands
+    # in the new lane (y = 3.5) at x = 60: as IDM traffic the handed-over car brakes and stops
+    # behind it (gap -> s0 = 2 m, half lengths 2 + 2: x -> 54); a car without the hand-over
+    # (scripted, constant speed) drives through it.
+    lead = dict(y=3.5, s_init=60.0)
+    car = dict(v_pre=10.0, v_post=10.0, trigger=TRIGGER_CLOCK, trigger_delay=1.0,
+               lat_shift=3.5, lat_duration=2.0, handover_after=2.0)  # fmt: skip
+    actors, script = make_scene([car, lead], num_slots=3)
+    tr = _rollout_actors(actors, script, NO_LIGHTS)
+    k3 = int(round(3.0 / DT)) - 1  # state after the tick ending at t = 3 s
+    assert float(tr.s[k3, 0]) == pytest.approx(30.0, abs=0.6)
+    np.testing.assert_allclose(np.asarray(tr.lat[k3:, 0]), 3.5, atol=1e-4)  # offset kept
+    np.testing.assert_allclose(np.asarray(tr.xy[k3:, 0, 1]), 3.5, atol=1e-3)
+    assert float(tr.speed[-1, 0]) < 0.05 and float(tr.xy[-1, 0, 0]) == pytest.approx(54.0, abs=0.5)
+    assert np.all(np.asarray(tr.xy[:, 0, 0]) <= 56.0)  # never reaches the leader's box
+    scripted = dict(car, handover_after=INF_TIME)
+    actors, script = make_scene([scripted, lead], num_slots=3)
+    tr = _rollout_actors(actors, script, NO_LIGHTS)
+    assert float(tr.xy[-1, 0, 0]) > 200.0  # constant speed, no car following
 
 
 def test_lane_change_lateral_profile():

@@ -388,14 +388,26 @@ def test_wording_table_of_a_template_matcher(base, ablated, suite2):
             assert t.loc[label, "Paraphrase CUS"] == pytest.approx(none[members].mean())
 
 
-def test_hidden_at_warning_table(base):
-    """The premise table: the PE pedestrian is hidden behind its occluder at the warning point."""
-    t = base.hidden_at_warning.set_index("model")
-    assert list(t.index) == ["expert", "ego", "coop"]
+def test_premise_table(base):
+    """The premise, measured: the route table's 0/1 columns and the per-family shares."""
+    rt = base.route_table
+    for col in ("hazard_hidden_at_warning", "hazard_hidden_before_warning"):
+        assert set(rt[col]) <= {0, 1}
+    # hidden for the whole approach implies hidden at the warning point
+    assert (rt["hazard_hidden_before_warning"] <= rt["hazard_hidden_at_warning"]).all()
+    # the PE pedestrian is hidden behind its truck for every model and condition
+    assert (rt.loc[rt["family"] == "PE", "hazard_hidden_before_warning"] == 1).all()
+    # policies that ignore warnings approach identically with and without the warning
+    for model in ("expert", "ego"):
+        a = rows(rt, model, "warning")[["hazard_hidden_at_warning", "hazard_hidden_before_warning"]]
+        b = rows(rt, model, "no-warning")[list(a.columns)]
+        pd.testing.assert_frame_equal(a, b)
+    t = base.premise.set_index("measure")
     assert list(t.columns) == [*FAMILIES, "Overall"]
-    assert (t["PE"] == 100.0).all()
-    vals = t.to_numpy(dtype=float)
-    assert np.all((vals[np.isfinite(vals)] >= 0) & (vals[np.isfinite(vals)] <= 100))
+    assert t.loc["hidden at the warning point", "PE"] == 100.0
+    assert t.loc["Route A executions", "PE"] == 6 and t.loc["Route A executions", "Overall"] == 12
+    share = 100.0 * rt.loc[rt["family"] == "LWW", "hazard_hidden_at_warning"].mean()
+    assert t.loc["hidden at the warning point", "LWW"] == pytest.approx(share)
 
 
 def test_two_phase_evaluation_matches_one_phase(shipped, monkeypatch):

@@ -30,13 +30,7 @@ from lantern_jax.constants import (
     WEATHERS,
 )
 from lantern_jax.scenarios.families import build_pair, sample_params
-from lantern_jax.scenarios.families_straight import (
-    PED_CROSSING,
-    PED_EXTENT,
-    PED_SPEED,
-    TRUCK_EXTENT,
-    pe_geometry,
-)
+from lantern_jax.scenarios.families_straight import PED_CROSSING, PED_EXTENT, PED_SPEED
 from lantern_jax.scenarios.handmade import ActorSpec, no_lights, straight_scene
 from lantern_jax.sim.observe import observe
 from lantern_jax.sim.sense import locate_on_route, sense
@@ -44,6 +38,14 @@ from lantern_jax.sim.state import init_state
 from lantern_jax.world import ProtocolState, TrafficLights
 
 HAZARD = 0  # hazard slot of every scene here
+TRUCK_EXTENT = (4.0, 1.25)  # m, half extents of the parked truck of the PE-like scene
+
+
+def pe_geometry(conflict_s: float) -> dict:
+    """PE-like layout: the pedestrian 6.5 m right of the ego lane at the conflict arc, the truck
+    (8 m x 2.5 m) parked 4.75 m right of it with its front 0.3 m short of the pedestrian's box."""
+    truck_x = conflict_s - PED_EXTENT[0] - 0.3 - TRUCK_EXTENT[0]
+    return dict(ped=np.array([conflict_s, -6.5]), truck=np.array([truck_x, -4.75]))
 
 
 # ---------------------------------------------------------------------------------------------

@@ -1,4 +1,5 @@
-"""The frozen suite lantern-v1: composition, hashes, tamper detection, static validation."""
+"""The frozen suite lantern-v2: composition, hashes, tamper detection, static validation,
+geometric diversity (no near duplicates), the premise, recorded routes."""
 
 from __future__ import annotations
 
@@ -12,7 +13,9 @@ import numpy as np
 import pytest
 
 from lantern_jax.constants import FAMILIES, WEATHERS
+from lantern_jax.scenarios.duplicates import near_duplicates, route_samples
 from lantern_jax.scenarios.families import build_pair
+from lantern_jax.scenarios.premise import PREMISE_FAMILIES, hazard_visible_at_warning
 from lantern_jax.scenarios.spec import content_hash
 from lantern_jax.scenarios.suite import (
     SUITE_ID,
@@ -78,7 +81,7 @@ def test_manifest_structure_errors(raw, tmp_path):
     write_manifest(reordered, path)
     with pytest.raises(ValueError, match="suite hash mismatch"):
         load_suite(path)
-    with pytest.raises(FileNotFoundError, match="lantern-v1"):
+    with pytest.raises(FileNotFoundError, match="lantern-v2"):
         load_suite("lantern-v9")
 
 
@@ -98,6 +101,29 @@ def test_static_validation_rejects_a_short_recovery(suite):
     params["conflict_s"] = 48.0
     with pytest.raises(ValueError):
         static_check(params, set())
+
+
+def test_no_near_duplicates_within_a_family_from_the_file_alone(suite):
+    """The paper's rule (>= 70 % of 2-m samples within 3 m, both ways, start-pose frame) on the
+    routes the manifest records: no pair of routes of one family is a near duplicate."""
+    for fam in FAMILIES:
+        routes = [np.asarray(p.route_2m, np.float64) for p in suite.pairs if p.family == fam]
+        assert len(routes) == 20 and all(r.shape[1] == 2 and len(r) > 20 for r in routes)
+        assert near_duplicates(routes) == [], fam
+
+
+def test_recorded_routes_are_the_built_routes(suite):
+    for p in suite.pairs[::11]:
+        a, _, _ = build_pair(p.params)
+        np.testing.assert_allclose(route_samples(a), np.asarray(p.route_2m), atol=1.5e-3)
+
+
+def test_premise_holds_on_every_shipped_pair(suite):
+    """PE, OR, LWW and RWW: the hazard is hidden from the front camera at the warning point."""
+    for p in suite.pairs:
+        if p.family in PREMISE_FAMILIES:
+            a, _, meta = build_pair(p.params)
+            assert not hazard_visible_at_warning(a, meta).any(), p.pair_id
 
 
 def test_subset_and_select(suite):

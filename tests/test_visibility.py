@@ -13,8 +13,12 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from lantern_jax.constants import CAMERA_BACK_OFFSET, FRONT_CAMERA_FOV
+from lantern_jax.constants import CAMERA_BACK_OFFSET, FRONT_CAMERA_FOV, OCC_BUILDING, OCC_WALL
+from lantern_jax.scenarios.handmade import straight_scene
+from lantern_jax.scenarios.road import OccluderSpec
+from lantern_jax.scoring.measure import measure
 from lantern_jax.sensors import visibility as vis
+from lantern_jax.world import Occluders, ProtocolState
 
 try:  # tests/ as a rootdir-relative folder or as a package
     import reference_numpy_geometry as ref
@@ -262,3 +266,99 @@ def test_range_image_gradients_finite_with_padding():
     np.testing.assert_allclose(grads[0][0], [1.0, 0.0], atol=1e-5)
     np.testing.assert_allclose(grads[2][0], [-1.0, 0.0], atol=1e-5)
     np.testing.assert_allclose(grads[0][1:], 0.0)
+
+
+# ---------------------------------------------------------------------------------------------
+# static occluders (buildings, walls, parked vehicles)
+# ---------------------------------------------------------------------------------------------
+def occluders(*boxes, pad: int = 2) -> Occluders:
+    """Occluders given as (x, y, yaw, half_length, half_width); ``pad`` invalid slots."""
+    rows = [tuple(b) for b in boxes] + [(0.0, 0.0, 0.0, 0.0, 0.0)] * pad
+    arr = np.array(rows, np.float32).reshape(-1, 5)
+    n = arr.shape[0]
+    return Occluders(
+        center=jnp.asarray(arr[:, :2]), yaw=jnp.asarray(arr[:, 2]),
+        extent=jnp.asarray(arr[:, 3:5]), kind=jnp.full((n,), OCC_BUILDING, jnp.int32),
+        valid=jnp.asarray(np.arange(n) < len(boxes)),
+    )  # fmt: skip
+
+
+@functools.partial(jax.jit, static_argnames=("fov_deg",))
+def visible_occ(cam_xy, cam_yaw, centers, yaws, extents, present, fov_deg, max_range, occ):
+    return vis.visible_actors(
+        cam_xy, cam_yaw, centers, yaws, extents, present, fov_deg, max_range, occ
+    )
+
+
+def see_occ(actors, occ, fov=FRONT_CAMERA_FOV, cam=CAM, cam_yaw=CAM_YAW):
+    c, y, e, p = actors
+    return np.asarray(visible_occ(cam, cam_yaw, c, y, e, p, fov, RANGE, occ))
+
+
+def test_building_blocks_every_ray_to_an_actor():
+    # A car behind a corner building, seen from the camera at the origin looking east.
+    # car: x in [27.6, 32.4], y in [13, 15] (centre (30, 14)); building x in [10, 20],
+    # y in [2, 12] (centre (15, 7), half extents (5, 5)).  The sight line to a car point
+    # (xp, yp) has slope yp / xp in [13 / 32.4, 15 / 27.6] = [0.401, 0.543]: at the building's
+    # near face x = 10 it is at y = 10 yp / xp in [4.0, 5.4] inside [2, 12] -> blocked, for
+    # all 9 sample points.  Bearing of the centre = atan(14/30) = 25 deg, inside the field.
+    car = scene((30, 14, 0, *CAR))
+    assert see(car).tolist() == [True]  # without the building: in plain view
+    assert see_occ(car, occluders((15, 7, 0, 5, 5))).tolist() == [False]
+    # the 360-degree rig is blocked the same way
+    assert see_occ(car, occluders((15, 7, 0, 5, 5)), fov=vis.SIX_CAMERA_FOV).tolist() == [False]
+    # an invalid (padding) occluder at the same place blocks nothing
+    padded = occluders((15, 7, 0, 5, 5))
+    padded = padded.replace(valid=jnp.zeros_like(padded.valid))
+    assert see_occ(car, padded).tolist() == [True]
+
+
+def test_gap_between_buildings_lets_one_ray_through():
+    # Two buildings leave a gap between y = 4.6 and y = 5.4 at x in [10, 20]:
+    # lower x in [10, 20], y in [0, 4.6] (centre (15, 2.3), half (5, 2.3));
+    # upper x in [10, 20], y in [5.4, 12] (centre (15, 8.7), half (5, 3.3)).
+    # A sight line to (xp, yp) passes the gap only if it stays in [4.6, 5.4] over x in [10, 20]:
+    # y(10) = 10 k >= 4.6 and y(20) = 20 k <= 5.4 with k = yp / xp, i.e. k in [0.46, 0.27] -
+    # empty.  So make the buildings thin (x in [14.5, 15.5]): k in [4.6 / 14.5, 5.4 / 15.5]
+    # = [0.317, 0.348].  The car centre (40, 13.2) has k = 0.330 -> passes, and so do the
+    # corners (37.6, 12.2) k = 0.325 and (42.4, 14.2) k = 0.335; the other six points
+    # (k = 0.288, 0.305, 0.311, 0.351, 0.355, 0.378) are blocked.
+    car = scene((40, 13.2, 0, *CAR))
+    gap = occluders((15, 2.3, 0, 0.5, 2.3), (15, 8.7, 0, 0.5, 3.3))
+    assert see_occ(car, gap).tolist() == [True]
+    # closing the gap (one wall from y = 0 to 12) hides the car
+    assert see_occ(car, occluders((15, 6.0, 0, 0.5, 6.0))).tolist() == [False]
+
+
+def test_occluders_are_never_targets_and_shape_the_range_image():
+    # one actor box ahead at x in [29, 31]; a wall at x in [9, 11] blocks the central ray first
+    c, y, e, p = scene((30, 0, 0, 1, 1), pad=1)
+    occ = occluders((10, 0, 0, 1, 1))
+    vis_mask = see_occ((c, y, e, p), occ)
+    assert vis_mask.shape == (2,) and vis_mask.tolist() == [False, False]
+    r, idx = jax.jit(
+        functools.partial(vis.range_image, fov_deg=FRONT_CAMERA_FOV, num_rays=11),
+    )(CAM, CAM_YAW, c, y, e, p, max_range=RANGE, occluders=occ)
+    # central ray hits the occluder face x = 9; its index is A + k = 2 + 0
+    assert float(r[5]) == pytest.approx(9.0, abs=1e-5) and int(idx[5]) == 2
+
+
+def test_ego_collides_with_an_occluder():
+    # the ego drives straight into a wall across its lane: the collision gate fails
+    wall = OccluderSpec(np.array([20.0, 0.0]), 0.0, (0.5, 3.0), OCC_WALL, "wall")
+    world = straight_scene([], length=60.0, occluders=[wall])
+    sample = measure(
+        world, world.ego0.replace(xy=jnp.asarray([18.0, 0.0], jnp.float32)), world.actors0,
+        jnp.zeros(world.actors.num, bool), ProtocolState.initial(), jnp.float32(1.0),
+        jnp.float32(18.0), jnp.float32(0.0), jnp.float32(17.9), jnp.float32(18.0),
+        jnp.int32(0), jnp.asarray(False), jnp.asarray(False),
+    )  # fmt: skip
+    # ego front at 18 + 2.45 = 20.45 > wall face 19.5, moving at 8 m/s -> collision
+    assert bool(sample.collision)
+    at_rest = measure(
+        world, world.ego0.replace(xy=jnp.asarray([18.0, 0.0], jnp.float32), speed=0.0),
+        world.actors0, jnp.zeros(world.actors.num, bool), ProtocolState.initial(),
+        jnp.float32(1.0), jnp.float32(18.0), jnp.float32(0.0), jnp.float32(17.9),
+        jnp.float32(18.0), jnp.int32(0), jnp.asarray(False), jnp.asarray(False),
+    )  # fmt: skip
+    assert not bool(at_rest.collision)  # contacts at standstill are ignored (leaderboard)

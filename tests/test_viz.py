@@ -62,7 +62,15 @@ def _assert_png(path, min_bytes=10_000):
 
 
 def _actor_patches(ax):
-    return [p for p in ax.patches if isinstance(p, (Rectangle, Polygon))]
+    """Actor and ego patches (occluders of the map are drawn as patches too, gid occluder:k)."""
+    return [
+        p for p in ax.patches
+        if isinstance(p, (Rectangle, Polygon)) and not str(p.get_gid()).startswith("occluder:")
+    ]  # fmt: skip
+
+
+def _occluder_patches(ax):
+    return [p for p in ax.patches if str(p.get_gid()).startswith("occluder:")]
 
 
 def _norm(s: str) -> str:
@@ -86,6 +94,12 @@ def test_bev_with_active_warning(pe_runs, tmp_path):
     assert len(patches) == int(present.sum()) + 1
     gids = sorted(p.get_gid() for p in patches)
     assert gids == sorted(["ego"] + [f"actor:{a}" for a in np.nonzero(present)[0]])
+    # the map's occluders (the parked truck hiding the pedestrian, ...) are drawn, one each
+    occ = np.nonzero(np.asarray(world.occluders.valid))[0]
+    assert len(occ) >= 1
+    assert sorted(p.get_gid() for p in _occluder_patches(ax)) == sorted(
+        f"occluder:{k}" for k in occ
+    )
 
     # equal aspect, ego-centred window, time and speed in the title
     x0, x1 = ax.get_xlim()

@@ -8,9 +8,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from lantern_jax.constants import KIND_PEDESTRIAN, ROLE_HAZARD, TRIGGER_EVENT
+from lantern_jax.constants import KIND_PEDESTRIAN, OCC_WALL, ROLE_HAZARD, TRIGGER_EVENT
 from lantern_jax.scenarios.assemble import execution_config
 from lantern_jax.scenarios.handmade import ActorSpec, config_fields, pack_route, straight_scene
+from lantern_jax.scenarios.road import OccluderSpec
 
 
 def scenario_config(**overrides):
@@ -149,3 +150,23 @@ def test_ego_light_must_be_a_valid_slot():
     bad = sc.replace(lights=lights, config=sc.config.replace(ego_light=jnp.int32(0)))
     with pytest.raises(ValueError, match=r"ExecutionConfig.ego_light: light slot 0 is not valid"):
         bad.validate()
+
+
+@pytest.mark.parametrize(
+    "mutate, field",
+    [
+        (lambda o: o.replace(extent=o.extent.at[0, 0].set(0.0)), "Occluders.extent"),
+        (lambda o: o.replace(center=o.center.at[0, 1].set(jnp.nan)), "Occluders.center"),
+        (lambda o: o.replace(kind=o.kind.at[0].set(7)), "Occluders.kind"),
+        (lambda o: o.replace(yaw=o.yaw[:3]), "Occluders.yaw"),
+    ],
+)
+def test_bad_occluders_name_the_field(mutate, field):
+    wall = OccluderSpec(np.array([20.0, 8.0]), 0.0, (4.0, 0.3), OCC_WALL, "wall")
+    sc = straight_scene([], occluders=[wall])
+    assert bool(sc.occluders.valid[0]) and not bool(sc.occluders.valid[1])
+    with pytest.raises(ValueError, match=field):
+        sc.replace(occluders=mutate(sc.occluders)).validate()
+    # NaN in a padding slot is allowed (only valid slots must be finite)
+    pad_nan = sc.occluders.replace(center=sc.occluders.center.at[1, 0].set(jnp.nan))
+    sc.replace(occluders=pad_nan).validate()

@@ -3,9 +3,17 @@
 * **Scripted actors** (``MOTION_SCRIPTED``) take their closed-form pose at ``t_next``
   (:mod:`lantern_jax.dynamics.scripted`) with trigger time ``trigger_delay`` (clock),
   ``t_event + trigger_delay`` (event; not triggered while ``t_event`` is pending) or never.
+  A deadline (``trigger_deadline``) triggers a scripted actor even if its source has not
+  fired yet (the Obstacle Reveal van's own guard).
 * **IDM actors** (``MOTION_IDM``) integrate arc ``s`` and speed along their path with the IDM
-  (:mod:`lantern_jax.dynamics.idm`), desired speed ``v_pre``, ``lat = 0``.  The acceleration is
-  the minimum of the IDM accelerations toward every constraint ahead:
+  (:mod:`lantern_jax.dynamics.idm`), desired speed ``v_pre``, ``lat = 0``.
+* **Hand-over**: a scripted actor becomes an IDM actor ``handover_after`` seconds after its
+  trigger (data, not code: every slot has the field, ``NEVER`` = never).  It continues from its
+  scripted arc and speed, with desired speed ``v_post``; its lateral offset keeps following the
+  script in time (constant ``lat_shift`` once the manoeuvre is over), so the Vehicle Cut-In car
+  continues as ordinary traffic in its new lane after its merge.
+
+  The IDM acceleration is the minimum of the IDM accelerations toward every constraint ahead:
 
   - every other present actor and the ego whose box centre lies ahead of this actor, within
     ``LEADER_LATERAL`` (1.6 m) of its heading line (a local-frame search, exact on straight
@@ -40,6 +48,7 @@ from lantern_jax.constants import (
     LIGHT_RED,
     LIGHT_YELLOW,
     MOTION_IDM,
+    MOTION_SCRIPTED,
 )
 from lantern_jax.dynamics.bicycle import longitudinal_step
 from lantern_jax.dynamics.idm import (
@@ -50,8 +59,8 @@ from lantern_jax.dynamics.idm import (
     interaction_term,
 )
 from lantern_jax.dynamics.scripted import scripted_pose, trigger_time
-from lantern_jax.polyline import interpolate
-from lantern_jax.times import NEVER
+from lantern_jax.polyline import interpolate, left_normal
+from lantern_jax.times import NEVER, happened
 from lantern_jax.world import ActorScript, ActorState, present
 
 Array = jax.Array
@@ -189,7 +198,7 @@ def scripted_states(
         s (A,) m, lat (A,) m, speed (A,) m/s, xy (A, 2) m, yaw (A,) rad, active (A,) bool — see
         :func:`lantern_jax.dynamics.scripted.scripted_pose`.
     """
-    tau = trigger_time(script.trigger, script.trigger_delay, t_event)
+    tau = trigger_time(script.trigger, script.trigger_delay, t_event, script.trigger_deadline)
     pose = jax.vmap(scripted_pose, in_axes=(0,) * 11 + (None, 0))
     return pose(
         script.path,
@@ -280,15 +289,27 @@ def step_actors(
 
     sc_s, sc_lat, sc_speed, sc_xy, sc_yaw, sc_active = scripted_states(script, t_next, t_event)
 
-    # IDM: integrate along the path
-    id_s, id_speed, id_active = _idm_update(
-        clean, script, is_present, light_state, ego_xy, ego_yaw, ego_speed, dt, idm_params
+    # Hand-over: scripted actors whose manoeuvre is over continue as IDM traffic.
+    tau = trigger_time(script.trigger, script.trigger_delay, t_event, script.trigger_deadline)
+    handed = (
+        (script.motion == MOTION_SCRIPTED)
+        & happened(tau)
+        & (t_next >= jnp.where(happened(tau), tau, 0.0) + script.handover_after)
     )
-    id_xy, id_yaw = jax.vmap(interpolate)(script.path, script.path_s, script.path_valid, id_s)
+    is_idm = (script.motion == MOTION_IDM) | handed
+    idm_script = script.replace(v_pre=jnp.where(handed, script.v_post, script.v_pre))
 
-    is_idm = script.motion == MOTION_IDM
+    # IDM: integrate along the path (a handed-over actor's lateral offset keeps following its
+    # script in time, i.e. stays at lat_shift once its manoeuvre is over)
+    id_s, id_speed, id_active = _idm_update(
+        clean, idm_script, is_present, light_state, ego_xy, ego_yaw, ego_speed, dt, idm_params
+    )
+    id_pt, id_yaw = jax.vmap(interpolate)(script.path, script.path_s, script.path_valid, id_s)
+    id_lat = jnp.where(handed, sc_lat, 0.0)
+    id_xy = id_pt + left_normal(id_yaw) * id_lat[:, None]
+
     s = jnp.where(is_idm, id_s, sc_s)
-    lat = jnp.where(is_idm, 0.0, sc_lat)
+    lat = jnp.where(is_idm, id_lat, sc_lat)
     speed = jnp.where(is_idm, id_speed, sc_speed)
     xy = jnp.where(is_idm[:, None], id_xy, sc_xy)
     yaw = jnp.where(is_idm, id_yaw, sc_yaw)

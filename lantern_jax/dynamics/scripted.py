@@ -29,17 +29,21 @@ from lantern_jax.times import NEVER, happened
 
 Array = jax.Array
 
-def trigger_time(trigger: Array, trigger_delay: Array, t_event: Array) -> Array:
+def trigger_time(
+    trigger: Array, trigger_delay: Array, t_event: Array, deadline: Array | None = None
+) -> Array:
     """Trigger time of a scripted actor.
 
     Args:
         trigger: (...) int32, TRIGGER_* source.
         trigger_delay: (...) float32, s, delay after the source.
         t_event: () or (...) float32, s, physical event onset (``times.NEVER`` until it happens).
+        deadline: (...) float32, s, latest trigger time (``times.NEVER`` = none); None = none.
 
     Returns:
         (...) float32, s: ``trigger_delay`` (clock), ``t_event + trigger_delay`` (event; stays
-        ``NEVER`` while the event is pending), ``NEVER`` (never).
+        ``NEVER`` while the event is pending), ``NEVER`` (never) — or the deadline when it comes
+        first.
     """
     event_pending = ~happened(t_event)
     t_ev = jnp.where(event_pending, 0.0, t_event)
@@ -49,6 +53,8 @@ def trigger_time(trigger: Array, trigger_delay: Array, t_event: Array) -> Array:
         trigger_delay,
         jnp.where(trigger == TRIGGER_EVENT, tau_event, NEVER),
     )
+    if deadline is not None:
+        tau = jnp.minimum(tau, deadline)
     return tau.astype(jnp.float32)
 
 

@@ -17,7 +17,14 @@ from dataclasses import dataclass
 import jax.numpy as jnp
 import numpy as np
 
-from lantern_jax.constants import BIG, MOTION_IDM, MOTION_SCRIPTED, TRIGGER_CLOCK, TRIGGER_NEVER
+from lantern_jax.constants import (
+    BIG,
+    INF_TIME,
+    MOTION_IDM,
+    MOTION_SCRIPTED,
+    TRIGGER_CLOCK,
+    TRIGGER_NEVER,
+)
 from lantern_jax.scenarios import road
 from lantern_jax.world import (
     NO_OVERRIDE,
@@ -26,6 +33,7 @@ from lantern_jax.world import (
     EgoState,
     ExecutionConfig,
     Lanes,
+    Occluders,
     Route,
     Scenario,
     TrafficLights,
@@ -53,12 +61,15 @@ class ActorSpec:
     despawn_at_end: bool = False
     light_index: int = -1
     stop_s: float = BIG
+    trigger_deadline: float = INF_TIME  # s, latest trigger time (INF_TIME = none)
+    handover_after: float = INF_TIME  # s after the trigger: continue as IDM (INF_TIME = never)
 
     def initial_state(self) -> tuple[float, float]:
         """``(s, speed)`` at ``t = 0`` from the scripted closed form (IDM: s_init, v_pre)."""
         if self.motion == MOTION_IDM:
             return self.s_init, self.v_pre
-        if self.trigger == TRIGGER_CLOCK and self.trigger_delay <= 0.0:
+        started = self.trigger == TRIGGER_CLOCK and self.trigger_delay <= 0.0
+        if started or self.trigger_deadline <= 0.0:
             return self.s_init, self.v_post
         if self.s_init >= self.s_hold:
             return self.s_hold, 0.0
@@ -73,7 +84,8 @@ def initial_pose(spec: ActorSpec) -> tuple[np.ndarray, float, float, float]:
 
 _SCRIPT_FIELDS = (
     "motion", "s_init", "v_pre", "v_post", "s_hold", "trigger", "trigger_delay", "lat_shift",
-    "lat_duration", "despawn_at_end", "light_index", "stop_s",
+    "lat_duration", "despawn_at_end", "light_index", "stop_s", "trigger_deadline",
+    "handover_after",
 )  # fmt: skip
 
 
@@ -97,6 +109,8 @@ def pack_actors(slots: list[ActorSpec | None], rot: np.ndarray) -> tuple[ActorSc
         lat_shift=f32(a_n), lat_duration=np.ones(a_n, np.float32),
         despawn_at_end=np.zeros(a_n, bool), light_index=np.full(a_n, -1, np.int32),
         stop_s=np.full(a_n, BIG, np.float32),
+        trigger_deadline=np.full(a_n, INF_TIME, np.float32),
+        handover_after=np.full(a_n, INF_TIME, np.float32),
     )  # fmt: skip
     scr["path_valid"][:, 0] = True  # padded slots: a single point (validate() needs one)
     for i, sp in enumerate(slots):
@@ -196,6 +210,7 @@ def assemble_scenario(
     )
     return Scenario(
         lanes=Lanes(**_jnp_tree(road.pack_lanes(road_map, rot))),
+        occluders=Occluders(**_jnp_tree(road.pack_occluders(road_map.occluders, rot))),
         route=Route(**_jnp_tree(route)),
         lights=TrafficLights(**_jnp_tree(road.pack_lights(road_map.lights, rot))),
         actors=script,

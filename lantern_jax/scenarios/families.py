@@ -241,11 +241,13 @@ def validate_params(params: dict, feasibility: bool = True) -> dict:
     return params
 
 
-def build_pair(params: dict) -> tuple[Scenario, Scenario, dict]:
+def build_pair(params: dict, validate: bool = True) -> tuple[Scenario, Scenario, dict]:
     """Build the Route A and Route B scenarios of one pair.
 
     Args:
-        params: a parameter dict (as from :func:`sample_params`); validated first.
+        params: a parameter dict (as from :func:`sample_params`).
+        validate: check it first (:func:`validate_params`); False only for a dict just
+            validated by the caller.
 
     Returns:
         ``(scenario_a, scenario_b, meta)``: two :class:`~lantern_jax.world.Scenario` pytrees with
@@ -257,7 +259,8 @@ def build_pair(params: dict) -> tuple[Scenario, Scenario, dict]:
     Raises:
         ValueError: naming the offending field for invalid or infeasible parameters.
     """
-    validate_params(params)
+    if validate:
+        validate_params(params)
     scene = {k: v for k, v in params.items() if k != KNOBS_FIELD}
     a, b, meta = family(params["family"]).build(scene)
     if KNOBS_FIELD in params:

@@ -9,10 +9,15 @@ Actor slot layout (identical for every family, so Route A/B and all scenarios li
 
 * slot 0 (``HAZARD_SLOT``): the controlled hazard on Route A; its Route B stand-in (role
   context) or an invalid slot on Route B;
-* slot 1 (``SCENE_SLOT``): the family's scene actor kept on both routes (PE parked truck, OR
-  lead van), otherwise invalid;
+* slot 1 (``SCENE_SLOT``): the family's scene actor kept on both routes (the OR lead van),
+  otherwise invalid;
 * slots 2-6: background traffic (0-5 IDM vehicles), identical on both routes;
+* slots 7-9 (``FLOW_SLOTS``): the Right-Turn Yield flow behind its first (evaluated) vehicle;
 * the rest: padding.
+
+Static scenery — parked trucks and vans, corner buildings, walls — is not an actor: it is part
+of the map (:class:`~lantern_jax.scenarios.road.OccluderSpec`, packed into
+:class:`~lantern_jax.world.Occluders`), identical on Route A and Route B.
 """
 
 from __future__ import annotations
@@ -40,6 +45,15 @@ HAZARD_SLOT = 0
 SCENE_SLOT = 1
 BACKGROUND_SLOTS = range(2, 7)
 MAX_BACKGROUND = len(BACKGROUND_SLOTS)
+FLOW_SLOTS = range(7, 10)
+
+#: The parameter that places each occluder (by name prefix), for error messages.
+OCCLUDER_FIELDS = (
+    ("truck_W", "truck_length"),  # LWW: the truck waiting on the W arm
+    ("truck", "truck_width"),  # PE: the parked truck hiding the pedestrian
+    ("parked_", "parked_count"),
+    ("corner_", "corner_setback"),
+)
 
 CAR_EXTENT = (2.3, 1.0)  # m, half length / half width of an ordinary car
 BG_SPEED = (7.0, 11.0)  # m/s, desired speed range of background vehicles
@@ -276,14 +290,34 @@ def draw(
     key: str,
     at_least: float | None = None,
     at_most: float | None = None,
+    nd: int = 3,
 ) -> float:
     """Sample field ``key`` of a family uniformly within its documented range
     (:data:`~lantern_jax.scenarios.spec.PARAM_RANGES`), optionally narrowed to
-    ``[at_least, at_most]`` by the family's cross-field rules; rounded to 1e-3."""
+    ``[at_least, at_most]`` by the family's cross-field rules; rounded to ``nd`` decimals."""
     rng_def = PARAM_RANGES[family][key]
     lo = rng_def.lo if at_least is None else max(rng_def.lo, at_least)
     hi = rng_def.hi if at_most is None else min(rng_def.hi, at_most)
-    return uniform(rng, lo, hi)
+    return uniform(rng, lo, hi, nd)
+
+
+def check_occluders(family: str, p: dict, scene: tuple) -> None:
+    """Refuse occluders that intrude on the route corridor or a driving lane.
+
+    Args:
+        family: family code (for the message).
+        p: the parameter dict.
+        scene: ``(road_map, route, ...)`` as built from ``p``.
+
+    Raises:
+        ValueError: naming the parameter that places the first intruding occluder, e.g.
+            ``"PE.truck_width: occluder truck overlaps the route corridor (...)"``.
+    """
+    road_map, route = scene[0], scene[1]
+    for msg in road.occluder_intrusions(road_map, route.xy):
+        name = msg.split()[1]
+        field = next((f for prefix, f in OCCLUDER_FIELDS if name.startswith(prefix)), "occluders")
+        raise ValueError(f"{family}.{field}: {msg}")
 
 
 def choose(rng: np.random.Generator, family: str, key: str, options: tuple | None = None):

@@ -125,6 +125,7 @@ def straight_scene(
     length: float = 120.0,
     speed: float = 8.0,
     lights: TrafficLights | None = None,
+    occluders: list[road.OccluderSpec] | None = None,
     **config_overrides,
 ) -> Scenario:
     """A straight road along +x: ego lane y = 0 (eastbound), a second eastbound lane at
@@ -135,6 +136,7 @@ def straight_scene(
         length: route length, m.
         speed: initial ego speed and default reference speed, m/s.
         lights: optional traffic lights.
+        occluders: optional static scenery boxes (world frame, at most ``road.MAX_OCCLUDERS``).
         **config_overrides: :class:`~lantern_jax.world.ExecutionConfig` fields to override.
     """
     lanes = make_road_map(
@@ -145,6 +147,7 @@ def straight_scene(
         ],
         [3.5, 3.5, 3.5],
     )
+    lanes.occluders = list(occluders or [])
     scenario = assemble.assemble_scenario(
         lanes,
         route_points(np.array([[0.0, 0.0], [length, 0.0]])),

@@ -2,10 +2,12 @@
 
 A knob is a continuous quantity a user may sweep or differentiate — the hazard's speed, its
 trigger delay, where it starts along its path, the size of its lateral manoeuvre, the scene
-actor's speed, the warning and event leads.  Each knob reads and writes leaves of the
-:class:`~lantern_jax.world.Scenario` pytree itself (its actor scripts and execution config), so
-there is one source for every value, no parallel copy to keep in sync, and a gradient with
-respect to a knob is an ordinary JAX gradient::
+actor's speed and reveal deadline, the warning and event leads.  Scene geometry (road
+curvature, junction shape, occluder set-back and size) is not a knob: it is built in NumPy
+before the rollout and does not map onto a single leaf of the scenario.  Each knob reads and
+writes leaves of the :class:`~lantern_jax.world.Scenario` pytree itself (its actor scripts and
+execution config), so there is one source for every value, no parallel copy to keep in sync,
+and a gradient with respect to a knob is an ordinary JAX gradient::
 
     def objective(speed):
         sc = set_knobs(scenario, hazard_speed=speed)
@@ -119,6 +121,10 @@ KNOBS: dict[str, Knob] = {
                      "duration of the hazard's lateral manoeuvre (the cut-in lane change)"),
         _speed_knob("scene_speed", "speed of the family's scene actor (the OR lead van)",
                     SCENE_SLOT),
+        _script_knob("scene_deadline", "trigger_deadline", "s",
+                     "latest trigger time of the scene actor: the OR van's own guard, the time "
+                     "at which it starts its lane change even if the event has not happened",
+                     SCENE_SLOT),
         _lead_knob("warn_lead", "s_warn", "warning point distance before the conflict point"),
         _lead_knob("event_lead", "s_event", "event point distance before the conflict point"),
     )  # fmt: skip

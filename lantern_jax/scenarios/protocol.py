@@ -212,7 +212,8 @@ def record_onset(
     shown: Array,
 ) -> ProtocolState:
     """Warning bookkeeping of a tick: onset time, whether the hazard was camera-visible at the
-    warning point, and how many ticks the policy has been shown the warning.
+    warning point, whether the camera saw it at any tick of the approach up to it, and how many
+    ticks the policy has been shown the warning.
 
     Args:
         proto: protocol state after this tick's transitions.
@@ -223,10 +224,12 @@ def record_onset(
         shown: () bool, the policy's observation of this tick carried an active warning.
     """
     first = happened(proto.t_warn_point) & ~happened(before.t_warn_point)
+    approaching = ~happened(before.t_warn_point)  # this tick ends at or before the warning point
     return proto.replace(
         t_warn_on=warning_onset(proto, config),
         hazard_visible_at_warn=jnp.where(first, hazard_visible, proto.hazard_visible_at_warn),
         warning_ticks=proto.warning_ticks + shown.astype(jnp.int32),
+        hazard_seen_before_warn=proto.hazard_seen_before_warn | (approaching & hazard_visible),
     )
 
 

@@ -9,7 +9,10 @@ feasibility rules).
 
 Ranges follow the paper's "Detailed Scenario Specifications" table; route lengths are the
 closed-loop ranges of its data-collection appendix as rounded in DESIGN.md section 5 (PE 68-135 m,
-VC 58-164, OR 66-133, LWW 56-80, RWW 52-87, RTY 50-75).
+VC 58-164, OR 66-133, LWW 56-80, RWW 52-87, RTY 50-75).  Every pair also samples its own
+geometry within documented ranges (lane count and width, road curvature, junction size through
+the kerb radius, skewed arms, occluder type, size and set-back, hazard offsets), so that no two
+routes of a family are near duplicates (:mod:`lantern_jax.scenarios.duplicates`).
 """
 
 from __future__ import annotations
@@ -33,18 +36,19 @@ class WeatherProfile:
     """What a weather profile changes in this simulator.
 
     ``carla`` records the paper's CARLA settings (cloudiness, precipitation, wetness, fog, sun
-    altitude in degrees; the first four on CARLA's 0-100 scale).  The paper gives only those
-    settings; ``friction`` (tyre-road coefficient scaling the braking limit) and
-    ``sensing_range`` (camera range, m) are this package's mapping of them:
+    altitude in degrees; the first four on CARLA's 0-100 scale).  CARLA weather changes neither
+    tyre friction nor geometry, so every profile keeps ``friction = 1.0``; what it changes here is
+    the camera's ``sensing_range`` (m), this package's stand-in for visual degradation (rain,
+    fog, low sun):
 
     ============  ========  =======  =============================================
     profile       friction  range m  reasoning
     ============  ========  =======  =============================================
-    clear_day     1.00      120      dry road, full visibility
-    cloudy_day    1.00      100      dry road, flat light
-    wet_day       0.75       90      wet asphalt (wetness 70), light fog
-    light_rain    0.70       70      rain on a wet road, spray and fog
-    dusk          0.95       60      low sun (8 deg), slightly damp
+    clear_day     1.0       120      full visibility
+    cloudy_day    1.0       100      flat light
+    wet_day       1.0        90      light fog (fog 5), spray
+    light_rain    1.0        70      rain, spray and fog
+    dusk          1.0        60      low sun (8 deg)
     ============  ========  =======  =============================================
     """
 
@@ -57,9 +61,9 @@ class WeatherProfile:
 WEATHER_PROFILES: dict[str, WeatherProfile] = {
     "clear_day": WeatherProfile("clear_day", 1.0, 120.0, (5, 0, 0, 2, 45)),
     "cloudy_day": WeatherProfile("cloudy_day", 1.0, 100.0, (75, 0, 0, 3, 55)),
-    "wet_day": WeatherProfile("wet_day", 0.75, 90.0, (65, 0, 70, 5, 35)),
-    "light_rain": WeatherProfile("light_rain", 0.7, 70.0, (85, 25, 80, 4, 40)),
-    "dusk": WeatherProfile("dusk", 0.95, 60.0, (40, 0, 10, 2, 8)),
+    "wet_day": WeatherProfile("wet_day", 1.0, 90.0, (65, 0, 70, 5, 35)),
+    "light_rain": WeatherProfile("light_rain", 1.0, 70.0, (85, 25, 80, 4, 40)),
+    "dusk": WeatherProfile("dusk", 1.0, 60.0, (40, 0, 10, 2, 8)),
 }
 assert tuple(WEATHER_PROFILES) == WEATHERS
 
@@ -131,6 +135,8 @@ class Flag:
 
 SEED_MAX = 2**31 - 1
 MIN_RECOVERY_M = 29.0  # m of route after the conflict point, every family (paper appendix A)
+MAX_CURVATURE = 1.0 / 70.0  # 1/m, gentle: < 1.5 m/s^2 lateral acceleration at 10 m/s
+MAX_BEND = 1.0 / 30.0  # 1/m, junction arms (v_ref <= 8 m/s: < 2.2 m/s^2)
 
 _COMMON = {
     "seed": IntRange(0, SEED_MAX),  # pair seed: position-noise seed of the ablation
@@ -139,47 +145,89 @@ _COMMON = {
     "rotation_deg": FloatRange(0.0, 360.0),  # rigid rotation of the whole scene
 }
 
+#: Road geometry of the straight-road families (scenarios.road_straight).
+_STRAIGHT = {
+    "lane_width": FloatRange(3.0, 3.75),  # m
+    "lanes_back": Choice((1, 2)),  # opposing lanes
+    "curvature_1": FloatRange(-MAX_CURVATURE, MAX_CURVATURE),  # 1/m before curve_split, + left
+    "curvature_2": FloatRange(-MAX_CURVATURE, MAX_CURVATURE),  # 1/m from curve_split on
+    "curve_split": FloatRange(20.0, 80.0),  # m, route arc where the curvature changes
+}
+
+#: Junction geometry and occluders of the junction families (scenarios.road_junction).
 _JUNCTION = {
     "num_arms": Choice((3, 4)),
     "missing_arm": Choice(("none", "E", "N", "W")),
     "signalized": Flag(),
     "red_s": FloatRange(2.0, 8.0),  # s, initial red of the ego light (unused if unsignalized)
     "approach": FloatRange(12.0, 50.0),  # m, route start to the junction-box edge
+    "lanes_per_direction": Choice((1, 2)),
+    "lane_width": FloatRange(3.0, 3.75),  # m
+    "kerb_radius": FloatRange(6.5, 10.0),  # m, corner fillet radius (sets the junction size)
+    "skew_E": FloatRange(-20.0, 20.0),  # deg, counter-clockwise rotation of the E arm
+    "skew_N": FloatRange(-20.0, 20.0),  # deg, of the N arm
+    "skew_W": FloatRange(-20.0, 20.0),  # deg, of the W arm
+    "bend_approach": FloatRange(-MAX_BEND, MAX_BEND),  # 1/m, the ego's approach arm
+    "bend_exit": FloatRange(-MAX_BEND, MAX_BEND),  # 1/m, the ego's exit arm
+    "corner_kind": Choice(("building", "wall")),  # occluder at every rounded corner
+    "corner_setback": FloatRange(1.0, 4.0),  # m, occluder's distance inside the kerb arc
+    "corner_size": FloatRange(10.0, 20.0),  # m, building side / wall length
 }
 
-#: Parameter ranges per family (paper: "Detailed Scenario Specifications").
+#: Parameter ranges per family (paper: "Detailed Scenario Specifications"; geometry ranges are
+#: this package's, documented in the family builders).
 PARAM_RANGES: dict[str, dict[str, Any]] = {
     "PE": {
         **_COMMON,
+        **_STRAIGHT,
         "v_ref": FloatRange(8.0, 10.0),
         "route_length": FloatRange(68.0, 135.0),
         "conflict_s": FloatRange(33.0, 48.0),  # m, route arc of the pedestrian crossing line
+        "lanes_fwd": Choice((1, 2)),  # the ego drives the rightmost one, beside the parking lane
+        "parking_width": FloatRange(2.2, 2.8),  # m
+        "truck_length": FloatRange(6.0, 10.0),  # m, the parked truck or van hiding the walker
+        "truck_width": FloatRange(2.2, 2.6),  # m
+        "ped_gap": FloatRange(0.2, 0.8),  # m, truck front to the pedestrian's box
+        "ped_offset": FloatRange(0.3, 1.0),  # m, pedestrian centre beyond the kerb
+        "parked_count": Choice((0, 1, 2)),  # further parked vehicles beyond the crossing
     },
     "VC": {
         **_COMMON,
+        **_STRAIGHT,
         "v_ref": FloatRange(9.0, 11.0),
         "route_length": FloatRange(58.0, 164.0),
         "cut_frac": FloatRange(0.80, 0.85),  # cut-in speed / v_ref (floored at 6.5 m/s)
         "gap_event": FloatRange(6.0, 10.0),  # m, nominal centre gap at the event
         "warn_lead": Choice((10.0, 17.0)),
-        "num_opposing": Choice((1, 2)),
+        "lanes_fwd": Choice((2, 3)),  # the cut-in comes from the rightmost lane
     },
     "OR": {
         **_COMMON,
+        **{k: v for k, v in _STRAIGHT.items() if k != "curve_split"},  # see or_centerline
         "v_ref": FloatRange(8.0, 10.0),
         "route_length": FloatRange(66.0, 133.0),
         "lead_speed_kmh": FloatRange(12.0, 20.0),
         "lead_gap": FloatRange(15.0, 25.0),  # m, van centre ahead of the ego at t = 0
-        "reveal_s": FloatRange(30.0, 104.0),  # m, route arc of the reveal point C
-        "object_ahead": FloatRange(12.0, 16.0),  # m, object centre ahead of C
-        "num_opposing": Choice((1, 2)),
+        "reveal_s": FloatRange(30.0, 104.0),  # m, route arc where the van starts its lane change
+        "object_ahead": FloatRange(12.0, 16.0),  # m, object centre ahead of the van then
+        "van_length": FloatRange(5.0, 6.0),  # m
+        "object_width": FloatRange(1.4, 2.0),  # m, narrower than the van (2.2 m)
+        "lanes_fwd": Choice((2, 3)),  # the ego drives the rightmost one; the van moves left
     },
     "LWW": {
         **_COMMON,
         **_JUNCTION,
+        # single-lane, tight junctions only: with two lanes per direction or a wide kerb radius
+        # the left turn is so long that a wrong-way car 25 m along the reversed route from a
+        # conflict point within reach of the 10-m warning lead waits at the box edge, in plain
+        # view across the junction, where no corner occluder can hide it
+        "lanes_per_direction": Choice((1,)),
+        "kerb_radius": FloatRange(6.5, 8.5),
         "v_ref": FloatRange(6.0, 8.0),
         "route_length": FloatRange(56.0, 80.0),
         "actor_speed": FloatRange(7.0, 9.0),
+        "conflict_offset": FloatRange(6.0, 10.0),  # m, conflict point past the box entry
+        "truck_length": FloatRange(6.0, 9.0),  # m, truck waiting at the W arm's stop line
     },
     "RWW": {
         **_COMMON,
@@ -187,6 +235,7 @@ PARAM_RANGES: dict[str, dict[str, Any]] = {
         "v_ref": FloatRange(6.0, 8.0),
         "route_length": FloatRange(52.0, 87.0),
         "actor_speed": FloatRange(7.0, 9.0),
+        "conflict_offset": FloatRange(6.0, 10.0),  # m, conflict point past the box entry
     },
     "RTY": {
         **_COMMON,
@@ -194,7 +243,9 @@ PARAM_RANGES: dict[str, dict[str, Any]] = {
         "v_ref": FloatRange(6.0, 8.0),
         "route_length": FloatRange(50.0, 75.0),
         "actor_speed": FloatRange(8.0, 12.0),
-        "source_dist": FloatRange(10.0, 50.0),  # m, spawn distance before the crossing point
+        "source_dist": FloatRange(15.0, 50.0),  # m, first flow vehicle before its crossing point
+        "source_interval": FloatRange(10.0, 50.0),  # m, spacing of the flow (paper)
+        "flow_size": Choice((2, 3, 4)),  # vehicles in the flow (the first is evaluated)
     },
 }
 assert tuple(PARAM_RANGES) == FAMILIES

@@ -1,20 +1,24 @@
-"""The frozen closed-loop suite ``lantern-v1``: pairs, static validation, manifest, loading.
+"""The frozen closed-loop suite ``lantern-v2``: pairs, static validation, manifest, loading.
 
 120 matched Route A/B pairs: 20 per family, five weather profiles x 24 pairs (4 per family per
 profile), as in the paper's appendix A.  A suite is generated from a seed by
 :mod:`lantern_jax.generate` (which needs the simulator and the expert to validate candidates
 dynamically); this module holds what does not: the :class:`Suite` and :class:`PairSpec` types,
 **static validation** (:func:`static_check`: a candidate whose parameters are out of range or
-infeasible, whose markers are out of order or off the route, whose recovery stretch is shorter
-than 29 m, whose junction has fewer than three arms or turns the wrong way, whose Route A and
-Route B disagree on anything they must share, or whose content hash repeats, is rejected),
-manifest writing and loading.
+infeasible — occluders overlapping the route corridor included —, whose markers are out of
+order or off the route, whose recovery stretch is shorter than 29 m, whose junction has fewer
+than three arms or turns the wrong way, whose Route A and Route B disagree on anything they must
+share, whose hazard the front camera can see at the warning point (the premise,
+:mod:`lantern_jax.scenarios.premise`), or whose content hash repeats, is rejected), manifest
+writing and loading.  Near duplicates within a family (:mod:`lantern_jax.scenarios.duplicates`)
+are rejected by generation, which knows the pairs already selected.
 
-The manifest (``lantern_jax/data/lantern-v1.json``) stores every pair's parameter dict and its
-SHA-256 content hash, the suite hash, and the generation report (candidate counts and the
-expert's pass rate before filtering).  :func:`load_suite` validates the whole file — types,
-ranges, labels, duplicates, every hash — before anything is built, and names the file, the pair
-and the field of every problem.
+The manifest (``lantern_jax/data/lantern-v2.json``) stores every pair's parameter dict, its
+SHA-256 content hash and its route resampled every 2 m (``route_2m``, world frame, so anyone
+can re-check near duplicates from the file alone), the suite hash, and the generation report
+(candidate counts, rejections by reason, the expert's pass rate before filtering).
+:func:`load_suite` validates the whole file — types, ranges, labels, duplicates, every hash —
+before anything is built, and names the file, the pair and the field of every problem.
 """
 
 from __future__ import annotations
@@ -29,30 +33,27 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from lantern_jax.constants import FAMILIES, WEATHERS
+from lantern_jax.constants import FAMILIES, SUITE_ID, WEATHERS
 from lantern_jax.files import atomic_write
-from lantern_jax.scenarios.families import (
-    build_pair,
-    check_feasible,
-    param_errors,
-    validate_params,
-)
+from lantern_jax.scenarios.families import build_pair, param_errors, validate_params
+from lantern_jax.scenarios.premise import premise_error
 from lantern_jax.scenarios.spec import MIN_RECOVERY_M, SEED_MAX, content_hash
 from lantern_jax.world import Scenario
 
-SUITE_ID = "lantern-v1"
 TURN_FAMILIES = {"LWW": 1.0, "RWW": -1.0, "RTY": -1.0}  # sign of the heading change
 
 
 @dataclasses.dataclass(frozen=True)
 class PairSpec:
-    """One pair of a suite: its id, family, weather, parameter dict and content hash."""
+    """One pair of a suite: its id, family, weather, parameter dict, content hash and (from a
+    manifest that records it) its route resampled every 2 m."""
 
     pair_id: str
     family: str
     weather: str
     params: dict
     sha256: str
+    route_2m: list | None = None  # [[x, y], ...] m, world frame
 
 
 @dataclasses.dataclass(frozen=True)
@@ -123,11 +124,15 @@ def _tree_equal(a, b) -> bool:
     )
 
 
-def _heading_change(scenario: Scenario) -> float:
-    r = np.asarray(scenario.route.xy)[np.asarray(scenario.route.valid)]
+def _heading_change(scenario: Scenario, s0: float, s1: float) -> float:
+    """rad, the route's heading change from arc ``s0`` to arc ``s1`` (the turn through the
+    junction box, so that gently bending arms do not count)."""
+    r = np.asarray(scenario.route.xy, np.float64)[np.asarray(scenario.route.valid)]
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(r, axis=0), axis=1))])
     d = np.diff(r, axis=0)
     h = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
-    return float(h[-1] - h[0])
+    mid = 0.5 * (s[1:] + s[:-1])
+    return float(np.interp(s1, mid, h) - np.interp(s0, mid, h))
 
 
 def static_check(params: dict, seen_hashes: set[str]) -> tuple[Scenario, Scenario, dict]:
@@ -137,8 +142,7 @@ def static_check(params: dict, seen_hashes: set[str]) -> tuple[Scenario, Scenari
         ValueError: naming the failed check.
     """
     validate_params(params)
-    check_feasible(params)
-    a, b, meta = build_pair(params)
+    a, b, meta = build_pair(params, validate=False)
     a.validate()
     b.validate()
     fam = meta["family"]
@@ -153,7 +157,8 @@ def static_check(params: dict, seen_hashes: set[str]) -> tuple[Scenario, Scenari
     if length - s_conflict < MIN_RECOVERY_M - 1e-3:
         raise ValueError(f"{fam}: recovery {length - s_conflict:.1f} m < {MIN_RECOVERY_M} m")
     if fam in TURN_FAMILIES:
-        turn = _heading_change(a)
+        box = meta["canonical"]
+        turn = _heading_change(a, box["box_in_s"], box["box_out_s"])
         if np.sign(turn) != TURN_FAMILIES[fam] or abs(turn) < np.pi / 3:
             raise ValueError(f"{fam}: route turns {np.degrees(turn):.0f} deg, wrong direction")
         arms = len(
@@ -163,7 +168,7 @@ def static_check(params: dict, seen_hashes: set[str]) -> tuple[Scenario, Scenari
         if arms < 3:
             raise ValueError(f"{fam}: junction with {arms} arms (need >= 3)")
     # Route A and Route B share everything but the hazard behaviour.
-    for name in ("route", "lanes", "lights"):
+    for name in ("route", "lanes", "occluders", "lights"):
         if not _tree_equal(getattr(a, name), getattr(b, name)):
             raise ValueError(f"{fam}: Route A and Route B differ in {name}")
     for f in ("s_warn", "s_event", "s_conflict", "friction", "sensing_range", "v_ref",
@@ -180,6 +185,9 @@ def static_check(params: dict, seen_hashes: set[str]) -> tuple[Scenario, Scenari
     h = content_hash(params)
     if h in seen_hashes:
         raise ValueError(f"{fam}: duplicate content hash {h[:12]}")
+    why = premise_error(a, meta)
+    if why is not None:
+        raise ValueError(why)
     return a, b, meta
 
 
@@ -229,7 +237,8 @@ MANIFEST_FIELDS = {
     "suite_sha256": True,
     "generation_report": False,
 }
-PAIR_FIELDS = ("pair_id", "family", "weather", "params", "sha256")
+PAIR_FIELDS = ("pair_id", "family", "weather", "params", "sha256", "route_2m")
+OPTIONAL_PAIR_FIELDS = ("route_2m",)  # a hand-written suite file may leave the route out
 _HEX = set("0123456789abcdef")
 
 
@@ -268,6 +277,21 @@ def _valid_pair_id(v: object) -> bool:
     )
 
 
+def _route_problem(route: object) -> str | None:
+    """What is wrong with a manifest's ``route_2m`` entry (None when it is a list of at least
+    two finite ``[x, y]`` points)."""
+    if not isinstance(route, list) or len(route) < 2:
+        return f"expected a JSON array of at least two [x, y] points, got {_type_name(route)}"
+    for k, pt in enumerate(route):
+        ok = isinstance(pt, list) and len(pt) == 2 and all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v)
+            for v in pt
+        )
+        if not ok:
+            return f"point {k}: expected [x, y] with finite numbers, got {pt!r}"
+    return None
+
+
 def _pair_errors(d: object, i: int) -> tuple[str, list[str], PairSpec | None]:
     """Problems of ``pairs[i]`` (each prefixed ``"pair <id>: "``) and its spec when valid."""
     if not isinstance(d, dict):
@@ -285,8 +309,12 @@ def _pair_errors(d: object, i: int) -> tuple[str, list[str], PairSpec | None]:
         if key not in PAIR_FIELDS:
             err(key, f"unknown field (known: {', '.join(PAIR_FIELDS)})")
     for key in PAIR_FIELDS:
-        if key not in d:
+        if key not in d and key not in OPTIONAL_PAIR_FIELDS:
             err(key, "missing")
+    if "route_2m" in d:
+        problem = _route_problem(d["route_2m"])
+        if problem:
+            err("route_2m", problem)
     if "pair_id" in d and not _valid_pair_id(pid):
         err("pair_id", f"expected a non-empty string of letters, digits, '_', '-' or '.', "
                        f"got {_type_name(pid)} {pid!r}")  # fmt: skip
@@ -324,7 +352,7 @@ def _pair_errors(d: object, i: int) -> tuple[str, list[str], PairSpec | None]:
                                   f"content {h[:12]}...)")  # fmt: skip
     if errs:
         return label, errs, None
-    return label, [], PairSpec(pid, fam, weather, params, sha)
+    return label, [], PairSpec(pid, fam, weather, params, sha, d.get("route_2m"))
 
 
 def _manifest_errors(raw: object) -> tuple[list[str], Suite | None]:
@@ -399,7 +427,7 @@ def load_suite(name_or_path: str | Path = SUITE_ID) -> Suite:
     suite hash.
 
     Args:
-        name_or_path: a shipped suite id (``"lantern-v1"``) or the path of a manifest file.
+        name_or_path: a shipped suite id (``"lantern-v2"``) or the path of a manifest file.
 
     Returns:
         The :class:`Suite`.

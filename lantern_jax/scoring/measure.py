@@ -5,8 +5,9 @@ the resulting :class:`~lantern_jax.scoring.sample.TickSample` into the telemetry
 :func:`execution_ended` to know when the execution is over.  Everything a gate or a component
 looks at is decided here, with thresholds from :mod:`lantern_jax.scoring.thresholds`:
 
-* collision: the ego box overlaps a present actor while the ego moves at >= 0.1 m/s (the
-  leaderboard ignores contacts at standstill);
+* collision: the ego box overlaps a present actor or a static occluder of the map (building,
+  wall, parked vehicle) while the ego moves at >= 0.1 m/s (the leaderboard ignores contacts at
+  standstill);
 * outside the lanes: the ego centre is in no lane (half width + 0.5 m) or drives its lane the
   wrong way (more than 120 deg from the lane direction);
 * red-light violation: the ego crossed its stop line during the tick while its light was red;
@@ -103,7 +104,10 @@ def measure(
     ext = scenario.actors.extent
     ego_ext = jnp.asarray(EGO_EXTENT, jnp.float32)
     overlap = geometry.overlap_with_boxes(ego.xy, ego.yaw, ego_ext, actors.xy, actors.yaw, ext)
-    collision = jnp.any(overlap & present) & (ego.speed >= thresholds.COLLISION_MIN_SPEED_MPS)
+    occ = scenario.occluders
+    hit_occ = geometry.overlap_with_boxes(ego.xy, ego.yaw, ego_ext, occ.center, occ.yaw, occ.extent)
+    contact = jnp.any(overlap & present) | jnp.any(hit_occ & occ.valid)
+    collision = contact & (ego.speed >= thresholds.COLLISION_MIN_SPEED_MPS)
     dists = geometry.distance_to_boxes(ego.xy, ego.yaw, ego_ext, actors.xy, actors.yaw, ext)
     ego_vel = ego.speed * jnp.stack([jnp.cos(ego.yaw), jnp.sin(ego.yaw)])
     hz_vel = actors.speed[h] * jnp.stack([jnp.cos(actors.yaw[h]), jnp.sin(actors.yaw[h])])

@@ -47,6 +47,13 @@ def _per_row(name: str, value: Any, n: int) -> list:
     return out
 
 
+def _flags(values: Any, n: int) -> np.ndarray:
+    """(n,) int64 0/1 column from booleans (None = all 0)."""
+    if values is None:
+        return np.zeros(n, np.int64)
+    return np.broadcast_to(np.asarray(values, bool), (n,)).astype(np.int64)
+
+
 def _family_codes(families: Any, n: int) -> list[str]:
     codes = []
     for f in _per_row("families", families, n):
@@ -71,6 +78,8 @@ def build_route_table(
     t_warn_on: Any = None,
     d_safe: Any = None,
     warning_ticks: Any = None,
+    hidden_at_warning: Any = None,
+    hidden_before_warning: Any = None,
 ) -> pd.DataFrame:
     """Route-level DataFrame from batched per-execution metrics.
 
@@ -84,6 +93,9 @@ def build_route_table(
         d_safe: (n,) m, clearance normalisers; default from the family (2 m PE/OR, else 3 m).
         warning_ticks: (n,) int, ticks at which the Route A policy was shown an active warning
             (default 0).
+        hidden_at_warning, hidden_before_warning: (n,) bool, the Route A hazard was hidden from
+            the front camera at the warning point / for the whole approach up to it (see the
+            schema); default False (0) for every row.
 
     Returns:
         DataFrame with the schema's columns in order (see :func:`validate_route_table`).
@@ -141,6 +153,8 @@ def build_route_table(
         "B_controller_fault": np.asarray(b.controller_fault).astype(np.int64),
         "B_t_fault_s": f64(b.t_fault_s),
         "coincident_onset": np.asarray(a.coincident_onset).astype(np.int64),
+        "hazard_hidden_at_warning": _flags(hidden_at_warning, n),
+        "hazard_hidden_before_warning": _flags(hidden_before_warning, n),
         "t_first_failure_s": f64(a.t_first_failure_s),
         "warning_ticks": shown,
         "warning_delivered": (shown > 0).astype(np.int64),
@@ -195,7 +209,7 @@ def validate_route_table(df: pd.DataFrame, require_same_pairs: bool = True) -> p
     unknown = sorted(set(df["family"]) - set(FAMILIES))
     if unknown:
         raise ValueError(f"route table: unknown family code(s) {unknown}; known: {FAMILIES}")
-    for g in GATE_NAMES:
+    for g in (*GATE_NAMES, "hazard_hidden_at_warning", "hazard_hidden_before_warning"):
         off = ~df[g].isin([0, 1])
         if off.any():
             raise ValueError(f"route table: {g} must be 0 or 1; offending rows {pairs(off)}")

@@ -1,4 +1,5 @@
-"""Camera visibility of actors and planar range images, by ray casting against actor boxes.
+"""Camera visibility of actors and planar range images, by ray casting against actor boxes and
+the map's static occluders.
 
 The front camera sits ``constants.CAMERA_BACK_OFFSET`` behind the ego centre and looks along
 the ego heading with a ``constants.FRONT_CAMERA_FOV`` (110 degree) horizontal field of view.
@@ -9,14 +10,17 @@ mounting point here).
 
 An actor is **visible** when at least one of its 9 sample points (box centre, 4 corners,
 4 edge midpoints) is inside the field of view, within ``max_range`` of the camera, and the
-sight line from the camera to the point is not blocked by *another* present actor's box: a
-box blocks the point when the sight line enters it more than ``OCCLUSION_EPS`` before
-reaching the point.  The target's own box never blocks its own points, non-present actors
-neither block nor are visible, and the ego's own box is not part of the actor set.
+sight line from the camera to the point is not blocked by *another* present actor's box or by
+a valid static occluder (:class:`~lantern_jax.world.Occluders`: buildings, walls, parked
+vehicles): a box blocks the point when the sight line enters it more than ``OCCLUSION_EPS``
+before reaching the point.  The target's own box never blocks its own points, non-present
+actors neither block nor are visible, occluders block but are never targets, and the ego's own
+box is not part of either set.  The range image sees both kinds of box.
 
-One scenario per call; the (A targets x 9 points) sight lines are tested against all A boxes
-in one broadcasted computation, and batches of scenarios are made with ``jax.vmap`` outside.
-``fov_deg`` and ``num_rays`` are static Python numbers.
+One scenario per call; the (A targets x 9 points) sight lines are tested against all A + K
+boxes in one broadcasted computation, and batches of scenarios are made with ``jax.vmap``
+outside.  ``fov_deg`` and ``num_rays`` are static Python numbers.  Occluders are static, so
+their trigonometry is loop-invariant inside a rollout's scan (the compiler hoists it).
 """
 
 from __future__ import annotations
@@ -29,6 +33,7 @@ import numpy as np
 
 from lantern_jax.constants import BIG, CAMERA_BACK_OFFSET
 from lantern_jax.geometry import rays_boxes_hit, safe_norm, segments_hit_boxes
+from lantern_jax.world import Occluders
 
 Array = jax.Array
 
@@ -93,6 +98,23 @@ def _in_fov(rel: Array, dist: Array, cam_yaw: Array, fov_deg: float) -> Array:
     return along >= dist * math.cos(half)
 
 
+def _with_occluders(
+    centers: Array, yaws: Array, extents: Array, occluders: Occluders | None
+) -> tuple[Array, Array, Array, Array]:
+    """Actor boxes followed by the occluder boxes, and the occluders' valid mask (K,)."""
+    centers = jnp.asarray(centers, jnp.float32)
+    yaws = jnp.asarray(yaws, jnp.float32)
+    extents = jnp.asarray(extents, jnp.float32)
+    if occluders is None:
+        return centers, yaws, extents, jnp.zeros((0,), bool)
+    return (
+        jnp.concatenate([centers, jnp.asarray(occluders.center, jnp.float32)]),
+        jnp.concatenate([yaws, jnp.asarray(occluders.yaw, jnp.float32)]),
+        jnp.concatenate([extents, jnp.asarray(occluders.extent, jnp.float32)]),
+        jnp.asarray(occluders.valid, bool),
+    )
+
+
 def visible_actors(
     cam_xy: Array,
     cam_yaw: Array,
@@ -102,8 +124,10 @@ def visible_actors(
     present: Array,
     fov_deg: float,
     max_range: Array,
+    occluders: Occluders | None = None,
 ) -> Array:
-    """Which actors the camera sees (field of view, range and occlusion by other actors).
+    """Which actors the camera sees (field of view, range, occlusion by other actors and by the
+    static occluders).
 
     Args:
         cam_xy: (2,) float32 camera position, m, world frame (see :func:`camera_pose`).
@@ -115,6 +139,7 @@ def visible_actors(
         fov_deg: static Python float, horizontal field of view in degrees
             (``FRONT_CAMERA_FOV`` = 110 or ``SIX_CAMERA_FOV`` = 360).
         max_range: () float32 sensing range, m.
+        occluders: the map's static occluders (K slots, ``valid``-masked); None = none.
 
     Returns:
         (A,) bool, True for a present actor with at least one unoccluded sample point inside
@@ -124,6 +149,7 @@ def visible_actors(
     cam_yaw = jnp.asarray(cam_yaw, jnp.float32)
     present = jnp.asarray(present, bool)
     num = present.shape[0]
+    box_c, box_yaw, box_e, occ_valid = _with_occluders(centers, yaws, extents, occluders)
 
     pts = actor_sample_points(centers, yaws, extents)  # (A, 9, 2)
     rel = pts - cam_xy
@@ -134,13 +160,15 @@ def visible_actors(
     far = dist > OCCLUSION_EPS
     frac = jnp.where(far, 1.0 - OCCLUSION_EPS / jnp.where(far, dist, 1.0), 0.0)
     ends = cam_xy + rel * frac[..., None]
-    blockers = present[None, :] & ~jnp.eye(num, dtype=bool)  # (target, blocker)
+    blockers = present[None, :] & ~jnp.eye(num, dtype=bool)  # (target, blocker actor)
+    occ = jnp.broadcast_to(occ_valid[None, :], (num, occ_valid.shape[0]))
+    blockers = jnp.concatenate([blockers, occ], axis=1)  # (target, A + K)
 
     # One target per loop step: the loop boundary makes the compiler materialise the sight-line
     # ends and box data once instead of re-deriving them for every (point, blocker) element.
     def one_target(args):
-        ends_t, blockers_t = args  # (9, 2), (A,)
-        hits = segments_hit_boxes(cam_xy, ends_t, centers, yaws, extents)  # (9, A)
+        ends_t, blockers_t = args  # (9, 2), (A + K,)
+        hits = segments_hit_boxes(cam_xy, ends_t, box_c, box_yaw, box_e)  # (9, A + K)
         return jnp.any(hits & blockers_t[None, :], axis=-1)
 
     blocked = jax.lax.map(one_target, (ends, blockers)) & far
@@ -183,8 +211,10 @@ def range_image(
     fov_deg: float,
     num_rays: int,
     max_range: Array,
+    occluders: Occluders | None = None,
 ) -> tuple[Array, Array]:
-    """Planar range image: distance to the nearest present actor box along evenly spread rays.
+    """Planar range image: distance to the nearest present actor box or static occluder along
+    evenly spread rays.
 
     Args:
         cam_xy: (2,) float32 camera position, m, world frame.
@@ -197,20 +227,23 @@ def range_image(
             :func:`ray_angles` for the ray layout).
         num_rays: static Python int, number of rays.
         max_range: () float32 sensing range, m.
+        occluders: the map's static occluders (K slots, ``valid``-masked); None = none.
 
     Returns:
         ranges: (num_rays,) float32 distance to the first hit, m, capped at ``max_range``
             (0 when the camera is inside a box).
-        hit_index: (num_rays,) int32 actor slot hit by each ray, -1 when nothing is hit within
-            ``max_range``.
+        hit_index: (num_rays,) int32 what each ray hits first: the actor slot ``a`` (0..A-1),
+            ``A + k`` for occluder ``k``, or -1 when nothing is hit within ``max_range``.
     """
     cam_xy = jnp.asarray(cam_xy, jnp.float32)
     cam_yaw = jnp.asarray(cam_yaw, jnp.float32)
     max_range = jnp.asarray(max_range, jnp.float32)
+    box_c, box_yaw, box_e, occ_valid = _with_occluders(centers, yaws, extents, occluders)
+    hittable = jnp.concatenate([jnp.asarray(present, bool), occ_valid])  # (A + K,)
     ang = cam_yaw + ray_angles(fov_deg, num_rays)
     dirs = jnp.stack([jnp.cos(ang), jnp.sin(ang)], axis=-1)  # (num_rays, 2)
-    t = rays_boxes_hit(cam_xy, dirs, centers, yaws, extents)  # (num_rays, A)
-    t = jnp.where(jnp.asarray(present, bool)[None, :], t, 2.0 * BIG)  # never within range
+    t = rays_boxes_hit(cam_xy, dirs, box_c, box_yaw, box_e)  # (num_rays, A + K)
+    t = jnp.where(hittable[None, :], t, 2.0 * BIG)  # never within range
     nearest = jnp.min(t, axis=-1)
     hit = nearest <= max_range
     ranges = jnp.where(hit, nearest, max_range)

@@ -1,7 +1,8 @@
 """What the ego's sensors and route localisation report after a tick (one scenario).
 
 :func:`sense` runs the front camera (110 deg; visibility of every actor and a planar range
-image, :mod:`lantern_jax.sensors.visibility`) on the world after the actors moved, and
+image, both blocked by actor boxes and the map's static occluders,
+:mod:`lantern_jax.sensors.visibility`) on the world after the actors moved, and
 :func:`locate_on_route` places the ego on its route (arc, distance, monotone progress).  Both
 results travel in :class:`Percept`, part of the simulator's state, so the next tick's
 observation and the protocol read them without recomputing.
@@ -63,7 +64,7 @@ def sense(
     """Front-camera visibility and range image of the current world, with the ego's route place.
 
     Args:
-        scenario: the execution's static scenario (actor boxes, sensing range).
+        scenario: the execution's static scenario (actor boxes, occluders, sensing range).
         ego: the ego now.
         actors: the actors now.
         route_arc, dist_to_route, progress: from :func:`locate_on_route`.
@@ -72,12 +73,13 @@ def sense(
     on = present(boxes, actors)
     cam_xy, cam_yaw = camera_pose(ego.xy, ego.yaw)
     rng = scenario.config.sensing_range
+    occ = scenario.occluders
     vis = visible_actors(
-        cam_xy, cam_yaw, actors.xy, actors.yaw, boxes.extent, on, FRONT_CAMERA_FOV, rng
+        cam_xy, cam_yaw, actors.xy, actors.yaw, boxes.extent, on, FRONT_CAMERA_FOV, rng, occ
     )
     ranges, _ = range_image(
         cam_xy, cam_yaw, actors.xy, actors.yaw, boxes.extent, on, FRONT_CAMERA_FOV,
-        NUM_RANGE_RAYS, rng,
+        NUM_RANGE_RAYS, rng, occ,
     )  # fmt: skip
     return Percept(
         visible=vis, ranges=ranges, route_arc=route_arc, dist_to_route=dist_to_route,

@@ -13,7 +13,7 @@ from flax import struct
 
 from lantern_jax.scoring.telemetry import Telemetry, init_telemetry
 from lantern_jax.sim.sense import Percept, locate_on_route, sense
-from lantern_jax.world import ActorState, EgoState, ProtocolState, Scenario
+from lantern_jax.world import ActorState, EgoState, ProtocolState, Scenario, present
 
 Array = jax.Array
 
@@ -34,16 +34,20 @@ class State:
 
 
 def init_state(scenario: Scenario) -> State:
-    """The state at ``t = 0``: the scenario's initial ego and actors, sensed; empty telemetry."""
+    """The state at ``t = 0``: the scenario's initial ego and actors, sensed (a hazard seen
+    already counts as seen before the warning point); empty telemetry."""
     zero = jnp.asarray(0.0, jnp.float32)
     arc, dist, progress = locate_on_route(scenario.route, scenario.ego0.xy, zero)
+    percept = sense(scenario, scenario.ego0, scenario.actors0, arc, dist, progress)
+    h = scenario.config.hazard_index
+    seen = percept.visible[h] & present(scenario.actors, scenario.actors0)[h]
     return State(
         t=zero,
         tick=jnp.asarray(0, jnp.int32),
         ego=scenario.ego0,
         actors=scenario.actors0,
-        protocol=ProtocolState.initial(),
-        percept=sense(scenario, scenario.ego0, scenario.actors0, arc, dist, progress),
+        protocol=ProtocolState.initial().replace(hazard_seen_before_warn=seen),
+        percept=percept,
         telemetry=init_telemetry(),
         done=jnp.asarray(False),
         fault=jnp.asarray(False),

@@ -38,6 +38,9 @@ from lantern_jax.constants import (
     LIGHT_GREEN,
     LIGHT_RED,
     LIGHT_YELLOW,
+    OCC_BUILDING,
+    OCC_PARKED_VEHICLE,
+    OCC_WALL,
     ROLE_NAMES,
 )
 from lantern_jax.dynamics.lights import light_states
@@ -66,6 +69,11 @@ VISIBLE_EDGE = "#00c853"
 RAY_COLOR = "#606c38"
 LIGHT_COLORS = {LIGHT_GREEN: "#2ecc40", LIGHT_YELLOW: "#ffdc00", LIGHT_RED: "#ff4136"}
 LANE_FACE = ("#d4d4d4", "#ececec", "#e4e4e4")  # driving, shoulder, junction connector
+OCCLUDER_STYLE = {  # kind -> (face, edge, hatch, label)
+    OCC_BUILDING: ("#b5a48b", "#6b5d4a", "//", "building"),
+    OCC_WALL: ("#8d99ae", "#4a5568", "", "wall / fence"),
+    OCC_PARKED_VEHICLE: ("#5c5c5c", "#222222", "", "parked vehicle"),
+}
 MARKERS = (  # (params field, label, marker, colour)
     ("s_warn", "warning point", "v", "#e9c46a"),
     ("s_event", "event trigger", "D", "#f4a261"),
@@ -109,6 +117,19 @@ def _draw_lanes(ax, lanes: Any) -> None:
     for k, zo in ((1, 0.9), (0, 1.0), (2, 1.1)):
         if polys[k]:
             ax.add_collection(PolyCollection(polys[k], zorder=zo, **style[k]))
+
+
+def _draw_occluders(ax, occluders: Any) -> None:
+    """The map's static occluders (``gid="occluder:<slot>"``), styled by kind."""
+    for k in np.nonzero(np.asarray(occluders.valid, bool))[0]:
+        face, edge, hatch, _ = OCCLUDER_STYLE.get(int(occluders.kind[k]), OCCLUDER_STYLE[0])
+        ax.add_patch(
+            Polygon(
+                box_corners_np(occluders.center[k], float(occluders.yaw[k]), occluders.extent[k]),
+                closed=True, facecolor=face, edgecolor=edge, hatch=hatch, linewidth=0.8,
+                alpha=0.95, gid=f"occluder:{k}", zorder=4,
+            )
+        )  # fmt: skip
 
 
 def _draw_route(ax, scenario: Any) -> None:
@@ -303,7 +324,9 @@ def bev_plot(
     Draws the lanes (driving lanes as grey strips with their travel direction, shoulders dashed,
     junction connectors faint with a dotted centre line), the ego route with the warning point,
     event trigger and conflict point (route arcs ``s_warn``, ``s_event``, ``s_conflict``), the
-    ego's past trajectory and planned waypoints, the ego box and its 110-degree camera frustum,
+    ego's past trajectory and planned waypoints, the map's static occluders (buildings hatched
+    brown, walls slate, parked vehicles dark grey; ``gid="occluder:<slot>"``), the ego box and
+    its 110-degree camera frustum,
     the present actors coloured by role (hazard red, occluder dark grey, context orange,
     background blue; a white front edge shows the heading), visible actors outlined in green
     with sight lines from the camera, the traffic lights at their stop lines (colour = state),
@@ -314,7 +337,8 @@ def bev_plot(
 
     Args:
         scenario: the :class:`~lantern_jax.world.Scenario` of the execution (static data:
-            lanes, route, lights, extents, roles, markers, text id, initial ego pose).
+            lanes, occluders, route, lights, extents, roles, markers, text id, initial ego
+            pose).
         record: its ``TickRecord`` with a leading time axis (``rollout(..., record=True)``).
         tick_index: entry of ``record`` to draw (negative counts from the end); entries past the
             end of the execution show its last tick.
@@ -344,6 +368,7 @@ def bev_plot(
         prev_xy, prev_yaw = sc.ego0.xy, float(sc.ego0.yaw)
     t = float(rec.t[i])
     _draw_lanes(ax, sc.lanes)
+    _draw_occluders(ax, sc.occluders)
     _draw_route(ax, sc)
     _draw_lights(ax, sc.lights, t)
     # ego trail and planned waypoints (the plan was made at the previous tick's pose)
@@ -376,6 +401,10 @@ def bev_plot(
 def _bev_legend(ax) -> None:
     handles = [
         Line2D([], [], marker="s", ls="none", ms=8, color=EGO_COLOR, label="ego"),
+        *(
+            Line2D([], [], marker="s", ls="none", ms=8, color=face, mec=edge, label=label)
+            for face, edge, _, label in OCCLUDER_STYLE.values()
+        ),
         *(
             Line2D([], [], marker="s", ls="none", ms=8, color=c, label=n)
             for c, n in zip(ROLE_COLORS, ROLE_NAMES, strict=True)
