@@ -7,15 +7,20 @@ Generation is deterministic from a seed:
 2. **static validation** (:func:`lantern_jax.scenarios.suite.static_check`) rejects candidates
    whose parameters, markers, recovery stretch, junction or Route A/B agreement are wrong, or
    whose content hash repeats;
-3. **dynamic validation** (:func:`dynamic_check`) runs the privileged ``expert`` on Route A
-   (warning condition) and Route B in one batched call and keeps a pair only when both routes
-   are completed without any gate failure, the warning starts and ends exactly once and the
-   physical event and its clearance are recorded on Route A;
+3. **dynamic validation** (:func:`dynamic_check`) runs the validator policy — the privileged
+   ``expert`` — on Route A (warning condition) and Route B in one batched call and keeps a pair
+   only when both routes are completed without any gate failure, the warning starts and ends
+   exactly once and the physical event and its clearance are recorded on Route A;
 4. the first four accepted candidates of each slot form the suite.
 
 This is an evaluation-layer concern (it runs the simulator and a policy), so it lives above
 :mod:`lantern_jax.scenarios`.  :func:`verify_regeneration` regenerates a shipped suite from its
 seed and compares every hash.
+
+The validator is part of what makes a suite: the manifest's generation report names it
+(``validator``), and a suite regenerates only with the validator that filtered it.
+``lantern-v1`` predates that record and was filtered by the first privileged reference, now
+registered as ``expert-v1`` (:data:`LEGACY_VALIDATOR`); new suites use ``expert``.
 """
 
 from __future__ import annotations
@@ -42,23 +47,30 @@ DEFAULT_SEED = 20260611
 PAIRS_PER_SLOT = 4  # per family per weather profile
 CANDIDATES_PER_SLOT = 8
 EXPERT_MIN_PROGRESS = 0.99  # route completion the expert must reach on both routes
+VALIDATOR = "expert"  # policy that filters newly generated suites
+LEGACY_VALIDATOR = "expert-v1"  # the validator of manifests that do not name one (lantern-v1)
 
 
 def dynamic_check(
-    scenarios_a: list[Scenario], scenarios_b: list[Scenario], max_ticks: int | None = None
+    scenarios_a: list[Scenario],
+    scenarios_b: list[Scenario],
+    max_ticks: int | None = None,
+    validator: str = VALIDATOR,
 ):
-    """Run the expert on Route A (warning) and Route B of many pairs in one batched call.
+    """Run the validator on Route A (warning) and Route B of many pairs in one batched call.
 
     Returns:
         (accepted (N,) bool, reasons list[str] — "" for accepted pairs).
     """
-    expert = get_policy("expert")
+    expert = get_policy(validator)
     params = expert.init(jax.random.PRNGKey(0))
     n = len(scenarios_a)
     batch = tree_stack(list(scenarios_a) + list(scenarios_b))
     if max_ticks is None:
         max_ticks = int(np.ceil(float(np.max(np.asarray(batch.config.timeout_s))) / DT))
-    final = jax.jit(lambda sc: rollout_batch(sc, expert.act, params, max_ticks))(batch)
+    final = jax.jit(
+        lambda sc: rollout_batch(sc, expert.act, params, max_ticks, privileged=expert.privileged)
+    )(batch)
     m = jax.tree.map(np.asarray, finalize(final.telemetry))
     proto = jax.tree.map(np.asarray, final.protocol)
     gates = ("gate_collision", "gate_route_deviation", "gate_lane", "gate_rule", "gate_block")
@@ -163,6 +175,7 @@ def generate_suite(
     pairs_per_slot: int = PAIRS_PER_SLOT,
     candidates_per_slot: int = CANDIDATES_PER_SLOT,
     progress: bool = True,
+    validator: str = VALIDATOR,
 ) -> dict:
     """Generate, validate and select a suite; returns the manifest dict.
 
@@ -171,13 +184,16 @@ def generate_suite(
         pairs_per_slot: accepted pairs per (weather, family) slot (4 for lantern-v1).
         candidates_per_slot: candidates sampled per slot before filtering.
         progress: print progress lines.
+        validator: registered policy of the dynamic validation (recorded in the report).
     """
     cands, static_rejects = _candidates(seed, candidates_per_slot)
     if progress:
-        print(f"[suite] {len(cands)} candidates passed static validation; running the expert")
-    ok, reasons = dynamic_check([c[4] for c in cands], [c[5] for c in cands])
+        print(f"[suite] {len(cands)} candidates passed static validation; running {validator}")
+    ok, reasons = dynamic_check([c[4] for c in cands], [c[5] for c in cands],
+                                validator=validator)  # fmt: skip
     pairs, stats = _select(cands, ok, reasons, pairs_per_slot)
-    report = dict(candidates_per_slot=candidates_per_slot, static_rejected=static_rejects, **stats)
+    report = dict(candidates_per_slot=candidates_per_slot, static_rejected=static_rejects,
+                  validator=validator, **stats)  # fmt: skip
     specs = [PairSpec(p["pair_id"], p["family"], p["weather"], p["params"], p["sha256"])
              for p in pairs]  # fmt: skip
     return dict(
@@ -190,10 +206,16 @@ def generate_suite(
     )
 
 
+def suite_validator(report: dict | None) -> str:
+    """The validator policy named by a generation report (:data:`LEGACY_VALIDATOR` if none)."""
+    return (report or {}).get("validator", LEGACY_VALIDATOR)
+
+
 def verify_regeneration(name: str = SUITE_ID) -> tuple[bool, str]:
-    """Regenerate a shipped suite from its seed and compare every pair hash and the suite hash."""
+    """Regenerate a shipped suite from its seed (with its own validator) and compare every pair
+    hash and the suite hash."""
     shipped = load_suite(name)
-    fresh = generate_suite(shipped.seed, progress=False)
+    fresh = generate_suite(shipped.seed, progress=False, validator=suite_validator(shipped.report))
     got = [(p["pair_id"], p["sha256"]) for p in fresh["pairs"]]
     want = [(p.pair_id, p.sha256) for p in shipped.pairs]
     for g, w in zip(got, want, strict=False):

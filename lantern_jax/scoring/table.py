@@ -133,6 +133,8 @@ def build_route_table(
         "controller_fault": np.asarray(a.controller_fault).astype(np.int64),
         "coincident_onset": np.asarray(a.coincident_onset).astype(np.int64),
         "t_first_failure_s": f64(a.t_first_failure_s),
+        "event_exposed": np.asarray(a.event_exposed).astype(np.int64),
+        "B_false_brake_stop_s": f64(b.false_brake_max_stop_s),
     }
     df = pd.DataFrame(data)
     for name, dtype in schema_columns():

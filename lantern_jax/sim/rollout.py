@@ -44,6 +44,7 @@ def rollout(
     num_ticks: int,
     record: bool = False,
     temperature: float | Array = 0.05,
+    privileged: bool = False,
 ) -> tuple[State, TickRecord | None]:
     """Roll one execution forward for ``num_ticks`` ticks (frozen once it has ended).
 
@@ -54,6 +55,8 @@ def rollout(
         num_ticks: static horizon.
         record: also return the per-tick :class:`TickRecord` (leading axis ``num_ticks``).
         temperature: soft-score temperature for the smooth telemetry accumulators.
+        privileged: static; fill ``obs.privileged`` for a privileged policy
+            (``Policy.privileged``, e.g. the ``expert``).
 
     Returns:
         (final state, records or None).
@@ -61,7 +64,7 @@ def rollout(
     temperature = jnp.asarray(temperature, jnp.float32)
 
     def body(state, _):
-        new, rec = step(act, policy_params, scenario, state, temperature)
+        new, rec = step(act, policy_params, scenario, state, temperature, privileged)
         return new, (rec if record else None)
 
     return jax.lax.scan(body, init_state(scenario), None, length=num_ticks)
@@ -75,6 +78,7 @@ def rollout_batch(
     chunk: int = 40,
     temperature: float | Array = 0.05,
     start: State | None = None,
+    privileged: bool = False,
 ) -> State:
     """Roll a batch of executions (leading axis on every leaf) until all have ended.
 
@@ -87,6 +91,7 @@ def rollout_batch(
         temperature: soft-score temperature.
         start: continue these batched states (from an earlier call) instead of starting at
             the scenarios' initial state.
+        privileged: static; fill ``obs.privileged`` (``Policy.privileged``).
 
     Returns:
         The batched final states.
@@ -96,7 +101,7 @@ def rollout_batch(
 
     def run_chunk(scenario: Scenario, state: State) -> State:
         def body(s, _):
-            return step(act, policy_params, scenario, s, temperature)[0], None
+            return step(act, policy_params, scenario, s, temperature, privileged)[0], None
 
         return jax.lax.scan(body, state, None, length=chunk)[0]
 
@@ -122,6 +127,7 @@ def rollout_batch_parallel(
     chunk: int = 40,
     temperature: float | Array = 0.05,
     start: State | None = None,
+    privileged: bool = False,
 ) -> State:
     """:func:`rollout_batch` split over all local devices (e.g. the CPU cores exposed with
     ``--xla_force_host_platform_device_count``), each shard stopping independently.
@@ -132,7 +138,9 @@ def rollout_batch_parallel(
     """
     n_dev = jax.device_count()
     if n_dev == 1:
-        return rollout_batch(scenarios, act, policy_params, max_ticks, chunk, temperature, start)
+        return rollout_batch(
+            scenarios, act, policy_params, max_ticks, chunk, temperature, start, privileged
+        )
     from jax.sharding import PartitionSpec
 
     n = jax.tree.leaves(scenarios)[0].shape[0]
@@ -149,7 +157,9 @@ def rollout_batch_parallel(
     if start is not None:
         start = jax.lax.with_sharding_constraint(start, spec)
     run = jax.shard_map(
-        lambda sc, s: rollout_batch(sc, act, policy_params, max_ticks, chunk, temperature, s),
+        lambda sc, s: rollout_batch(
+            sc, act, policy_params, max_ticks, chunk, temperature, s, privileged
+        ),
         mesh=mesh,
         in_specs=(PartitionSpec("batch"), PartitionSpec("batch") if start is not None else None),
         out_specs=PartitionSpec("batch"),
