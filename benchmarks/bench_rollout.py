@@ -100,8 +100,10 @@ def main() -> None:
             walls.append(time.perf_counter() - t0)
             cpus.append(time.process_time() - c0)
         wall, cpu_s = float(np.min(walls)), float(np.min(cpus))
-        print(f"{b:>6} {t_compile:>10.2f} {wall:>9.3f} {b * args.ticks / wall:>17,.0f} "
-              f"{cpu_s:>8.3f}", flush=True)
+        print(
+            f"{b:>6} {t_compile:>10.2f} {wall:>9.3f} {b * args.ticks / wall:>17,.0f} {cpu_s:>8.3f}",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

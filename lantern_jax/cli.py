@@ -8,10 +8,11 @@
     lantern-jax suite --verify           # regenerate lantern-v2 from its seed, compare hashes
     lantern-jax suite --regenerate suite.json
     lantern-jax policies
-    lantern-jax ablations
     lantern-jax wording --policy coop    # warning wording by ambiguity (paper appendix table)
     lantern-jax diagnostics nonactionable --policy coop   # non-actionable warnings, empty road
     lantern-jax diagnostics distance --policy coop        # near vs far warning on Route B
+    lantern-jax ablations --list         # the protocol ablations
+    lantern-jax ablations --policy coop  # the paper's ablation table for one policy
 
 Options may also come from an experiment file (``--config``, TOML, one ``[evaluate]`` table; see
 :func:`load_config`); an option given on the command line always wins over the file.  Options
@@ -35,8 +36,7 @@ from collections.abc import Sequence
 from lantern_jax.commands import CommandError
 from lantern_jax.commands import dataset as dataset_command
 from lantern_jax.commands import stress as stress_command
-from lantern_jax.constants import FAMILIES
-from lantern_jax.constants import SUITE_ID
+from lantern_jax.constants import FAMILIES, SUITE_ID
 
 REFERENCE_POLICIES = ("expert", "ego", "coop")
 EXIT_INTERRUPTED = 130
@@ -57,7 +57,8 @@ ABLATION_DESCRIPTIONS = {
     "late_onset": "warning delivered from the physical event on, not from the warning point",
     "warning_beyond_termination": "warning held 10 s beyond its termination",
     "no_anti_deadlock": "no anti-deadlock countdown: the event waits for the ego indefinitely",
-    "noisy_position": "Gaussian noise (sigma 2 m) on the grounded hazard position",
+    "noisy_position": "the reported hazard position displaced once per execution by exactly "
+    "2 m in a seeded random direction",
     "held_out_paraphrase": "every warning text replaced by a held-out paraphrase of its pair's "
     "ambiguity tier (low / medium / high, three disjoint thirds of the suite)",
 }
@@ -385,7 +386,9 @@ def _print_suite(suite) -> None:
     rate = rep.get("expert_pass_rate")
     if rate:
         tried = rep.get("dynamic_tried", {})
-        print("generation report: expert pass rate before filtering (candidates run)")
+        who = rep.get("validator", "expert-v1")
+        print(f"generation report: expert pass rate before filtering (candidates run; "
+              f"validator {who})")  # fmt: skip
         for f in FAMILIES:
             if f in rate:
                 print(f"  {f:<4} {100.0 * float(rate[f]):5.1f} %  ({tried.get(f, '?')})")
@@ -402,7 +405,12 @@ def _print_suite(suite) -> None:
 def cmd_suite(args: argparse.Namespace, argv: Sequence[str]) -> int:
     """``lantern-jax suite``: list, verify or regenerate a suite."""
     del argv
-    from lantern_jax.generate import DEFAULT_SEED, generate_suite, verify_regeneration
+    from lantern_jax.generate import (
+        DEFAULT_SEED,
+        generate_suite,
+        suite_validator,
+        verify_regeneration,
+    )
     from lantern_jax.scenarios.suite import write_manifest
 
     rc = 0
@@ -417,8 +425,10 @@ def cmd_suite(args: argparse.Namespace, argv: Sequence[str]) -> int:
         _print_suite(_load_suite(args))
     if args.regenerate:
         seed = DEFAULT_SEED if args.seed is None else args.seed
-        _stage(args, f"generating a suite from seed {seed} (runs the expert on every candidate)")
-        manifest = generate_suite(seed, progress=not args.quiet)
+        validator = args.validator or suite_validator(_load_suite(args).report)
+        resolve_policies([validator])
+        _stage(args, f"generating a suite from seed {seed} (runs {validator} on every candidate)")
+        manifest = generate_suite(seed, progress=not args.quiet, validator=validator)
         try:
             write_manifest(manifest, args.regenerate)
         except OSError as e:
@@ -451,15 +461,60 @@ def cmd_policies(args: argparse.Namespace, argv: Sequence[str]) -> int:
     return 0
 
 
-def cmd_ablations(args: argparse.Namespace, argv: Sequence[str]) -> int:
-    """``lantern-jax ablations``: the protocol ablations."""
-    del args, argv
+def _list_ablations() -> None:
     from tabulate import tabulate
 
     from lantern_jax.evaluate import ablation_names
 
     rows = [[n, ABLATION_DESCRIPTIONS.get(n, "")] for n in ablation_names()]
     print(tabulate(rows, headers=["ablation", "description"], disable_numparse=True))
+
+
+def cmd_ablations(args: argparse.Namespace, argv: Sequence[str]) -> int:
+    """``lantern-jax ablations``: list the protocol ablations, or run the ablation table."""
+    if args.list or args.policy is None:
+        _list_ablations()
+        if args.policy is None and not args.list:
+            print("\n(run the table with: lantern-jax ablations --policy NAME)")
+        return 0
+    policies = resolve_policies([args.policy])
+    if len(policies) != 1:
+        raise UsageError(f"--policy: give one policy, got {', '.join(policies)}")
+    _check_out(args.out)
+    suite = _load_suite(args)
+    from lantern_jax.ablations import VARIANTS, run_ablations
+    from lantern_jax.evaluate import PolicyError
+    from lantern_jax.report import format_ablation_table, write_ablation_outputs
+
+    _stage(
+        args,
+        f"suite {suite.suite_id}: {len(suite)} pairs; policy {policies[0]}; "
+        f"{len(VARIANTS)} protocol variants x {3 * len(suite)} executions",
+    )
+    t0 = time.perf_counter()
+    try:
+        result = run_ablations(policies[0], suite=suite, progress=not args.quiet)
+    except PolicyError as e:
+        print(f"lantern-jax ablations: error: {e}", file=sys.stderr)
+        return 1
+    _stage(args, f"done in {time.perf_counter() - t0:.1f} s; writing {args.out}")
+    try:
+        files = write_ablation_outputs(
+            result, args.out, extra_manifest={"command": shlex.join(["lantern-jax", *argv])}
+        )
+    except OSError as e:
+        print(f"lantern-jax: error: cannot write results to {args.out}: {e}", file=sys.stderr)
+        return 1
+    m = result.manifest
+    print(
+        f"Ablations  (suite {m['suite_id']}, {m['num_pairs']} pairs, policy {policies[0]}, "
+        "warning condition; all entries 0-100)"
+    )
+    print(format_ablation_table(result.table))
+    print()
+    print(f"Wrote {len(files)} files:")
+    for path in files.values():
+        print(f"  {path}")
     return 0
 
 
@@ -625,6 +680,12 @@ def build_parser() -> argparse.ArgumentParser:
     su.add_argument("--regenerate", metavar="PATH", help="write a freshly generated manifest")
     su.add_argument("--seed", type=int, help="generation seed for --regenerate")
     su.add_argument(
+        "--validator",
+        metavar="POLICY",
+        help="policy of the dynamic validation for --regenerate (default: the one that "
+        "filtered --suite, as its manifest records; expert-v1 for lantern-v2)",
+    )
+    su.add_argument(
         "--suite", default=SUITE_ID, metavar="ID|PATH", help="suite id or manifest path"
     )
     su.add_argument("--quiet", action="store_true", help="no stage lines")
@@ -632,7 +693,30 @@ def build_parser() -> argparse.ArgumentParser:
 
     po = sub.add_parser("policies", help="list registered policies", allow_abbrev=False)
     po.set_defaults(func=cmd_policies)
-    ab = sub.add_parser("ablations", help="list protocol ablations", allow_abbrev=False)
+    ab = sub.add_parser(
+        "ablations",
+        allow_abbrev=False,
+        help="list the protocol ablations, or run the ablation table for a policy",
+        description="Without --policy (or with --list): list the protocol ablations. With "
+        "--policy NAME: evaluate the policy under the full temporal protocol and each of the "
+        "five variants, print the paper's ablation table (CUS, A-Prog., Event Exp., Ant., "
+        "Rec., Coll.-A, Block-A; warning condition) and write it with every variant's "
+        "route-level rows.",
+    )
+    ab.add_argument("--list", action="store_true", help="list the ablations and exit")
+    ab.add_argument("--policy", metavar="NAME", help="run the table for this policy")
+    ab.add_argument(
+        "--suite", default="lantern-v1", metavar="ID|PATH", help="suite id or manifest path"
+    )
+    ab.add_argument(
+        "--pairs-per-family", type=int, metavar="N", help="only the first N pairs of each family"
+    )
+    ab.add_argument("--pairs", action="append", metavar="ID[,ID...]", help="only these pair ids")
+    ab.add_argument(
+        "--out", default="results/ablations", metavar="DIR", help="output folder "
+        "(default: results/ablations; the set replaces an earlier one there as a whole)"
+    )
+    ab.add_argument("--quiet", action="store_true", help="no progress bar or stage lines")
     ab.set_defaults(func=cmd_ablations)
     stress_command.add_parser(sub)
     dataset_command.add_parser(sub)

@@ -65,7 +65,7 @@ ABLATIONS: dict[str, Any] = {
     "late_onset": _ablate("late_onset", True),
     "warning_beyond_termination": _ablate("warn_hold_extra", 10.0),
     "no_anti_deadlock": _ablate("force_event", False),
-    "noisy_position": _ablate("pos_noise_sigma", 2.0),
+    "noisy_position": _ablate("pos_noise_m", 2.0),
     "held_out_paraphrase": _paraphrase,
 }
 
@@ -128,25 +128,26 @@ COMPACT_GROUP = 96
 COMPACT_MIN_BATCH = 256
 
 
-def compiled_rollout(act, max_ticks: int, start: bool = False):
+def compiled_rollout(act, max_ticks: int, start: bool = False, privileged: bool = False):
     """The jitted batched rollout for a policy ``act`` (cached: repeated calls reuse it).
 
     Split over every local device (:func:`~lantern_jax.sim.rollout.rollout_batch_parallel`);
     the command line exposes one CPU device per core.  With ``start=True`` the function takes a
-    third argument, the batched states to continue.
+    third argument, the batched states to continue.  ``privileged`` fills ``obs.privileged``
+    (``Policy.privileged``).
     """
-    key = (act, max_ticks, start)
+    key = (act, max_ticks, start, privileged)
     if key not in _COMPILED:
         if start:
             fn = jax.jit(
                 lambda scenarios, policy_params, s: rollout_batch_parallel(
-                    scenarios, act, policy_params, max_ticks, start=s
+                    scenarios, act, policy_params, max_ticks, start=s, privileged=privileged
                 )
             )
         else:
             fn = jax.jit(
                 lambda scenarios, policy_params: rollout_batch_parallel(
-                    scenarios, act, policy_params, max_ticks
+                    scenarios, act, policy_params, max_ticks, privileged=privileged
                 )
             )
         _COMPILED[key] = fn
@@ -167,23 +168,30 @@ def _take(tree, idx):
 
 
 def run_executions(
-    act, scenarios: Scenario, policy_params: Any, max_ticks: int, compact: bool | None = None
+    act,
+    scenarios: Scenario,
+    policy_params: Any,
+    max_ticks: int,
+    compact: bool | None = None,
+    privileged: bool = False,
 ):
     """Roll out a batch of executions until all have ended; returns (final states, seconds
     spent compiling).
 
     Large batches run in two phases (see ``COMPACT_*``): results are the same executions,
-    continued from their exact state, only grouped differently.
+    continued from their exact state, only grouped differently.  ``privileged`` must be the
+    policy's ``Policy.privileged`` flag.
     """
     n = jax.tree.leaves(scenarios)[0].shape[0]
     if compact is None:
         compact = n >= COMPACT_MIN_BATCH and max_ticks > COMPACT_AFTER_TICKS
     t0 = time.perf_counter()
     if not compact:
-        exe = _executable(compiled_rollout(act, max_ticks), scenarios, policy_params)
+        exe = _executable(compiled_rollout(act, max_ticks, privileged=privileged), scenarios,
+                          policy_params)  # fmt: skip
         return exe(scenarios, policy_params), time.perf_counter() - t0
-    first = compiled_rollout(act, COMPACT_AFTER_TICKS)
-    rest = compiled_rollout(act, max_ticks - COMPACT_AFTER_TICKS, start=True)
+    first = compiled_rollout(act, COMPACT_AFTER_TICKS, privileged=privileged)
+    rest = compiled_rollout(act, max_ticks - COMPACT_AFTER_TICKS, True, privileged)
     exe1 = _executable(first, scenarios, policy_params)
     group = min(COMPACT_GROUP, n)
     sc_g = _take(scenarios, np.arange(group))
@@ -255,9 +263,12 @@ def run_policy(
     pol = get_policy(policy) if isinstance(policy, str) else policy
     params = pol.init(jax.random.PRNGKey(0)) if policy_params is None else policy_params
     sc0 = jax.tree.map(lambda x: x[0], execs.scenarios)
-    check_policy_output(pol, params, jax.eval_shape(lambda sc: observe(sc, init_state(sc)), sc0))
+    obs = jax.eval_shape(lambda sc: observe(sc, init_state(sc), pol.privileged), sc0)
+    check_policy_output(pol, params, obs)
     t0 = time.perf_counter()
-    final, t_compile = run_executions(pol.act, execs.scenarios, params, execs.max_ticks)
+    final, t_compile = run_executions(
+        pol.act, execs.scenarios, params, execs.max_ticks, privileged=pol.privileged
+    )
     jax.block_until_ready(final)
     t2 = time.perf_counter()
     t1 = t0 + t_compile

@@ -24,6 +24,11 @@ padded to one size, so one compilation serves all rounds.  This is an evaluation
 (it runs the simulator and a policy), so it lives above :mod:`lantern_jax.scenarios`.
 :func:`verify_regeneration` regenerates a shipped suite from its seed and compares every hash
 and every recorded route.
+
+The validator is part of what makes a suite: the manifest's generation report names it
+(``validator``), and a suite regenerates only with the validator that filtered it.  Manifests
+that name none (``lantern-v2``) were filtered by the first privileged reference, registered as
+``expert-v1`` (:data:`LEGACY_VALIDATOR`); new suites use ``expert``.
 """
 
 from __future__ import annotations
@@ -63,22 +68,31 @@ MAX_TICKS = int(
 )
 GATES = ("gate_collision", "gate_route_deviation", "gate_lane", "gate_rule", "gate_block")
 
-_EXPERT_RUN = {}
+VALIDATOR = "expert"  # policy that filters newly generated suites
+LEGACY_VALIDATOR = "expert-v1"  # the validator of manifests that do not name one (lantern-v2)
+
+_VALIDATOR_RUN = {}
 
 
-def _expert_run():
-    """The jitted batched expert rollout (built once)."""
-    if "fn" not in _EXPERT_RUN:
-        expert = get_policy("expert")
-        params = expert.init(jax.random.PRNGKey(0))
-        _EXPERT_RUN["fn"] = jax.jit(lambda sc: rollout_batch(sc, expert.act, params, MAX_TICKS))
-    return _EXPERT_RUN["fn"]
+def _validator_run(validator: str):
+    """The jitted batched rollout of a validator policy (built once per validator)."""
+    if validator not in _VALIDATOR_RUN:
+        pol = get_policy(validator)
+        params = pol.init(jax.random.PRNGKey(0))
+        _VALIDATOR_RUN[validator] = jax.jit(
+            lambda sc: rollout_batch(sc, pol.act, params, MAX_TICKS, privileged=pol.privileged)
+        )
+    return _VALIDATOR_RUN[validator]
 
 
 def dynamic_check(
-    scenarios_a: list[Scenario], scenarios_b: list[Scenario], batch_size: int | None = None
+    scenarios_a: list[Scenario],
+    scenarios_b: list[Scenario],
+    batch_size: int | None = None,
+    validator: str = VALIDATOR,
 ) -> tuple[np.ndarray, list[str]]:
-    """Run the expert on Route A (warning) and Route B of many pairs in one batched call.
+    """Run the validator (a privileged expert) on Route A (warning) and Route B of many pairs
+    in one batched call.
 
     Args:
         scenarios_a, scenarios_b: the pairs' Route A and Route B scenarios.
@@ -94,7 +108,7 @@ def dynamic_check(
         if batch_size < len(execs):
             raise ValueError(f"dynamic_check: {len(execs)} executions exceed batch {batch_size}")
         execs += [execs[-1]] * (batch_size - len(execs))
-    final = _expert_run()(tree_stack(execs))
+    final = _validator_run(validator)(tree_stack(execs))
     m = jax.tree.map(np.asarray, finalize(final.telemetry))
     proto = jax.tree.map(np.asarray, final.protocol)
     ok, reasons = np.ones(n, bool), [""] * n
@@ -207,6 +221,7 @@ def generate_suite(
     pairs_per_slot: int = PAIRS_PER_SLOT,
     candidates_per_slot: int = CANDIDATES_PER_SLOT,
     progress: bool = True,
+    validator: str = VALIDATOR,
 ) -> dict:
     """Generate, validate and select a suite; returns the manifest dict.
 
@@ -215,6 +230,7 @@ def generate_suite(
         pairs_per_slot: accepted pairs per (weather, family) slot (4 for lantern-v2).
         candidates_per_slot: most candidates drawn per slot.
         progress: print one line per round.
+        validator: registered policy of the dynamic validation (recorded in the report).
 
     Raises:
         RuntimeError: naming the slots that could not be filled.
@@ -226,11 +242,12 @@ def generate_suite(
         cands = gen.draw_round()
         rounds += 1
         if cands:
-            ok, reasons = dynamic_check([c["a"] for c in cands], [c["b"] for c in cands], batch)
+            ok, reasons = dynamic_check([c["a"] for c in cands], [c["b"] for c in cands], batch,
+                                        validator)
             gen.select(cands, ok, reasons)
         if progress:
             done = sum(min(v, pairs_per_slot) for v in gen.filled.values())
-            print(f"[suite] round {rounds}: {len(cands)} candidates to the expert, "
+            print(f"[suite] round {rounds}: {len(cands)} candidates to {validator}, "
                   f"{done}/{pairs_per_slot * len(gen.rngs)} pairs selected")  # fmt: skip
     missing = [(WEATHERS[w], FAMILIES[f]) for (w, f) in gen.rngs if gen.filled[(w, f)] < gen.need]
     if missing:
@@ -241,6 +258,7 @@ def generate_suite(
     report = dict(
         candidates_per_slot_max=candidates_per_slot,
         round_size=ROUND_SIZE,
+        validator=validator,
         rounds=rounds,
         **st,
         expert_pass_rate={f: st["dynamic_passed"][f] / max(st["dynamic_tried"][f], 1)
@@ -259,11 +277,16 @@ def generate_suite(
     )
 
 
+def suite_validator(report: dict | None) -> str:
+    """The validator policy named by a generation report (:data:`LEGACY_VALIDATOR` if none)."""
+    return (report or {}).get("validator", LEGACY_VALIDATOR)
+
+
 def verify_regeneration(name: str = SUITE_ID) -> tuple[bool, str]:
-    """Regenerate a shipped suite from its seed and compare every pair hash, every recorded
-    route and the suite hash."""
+    """Regenerate a shipped suite from its seed (with its own validator) and compare every pair
+    hash, every recorded route and the suite hash."""
     shipped = load_suite(name)
-    fresh = generate_suite(shipped.seed, progress=False)
+    fresh = generate_suite(shipped.seed, progress=False, validator=suite_validator(shipped.report))
     got = [(p["pair_id"], p["sha256"], p["route_2m"]) for p in fresh["pairs"]]
     want = [(p.pair_id, p.sha256, p.route_2m) for p in shipped.pairs]
     for g, w in zip(got, want, strict=False):

@@ -16,6 +16,11 @@ the delivered text's template (:mod:`lantern_jax.language`: fixed length, ``PAD_
 as numbers and ``warning_has_position`` whether the text states one at all (a high-ambiguity
 paraphrase or a non-actionable message does not: then ``warning_pos`` is zero and must not be
 read as a position).  ``render_warning(warning_text_id, warning_pos)`` gives the exact string.
+
+``privileged`` holds what only a privileged policy may read (:class:`PrivilegedView`: every
+actor's forecast from its own script or motion model).  The simulator fills it only for a policy
+whose ``Policy.privileged`` flag is set (a static switch of the rollout), so ordinary policies
+pay nothing for it; for them it is ``None``.
 """
 
 from __future__ import annotations
@@ -32,6 +37,30 @@ Array = jax.Array
 NUM_ROUTE_POINTS = 24  # route points ahead in the observation
 ROUTE_STEP = 2.0  # m between observed route points
 NUM_RANGE_RAYS = 32  # rays of the front-camera range image
+FORECAST_STEPS = 40  # forecast times of the privileged view: 2 s at 20 Hz (PDM-Lite)
+FORECAST_DT = 0.05  # s between forecast times
+
+
+@struct.dataclass
+class PrivilegedView:
+    """Privileged forecast of every actor slot (ego frame), from the actors' own scripts.
+
+    Entry ``[i, k]`` is actor ``i`` at ``t + FORECAST_DT * (k + 1)``; one array per component
+    (x and y apart), which XLA vectorises far better than a trailing axis of 2.  A scenario actor
+    whose
+    trigger (the protocol's physical event) is still pending may start at any moment from the
+    earliest possible event onset on; its entry is then the box covering every such start
+    (:mod:`lantern_jax.dynamics.forecast`).
+    """
+
+    forecast_x: Array  # (A, K) float32, m, box centres (x forward)
+    forecast_y: Array  # (A, K) float32, m, (y right)
+    forecast_ux: Array  # (A, K) float32, unit vectors along the box lengths
+    forecast_uy: Array  # (A, K) float32
+    forecast_half_length: Array  # (A, K) float32, m
+    forecast_half_width: Array  # (A, K) float32, m
+    forecast_speed: Array  # (A, K) float32, m/s
+    forecast_valid: Array  # (A, K) bool, the actor is (may be) in the world then
 
 
 @struct.dataclass
@@ -64,18 +93,29 @@ class Observation:
     #                              inactive)
     warning_tokens: Array  # (MAX_TOKENS,) int32, token ids of the delivered template (all
     #                        PAD_ID when inactive)
+    privileged: PrivilegedView | None = None  # only for privileged policies (else None)
 
 
 def corridor_gaps(obs: Observation) -> tuple[Array, Array]:
-    """Route gap ahead of the ego and lateral distance from the route of every actor.
+    """Route gap ahead of the ego and lateral clearance from the route of every actor.
 
     Uses the observation's route points ahead of the ego and the actors in the ego frame, so the
     projection runs on the ``NUM_ROUTE_POINTS`` observed route points rather than the whole route.
+    The actor's box is measured along and across the route at its projection (its heading
+    against the route tangent there), so a long vehicle parked beside the lane is as far from
+    the route as its side, not as its half length.
 
     Returns:
-        gap: (A,) float32, m, route distance from the ego front to the actor's nearest point.
-        lateral: (A,) float32, m, distance of the actor centre from the route minus its half size.
+        gap: (A,) float32, m, route distance from the ego front to the actor box's near end.
+        lateral: (A,) float32, m, distance of the actor centre from the route minus its half
+            extent across the route (<= 0: the box reaches the route centre line).
     """
-    arc, dist = project_uniform(obs.route, ROUTE_STEP, obs.actor_xy)
-    half = jnp.max(obs.actor_extent, axis=-1)
-    return arc - EGO_HALF_LENGTH - half, dist - half
+    route = obs.route
+    arc, dist = project_uniform(route, ROUTE_STEP, obs.actor_xy)
+    k = jnp.clip(jnp.floor(arc / ROUTE_STEP).astype(jnp.int32), 0, route.shape[0] - 2)
+    d = route[k + 1] - route[k]  # (A, 2)
+    tang = d / jnp.sqrt(jnp.maximum(jnp.sum(d * d, -1, keepdims=True), 1e-12))
+    cos = jnp.abs(jnp.sum(obs.actor_dir * tang, -1))
+    sin = jnp.abs(obs.actor_dir[:, 0] * tang[:, 1] - obs.actor_dir[:, 1] * tang[:, 0])
+    hl, hw = obs.actor_extent[:, 0], obs.actor_extent[:, 1]
+    return arc - EGO_HALF_LENGTH - (hl * cos + hw * sin), dist - (hl * sin + hw * cos)

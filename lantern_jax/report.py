@@ -39,6 +39,7 @@ from lantern_jax.scoring.aggregate import DECOMPOSITION_COLUMNS
 from lantern_jax.scoring.table import schema_path_for, write_route_table
 
 if TYPE_CHECKING:
+    from lantern_jax.ablations import AblationResult
     from lantern_jax.evaluate import EvalResult
 
 ROUTE_CSV = "route_level_results.csv"
@@ -319,3 +320,85 @@ def write_outputs(
         stage.commit()
     out = Path(out_dir)
     return {name: out / name for name in OUTPUT_FILES}
+
+
+# ---------------------------------------------------------------------------------------------
+# the ablation table (``lantern-jax ablations --policy NAME``)
+# ---------------------------------------------------------------------------------------------
+ABLATION_CSV = "ablations.csv"
+ABLATION_MD = "ablations.md"
+ABLATION_ROUTE_CSV = "ablation_route_level_results.csv"
+ABLATION_MANIFEST = "ablations_manifest.json"
+#: Every file :func:`write_ablation_outputs` writes.
+ABLATION_FILES = (
+    ABLATION_CSV,
+    ABLATION_MD,
+    ABLATION_ROUTE_CSV,
+    schema_path_for(ABLATION_ROUTE_CSV).name,
+    ABLATION_MANIFEST,
+)
+
+
+def format_ablation_table(
+    df: pd.DataFrame, condition: str = "warning", tablefmt: str = "simple"
+) -> str:
+    """The ablation table (one row per model and variant) of one condition as text.
+
+    Args:
+        df: :attr:`lantern_jax.ablations.AblationResult.table`.
+        condition: the condition to show (the paper's table is the warning condition).
+        tablefmt: a tabulate format.
+    """
+    from lantern_jax.ablations import TABLE_COLUMNS
+
+    sub = df[df["condition"] == condition]
+    multi = sub["model"].nunique() > 1
+    rows = [
+        [f"{r['label']} ({r['model']})" if multi else r["label"]]
+        + [_fmt(r[c]) for c in TABLE_COLUMNS]
+        for _, r in sub.iterrows()
+    ]
+    return tabulate(
+        rows,
+        headers=["Variant", *TABLE_COLUMNS],
+        tablefmt=tablefmt,
+        disable_numparse=True,
+        colalign=("left", *["right"] * len(TABLE_COLUMNS)),
+    )
+
+
+def write_ablation_outputs(
+    result: AblationResult, out_dir: str | os.PathLike, extra_manifest: dict | None = None
+) -> dict[str, Path]:
+    """Write the ablation table (CSV, Markdown), every variant's route-level rows (with the
+    schema) and a manifest as one whole set (:class:`lantern_jax.files.StagedFolder`).
+
+    Returns:
+        File name -> path, for every file of :data:`ABLATION_FILES`.
+    """
+    with StagedFolder(out_dir, ABLATION_FILES) as stage:
+        out = stage.path
+        route = write_route_table(result.route_table, out / ABLATION_ROUTE_CSV)
+        written = [route, schema_path_for(route)]
+        written.append(atomic_write(out / ABLATION_CSV, _csv_bytes(result.table)))
+        m = result.manifest
+        note = (
+            f"Suite `{m.get('suite_id', '?')}` ({m.get('num_pairs', '?')} pairs), warning "
+            "condition. CUS: Overall (macro-average over families); A-Prog., Ant., Rec.: means "
+            "x 100; Event Exp.: % of Route A executions whose event began; Coll.-A, Block-A: % "
+            "of pairs failing the gate."
+        )
+        md = _markdown(
+            "Ablations", note, format_ablation_table(result.table, tablefmt="github")
+        )
+        written.append(atomic_write(out / ABLATION_MD, md))
+        manifest = dict(m)
+        manifest.update(extra_manifest or {})
+        manifest["files"] = [
+            dict(name=p.name, sha256=_sha256(p), bytes=p.stat().st_size) for p in written
+        ]
+        text = json.dumps(manifest, indent=2, default=_jsonable, allow_nan=False) + "\n"
+        atomic_write(out / ABLATION_MANIFEST, text.encode())
+        stage.commit()
+    target = Path(out_dir)
+    return {name: target / name for name in ABLATION_FILES}

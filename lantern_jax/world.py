@@ -432,8 +432,8 @@ class ExecutionConfig:
     timeout_s: Array  # () float32, s, route timeout
     late_onset: Array  # () bool, ablation: warning delivered from the event on
     warn_hold_extra: Array  # () float32, s, ablation: warning held beyond termination
-    pos_noise_sigma: Array  # () float32, m, ablation: Gaussian noise on the grounded position
-    noise_seed: Array  # () uint32, seed of that noise
+    pos_noise_m: Array  # () float32, m, ablation: one displacement of the reported hazard position
+    noise_seed: Array  # () uint32, seed of its direction
     # Warning override (diagnostics): while the window is open the policy is delivered this
     # text and position instead of the protocol's warning, on any route and condition; an
     # empty window or a negative text id is "no override" (see NO_OVERRIDE).  It changes only
@@ -453,7 +453,7 @@ class ExecutionConfig:
         for f in ("d_safe", "v_ref", "friction", "sensing_range", "timeout_s", "force_delay"):
             if float(getattr(self, f)) <= 0:
                 raise ValueError(f"ExecutionConfig.{f}: must be > 0, got {float(getattr(self, f))}")
-        check_nonneg("ExecutionConfig.pos_noise_sigma", self.pos_noise_sigma)
+        check_nonneg("ExecutionConfig.pos_noise_m", self.pos_noise_m)
         check_nonneg("ExecutionConfig.warn_hold_extra", self.warn_hold_extra)
         if int(self.override_text_id) < -1:
             raise ValueError(

@@ -10,7 +10,8 @@ once per session and every test feeds them worlds of the same shapes:
 
 All three drive the same *probe* policy: its parameters ``(mode, value)`` pick one of the
 reference policies or a small scripted test behaviour (see ``MODE_*``), so one compilation serves
-every policy the tests need.  Under ``vmap`` each execution of a batch has its own mode.
+every policy the tests need.  Under ``vmap`` each execution of a batch has its own mode.  The
+runners fill the privileged observation (the ``expert`` needs it), so every mode pays for it.
 """
 
 from __future__ import annotations
@@ -43,19 +44,23 @@ def constant_speed_waypoints(speed: jax.Array) -> jax.Array:
 
 
 def _make_probe_act():
-    policies = [get_policy(n) for n in ("expert", "ego", "coop")]
-    act = policies[0].act
-    # The reference policies share one act function and differ only in their parameters, so
-    # a per-execution choice among them is a choice of parameters.
-    assert all(p.act is act for p in policies), "reference policies no longer share act"
-    ref_params = [p.init(jax.random.PRNGKey(0)) for p in policies]
+    ref = [get_policy(n) for n in ("ego", "coop")]
+    act = ref[0].act
+    # ego and coop share one act function and differ only in their parameters, so a
+    # per-execution choice between them is a choice of parameters.
+    assert all(p.act is act for p in ref), "reference policies no longer share act"
+    ref_params = [p.init(jax.random.PRNGKey(0)) for p in ref]
+    expert = get_policy("expert")
+    expert_params = expert.init(jax.random.PRNGKey(0))
 
     def probe_act(params, obs):
         mode, value = params
-        ref = jnp.clip(mode, 0, 2)  # the scripted behaviours wrap the expert
-        ref = jnp.where(mode > MODE_COOP, MODE_EXPERT, ref)
-        chosen = jax.tree.map(lambda *xs: jnp.stack(xs)[ref], *ref_params)
-        planned = act(chosen, obs).astype(jnp.float32)
+        k = jnp.clip(mode - MODE_EGO, 0, 1)
+        chosen = jax.tree.map(lambda *xs: jnp.stack(xs)[k], *ref_params)
+        camera = act(chosen, obs).astype(jnp.float32)
+        # the expert, also under the scripted behaviours that wrap it
+        use_expert = (mode == MODE_EXPERT) | (mode > MODE_COOP)
+        planned = jnp.where(use_expert, expert.act(expert_params, obs), camera)
         cruise = constant_speed_waypoints(obs.v_ref)
         out = jnp.where(mode == MODE_NAN_BELOW, jnp.where(obs.ego_speed < value, jnp.nan, planned),
                         planned)  # fmt: skip
@@ -82,7 +87,7 @@ class Sim:
         def one(world, mode, value, counter=None):
             if counter is not None:
                 self.traces[counter] += 1
-            return rollout(world, act, (mode, value), HORIZON, record=True)
+            return rollout(world, act, (mode, value), HORIZON, record=True, privileged=True)
 
         def single(world, mode, value):
             return one(world, mode, value, "single")
@@ -93,7 +98,7 @@ class Sim:
 
         def evaluate(worlds, mode, value):
             self.traces["evaluate"] += 1
-            return rollout_batch(worlds, act, (mode, value), HORIZON)
+            return rollout_batch(worlds, act, (mode, value), HORIZON, privileged=True)
 
         self.single_fn = jax.jit(single)
         self.batch_fn = jax.jit(batch)

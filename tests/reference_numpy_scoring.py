@@ -16,12 +16,12 @@ from lantern_jax.constants import DT, INF_TIME
 FIELDS = (
     "t", "ego_speed", "ego_accel", "progress", "route_length", "dist_to_route", "outside_lanes",
     "red_light_violation", "collision", "hazard_present", "hazard_rel", "hazard_rel_vel",
-    "hazard_box_dist", "justified_stop", "controller_fault", "t_warn_point", "t_event",
+    "hazard_box_dist", "justified_stop", "fb_window", "controller_fault", "t_warn_point", "t_event",
     "t_warn_off", "t_clear", "is_route_a", "coincident_onset",
 )  # fmt: skip
 BOOL_FIELDS = (
     "outside_lanes", "red_light_violation", "collision", "hazard_present", "justified_stop",
-    "controller_fault", "is_route_a", "coincident_onset",
+    "fb_window", "controller_fault", "is_route_a", "coincident_onset",
 )  # fmt: skip
 
 EGO_HALF_LENGTH, EGO_HALF_WIDTH, PED_HALF = 2.45, 1.06, 0.3
@@ -53,7 +53,9 @@ def make_trajectory(
     reaching the warning point (``x_warn``), holds, and accelerates back from ``resume_offset`` s
     after it.  A pedestrian ``hazard_ahead`` m past the warning point starts 6 m to the right at
     the event and crosses at ``hazard_speed``; it clears (and despawns) 4 m to the left.
-    ``route_length = final position + route_extra``.  All times lie on the 20 Hz grid.
+    ``route_length = final position + route_extra``.  All times lie on the 20 Hz grid.  The
+    Route B false-brake stretch is ``[x_warn, x_warn + v0 * event_delay]`` (where the cruising
+    ego is at the event), or ``[x_warn - 10, x_warn + hazard_ahead]`` with coincident onset.
     """
     t = (np.arange(n) + 1) * DT
     # cruise until the warning point, to find k_wp
@@ -107,6 +109,9 @@ def make_trajectory(
         return np.where(np.arange(n) >= k, t[k], INF_TIME)
 
     k_off = k_ev + int(round(warn_off_delay / DT))
+    fb_lo, fb_hi = (
+        (x_warn - 10.0, x_h) if coincident else (x_warn, x_warn + v0 * event_delay)
+    )
     tr = {
         "t": t,
         "ego_speed": v,
@@ -122,6 +127,7 @@ def make_trajectory(
         "hazard_rel_vel": rel_vel,
         "hazard_box_dist": np.where(present, box, 1.0e6),
         "justified_stop": np.zeros(n, bool),
+        "fb_window": (progress >= fb_lo) & (progress <= fb_hi),
         "controller_fault": np.zeros(n, bool),
         "t_warn_point": marker(k_wp),
         "t_event": marker(k_ev),
@@ -233,9 +239,10 @@ def reference_execution(tr: dict[str, np.ndarray]) -> dict[str, float]:
             clear = min(clear, 0.0 if g["collision"][k] else box[k])
             clear_any = True
 
-    # reaction
+    # reaction: v_pre = the speed on the last tick before t_ref (the first tick's own speed
+    # when t_ref precedes every tick)
     k_pre = int(np.argmax(post_ref)) if post_ref.any() else None
-    v_pre = v[k_pre] if k_pre is not None else 0.0
+    v_pre = v[max(k_pre - 1, 0)] if k_pre is not None else 0.0
     flags = post_ref & ((acc <= -0.5) | (v <= v_pre - 1.0))
     t_react = math.inf
     for k0 in range(n - 9):
@@ -284,9 +291,21 @@ def reference_execution(tr: dict[str, np.ndarray]) -> dict[str, float]:
     k_stall = _first_window(still, 400)
     t_stall = t[k_stall + 399] if k_stall is not None else INF_TIME
     t_fault = first(g["controller_fault"])
-    in_fb = post_ref & (t <= tev)
-    stop = in_fb & (v <= 0.1) & ~g["justified_stop"]
-    fb_fail = _first_window(stop, 20) is not None
+    # false brake: a maximal run of unjustified stopped ticks of >= 20 ticks touching the stretch
+    stop = (v <= 0.1) & ~g["justified_stop"]
+    fb_fail, k = False, 0
+    while k < n:
+        if not stop[k]:
+            k += 1
+            continue
+        k_end = k
+        while k_end + 1 < n and stop[k_end + 1]:
+            k_end += 1
+        # a run counts up to each tick once it has touched the stretch
+        touched = np.flatnonzero(g["fb_window"][k : k_end + 1])
+        if len(touched) and k_end - k + 1 >= 20:
+            fb_fail = True
+        k = k_end + 1
     t_fail = min(t_coll, t_road, t_lane, t_rule, t_stall, t_fault, INF_TIME if completed else t[-1])
 
     ref_ok = _hap(tref[-1]) and tref[-1] <= t_fail

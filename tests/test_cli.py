@@ -195,6 +195,44 @@ def test_policies_and_ablations(capsys):
         assert name in out
 
 
+def test_ablations_list_and_bad_policy(capsys):
+    assert cli.main(["ablations", "--list"]) == 0
+    out = capsys.readouterr().out
+    for name in ablation_names():
+        assert name in out
+    res = run_cli(["ablations", "--policy", "nope"])
+    assert res.rc == 2 and "unknown policy 'nope'" in res.err
+
+
+def test_ablations_table_command(manifest_path, tmp_path):
+    """``lantern-jax ablations --policy coop`` runs the six protocol variants, prints the
+    paper's table and writes it (same batch shape as ``evaluated``: one compile)."""
+    from lantern_jax.ablations import TABLE_COLUMNS, VARIANTS
+    from lantern_jax.report import ABLATION_FILES
+
+    out_dir = tmp_path / "abl"
+    res = run_cli(["ablations", "--policy", "coop", "--suite", str(manifest_path),
+                   "--out", str(out_dir), "--quiet"])  # fmt: skip
+    assert res.rc == 0, res.err
+    for name in ABLATION_FILES:
+        assert (out_dir / name).is_file(), name
+    for _, label in VARIANTS:
+        assert label in res.out
+    for col in TABLE_COLUMNS:
+        assert col in res.out
+    table = pd.read_csv(out_dir / "ablations.csv")
+    assert list(table.columns) == ["model", "condition", "variant", "label", *TABLE_COLUMNS]
+    warned = table[table["condition"] == "warning"].set_index("variant")
+    assert list(warned.index) == [v for v, _ in VARIANTS]
+    assert warned.loc["none", "Event Exp."] == 100.0
+    # late onset: the warning arrives with the event, nothing to anticipate with
+    assert warned.loc["late_onset", "Ant."] <= warned.loc["none", "Ant."]
+    routes = validate_route_table(read_route_table(out_dir / "ablation_route_level_results.csv"))
+    assert set(routes["condition"]) == {
+        c if v == "none" else f"{c}:{v}" for c in ("warning", "no-warning") for v, _ in VARIANTS
+    }
+
+
 def test_python_dash_m():
     res = subprocess.run(
         [sys.executable, "-m", "lantern_jax", "ablations"],

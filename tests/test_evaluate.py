@@ -2,8 +2,9 @@
 output failures, ablations.
 
 Every test runs on a two-pair suite (one PE pair, one LWW pair) or on one of its pairs alone.
-The reference policies share one act function, so ``expert``, ``ego`` and ``coop`` and every
-ablation reuse one compiled rollout per batch shape; module-scoped fixtures share the runs.
+``ego`` and ``coop`` share one act function (the privileged ``expert`` has its own), so they
+and every ablation reuse one compiled rollout per batch shape; module-scoped fixtures share the
+runs.
 """
 
 from __future__ import annotations
@@ -335,8 +336,8 @@ def test_no_anti_deadlock(ablated, suite2):
 
 def test_noisy_position(base, ablated, suite2):
     params, n = _route_a_params(suite2, "noisy_position")
-    sigma = np.asarray(params.pos_noise_sigma)
-    np.testing.assert_array_equal(sigma[: 2 * n], 2.0)
+    np.testing.assert_array_equal(np.asarray(params.pos_noise_m)[: 2 * n], 2.0)
+    np.testing.assert_array_equal(np.asarray(params.pos_noise_m)[2 * n :], 0.0)  # Route B
     rt = ablated["noisy_position"].route_table
     pd.testing.assert_frame_equal(
         rows(rt, "coop", "no-warning"), rows(base.route_table, "coop", "no-warning")
@@ -386,6 +387,24 @@ def test_wording_table_of_a_template_matcher(base, ablated, suite2):
         members = [i for i, tk in zip(ids, tiers, strict=True) if tk == k]
         if members:
             assert t.loc[label, "Paraphrase CUS"] == pytest.approx(none[members].mean())
+
+
+def test_ablation_table_rows(base, ablated):
+    """The paper's ablation columns from each variant's route rows (Event Exposure included)."""
+    from lantern_jax.ablations import TABLE_COLUMNS, ablation_rows
+
+    full = ablation_rows(base.route_table).set_index(["model", "condition"])
+    assert list(full.columns) == list(TABLE_COLUMNS)
+    coop = full.loc[("coop", "warning")]
+    assert coop["CUS"] == pytest.approx(
+        base.family_table.query("model == 'coop' and condition == 'warning'")["Overall"].item()
+    )
+    assert coop["Event Exp."] == 100.0
+    rt = base.route_table
+    assert set(rt["event_exposed"]) <= {0, 1}
+    assert (rt["event_exposed"] == rt["t_event_s"].notna().astype(int)).all()
+    late = ablation_rows(ablated["late_onset"].route_table).set_index(["model", "condition"])
+    assert late.loc[("coop", "warning"), "Ant."] <= coop["Ant."]
 
 
 def test_premise_table(base):

@@ -268,13 +268,15 @@ def test_rollout_batch_traces_once_and_matches_fixed_horizon(sim, family_pairs):
 # ---------------------------------------------------------------------------------------------
 # gradients
 # ---------------------------------------------------------------------------------------------
-def _soft_clearance_grad(act):
+def _soft_clearance_grad(act, privileged: bool = False):
     """``jit(value_and_grad)`` of the soft clearance accumulator of :func:`crossing_scene` with
     respect to the pedestrian's crossing speed ``v_post`` (3 m/s), over GRAD_TICKS ticks."""
     world = crossing_scene()
 
     def soft_clearance(v_post):
-        final, _ = rollout(set_knobs(world, hazard_speed=v_post), act, None, GRAD_TICKS)
+        final, _ = rollout(
+            set_knobs(world, hazard_speed=v_post), act, None, GRAD_TICKS, privileged=privileged
+        )
         return final.telemetry.clearance.lse
 
     value, grad = jax.jit(jax.value_and_grad(soft_clearance))(jnp.float32(3.0))
@@ -290,25 +292,41 @@ def test_gradient_through_simulator_core():
 
 def test_expert_plan_gradient_wrt_observation_is_finite():
     """d(plan)/d(observation) of the expert is finite for an ordinary scene, including actors
-    aligned with the route (where a sqrt(1 - cos^2) footprint would have an infinite slope)."""
+    aligned with the route (where a sqrt(1 - cos^2) footprint would have an infinite slope) and
+    the privileged forecast."""
     expert = get_policy("expert")
     pp = expert.init(jax.random.PRNGKey(0))
     world = crossing_scene()
+    obs = jax.jit(lambda w: observe(w, init_state(w), privileged=True))(world)
+
+    def plan_sum(route, actor_dir, forecast_x):
+        pv = obs.privileged.replace(forecast_x=forecast_x)
+        return jnp.sum(
+            expert.act(pp, obs.replace(route=route, actor_dir=actor_dir, privileged=pv))
+        )
+
+    grads = jax.jit(jax.grad(plan_sum, argnums=(0, 1, 2)))(
+        obs.route, obs.actor_dir, obs.privileged.forecast_x
+    )
+    for g in grads:
+        assert np.isfinite(np.asarray(g)).all()
+
+
+def test_expert_refuses_an_ordinary_observation():
+    """The expert needs the privileged view; an ordinary rollout gets a clear error."""
+    expert = get_policy("expert")
+    world = crossing_scene()
     obs = jax.jit(lambda w: observe(w, init_state(w)))(world)
-
-    def plan_sum(route, actor_dir):
-        return jnp.sum(expert.act(pp, obs.replace(route=route, actor_dir=actor_dir)))
-
-    g_route, g_dir = jax.jit(jax.grad(plan_sum, argnums=(0, 1)))(obs.route, obs.actor_dir)
-    assert np.isfinite(np.asarray(g_route)).all()
-    assert np.isfinite(np.asarray(g_dir)).all()
+    assert obs.privileged is None
+    with pytest.raises(ValueError, match="privileged=True"):
+        expert.act(expert.init(jax.random.PRNGKey(0)), obs)
 
 
 @pytest.mark.slow
 def test_gradient_through_expert_policy():
     expert = get_policy("expert")
     pp = expert.init(jax.random.PRNGKey(0))
-    value, grad = _soft_clearance_grad(lambda _, obs: expert.act(pp, obs))
+    value, grad = _soft_clearance_grad(lambda _, obs: expert.act(pp, obs), privileged=True)
     assert np.isfinite(value)
     assert np.isfinite(grad) and abs(grad) > 1e-6
 

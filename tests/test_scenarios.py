@@ -153,7 +153,7 @@ def test_pair_is_valid_and_matched(family, seed, weather):
     assert float(pa.force_delay) == 2.0
     assert float(pa.d_safe) == (2.0 if family in ("PE", "OR") else 3.0)
     assert float(pa.timeout_s) == pytest.approx(20.0 + length / 3.0, rel=1e-6)
-    assert not bool(pa.late_onset) and float(pa.pos_noise_sigma) == 0.0
+    assert not bool(pa.late_onset) and float(pa.pos_noise_m) == 0.0
     if meta["signalized"]:
         assert int(pa.ego_light) == 0
         assert float(pa.ego_stop_s) == pytest.approx(params["approach"] - 2.0, abs=1e-4)

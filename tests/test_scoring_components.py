@@ -31,7 +31,7 @@ from lantern_jax.times import NEVER
 
 N = 60  # ticks of every tiny trajectory (3 s); t[k] = (k + 1) * DT
 BOOLS = ("outside_lanes", "red_light_violation", "collision", "hazard_present", "justified_stop",
-         "controller_fault", "is_route_a", "coincident_onset")  # fmt: skip
+         "fb_window", "controller_fault", "is_route_a", "coincident_onset")  # fmt: skip
 
 
 def quiet(n: int = N, speed: float = 5.0) -> dict[str, np.ndarray]:
@@ -88,7 +88,8 @@ def f(x) -> float:
 
 # -------------------------------------------------------------------------------- shared context
 def test_context_v_pre_rings_and_window_masks():
-    # speed 6 m/s rising by 0.1 m/s per tick; t_ref at tick 3 -> v_pre = 6.3 m/s
+    # speed 6 m/s rising by 0.1 m/s per tick; t_ref at tick 3 -> v_pre = the speed before
+    # warning onset, on tick 2: 6.2 m/s
     tr = quiet()
     tr["ego_speed"] = 6.0 + 0.1 * np.arange(N)
     tr["t_warn_point"][:], tr["t_event"][:] = at(3), at(8)
@@ -97,7 +98,7 @@ def test_context_v_pre_rings_and_window_masks():
     for k in range(6):  # fold ticks 0..5
         row = jax.tree.map(lambda x, k=k: x[k], ticks)
         ctx, tick = context.update(ctx, row, jnp.float32(0.01))
-    assert f(ctx.v_pre) == pytest.approx(6.3) and bool(ctx.v_pre_set)
+    assert f(ctx.v_pre) == pytest.approx(6.2) and bool(ctx.v_pre_set)
     assert int(ctx.n_ticks) == 6 and f(ctx.t_last) == at(5)
     assert f(ctx.time_ring[-1]) == at(5) and f(ctx.time_ring[-7]) == 0.0  # 6 ticks, zero-filled
     # tick 5 lies after t_ref and before t_event and clearance
@@ -354,10 +355,12 @@ def test_block_gate_stall_timeout_and_fault():
 
 
 def stop_case(first: int, last: int) -> dict:
-    # Route B: matched interval [t_ref, t_event] = ticks 5..45; stopped (0.05 m/s) on first..last
+    # Route B: the ego's progress lies in the matched stretch on ticks 5..45 (fb_window);
+    # stopped (0.05 m/s) on first..last
     tr = quiet()
     tr["is_route_a"][:] = False
     tr["ego_speed"][first : last + 1] = 0.05
+    tr["fb_window"][5:46] = True
     tr["t_warn_point"][:], tr["t_event"][:] = at(5), at(45)
     return tr
 
@@ -368,8 +371,12 @@ def stop_case(first: int, last: int) -> dict:
         (10, 28, False, True),  # 19 ticks = 0.95 s: passes
         (10, 30, False, False),  # 21 ticks inside the window: fails
         (10, 30, True, True),  # the same stop, justified (light, lead vehicle, ...): passes
-        (46, 59, False, True),  # after t_event: outside the matched interval
-        (0, 24, False, False),  # began before t_ref; 20 ticks (5..24) inside the window: fails
+        (46, 59, False, True),  # beyond the matched stretch
+        (0, 24, False, False),  # began before the stretch; 20 ticks (5..24) inside: fails
+        (0, 16, False, True),  # 17 ticks in all (12 inside): passes
+        (0, 19, False, False),  # 20 ticks in all, only 15 inside: the whole stop counts, fails
+        (40, 59, False, False),  # began inside, lasts 20 ticks (15 beyond the stretch): fails
+        (0, 4, False, True),  # ends before the stretch: passes
     ],
 )
 def test_false_brake_gate(first, last, justified, passed):

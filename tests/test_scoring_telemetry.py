@@ -171,10 +171,13 @@ def test_false_brake_gate(base):
 
 def test_false_brake_outside_window_is_ignored(base):
     a, b = base
-    k = first_index(b, "t_event")
+    inside = np.flatnonzero(b["fb_window"])
+    k = int(inside[-1])  # last tick inside the matched stretch of route
     b = dict(b, ego_speed=b["ego_speed"].copy())
-    b["ego_speed"][k + 1 : k + 60] = 0.0  # after the matched interval
+    b["ego_speed"][k + 1 : k + 60] = 0.0  # beyond the matched stretch
     assert pair(a, b)["gate_false_brake"] == 1.0
+    b["ego_speed"][k] = 0.0  # the same stop, begun on the stretch's last tick: fails
+    assert_only_gate_fails(pair(a, b), "gate_false_brake")
 
 
 # ---------------------------------------------------------------------- component boundaries

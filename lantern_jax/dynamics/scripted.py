@@ -71,10 +71,7 @@ def smoothstep(x: Array) -> Array:
     return x * x * (3.0 - 2.0 * x)
 
 
-def scripted_pose(
-    path: Array,
-    path_s: Array,
-    path_valid: Array,
+def scripted_arc(
     s_init: Array,
     v_pre: Array,
     v_post: Array,
@@ -85,13 +82,10 @@ def scripted_pose(
     despawn_at_end: Array,
     t: Array,
     t_trigger: Array,
-) -> tuple[Array, Array, Array, Array, Array, Array]:
-    """Closed-form state of ONE scripted actor at time ``t``.
+) -> tuple[Array, Array, Array, Array, Array]:
+    """Closed-form place of ONE scripted actor along its path at time ``t`` (no geometry).
 
     Args:
-        path: (P, 2) float32, m, world-frame polyline.
-        path_s: (P,) float32, m, its cumulative arc length.
-        path_valid: (P,) bool, prefix mask of valid points.
         s_init: () float32, m, arc at t = 0.
         v_pre: () float32, m/s, speed before the trigger (>= 0).
         v_post: () float32, m/s, speed after the trigger (>= 0).
@@ -106,9 +100,8 @@ def scripted_pose(
     Returns:
         s: () float32, m, arc along the path.
         lat: () float32, m, lateral offset, + = left of travel.
-        speed: () float32, m/s, ``sqrt((ds/dt)^2 + (dlat/dt)^2)`` along ``yaw``.
-        xy: (2,) float32, m, world-frame box centre.
-        yaw: () float32, rad, CCW from +x.
+        v_long: () float32, m/s, speed along the path.
+        v_lat: () float32, m/s, lateral speed (during the manoeuvre).
         active: () bool, False once ``s_end`` is reached when ``despawn_at_end``.
     """
     pending = ~happened(t_trigger)
@@ -132,11 +125,49 @@ def scripted_pose(
     in_manoeuvre = fired & (x < 1.0)
     xc = jnp.clip(x, 0.0, 1.0)
     v_lat = jnp.where(in_manoeuvre, lat_shift * 6.0 * xc * (1.0 - xc) / dur, 0.0)
+    active = ~(despawn_at_end & reached)
+    return s, lat, v_long, v_lat, active
 
+
+def scripted_pose(
+    path: Array,
+    path_s: Array,
+    path_valid: Array,
+    s_init: Array,
+    v_pre: Array,
+    v_post: Array,
+    s_hold: Array,
+    s_end: Array,
+    lat_shift: Array,
+    lat_duration: Array,
+    despawn_at_end: Array,
+    t: Array,
+    t_trigger: Array,
+) -> tuple[Array, Array, Array, Array, Array, Array]:
+    """Closed-form state of ONE scripted actor at time ``t``.
+
+    Args:
+        path: (P, 2) float32, m, world-frame polyline.
+        path_s: (P,) float32, m, its cumulative arc length.
+        path_valid: (P,) bool, prefix mask of valid points.
+        s_init, v_pre, v_post, s_hold, s_end, lat_shift, lat_duration, despawn_at_end, t,
+            t_trigger: as in :func:`scripted_arc`.
+
+    Returns:
+        s: () float32, m, arc along the path.
+        lat: () float32, m, lateral offset, + = left of travel.
+        speed: () float32, m/s, ``sqrt((ds/dt)^2 + (dlat/dt)^2)`` along ``yaw``.
+        xy: (2,) float32, m, world-frame box centre.
+        yaw: () float32, rad, CCW from +x.
+        active: () bool, False once ``s_end`` is reached when ``despawn_at_end``.
+    """
+    s, lat, v_long, v_lat, active = scripted_arc(
+        s_init, v_pre, v_post, s_hold, s_end, lat_shift, lat_duration, despawn_at_end, t,
+        t_trigger,
+    )  # fmt: skip
     point, heading = interpolate(path, path_s, path_valid, s)
     xy = point + left_normal(heading) * lat
     yaw = heading + safe_atan2(v_lat, v_long)
     yaw = jnp.arctan2(jnp.sin(yaw), jnp.cos(yaw))
     speed = safe_norm(jnp.stack([v_long, v_lat]))
-    active = ~(despawn_at_end & reached)
     return s, lat, speed, xy, yaw, active

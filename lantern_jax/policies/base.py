@@ -26,7 +26,13 @@ ActFn = Callable[[Any, Observation], jax.Array]
 
 @dataclasses.dataclass(frozen=True)
 class Policy:
-    """A named driving policy: ``init(key) -> params`` and ``act(params, obs) -> (10, 2)``."""
+    """A named driving policy: ``init(key) -> params`` and ``act(params, obs) -> (10, 2)``.
+
+    ``privileged`` is a static switch of the simulator: only for such a policy does the
+    observation carry ``obs.privileged`` (every actor's forecast from its script), and every
+    rollout of it must be run with ``privileged=True`` (:func:`lantern_jax.evaluate.evaluate`
+    does this).  ``uses_warning`` is descriptive.
+    """
 
     name: str
     init: InitFn

@@ -1,8 +1,7 @@
-"""The three reference policies of the result tables: ``expert``, ``ego`` and ``coop``.
+"""The camera-based reference policies of the result tables, ``ego`` and ``coop`` (the
+privileged ``expert`` is :mod:`lantern_jax.policies.expert`), and ``expert-v1``.
 
-* ``expert`` — the planner over every present actor, hidden ones included (privileged upper
-  reference, in the spirit of PDM-Lite).
-* ``ego`` — the same planner restricted to what the front camera sees now; ignores warnings.
+* ``ego`` — the planner restricted to what the front camera sees now; ignores warnings.
 * ``coop`` — ``ego`` plus warning handling: while a warning is active, the warned hazard becomes
   a virtual constraint at its grounded position, chosen by what the warning text says:
 
@@ -15,6 +14,10 @@
 
   The semantics come from the text bank (:mod:`lantern_jax.scenarios.warnings`), so a text the
   policy does not understand (an unseen paraphrase or a non-actionable message) has no effect.
+* ``expert-v1`` — the same planner over every present actor, hidden ones included, with
+  constant-velocity forecasts: the first privileged reference, which validated (filtered) the
+  ``lantern-v1`` suite.  It is kept so that ``lantern-v1`` regenerates exactly from its seed; it
+  reacts to a waiting hazard only once it moves (see :mod:`lantern_jax.policies.expert`).
 """
 
 from __future__ import annotations
@@ -110,8 +113,8 @@ def warning_constraints(
 class ReferenceParams:
     """Parameters of the reference policies: one act function, behaviour chosen by data.
 
-    Because ``expert``, ``ego`` and ``coop`` share :func:`reference_act` and differ only in
-    these (traced) flags, evaluating all three reuses one compiled rollout.
+    Because ``ego``, ``coop`` and ``expert-v1`` share :func:`reference_act` and differ only in
+    these (traced) flags, evaluating them reuses one compiled rollout.
     """
 
     planner: PlannerConfig
@@ -157,14 +160,18 @@ def _make_init(privileged: bool, use_warning: bool):
     return init
 
 
-def expert_policy() -> Policy:
-    """Privileged planner over all present actors (upper reference)."""
+def legacy_expert_policy() -> Policy:
+    """``expert-v1``: the planner over all present actors (the ``lantern-v1`` suite validator).
+
+    It reads ``obs.present`` (in every observation), not the privileged forecast, so it runs in
+    an ordinary rollout.
+    """
     return Policy(
-        "expert",
+        "expert-v1",
         _make_init(True, False),
         reference_act,
-        "privileged PDM-Lite-style planner over every actor, hidden ones included",
-        privileged=True,
+        "the lantern-v1 suite validator: the ego planner over every present actor with "
+        "constant-velocity forecasts (kept so lantern-v1 regenerates exactly)",
     )
 
 

@@ -228,7 +228,7 @@ def pair_params(
         ego_light=ego_light, ego_stop_s=ego_stop_s, d_safe=d_safe, v_ref=v_ref,
         friction=friction, sensing_range=sensing_range, template_id=family, text_id=family,
         timeout_s=20.0 + route_length / 3.0, late_onset=False, warn_hold_extra=0.0,
-        pos_noise_sigma=0.0, noise_seed=np.uint32(int(seed) & 0xFFFFFFFF),
+        pos_noise_m=0.0, noise_seed=np.uint32(int(seed) & 0xFFFFFFFF),
     )  # fmt: skip
     return a, replace_dict(a, is_route_a=False, warning_enabled=False)
 

@@ -108,7 +108,7 @@ NEUTRAL_CONFIG = dict(
     clear_on_ego_stop=False, despawn_on_clear=False, force_event=True, force_delay=2.0,
     ego_light=-1, ego_stop_s=BIG, d_safe=2.0, v_ref=8.0, friction=1.0, sensing_range=100.0,
     template_id=0, text_id=0, timeout_s=60.0, late_onset=False, warn_hold_extra=0.0,
-    pos_noise_sigma=0.0, noise_seed=0, **NO_OVERRIDE,
+    pos_noise_m=0.0, noise_seed=0, **NO_OVERRIDE,
 )  # fmt: skip
 
 

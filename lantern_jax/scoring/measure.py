@@ -11,8 +11,12 @@ looks at is decided here, with thresholds from :mod:`lantern_jax.scoring.thresho
 * outside the lanes: the ego centre is in no lane (half width + 0.5 m) or drives its lane the
   wrong way (more than 120 deg from the lane direction);
 * red-light violation: the ego crossed its stop line during the tick while its light was red;
-* justified stop (the Route B false-brake excuse): a red/yellow light holds the ego, an actor
-  is in the corridor within 15 m ahead, or the route end is within 10 m;
+* justified stop (the Route B false-brake excuse): a red/yellow light holds the ego, an actor's
+  box reaches into the ego's path (within the ego half width + 0.5 m of the route centre line,
+  measured across the route) within 15 m ahead, or the route end is within 10 m; a vehicle
+  parked beside the lane is no excuse, and neither is a warning;
+* whether the ego's progress lies in the Route B false-brake stretch
+  (:func:`lantern_jax.scoring.components.false_brake.matched_window`);
 * the controlled hazard's relative position and velocity and box distance (TTC, clearance).
 """
 
@@ -24,6 +28,7 @@ import jax.numpy as jnp
 from lantern_jax import geometry, polyline
 from lantern_jax.constants import EGO_HALF_LENGTH, EGO_HALF_WIDTH, LIGHT_RED
 from lantern_jax.scoring import thresholds
+from lantern_jax.scoring.components.false_brake import matched_window
 from lantern_jax.scoring.sample import TickSample
 from lantern_jax.world import ActorState, EgoState, Lanes, ProtocolState, Scenario
 
@@ -112,6 +117,7 @@ def measure(
     ego_vel = ego.speed * jnp.stack([jnp.cos(ego.yaw), jnp.sin(ego.yaw)])
     hz_vel = actors.speed[h] * jnp.stack([jnp.cos(actors.yaw[h]), jnp.sin(actors.yaw[h])])
     crossed_stop = (arc_before < cfg.ego_stop_s) & (arc_now >= cfg.ego_stop_s)
+    fb_lo, fb_hi = matched_window(cfg.s_warn, cfg.s_event, cfg.s_conflict)
     return TickSample(
         t=t,
         ego_speed=ego.speed,
@@ -127,6 +133,7 @@ def measure(
         hazard_rel_vel=hz_vel - ego_vel,
         hazard_box_dist=dists[h],
         justified_stop=justified,
+        fb_window=(progress >= fb_lo) & (progress <= fb_hi),
         controller_fault=fault,
         t_warn_point=protocol.t_warn_point,
         t_event=protocol.t_event,

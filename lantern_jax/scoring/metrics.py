@@ -51,7 +51,7 @@ from lantern_jax.scoring.components import (
     ttc,
 )
 from lantern_jax.scoring.telemetry import Telemetry
-from lantern_jax.times import time_or_nan
+from lantern_jax.times import happened, time_or_nan
 
 Array = jax.Array
 
@@ -76,7 +76,9 @@ class ExecutionMetrics:
     t_react_s: Array  # () float32, s, NaN unavailable or no response
     t_recover_s: Array  # () float32, s, NaN unavailable or no recovery
     recovery_latency_s: Array  # () float32, s, t_recover - t_release, NaN unavailable/no recovery
-    v_pre_mps: Array  # () float32, m/s, ego speed at the first tick with t >= t_ref (NaN never)
+    v_pre_mps: Array  # () float32, m/s, ego speed before warning onset (last tick before t_ref;
+    #                   NaN when t_ref never happened)
+    event_exposed: Array  # () bool, the physical event began (t_event recorded): Event Exposure
     response_at_event: Array  # () bool, the window ending at the event tick met the criterion
     ttc_available: Array  # () bool
     clearance_available: Array  # () bool
@@ -87,7 +89,8 @@ class ExecutionMetrics:
     gate_lane: Array  # () bool, passed (< 1 s in total outside the driving lanes)
     gate_rule: Array  # () bool, passed (no red-light violation)
     gate_block: Array  # () bool, passed (no 20 s standstill, route completed, no controller fault)
-    gate_false_brake: Array  # () bool, passed (no unjustified 1 s stop in [t_ref, t_event])
+    gate_false_brake: Array  # () bool, passed (no unjustified 1 s stop touching the matched
+    #                          stretch of route; see scoring.components.false_brake)
     controller_fault: Array  # () bool, the policy produced NaN/inf waypoints on some tick
     t_fault_s: Array  # float32, s, first controller fault (NaN none)
     stalled: Array  # () bool, standstill of >= 20 s with the route unfinished
@@ -96,7 +99,8 @@ class ExecutionMetrics:
     max_route_dist_m: Array  # () float32, m
     outside_lanes_s: Array  # () float32, s, total time outside the driving lanes
     max_still_s: Array  # () float32, s, longest standstill with the route unfinished
-    false_brake_max_stop_s: Array  # () float32, s, longest unjustified stop in [t_ref, t_event]
+    false_brake_max_stop_s: Array  # () float32, s, longest unjustified stop touching the matched
+    #                                stretch of route (Route B false brake)
 
 
 def first_failure_time(tel: Telemetry) -> Array:
@@ -151,6 +155,7 @@ def finalize(tel: Telemetry) -> ExecutionMetrics:
         t_recover_s=_or_nan(recovery.recovered_at(tel.recovery, ctx, t_fail)),
         recovery_latency_s=_or_nan(recovery.hard(tel.recovery, ctx, t_fail)),
         v_pre_mps=jnp.where(ctx.v_pre_set, ctx.v_pre, jnp.nan),
+        event_exposed=happened(ctx.t_event),
         response_at_event=tel.anticipation.response_at_event,
         ttc_available=avail["ttc"],
         clearance_available=avail["clearance"],

@@ -32,6 +32,8 @@ class TickSample:
     hazard_box_dist: Array  # () m, box-surface distance ego-hazard (0 when overlapping)
     justified_stop: Array  # () bool, a light, lead vehicle, obstacle, conflict or route end
     #                         justifies standing still (Route B false-brake excuse)
+    fb_window: Array  # () bool, the ego's route progress lies in the stretch matched to Route A's
+    #                    warning-to-event approach (Route B false brake)
     controller_fault: Array  # () bool, the policy produced NaN/inf waypoints this tick
     t_warn_point: Array  # () s, protocol: ego reached the warning point (t_ref); NEVER if not
     t_event: Array  # () s, protocol: physical-event onset; NEVER if not yet

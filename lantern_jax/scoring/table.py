@@ -158,6 +158,8 @@ def build_route_table(
         "t_first_failure_s": f64(a.t_first_failure_s),
         "warning_ticks": shown,
         "warning_delivered": (shown > 0).astype(np.int64),
+        "event_exposed": np.asarray(a.event_exposed).astype(np.int64),
+        "B_false_brake_stop_s": f64(b.false_brake_max_stop_s),
     }
     df = pd.DataFrame(data)
     for name, dtype in schema_columns():

@@ -70,8 +70,10 @@ def completion_length(route_length):
 
 
 FALSE_BRAKE_SPEED_MPS = 0.1  # m/s, Route B stop: speed <= this
-FALSE_BRAKE_S = 1.0  # s, continuous unjustified stop in the matched interval that fails the gate
+FALSE_BRAKE_S = 1.0  # s, continuous unjustified stop touching the matched stretch: gate fails
 FALSE_BRAKE = ticks(FALSE_BRAKE_S)  # 20 ticks
+FALSE_BRAKE_COINCIDENT_LEAD_M = 10.0  # m, coincident warning/event points (RTY): the matched
+#                                       stretch starts this far before the warning point
 
 # --- weights -----------------------------------------------------------------------------------
 W_ROUTE_A = 0.85
@@ -92,5 +94,7 @@ WRONG_WAY_RAD = 2.0 * math.pi / 3.0  # rad, heading difference that counts as dr
 #                                      backwards (the leaderboard's junction threshold, 120 deg)
 JUSTIFY_LEAD_DIST_M = 15.0  # m, an actor this close ahead in the corridor justifies a stop
 JUSTIFY_LEAD_BEHIND_M = -2.0  # m, ... or overlapping the ego front by up to 2 m
-JUSTIFY_LATERAL_MARGIN_M = 1.0  # m, corridor = ego half width + this, beyond the actor's half size
+JUSTIFY_LATERAL_MARGIN_M = 0.5  # m, an actor whose box comes within ego half width + this of
+#                                the route centre line is in the ego's path (a vehicle parked
+#                                beside the lane, e.g. Pedestrian Emergence's occluder, is not)
 JUSTIFY_ROUTE_END_M = 10.0  # m, standing this close to the route end is justified

@@ -5,6 +5,11 @@ Built from the static :class:`~lantern_jax.world.Scenario` and the dynamic
 the actors in the ego frame (with the camera's visibility mask), the range image, the ego's
 light and stop line, and the cooperative warning (active flag, text id, token ids, grounded
 position and whether the text states one).
+
+With ``privileged=True`` (a static switch, set for policies whose ``Policy.privileged`` flag is
+on) it also fills ``Observation.privileged``: every actor's forecast over the next 2 s from its
+own script or motion model (:mod:`lantern_jax.dynamics.forecast`), in the ego frame.  Ordinary
+policies get ``None`` there and the forecast is never computed for them.
 """
 
 from __future__ import annotations
@@ -14,8 +19,16 @@ import jax.numpy as jnp
 
 from lantern_jax import geometry, polyline
 from lantern_jax.constants import BIG, OVERRIDE_FRAME_EGO
+from lantern_jax.dynamics.forecast import earliest_event_time, forecast_actors
 from lantern_jax.dynamics.lights import ego_light_state
-from lantern_jax.observation import NUM_ROUTE_POINTS, ROUTE_STEP, Observation
+from lantern_jax.observation import (
+    FORECAST_DT,
+    FORECAST_STEPS,
+    NUM_ROUTE_POINTS,
+    ROUTE_STEP,
+    Observation,
+    PrivilegedView,
+)
 from lantern_jax.scenarios import protocol, warnings
 from lantern_jax.sim.state import State
 from lantern_jax.world import Scenario, present
@@ -25,18 +38,29 @@ Array = jax.Array
 NAV_TARGETS_M = (10.0, 30.0)  # m ahead on the route: the two navigation target points
 
 
+def position_offset(scenario: Scenario) -> Array:
+    """(2,) m, world frame: the noisy-position ablation's displacement of the reported position.
+
+    One displacement per execution (not redrawn per tick): length ``pos_noise_m`` exactly, in a
+    direction drawn uniformly on the circle from the execution's ``noise_seed``.  It stands for
+    a fixed localisation error of the warning's source; zero without the ablation.
+    """
+    cfg = scenario.config
+    angle = jax.random.uniform(
+        jax.random.PRNGKey(cfg.noise_seed), (), jnp.float32, 0.0, 2.0 * jnp.pi
+    )
+    return cfg.pos_noise_m * jnp.stack([jnp.cos(angle), jnp.sin(angle)])
+
+
 def grounded_position(scenario: Scenario, state: State) -> Array:
     """(2,) m, the warning's <FRONT_CAR_POS>: hazard position in the ego frame (x fwd, y right).
 
-    With the position-noise ablation, Gaussian noise of ``pos_noise_sigma`` (independent per
-    tick, seeded by ``noise_seed``) is added.
+    With the noisy-position ablation the reported hazard position is displaced by
+    :func:`position_offset` (in the world frame, so the reported point is off by exactly
+    ``pos_noise_m`` in the ego frame too).
     """
-    cfg = scenario.config
-    h = state.actors.xy[cfg.hazard_index]
-    pos = geometry.world_to_ego(h, state.ego.xy, state.ego.yaw)
-    key = jax.random.fold_in(jax.random.PRNGKey(cfg.noise_seed), state.tick)
-    noise = jax.random.normal(key, (2,), jnp.float32) * cfg.pos_noise_sigma
-    return pos + noise
+    h = state.actors.xy[scenario.config.hazard_index] + position_offset(scenario)
+    return geometry.world_to_ego(h, state.ego.xy, state.ego.yaw)
 
 
 def warning_fields(scenario: Scenario, state: State) -> dict[str, Array]:
@@ -65,12 +89,40 @@ def warning_fields(scenario: Scenario, state: State) -> dict[str, Array]:
     )
 
 
-def observe(scenario: Scenario, state: State) -> Observation:
+def privileged_view(scenario: Scenario, state: State) -> PrivilegedView:
+    """Every actor's 2-s forecast (:func:`~lantern_jax.dynamics.forecast.forecast_actors`) in
+    the ego frame; a pending event may begin once the ego reaches the warning point."""
+    ego, a, proto = state.ego, state.actors, state.protocol
+    t_early = earliest_event_time(state.t, proto.t_warn_point, proto.t_event)
+    on = present(scenario.actors, a)
+    fc = forecast_actors(
+        scenario.actors, a, on, state.t, proto.t_event, t_early, FORECAST_STEPS, FORECAST_DT
+    )
+    # world -> ego frame (x forward, y right), component-wise (see geometry.world_to_ego_vec)
+    c, s = jnp.cos(ego.yaw), jnp.sin(ego.yaw)
+    dx, dy = fc.x - ego.xy[0], fc.y - ego.xy[1]
+    view = PrivilegedView(
+        forecast_x=c * dx + s * dy,
+        forecast_y=s * dx - c * dy,
+        forecast_ux=c * fc.ux + s * fc.uy,
+        forecast_uy=s * fc.ux - c * fc.uy,
+        forecast_half_length=fc.half_length,
+        forecast_half_width=fc.half_width,
+        forecast_speed=fc.speed,
+        forecast_valid=fc.valid,
+    )
+    # Materialise the forecast once: fused into the policy's box tests, XLA would recompute it
+    # for each of them (several times slower).
+    return jax.lax.optimization_barrier(view)
+
+
+def observe(scenario: Scenario, state: State, privileged: bool = False) -> Observation:
     """Build the policy observation of the current tick.
 
     Args:
         scenario: the execution's static scenario.
         state: the simulator state at time ``state.t`` (its percept is that of the same tick).
+        privileged: static; also fill ``Observation.privileged`` (:func:`privileged_view`).
     """
     ego, a, r, cfg = state.ego, state.actors, scenario.route, scenario.config
     percept = state.percept
@@ -103,4 +155,5 @@ def observe(scenario: Scenario, state: State) -> Observation:
         light_state=ego_light_state(scenario.lights, cfg.ego_light, state.t),
         dist_to_stop=dist_to_stop,
         **warning_fields(scenario, state),
+        privileged=privileged_view(scenario, state) if privileged else None,
     )

@@ -45,6 +45,7 @@ def rollout(
     record: bool = False,
     temperature: float | Array = 0.05,
     remat: bool = False,
+    privileged: bool = False,
 ) -> tuple[State, TickRecord | None]:
     """Roll one execution forward for ``num_ticks`` ticks (frozen once it has ended).
 
@@ -58,6 +59,8 @@ def rollout(
         remat: recompute each tick's internals in the backward pass instead of storing them
             (``jax.checkpoint``): reverse-mode memory then grows with the carried state only,
             for a second forward pass of compute.
+        privileged: static; fill ``obs.privileged`` for a privileged policy
+            (``Policy.privileged``, e.g. the ``expert``).
 
     Returns:
         (final state, records or None).
@@ -65,7 +68,7 @@ def rollout(
     temperature = jnp.asarray(temperature, jnp.float32)
 
     def body(state, _):
-        new, rec = step(act, policy_params, scenario, state, temperature)
+        new, rec = step(act, policy_params, scenario, state, temperature, privileged)
         return new, (rec if record else None)
 
     if remat:
@@ -82,6 +85,7 @@ def rollout_batch(
     chunk: int = 40,
     temperature: float | Array = 0.05,
     start: State | None = None,
+    privileged: bool = False,
 ) -> State:
     """Roll a batch of executions (leading axis on every leaf) until all have ended.
 
@@ -94,6 +98,7 @@ def rollout_batch(
         temperature: soft-score temperature.
         start: continue these batched states (from an earlier call) instead of starting at
             the scenarios' initial state.
+        privileged: static; fill ``obs.privileged`` (``Policy.privileged``).
 
     Returns:
         The batched final states.
@@ -103,7 +108,7 @@ def rollout_batch(
 
     def run_chunk(scenario: Scenario, state: State) -> State:
         def body(s, _):
-            return step(act, policy_params, scenario, s, temperature)[0], None
+            return step(act, policy_params, scenario, s, temperature, privileged)[0], None
 
         return jax.lax.scan(body, state, None, length=chunk)[0]
 
@@ -129,6 +134,7 @@ def rollout_batch_parallel(
     chunk: int = 40,
     temperature: float | Array = 0.05,
     start: State | None = None,
+    privileged: bool = False,
 ) -> State:
     """:func:`rollout_batch` split over all local devices (e.g. the CPU cores exposed with
     ``--xla_force_host_platform_device_count``), each shard stopping independently.
@@ -139,7 +145,9 @@ def rollout_batch_parallel(
     """
     n_dev = jax.device_count()
     if n_dev == 1:
-        return rollout_batch(scenarios, act, policy_params, max_ticks, chunk, temperature, start)
+        return rollout_batch(
+            scenarios, act, policy_params, max_ticks, chunk, temperature, start, privileged
+        )
     from jax.sharding import PartitionSpec
 
     n = jax.tree.leaves(scenarios)[0].shape[0]
@@ -156,7 +164,9 @@ def rollout_batch_parallel(
     if start is not None:
         start = jax.lax.with_sharding_constraint(start, spec)
     run = jax.shard_map(
-        lambda sc, s: rollout_batch(sc, act, policy_params, max_ticks, chunk, temperature, s),
+        lambda sc, s: rollout_batch(
+            sc, act, policy_params, max_ticks, chunk, temperature, s, privileged
+        ),
         mesh=mesh,
         in_specs=(PartitionSpec("batch"), PartitionSpec("batch") if start is not None else None),
         out_specs=PartitionSpec("batch"),

@@ -46,7 +46,12 @@ ActFn = Callable[[Any, Any], Array]
 
 
 def step(
-    act: ActFn, policy_params: Any, scenario: Scenario, state: State, temperature: Array
+    act: ActFn,
+    policy_params: Any,
+    scenario: Scenario,
+    state: State,
+    temperature: Array,
+    privileged: bool = False,
 ) -> tuple[State, TickRecord]:
     """Advance one execution by one tick (see the module docstring for the stages).
 
@@ -56,14 +61,18 @@ def step(
         scenario: the execution's static scenario (closed over by the caller's scan).
         state: the state at the start of the tick.
         temperature: () float32, soft-score temperature of the telemetry's smooth accumulators.
+        privileged: static; the policy reads ``obs.privileged`` (``Policy.privileged``).
 
     Returns:
         (the state at the end of the tick — ``state`` itself when it had already ended,
         the tick's record for plots).
     """
     cfg, script, h = scenario.config, scenario.actors, scenario.config.hazard_index
-    obs = observe(scenario, state)
-    ego, fault, plan = follow_plan(state.ego, act(policy_params, obs), cfg.friction)
+    obs = observe(scenario, state, privileged)
+    waypoints = act(policy_params, obs)
+    if privileged:
+        waypoints = jax.lax.optimization_barrier(waypoints)
+    ego, fault, plan = follow_plan(state.ego, waypoints, cfg.friction)
     t = state.t + DT
 
     arc, dist, progress = locate_on_route(scenario.route, ego.xy, state.percept.progress)

@@ -13,8 +13,10 @@ Conventions (paper appendix "Complete Cooperative Unified Score"):
   at the time stamp of its first tick.
 * Window membership uses the protocol times of the current sample: ``t_ref <= t`` (post
   reference), ``t_event <= t`` (post event), ``t <= t_clear`` (before clearance).
-* ``v_pre`` is the ego speed at the first tick with ``t >= t_ref`` (the paper's "pre-warning
-  reference" speed, used by anticipation and recovery).
+* ``v_pre`` is the ego speed before warning onset (the paper's "pre-warning reference" speed,
+  used by anticipation and recovery): the speed on the last tick with ``t < t_ref``, i.e. the
+  state just before the tick in which the ego crossed the warning point (the speed on the
+  first tick at/after ``t_ref`` only if no tick came before it).
 """
 
 from __future__ import annotations
@@ -54,8 +56,9 @@ class Context:
     progress_ring: Array  # (RING,) float32, m, progress of the last ticks
     speed_ring: Array  # (REACT_WINDOW,) float32, m/s, ego speed of the last ticks
     accel_ring: Array  # (REACT_WINDOW,) float32, m/s^2, ego acceleration of the last ticks
-    v_pre: Array  # () float32, m/s, ego speed at the first tick with t >= t_ref (0 before)
-    v_pre_set: Array  # () bool, v_pre has been recorded
+    v_pre: Array  # () float32, m/s, ego speed on the last tick before t_ref (running value
+    #               until the first tick at/after t_ref, frozen from then on)
+    v_pre_set: Array  # () bool, v_pre has been frozen (a tick at/after t_ref was folded)
 
 
 @struct.dataclass
@@ -82,7 +85,7 @@ class Tick:
     progress_ring: Array  # (RING,) float32, m
     speed_ring: Array  # (REACT_WINDOW,) float32, m/s
     accel_ring: Array  # (REACT_WINDOW,) float32, m/s^2
-    v_pre: Array  # () float32, m/s, pre-warning speed after this tick
+    v_pre: Array  # () float32, m/s, pre-warning speed after this tick (final once post_ref)
 
 
 def init() -> Context:
@@ -106,7 +109,10 @@ def _tick(ctx: Context, s: TickSample) -> Tick:
     t = jnp.asarray(s.t, f32)
     speed = jnp.asarray(s.ego_speed, f32)
     post_ref = happened(s.t_warn_point) & (t >= s.t_warn_point)
-    first_post = post_ref & ~ctx.v_pre_set
+    # Before t_ref v_pre follows the speed; the first tick at/after t_ref freezes the speed of
+    # the tick before it (or its own speed when it is the very first tick).
+    first_speed = jnp.where(ctx.n_ticks > 0, ctx.v_pre, speed)
+    v_pre = jnp.where(ctx.v_pre_set, ctx.v_pre, jnp.where(post_ref, first_speed, speed))
     return Tick(
         t=t,
         speed=speed,
@@ -128,7 +134,7 @@ def _tick(ctx: Context, s: TickSample) -> Tick:
         progress_ring=push(ctx.progress_ring, jnp.asarray(s.progress, f32)),
         speed_ring=push(ctx.speed_ring, speed),
         accel_ring=push(ctx.accel_ring, jnp.asarray(s.ego_accel, f32)),
-        v_pre=jnp.where(first_post, speed, ctx.v_pre),
+        v_pre=v_pre,
     )
 
 

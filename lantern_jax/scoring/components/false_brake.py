@@ -1,11 +1,19 @@
 """Route B false-brake gate ``G_FB`` (paper appendix "Complete Cooperative Unified Score",
 paragraph "Hard gates", Route B).
 
-Fails when the ego stands still (``speed <= 0.1 m/s``) without ``justified_stop`` (a light, stop
-sign, lead vehicle, obstacle, conflict or route end; a warning is no justification) on 20
-consecutive ticks (1 s) inside ``[t_ref, t_event]`` -- on Route B the stretch matched by arc
-length to Route A's warning-to-event approach.  Soft:
-``sigmoid((19.5 ticks - longest such stop) * DT / T)``.
+**The matched stretch** is a stretch of route, not of time: the arc lengths of Route A's
+warning-to-event approach, ``[s_warn, s_event]`` (Route A and its Route B share the route
+exactly, so these are the same places on Route B).  With coincident warning and event points
+(Right-Turn Yield) it is ``[s_warn - 10 m, s_conflict]``.  Route B never closes it early: no
+forced event, no time limit.  The ego is in it while its route progress lies in it
+(:func:`matched_window`, evaluated per tick in :func:`lantern_jax.scoring.measure.measure`).
+
+**A false brake** is a stop (``speed <= 0.1 m/s``, not justified by a light, stop sign, lead
+vehicle, obstacle, conflict or the route end; a warning is no justification — see
+:func:`lantern_jax.scoring.measure.justified_stop`) of at least 20 consecutive ticks (1 s) that
+touches the matched stretch; the whole stop counts, including the part before the ego crept
+into the stretch (a stop that began before the stretch and lasts into it).  Any such stop fails
+the gate.  Soft: ``sigmoid((19.5 ticks - longest such stop) * DT / T)``.
 """
 
 from __future__ import annotations
@@ -25,19 +33,40 @@ from lantern_jax.times import NEVER, happened
 Array = jax.Array
 
 
+def matched_window(s_warn: Array, s_event: Array, s_conflict: Array) -> tuple[Array, Array]:
+    """The matched stretch of route ``[lo, hi]`` (m of route arc).
+
+    Args:
+        s_warn: () float32, m, warning point.
+        s_event: () float32, m, geometric event point.
+        s_conflict: () float32, m, conflict point.
+
+    Returns:
+        ``(lo, hi)``: ``(s_warn, s_event)``, or ``(s_warn - 10 m, s_conflict)`` when the event
+        point does not lie beyond the warning point (coincident onset).
+    """
+    coincident = s_event <= s_warn
+    lo = jnp.where(coincident, s_warn - thresholds.FALSE_BRAKE_COINCIDENT_LEAD_M, s_warn)
+    hi = jnp.where(coincident, s_conflict, s_event)
+    return lo, hi
+
+
 @struct.dataclass
 class FalseBrakeState:
     """Unjustified-stop record of one execution (scalars)."""
 
-    run: Array  # () int32, consecutive unjustified stopped ticks in [t_ref, t_event]
-    max_run: Array  # () int32, longest such run
+    run: Array  # () int32, consecutive unjustified stopped ticks (anywhere on the route)
+    touched: Array  # () bool, the current such stop has been inside the matched stretch
+    max_run: Array  # () int32, longest such stop that touched the matched stretch, ticks
     t_fail: Array  # () float32, s, tick at which such a stop reached 1 s (NEVER)
 
 
 def init() -> FalseBrakeState:
     """No stop yet."""
     i0 = jnp.asarray(0, jnp.int32)
-    return FalseBrakeState(run=i0, max_run=i0, t_fail=jnp.asarray(NEVER, jnp.float32))
+    return FalseBrakeState(
+        run=i0, touched=jnp.asarray(False), max_run=i0, t_fail=jnp.asarray(NEVER, jnp.float32)
+    )
 
 
 def update(
@@ -47,26 +76,30 @@ def update(
 
     Args:
         state: record before the tick.
-        sample: the tick's measurement (``justified_stop``).
+        sample: the tick's measurement (``justified_stop``, ``fb_window``).
         tick: shared per-tick context.
         temperature: unused (the soft gate is decoded from the final record).
 
     Returns:
         The record after the tick.
     """
-    in_window = tick.post_ref & (tick.t <= tick.t_event)
     stopped = tick.speed <= thresholds.FALSE_BRAKE_SPEED_MPS
-    n_run = run(state.run, in_window & stopped & ~jnp.asarray(sample.justified_stop, bool))
-    failed = n_run >= thresholds.FALSE_BRAKE
+    stop = stopped & ~jnp.asarray(sample.justified_stop, bool)
+    n_run = run(state.run, stop)
+    in_window = jnp.asarray(sample.fb_window, bool)
+    touched = stop & (in_window | ((state.run > 0) & state.touched))
+    counted = jnp.where(touched, n_run, 0)
+    failed = counted >= thresholds.FALSE_BRAKE
     return FalseBrakeState(
         run=n_run,
-        max_run=jnp.maximum(state.max_run, n_run),
+        touched=touched,
+        max_run=jnp.maximum(state.max_run, counted),
         t_fail=first_time(happened(state.t_fail), failed, tick.t, state.t_fail),
     )
 
 
 def max_stop_s(state: FalseBrakeState) -> Array:
-    """() float32, s: longest unjustified stop in ``[t_ref, t_event]``."""
+    """() float32, s: longest unjustified stop that touched the matched stretch."""
     return state.max_run.astype(jnp.float32) * DT
 
 
@@ -78,7 +111,7 @@ def hard(state: FalseBrakeState, ctx: Context) -> tuple[Array, Array]:
         ctx: final shared context.
 
     Returns:
-        ``(passed, valid)``: () bool, no unjustified 1 s stop in ``[t_ref, t_event]``;
+        ``(passed, valid)``: () bool, no unjustified stop of 1 s touching the matched stretch;
         () bool (always True).
     """
     return state.max_run < thresholds.FALSE_BRAKE, jnp.asarray(True)

@@ -1,0 +1,140 @@
+"""The paper's ablation table in one call (paper §"Ablations and Robustness", Table
+"Sensitivity to warning timing, event activation, localization, and wording").
+
+:func:`run_ablations` evaluates one policy under the full temporal protocol and each of its five
+variants (:data:`VARIANTS`; every variant changes one rule of the protocol, see
+:data:`lantern_jax.evaluate.ABLATIONS`) on the same suite, with the same Route B control and
+the same CUS, and collects one row per variant:
+
+=============  ===================================================================================
+CUS            Overall CUS (macro-average over families), points
+A-Prog.        mean Route A progress x 100
+Event Exp.     Event Exposure: % of Route A executions in which the intended physical event
+               began (``event_exposed``; the anti-deadlock rule exists to keep this at 100 %)
+Ant., Rec.     mean anticipation / recovery x 100 (available pairs)
+Coll.-A        % of pairs with a Route A collision
+Block-A        % of pairs failing the Route A blocking / timeout gate
+=============  ===================================================================================
+
+The paper's table is the cooperative model under the *warning* condition; both conditions are
+computed (``condition`` column) and the warning rows are what the command line prints.  All
+variants share one compiled rollout (they change protocol data only).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from lantern_jax.constants import DT
+from lantern_jax.evaluate import CONDITIONS, EvalResult, evaluate, package_versions
+from lantern_jax.policies.base import Policy
+from lantern_jax.scenarios.suite import Suite, load_suite
+from lantern_jax.scoring.aggregate import decomposition_table, family_scores
+
+#: (ablation name, row label) in the paper's order; "none" is the full protocol.
+VARIANTS: tuple[tuple[str, str], ...] = (
+    ("none", "Full temporal protocol"),
+    ("late_onset", "Late warning onset"),
+    ("warning_beyond_termination", "Warning beyond termination"),
+    ("no_anti_deadlock", "No anti-deadlock rule"),
+    ("noisy_position", "Noisy warning position"),
+    ("held_out_paraphrase", "Held-out warning paraphrase"),
+)
+TABLE_COLUMNS = ("CUS", "A-Prog.", "Event Exp.", "Ant.", "Rec.", "Coll.-A", "Block-A")
+
+
+@dataclasses.dataclass
+class AblationResult:
+    """Everything :func:`run_ablations` produces."""
+
+    table: pd.DataFrame  # model, condition, variant, label, then TABLE_COLUMNS (0..100)
+    route_table: pd.DataFrame  # every variant's route rows; condition "<c>" or "<c>:<variant>"
+    manifest: dict
+    results: dict[str, EvalResult]  # per variant
+
+
+def variant_condition(condition: str, variant: str) -> str:
+    """The route table's condition label of a variant's row (``"warning:late_onset"``)."""
+    return condition if variant == "none" else f"{condition}:{variant}"
+
+
+def ablation_rows(route_table: pd.DataFrame) -> pd.DataFrame:
+    """The table's columns for every (model, condition) group of one variant's route rows.
+
+    Returns:
+        DataFrame with ``model, condition`` and :data:`TABLE_COLUMNS`.
+    """
+    fam = family_scores(route_table)
+    dec = decomposition_table(route_table)
+    rows = []
+    for (model, cond), g in route_table.groupby(["model", "condition"], sort=False):
+        d = dec.loc[(model, cond)]
+        rows.append({
+            "model": model,
+            "condition": cond,
+            "CUS": float(fam.loc[(model, cond), "Overall"]),
+            "A-Prog.": float(d["A-Prog."]),
+            "Event Exp.": 100.0 * float(np.mean(g["event_exposed"].to_numpy() == 1)),
+            "Ant.": float(d["Ant."]),
+            "Rec.": float(d["Rec."]),
+            "Coll.-A": float(d["Coll.-A"]),
+            "Block-A": float(d["Block-A"]),
+        })  # fmt: skip
+    return pd.DataFrame(rows, columns=["model", "condition", *TABLE_COLUMNS])
+
+
+def run_ablations(
+    policy: str | Policy,
+    suite: Suite | str = "lantern-v1",
+    policy_params: Any = None,
+    variants: Sequence[str] | None = None,
+    progress: bool = True,
+) -> AblationResult:
+    """Evaluate ``policy`` under the full protocol and every variant; build the table.
+
+    Args:
+        policy: a registered name or a :class:`Policy`.
+        suite: a :class:`Suite` or a suite id / manifest path.
+        policy_params: the policy's parameters (default: its ``init``).
+        variants: ablation names to run (default: all of :data:`VARIANTS`, in that order).
+        progress: show progress bars.
+
+    Raises:
+        ValueError: for an unknown variant (listing the valid ones).
+    """
+    known = dict(VARIANTS)
+    names = [v for v, _ in VARIANTS] if variants is None else list(variants)
+    unknown = [v for v in names if v not in known]
+    if unknown:
+        raise ValueError(f"unknown ablation(s) {unknown}; valid: {', '.join(known)}")
+    s = load_suite(suite) if isinstance(suite, str) else suite
+    results, tables, routes = {}, [], []
+    for v in names:
+        r = evaluate([policy], [policy_params], suite=s, ablation=v, progress=progress)
+        results[v] = r
+        t = ablation_rows(r.route_table)
+        t.insert(2, "variant", v)
+        t.insert(3, "label", known[v])
+        tables.append(t)
+        rt = r.route_table.copy()
+        rt["condition"] = [variant_condition(c, v) for c in rt["condition"]]
+        routes.append(rt)
+    first = results[names[0]].manifest
+    manifest = dict(
+        suite_id=s.suite_id, suite_sha256=s.suite_sha256, suite_seed=s.seed,
+        num_pairs=len(s.pairs), conditions=list(CONDITIONS), dt_s=DT,
+        variants=[dict(name=v, label=known[v], policies=results[v].manifest["policies"])
+                  for v in names],
+        policy_init_seed=first["policy_init_seed"], packages=package_versions(),
+    )  # fmt: skip
+    return AblationResult(
+        table=pd.concat(tables, ignore_index=True),
+        route_table=pd.concat(routes, ignore_index=True),
+        manifest=manifest,
+        results=results,
+    )
