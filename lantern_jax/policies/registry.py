@@ -11,13 +11,14 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from lantern_jax.policies import reference
+from lantern_jax.policies import learned_ppo, reference
 from lantern_jax.policies.base import Policy
 
 _REGISTRY: dict[str, Callable[[], Policy]] = {
     "expert": reference.expert_policy,
     "ego": reference.ego_policy,
     "coop": reference.coop_policy,
+    "ppo": learned_ppo.ppo_policy,
 }
 
 
