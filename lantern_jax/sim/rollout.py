@@ -23,6 +23,7 @@ import jax
 import jax.numpy as jnp
 
 from lantern_jax.constants import DT
+from lantern_jax.sim.distributed import batch_mesh
 from lantern_jax.sim.record import TickRecord
 from lantern_jax.sim.state import State, init_state
 from lantern_jax.sim.step import step
@@ -143,7 +144,7 @@ def rollout_batch_parallel(
     if pad:
         scenarios = pad_tree(scenarios)
         start = None if start is None else pad_tree(start)
-    mesh = jax.make_mesh((n_dev,), ("batch",), axis_types=(jax.sharding.AxisType.Auto,))
+    mesh = batch_mesh()  # every device of every process (lantern_jax.sim.distributed)
     spec = jax.sharding.NamedSharding(mesh, PartitionSpec("batch"))
     scenarios = jax.lax.with_sharding_constraint(scenarios, spec)
     if start is not None:
