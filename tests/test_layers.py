@@ -24,7 +24,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("scenarios",),  # roads, families, protocol, warnings, suites (NumPy builders + JAX protocol)
     ("policies",),  # reference planners and the registry
     ("sim",),  # one tick and the rollouts
-    ("evaluate", "generate", "envs"),  # whole-suite evaluation, suite generation, brax env
+    ("evaluate", "generate", "envs", "stream"),  # evaluation, generation, brax env, chunks
     ("report", "viz"),  # tables, files, plots
     ("cli", "__main__"),  # the command line
 )
