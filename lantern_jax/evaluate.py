@@ -444,6 +444,8 @@ def _manifest(s: Suite, ablation: str, execs: Executions, runs: list[PolicyRun])
             for r in runs
         ],
         policy_init_seed=0,
+        devices=jax.device_count(),  # every process's devices (the global mesh)
+        processes=jax.process_count(),
         packages=package_versions(),
     )
 

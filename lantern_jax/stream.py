@@ -71,11 +71,15 @@ def stress_source(suite: Suite | str = "lantern-v1", seed: int = 0, ablation: st
     return (lambda ids: make(jnp.asarray(ids, jnp.int32))), execs.max_ticks + slack, n_base
 
 
+def _finalize(states) -> Any:
+    return finalize(states.telemetry)
+
+
 @dataclasses.dataclass
 class StreamResult:
     """Per-execution outputs of a streamed workload."""
 
-    metrics: dict[str, np.ndarray]  # ExecutionMetrics fields, (count,) each
+    metrics: dict[str, np.ndarray]  # what ``collect`` keeps (ExecutionMetrics), (count, ...)
     seconds_compile: float
     seconds_total: float
     chunks: int
@@ -89,6 +93,7 @@ def stream_executions(
     max_ticks: int,
     chunk: int = 4096,
     progress: bool = True,
+    collect: Callable[[Any], Any] | None = None,
 ) -> StreamResult:
     """Run ``count`` executions from ``source`` in chunks of ``chunk``; keep their outputs.
 
@@ -100,6 +105,9 @@ def stream_executions(
         max_ticks: static horizon (covers every execution).
         chunk: executions per chunk (the last one is padded with copies of its first id).
         progress: show a progress bar (executions).
+        collect: what to keep of a chunk's final states: ``collect(states)`` -> a flat
+            dataclass or dict of per-execution arrays (default: ``finalize`` of the telemetry,
+            the :class:`~lantern_jax.scoring.metrics.ExecutionMetrics`).
     """
     metrics: dict[str, np.ndarray] = {}
     t0, t_compile, n_chunks = time.perf_counter(), 0.0, 0
@@ -113,12 +121,14 @@ def stream_executions(
             ids = np.arange(start, min(start + chunk, count))
             padded = np.concatenate([ids, np.full(chunk - len(ids), ids[0])])
             final, tc = run_executions(act, source(padded), policy_params, max_ticks)
-            out = jax.tree.map(np.asarray, finalize(final.telemetry))
-            for f in dataclasses.fields(out):
-                col = getattr(out, f.name)[: len(ids)]
-                if f.name not in metrics:
-                    metrics[f.name] = np.empty((count, *col.shape[1:]), col.dtype)
-                metrics[f.name][start : start + len(ids)] = col
+            out = (collect or _finalize)(final)
+            if dataclasses.is_dataclass(out):
+                out = {f.name: getattr(out, f.name) for f in dataclasses.fields(out)}
+            for name, value in out.items():
+                col = np.asarray(value)[: len(ids)]
+                if name not in metrics:
+                    metrics[name] = np.empty((count, *col.shape[1:]), col.dtype)
+                metrics[name][start : start + len(ids)] = col
             t_compile += tc if n_chunks == 0 else 0.0
             n_chunks += 1
             if bar is not None:
