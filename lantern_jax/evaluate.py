@@ -219,7 +219,12 @@ def run_executions(
         ids = todo[k : k + group]
         padded = np.concatenate([ids, np.full(group - len(ids), ids[0])])
         part = place.get(rest(put(_take(scenarios, padded)), params, put(_take(state, padded))))
-        state = jax.tree.map(lambda full, p, ids=ids: full.at[ids].set(p[: len(ids)]), state, part)
+        # Write back with one fixed shape (padding rows go to index n and are dropped), so the
+        # update compiles once however many executions a group holds.
+        where = np.concatenate([ids, np.full(group - len(ids), n)])
+        state = jax.tree.map(
+            lambda full, p, where=where: full.at[where].set(p, mode="drop"), state, part
+        )
     return state, t_compile
 
 

@@ -71,6 +71,7 @@ def stress_source(suite: Suite | str = "lantern-v1", seed: int = 0, ablation: st
     return (lambda ids: make(jnp.asarray(ids, jnp.int32))), execs.max_ticks + slack, n_base
 
 
+@jax.jit
 def _finalize(states) -> Any:
     return finalize(states.telemetry)
 
