@@ -82,8 +82,61 @@ def expose_cpu_cores() -> None:
         os.environ["XLA_FLAGS"] = f"{flags} --xla_force_host_platform_device_count={n}".strip()
 
 
+#: Environment variable that moves the persistent compilation cache of the command line.
+CACHE_DIR_ENV = "LANTERN_JAX_CACHE_DIR"
+
+
+def compile_cache_dir() -> str:
+    """Where the command line keeps compiled programs between runs.
+
+    ``$LANTERN_JAX_CACHE_DIR`` if set, else JAX's own ``$JAX_COMPILATION_CACHE_DIR`` if set,
+    else ``$XDG_CACHE_HOME/lantern-jax/jax`` (``~/.cache/lantern-jax/jax`` by default).
+    """
+    for var in (CACHE_DIR_ENV, "JAX_COMPILATION_CACHE_DIR"):
+        if os.environ.get(var):
+            return os.environ[var]
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return os.path.join(base, "lantern-jax", "jax")
+
+
+def configure_compile_cache(enabled: bool) -> str | None:
+    """Turn JAX's persistent compilation cache on (in :func:`compile_cache_dir`) or off.
+
+    A second run of the same command then loads its compiled programs instead of compiling
+    them again (``--no-compile-cache`` turns this off).  Must run before the first compile.
+
+    Returns:
+        The cache folder, or None when disabled.
+    """
+    import jax
+
+    jax.config.update("jax_enable_compilation_cache", enabled)
+    if not enabled:
+        return None
+    path = compile_cache_dir()
+    jax.config.update("jax_compilation_cache_dir", path)
+    return path
+
+
 class UsageError(Exception):
     """A user error that ends the command with exit code 2."""
+
+
+def initialize_distributed(args: argparse.Namespace) -> None:
+    """Join JAX's distributed runtime (``--coordinator``, ``--num-processes``, ``--process-id``)
+    before anything runs on a device; the evaluation then spans every process's devices.
+
+    Raises:
+        UsageError: for an incomplete or inconsistent set of the three options.
+    """
+    n, i, addr = args.num_processes, args.process_id, args.coordinator
+    if addr is None or n is None or i is None:
+        raise UsageError("--coordinator, --num-processes and --process-id go together")
+    if n < 1 or not 0 <= i < n:
+        raise UsageError(f"--process-id must be in [0, {n}) and --num-processes >= 1")
+    import jax
+
+    jax.distributed.initialize(coordinator_address=addr, num_processes=n, process_id=i)
 
 
 def _stage(args: argparse.Namespace, msg: str) -> None:
@@ -99,6 +152,7 @@ def suite_to_manifest(suite, suite_id: str | None = None) -> dict:
         suite: the suite.
         suite_id: id stored in the manifest (default: the suite's id).
     """
+
     def pair(p) -> dict:
         d = dict(pair_id=p.pair_id, family=p.family, weather=p.weather, sha256=p.sha256,
                  params=p.params)  # fmt: skip
@@ -316,6 +370,10 @@ def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
     except PolicyError as e:
         print(f"lantern-jax evaluate: error: {e}", file=sys.stderr)
         return 1
+    import jax
+
+    if jax.process_index() != 0:  # every process has the whole result; one writes it
+        return 0
     for run in result.manifest["policies"]:
         _stage(
             args,
@@ -619,6 +677,15 @@ def cmd_diagnostics(args: argparse.Namespace, argv: Sequence[str]) -> int:
 # ---------------------------------------------------------------------------------------------
 # parser
 # ---------------------------------------------------------------------------------------------
+def _add_cache_flag(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--no-compile-cache",
+        action="store_true",
+        help="do not keep compiled programs between runs (default: kept in "
+        f"$XDG_CACHE_HOME/lantern-jax/jax; ${CACHE_DIR_ENV} moves it)",
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``lantern-jax``."""
     parser = argparse.ArgumentParser(
@@ -659,11 +726,20 @@ def build_parser() -> argparse.ArgumentParser:
     )
     ev.add_argument("--quiet", action="store_true", help="no progress bar or stage lines")
     ev.add_argument(
+        "--coordinator",
+        metavar="HOST:PORT",
+        help="run across processes with JAX's distributed runtime: address of process 0 "
+        "(with --num-processes and --process-id; process 0 writes the results)",
+    )
+    ev.add_argument("--num-processes", type=int, metavar="N", help="processes in the run")
+    ev.add_argument("--process-id", type=int, metavar="I", help="this process, 0 .. N-1")
+    ev.add_argument(
         "--config",
         metavar="TOML",
         help="experiment file with an [evaluate] table (e.g. configs/quick.toml); options "
         "given on the command line win over it",
     )
+    _add_cache_flag(ev)
     ev.set_defaults(func=cmd_evaluate)
 
     su = sub.add_parser(
@@ -689,6 +765,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--suite", default=SUITE_ID, metavar="ID|PATH", help="suite id or manifest path"
     )
     su.add_argument("--quiet", action="store_true", help="no stage lines")
+    _add_cache_flag(su)
     su.set_defaults(func=cmd_suite)
 
     po = sub.add_parser("policies", help="list registered policies", allow_abbrev=False)
@@ -713,8 +790,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     ab.add_argument("--pairs", action="append", metavar="ID[,ID...]", help="only these pair ids")
     ab.add_argument(
-        "--out", default="results/ablations", metavar="DIR", help="output folder "
-        "(default: results/ablations; the set replaces an earlier one there as a whole)"
+        "--out",
+        default="results/ablations",
+        metavar="DIR",
+        help="output folder "
+        "(default: results/ablations; the set replaces an earlier one there as a whole)",
     )
     ab.add_argument("--quiet", action="store_true", help="no progress bar or stage lines")
     ab.set_defaults(func=cmd_ablations)
@@ -797,6 +877,10 @@ def main(argv: Sequence[str] | None = None, exit_on_interrupt: bool | None = Non
         except SystemExit as e:  # --help, or an argparse usage error (already printed)
             return e.code if isinstance(e.code, int) else (0 if e.code is None else 2)
         try:
+            if hasattr(args, "no_compile_cache"):
+                configure_compile_cache(not args.no_compile_cache)
+            if getattr(args, "coordinator", None) or getattr(args, "num_processes", None):
+                initialize_distributed(args)
             return args.func(args, argv)
         except (UsageError, CommandError) as e:
             print(f"lantern-jax {args.command}: error: {e}", file=sys.stderr)

@@ -36,6 +36,7 @@ from lantern_jax.scenarios.warnings import paraphrase_text_ids
 from lantern_jax.scoring.aggregate import decomposition_table, family_scores
 from lantern_jax.scoring.metrics import finalize
 from lantern_jax.scoring.table import build_route_table
+from lantern_jax.sim.distributed import pad_batch, placement
 from lantern_jax.sim.observe import observe
 from lantern_jax.sim.rollout import rollout_batch_parallel
 from lantern_jax.sim.state import init_state
@@ -167,6 +168,13 @@ def _take(tree, idx):
     return jax.tree.map(lambda x: x[idx], tree)
 
 
+def _cut(tree, n: int):
+    """The first ``n`` executions (the rest is padding)."""
+    if jax.tree.leaves(tree)[0].shape[0] == n:
+        return tree
+    return jax.tree.map(lambda x: x[:n], tree)
+
+
 def run_executions(
     act,
     scenarios: Scenario,
@@ -180,37 +188,51 @@ def run_executions(
 
     Large batches run in two phases (see ``COMPACT_*``): results are the same executions,
     continued from their exact state, only grouped differently.  ``privileged`` must be the
-    policy's ``Policy.privileged`` flag.
+    policy's ``Policy.privileged`` flag.  Under JAX's distributed runtime (several processes)
+    every call runs on the global mesh, each process stepping its shard, and the final states
+    are gathered on every process (:mod:`lantern_jax.sim.distributed`).
     """
     n = jax.tree.leaves(scenarios)[0].shape[0]
     if compact is None:
         compact = n >= COMPACT_MIN_BATCH and max_ticks > COMPACT_AFTER_TICKS
+    place = placement()
+    params = place.replicate(policy_params)
+
+    def put(tree):
+        return place.put(pad_batch(tree, place.multiple)[0])
+
     t0 = time.perf_counter()
     if not compact:
-        exe = _executable(compiled_rollout(act, max_ticks, privileged=privileged), scenarios,
-                          policy_params)  # fmt: skip
-        return exe(scenarios, policy_params), time.perf_counter() - t0
+        sc = put(scenarios)
+        exe = _executable(compiled_rollout(act, max_ticks, privileged=privileged), sc, params)
+        return _cut(place.get(exe(sc, params)), n), time.perf_counter() - t0
     first = compiled_rollout(act, COMPACT_AFTER_TICKS, privileged=privileged)
-    rest = compiled_rollout(act, max_ticks - COMPACT_AFTER_TICKS, True, privileged)
-    exe1 = _executable(first, scenarios, policy_params)
-    group = min(COMPACT_GROUP, n)
-    sc_g = _take(scenarios, np.arange(group))
+    rest = compiled_rollout(act, max_ticks - COMPACT_AFTER_TICKS, start=True, privileged=privileged)
+    sc_all = put(scenarios)
+    exe1 = _executable(first, sc_all, params)
+    group = -(-min(COMPACT_GROUP, n) // place.multiple) * place.multiple
+    sc_g = _take(scenarios, np.arange(group) % n)
     key = ("warm", rest, group)
     if key not in _COMPILED:
         # Compile the second phase now: a call on finished (done) states runs no tick.
-        s_shape = jax.eval_shape(first, scenarios, policy_params)
+        s_shape = jax.eval_shape(first, sc_all, params)
         dummy = jax.tree.map(lambda x: jnp.zeros((group, *x.shape[1:]), x.dtype), s_shape)
         dummy = dummy.replace(done=jnp.ones((group,), bool))
-        jax.block_until_ready(rest(sc_g, policy_params, dummy))
+        jax.block_until_ready(rest(put(sc_g), params, put(dummy)))
         _COMPILED[key] = True
     t_compile = time.perf_counter() - t0
-    state = exe1(scenarios, policy_params)
+    state = _cut(place.get(exe1(sc_all, params)), n)
     todo = np.flatnonzero(~np.asarray(state.done))
     for k in range(0, len(todo), group):
         ids = todo[k : k + group]
         padded = np.concatenate([ids, np.full(group - len(ids), ids[0])])
-        part = rest(_take(scenarios, padded), policy_params, _take(state, padded))
-        state = jax.tree.map(lambda full, p, ids=ids: full.at[ids].set(p[: len(ids)]), state, part)
+        part = place.get(rest(put(_take(scenarios, padded)), params, put(_take(state, padded))))
+        # Write back with one fixed shape (padding rows go to index n and are dropped), so the
+        # update compiles once however many executions a group holds.
+        where = np.concatenate([ids, np.full(group - len(ids), n)])
+        state = jax.tree.map(
+            lambda full, p, where=where: full.at[where].set(p, mode="drop"), state, part
+        )
     return state, t_compile
 
 
@@ -450,6 +472,8 @@ def _manifest(s: Suite, ablation: str, execs: Executions, runs: list[PolicyRun])
             for r in runs
         ],
         policy_init_seed=0,
+        devices=jax.device_count(),  # every process's devices (the global mesh)
+        processes=jax.process_count(),
         packages=package_versions(),
     )
 

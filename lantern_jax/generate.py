@@ -242,8 +242,9 @@ def generate_suite(
         cands = gen.draw_round()
         rounds += 1
         if cands:
-            ok, reasons = dynamic_check([c["a"] for c in cands], [c["b"] for c in cands], batch,
-                                        validator)
+            ok, reasons = dynamic_check(
+                [c["a"] for c in cands], [c["b"] for c in cands], batch, validator
+            )
             gen.select(cands, ok, reasons)
         if progress:
             done = sum(min(v, pairs_per_slot) for v in gen.filled.values())
@@ -261,8 +262,9 @@ def generate_suite(
         validator=validator,
         rounds=rounds,
         **st,
-        expert_pass_rate={f: st["dynamic_passed"][f] / max(st["dynamic_tried"][f], 1)
-                          for f in FAMILIES},  # fmt: skip
+        expert_pass_rate={
+            f: st["dynamic_passed"][f] / max(st["dynamic_tried"][f], 1) for f in FAMILIES
+        },  # fmt: skip
         dynamic_reject_reasons={f: sorted(r)[:10] for f, r in gen.reasons.items()},
     )
     specs = [PairSpec(p["pair_id"], p["family"], p["weather"], p["params"], p["sha256"])

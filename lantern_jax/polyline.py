@@ -120,9 +120,7 @@ def interpolate(points: Array, s: Array, valid: Array, s_query: Array) -> tuple[
     return xy, heading
 
 
-def interpolate_dir(
-    points: Array, s: Array, valid: Array, s_query: Array
-) -> tuple[Array, Array]:
+def interpolate_dir(points: Array, s: Array, valid: Array, s_query: Array) -> tuple[Array, Array]:
     """Point and unit travel direction at arc ``s_query`` (:func:`interpolate` without trig).
 
     Args:

@@ -194,8 +194,13 @@ def format_premise_table(df: pd.DataFrame, tablefmt: str = "simple") -> str:
                                                    f"{rec[c]:.1f}")
             for c in FAMILY_COLUMNS
         ])  # fmt: skip
-    return tabulate(rows, headers=["", *FAMILY_COLUMNS], tablefmt=tablefmt,
-                    disable_numparse=True, colalign=("left", *["right"] * len(FAMILY_COLUMNS)))
+    return tabulate(
+        rows,
+        headers=["", *FAMILY_COLUMNS],
+        tablefmt=tablefmt,
+        disable_numparse=True,
+        colalign=("left", *["right"] * len(FAMILY_COLUMNS)),
+    )
 
 
 # ---------------------------------------------------------------------------------------------
@@ -388,9 +393,7 @@ def write_ablation_outputs(
             "x 100; Event Exp.: % of Route A executions whose event began; Coll.-A, Block-A: % "
             "of pairs failing the gate."
         )
-        md = _markdown(
-            "Ablations", note, format_ablation_table(result.table, tablefmt="github")
-        )
+        md = _markdown("Ablations", note, format_ablation_table(result.table, tablefmt="github"))
         written.append(atomic_write(out / ABLATION_MD, md))
         manifest = dict(m)
         manifest.update(extra_manifest or {})

@@ -327,9 +327,7 @@ class Occluders:
             raise ValueError(f"Occluders.extent: occluder {i} needs positive half extents")
         kind = np.asarray(self.kind)
         if np.any(v & ((kind < 0) | (kind >= NUM_OCCLUDER_KINDS))):
-            raise ValueError(
-                "Occluders.kind: must be 0 (building), 1 (wall) or 2 (parked vehicle)"
-            )
+            raise ValueError("Occluders.kind: must be 0 (building), 1 (wall) or 2 (parked vehicle)")
         return self
 
 

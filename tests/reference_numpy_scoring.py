@@ -109,9 +109,7 @@ def make_trajectory(
         return np.where(np.arange(n) >= k, t[k], INF_TIME)
 
     k_off = k_ev + int(round(warn_off_delay / DT))
-    fb_lo, fb_hi = (
-        (x_warn - 10.0, x_h) if coincident else (x_warn, x_warn + v0 * event_delay)
-    )
+    fb_lo, fb_hi = (x_warn - 10.0, x_h) if coincident else (x_warn, x_warn + v0 * event_delay)
     tr = {
         "t": t,
         "ego_speed": v,

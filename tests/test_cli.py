@@ -10,6 +10,7 @@ import contextlib
 import hashlib
 import io
 import json
+import os
 import subprocess
 import sys
 import types
@@ -336,3 +337,44 @@ def test_nonactionable_command_end_to_end(tmp_path):
     assert res.rc == 0, res.err
     na = pd.read_csv(tmp_path / "nonactionable.csv")
     assert (na["dv_max (m/s)"] == 0.0).all() and (na["RC (%)"] == 100.0).all()
+
+
+def test_compile_cache_folder_environment_and_flag(tmp_path, monkeypatch):
+    import jax
+
+    before = (jax.config.jax_enable_compilation_cache, jax.config.jax_compilation_cache_dir)
+    monkeypatch.delenv(cli.CACHE_DIR_ENV, raising=False)
+    monkeypatch.delenv("JAX_COMPILATION_CACHE_DIR", raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    try:
+        assert cli.compile_cache_dir() == str(tmp_path / "lantern-jax" / "jax")
+        monkeypatch.setenv("JAX_COMPILATION_CACHE_DIR", str(tmp_path / "jax-own"))
+        assert cli.compile_cache_dir() == str(tmp_path / "jax-own")
+        monkeypatch.setenv(cli.CACHE_DIR_ENV, str(tmp_path / "moved"))  # ours wins
+        assert cli.configure_compile_cache(True) == str(tmp_path / "moved")
+        assert jax.config.jax_enable_compilation_cache
+        assert jax.config.jax_compilation_cache_dir == str(tmp_path / "moved")
+        assert cli.configure_compile_cache(False) is None
+        assert not jax.config.jax_enable_compilation_cache
+    finally:
+        jax.config.update("jax_enable_compilation_cache", before[0])
+        jax.config.update("jax_compilation_cache_dir", before[1])
+    parser = cli.build_parser()
+    for cmd in ("evaluate", "suite"):
+        assert parser.parse_args([cmd, "--no-compile-cache"]).no_compile_cache
+        assert not parser.parse_args([cmd]).no_compile_cache
+
+
+@pytest.mark.slow
+def test_evaluate_fills_the_compile_cache_unless_told_not_to(tmp_path):
+    env = {k: v for k, v in os.environ.items() if k != "JAX_COMPILATION_CACHE_DIR"}
+    env.update(XDG_CACHE_HOME=str(tmp_path / "xdg"), LANTERN_JAX_CPU_DEVICES="1")
+    base = [sys.executable, "-m", "lantern_jax", "evaluate", "--policy", "ego", "--quiet",
+            "--pairs", "pe_0001"]  # fmt: skip
+    cache = tmp_path / "xdg" / "lantern-jax" / "jax"
+    subprocess.run([*base, "--no-compile-cache", "--out", str(tmp_path / "a")], env=env,
+                   check=True, capture_output=True)  # fmt: skip
+    assert not cache.exists()
+    subprocess.run([*base, "--out", str(tmp_path / "b")], env=env, check=True,
+                   capture_output=True)  # fmt: skip
+    assert any(cache.iterdir())

@@ -201,9 +201,7 @@ def test_padding_slots_change_nothing(sim):
     assert_trees_equal(d.telemetry, c.telemetry, "telemetry")
     assert_trees_equal(d.ego, c.ego, "ego")
     assert_trees_equal(d.protocol, c.protocol, "protocol")
-    assert_trees_equal(
-        (d.t, d.tick, d.done, d.fault), (c.t, c.tick, c.done, c.fault)
-    )
+    assert_trees_equal((d.t, d.tick, d.done, d.fault), (c.t, c.tick, c.done, c.fault))
     for f in ("xy", "yaw", "speed", "active", "s", "lat"):
         np.testing.assert_array_equal(
             getattr(d.actors, f)[:n_valid], getattr(c.actors, f)[:n_valid], f
@@ -301,9 +299,7 @@ def test_expert_plan_gradient_wrt_observation_is_finite():
 
     def plan_sum(route, actor_dir, forecast_x):
         pv = obs.privileged.replace(forecast_x=forecast_x)
-        return jnp.sum(
-            expert.act(pp, obs.replace(route=route, actor_dir=actor_dir, privileged=pv))
-        )
+        return jnp.sum(expert.act(pp, obs.replace(route=route, actor_dir=actor_dir, privileged=pv)))
 
     grads = jax.jit(jax.grad(plan_sum, argnums=(0, 1, 2)))(
         obs.route, obs.actor_dir, obs.privileged.forecast_x

@@ -201,8 +201,12 @@ def _check_occluders(w, route):
     at least ego half width + 0.5 m from the route)."""
     occ = w.occluders
     for k in np.flatnonzero(occ.valid):
-        box = rd.OccluderSpec(np.asarray(occ.center[k], np.float64), float(occ.yaw[k]),
-                              tuple(np.asarray(occ.extent[k], np.float64)), int(occ.kind[k]))
+        box = rd.OccluderSpec(
+            np.asarray(occ.center[k], np.float64),
+            float(occ.yaw[k]),
+            tuple(np.asarray(occ.extent[k], np.float64)),
+            int(occ.kind[k]),
+        )
         assert int(occ.kind[k]) in (OCC_BUILDING, OCC_WALL, OCC_PARKED_VEHICLE)
         assert rd._polyline_distance(rd._box_outline(box), route) >= EGO_HALF_WIDTH + 0.5 - 1e-3
 

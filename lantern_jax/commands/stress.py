@@ -116,4 +116,3 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     st.add_argument("--seed", type=int, default=0)
     st.add_argument("--quiet", action="store_true", help="no progress lines")
     st.set_defaults(func=cmd_stress)
-

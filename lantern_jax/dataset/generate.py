@@ -138,8 +138,10 @@ def _update_card(card: dict, k: int, names: tuple, rows: list, rejects: dict, n_
         card["rejected"][why] = card["rejected"].get(why, 0) + c
     counts = {(c["family"], c["route"]): c for c in card["counts"]}
     for r in acc:
-        c = counts.setdefault((r["family"], r["route"]),
-                              dict(family=r["family"], route=r["route"], sequences=0, frames=0))
+        c = counts.setdefault(
+            (r["family"], r["route"]),
+            dict(family=r["family"], route=r["route"], sequences=0, frames=0),
+        )
         c["sequences"] += 1
         c["frames"] += r["frames"]
         card["weathers"][r["weather"]] = card["weathers"].get(r["weather"], 0) + 1

@@ -42,9 +42,7 @@ class SceneSpec:
     sha256: str
 
 
-def plan_scenes(
-    pairs_per_family: int, seed: int, suite: Suite | None = None
-) -> list[SceneSpec]:
+def plan_scenes(pairs_per_family: int, seed: int, suite: Suite | None = None) -> list[SceneSpec]:
     """The dataset's candidate pairs, in a deterministic order (family-major, weathers cycled).
 
     Args:

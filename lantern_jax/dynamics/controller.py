@@ -151,9 +151,7 @@ def track_waypoints(ego: EgoState, waypoints: Array, friction: Array) -> tuple[A
     return jnp.where(fault, nan, steer), jnp.where(fault, nan, accel)
 
 
-def follow_plan(
-    ego: EgoState, waypoints: Array, friction: Array
-) -> tuple[EgoState, Array, Array]:
+def follow_plan(ego: EgoState, waypoints: Array, friction: Array) -> tuple[EgoState, Array, Array]:
     """One tick of the ego driving a plan: controller, fault handling, bicycle.
 
     Non-finite waypoints (or controls) are a controller fault: the ego brakes fully (friction

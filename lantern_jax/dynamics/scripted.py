@@ -29,6 +29,7 @@ from lantern_jax.times import NEVER, happened
 
 Array = jax.Array
 
+
 def trigger_time(
     trigger: Array, trigger_delay: Array, t_event: Array, deadline: Array | None = None
 ) -> Array:

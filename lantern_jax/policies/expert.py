@@ -395,6 +395,11 @@ def expert_act(params: ExpertParams, obs: Observation) -> Array:
     return jax.vmap(lambda a: route_point(obs.route, a))(arcs).astype(jnp.float32)
 
 
+#: The simulator reads this flag from the function itself (:func:`lantern_jax.sim.step.step`), so
+#: every rollout of the expert fills ``obs.privileged`` whichever entry point runs it.
+expert_act.privileged = True
+
+
 def expert_policy() -> Policy:
     """The privileged expert (upper reference); needs ``privileged=True`` rollouts."""
     return Policy(

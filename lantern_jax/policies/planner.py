@@ -167,8 +167,7 @@ def actor_constraints(
     taus = jnp.arange(FORECAST_STEPS, dtype=jnp.float32) * FORECAST_DT
     fut = obs.actor_xy[:, None, :] + obs.actor_vel[:, None, :] * taus[None, :, None]  # (A,F,2)
     arcs_all, dists_all = project_uniform(
-        route,
-        ROUTE_STEP, jnp.concatenate([obs.actor_xy, fut.reshape(-1, 2)], axis=0)
+        route, ROUTE_STEP, jnp.concatenate([obs.actor_xy, fut.reshape(-1, 2)], axis=0)
     )
     arc, dist = arcs_all[:n_act], dists_all[:n_act]
     f_arc = arcs_all[n_act:].reshape(n_act, FORECAST_STEPS)

@@ -194,4 +194,3 @@ def coop_policy() -> Policy:
         "front-camera planner + cooperative warnings as virtual constraints",
         uses_warning=True,
     )
-

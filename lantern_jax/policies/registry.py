@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from lantern_jax.policies import expert, reference
+from lantern_jax.policies import expert, learned_ppo, reference
 from lantern_jax.policies.base import Policy
 
 _REGISTRY: dict[str, Callable[[], Policy]] = {
@@ -19,6 +19,7 @@ _REGISTRY: dict[str, Callable[[], Policy]] = {
     "ego": reference.ego_policy,
     "coop": reference.coop_policy,
     "expert-v1": reference.legacy_expert_policy,
+    "ppo": learned_ppo.ppo_policy,
 }
 
 

@@ -175,9 +175,7 @@ def sample_junction(fam: str, rng: np.random.Generator, weather: str) -> dict:
     p = common_fields(rng, fam, weather)
     p["num_arms"] = int(choose(rng, fam, "num_arms"))
     p["missing_arm"] = (
-        str(choose(rng, fam, "missing_arm", ALLOWED_MISSING[fam]))
-        if p["num_arms"] == 3
-        else "none"
+        str(choose(rng, fam, "missing_arm", ALLOWED_MISSING[fam])) if p["num_arms"] == 3 else "none"
     )
     p["signalized"] = bool(rng.random() < SIGNALIZED_SHARE)
     p["red_s"] = draw(rng, fam, "red_s")

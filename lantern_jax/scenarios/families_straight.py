@@ -238,8 +238,9 @@ def build_pe(p: dict):
         clear_s=PED_CROSSING, clear_time_limit=BIG, clear_on_ego_stop=False,
         despawn_on_clear=True, force_event=True, d_safe=D_SAFE_SMALL_M,
     )  # fmt: skip
-    extra = dict(conflict_xy=line.to_xy(sc, 0.0).tolist(), ped_xy=start.tolist(),
-                 premise_times=[0.0])
+    extra = dict(
+        conflict_xy=line.to_xy(sc, 0.0).tolist(), ped_xy=start.tolist(), premise_times=[0.0]
+    )
     return finish_pair(p, PE, road_map, route, {HAZARD_SLOT: ped}, {}, sections, markers,
                        rules, extra)  # fmt: skip
 

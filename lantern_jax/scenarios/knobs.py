@@ -38,6 +38,7 @@ from lantern_jax.world import Scenario
 
 Array = jax.Array
 
+
 @dataclass(frozen=True)
 class Knob:
     """A named continuous scenario quantity: how to read it and how to write it."""
@@ -63,6 +64,7 @@ def _with_script(scenario: Scenario, slot: Array, **fields: Array) -> Scenario:
     )  # fmt: skip
     start = start_state(new)
     mask = jnp.arange(script.valid.shape[0]) == slot
+
     def keep_others(fresh, old):
         return jnp.where(mask.reshape(mask.shape + (1,) * (old.ndim - 1)), fresh, old)
 
@@ -109,22 +111,47 @@ def _lead_knob(name: str, marker: str, doc: str) -> Knob:
 KNOBS: dict[str, Knob] = {
     k.name: k
     for k in (
-        _speed_knob("hazard_speed", "the hazard's scripted speed after its trigger (and before "
-                    "it, where it already moves then, e.g. the cut-in vehicle)", None),
-        _script_knob("hazard_delay", "trigger_delay", "s",
-                     "delay of the hazard's trigger after its source (the physical event)"),
-        _script_knob("hazard_start", "s_init", "m",
-                     "where the hazard starts along its path (its arc at t = 0)"),
-        _script_knob("hazard_lateral", "lat_shift", "m",
-                     "size of the hazard's lateral manoeuvre after its trigger (+ = left)"),
-        _script_knob("hazard_manoeuvre", "lat_duration", "s",
-                     "duration of the hazard's lateral manoeuvre (the cut-in lane change)"),
-        _speed_knob("scene_speed", "speed of the family's scene actor (the OR lead van)",
-                    SCENE_SLOT),
-        _script_knob("scene_deadline", "trigger_deadline", "s",
-                     "latest trigger time of the scene actor: the OR van's own guard, the time "
-                     "at which it starts its lane change even if the event has not happened",
-                     SCENE_SLOT),
+        _speed_knob(
+            "hazard_speed",
+            "the hazard's scripted speed after its trigger (and before "
+            "it, where it already moves then, e.g. the cut-in vehicle)",
+            None,
+        ),
+        _script_knob(
+            "hazard_delay",
+            "trigger_delay",
+            "s",
+            "delay of the hazard's trigger after its source (the physical event)",
+        ),
+        _script_knob(
+            "hazard_start",
+            "s_init",
+            "m",
+            "where the hazard starts along its path (its arc at t = 0)",
+        ),
+        _script_knob(
+            "hazard_lateral",
+            "lat_shift",
+            "m",
+            "size of the hazard's lateral manoeuvre after its trigger (+ = left)",
+        ),
+        _script_knob(
+            "hazard_manoeuvre",
+            "lat_duration",
+            "s",
+            "duration of the hazard's lateral manoeuvre (the cut-in lane change)",
+        ),
+        _speed_knob(
+            "scene_speed", "speed of the family's scene actor (the OR lead van)", SCENE_SLOT
+        ),
+        _script_knob(
+            "scene_deadline",
+            "trigger_deadline",
+            "s",
+            "latest trigger time of the scene actor: the OR van's own guard, the time "
+            "at which it starts its lane change even if the event has not happened",
+            SCENE_SLOT,
+        ),
         _lead_knob("warn_lead", "s_warn", "warning point distance before the conflict point"),
         _lead_knob("event_lead", "s_event", "event point distance before the conflict point"),
     )  # fmt: skip
@@ -167,4 +194,3 @@ def set_knobs(scenario: Scenario, **values: Array) -> Scenario:
     for name, value in values.items():
         scenario = knob(name).set(scenario, value)
     return scenario
-

@@ -256,9 +256,7 @@ def warning_active(proto: ProtocolState, config: ExecutionConfig, t: Array) -> A
     hazard is seen, so the interval stays open until then.
     """
     t_on = warning_onset(proto, config)
-    t_off = jnp.where(
-        happened(proto.t_warn_off), proto.t_warn_off + config.warn_hold_extra, NEVER
-    )
+    t_off = jnp.where(happened(proto.t_warn_off), proto.t_warn_off + config.warn_hold_extra, NEVER)
     return happened(t_on) & (t >= t_on) & (t < t_off)
 
 

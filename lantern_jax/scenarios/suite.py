@@ -283,9 +283,13 @@ def _route_problem(route: object) -> str | None:
     if not isinstance(route, list) or len(route) < 2:
         return f"expected a JSON array of at least two [x, y] points, got {_type_name(route)}"
     for k, pt in enumerate(route):
-        ok = isinstance(pt, list) and len(pt) == 2 and all(
-            isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v)
-            for v in pt
+        ok = (
+            isinstance(pt, list)
+            and len(pt) == 2
+            and all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v)
+                for v in pt
+            )
         )
         if not ok:
             return f"point {k}: expected [x, y] with finite numbers, got {pt!r}"

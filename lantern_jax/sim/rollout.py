@@ -23,6 +23,7 @@ import jax
 import jax.numpy as jnp
 
 from lantern_jax.constants import DT
+from lantern_jax.sim.distributed import batch_mesh
 from lantern_jax.sim.record import TickRecord
 from lantern_jax.sim.state import State, init_state
 from lantern_jax.sim.step import step
@@ -152,13 +153,14 @@ def rollout_batch_parallel(
 
     n = jax.tree.leaves(scenarios)[0].shape[0]
     pad = (-n) % n_dev
+
     def pad_tree(tree):
         return jax.tree.map(lambda x: jnp.concatenate([x, jnp.repeat(x[:1], pad, axis=0)]), tree)
 
     if pad:
         scenarios = pad_tree(scenarios)
         start = None if start is None else pad_tree(start)
-    mesh = jax.make_mesh((n_dev,), ("batch",), axis_types=(jax.sharding.AxisType.Auto,))
+    mesh = batch_mesh()  # every device of every process (lantern_jax.sim.distributed)
     spec = jax.sharding.NamedSharding(mesh, PartitionSpec("batch"))
     scenarios = jax.lax.with_sharding_constraint(scenarios, spec)
     if start is not None:

@@ -61,13 +61,16 @@ def step(
         scenario: the execution's static scenario (closed over by the caller's scan).
         state: the state at the start of the tick.
         temperature: () float32, soft-score temperature of the telemetry's smooth accumulators.
-        privileged: static; the policy reads ``obs.privileged`` (``Policy.privileged``).
+        privileged: static; the policy reads ``obs.privileged`` (``Policy.privileged``); also
+            on whenever ``act`` carries a true ``privileged`` attribute (the expert's does).
 
     Returns:
         (the state at the end of the tick — ``state`` itself when it had already ended,
         the tick's record for plots).
     """
     cfg, script, h = scenario.config, scenario.actors, scenario.config.hazard_index
+    # A privileged act function says so itself (``act.privileged``), so no caller can forget it.
+    privileged = privileged or bool(getattr(act, "privileged", False))
     obs = observe(scenario, state, privileged)
     waypoints = act(policy_params, obs)
     if privileged:

@@ -169,8 +169,9 @@ def batched_estimator(problem: Problem, sigma: float) -> Callable:
     """``(z (R, K), eps (R, M, K)) -> Estimate`` over restarts, compiled once per static part."""
     fn = _cached(
         ("estimate", problem.static(), float(sigma)),
-        lambda: jax.jit(jax.vmap(lambda data, z, e: estimate(problem, z, e, sigma, data),
-                                 in_axes=(None, 0, 0))),  # fmt: skip
+        lambda: jax.jit(
+            jax.vmap(lambda data, z, e: estimate(problem, z, e, sigma, data), in_axes=(None, 0, 0))
+        ),  # fmt: skip
     )
     data = problem.data()
     return lambda z, eps: fn(data, z, eps)
@@ -180,8 +181,9 @@ def batched_objective(problem: Problem) -> Callable:
     """``z (N, K) -> (N,)`` surrogate values, compiled once per static part."""
     fn = _cached(
         ("objective", problem.static()),
-        lambda: jax.jit(jax.vmap(lambda data, z: soft_objective(problem, z, data),
-                                 in_axes=(None, 0))),  # fmt: skip
+        lambda: jax.jit(
+            jax.vmap(lambda data, z: soft_objective(problem, z, data), in_axes=(None, 0))
+        ),  # fmt: skip
     )
     data = problem.data()
     return lambda z: fn(data, z)

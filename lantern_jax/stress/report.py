@@ -92,11 +92,24 @@ def stress_test(
             print(f"[stress] {pair.pair_id} {pol.name}: {method}, {cfg.budget_s:g} s budget",
                   flush=True)  # fmt: skip
         if method == "gradient":
-            traces.append(search.gradient_search(problem, verifier, cfg.budget_s, cfg.restarts,
-                                                 cfg.samples, cfg.sigma, cfg.lr, cfg.seed))
+            traces.append(
+                search.gradient_search(
+                    problem,
+                    verifier,
+                    cfg.budget_s,
+                    cfg.restarts,
+                    cfg.samples,
+                    cfg.sigma,
+                    cfg.lr,
+                    cfg.seed,
+                )
+            )
         elif method == "random":
-            traces.append(search.random_search(problem, verifier, cfg.budget_s, cfg.restarts,
-                                               cfg.samples, cfg.seed))
+            traces.append(
+                search.random_search(
+                    problem, verifier, cfg.budget_s, cfg.restarts, cfg.samples, cfg.seed
+                )
+            )
         else:
             traces.append(search.cmaes_search(problem, verifier, cfg.budget_s, cfg.restarts,
                                               cfg.samples, cfg.seed))  # fmt: skip

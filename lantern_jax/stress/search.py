@@ -67,8 +67,12 @@ class Trace:
                                        evaluations=int(self.first_evaluations[r])))  # fmt: skip
         k = int(np.argmin(verdict.cus))
         if self.lowest is None or verdict.cus[k] < self.lowest["cus"]:
-            self.lowest = dict(values=values[k].tolist(), cus=float(verdict.cus[k]),
-                               failed=bool(verdict.failed[k]), expert_ok=bool(verdict.expert_ok[k]))
+            self.lowest = dict(
+                values=values[k].tolist(),
+                cus=float(verdict.cus[k]),
+                failed=bool(verdict.failed[k]),
+                expert_ok=bool(verdict.expert_ok[k]),
+            )
         self.seconds.append(elapsed)
         self.evaluations.append(evals_total)
         self.best_cus.append(self.lowest["cus"])

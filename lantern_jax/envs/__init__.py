@@ -1,0 +1,34 @@
+"""Reinforcement learning on the benchmark with brax (optional extra ``lantern-jax[rl]``).
+
+Importing this package imports brax, installs the JAX compatibility function brax's PPO needs
+(:mod:`lantern_jax.envs.compat`) and registers the environment with brax as ``lantern``::
+
+    import lantern_jax.envs
+    from brax import envs
+    env = envs.get_environment("lantern", pairs_per_family=4)
+
+``import lantern_jax`` alone never imports brax.
+"""
+
+from __future__ import annotations
+
+from brax import envs as _brax_envs
+
+from lantern_jax.envs import compat
+from lantern_jax.envs.bank import ScenarioBank, build_bank
+from lantern_jax.envs.env import EnvState, LanternEnv
+from lantern_jax.envs.wrappers import SceneResetWrapper, wrap_for_training
+
+compat.install()
+ENV_NAME = "lantern"
+_brax_envs.register_environment(ENV_NAME, LanternEnv)  # a repeated registration overwrites
+
+__all__ = [
+    "ENV_NAME",
+    "EnvState",
+    "LanternEnv",
+    "ScenarioBank",
+    "SceneResetWrapper",
+    "build_bank",
+    "wrap_for_training",
+]

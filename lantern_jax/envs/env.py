@@ -1,0 +1,134 @@
+"""The benchmark as a brax environment: one execution of a scene per episode, one tick per step.
+
+``LanternEnv`` subclasses :class:`brax.envs.Env` directly (there is no physics pipeline):
+
+* ``reset(rng)`` draws a scene from a :class:`~lantern_jax.envs.bank.ScenarioBank` (``rng`` is
+  a raw ``jax.random.PRNGKey``) and starts its execution;
+* ``step(state, action)`` maps the action (acceleration and curvature in [-1, 1]) to waypoints
+  (:func:`lantern_jax.policies.features.action_to_waypoints`) and runs one 20 Hz tick of the
+  simulator (:func:`lantern_jax.sim.step.step`: the same tick the evaluation runs);
+* the observation is :func:`lantern_jax.policies.features.observation_vector` (``OBS_SIZE``
+  slots, each documented there); the reward is documented in :mod:`lantern_jax.envs.reward`;
+* ``done`` = the execution is over (route completed, timeout, 30 m off the route, 20 s
+  blocked) or a gate has failed.
+
+The whole simulator state lives in ``pipeline_state`` (:class:`EnvState`: the bank index of the
+scene, the simulator :class:`~lantern_jax.sim.state.State` and the running score), so brax's
+``AutoResetWrapper``, which copies back ``pipeline_state`` and ``obs`` of the first state,
+restarts a consistent execution -- but always the same scene per slot.
+:class:`~lantern_jax.envs.wrappers.SceneResetWrapper` resets to a newly drawn scene instead.
+
+``info`` carries no simulator state.  ``metrics`` (summed over an episode by brax's
+``EpisodeWrapper``): ``progress`` (route completion gained this tick, so the sum is ``P``),
+``gate_failure`` (1 on the tick a gate fails), ``completed`` (1 on the tick the route is
+completed without a gate failure).
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+from brax.envs.base import Env
+from brax.envs.base import State as BraxState
+from flax import struct
+
+from lantern_jax.envs.bank import ScenarioBank, build_bank
+from lantern_jax.envs.reward import running_score
+from lantern_jax.policies.features import ACTION_SIZE, OBS_SIZE, action_to_waypoints
+from lantern_jax.policies.features import observation_vector as flat
+from lantern_jax.scoring.components import progress
+from lantern_jax.sim.observe import observe
+from lantern_jax.sim.state import State
+from lantern_jax.sim.step import step as sim_step
+
+Array = jax.Array
+
+TEMPERATURE = 0.05  # soft-accumulator temperature of the telemetry (unused by the reward)
+METRICS = ("progress", "gate_failure", "completed")
+
+
+@struct.dataclass
+class EnvState:
+    """The environment's ``pipeline_state``: everything needed to continue an execution."""
+
+    index: Array  # () int32, bank index of the scene
+    sim: State  # simulator state
+    score: Array  # () float32, running route score R (see lantern_jax.envs.reward)
+    failed: Array  # () bool, a gate has failed
+
+
+class LanternEnv(Env):
+    """Driving through the benchmark's scenes (see the module docstring).
+
+    Args:
+        bank: the scenes to draw from (default: :func:`~lantern_jax.envs.bank.build_bank` with
+            its defaults, 16 pairs per family).
+        **bank_kwargs: passed to :func:`~lantern_jax.envs.bank.build_bank` when ``bank`` is
+            not given (``pairs_per_family``, ``seed``, ``families``).
+    """
+
+    def __init__(self, bank: ScenarioBank | None = None, **bank_kwargs):
+        self.bank = build_bank(**bank_kwargs) if bank is None else bank
+
+    def start(self, index: Array) -> BraxState:
+        """The first state of the execution of bank scene ``index`` (() int32)."""
+        scenario, sim = self.bank.take(index)
+        zero = jnp.zeros((), jnp.float32)
+        pipeline = EnvState(index=index, sim=sim, score=zero, failed=jnp.asarray(False))
+        return BraxState(
+            pipeline_state=pipeline,
+            obs=flat(observe(scenario, sim)),
+            reward=zero,
+            done=zero,
+            metrics={k: zero for k in METRICS},
+            info={},
+        )
+
+    def reset(self, rng: Array) -> BraxState:
+        """Draw a scene uniformly from the bank and start it (``rng``: raw PRNGKey, (2,) uint32)."""
+        index = jax.random.randint(rng, (), 0, self.bank.size, dtype=jnp.int32)
+        return self.start(index)
+
+    def step(self, state: BraxState, action: Array) -> BraxState:
+        """One tick under ``action`` ((2,) float32 in [-1, 1]: acceleration, curvature)."""
+        ps: EnvState = state.pipeline_state
+        scenario, _ = self.bank.take(ps.index)
+        act = lambda _params, obs: action_to_waypoints(action, obs.ego_speed)  # noqa: E731
+        sim, _ = sim_step(act, None, scenario, ps.sim, jnp.float32(TEMPERATURE))
+        score, failed = running_score(sim.telemetry, sim.done, scenario.config.d_safe)
+        # Once over, an episode stays over (brax may step a done state before a reset).
+        over = ps.failed | ps.sim.done
+        score = jnp.where(over, ps.score, score)
+        failed = ps.failed | failed
+        done = sim.done | failed
+        p_old = progress.hard(ps.sim.telemetry.context)[0]
+        p_new = progress.hard(sim.telemetry.context)[0]
+        completed = done & ~failed & ~ps.sim.done
+        metrics = {
+            "progress": jnp.where(over, 0.0, p_new - p_old),
+            "gate_failure": (failed & ~ps.failed).astype(jnp.float32),
+            "completed": completed.astype(jnp.float32),
+        }
+        return state.replace(
+            pipeline_state=EnvState(index=ps.index, sim=sim, score=score, failed=failed),
+            obs=flat(observe(scenario, sim)),
+            reward=(score - ps.score).astype(jnp.float32),
+            done=done.astype(jnp.float32),
+            # other keys (e.g. a wrapper's ``reward``) are kept, as brax environments do
+            metrics={
+                **state.metrics,
+                **{k: jnp.asarray(v, jnp.float32) for k, v in metrics.items()},
+            },  # fmt: skip
+        )
+
+    @property
+    def observation_size(self) -> int:
+        return OBS_SIZE
+
+    @property
+    def action_size(self) -> int:
+        return ACTION_SIZE
+
+    @property
+    def backend(self) -> str:
+        return "jax"

@@ -1,0 +1,97 @@
+"""Where a batch of executions lives: this process's devices, or a global mesh across processes.
+
+With JAX's distributed runtime (``jax.distributed.initialize``: one process per host, each with
+its local devices), ``jax.devices()`` lists every device of every process and a jitted batched
+rollout runs on a **global mesh**: each process holds and steps only its shard of the batch.
+The executions are independent, so the rollout itself needs no communication; only the final
+states are gathered (``process_allgather``) so that every process can score the whole batch.
+
+:func:`placement` picks the right pair of functions for the current run:
+
+* one process — the batch stays as it is (the rollout splits it over the local devices
+  itself, :func:`lantern_jax.sim.rollout.rollout_batch_parallel`);
+* several processes — ``put`` builds global arrays sharded along the batch over
+  :func:`batch_mesh` (every process builds the same host batch, each process then hands over
+  only its own shard: ``jax.make_array_from_callback``), parameters are replicated, and
+  ``get`` gathers a result back into ordinary local arrays on every process.
+
+The batch must divide by the global device count; :func:`pad_batch` pads with copies of the
+first execution (cut off again after the run).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.sharding import NamedSharding, PartitionSpec
+
+BATCH_AXIS = "batch"
+
+
+def batch_mesh() -> jax.sharding.Mesh:
+    """A 1-D mesh over every device of every process, axis ``"batch"``."""
+    return jax.make_mesh(
+        (jax.device_count(),), (BATCH_AXIS,), axis_types=(jax.sharding.AxisType.Auto,)
+    )
+
+
+def pad_batch(tree: Any, multiple: int) -> tuple[Any, int]:
+    """Pad the leading axis to a multiple of ``multiple`` with copies of element 0.
+
+    Returns:
+        (padded tree, original batch size).
+    """
+    n = jax.tree.leaves(tree)[0].shape[0]
+    pad = (-n) % multiple
+    if pad:
+        tree = jax.tree.map(lambda x: jnp.concatenate([x, jnp.repeat(x[:1], pad, axis=0)]), tree)
+    return tree, n
+
+
+@dataclasses.dataclass(frozen=True)
+class Placement:
+    """How to hand a batch to the jitted rollout and how to read the result back."""
+
+    put: Callable[[Any], Any]  # batched tree -> its placed version
+    replicate: Callable[[Any], Any]  # parameters -> placed on every device
+    get: Callable[[Any], Any]  # result -> ordinary arrays of this process (whole batch)
+    multiple: int  # the batch given to ``put`` must divide by this
+    processes: int
+
+
+def _identity(tree: Any) -> Any:
+    return tree
+
+
+def _global(tree: Any, spec: PartitionSpec) -> Any:
+    sharding = NamedSharding(batch_mesh(), spec)
+
+    def make(x):
+        host = np.asarray(x)
+        return jax.make_array_from_callback(host.shape, sharding, lambda index: host[index])
+
+    return jax.tree.map(make, tree)
+
+
+def _gather(tree: Any) -> Any:
+    from jax.experimental import multihost_utils
+
+    return jax.tree.map(jnp.asarray, multihost_utils.process_allgather(tree, tiled=True))
+
+
+def placement() -> Placement:
+    """The placement for this run (see the module docstring)."""
+    if jax.process_count() == 1:
+        return Placement(_identity, _identity, _identity, 1, 1)
+    return Placement(
+        put=lambda tree: _global(tree, PartitionSpec(BATCH_AXIS)),
+        replicate=lambda tree: _global(tree, PartitionSpec()),
+        get=_gather,
+        multiple=jax.device_count(),
+        processes=jax.process_count(),
+    )
