@@ -32,6 +32,7 @@ from collections.abc import Sequence
 from lantern_jax.commands import CommandError
 from lantern_jax.commands import dataset as dataset_command
 from lantern_jax.commands import stress as stress_command
+from lantern_jax.commands import train as train_command
 
 REFERENCE_POLICIES = ("expert", "ego", "coop")
 EXIT_INTERRUPTED = 130
@@ -529,6 +530,7 @@ def build_parser() -> argparse.ArgumentParser:
     ab.set_defaults(func=cmd_ablations)
     stress_command.add_parser(sub)
     dataset_command.add_parser(sub)
+    train_command.add_parser(sub)
     return parser
 
 

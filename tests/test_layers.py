@@ -24,7 +24,8 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("scenarios",),  # roads, families, protocol, warnings, suites (NumPy builders + JAX protocol)
     ("policies",),  # reference planners and the registry
     ("sim",),  # one tick and the rollouts
-    ("evaluate", "generate", "stress", "dataset"),  # evaluation, suite generation, stress, data
+    ("evaluate", "generate", "stress", "dataset", "training"),  # evaluation, suites, stress,
+    #                                                            data, training
     ("report", "viz"),  # tables, files, plots
     ("cli", "commands", "__main__"),  # the command line
 )
