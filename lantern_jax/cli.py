@@ -9,6 +9,9 @@
     lantern-jax suite --regenerate suite.json
     lantern-jax policies
     lantern-jax ablations
+    lantern-jax wording --policy coop    # warning wording by ambiguity (paper appendix table)
+    lantern-jax diagnostics nonactionable --policy coop   # non-actionable warnings, empty road
+    lantern-jax diagnostics distance --policy coop        # near vs far warning on Route B
 
 Options may also come from an experiment file (``--config``, TOML, one ``[evaluate]`` table; see
 :func:`load_config`); an option given on the command line always wins over the file.  Options
@@ -32,7 +35,11 @@ from collections.abc import Sequence
 from lantern_jax.commands import CommandError
 from lantern_jax.commands import dataset as dataset_command
 from lantern_jax.commands import stress as stress_command
+<<<<<<< HEAD
 from lantern_jax.commands import train as train_command
+=======
+from lantern_jax.constants import FAMILIES
+>>>>>>> main
 
 REFERENCE_POLICIES = ("expert", "ego", "coop")
 EXIT_INTERRUPTED = 130
@@ -54,7 +61,8 @@ ABLATION_DESCRIPTIONS = {
     "warning_beyond_termination": "warning held 10 s beyond its termination",
     "no_anti_deadlock": "no anti-deadlock countdown: the event waits for the ego indefinitely",
     "noisy_position": "Gaussian noise (sigma 2 m) on the grounded hazard position",
-    "held_out_paraphrase": "every warning text replaced by its held-out paraphrase",
+    "held_out_paraphrase": "every warning text replaced by a held-out paraphrase of its pair's "
+    "ambiguity tier (low / medium / high, three disjoint thirds of the suite)",
 }
 
 
@@ -455,6 +463,104 @@ def cmd_ablations(args: argparse.Namespace, argv: Sequence[str]) -> int:
     return 0
 
 
+def _one_policy(args: argparse.Namespace) -> str:
+    names = resolve_policies([args.policy])
+    if len(names) != 1:
+        raise UsageError(f"--policy: give one policy name, got {', '.join(names)}")
+    return names[0]
+
+
+def _print_and_write(args: argparse.Namespace, tables: dict, note: str) -> int:
+    """Print every (title, table) and write them as CSV + Markdown into ``--out``."""
+    from tabulate import tabulate
+
+    from lantern_jax.diagnostics import write_tables
+
+    for title, df in tables.values():
+        print(title)
+        print(tabulate(df, headers="keys", showindex=False, floatfmt=".1f"))
+        print()
+    if note:
+        print(note)
+    try:
+        paths = write_tables(tables, args.out)
+    except OSError as e:
+        print(f"lantern-jax: error: cannot write results to {args.out}: {e}", file=sys.stderr)
+        return 1
+    print(f"Wrote {len(paths)} files:")
+    for path in paths:
+        print(f"  {path}")
+    return 0
+
+
+def cmd_wording(args: argparse.Namespace, argv: Sequence[str]) -> int:
+    """``lantern-jax wording``: the warning-wording table by ambiguity tier."""
+    del argv
+    policy = _one_policy(args)
+    _check_out(args.out)
+    suite = _load_suite(args)
+    _stage(args, f"{policy} on {suite.suite_id} ({len(suite)} pairs): canonical and tiered "
+                 "paraphrase warnings")  # fmt: skip
+    from lantern_jax.diagnostics import wording_table
+
+    table = wording_table(policy, suite)
+    title = (
+        f"Warning wording by ambiguity  ({policy}, suite {suite.suite_id}; Route A with warning; "
+        "retention = paraphrase / matched canonical CUS)"
+    )
+    note = (
+        "Matched no-warning = the same pairs without any warning (what ignoring the text scores)."
+    )
+    return _print_and_write(args, {"wording": (title, table)}, note)
+
+
+def cmd_diagnostics(args: argparse.Namespace, argv: Sequence[str]) -> int:
+    """``lantern-jax diagnostics nonactionable|distance``."""
+    del argv
+    policy = _one_policy(args)
+    _check_out(args.out)
+    from lantern_jax import diagnostics as dg
+
+    if args.which == "nonactionable":
+        _stage(args, f"{policy}: non-actionable warnings on an empty road")
+        table = dg.nonactionable_table(policy)
+        title = (
+            f"Non-actionable warnings  ({policy}; empty {dg.EMPTY_ROAD_LENGTH_M:.0f} m road at "
+            f"{dg.EMPTY_ROAD_SPEED_MPS:.0f} m/s, warning from t = {dg.ONSET_S:.0f} s to the end)"
+        )
+        note = (
+            "dv_max: largest additional speed reduction vs no warning; Stop: longest standstill; "
+            "non-actionable = dv_max < 2 m/s, no stop >= 1 s, RC drop <= 5 points."
+        )
+        return _print_and_write(args, {"nonactionable": (title, table)}, note)
+    suite = _load_suite(args)
+    if args.routes < 1:
+        raise UsageError(f"--routes must be >= 1 (got {args.routes})")
+    if not args.window > 0:
+        raise UsageError(f"--window must be > 0 s (got {args.window})")
+    _stage(args, f"{policy}: near vs far {args.family} warning on Route B of {suite.suite_id}")
+    try:
+        open_loop, closed_loop = dg.distance_table(
+            policy, suite, family=args.family, routes=args.routes, window_s=args.window
+        )
+    except ValueError as e:
+        raise UsageError(str(e)) from None
+    near, far = dg.DISTANCE_POSITIONS["near"], dg.DISTANCE_POSITIONS["far"]
+    tables = {
+        "distance": (
+            f"Distance-conditioned warning  ({policy}; Route B, {args.family} template at "
+            f"{near} m (near) or {far} m (far) in the ego frame from the warning point): final "
+            "predicted progress (m) of the plan at the warning point",
+            open_loop,
+        ),
+        "distance_closed_loop": (
+            f"Same runs in closed loop (warning window {args.window:.1f} s)",
+            closed_loop,
+        ),
+    }
+    return _print_and_write(args, tables, "Retention = far / no-warning predicted progress.")
+
+
 # ---------------------------------------------------------------------------------------------
 # parser
 # ---------------------------------------------------------------------------------------------
@@ -530,8 +636,53 @@ def build_parser() -> argparse.ArgumentParser:
     ab.set_defaults(func=cmd_ablations)
     stress_command.add_parser(sub)
     dataset_command.add_parser(sub)
+<<<<<<< HEAD
     train_command.add_parser(sub)
+=======
+    _add_language_commands(sub)
+>>>>>>> main
     return parser
+
+
+def _add_language_commands(sub) -> None:
+    """``wording`` and ``diagnostics`` (paper appendices on warning language)."""
+    wo = sub.add_parser(
+        "wording",
+        allow_abbrev=False,
+        help="warning wording by ambiguity tier (paraphrase vs canonical CUS)",
+        description="Run a policy on the suite with the canonical warnings and with held-out "
+        "paraphrases of three ambiguity tiers (three disjoint thirds of the suite), print and "
+        "write the paraphrase CUS, matched canonical CUS, retention and collision rate per tier.",
+    )
+    wo.add_argument("--policy", default="coop", metavar="NAME", help="policy (default: coop)")
+    wo.add_argument("--suite", default="lantern-v1", metavar="ID|PATH", help="suite id or path")
+    wo.add_argument(
+        "--pairs-per-family", type=int, metavar="N", help="only the first N pairs of each family"
+    )
+    wo.add_argument("--out", default="results/language", metavar="DIR", help="output folder")
+    wo.add_argument("--quiet", action="store_true", help="no stage lines")
+    wo.set_defaults(func=cmd_wording, pairs=None)
+
+    dg = sub.add_parser(
+        "diagnostics",
+        allow_abbrev=False,
+        help="non-actionable and distance-conditioned warning diagnostics",
+        description="nonactionable: the paper's five non-actionable warnings on an empty road "
+        "(max additional speed reduction, longest stop, route completion, criterion). "
+        "distance: a family's warning at a near vs a far ego-frame position on Route B "
+        "(final predicted progress; closed-loop speed, stop and completion).",
+    )
+    dg.add_argument("which", choices=("nonactionable", "distance"), help="which diagnostic")
+    dg.add_argument("--policy", default="coop", metavar="NAME", help="policy (default: coop)")
+    dg.add_argument("--suite", default="lantern-v1", metavar="ID|PATH", help="suite (distance)")
+    dg.add_argument("--family", default="PE", choices=FAMILIES, help="family (distance)")
+    dg.add_argument("--routes", type=int, default=3, metavar="N", help="Route B count (distance)")
+    dg.add_argument(
+        "--window", type=float, default=5.0, metavar="S", help="warning window, s (distance)"
+    )
+    dg.add_argument("--out", default="results/language", metavar="DIR", help="output folder")
+    dg.add_argument("--quiet", action="store_true", help="no stage lines")
+    dg.set_defaults(func=cmd_diagnostics, pairs=None, pairs_per_family=None)
 
 
 def _interrupted(exit_process: bool) -> int:

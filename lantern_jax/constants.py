@@ -52,6 +52,12 @@ TRIGGER_CLOCK = 0  # trigger at t = trigger_delay
 TRIGGER_EVENT = 1  # trigger at t = t_event + trigger_delay (the protocol's physical event)
 TRIGGER_NEVER = 2  # never triggers (Route B stand-ins)
 
+# --- warning overrides (ExecutionConfig.override_*) --------------------------------------------
+OVERRIDE_ANCHOR_START = 0  # override window times count from the start of the execution
+OVERRIDE_ANCHOR_WARN_POINT = 1  # ... from the ego reaching the warning point (both routes)
+OVERRIDE_FRAME_WORLD = 0  # override position fixed in the world frame (grounded every tick)
+OVERRIDE_FRAME_EGO = 1  # override position fixed in the ego frame (x forward, y right)
+
 # --- traffic-light states ---------------------------------------------------------------------
 LIGHT_GREEN = 0
 LIGHT_YELLOW = 1

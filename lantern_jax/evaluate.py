@@ -32,7 +32,7 @@ from lantern_jax.constants import DT, FAMILIES
 from lantern_jax.policies.base import Policy, check_policy_output
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.suite import Suite, build_suite_scenarios, load_suite
-from lantern_jax.scenarios.warnings import paraphrase_text_id
+from lantern_jax.scenarios.warnings import paraphrase_text_ids
 from lantern_jax.scoring.aggregate import decomposition_table, family_scores
 from lantern_jax.scoring.metrics import finalize
 from lantern_jax.scoring.table import build_route_table
@@ -53,8 +53,10 @@ def _ablate(field: str, value):
 
 
 def _paraphrase(config):
-    offset = jnp.asarray(config.family * 0 + paraphrase_text_id(0), jnp.int32)
-    return config.replace(text_id=offset + config.family)
+    """Held-out paraphrases by ambiguity tier (``warnings.paraphrase_text_ids``): the pairs
+    fall into three disjoint subsets (low / medium / high ambiguity) and each pair reads a
+    paraphrase of its family and tier; the paper's ablation aggregates the three tiers."""
+    return config.replace(text_id=jnp.asarray(paraphrase_text_ids(config), jnp.int32))
 
 
 #: Ablations of the temporal protocol and the warning (paper Table "Sensitivity ...").

@@ -9,6 +9,13 @@ metres, relative to the ego box centre.  Perception masks:
 * ``visible`` — the front camera (110 deg frustum + unobstructed ray) sees the actor now;
   onboard policies must only use actors with ``visible``.
 * ``present`` — the actor exists in the world (privileged; only the ``expert`` uses it).
+
+The cooperative warning reaches a policy as language: ``warning_tokens`` are the token ids of
+the delivered text's template (:mod:`lantern_jax.language`: fixed length, ``PAD_ID`` padding, a
+``PLACEHOLDER_ID`` token where ``<FRONT_CAR_POS>`` stands), ``warning_pos`` the grounded position
+as numbers and ``warning_has_position`` whether the text states one at all (a high-ambiguity
+paraphrase or a non-actionable message does not: then ``warning_pos`` is zero and must not be
+read as a position).  ``render_warning(warning_text_id, warning_pos)`` gives the exact string.
 """
 
 from __future__ import annotations
@@ -51,7 +58,12 @@ class Observation:
     dist_to_stop: Array  # () float32, m, route distance from the ego centre to its stop line
     warning_active: Array  # () bool, a cooperative warning is being delivered now
     warning_text_id: Array  # () int32, text-bank id of the warning (-1 when inactive)
-    warning_pos: Array  # (2,) float32, m, grounded <FRONT_CAR_POS> (zeros when inactive)
+    warning_pos: Array  # (2,) float32, m, grounded <FRONT_CAR_POS> (zeros when inactive or when
+    #                     the text states no position)
+    warning_has_position: Array  # () bool, the delivered text states a position (False when
+    #                              inactive)
+    warning_tokens: Array  # (MAX_TOKENS,) int32, token ids of the delivered template (all
+    #                        PAD_ID when inactive)
 
 
 def corridor_gaps(obs: Observation) -> tuple[Array, Array]:

@@ -383,6 +383,17 @@ class ExecutionConfig:
     warn_hold_extra: Array  # () float32, s, ablation: warning held beyond termination
     pos_noise_sigma: Array  # () float32, m, ablation: Gaussian noise on the grounded position
     noise_seed: Array  # () uint32, seed of that noise
+    # Warning override (diagnostics): while the window is open the policy is delivered this
+    # text and position instead of the protocol's warning, on any route and condition; an
+    # empty window or a negative text id is "no override" (see NO_OVERRIDE).  It changes only
+    # what the policy observes, never the protocol's times or the scoring.
+    override_text_id: Array  # () int32, text-bank id delivered in the window (-1 = none)
+    override_on_s: Array  # () float32, s, window start after the anchor (NEVER = none)
+    override_off_s: Array  # () float32, s, window end (exclusive) after the anchor
+    override_anchor: Array  # () int32, OVERRIDE_ANCHOR_* (execution start / warning point)
+    override_x: Array  # () float32, m, override position: world x, or ego-frame forward
+    override_y: Array  # () float32, m, override position: world y, or ego-frame right
+    override_frame: Array  # () int32, OVERRIDE_FRAME_* (world / ego frame)
 
     def validate(self) -> ExecutionConfig:
         for f in self.__dataclass_fields__:
@@ -393,6 +404,22 @@ class ExecutionConfig:
                 raise ValueError(f"ExecutionConfig.{f}: must be > 0, got {float(getattr(self, f))}")
         check_nonneg("ExecutionConfig.pos_noise_sigma", self.pos_noise_sigma)
         check_nonneg("ExecutionConfig.warn_hold_extra", self.warn_hold_extra)
+        if int(self.override_text_id) < -1:
+            raise ValueError(
+                f"ExecutionConfig.override_text_id: {int(self.override_text_id)} (-1 = none)"
+            )
+        for f, allowed in (
+            ("override_anchor", "0 (start) or 1 (warning point)"),
+            ("override_frame", "0 (world) or 1 (ego frame)"),
+        ):
+            value = int(getattr(self, f))
+            if value not in (0, 1):
+                raise ValueError(f"ExecutionConfig.{f}: must be {allowed}, got {value}")
+        if float(self.override_off_s) < float(self.override_on_s):
+            raise ValueError(
+                f"ExecutionConfig.override_off_s: {float(self.override_off_s)} before "
+                f"override_on_s {float(self.override_on_s)}"
+            )
         fam = int(self.family)
         if not 0 <= fam < len(FAMILIES):
             raise ValueError(f"ExecutionConfig.family: {fam} outside 0..{len(FAMILIES) - 1}")
@@ -403,6 +430,13 @@ class ExecutionConfig:
                 f"{float(self.s_conflict)}"
             )
         return self
+
+
+#: :class:`ExecutionConfig` override fields of an execution without a warning override.
+NO_OVERRIDE = dict(
+    override_text_id=-1, override_on_s=NEVER, override_off_s=NEVER, override_anchor=0,
+    override_x=0.0, override_y=0.0, override_frame=0,
+)  # fmt: skip
 
 
 @struct.dataclass

@@ -157,3 +157,21 @@ def family_runs(sim, family_pairs):
 
     worlds = [w for f in FAMILIES for w in family_pairs[f][:2]]
     return worlds, sim.batch(worlds, MODE_EXPERT)
+
+
+@pytest.fixture
+def shared_runner(sim, monkeypatch):
+    """Route :func:`lantern_jax.diagnostics.run_recorded` through the session's compiled batch
+    runner (no compile of its own); ``shared_runner["mode"]`` picks the reference policy."""
+    from lantern_jax import diagnostics
+    from lantern_jax.scoring.metrics import finalize
+
+    chosen = {"mode": MODE_COOP}
+
+    def run(policy, params, scenarios):
+        del policy, params
+        final, rec = sim.batch(scenarios, chosen["mode"])
+        return final, rec, to_numpy(jax.vmap(finalize)(final.telemetry))
+
+    monkeypatch.setattr(diagnostics, "run_recorded", run)
+    return chosen

@@ -224,3 +224,64 @@ def test_shipped_configs_parse_and_bad_configs_name_the_field(tmp_path):
     bad.write_text('[evaluate]\nablaton = "none"\n')
     with pytest.raises(UsageError, match="unknown key 'ablaton'"):
         load_config(str(bad))
+
+
+# ---------------------------------------------------------------------------------------------
+# language commands: wording, diagnostics
+# ---------------------------------------------------------------------------------------------
+def test_wording_command(manifest_path, tmp_path):
+    """Same batch shape as ``evaluate`` above: the compiled rollout is shared."""
+    res = run_cli(["wording", "--policy", "coop", "--suite", str(manifest_path),
+                   "--out", str(tmp_path), "--quiet"])  # fmt: skip
+    assert res.rc == 0, res.err
+    assert "Low ambiguity" in res.out and "All tiers" in res.out and "Retention" in res.out
+    table = pd.read_csv(tmp_path / "wording.csv")
+    assert list(table.columns) == ["Wording", "n", "Paraphrase CUS", "Matched canonical",
+                                   "Retention (%)", "Coll. (%)", "Matched no-warning"]  # fmt: skip
+    assert table["n"].iloc[-1] == len(PAIRS)
+    # coop ignores paraphrases: the paraphrase CUS is the no-warning CUS (CSV keeps 4 digits)
+    all_tiers = table.iloc[-1]
+    assert all_tiers["Paraphrase CUS"] == pytest.approx(all_tiers["Matched no-warning"], rel=1e-3)
+    assert (tmp_path / "wording.md").read_text().startswith("# Warning wording by ambiguity")
+
+
+def test_diagnostics_commands(shared_runner, tmp_path):
+    res = run_cli(["diagnostics", "nonactionable", "--out", str(tmp_path), "--quiet"])
+    assert res.rc == 0, res.err
+    assert "Caution: maintenance equipment is operating behind the roadside barrier." in res.out
+    na = pd.read_csv(tmp_path / "nonactionable.csv")
+    assert len(na) == 6 and (na["Non-actionable"].iloc[1:] == "yes").all()
+    res = run_cli(["diagnostics", "distance", "--routes", "2", "--out", str(tmp_path), "--quiet"])
+    assert res.rc == 0, res.err
+    assert "(12.0, 0.5)" in res.out and "(100.0, 0.5)" in res.out
+    dist = pd.read_csv(tmp_path / "distance.csv")
+    assert list(dist["pair"]) == ["pe_0001", "pe_0002"]
+    assert len(pd.read_csv(tmp_path / "distance_closed_loop.csv")) == 6
+    assert (tmp_path / "nonactionable.csv").exists()  # an earlier set in the folder is kept
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["wording", "--policy", "nosuch"],
+        ["wording", "--policy", "coop,ego"],
+        ["wording", "--pairs-per-family", "0"],
+        ["diagnostics", "nope"],
+        ["diagnostics", "distance", "--family", "XX"],
+        ["diagnostics", "distance", "--routes", "0"],
+        ["diagnostics", "distance", "--window", "0"],
+        ["diagnostics", "nonactionable", "--policy", "nosuch"],
+    ],
+)
+def test_language_usage_errors_exit_2(argv, capsys):
+    assert cli.main(argv) == 2
+    assert capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_nonactionable_command_end_to_end(tmp_path):
+    """The command with its own compiled runner (``diagnostics.run_recorded``)."""
+    res = run_cli(["diagnostics", "nonactionable", "--policy", "coop", "--out", str(tmp_path)])
+    assert res.rc == 0, res.err
+    na = pd.read_csv(tmp_path / "nonactionable.csv")
+    assert (na["dv_max (m/s)"] == 0.0).all() and (na["RC (%)"] == 100.0).all()

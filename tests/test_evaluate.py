@@ -30,7 +30,7 @@ from lantern_jax.policies.reference import reference_act
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.report import OUTPUT_FILES, write_outputs
 from lantern_jax.scenarios.suite import load_suite
-from lantern_jax.scenarios.warnings import paraphrase_text_id
+from lantern_jax.scenarios.warnings import TIERS, get_text, paraphrase_tiers
 from lantern_jax.scoring.table import (
     compare_route_tables,
     read_route_table,
@@ -348,9 +348,15 @@ def test_noisy_position(base, ablated, suite2):
 
 def test_held_out_paraphrase(ablated, suite2):
     params, n = _route_a_params(suite2, "held_out_paraphrase")
-    fam = np.asarray(params.family)[:n]
-    want = [paraphrase_text_id(int(f)) for f in fam]
-    np.testing.assert_array_equal(np.asarray(params.text_id)[:n], want)
+    route_a = jax.tree.map(lambda x: x[:n], params)
+    tiers = paraphrase_tiers(route_a)
+    assert sorted(tiers.tolist()) == [0, 1]  # two pairs: two different tiers
+    for f, tid, tier in zip(np.asarray(params.family)[:n], np.asarray(params.text_id)[:n], tiers,
+                            strict=True):  # fmt: skip
+        e = get_text(int(tid))
+        assert (e.family, e.kind, e.tier) == (int(f), "paraphrase", TIERS[tier])
+    text = np.asarray(params.text_id)
+    np.testing.assert_array_equal(text[n : 2 * n], text[:n])  # both Route A conditions
     # coop was built for the canonical wording: a paraphrased warning changes nothing.
     rt = ablated["held_out_paraphrase"].route_table
     differ = ["condition", "t_warn_on_s"]
@@ -359,6 +365,27 @@ def test_held_out_paraphrase(ablated, suite2):
         rows(rt, "coop", "no-warning", drop=differ),
         check_exact=True,
     )
+
+
+def test_wording_table_of_a_template_matcher(base, ablated, suite2):
+    """coop understands only the canonical wording: under every tier its paraphrase CUS is its
+    no-warning CUS, so retention = no-warning / canonical."""
+    from lantern_jax.diagnostics import tier_rows
+
+    params, n = _route_a_params(suite2, "held_out_paraphrase")
+    tiers = paraphrase_tiers(jax.tree.map(lambda x: x[:n], params))
+    ids = [p.pair_id for p in suite2.pairs]
+    canon = rows(base.route_table, "coop", "warning")
+    para = rows(ablated["held_out_paraphrase"].route_table, "coop", "warning")
+    none = rows(base.route_table, "coop", "no-warning").set_index("pair_id")["CUS"]
+    t = tier_rows(canon, para, tiers, ids).set_index("Wording")
+    assert t.loc["All tiers", "n"] == len(ids)
+    assert t.loc["All tiers", "Paraphrase CUS"] == pytest.approx(none.mean())
+    for k, tier in enumerate(TIERS):
+        label = [w for w in t.index if w.lower().startswith(tier)][0]
+        members = [i for i, tk in zip(ids, tiers, strict=True) if tk == k]
+        if members:
+            assert t.loc[label, "Paraphrase CUS"] == pytest.approx(none[members].mean())
 
 
 def test_hidden_at_warning_table(base):

@@ -19,13 +19,13 @@ PACKAGE = Path(lantern_jax.__file__).parent
 LAYERS: tuple[tuple[str, ...], ...] = (
     ("constants", "times"),  # values and the time sentinel
     ("geometry", "polyline"),  # pure JAX maths
-    ("world", "observation", "files"),  # the types of a scenario and of what a policy sees; I/O
+    ("world", "observation", "files", "language"),  # scenario and observation types; I/O; tokens
     ("dynamics", "sensors", "scoring"),  # how things move, what is seen, how it is measured
     ("scenarios",),  # roads, families, protocol, warnings, suites (NumPy builders + JAX protocol)
     ("policies",),  # reference planners and the registry
     ("sim",),  # one tick and the rollouts
-    ("evaluate", "generate", "stress", "dataset", "training"),  # evaluation, suites, stress,
-    #                                                            data, training
+    ("evaluate", "generate", "stress", "dataset", "diagnostics", "training"),  # evaluation,
+    #              suites, stress testing, data, language diagnostics, training
     ("report", "viz"),  # tables, files, plots
     ("cli", "commands", "__main__"),  # the command line
 )

@@ -63,11 +63,12 @@ def text_semantics(understood_kinds: tuple[str, ...] = ("canonical",)) -> np.nda
 
     Args:
         understood_kinds: text kinds whose wording the policy was built for; other texts (e.g.
-            held-out paraphrases, non-actionable messages) map to ``SEM_NONE``.
+            held-out paraphrases, non-actionable messages) and texts of no family map to
+            ``SEM_NONE``.
     """
     out = np.full((len(TEXT_BANK),), SEM_NONE, np.int32)
     for entry in TEXT_BANK:
-        if entry.kind in understood_kinds:
+        if entry.kind in understood_kinds and entry.family >= 0:
             out[entry.text_id] = _RESPONSE_CODES[family(entry.family).response]
     return out
 

@@ -20,6 +20,7 @@ import numpy as np
 from lantern_jax.constants import BIG, MOTION_IDM, MOTION_SCRIPTED, TRIGGER_CLOCK, TRIGGER_NEVER
 from lantern_jax.scenarios import road
 from lantern_jax.world import (
+    NO_OVERRIDE,
     ActorScript,
     ActorState,
     EgoState,
@@ -127,17 +128,22 @@ def pack_actors(slots: list[ActorSpec | None], rot: np.ndarray) -> tuple[ActorSc
 CONFIG_DTYPES = {
     "family": jnp.int32, "hazard_index": jnp.int32, "ego_light": jnp.int32,
     "template_id": jnp.int32, "text_id": jnp.int32, "noise_seed": jnp.uint32,
+    "override_text_id": jnp.int32, "override_anchor": jnp.int32, "override_frame": jnp.int32,
     "is_route_a": jnp.bool_, "warning_enabled": jnp.bool_, "clear_on_ego_stop": jnp.bool_,
     "despawn_on_clear": jnp.bool_, "force_event": jnp.bool_, "late_onset": jnp.bool_,
 }  # fmt: skip
 
 
 def execution_config(fields: dict) -> ExecutionConfig:
-    """An :class:`ExecutionConfig` from a dict of Python values (every field required).
+    """An :class:`ExecutionConfig` from a dict of Python values.
+
+    Every field is required except the warning-override fields, which default to
+    :data:`~lantern_jax.world.NO_OVERRIDE` (no override).
 
     Raises:
         ValueError: naming missing or unknown fields.
     """
+    fields = {**NO_OVERRIDE, **fields}
     names = set(ExecutionConfig.__dataclass_fields__)
     missing, unknown = names - set(fields), set(fields) - names
     if missing or unknown:

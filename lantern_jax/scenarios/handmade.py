@@ -16,7 +16,15 @@ import numpy as np
 
 from lantern_jax.constants import BIG, KIND_VEHICLE, PE, ROLE_BACKGROUND
 from lantern_jax.scenarios import assemble, road
-from lantern_jax.world import ActorScript, ActorState, Lanes, Route, Scenario, TrafficLights
+from lantern_jax.world import (
+    NO_OVERRIDE,
+    ActorScript,
+    ActorState,
+    Lanes,
+    Route,
+    Scenario,
+    TrafficLights,
+)
 
 CAP_T = road.MAX_LIGHTS
 
@@ -100,7 +108,7 @@ NEUTRAL_CONFIG = dict(
     clear_on_ego_stop=False, despawn_on_clear=False, force_event=True, force_delay=2.0,
     ego_light=-1, ego_stop_s=BIG, d_safe=2.0, v_ref=8.0, friction=1.0, sensing_range=100.0,
     template_id=0, text_id=0, timeout_s=60.0, late_onset=False, warn_hold_extra=0.0,
-    pos_noise_sigma=0.0, noise_seed=0,
+    pos_noise_sigma=0.0, noise_seed=0, **NO_OVERRIDE,
 )  # fmt: skip
 
 

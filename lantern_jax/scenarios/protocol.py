@@ -23,7 +23,10 @@ once.  Per execution:
 
 Warning delivery (what a policy reads) is a function of these times and the ablation switches:
 active on ``[t_on, t_warn_off + warn_hold_extra)`` with ``t_on = t_warn_point`` (or ``t_event``
-with the late-onset ablation), and only in the warning condition of Route A.
+with the late-onset ablation), and only in the warning condition of Route A.  A warning
+override (``ExecutionConfig.override_*``, :func:`delivered_warning`) delivers a chosen text in a
+chosen window on any execution, Route B included; it changes what the policy reads, never these
+times.
 """
 
 from __future__ import annotations
@@ -31,7 +34,13 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from lantern_jax.constants import BIG, DT, EGO_HALF_WIDTH, ROLE_BACKGROUND
+from lantern_jax.constants import (
+    BIG,
+    DT,
+    EGO_HALF_WIDTH,
+    OVERRIDE_ANCHOR_WARN_POINT,
+    ROLE_BACKGROUND,
+)
 from lantern_jax.dynamics.lights import light_holds_ego
 from lantern_jax.times import NEVER, happened
 from lantern_jax.world import ActorState, ExecutionConfig, ProtocolState
@@ -248,3 +257,37 @@ def warning_active(proto: ProtocolState, config: ExecutionConfig, t: Array) -> A
         happened(proto.t_warn_off), proto.t_warn_off + config.warn_hold_extra, NEVER
     )
     return happened(t_on) & (t >= t_on) & (t < t_off)
+
+
+def override_window(proto: ProtocolState, config: ExecutionConfig, t: Array) -> Array:
+    """() bool: the warning override is open at time ``t``.
+
+    Open on ``[anchor + override_on_s, anchor + override_off_s)`` where the anchor is ``0`` or
+    the time the ego reached the warning point (``override_anchor``); never open for a negative
+    ``override_text_id``, an empty window, or an anchor that has not happened.
+    """
+    at_warn = config.override_anchor == OVERRIDE_ANCHOR_WARN_POINT
+    anchor = jnp.where(at_warn, proto.t_warn_point, 0.0)
+    return (
+        (config.override_text_id >= 0)
+        & happened(anchor)
+        & (t >= anchor + config.override_on_s)
+        & (t < anchor + config.override_off_s)
+    )
+
+
+def delivered_warning(
+    proto: ProtocolState, config: ExecutionConfig, t: Array
+) -> tuple[Array, Array, Array]:
+    """The warning the policy reads at time ``t``: the override while its window is open, else
+    the protocol's warning.
+
+    Returns:
+        active: () bool, a warning is delivered.
+        text_id: () int32, its text-bank id (-1 when inactive).
+        overridden: () bool, it is the override (its position is ``override_x/y``).
+    """
+    overridden = override_window(proto, config, t)
+    normal = warning_active(proto, config, t)
+    text_id = jnp.where(overridden, config.override_text_id, jnp.where(normal, config.text_id, -1))
+    return overridden | normal, text_id.astype(jnp.int32), overridden

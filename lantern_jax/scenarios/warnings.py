@@ -1,29 +1,73 @@
-"""Cooperative warning texts: the six canonical templates, a text bank, rendering and grounding.
+"""Cooperative warning texts: the six canonical templates, a text bank by ambiguity, rendering,
+grounding and the token tables that a rollout reads.
 
 The templates are verbatim from the paper's warning-template table.  The token
 ``<FRONT_CAR_POS>`` is never shown literally: at every step it is replaced by the hazard (or
 conflict) position ``(x, y)`` in metres in the *current ego frame*, ``x`` forward and ``y`` to
 the **right** (the paper's convention), formatted with one decimal.
 
-The text bank is a list of :class:`WarningText` entries; the canonical template of family ``f``
-has ``text_id == f`` (ids 0-5), and further entries (held-out paraphrases, non-actionable texts,
-distance-conditioned variants) are appended with :func:`add_text`, so existing ids never change.
-Inside the simulator a warning is just ``(active, text_id, grounded position)``; the strings are
-produced outside ``jit`` by :func:`render_warning` for language policies.
+The text bank (:data:`TEXT_BANK`) is a list of :class:`WarningText` entries with fixed ids:
+
+==========  ==================================================================================
+ids         entries
+==========  ==================================================================================
+0-5         canonical template of family ``f`` (``text_id == f``)
+6-11        first low-ambiguity paraphrase of each family (:func:`paraphrase_text_id`)
+12-59       per family (8 each, family order): low 2-3, medium 1-3, high 1-3
+60-64       the five non-actionable warnings of the paper's appendix, verbatim (no family)
+==========  ==================================================================================
+
+Ambiguity tiers of the paraphrases (paper appendix "Additional Ablation Analysis"):
+
+* **low** — local wording changes; the event and the position are kept;
+* **medium** — the event is described less directly; the position is kept;
+* **high** — only a generic description of the impending interaction, **no position**.
+
+A text states a position exactly when it contains ``<FRONT_CAR_POS>``; one that does not (the
+high tier, the non-actionable texts) delivers no position to the policy, and the observation says
+so (``Observation.warning_has_position`` False, ``warning_pos`` zero).
+
+Distance-conditioned warnings (paper appendix "Diagnostics with Non-Actionable Language
+Inputs") are a family's canonical text grounded at a near or a far position
+(:data:`DISTANCE_POSITIONS`, the paper's (12.0, 0.5) m and (100.0, 0.5) m), delivered with a
+warning override (``ExecutionConfig.override_*``); ``render_warning(0, (12.0, 0.5))`` is the
+string a language model reads.
+
+Inside the simulator a warning is ``(active, text_id, grounded position)``: the token ids of
+every text are computed once, outside ``jit``, into :func:`token_table` (text id -> padded ids,
+:mod:`lantern_jax.language`), which a rollout indexes by id; strings are produced outside
+``jit`` by :func:`render_warning`.  Texts added with :func:`add_text` after a rollout was
+compiled are unknown to that compiled rollout (it reads them as padding with no position): add
+texts before compiling.
 """
 
 from __future__ import annotations
 
+import hashlib
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from lantern_jax.constants import FAMILIES
+from lantern_jax import language
+from lantern_jax.constants import (
+    FAMILIES,
+    OVERRIDE_ANCHOR_START,
+    OVERRIDE_ANCHOR_WARN_POINT,
+    OVERRIDE_FRAME_EGO,
+    OVERRIDE_FRAME_WORLD,
+)
+from lantern_jax.times import NEVER
+from lantern_jax.world import Scenario
 
-TOKEN = "<FRONT_CAR_POS>"
+Array = jax.Array
+
+TOKEN = language.PLACEHOLDER  # "<FRONT_CAR_POS>"
 TEXT_KINDS = ("canonical", "paraphrase", "non_actionable")
+TIERS = ("low", "medium", "high")
+NO_FAMILY = -1  # family of a text that belongs to no scenario family (non-actionable)
 
 #: Canonical templates, index = family index (paper, warning-template table).
 TEMPLATES: tuple[str, ...] = (
@@ -39,68 +83,239 @@ TEMPLATES: tuple[str, ...] = (
 )
 assert len(TEMPLATES) == len(FAMILIES)
 
+P = TOKEN
+#: Paraphrases per family and tier (three each).  The first low-tier text of each family keeps
+#: id ``6 + family``.
+PARAPHRASES: dict[str, dict[str, tuple[str, ...]]] = {
+    "PE": {
+        "low": (
+            f"Watch out: someone on foot near {P} is stepping into your lane.",
+            f"A pedestrian at {P} is about to step into the ego lane.",
+            f"Caution, a person walking at {P} will enter your lane in a moment.",
+        ),
+        "medium": (
+            f"Someone near {P} may end up on the road ahead.",
+            f"There is movement at the roadside near {P} that could reach your path.",
+            f"Keep an eye on the area around {P} as it may not stay clear.",
+        ),
+        "high": (
+            "Someone may cross in front of you.",
+            "Watch for people near the road ahead.",
+            "A road user may step out ahead.",
+        ),
+    },
+    "VC": {
+        "low": (
+            f"A car around {P} is about to merge in front of you.",
+            f"The vehicle at {P} is going to change into the ego lane shortly.",
+            f"Heads up: the car at {P} will move into your lane soon.",
+        ),
+        "medium": (
+            f"The car near {P} may not stay in its lane.",
+            f"Traffic beside you near {P} could come across.",
+            f"Watch the vehicle around {P} because its path may meet yours.",
+        ),
+        "high": (
+            "A nearby vehicle may change lanes.",
+            "Another car may move in front of you.",
+            "Watch for merging traffic.",
+        ),
+    },
+    "OR": {
+        "low": (
+            f"Something is stopped in your lane near {P} and the road ahead is blocked.",
+            f"A stationary object at {P} is obstructing the ego lane.",
+            f"The ego lane is blocked by a stopped object at {P} ahead.",
+        ),
+        "medium": (
+            f"The lane near {P} is not clear.",
+            f"There may be something on the road around {P} ahead.",
+            f"Expect an obstruction near {P} on your way.",
+        ),
+        "high": (
+            "The road ahead may be blocked.",
+            "There may be an obstacle ahead.",
+            "The way ahead may not be clear.",
+        ),
+    },
+    "LWW": {
+        "low": (
+            f"A car driving against traffic near {P} will pass through your left turn. "
+            "Wait before turning.",
+            f"A vehicle going the wrong way at {P} will cut across your left turn. "
+            "Yield before turning left.",
+            f"Wrong-way traffic at {P} is about to cross the ego left-turn path, so give way "
+            "before the turn.",
+        ),
+        "medium": (
+            f"A car near {P} is not following the usual direction. Take care in the left turn.",
+            f"Oncoming traffic near {P} may be in the wrong lane for your left turn.",
+            f"The left turn may not be clear, so check the vehicle near {P} first.",
+        ),
+        "high": (
+            "Take care when turning left.",
+            "Another vehicle may be in your way in the turn.",
+            "Be ready to wait before turning left.",
+        ),
+    },
+    "RWW": {
+        "low": (
+            f"A car driving against traffic near {P} will pass through your right turn. "
+            "Wait before turning.",
+            f"A vehicle going the wrong way at {P} will cut across your right turn. "
+            "Yield before turning right.",
+            f"Wrong-way traffic at {P} is about to cross the ego right-turn path, so give way "
+            "before the turn.",
+        ),
+        "medium": (
+            f"A car near {P} is not following the usual direction. Take care in the right turn.",
+            f"Oncoming traffic near {P} may be in the wrong lane for your right turn.",
+            f"The right turn may not be clear, so check the vehicle near {P} first.",
+        ),
+        "high": (
+            "Take care when turning right.",
+            "Another vehicle may be in your way in the turn.",
+            "Be ready to wait before turning right.",
+        ),
+    },
+    "RTY": {
+        "low": (
+            f"Cross traffic near {P} is heading through your right turn. Let it pass first.",
+            f"A vehicle at {P} is about to cross the ego right-turn path. Give way before "
+            "turning right.",
+            f"The car at {P} will pass through your right turn, so wait for it before turning.",
+        ),
+        "medium": (
+            f"Traffic near {P} may be coming through the junction.",
+            f"The junction near {P} may not be clear for your turn.",
+            f"Check the crossing traffic around {P} before the right turn.",
+        ),
+        "high": (
+            "Traffic may be crossing ahead.",
+            "Be careful at the junction.",
+            "Other vehicles may need to pass first.",
+        ),
+    },
+}
+del P
+
+#: The five non-actionable warnings of the paper's appendix, verbatim.
+NON_ACTIONABLE: tuple[str, ...] = (
+    "Caution: maintenance equipment is operating behind the roadside barrier.",
+    "Warning: a delivery van is parked in an off-road service area.",
+    "Caution: a pedestrian is waiting behind a roadside fence and remains clear of traffic.",
+    "Warning: a cyclist is traveling away on a physically separated path.",
+    "Caution: traffic is restricted on a parallel road outside the ego route.",
+)
+
+#: Ego-frame positions (x forward, y right; m) of the distance-conditioned diagnostic (paper).
+DISTANCE_POSITIONS: dict[str, tuple[float, float]] = {"near": (12.0, 0.5), "far": (100.0, 0.5)}
+
 
 @dataclass(frozen=True)
 class WarningText:
     """One entry of the text bank."""
 
     text_id: int
-    family: int  # index into constants.FAMILIES
+    family: int  # index into constants.FAMILIES, NO_FAMILY for non-actionable texts
     kind: str  # one of TEXT_KINDS
-    text: str  # may contain TOKEN (non-actionable texts need not)
+    text: str  # may contain TOKEN (then it states a position)
+    tier: str = ""  # one of TIERS for paraphrases, "" otherwise
+
+    @property
+    def has_position(self) -> bool:
+        """The text states a position (contains ``<FRONT_CAR_POS>``)."""
+        return TOKEN in self.text
 
 
-def _family_index(family: int | str) -> int:
+def _family_index(family: int | str, allow_none: bool = False) -> int:
     if isinstance(family, str):
         if family not in FAMILIES:
             raise ValueError(f"family: {family!r} not one of {{{', '.join(FAMILIES)}}}")
         return FAMILIES.index(family)
     f = int(family)
+    if allow_none and f == NO_FAMILY:
+        return f
     if not 0 <= f < len(FAMILIES):
         raise ValueError(f"family: {f} outside 0..{len(FAMILIES) - 1}")
     return f
 
 
-#: The text bank; canonical entries first so that ``text_id == family`` for them.
-TEXT_BANK: list[WarningText] = [WarningText(i, i, "canonical", t) for i, t in enumerate(TEMPLATES)]
+def _check_entry(kind: str, tier: str, text: str) -> None:
+    """Bank rules: spacing around the placeholder, at most one position, tiers consistent."""
+    language.check_template(text, TOKEN)
+    n = text.count(TOKEN)
+    if n > 1:
+        raise ValueError(f"text: states {n} positions; a warning grounds one ({text!r})")
+    if kind == "paraphrase" and tier not in TIERS:
+        raise ValueError(f"tier: {tier!r} not one of {{{', '.join(TIERS)}}}")
+    if kind != "paraphrase" and tier:
+        raise ValueError(f"tier: only paraphrases have a tier, got {tier!r} for kind {kind!r}")
+    if tier in ("low", "medium") and n != 1:
+        raise ValueError(f"text: a {tier}-ambiguity paraphrase must state the position ({text!r})")
+    if tier == "high" and n:
+        raise ValueError(f"text: a high-ambiguity paraphrase states no position ({text!r})")
 
-#: Held-out paraphrases (ids 6-11, family order): same meaning, different wording.  Used by the
-#: ``held_out_paraphrase`` ablation; a policy built for the canonical wording need not
-#: understand them.
-PARAPHRASES: tuple[str, ...] = (
-    "Watch out: someone on foot near <FRONT_CAR_POS> is stepping into your lane.",
-    "A car around <FRONT_CAR_POS> is about to merge in front of you.",
-    "Something is stopped in your lane near <FRONT_CAR_POS>; the road ahead is blocked.",
-    "A car driving against traffic near <FRONT_CAR_POS> will pass through your left turn. "
-    "Wait before turning.",
-    "A car driving against traffic near <FRONT_CAR_POS> will pass through your right turn. "
-    "Wait before turning.",
-    "Cross traffic near <FRONT_CAR_POS> is heading through your right turn. Let it pass first.",
-)
-TEXT_BANK += [
-    WarningText(len(TEMPLATES) + i, i, "paraphrase", t) for i, t in enumerate(PARAPHRASES)
-]
+
+def _initial_bank() -> list[WarningText]:
+    bank = [WarningText(i, i, "canonical", t) for i, t in enumerate(TEMPLATES)]
+    for f, fam in enumerate(FAMILIES):
+        bank.append(WarningText(len(bank), f, "paraphrase", PARAPHRASES[fam]["low"][0], "low"))
+    for f, fam in enumerate(FAMILIES):
+        for tier in TIERS:
+            for text in PARAPHRASES[fam][tier][1 if tier == "low" else 0 :]:
+                bank.append(WarningText(len(bank), f, "paraphrase", text, tier))
+    for text in NON_ACTIONABLE:
+        bank.append(WarningText(len(bank), NO_FAMILY, "non_actionable", text))
+    for e in bank:
+        _check_entry(e.kind, e.tier, e.text)
+    return bank
+
+
+#: The text bank; canonical entries first so that ``text_id == family`` for them.
+TEXT_BANK: list[WarningText] = _initial_bank()
 
 
 def paraphrase_text_id(family: int) -> int:
-    """Text id of a family's held-out paraphrase."""
-    return len(TEMPLATES) + int(family)
+    """Text id of a family's first low-ambiguity paraphrase (ids 6-11, as before the tiers)."""
+    return len(TEMPLATES) + _family_index(family)
 
 
-def add_text(family: int | str, kind: str, text: str) -> int:
+def tier_text_ids(family: int | str, tier: str) -> tuple[int, ...]:
+    """Ids of a family's paraphrases of one ambiguity tier, in bank order."""
+    f = _family_index(family)
+    if tier not in TIERS:
+        raise ValueError(f"tier: {tier!r} not one of {{{', '.join(TIERS)}}}")
+    return tuple(
+        e.text_id for e in TEXT_BANK if e.kind == "paraphrase" and e.family == f and e.tier == tier
+    )
+
+
+def non_actionable_text_ids() -> tuple[int, ...]:
+    """Ids of the non-actionable texts, in bank order (the paper's five first)."""
+    return tuple(e.text_id for e in TEXT_BANK if e.kind == "non_actionable")
+
+
+def add_text(family: int | str, kind: str, text: str, tier: str = "") -> int:
     """Append a text to :data:`TEXT_BANK` and return its new ``text_id``.
 
+    Args:
+        family: family index or code (``NO_FAMILY`` allowed for non-actionable texts).
+        kind: one of :data:`TEXT_KINDS` except ``"canonical"``.
+        text: the template (spacing rule: :func:`lantern_jax.language.check_template`).
+        tier: the ambiguity tier of a paraphrase.
+
     Raises:
-        ValueError: for an unknown family or kind, an empty text, or a second canonical text.
+        ValueError: for an unknown family, kind or tier, a canonical text, an empty text, a
+            text that breaks the spacing rule or its tier's position rule.
     """
-    f = _family_index(family)
     if kind not in TEXT_KINDS:
         raise ValueError(f"kind: {kind!r} not one of {{{', '.join(TEXT_KINDS)}}}")
     if kind == "canonical":
         raise ValueError("kind: the canonical texts are fixed (ids 0-5)")
-    if not isinstance(text, str) or not text.strip():
-        raise ValueError("text: must be a non-empty string")
-    entry = WarningText(len(TEXT_BANK), f, kind, text)
+    f = _family_index(family, allow_none=kind == "non_actionable")
+    _check_entry(kind, tier, text)
+    entry = WarningText(len(TEXT_BANK), f, kind, text, tier)
     TEXT_BANK.append(entry)
     return entry.text_id
 
@@ -113,6 +328,80 @@ def get_text(text_id: int) -> WarningText:
     return TEXT_BANK[i]
 
 
+# ---------------------------------------------------------------------------------------------
+# ambiguity tiers over a suite
+# ---------------------------------------------------------------------------------------------
+def _tier_order(families: Sequence[str | int], keys: Sequence[str]) -> np.ndarray:
+    """Rank of every pair when ordered by (family, SHA-256 of its key)."""
+    if len(families) != len(keys):
+        raise ValueError(f"families/keys: {len(families)} families but {len(keys)} keys")
+    fam = [_family_index(f) for f in families]
+    digest = [hashlib.sha256(str(k).encode()).hexdigest() for k in keys]
+    order = sorted(range(len(fam)), key=lambda i: (fam[i], digest[i], i))
+    rank = np.empty(len(fam), np.int64)
+    rank[order] = np.arange(len(fam))
+    return rank
+
+
+def ambiguity_tiers(families: Sequence[str | int], keys: Sequence[str]) -> np.ndarray:
+    """(n,) int: the ambiguity tier (index into :data:`TIERS`) of every pair of a suite.
+
+    The pairs are ordered by family (paper order) and, within a family, by the SHA-256 of
+    their key (e.g. the pair's generation seed); the ``k``-th pair of that order gets tier
+    ``k mod 3``.
+    The three tiers are therefore disjoint, cover the suite, differ in size by at most one
+    (the 120-pair suite: 40 each, 6-7 per family) and do not depend on the order in which the
+    suite lists its pairs.
+
+    Args:
+        families: (n,) family codes or indices.
+        keys: (n,) a stable identity per pair (:func:`paraphrase_text_ids` uses the pair's
+            generation seed).
+    """
+    return _tier_order(families, keys) % len(TIERS)
+
+
+def held_out_text_ids(families: Sequence[str | int], keys: Sequence[str]) -> np.ndarray:
+    """(n,) int32: the held-out paraphrase text of every pair, by its ambiguity tier.
+
+    The tier comes from :func:`ambiguity_tiers`; within a tier the ``k``-th pair of the order
+    uses paraphrase ``(k // 3) mod 3`` of its family and tier, so every paraphrase is used.
+    """
+    rank = _tier_order(families, keys)
+    out = np.empty(len(rank), np.int32)
+    for i, (f, r) in enumerate(zip(families, rank, strict=True)):
+        ids = tier_text_ids(f, TIERS[r % len(TIERS)])
+        out[i] = ids[(r // len(TIERS)) % len(ids)]
+    return out
+
+
+def paraphrase_text_ids(config) -> np.ndarray:
+    """(n,) int32: the held-out paraphrase of every execution of a batched config, by tier.
+
+    The pair key is the pair's generation seed (``ExecutionConfig.noise_seed``, from the pair
+    parameters' ``seed``), so the tiers are those of :func:`ambiguity_tiers` over the batch
+    (40 / 40 / 40 on the 120-pair suite) whatever the batch order.  Outside ``jit``.
+
+    Args:
+        config: an :class:`~lantern_jax.world.ExecutionConfig` with a leading batch axis (the
+            Route A executions of a suite, one per pair).
+    """
+    families = np.asarray(config.family).reshape(-1)
+    keys = [str(int(k)) for k in np.asarray(config.noise_seed).reshape(-1)]
+    return held_out_text_ids(families.tolist(), keys)
+
+
+def paraphrase_tiers(config) -> np.ndarray:
+    """(n,) int: the ambiguity tier (index into :data:`TIERS`) that :func:`paraphrase_text_ids`
+    uses for every execution of a batched config."""
+    families = np.asarray(config.family).reshape(-1)
+    keys = [str(int(k)) for k in np.asarray(config.noise_seed).reshape(-1)]
+    return ambiguity_tiers(families.tolist(), keys)
+
+
+# ---------------------------------------------------------------------------------------------
+# rendering, grounding and the token tables
+# ---------------------------------------------------------------------------------------------
 def format_position(pos_ego_xy) -> str:
     """``"(x, y)"`` with one decimal (``-0.0`` printed as ``0.0``)."""
     p = np.asarray(pos_ego_xy, np.float64).reshape(-1)
@@ -122,19 +411,23 @@ def format_position(pos_ego_xy) -> str:
     return f"({x:.1f}, {y:.1f})"
 
 
-def render_warning(text_id: int, pos_ego_xy) -> str:
-    """The warning string with ``<FRONT_CAR_POS>`` grounded.
+def render_warning(text_id: int, pos_ego_xy=None) -> str:
+    """The warning string with ``<FRONT_CAR_POS>`` grounded (what a language model reads).
 
     Args:
         text_id: id in :data:`TEXT_BANK`.
         pos_ego_xy: (2,) m, grounded position in the ego frame (x forward, y right), e.g. the
-            output of :func:`ground_position`.
+            output of :func:`ground_position`; ignored (may be None) for a text that states no
+            position.
 
     Example:
         ``render_warning(0, (14.2, 3.1))`` ->
         ``"The pedestrian at position (14.2, 3.1) is about to enter the ego lane."``
     """
-    return get_text(text_id).text.replace(TOKEN, format_position(pos_ego_xy))
+    entry = get_text(text_id)
+    if not entry.has_position:
+        return entry.text
+    return entry.text.replace(TOKEN, format_position(pos_ego_xy))
 
 
 def ground_position(hazard_xy: jax.Array, ego_xy: jax.Array, ego_yaw: jax.Array) -> jax.Array:
@@ -151,3 +444,125 @@ def ground_position(hazard_xy: jax.Array, ego_xy: jax.Array, ego_yaw: jax.Array)
     from lantern_jax.geometry import world_to_ego
 
     return world_to_ego(jnp.asarray(hazard_xy), jnp.asarray(ego_xy), jnp.asarray(ego_yaw))
+
+
+_TABLES: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+
+
+def text_tables() -> tuple[np.ndarray, np.ndarray]:
+    """The per-text tables a rollout indexes by text id, built once per bank size.
+
+    Returns:
+        tokens: (num_texts, MAX_TOKENS) int32, padded token ids of every template
+            (:func:`lantern_jax.language.tokenize`, placeholder id where it grounds a position).
+        has_position: (num_texts,) bool, the text states a position.
+
+    Raises:
+        lantern_jax.language.LanguageAssetError: when the tokenizer file is missing.
+        ValueError: naming a text longer than ``MAX_TOKENS`` tokens.
+    """
+    n = len(TEXT_BANK)
+    if n not in _TABLES:
+        rows = []
+        for e in TEXT_BANK:
+            ids = language.tokenize(e.text)
+            if len(ids) > language.MAX_TOKENS:
+                raise ValueError(
+                    f"text {e.text_id}: {len(ids)} tokens exceed MAX_TOKENS "
+                    f"{language.MAX_TOKENS}: {e.text!r}"
+                )
+            rows.append(language.pad(ids))
+        tokens = np.stack(rows)
+        has_pos = np.array([e.has_position for e in TEXT_BANK], bool)
+        tokens.setflags(write=False)
+        has_pos.setflags(write=False)
+        _TABLES.clear()
+        _TABLES[n] = (tokens, has_pos)
+    return _TABLES[n]
+
+
+def token_table() -> np.ndarray:
+    """(num_texts, MAX_TOKENS) int32, padded token ids of every text (see :func:`text_tables`)."""
+    return text_tables()[0]
+
+
+def text_language(text_id: Array, active: Array) -> tuple[Array, Array]:
+    """Token ids and position flag of the delivered text (jittable; one table lookup).
+
+    Args:
+        text_id: () int32, delivered text id (-1 or out of the bank: unknown).
+        active: () bool, a warning is delivered now.
+
+    Returns:
+        tokens: (MAX_TOKENS,) int32, all ``PAD_ID`` when inactive or unknown.
+        has_position: () bool, the delivered text states a position.
+    """
+    tokens_np, has_pos_np = text_tables()
+    n = tokens_np.shape[0]
+    known = active & (text_id >= 0) & (text_id < n)
+    i = jnp.clip(text_id, 0, n - 1)
+    tokens = jnp.where(known, jnp.asarray(tokens_np)[i], language.PAD_ID)
+    return tokens.astype(jnp.int32), known & jnp.asarray(has_pos_np)[i]
+
+
+# ---------------------------------------------------------------------------------------------
+# warning overrides (diagnostics)
+# ---------------------------------------------------------------------------------------------
+OVERRIDE_FRAMES = {"world": OVERRIDE_FRAME_WORLD, "ego": OVERRIDE_FRAME_EGO}
+OVERRIDE_ANCHORS = {"start": OVERRIDE_ANCHOR_START, "warning_point": OVERRIDE_ANCHOR_WARN_POINT}
+
+
+def set_override(
+    scenario: Scenario,
+    text_id: int,
+    position: Sequence[float] = (0.0, 0.0),
+    frame: str = "ego",
+    on_s: float = 0.0,
+    off_s: float = NEVER,
+    anchor: str = "start",
+) -> Scenario:
+    """A copy of a scenario (or a batch of them) whose policy is delivered ``text_id`` at
+    ``position`` while ``anchor + on_s <= t < anchor + off_s``, on any route and condition.
+
+    Outside the window the protocol's own warning (if any) is delivered as usual.  The override
+    changes only what the policy reads (:func:`~lantern_jax.scenarios.protocol.delivered_warning`),
+    not the protocol's times or the scoring.  A text that states no position delivers none.
+
+    Args:
+        scenario: one :class:`~lantern_jax.world.Scenario` or a batch (leading axis).
+        text_id: id in :data:`TEXT_BANK`.
+        position: (2,) m: ego frame ``(forward, right)`` for ``frame="ego"`` (fixed relative to
+            the ego, as in the paper's distance diagnostic), world ``(x, y)`` for
+            ``frame="world"`` (a fixed point, grounded into the ego frame every tick).
+        frame: ``"ego"`` or ``"world"``.
+        on_s: s, window start after the anchor.
+        off_s: s, window end (exclusive) after the anchor; ``NEVER`` keeps it open.
+        anchor: ``"start"`` (t = 0) or ``"warning_point"`` (the ego reaching the route's warning
+            point, recorded on Route A and Route B alike).
+
+    Raises:
+        ValueError: naming the bad argument.
+    """
+    get_text(text_id)
+    if frame not in OVERRIDE_FRAMES:
+        raise ValueError(f"frame: {frame!r} not one of {{{', '.join(OVERRIDE_FRAMES)}}}")
+    if anchor not in OVERRIDE_ANCHORS:
+        raise ValueError(f"anchor: {anchor!r} not one of {{{', '.join(OVERRIDE_ANCHORS)}}}")
+    pos = np.asarray(position, np.float64).reshape(-1)
+    if pos.shape != (2,) or not np.all(np.isfinite(pos)):
+        raise ValueError(f"position: expected two finite numbers, got {position!r}")
+    if not (np.isfinite(on_s) and np.isfinite(off_s) and 0.0 <= on_s <= off_s):
+        raise ValueError(f"on_s/off_s: need 0 <= on_s <= off_s (finite), got {on_s}, {off_s}")
+    cfg = scenario.config
+    full = jnp.full_like
+    return scenario.replace(
+        config=cfg.replace(
+            override_text_id=full(cfg.override_text_id, int(text_id)),
+            override_on_s=full(cfg.override_on_s, on_s),
+            override_off_s=full(cfg.override_off_s, off_s),
+            override_anchor=full(cfg.override_anchor, OVERRIDE_ANCHORS[anchor]),
+            override_x=full(cfg.override_x, pos[0]),
+            override_y=full(cfg.override_y, pos[1]),
+            override_frame=full(cfg.override_frame, OVERRIDE_FRAMES[frame]),
+        )
+    )

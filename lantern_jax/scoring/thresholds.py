@@ -81,6 +81,11 @@ W_SAFETY_A = 0.35
 W_TEMPORAL_A = 0.25
 CUS_SCALE = 100.0  # the CUS is reported in points, 0..100
 
+# --- language diagnostics (paper appendix "Diagnostics with Non-Actionable Language Inputs") ----
+NONACTIONABLE_MAX_DV_MPS = 2.0  # m/s, max additional speed reduction vs no warning: below this
+NONACTIONABLE_MAX_STOP_S = 1.0  # s, no standstill (speed < STILL_SPEED_MPS) of this length
+NONACTIONABLE_MAX_RC_DROP = 5.0  # percentage points, route completion may drop at most this
+
 # --- per-tick measurement (scoring/measure.py) -------------------------------------------------
 LANE_MARGIN_M = 0.5  # m, outside every lane: centre farther than half a lane width + this
 WRONG_WAY_RAD = 2.0 * math.pi / 3.0  # rad, heading difference that counts as driving a lane

@@ -3,7 +3,8 @@
 Built from the static :class:`~lantern_jax.world.Scenario` and the dynamic
 :class:`~lantern_jax.sim.state.State` at the start of a tick: the route ahead in the ego frame,
 the actors in the ego frame (with the camera's visibility mask), the range image, the ego's
-light and stop line, and the cooperative warning (active flag, text id, grounded position).
+light and stop line, and the cooperative warning (active flag, text id, token ids, grounded
+position and whether the text states one).
 """
 
 from __future__ import annotations
@@ -12,10 +13,10 @@ import jax
 import jax.numpy as jnp
 
 from lantern_jax import geometry, polyline
-from lantern_jax.constants import BIG
+from lantern_jax.constants import BIG, OVERRIDE_FRAME_EGO
 from lantern_jax.dynamics.lights import ego_light_state
 from lantern_jax.observation import NUM_ROUTE_POINTS, ROUTE_STEP, Observation
-from lantern_jax.scenarios import protocol
+from lantern_jax.scenarios import protocol, warnings
 from lantern_jax.sim.state import State
 from lantern_jax.world import Scenario, present
 
@@ -38,6 +39,32 @@ def grounded_position(scenario: Scenario, state: State) -> Array:
     return pos + noise
 
 
+def warning_fields(scenario: Scenario, state: State) -> dict[str, Array]:
+    """The warning fields of the observation: what is delivered (protocol or override), its
+    tokens (one lookup in the text table built outside ``jit``) and its position.
+
+    The override position is exact (no position-noise ablation): world-frame positions are
+    grounded into the current ego frame, ego-frame positions are delivered as they are.
+    """
+    cfg, ego = scenario.config, state.ego
+    active, text_id, overridden = protocol.delivered_warning(state.protocol, cfg, state.t)
+    tokens, has_position = warnings.text_language(text_id, active)
+    fixed = jnp.stack([cfg.override_x, cfg.override_y])
+    override_pos = jnp.where(
+        cfg.override_frame == OVERRIDE_FRAME_EGO,
+        fixed,
+        geometry.world_to_ego(fixed, ego.xy, ego.yaw),
+    )
+    pos = jnp.where(overridden, override_pos, grounded_position(scenario, state))
+    return dict(
+        warning_active=active,
+        warning_text_id=text_id,
+        warning_pos=jnp.where(has_position, pos, 0.0),
+        warning_has_position=has_position,
+        warning_tokens=tokens,
+    )
+
+
 def observe(scenario: Scenario, state: State) -> Observation:
     """Build the policy observation of the current tick.
 
@@ -56,7 +83,6 @@ def observe(scenario: Scenario, state: State) -> Observation:
     heading = jnp.stack([jnp.cos(a.yaw), jnp.sin(a.yaw)], -1)
     vel_w = heading * a.speed[:, None]
     on = present(scenario.actors, a)
-    active = protocol.warning_active(state.protocol, cfg, state.t)
     dist_to_stop = jnp.where(cfg.ego_stop_s < BIG * 0.5, cfg.ego_stop_s - percept.route_arc, BIG)
     return Observation(
         ego_speed=ego.speed,
@@ -76,7 +102,5 @@ def observe(scenario: Scenario, state: State) -> Observation:
         range_image=percept.ranges,
         light_state=ego_light_state(scenario.lights, cfg.ego_light, state.t),
         dist_to_stop=dist_to_stop,
-        warning_active=active,
-        warning_text_id=jnp.where(active, cfg.text_id, -1).astype(jnp.int32),
-        warning_pos=jnp.where(active, grounded_position(scenario, state), 0.0),
+        **warning_fields(scenario, state),
     )

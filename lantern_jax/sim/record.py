@@ -18,9 +18,9 @@ class TickRecord:
     """What is kept per tick when full trajectories are recorded (for plots).
 
     State fields (``t``, ego, actors, visibility) are those at the END of the tick; the policy
-    fields (``warning_active``, ``warning_pos``, ``waypoints``) are what the policy saw and
-    returned at the START of it.  After an execution has ended, records repeat its final state
-    (``done`` True) with the policy fields zeroed.
+    fields (``warning_active``, ``warning_text_id``, ``warning_pos``, ``waypoints``) are what the
+    policy saw and returned at the START of it.  After an execution has ended, records repeat its
+    final state (``done`` True) with the policy fields zeroed (text id -1).
     """
 
     t: Array  # () s
@@ -33,6 +33,7 @@ class TickRecord:
     actor_present: Array  # (A,) bool
     visible: Array  # (A,) bool
     warning_active: Array  # () bool
+    warning_text_id: Array  # () int32, delivered text id (-1 when none)
     warning_pos: Array  # (2,) m, ego frame
     waypoints: Array  # (10, 2) m, ego frame
     light: Array  # () int32
@@ -64,6 +65,7 @@ def tick_record(
         actor_present=on,
         visible=new.percept.visible & on,
         warning_active=obs.warning_active & live,
+        warning_text_id=jnp.where(live, obs.warning_text_id, -1),
         warning_pos=jnp.where(live, obs.warning_pos, 0.0),
         waypoints=jnp.where(live, plan, 0.0),
         light=light,

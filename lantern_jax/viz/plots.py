@@ -41,7 +41,7 @@ from lantern_jax.constants import (
     ROLE_NAMES,
 )
 from lantern_jax.dynamics.lights import light_states
-from lantern_jax.scenarios.warnings import render_warning
+from lantern_jax.scenarios.warnings import get_text, render_warning
 from lantern_jax.viz.common import (
     box_corners_np,
     ego_frame_to_world,
@@ -242,19 +242,20 @@ def _draw_actors(ax, sc: Any, rec: Any, i: int, cam: np.ndarray, show_rays: bool
             ax.plot(*axy[a], marker="o", ms=3, color=VISIBLE_EDGE, zorder=5.5)
 
 
-def _draw_warning(ax, fig: Figure, text: str, grounded_xy: np.ndarray) -> None:
+def _draw_warning(ax, fig: Figure, text: str, grounded_xy: np.ndarray | None) -> None:
     """The active warning text (wrapped to the axes width, ``gid="warning"``) and its grounded
-    position."""
-    ax.plot(
-        *grounded_xy,
-        marker="x",
-        ms=10,
-        mew=2.2,
-        color="#ff006e",
-        ls="none",
-        zorder=8,
-        label="grounded position",
-    )
+    position (none for a text that states no position)."""
+    if grounded_xy is not None:
+        ax.plot(
+            *grounded_xy,
+            marker="x",
+            ms=10,
+            mew=2.2,
+            color="#ff006e",
+            ls="none",
+            zorder=8,
+            label="grounded position",
+        )
     pos = ax.get_position()  # square axes (equal aspect): the smaller side is the width
     side_in = min(pos.width * fig.get_figwidth(), pos.height * fig.get_figheight())
     chars = max(30, int(side_in * 72.0 / (8 * 0.62)))
@@ -360,8 +361,11 @@ def bev_plot(
               gid="ego", zorder=5.2)  # fmt: skip
     ax.plot(*cam, marker="^", ms=4, color="black", zorder=5.6)
     if bool(rec.warning_active[i]):
-        text = render_warning(int(sc.config.text_id), rec.warning_pos[i])
-        _draw_warning(ax, fig, text, ego_frame_to_world(rec.warning_pos[i], prev_xy, prev_yaw)[0])
+        text_id = int(rec.warning_text_id[i])
+        text = render_warning(text_id, rec.warning_pos[i])
+        stated = get_text(text_id).has_position
+        where = ego_frame_to_world(rec.warning_pos[i], prev_xy, prev_yaw)[0] if stated else None
+        _draw_warning(ax, fig, text, where)
     _frame_view(ax, ego_xy)
     title = _default_title(sc.config) if title is None else title
     ax.set_title(f"{title}  |  t = {t:.2f} s, v = {float(rec.ego_speed[i]):.1f} m/s", fontsize=10)

