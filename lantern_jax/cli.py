@@ -35,11 +35,8 @@ from collections.abc import Sequence
 from lantern_jax.commands import CommandError
 from lantern_jax.commands import dataset as dataset_command
 from lantern_jax.commands import stress as stress_command
-<<<<<<< HEAD
 from lantern_jax.commands import train as train_command
-=======
 from lantern_jax.constants import FAMILIES
->>>>>>> main
 
 REFERENCE_POLICIES = ("expert", "ego", "coop")
 EXIT_INTERRUPTED = 130
@@ -636,11 +633,8 @@ def build_parser() -> argparse.ArgumentParser:
     ab.set_defaults(func=cmd_ablations)
     stress_command.add_parser(sub)
     dataset_command.add_parser(sub)
-<<<<<<< HEAD
     train_command.add_parser(sub)
-=======
     _add_language_commands(sub)
->>>>>>> main
     return parser
 
 

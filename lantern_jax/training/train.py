@@ -157,7 +157,7 @@ def train(cfg: TrainConfig, progress: bool = True) -> dict:
             best = (val, e)
             save_model(nnx.merge(graphdef, params), out / cfg.name,
                        dict(recipe=cfg.recipe, dataset=str(cfg.dataset), epoch=e, val_l1_m=val,
-                            config=dataclasses.asdict(cfg)))  # fmt: skip
+                            train_config=dataclasses.asdict(cfg)))  # fmt: skip
         mngr.save(e, args=ocp.args.Composite(
             state=ocp.args.StandardSave(dict(params=params, opt=opt_state)),
             meta=ocp.args.JsonSave(dict(curve=curve, best=list(best)))))  # fmt: skip

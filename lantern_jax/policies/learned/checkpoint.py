@@ -147,3 +147,38 @@ def load_model(path: str | Path, expect: ModelConfig | None = None) -> DrivingMo
         raise CheckpointError(f"{weights}: parameter {bad[0]} has another shape")
     state.replace_by_pure_dict(loaded)
     return nnx.merge(graphdef, state)
+
+
+SHIPPED_DIR = "data/models"  # inside the package: the default checkpoints of the learned rows
+SHIPPED = {
+    "learned-base": "language interface trained on ordinary driving, never on warnings "
+                    "(the SimLingo analogue)",
+    "learned-coop": "learned-base fine-tuned on the LANTERN dataset mixed with base data "
+                    "(the Coop-SimLingo analogue)",
+    "learned-surround": "six-camera rig, no language (the VAD analogue)",
+}  # fmt: skip
+
+
+def shipped_path(name: str) -> Path:
+    """Where the package ships the default checkpoint of ``name``."""
+    from importlib import resources
+
+    return Path(str(resources.files("lantern_jax") / SHIPPED_DIR / f"{name}.msgpack"))
+
+
+def checkpoint_policy(path: str | Path, name: str | None = None) -> Policy:
+    """The policy of a saved model (name: the one it was trained under, unless given).
+
+    Raises:
+        CheckpointError: for a missing or mismatching checkpoint (see :func:`load_model`).
+    """
+    path = Path(path)
+    if not path.with_suffix(".msgpack").exists():
+        raise CheckpointError(f"{path.with_suffix('.msgpack')}: no such checkpoint "
+                              "(train one with 'lantern-jax train --config ...')")  # fmt: skip
+    meta = read_meta(path)
+    model = load_model(path)
+    trained = meta.get("train_config", {})
+    label = name or trained.get("name") or path.stem
+    desc = SHIPPED.get(label, f"learned {trained.get('recipe', '')} model from {path.name}")
+    return model_policy(label, model, desc)
