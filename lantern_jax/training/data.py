@@ -104,12 +104,20 @@ def recipe_examples(frames: pd.DataFrame, card: dict, cfg: TrainConfig) -> Examp
 
 
 def split_by_sequence(ex: Examples, fraction: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    """(train indices, validation indices): whole sequences, chosen by a seeded hash of the id."""
+    """(train indices, validation indices): whole sequences held out, never single frames.
 
-    def held_out(seq: str) -> bool:
-        h = hashlib.sha256(f"{seed}:{seq}".encode()).digest()
-        return int.from_bytes(h[:8], "big") / 2**64 < fraction
+    Sequences are ranked by a seeded SHA-256 of their id and the first ``round(fraction * n)``
+    (at least one when ``fraction > 0`` and there are two or more sequences) are held out, so the
+    split is exact in size, independent of frame order, and the same for the same seed.
+    """
 
-    val_seq = {s for s in np.unique(ex.sequence) if held_out(s)}
+    def rank(seq: str) -> int:
+        return int.from_bytes(hashlib.sha256(f"{seed}:{seq}".encode()).digest()[:8], "big")
+
+    seqs = sorted(np.unique(ex.sequence), key=rank)
+    n_val = int(round(fraction * len(seqs)))
+    if fraction > 0 and len(seqs) > 1:
+        n_val = min(max(n_val, 1), len(seqs) - 1)
+    val_seq = set(seqs[:n_val])
     is_val = np.asarray([s in val_seq for s in ex.sequence])
     return np.flatnonzero(~is_val), np.flatnonzero(is_val)
