@@ -7,7 +7,10 @@
     lantern-jax suite --list             # pairs, suite hash, generation report
     lantern-jax suite --verify           # regenerate lantern-v2 from its seed, compare hashes
     lantern-jax suite --regenerate suite.json
+    lantern-jax evaluate --checkpoint runs/train/coop/learned-coop.msgpack --policy all
     lantern-jax policies
+    lantern-jax dataset --out data/lantern            # the open-loop training dataset
+    lantern-jax train --config configs/train_base.toml
     lantern-jax wording --policy coop    # warning wording by ambiguity (paper appendix table)
     lantern-jax diagnostics nonactionable --policy coop   # non-actionable warnings, empty road
     lantern-jax diagnostics distance --policy coop        # near vs far warning on Route B
@@ -36,6 +39,7 @@ from collections.abc import Sequence
 from lantern_jax.commands import CommandError
 from lantern_jax.commands import dataset as dataset_command
 from lantern_jax.commands import stress as stress_command
+from lantern_jax.commands import train as train_command
 from lantern_jax.constants import FAMILIES, SUITE_ID
 
 REFERENCE_POLICIES = ("expert", "ego", "coop")
@@ -44,7 +48,8 @@ EXIT_INTERRUPTED = 130
 #: Defaults of the ``evaluate`` options an experiment file may set (used when neither the
 #: command line nor the file gives one).
 EVALUATE_DEFAULTS = {
-    "policy": None,  # all reference policies
+    "policy": None,  # all reference policies (only the checkpoints' when --checkpoint is given)
+    "checkpoint": None,  # no saved learned models
     "ablation": "none",
     "suite": SUITE_ID,
     "pairs_per_family": None,  # every pair
@@ -236,6 +241,7 @@ def _load_suite(args: argparse.Namespace):
 #: Keys of an ``evaluate`` experiment file and their accepted types.
 CONFIG_KEYS = {
     "policy": (str, list),
+    "checkpoint": (str, list),
     "ablation": (str,),
     "suite": (str,),
     "pairs_per_family": (int,),
@@ -318,9 +324,30 @@ def _apply_config(args: argparse.Namespace) -> None:
         if getattr(args, key) is not None:
             continue
         value = cfg.get(key, default)
-        if key in ("policy", "pairs") and value is not None:
+        if key in ("policy", "pairs", "checkpoint") and value is not None:
             value = [value] if isinstance(value, str) else [",".join(value)]
         setattr(args, key, value)
+
+
+def register_checkpoints(paths: Sequence[str] | None) -> list[str]:
+    """Register saved learned models (``--checkpoint``) as policies; returns their names.
+
+    Raises:
+        UsageError: naming the file for a missing or mismatching checkpoint.
+    """
+    from lantern_jax.policies.learned.checkpoint import CheckpointError
+    from lantern_jax.policies.registry import register_checkpoint
+
+    names = []
+    for item in paths or []:
+        for path in (p.strip() for p in item.split(",")):
+            if not path:
+                continue
+            try:
+                names.append(register_checkpoint(path))
+            except CheckpointError as e:
+                raise UsageError(f"--checkpoint: {e}") from None
+    return names
 
 
 def _check_out(out: str) -> None:
@@ -341,7 +368,12 @@ def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
     _apply_config(args)
     if args.policy is not None and not any(n.strip() for v in args.policy for n in v.split(",")):
         raise UsageError("--policy: no policy name given (leave the option out for 'all')")
-    policies = resolve_policies(args.policy)
+    checkpoints = register_checkpoints(args.checkpoint)
+    if checkpoints and args.policy is None:
+        policies = checkpoints
+    else:
+        policies = resolve_policies(args.policy) + checkpoints
+        policies = list(dict.fromkeys(policies))
     if args.ablation not in ablation_names():
         raise UsageError(
             f"unknown ablation {args.ablation!r}; valid ablations: {', '.join(ablation_names())}"
@@ -577,6 +609,8 @@ def cmd_ablations(args: argparse.Namespace, argv: Sequence[str]) -> int:
 
 
 def _one_policy(args: argparse.Namespace) -> str:
+    if getattr(args, "checkpoint", None):
+        return register_checkpoints([args.checkpoint])[0]
     names = resolve_policies([args.policy])
     if len(names) != 1:
         raise UsageError(f"--policy: give one policy name, got {', '.join(names)}")
@@ -710,6 +744,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="policy name, comma-separated names or 'all' (= expert, ego, coop; the default); "
         "may be repeated",
     )
+    ev.add_argument(
+        "--checkpoint",
+        action="append",
+        metavar="PATH",
+        help="a saved learned model (lantern-jax train) to evaluate under the name it was "
+        "trained under; may be repeated; without --policy only the checkpoints are evaluated",
+    )
     ev.add_argument("--ablation", metavar="NAME", help="protocol ablation (default: none)")
     ev.add_argument(
         "--suite", metavar="ID|PATH", help=f"suite id or manifest path (default: {SUITE_ID})"
@@ -783,7 +824,7 @@ def build_parser() -> argparse.ArgumentParser:
     ab.add_argument("--list", action="store_true", help="list the ablations and exit")
     ab.add_argument("--policy", metavar="NAME", help="run the table for this policy")
     ab.add_argument(
-        "--suite", default="lantern-v1", metavar="ID|PATH", help="suite id or manifest path"
+        "--suite", default=SUITE_ID, metavar="ID|PATH", help="suite id or manifest path"
     )
     ab.add_argument(
         "--pairs-per-family", type=int, metavar="N", help="only the first N pairs of each family"
@@ -800,6 +841,7 @@ def build_parser() -> argparse.ArgumentParser:
     ab.set_defaults(func=cmd_ablations)
     stress_command.add_parser(sub)
     dataset_command.add_parser(sub)
+    train_command.add_parser(sub)
     _add_language_commands(sub)
     return parser
 
@@ -815,7 +857,10 @@ def _add_language_commands(sub) -> None:
         "write the paraphrase CUS, matched canonical CUS, retention and collision rate per tier.",
     )
     wo.add_argument("--policy", default="coop", metavar="NAME", help="policy (default: coop)")
-    wo.add_argument("--suite", default="lantern-v1", metavar="ID|PATH", help="suite id or path")
+    wo.add_argument(
+        "--checkpoint", metavar="PATH", help="a saved learned model (instead of --policy)"
+    )
+    wo.add_argument("--suite", default=SUITE_ID, metavar="ID|PATH", help="suite id or path")
     wo.add_argument(
         "--pairs-per-family", type=int, metavar="N", help="only the first N pairs of each family"
     )
@@ -834,7 +879,10 @@ def _add_language_commands(sub) -> None:
     )
     dg.add_argument("which", choices=("nonactionable", "distance"), help="which diagnostic")
     dg.add_argument("--policy", default="coop", metavar="NAME", help="policy (default: coop)")
-    dg.add_argument("--suite", default="lantern-v1", metavar="ID|PATH", help="suite (distance)")
+    dg.add_argument(
+        "--checkpoint", metavar="PATH", help="a saved learned model (instead of --policy)"
+    )
+    dg.add_argument("--suite", default=SUITE_ID, metavar="ID|PATH", help="suite (distance)")
     dg.add_argument("--family", default="PE", choices=FAMILIES, help="family (distance)")
     dg.add_argument("--routes", type=int, default=3, metavar="N", help="Route B count (distance)")
     dg.add_argument(

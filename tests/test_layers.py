@@ -24,8 +24,18 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("scenarios",),  # roads, families, protocol, warnings, suites (NumPy builders + JAX protocol)
     ("policies",),  # reference planners and the registry
     ("sim",),  # one tick and the rollouts
-    ("evaluate", "generate", "stress", "dataset", "diagnostics", "ablations", "envs", "stream"),
-    # evaluation, suites, stress testing, data, language diagnostics, ablations, brax env, chunks
+    (
+        "evaluate",
+        "generate",
+        "stress",
+        "dataset",
+        "diagnostics",
+        "ablations",
+        "envs",
+        "stream",
+        "training",
+    ),  # evaluation, suites, stress testing, data, language diagnostics, ablations,
+    #               brax env, chunks, training
     ("report", "viz"),  # tables, files, plots
     ("cli", "commands", "__main__"),  # the command line
 )

@@ -23,6 +23,19 @@ _REGISTRY: dict[str, Callable[[], Policy]] = {
 }
 
 
+def _shipped(name: str) -> Callable[[], Policy]:
+    def factory() -> Policy:
+        from lantern_jax.policies.learned.checkpoint import checkpoint_policy, shipped_path
+
+        return checkpoint_policy(shipped_path(name), name)
+
+    return factory
+
+
+for _name in ("learned-base", "learned-coop", "learned-surround"):
+    _REGISTRY[_name] = _shipped(_name)
+
+
 def register_policy(name: str, factory: Callable[[], Policy]) -> None:
     """Register a policy factory under ``name``; a duplicate name is an error."""
     if name in _REGISTRY:
@@ -39,6 +52,16 @@ def get_policy(name: str) -> Policy:
     if name not in _REGISTRY:
         raise KeyError(f"unknown policy {name!r}; known policies: {', '.join(sorted(_REGISTRY))}")
     return _REGISTRY[name]()
+
+
+def register_checkpoint(path: str, name: str | None = None) -> str:
+    """Register a saved learned model (``.msgpack`` + ``.json``) as a policy; returns its name
+    (the name it was trained under unless given)."""
+    from lantern_jax.policies.learned.checkpoint import checkpoint_policy
+
+    policy = checkpoint_policy(path, name)
+    _REGISTRY[policy.name] = lambda: policy
+    return policy.name
 
 
 def policy_names() -> list[str]:

@@ -1,0 +1,100 @@
+"""The driving model: perception, ego state, navigation and language to ten waypoints (NNX).
+
+::
+
+    object tokens (A, F) --Linear--> (A, W) --self-attention (masked) x layers--> mean over seen
+    range image (N,)     --MLP-----> (W,)
+    ego + route          --MLP-----> (W,)
+    trunk = MLP([objects, ranges, ego])                               (W,)
+    language (only when ``ModelConfig.language``):
+        gamma, beta = Linear([text embedding, stated position, has_position, warning])
+        trunk = trunk * (1 + gamma) + beta                            (FiLM)
+    head: MLP(trunk) -> (10, 2) increments, summed along the horizon  (ego frame, metres)
+
+The head predicts per-step displacements and accumulates them, so the waypoints are ordered
+along the plan; their scale is set by :data:`STEP_SCALE_M` (a 10 m/s plan moves 2.5 m a step).
+The token-embedding table is not part of the model: the pooled embedding is an input
+(:mod:`lantern_jax.policies.learned.features`), so checkpoints hold only trained weights.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+from flax import nnx
+
+from lantern_jax.constants import NUM_WAYPOINTS
+from lantern_jax.policies.learned.features import Features
+
+Array = jax.Array
+
+STEP_SCALE_M = 2.5  # m, scale of one predicted waypoint increment
+
+
+@dataclasses.dataclass(frozen=True)
+class ModelConfig:
+    """Architecture of a driving model (part of its checkpoint; a mismatch is refused)."""
+
+    rig: str = "front"  # front | surround
+    language: bool = True  # condition on the text channel (FiLM) and the stated position
+    width: int = 64  # hidden width W
+    heads: int = 4  # attention heads
+    layers: int = 1  # self-attention layers over object tokens
+    object_features: int = 13  # F (features.Features.objects' last axis)
+    ranges: int = 32  # N, rays of the rig's range image
+    text_dim: int = 256  # D, embedding width
+
+
+class _MLP(nnx.Module):
+    def __init__(self, sizes: tuple[int, ...], rngs: nnx.Rngs):
+        self.layers = nnx.List(
+            [nnx.Linear(a, b, rngs=rngs) for a, b in zip(sizes[:-1], sizes[1:], strict=True)]
+        )
+
+    def __call__(self, x: Array) -> Array:
+        for i, layer in enumerate(self.layers):
+            x = layer(x)
+            if i < len(self.layers) - 1:
+                x = nnx.gelu(x)
+        return x
+
+
+class DrivingModel(nnx.Module):
+    """See the module docstring; call it on one :class:`Features` (``vmap`` outside)."""
+
+    def __init__(self, config: ModelConfig, rngs: nnx.Rngs):
+        w = config.width
+        self.config = config
+        self.embed_objects = nnx.Linear(config.object_features, w, rngs=rngs)
+        self.attention = nnx.List([
+            nnx.MultiHeadAttention(num_heads=config.heads, in_features=w, qkv_features=w,
+                                   out_features=w, decode=False, rngs=rngs)
+            for _ in range(config.layers)
+        ])  # fmt: skip
+        self.norms = nnx.List([nnx.LayerNorm(w, rngs=rngs) for _ in range(config.layers)])
+        self.ranges = _MLP((config.ranges, w, w), rngs)
+        self.ego = _MLP((9 + 52, w, w), rngs)
+        self.trunk = _MLP((3 * w, 2 * w, w), rngs)
+        if config.language:
+            self.film = nnx.Linear(config.text_dim + 4, 2 * w, rngs=rngs)
+        self.head = _MLP((w, w, 2 * NUM_WAYPOINTS), rngs)
+
+    def __call__(self, f: Features) -> Array:
+        """(10, 2) float32 waypoints, ego frame (x forward, y right), metres."""
+        tokens = self.embed_objects(f.objects)  # (A, W)
+        pair_mask = (f.mask[:, None] & f.mask[None, :])[None]  # (1, A, A)
+        for att, norm in zip(self.attention, self.norms, strict=True):
+            tokens = norm(tokens + att(tokens, mask=pair_mask))
+        seen = f.mask.astype(jnp.float32)[:, None]
+        pooled = jnp.sum(tokens * seen, axis=0) / jnp.maximum(jnp.sum(seen), 1.0)
+        h = jnp.concatenate([pooled, self.ranges(f.ranges),
+                             self.ego(jnp.concatenate([f.ego, f.route]))])  # fmt: skip
+        h = self.trunk(h)
+        if self.config.language:
+            cond = jnp.concatenate([f.text, f.position, f.has_position[None], f.warning[None]])
+            gamma, beta = jnp.split(self.film(cond), 2)
+            h = h * (1.0 + gamma) + beta
+        steps = self.head(nnx.gelu(h)).reshape(NUM_WAYPOINTS, 2) * STEP_SCALE_M
+        return jnp.cumsum(steps, axis=0)

@@ -1,0 +1,123 @@
+"""Training examples from the open-loop dataset: observations, targets and recipes.
+
+Every example is a policy :class:`~lantern_jax.observation.Observation` rebuilt from a dataset
+frame's ``obs.<field>`` columns (so training and the closed loop feed the model through the same
+feature code) and the frame's ten expert waypoints.  :func:`recipe_examples` selects and edits
+frames as the training recipe says (:mod:`lantern_jax.training.config`); the validation split
+holds out whole sequences.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+
+import numpy as np
+import pandas as pd
+
+from lantern_jax.constants import FAMILIES, NUM_WAYPOINTS
+from lantern_jax.dataset.store import column_array
+from lantern_jax.observation import Observation
+from lantern_jax.training.config import TrainConfig
+
+OBS_PREFIX = "obs."
+
+
+@dataclasses.dataclass
+class Examples:
+    """Training examples as NumPy arrays with a leading example axis."""
+
+    obs: dict[str, np.ndarray]  # Observation field -> (n, ...) array
+    targets: np.ndarray  # (n, 10, 2) float32, m, ego frame
+    sequence: np.ndarray  # (n,) str, sequence id
+    base_style: np.ndarray  # (n,) bool, ordinary driving (no active warning in the text channel)
+
+    def __len__(self) -> int:
+        return len(self.targets)
+
+    def take(self, idx: np.ndarray) -> Examples:
+        """The examples at ``idx``."""
+        return Examples({k: v[idx] for k, v in self.obs.items()}, self.targets[idx],
+                        self.sequence[idx], self.base_style[idx])  # fmt: skip
+
+
+def observation_columns(frames: pd.DataFrame, card: dict) -> dict[str, np.ndarray]:
+    """Observation fields from a dataset's ``obs.<field>`` columns.
+
+    Raises:
+        ValueError: naming an Observation field the dataset does not store (a dataset recorded
+            by another version of the simulator).
+    """
+    shapes = card["frame_columns"]
+    out = {}
+    for f in dataclasses.fields(Observation):
+        col = OBS_PREFIX + f.name
+        if col not in shapes:
+            if f.default is not dataclasses.MISSING:
+                continue  # an optional field (e.g. privileged data) the dataset does not carry
+            raise ValueError(f"dataset: column {col!r} missing (recorded by another version?)")
+        out[f.name] = column_array(frames, col, shapes[col])
+    return out
+
+
+def examples_from_frames(frames: pd.DataFrame, card: dict) -> Examples:
+    """Every frame as an example."""
+    obs = observation_columns(frames, card)
+    targets = column_array(frames, "waypoints", [NUM_WAYPOINTS, 2]).astype(np.float32)
+    return Examples(obs, targets, frames["sequence_id"].to_numpy(str),
+                    ~obs["warning_active"].astype(bool))  # fmt: skip
+
+
+def _far_counterexamples(ex: Examples, frames: pd.DataFrame, far_m: float) -> Examples:
+    """Route B frames told of their family's hazard far ahead, with the ordinary trajectory."""
+    from lantern_jax.scenarios.warnings import text_tables
+
+    is_b = frames["route"].to_numpy(str) == "B"
+    sel = ex.take(np.flatnonzero(is_b))
+    tokens, has_pos = text_tables()
+    fam = np.asarray([FAMILIES.index(f) for f in frames["family"].to_numpy(str)[is_b]])
+    obs = dict(sel.obs)
+    obs["warning_active"] = np.ones(len(sel), bool)
+    obs["warning_text_id"] = fam.astype(np.int32)  # the canonical text of the family
+    obs["warning_tokens"] = tokens[fam]
+    obs["warning_has_position"] = has_pos[fam].astype(bool)
+    obs["warning_pos"] = np.tile(np.asarray([[far_m, 0.5]], np.float32), (len(sel), 1))
+    return Examples(obs, sel.targets, sel.sequence, np.zeros(len(sel), bool))
+
+
+def concat(parts: list[Examples]) -> Examples:
+    """Examples of several sets, in order."""
+    return Examples({k: np.concatenate([p.obs[k] for p in parts]) for k in parts[0].obs},
+                    np.concatenate([p.targets for p in parts]),
+                    np.concatenate([p.sequence for p in parts]),
+                    np.concatenate([p.base_style for p in parts]))  # fmt: skip
+
+
+def recipe_examples(frames: pd.DataFrame, card: dict, cfg: TrainConfig) -> Examples:
+    """The examples of a recipe (see :mod:`lantern_jax.training.config`)."""
+    ex = examples_from_frames(frames, card)
+    if cfg.recipe == "base":
+        return ex.take(np.flatnonzero(ex.base_style))
+    if cfg.recipe == "distance":
+        return concat([ex, _far_counterexamples(ex, frames, cfg.far_m)])
+    return ex
+
+
+def split_by_sequence(ex: Examples, fraction: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """(train indices, validation indices): whole sequences held out, never single frames.
+
+    Sequences are ranked by a seeded SHA-256 of their id and the first ``round(fraction * n)``
+    (at least one when ``fraction > 0`` and there are two or more sequences) are held out, so the
+    split is exact in size, independent of frame order, and the same for the same seed.
+    """
+
+    def rank(seq: str) -> int:
+        return int.from_bytes(hashlib.sha256(f"{seed}:{seq}".encode()).digest()[:8], "big")
+
+    seqs = sorted(np.unique(ex.sequence), key=rank)
+    n_val = int(round(fraction * len(seqs)))
+    if fraction > 0 and len(seqs) > 1:
+        n_val = min(max(n_val, 1), len(seqs) - 1)
+    val_seq = set(seqs[:n_val])
+    is_val = np.asarray([s in val_seq for s in ex.sequence])
+    return np.flatnonzero(~is_val), np.flatnonzero(is_val)

@@ -1,0 +1,215 @@
+"""Behaviour cloning of a driving model on the open-loop dataset.
+
+:func:`train` runs one configuration (:class:`~lantern_jax.training.config.TrainConfig`):
+
+* examples from the recipe (:func:`~lantern_jax.training.data.recipe_examples`), horizon-crossing
+  frames excluded, a validation split by sequence;
+* AdamW with a one-cycle schedule (linear warm-up, cosine decay), an L1 loss on the ten
+  waypoints (metres, ego frame), mini-batches shuffled by a seeded generator (``coop`` and
+  ``distance`` draw ``base_mix`` of every batch from ordinary-driving frames);
+* after every epoch: the validation loss, a row of ``curve.csv``, an orbax checkpoint of the
+  parameters and optimiser state (a rerun of the same config resumes from the latest), and,
+  when the validation loss is the best so far, the exported model (``<out>/<name>.msgpack`` +
+  ``.json``, :func:`~lantern_jax.policies.learned.checkpoint.save_model`);
+* ``curve.png`` at the end.
+
+Deterministic for a given seed on a given machine (seeded initialisation and shuffles; XLA on
+CPU is deterministic).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from pathlib import Path
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+import pandas as pd
+from flax import nnx
+
+from lantern_jax.dataset.store import load_frames, read_card
+from lantern_jax.files import atomic_write
+from lantern_jax.observation import Observation
+from lantern_jax.policies.learned.checkpoint import load_model, new_model, save_model
+from lantern_jax.policies.learned.features import features, nav_token_table
+from lantern_jax.policies.learned.model import ModelConfig
+from lantern_jax.training.config import TrainConfig
+from lantern_jax.training.data import Examples, recipe_examples, split_by_sequence
+
+
+def model_config(cfg: TrainConfig, ranges: int) -> ModelConfig:
+    """The architecture a training config asks for."""
+    return ModelConfig(rig=cfg.rig, language=cfg.language, width=cfg.width, heads=cfg.heads,
+                       layers=cfg.layers, ranges=ranges)  # fmt: skip
+
+
+def _observation(batch: dict[str, Any]) -> Observation:
+    names = {f.name for f in dataclasses.fields(Observation)}
+    return Observation(**{k: v for k, v in batch.items() if k in names})
+
+
+def make_loss(graphdef: Any, rig: str):
+    """``loss(params, obs_batch, targets, embedding, nav) -> () mean L1`` over a batch."""
+
+    def loss(params, obs, targets, embedding, nav):
+        model = nnx.merge(graphdef, params)
+        pred = jax.vmap(lambda o: model(features(o, rig, embedding, nav)))(_observation(obs))
+        return jnp.mean(jnp.abs(pred - targets))
+
+    return loss
+
+
+class _Batches:
+    """Seeded mini-batches of training indices (with the base-style mix where asked)."""
+
+    def __init__(self, ex: Examples, train_idx: np.ndarray, cfg: TrainConfig):
+        self.train_idx, self.cfg = train_idx, cfg
+        self.base_idx = train_idx[ex.base_style[train_idx]]
+        self.mix = cfg.base_mix if cfg.recipe in ("coop", "distance") else 0.0
+
+    def epoch(self, e: int) -> list[np.ndarray]:
+        rng = np.random.default_rng([self.cfg.seed, e])
+        order = rng.permutation(self.train_idx)
+        bs = self.cfg.batch_size
+        n_mix = int(round(self.mix * bs)) if len(self.base_idx) else 0
+        main = bs - n_mix
+        out = []
+        for k in range(len(order) // main):
+            idx = order[k * main : (k + 1) * main]
+            if n_mix:
+                idx = np.concatenate([idx, rng.choice(self.base_idx, n_mix)])
+            out.append(idx)
+        return out
+
+
+def _checkpointer(folder: Path):
+    import orbax.checkpoint as ocp
+
+    opts = ocp.CheckpointManagerOptions(max_to_keep=2)
+    return ocp.CheckpointManager(folder.resolve() / "checkpoints", options=opts)
+
+
+def train(cfg: TrainConfig, progress: bool = True) -> dict:
+    """Train one model; returns a summary (best epoch and validation loss, frames/s, paths)."""
+    import orbax.checkpoint as ocp
+
+    from lantern_jax.language import load_embedding
+
+    out = Path(cfg.out)
+    out.mkdir(parents=True, exist_ok=True)
+    card = read_card(Path(cfg.dataset))
+    frames = load_frames(cfg.dataset, include_crossing=False)
+    ex = recipe_examples(frames, card, cfg)
+    train_idx, val_idx = split_by_sequence(ex, cfg.val_fraction, cfg.seed)
+    ranges = ex.obs["surround_ranges" if cfg.rig == "surround" else "range_image"].shape[1]
+    mcfg = model_config(cfg, ranges)
+    model = load_model(cfg.init_from, expect=mcfg) if cfg.init_from else new_model(mcfg, cfg.seed)
+    graphdef, params = nnx.split(model)
+    embedding = jnp.asarray(load_embedding(), jnp.float32)
+    nav = jnp.asarray(nav_token_table())
+    batches = _Batches(ex, train_idx, cfg)
+    steps = max(1, len(batches.epoch(0))) * cfg.epochs
+    schedule = optax.warmup_cosine_decay_schedule(
+        0.0, cfg.lr, max(1, int(cfg.warmup * steps)), steps, cfg.lr * 0.01
+    )
+    tx = optax.adamw(schedule, weight_decay=cfg.weight_decay)
+    opt_state = tx.init(params)
+    loss_fn = make_loss(graphdef, cfg.rig)
+
+    @jax.jit
+    def step(params, opt_state, obs, targets):
+        value, grads = jax.value_and_grad(loss_fn)(params, obs, targets, embedding, nav)
+        updates, opt_state = tx.update(grads, opt_state, params)
+        return optax.apply_updates(params, updates), opt_state, value
+
+    val_loss_fn = jax.jit(lambda p, o, t: loss_fn(p, o, t, embedding, nav))
+    mngr = _checkpointer(out)
+    start, curve, best = 0, [], (np.inf, -1)
+    if mngr.latest_step() is not None:  # resume
+        last = mngr.latest_step()
+        restored = mngr.restore(last, args=ocp.args.Composite(
+            state=ocp.args.StandardRestore(dict(params=params, opt=opt_state)),
+            meta=ocp.args.JsonRestore()))  # fmt: skip
+        params, opt_state = restored.state["params"], restored.state["opt"]
+        curve, best = restored.meta["curve"], tuple(restored.meta["best"])
+        start = last + 1
+    t_start, seen = time.perf_counter(), 0
+    bar = _progress(progress, cfg, start)
+    for e in range(start, cfg.epochs):
+        losses = []
+        for idx in batches.epoch(e):
+            b = ex.take(idx)
+            params, opt_state, value = step(params, opt_state, b.obs, jnp.asarray(b.targets))
+            losses.append(float(value))
+            seen += len(idx)
+            if bar is not None:
+                bar.set_postfix_str(f"epoch {e} loss {np.mean(losses[-50:]):.3f} m")
+                bar.update(1)
+        val = _evaluate(val_loss_fn, params, ex, val_idx, cfg.batch_size)
+        train_l1 = float(np.mean(losses)) if losses else np.nan
+        elapsed = round(time.perf_counter() - t_start, 1)
+        curve.append(dict(epoch=e, train_l1_m=train_l1, val_l1_m=val, seconds=elapsed))
+        if val < best[0]:
+            best = (val, e)
+            save_model(nnx.merge(graphdef, params), out / cfg.name,
+                       dict(recipe=cfg.recipe, dataset=str(cfg.dataset), epoch=e, val_l1_m=val,
+                            train_config=dataclasses.asdict(cfg)))  # fmt: skip
+        mngr.save(e, args=ocp.args.Composite(
+            state=ocp.args.StandardSave(dict(params=params, opt=opt_state)),
+            meta=ocp.args.JsonSave(dict(curve=curve, best=list(best)))))  # fmt: skip
+        mngr.wait_until_finished()
+        atomic_write(out / "curve.csv", pd.DataFrame(curve).to_csv(index=False))
+        if (time.perf_counter() - t_start) / 60.0 > cfg.max_minutes:
+            break
+    if bar is not None:
+        bar.close()
+    elapsed = time.perf_counter() - t_start
+    _plot_curve(curve, out / "curve.png", cfg.name)
+    return dict(name=cfg.name, best_val_l1_m=best[0], best_epoch=best[1], epochs=len(curve),
+                train_examples=int(len(train_idx)), val_examples=int(len(val_idx)),
+                frames_per_s=seen / max(elapsed, 1e-9), seconds=elapsed,
+                model=str(out / f"{cfg.name}.msgpack"))  # fmt: skip
+
+
+def _evaluate(loss_fn, params, ex: Examples, idx: np.ndarray, batch_size: int) -> float:
+    if len(idx) == 0:
+        return float("nan")
+    total, count = 0.0, 0
+    for k in range(0, len(idx) - batch_size + 1, batch_size):  # whole batches: one compile
+        b = ex.take(idx[k : k + batch_size])
+        total += float(loss_fn(params, b.obs, jnp.asarray(b.targets))) * batch_size
+        count += batch_size
+    return total / max(count, 1) if count else float("nan")
+
+
+def _progress(on: bool, cfg: TrainConfig, start: int):
+    if not on:
+        return None
+    from tqdm.auto import tqdm
+
+    return tqdm(desc=f"train {cfg.name}", unit="batch", initial=0)
+
+
+def _plot_curve(curve: list[dict], path: Path, name: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+
+    df = pd.DataFrame(curve)
+    fig = Figure(figsize=(6, 3.5))
+    ax = fig.subplots()
+    if len(df):
+        ax.plot(df["epoch"], df["train_l1_m"], "o-", label="train")
+        ax.plot(df["epoch"], df["val_l1_m"], "s--", label="validation")
+    ax.set_xlabel("epoch")
+    ax.set_ylabel("waypoint L1 (m)")
+    ax.set_title(name)
+    ax.grid(alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)

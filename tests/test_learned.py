@@ -1,0 +1,303 @@
+"""Learned driving policies: features, the model, checkpoints, training configs, and training.
+
+Fast tests use one observation of a hand-built scene and a random-initialised small model;
+the end-to-end training tests (a tiny dataset recorded once per module, two trainings) run
+with the slow tests.
+"""
+
+from __future__ import annotations
+
+import json
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+import pytest
+from flax import nnx
+
+from lantern_jax.constants import NUM_WAYPOINTS
+from lantern_jax.policies.learned.checkpoint import (
+    CheckpointError,
+    checkpoint_policy,
+    learned_params,
+    load_model,
+    make_act,
+    model_policy,
+    new_model,
+    save_model,
+)
+from lantern_jax.policies.learned.features import (
+    NAV_TEXTS,
+    features,
+    nav_token_table,
+    navigation_instruction,
+)
+from lantern_jax.policies.learned.model import ModelConfig
+from lantern_jax.scenarios.handmade import straight_scene
+from lantern_jax.scenarios.warnings import text_tables
+from lantern_jax.sim.observe import observe
+from lantern_jax.sim.state import init_state
+from lantern_jax.training.config import ConfigError, load_config
+
+SMALL = ModelConfig(width=16, heads=2)
+
+
+@pytest.fixture(scope="module")
+def obs():
+    world = straight_scene([], length=120.0, speed=8.0, s_warn=22.0, s_event=31.0,
+                           s_conflict=40.0, hazard_index=0, clear_s=22.0)  # fmt: skip
+    return jax.jit(lambda w: observe(w, init_state(w)))(world)
+
+
+@pytest.fixture(scope="module")
+def tables():
+    from lantern_jax.language import load_embedding
+
+    return jnp.asarray(load_embedding(), jnp.float32), jnp.asarray(nav_token_table())
+
+
+def warned(obs, text_id: int, pos=(30.0, 0.0)):
+    """The observation with the warning ``text_id`` active at ``pos`` (ego frame, m)."""
+    tokens, has_pos = text_tables()
+    return obs.replace(
+        warning_active=jnp.bool_(True), warning_text_id=jnp.int32(text_id),
+        warning_tokens=jnp.asarray(tokens[text_id]),
+        warning_has_position=jnp.bool_(has_pos[text_id]),
+        warning_pos=jnp.asarray(pos, jnp.float32),
+    )  # fmt: skip
+
+
+def test_features_shapes_and_ranges(obs, tables):
+    f = features(obs, "front", *tables)
+    assert f.ego.shape == (9,) and f.route.shape == (52,)
+    assert f.objects.shape == (obs.actor_xy.shape[0], SMALL.object_features)
+    assert f.ranges.shape == obs.range_image.shape
+    assert float(f.ranges.min()) >= 0.0 and float(f.ranges.max()) <= 1.0
+    assert f.text.shape == (tables[0].shape[1],)
+    assert float(f.warning) == 0.0 and float(f.has_position) == 0.0
+    assert np.all(np.asarray(f.position) == 0.0)
+    for leaf in jax.tree.leaves(f):
+        assert np.all(np.isfinite(np.asarray(leaf, np.float32)))
+    with pytest.raises(ValueError, match="rig"):
+        features(obs, "fisheye", *tables)
+
+
+def test_navigation_instruction_follows_the_route_bend():
+    """Ego frame: x forward, y right; a route bending to negative y is a left turn."""
+    straight = jnp.stack([jnp.arange(24.0), jnp.zeros(24)], -1)
+    left = straight.at[-1].set(jnp.array([22.5, -2.0]))
+    right = straight.at[-1].set(jnp.array([22.5, 2.0]))
+    got = [int(navigation_instruction(r)) for r in (straight, left, right)]
+    assert [NAV_TEXTS[i] for i in got] == list(NAV_TEXTS)
+
+
+def test_warning_replaces_the_navigation_text(obs, tables):
+    """While a warning is active the text channel is the warning's, otherwise the
+    navigation instruction's; the stated position only enters when the text states one."""
+    f0 = features(obs, "front", *tables)
+    f1 = features(warned(obs, 0), "front", *tables)
+    assert float(f1.warning) == 1.0
+    assert not np.allclose(np.asarray(f0.text), np.asarray(f1.text))
+    tokens, has_pos = text_tables()
+    assert float(f1.has_position) == float(has_pos[0])
+
+
+def test_model_output_is_ordered_finite_waypoints(obs, tables):
+    model = new_model(SMALL, seed=0)
+    wp = model(features(obs, "front", *tables))
+    assert wp.shape == (NUM_WAYPOINTS, 2) and wp.dtype == jnp.float32
+    assert np.all(np.isfinite(np.asarray(wp)))
+
+
+def test_language_model_reads_the_text_and_languageless_one_does_not(obs, tables):
+    """A different warning text changes a language model's plan (FiLM), never the plan of a
+    model without language."""
+    lang = new_model(SMALL, seed=1)
+    mute = new_model(ModelConfig(width=16, heads=2, language=False), seed=1)
+    a, b = warned(obs, 0), warned(obs, 3)
+    fa, fb = features(a, "front", *tables), features(b, "front", *tables)
+    assert float(jnp.max(jnp.abs(lang(fa) - lang(fb)))) > 1e-4
+    assert float(jnp.max(jnp.abs(mute(fa) - mute(fb)))) == 0.0
+
+
+def test_text_gradient_is_finite_and_nonzero(obs, tables):
+    """d(plan)/d(text embedding) of a language model: the text pathway is trainable."""
+    model = new_model(SMALL, seed=2)
+    f = features(warned(obs, 0), "front", *tables)
+    g = jax.grad(lambda t: jnp.sum(model(f.replace(text=t))))(f.text)
+    assert np.all(np.isfinite(np.asarray(g))) and float(jnp.max(jnp.abs(g))) > 0.0
+
+
+def test_policy_act_is_pure_and_batchable(obs, tables):
+    model = new_model(SMALL, seed=3)
+    pol = model_policy("m", model, embedding=tables[0])
+    params = pol.init(jax.random.PRNGKey(0))
+    one = jax.jit(pol.act)(params, obs)
+    batch = jax.tree.map(lambda x: jnp.stack([x, x]), obs)
+    two = jax.jit(jax.vmap(pol.act, (None, 0)))(params, batch)
+    np.testing.assert_allclose(np.asarray(two[0]), np.asarray(one), atol=1e-5)
+    assert pol.uses_warning
+
+
+def test_overfits_a_tiny_set(obs, tables):
+    """Sixteen observations with distinct targets: a few hundred AdamW steps bring the L1 loss
+    to a small fraction of its start (the model and the text pathway can fit)."""
+    rng = np.random.default_rng(0)
+    n = 16
+    batch = jax.tree.map(lambda x: jnp.stack([x] * n), obs)
+    tokens, _ = text_tables()
+    ids = np.arange(n) % 6
+    speed = rng.uniform(0.0, 10.0, n).astype(np.float32)
+    batch = batch.replace(
+        warning_active=jnp.ones(n, bool),
+        warning_tokens=jnp.asarray(tokens[ids]),
+        ego_speed=jnp.asarray(speed),
+    )  # fmt: skip
+    # the plan's length follows the speed, its bend follows the warning text
+    k = np.arange(1, NUM_WAYPOINTS + 1) * 0.25
+    targets = np.stack([np.stack([k * v, 0.05 * k * v * (i % 3 - 1)], -1)
+                        for i, v in zip(ids, speed, strict=True)]).astype(np.float32)  # fmt: skip
+    model = new_model(SMALL, seed=4)
+    graphdef, params = nnx.split(model)
+    tx = optax.adam(3e-3)
+    opt = tx.init(params)
+
+    def loss(p):
+        m = nnx.merge(graphdef, p)
+        pred = jax.vmap(lambda o: m(features(o, "front", *tables)))(batch)
+        return jnp.mean(jnp.abs(pred - targets))
+
+    @jax.jit
+    def step(p, s):
+        v, g = jax.value_and_grad(loss)(p)
+        u, s = tx.update(g, s, p)
+        return optax.apply_updates(p, u), s, v
+
+    first = float(loss(params))
+    for _ in range(400):
+        params, opt, _ = step(params, opt)
+    last = float(loss(params))
+    assert last < 0.15 * first, (first, last)
+
+
+def test_save_load_gives_identical_actions(obs, tables, tmp_path):
+    model = new_model(SMALL, seed=5)
+    save_model(model, tmp_path / "m", dict(note="x"))
+    back = load_model(tmp_path / "m", expect=SMALL)
+    f = features(warned(obs, 1), "front", *tables)
+    np.testing.assert_array_equal(np.asarray(model(f)), np.asarray(back(f)))
+    meta = json.loads((tmp_path / "m.json").read_text())
+    assert meta["note"] == "x" and meta["config"]["width"] == 16
+
+
+def test_checkpoint_policy_is_named_and_acts(obs, tmp_path):
+    save_model(new_model(SMALL, seed=6), tmp_path / "mine",
+               dict(train_config=dict(name="mine", recipe="coop")))  # fmt: skip
+    pol = checkpoint_policy(tmp_path / "mine.msgpack")
+    assert pol.name == "mine"
+    wp = jax.jit(pol.act)(pol.init(jax.random.PRNGKey(0)), obs)
+    assert np.all(np.isfinite(np.asarray(wp)))
+    assert checkpoint_policy(tmp_path / "mine", name="other").name == "other"
+
+
+# -- a catalogue of bad checkpoints -------------------------------------------------------------
+
+
+@pytest.fixture
+def saved(tmp_path):
+    save_model(new_model(SMALL, seed=7), tmp_path / "m")
+    return tmp_path / "m"
+
+
+def test_missing_checkpoint_is_named(tmp_path):
+    with pytest.raises(CheckpointError, match="no such checkpoint"):
+        checkpoint_policy(tmp_path / "absent.msgpack")
+
+
+def test_unreadable_description_is_named(saved):
+    saved.with_suffix(".json").write_text("{not json")
+    with pytest.raises(CheckpointError, match=r"m\.json"):
+        load_model(saved)
+
+
+def test_tampered_weights_are_refused(saved):
+    w = saved.with_suffix(".msgpack")
+    data = bytearray(w.read_bytes())
+    data[-1] ^= 0xFF
+    w.write_bytes(bytes(data))
+    with pytest.raises(CheckpointError, match="params_sha256"):
+        load_model(saved)
+
+
+def test_other_architecture_is_refused_naming_the_field(saved):
+    with pytest.raises(CheckpointError, match=r"config\.width"):
+        load_model(saved, expect=ModelConfig(width=32, heads=2))
+
+
+def test_unknown_config_field_is_refused(saved):
+    meta = json.loads(saved.with_suffix(".json").read_text())
+    meta["config"]["depth"] = 3
+    saved.with_suffix(".json").write_text(json.dumps(meta))
+    with pytest.raises(CheckpointError, match=r"config\.depth"):
+        load_model(saved)
+
+
+def test_weights_of_another_shape_are_refused(saved, tmp_path):
+    """A description edited to another width (hash still matching its weights)."""
+    meta = json.loads(saved.with_suffix(".json").read_text())
+    meta["config"]["width"] = 32
+    saved.with_suffix(".json").write_text(json.dumps(meta))
+    with pytest.raises(CheckpointError, match="shape|does not fit"):
+        load_model(saved)
+
+
+# -- training configs ---------------------------------------------------------------------------
+
+
+def write(tmp_path, text: str):
+    p = tmp_path / "t.toml"
+    p.write_text(text)
+    return p
+
+
+@pytest.mark.parametrize(
+    "text, match",
+    [
+        ("[train]\nrecipe = 'base'\n", r"train\.name: missing"),
+        ("[train]\nname = 'x'\nrecipe = 'fancy'\n", r"train\.recipe"),
+        ("[train]\nname = 'x'\nrecipe = 'coop'\n", r"train\.init_from"),
+        ("[train]\nname = 'x'\nrecipe = 'base'\nepochs = 'six'\n", r"train\.epochs must be int"),
+        ("[train]\nname = 'x'\nrecipe = 'base'\nepochs = 0\n", r"train\.epochs"),
+        ("[train]\nname = 'x'\nrecipe = 'base'\nlr = -1.0\n", r"train\.lr"),
+        ("[train]\nname = 'x'\nrecipe = 'base'\nbase_mix = 1.5\n", r"train\.base_mix"),
+        ("[train]\nname = 'x'\nrecipe = 'base'\nwidth = 10\nheads = 4\n", r"train\.heads"),
+        ("[train]\nname = 'x'\nrecipe = 'base'\nlearning_rate = 1.0\n", r"learning_rate"),
+        ("[train]\nname = 'x'\nrecipe = 'base'\nepochs = true\n", r"train\.epochs"),
+        ("[evaluate]\nname = 'x'\n", r"\[train\]"),
+        ("[train\nname = 'x'\n", "not valid TOML"),
+    ],
+)
+def test_bad_training_configs_are_named(tmp_path, text, match):
+    with pytest.raises(ConfigError, match=match):
+        load_config(write(tmp_path, text))
+
+
+def test_shipped_training_configs_load():
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parent.parent / "configs"
+    paths = sorted(root.glob("train_*.toml"))
+    assert {p.stem for p in paths} >= {"train_base", "train_coop", "train_surround"}
+    for p in paths:
+        cfg = load_config(p)
+        assert cfg.name.startswith("learned-")
+
+
+def test_make_act_matches_model_call(obs, tables):
+    model = new_model(SMALL, seed=8)
+    graphdef, _ = nnx.split(model)
+    params = learned_params(model, tables[0])
+    a = make_act(SMALL, graphdef)(params, obs)
+    b = model(features(obs, "front", *tables))
+    np.testing.assert_array_equal(np.asarray(a), np.asarray(b))

@@ -1,0 +1,103 @@
+"""Training end to end on a tiny recorded dataset: determinism, resume, fine-tuning from a base
+checkpoint, the recipes' frame selection, and the trained model in the closed loop.
+
+Recording the dataset and compiling the training step dominate the cost, so the module runs
+with the slow tests (CI runs them too).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from lantern_jax.cli import main
+from lantern_jax.dataset.generate import generate_dataset
+from lantern_jax.dataset.store import load_frames, read_card
+from lantern_jax.policies.learned.checkpoint import checkpoint_policy, read_meta
+from lantern_jax.training.config import TrainConfig
+from lantern_jax.training.data import examples_from_frames, recipe_examples, split_by_sequence
+from lantern_jax.training.train import train
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def dataset(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("ds") / "tiny"
+    generate_dataset(folder, pairs_per_family=1, seed=5, chunk_pairs=6, progress=False)
+    return folder
+
+
+def tiny(dataset, out, **kw) -> TrainConfig:
+    base = dict(name="learned-tiny", recipe="base", dataset=str(dataset), out=str(out), width=16,
+                heads=2, epochs=1, batch_size=32, val_fraction=0.2, seed=3)  # fmt: skip
+    return TrainConfig(**{**base, **kw})
+
+
+def test_recipes_select_the_frames_they_promise(dataset):
+    frames = load_frames(dataset, include_crossing=False)
+    card = read_card(dataset)
+    every = examples_from_frames(frames, card)
+    base = recipe_examples(frames, card, tiny(dataset, "x"))
+    assert len(base) == int(np.sum(~every.obs["warning_active"]))
+    assert not base.obs["warning_active"].any()
+    coop = recipe_examples(frames, card, tiny(dataset, "x", recipe="coop", init_from="b"))
+    assert len(coop) == len(every)
+    assert coop.obs["warning_active"].sum() == every.obs["warning_active"].sum()
+    far = recipe_examples(frames, card, tiny(dataset, "x", recipe="distance", init_from="b"))
+    n_b = int(np.sum(frames["route"].to_numpy(str) == "B"))
+    assert len(far) == len(every) + n_b
+    added = far.take(np.arange(len(every), len(far)))
+    assert added.obs["warning_active"].all()
+    assert np.allclose(added.obs["warning_pos"][:, 0], 100.0)
+
+
+def test_validation_split_holds_out_whole_sequences(dataset):
+    frames = load_frames(dataset, include_crossing=False)
+    ex = examples_from_frames(frames, read_card(dataset))
+    tr, va = split_by_sequence(ex, 0.3, seed=1)
+    assert len(tr) + len(va) == len(ex) and len(va) > 0
+    assert not set(ex.sequence[tr]) & set(ex.sequence[va])
+
+
+def test_same_seed_same_checkpoint_and_resume(dataset, tmp_path):
+    a = train(tiny(dataset, tmp_path / "a"), progress=False)
+    b = train(tiny(dataset, tmp_path / "b"), progress=False)
+    sha = [read_meta(tmp_path / d / "learned-tiny")["params_sha256"] for d in "ab"]
+    assert sha[0] == sha[1]
+    assert a["best_val_l1_m"] == b["best_val_l1_m"] and np.isfinite(a["best_val_l1_m"])
+    # a rerun with more epochs resumes from the orbax checkpoint instead of starting over
+    more = train(tiny(dataset, tmp_path / "a", epochs=2), progress=False)
+    curve = pd.read_csv(tmp_path / "a" / "curve.csv")
+    assert list(curve["epoch"]) == [0, 1] and more["epochs"] == 2
+    assert (tmp_path / "a" / "curve.png").stat().st_size > 0
+
+
+def test_coop_fine_tunes_the_base_and_runs_in_the_closed_loop(dataset, tmp_path, capsys):
+    train(tiny(dataset, tmp_path / "base"), progress=False)
+    base_path = tmp_path / "base" / "learned-tiny.msgpack"
+    cfg = tiny(dataset, tmp_path / "coop", name="learned-tiny-coop", recipe="coop",
+               init_from=str(base_path))  # fmt: skip
+    train(cfg, progress=False)
+    meta = read_meta(tmp_path / "coop" / "learned-tiny-coop")
+    assert meta["train_config"]["init_from"] == str(base_path)
+    assert meta["train_config"] == dataclasses.asdict(cfg)
+    pol = checkpoint_policy(tmp_path / "coop" / "learned-tiny-coop.msgpack")
+    assert pol.name == "learned-tiny-coop" and pol.uses_warning
+    rc = main(["evaluate", "--checkpoint", str(tmp_path / "coop" / "learned-tiny-coop.msgpack"),
+               "--pairs-per-family", "1", "--out", str(tmp_path / "res"), "--quiet"])  # fmt: skip
+    assert rc == 0
+    route = pd.read_csv(tmp_path / "res" / "route_level_results.csv")
+    assert set(route["model"]) == {"learned-tiny-coop"} and len(route) == 12
+    assert np.isfinite(route["CUS"]).all()
+    assert "learned-tiny-coop" in capsys.readouterr().out
+
+
+def test_train_command_names_a_bad_config(tmp_path, capsys):
+    p = tmp_path / "bad.toml"
+    p.write_text("[train]\nname = 'x'\nrecipe = 'coop'\n")
+    assert main(["train", "--config", str(p)]) == 2
+    assert "init_from" in capsys.readouterr().err
