@@ -1,7 +1,7 @@
 """Per-tick cost of running a policy on the host (``jax.pure_callback``) instead of in JAX.
 
 The same small MLP (``examples/host_models.py``) runs once as JAX code and once as NumPy code
-through :func:`lantern_jax.policies.host.host_policy`, on the 360 executions of ``lantern-v1``
+through :func:`lantern_jax.policies.host.host_policy`, on the 360 executions of the built-in suite
 for a fixed number of ticks (one device, :func:`lantern_jax.sim.rollout.rollout_batch`).  The
 overhead per tick is the wall-time difference divided by the ticks; the NumPy model's own time
 per call (batch 360) is measured separately, so the rest is the callback's transfer and

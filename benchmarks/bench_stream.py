@@ -1,7 +1,7 @@
 """Scaling of streamed evaluation: executions/s and peak memory from 1k to 100k executions.
 
 Each count runs in a fresh process (so its peak RSS is its own): the ``ego`` policy on the
-stress batch of ``lantern-v1`` (:func:`lantern_jax.stream.stress_source`: the suite's 360
+stress batch of the built-in suite (:func:`lantern_jax.stream.stress_source`: the suite's 360
 executions cycled, hazard speed and trigger perturbed per copy), in chunks of ``--chunk``
 executions, with the command line's device setup (one XLA CPU device per core).
 Executions/s excludes compilation (reported separately).

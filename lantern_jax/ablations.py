@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from lantern_jax.constants import DT
+from lantern_jax.constants import DT, SUITE_ID
 from lantern_jax.evaluate import CONDITIONS, EvalResult, evaluate, package_versions
 from lantern_jax.policies.base import Policy
 from lantern_jax.scenarios.suite import Suite, load_suite
@@ -90,7 +90,7 @@ def ablation_rows(route_table: pd.DataFrame) -> pd.DataFrame:
 
 def run_ablations(
     policy: str | Policy,
-    suite: Suite | str = "lantern-v1",
+    suite: Suite | str = SUITE_ID,
     policy_params: Any = None,
     variants: Sequence[str] | None = None,
     progress: bool = True,

@@ -35,7 +35,7 @@ import jax
 import numpy as np
 import pandas as pd
 
-from lantern_jax.constants import DT, FAMILIES
+from lantern_jax.constants import DT, FAMILIES, SUITE_ID
 from lantern_jax.evaluate import build_executions, run_policy
 from lantern_jax.files import StagedFolder
 from lantern_jax.policies.base import Policy
@@ -121,7 +121,7 @@ def tier_rows(
 
 
 def wording_table(
-    policy: Policy | str, suite: Suite | str = "lantern-v1", policy_params: Any = None
+    policy: Policy | str, suite: Suite | str = SUITE_ID, policy_params: Any = None
 ) -> pd.DataFrame:
     """Warning wording by ambiguity for one policy on a suite (paper appendix table).
 
@@ -319,7 +319,7 @@ def distance_scenarios(
 
 def distance_table(
     policy: Policy | str,
-    suite: Suite | str = "lantern-v1",
+    suite: Suite | str = SUITE_ID,
     policy_params: Any = None,
     family: str = "PE",
     routes: int = 3,

@@ -26,7 +26,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from lantern_jax.constants import DT
+from lantern_jax.constants import DT, SUITE_ID
 from lantern_jax.evaluate import build_executions, run_executions
 from lantern_jax.scenarios.knobs import get_knobs, set_knobs
 from lantern_jax.scenarios.suite import Suite, load_suite
@@ -40,7 +40,7 @@ Source = Callable[[np.ndarray], Scenario]
 STRESS_RANGES = {"hazard_speed_factor": (0.8, 1.25), "hazard_delay_add_s": (0.0, 0.5)}
 
 
-def stress_source(suite: Suite | str = "lantern-v1", seed: int = 0, ablation: str = "none"):
+def stress_source(suite: Suite | str = SUITE_ID, seed: int = 0, ablation: str = "none"):
     """Execution ``i`` = the suite's execution ``i mod (3 * pairs)`` (``[A warning | A
     no-warning | B]`` order) with its hazard perturbed (:data:`STRESS_RANGES`), drawn from
     ``fold_in(PRNGKey(seed), i)``; copy 0 of every execution (``i < 3 * pairs``) is unperturbed.
