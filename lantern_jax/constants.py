@@ -27,6 +27,7 @@ EGO_MAX_BRAKE = 8.0  # m/s^2, brake limit on dry asphalt (friction 1.0)
 GRAVITY = 9.81  # m/s^2
 CAMERA_BACK_OFFSET = 1.5  # m, front camera behind the vehicle centre
 FRONT_CAMERA_FOV = 110.0  # degrees
+SURROUND_FOV = 360.0  # degrees, the six-camera rig (6 x 60 deg, one mounting point)
 
 # --- actor kinds ------------------------------------------------------------------------------
 KIND_VEHICLE = 0

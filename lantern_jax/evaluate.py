@@ -285,7 +285,8 @@ def run_policy(
     pol = get_policy(policy) if isinstance(policy, str) else policy
     params = pol.init(jax.random.PRNGKey(0)) if policy_params is None else policy_params
     sc0 = jax.tree.map(lambda x: x[0], execs.scenarios)
-    obs = jax.eval_shape(lambda sc: observe(sc, init_state(sc), pol.privileged), sc0)
+    surround = bool(getattr(pol.act, "surround", False))
+    obs = jax.eval_shape(lambda sc: observe(sc, init_state(sc), pol.privileged, surround), sc0)
     check_policy_output(pol, params, obs)
     t0 = time.perf_counter()
     final, t_compile = run_executions(

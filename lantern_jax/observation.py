@@ -21,6 +21,11 @@ read as a position).  ``render_warning(warning_text_id, warning_pos)`` gives the
 actor's forecast from its own script or motion model).  The simulator fills it only for a policy
 whose ``Policy.privileged`` flag is set (a static switch of the rollout), so ordinary policies
 pay nothing for it; for them it is ``None``.
+
+``surround`` is the six-camera rig (:class:`SurroundView`, 360 deg: visibility of every actor and
+its own range image), the sensor of the surround-view learned model (the VAD analogue).  It is
+filled only for a policy whose act function asks for it (``act.surround = True``, a static
+switch read by :func:`lantern_jax.sim.step.step`); for every other policy it is ``None``.
 """
 
 from __future__ import annotations
@@ -64,6 +69,15 @@ class PrivilegedView:
 
 
 @struct.dataclass
+class SurroundView:
+    """The six-camera rig (360 deg, one mounting point) at one tick."""
+
+    visible: Array  # (A,) bool, the rig sees the actor (field of view, range, occlusion)
+    ranges: Array  # (SURROUND_RAYS,) float32, m, distance to the first hit along each ray
+    #                (capped at the sensing range; ray 0 points backwards, counter-clockwise)
+
+
+@struct.dataclass
 class Observation:
     """One tick of policy input (no batch axis)."""
 
@@ -94,6 +108,7 @@ class Observation:
     warning_tokens: Array  # (MAX_TOKENS,) int32, token ids of the delivered template (all
     #                        PAD_ID when inactive)
     privileged: PrivilegedView | None = None  # only for privileged policies (else None)
+    surround: SurroundView | None = None  # only for surround-rig policies (else None)
 
 
 def corridor_gaps(obs: Observation) -> tuple[Array, Array]:

@@ -301,3 +301,31 @@ def test_make_act_matches_model_call(obs, tables):
     a = make_act(SMALL, graphdef)(params, obs)
     b = model(features(obs, "front", *tables))
     np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+
+
+def test_surround_rig_reads_the_simulators_360_degree_view(tmp_path):
+    """A surround-rig model's act asks for the six-camera rig: the simulator fills
+    ``Observation.surround`` for it (and only for it), its features read that view, and it
+    drives a closed-loop rollout to finite waypoints."""
+    from lantern_jax.constants import SURROUND_FOV
+    from lantern_jax.sim.rollout import rollout
+    from lantern_jax.sim.sense import SURROUND_RAYS, camera_view
+
+    world = straight_scene([], length=120.0, speed=8.0, s_warn=22.0,
+                           s_event=31.0, s_conflict=40.0, hazard_index=0, clear_s=22.0)  # fmt: skip
+    state = init_state(world)
+    assert observe(world, state).surround is None
+    around = jax.jit(lambda w, s: observe(w, s, surround=True))(world, state).surround
+    rig = camera_view(world, state.ego, state.actors, SURROUND_FOV, SURROUND_RAYS)
+    np.testing.assert_array_equal(np.asarray(around.visible), np.asarray(rig.visible))
+    np.testing.assert_array_equal(np.asarray(around.ranges), np.asarray(rig.ranges))
+    assert around.ranges.shape == (SURROUND_RAYS,)
+
+    cfg = ModelConfig(width=16, heads=2, rig="surround", language=False, ranges=SURROUND_RAYS)
+    pol = model_policy("learned-surround-test", new_model(cfg, seed=1))
+    assert pol.act.surround
+    with pytest.raises(ValueError, match="surround"):
+        features(observe(world, state), "surround", *(pol.init(None).embedding,
+                 pol.init(None).nav_tokens))  # fmt: skip
+    final, _ = jax.jit(lambda w: rollout(w, pol.act, pol.init(None), 40))(world)
+    assert np.isfinite(np.asarray(final.ego.xy)).all() and float(final.t) > 0

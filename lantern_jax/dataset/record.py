@@ -18,7 +18,7 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from lantern_jax.constants import FRONT_CAMERA_FOV
+from lantern_jax.constants import FRONT_CAMERA_FOV, SURROUND_FOV
 from lantern_jax.observation import Observation
 from lantern_jax.sim.observe import observe
 from lantern_jax.sim.sense import FRONT_RAYS, SURROUND_RAYS, CameraView, camera_view
@@ -29,7 +29,6 @@ from lantern_jax.world import Scenario
 Array = jax.Array
 
 FRAME_TICKS = 5  # 20 Hz ticks per retained frame (4 Hz)
-SURROUND_FOV = 360.0  # degrees, the six-camera rig (6 x 60 deg, one mounting point)
 
 
 @struct.dataclass

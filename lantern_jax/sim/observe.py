@@ -18,7 +18,7 @@ import jax
 import jax.numpy as jnp
 
 from lantern_jax import geometry, polyline
-from lantern_jax.constants import BIG, OVERRIDE_FRAME_EGO
+from lantern_jax.constants import BIG, OVERRIDE_FRAME_EGO, SURROUND_FOV
 from lantern_jax.dynamics.forecast import earliest_event_time, forecast_actors
 from lantern_jax.dynamics.lights import ego_light_state
 from lantern_jax.observation import (
@@ -28,8 +28,10 @@ from lantern_jax.observation import (
     ROUTE_STEP,
     Observation,
     PrivilegedView,
+    SurroundView,
 )
 from lantern_jax.scenarios import protocol, warnings
+from lantern_jax.sim.sense import SURROUND_RAYS, camera_view
 from lantern_jax.sim.state import State
 from lantern_jax.world import Scenario, present
 
@@ -116,13 +118,16 @@ def privileged_view(scenario: Scenario, state: State) -> PrivilegedView:
     return jax.lax.optimization_barrier(view)
 
 
-def observe(scenario: Scenario, state: State, privileged: bool = False) -> Observation:
+def observe(
+    scenario: Scenario, state: State, privileged: bool = False, surround: bool = False
+) -> Observation:
     """Build the policy observation of the current tick.
 
     Args:
         scenario: the execution's static scenario.
         state: the simulator state at time ``state.t`` (its percept is that of the same tick).
         privileged: static; also fill ``Observation.privileged`` (:func:`privileged_view`).
+        surround: static; also fill ``Observation.surround`` (:func:`surround_view`).
     """
     ego, a, r, cfg = state.ego, state.actors, scenario.route, scenario.config
     percept = state.percept
@@ -156,4 +161,11 @@ def observe(scenario: Scenario, state: State, privileged: bool = False) -> Obser
         dist_to_stop=dist_to_stop,
         **warning_fields(scenario, state),
         privileged=privileged_view(scenario, state) if privileged else None,
+        surround=surround_view(scenario, state) if surround else None,
     )
+
+
+def surround_view(scenario: Scenario, state: State) -> SurroundView:
+    """The six-camera rig now (:func:`~lantern_jax.sim.sense.camera_view` at 360 deg)."""
+    v = camera_view(scenario, state.ego, state.actors, SURROUND_FOV, SURROUND_RAYS)
+    return SurroundView(visible=v.visible, ranges=v.ranges)

@@ -63,6 +63,7 @@ def step(
         temperature: () float32, soft-score temperature of the telemetry's smooth accumulators.
         privileged: static; the policy reads ``obs.privileged`` (``Policy.privileged``); also
             on whenever ``act`` carries a true ``privileged`` attribute (the expert's does).
+            Likewise ``act.surround`` asks for the six-camera rig (``Observation.surround``).
 
     Returns:
         (the state at the end of the tick — ``state`` itself when it had already ended,
@@ -71,7 +72,7 @@ def step(
     cfg, script, h = scenario.config, scenario.actors, scenario.config.hazard_index
     # A privileged act function says so itself (``act.privileged``), so no caller can forget it.
     privileged = privileged or bool(getattr(act, "privileged", False))
-    obs = observe(scenario, state, privileged)
+    obs = observe(scenario, state, privileged, bool(getattr(act, "surround", False)))
     waypoints = act(policy_params, obs)
     if privileged:
         waypoints = jax.lax.optimization_barrier(waypoints)

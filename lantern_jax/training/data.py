@@ -41,6 +41,9 @@ class Examples:
                         self.sequence[idx], self.base_style[idx])  # fmt: skip
 
 
+SURROUND_COLUMNS = ("surround.visible", "surround.ranges")  # stored as surround_<field>
+
+
 def observation_columns(frames: pd.DataFrame, card: dict) -> dict[str, np.ndarray]:
     """Observation fields from a dataset's ``obs.<field>`` columns.
 
@@ -57,6 +60,9 @@ def observation_columns(frames: pd.DataFrame, card: dict) -> dict[str, np.ndarra
                 continue  # an optional field (e.g. privileged data) the dataset does not carry
             raise ValueError(f"dataset: column {col!r} missing (recorded by another version?)")
         out[f.name] = column_array(frames, col, shapes[col])
+    for name in SURROUND_COLUMNS:  # the six-camera rig (Observation.surround)
+        if name in shapes:
+            out[name.replace(".", "_")] = column_array(frames, name, shapes[name])
     return out
 
 

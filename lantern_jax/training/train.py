@@ -33,7 +33,7 @@ from flax import nnx
 
 from lantern_jax.dataset.store import load_frames, read_card
 from lantern_jax.files import atomic_write
-from lantern_jax.observation import Observation
+from lantern_jax.observation import Observation, SurroundView
 from lantern_jax.policies.learned.checkpoint import load_model, new_model, save_model
 from lantern_jax.policies.learned.features import features, nav_token_table
 from lantern_jax.policies.learned.model import ModelConfig
@@ -48,8 +48,12 @@ def model_config(cfg: TrainConfig, ranges: int) -> ModelConfig:
 
 
 def _observation(batch: dict[str, Any]) -> Observation:
+    """An Observation from example columns (``surround_*`` columns form its surround view)."""
     names = {f.name for f in dataclasses.fields(Observation)}
-    return Observation(**{k: v for k, v in batch.items() if k in names})
+    obs = {k: v for k, v in batch.items() if k in names}
+    if "surround_visible" in batch:
+        obs["surround"] = SurroundView(batch["surround_visible"], batch["surround_ranges"])
+    return Observation(**obs)
 
 
 def make_loss(graphdef: Any, rig: str):

@@ -58,6 +58,7 @@ def make_act(config: ModelConfig, graphdef: Any):
         model = nnx.merge(graphdef, params.model)
         return model(features(obs, config.rig, params.embedding, params.nav_tokens))
 
+    act.surround = config.rig == "surround"  # the simulator fills Observation.surround for it
     return act
 
 

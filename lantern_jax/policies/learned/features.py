@@ -100,7 +100,12 @@ def features(obs: Observation, rig: str, embedding: Array, nav_tokens: Array) ->
     if rig == "front":
         mask, ranges = obs.visible, obs.range_image
     else:
-        mask, ranges = obs.surround_visible, obs.surround_ranges
+        if obs.surround is None:
+            raise ValueError(
+                "features: the surround rig needs Observation.surround (run the "
+                "policy through act, whose surround flag makes the simulator fill it)"
+            )
+        mask, ranges = obs.surround.visible, obs.surround.ranges
     mask = mask & obs.present
     kind = jax.nn.one_hot(obs.actor_kind, NUM_ACTOR_KINDS)
     xy = jnp.where(mask[:, None], obs.actor_xy, 0.0)
