@@ -212,3 +212,20 @@ def test_expert_does_not_brake_for_a_vehicle_that_braking_cannot_avoid():
     pp = expert.init(jax.random.PRNGKey(0))
     wps = np.asarray(expert.act(pp, _expert_observation(straight_scene([behind], speed=8.0))))
     assert wps[-1, 0] > 19.0
+
+
+def test_expert_waits_for_a_vehicle_that_driving_on_cannot_escape_either():
+    # A waiting ego; a car from the left turns into the ego lane 6 m ahead and comes down it
+    # (a wrong-way car on the ego's own path).  Stopped, the ego is reached within 2 s, but
+    # driving on meets the car sooner: braking does not escape it, driving on does not either,
+    # so the expert stays (it meets the car at rest, or not at all where the script ends).
+    wrong_way = ActorSpec(path=np.array([[6.0, 8.0], [6.0, 0.0], [-40.0, 0.0]]), v_pre=8.0)
+    scene = straight_scene([wrong_way], speed=8.0)
+    scene = scene.replace(ego0=scene.ego0.replace(speed=jnp.float32(0.0)))
+    expert = get_policy("expert")
+    pp = expert.init(jax.random.PRNGKey(0))
+    obs = _expert_observation(scene)
+    _, stop, go_tight = E.overlaps(pp, obs, jnp.float32(8.0))
+    assert bool(stop[0]) and bool(go_tight[0])  # neither stopping nor driving on escapes
+    wps = np.asarray(expert.act(pp, obs))
+    assert wps[-1, 0] < 0.5

@@ -42,11 +42,14 @@ marked *ours*):
    other box is lengthened at both ends by the distance the actor covers in 1 s, so the ego
    enters another actor's path only with a post-encroachment time of at least 1 s (PET < 1 s is
    the usual threshold of a serious traffic conflict); PDM-Lite's own margins let a waiting ego
-   start right behind a crossing car.  (b) **braking only where it helps** — a vehicle whose
-   forecast (without that margin) would still reach the ego braking fully to a standstill,
-   coming from the side or behind, does not make it brake: scripted actors never yield, and
-   stopping in their path only lets them hit the ego (an oncoming one still does: braking
-   lowers the closing speed).  This extends PDM-Lite's rule that trailing vehicles are ignored.
+   start right behind a crossing car.  (b) **driving on only where it escapes** — a vehicle
+   coming from the side or behind whose forecast (without that margin) would still reach the
+   ego braking fully to a standstill, but would *not* reach it driving on, does not make it
+   brake: scripted actors never yield, and stopping in their path only lets them hit the ego.
+   When driving on would be hit as well (a wrong-way car coming down the ego's own turn path)
+   the ego brakes: it then meets the actor slower, or not at all where the actor's script ends
+   before reaching it.  Oncoming vehicles always make it brake (braking lowers the closing
+   speed).  This extends PDM-Lite's rule that trailing vehicles are ignored.
 6. **Red light**: IDM toward the stop line (distance from the ego centre, leader length 0,
    s0 = 6 m, T = 0.1 s) while red, and while yellow if the ego can still stop at the comfortable
    deceleration (*ours*, as the reference planner).  Stop signs: no scene has one and the
@@ -283,17 +286,19 @@ def overlaps(p: ExpertParams, obs: Observation, v_free: Array) -> tuple[Array, A
     Returns:
         go (A,) bool: the driving-on forecast overlaps the actor's (gap-acceptance) box;
         stop (A,) bool: even braking fully to a standstill the ego is reached by the actor
-        (its box without the gap-acceptance margin).
+        (its box without the gap-acceptance margin);
+        go_tight (A,) bool: driving on, the ego is reached by the actor's box without the
+        gap-acceptance margin (driving on does not escape it either).
     """
 
-    def hits(stop: bool) -> Array:
-        box, valid = actor_boxes(p, obs, gap_acceptance=not stop)
+    def hits(stop: bool, margin: bool) -> Array:
+        box, valid = actor_boxes(p, obs, gap_acceptance=margin)
         e_xy, e_u, e_ext = ego_forecast(p, obs, v_free, stop)
         ego = (e_xy[None, :, 0], e_xy[None, :, 1], e_u[None, :, 0], e_u[None, :, 1],
                e_ext[0], e_ext[1])  # fmt: skip
         return jnp.any(boxes_overlap(ego, box) & valid, axis=-1)  # (A,)
 
-    return hits(False), hits(True)
+    return hits(False, True), hits(True, False), hits(False, False)
 
 
 @struct.dataclass
@@ -314,14 +319,16 @@ def constraints(p: ExpertParams, obs: Observation, v_free: Array) -> tuple[Leade
          () bool vehicle hazard).
     """
     lead, trail, lead_gap, lead_speed = leaders_and_trailers(p, obs)
-    go, stop = overlaps(p, obs, v_free)
+    go, stop, go_tight = overlaps(p, obs, v_free)
     hit = go & ~lead & ~trail
     walker = obs.actor_kind == KIND_PEDESTRIAN
-    # Braking is pointless against a vehicle that would still reach the stopped ego from the
-    # side or from behind (a scripted actor does not yield); against an oncoming one it
-    # lowers the closing speed.
+    # Driving on escapes a vehicle that would still reach the stopped ego from the side or
+    # from behind (a scripted actor does not yield) only when the driving-on forecast is
+    # clear of it; otherwise, and always against an oncoming one, braking lowers the speed at
+    # which they meet (or avoids the meeting where the actor's script ends first).
     head_on = obs.actor_dir[:, 0] < -p.lead_cos
-    vehicle_hazard = jnp.any(hit & ~walker & ~(stop & ~head_on))
+    escapes = stop & ~go_tight & ~head_on
+    vehicle_hazard = jnp.any(hit & ~walker & ~escapes)
     dist = jnp.sqrt(jnp.maximum(jnp.sum(obs.actor_xy * obs.actor_xy, -1), 1e-12))
     walker_gap = jnp.where(hit & walker, dist - p.walker_length - EGO_HALF_LENGTH, BIG)
 
