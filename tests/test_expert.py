@@ -129,6 +129,11 @@ def test_earliest_event_time():
     never = jnp.float32(NEVER)
     assert float(earliest_event_time(jnp.float32(5.0), never, never)) == NEVER
     assert float(earliest_event_time(jnp.float32(5.0), jnp.float32(4.2), never)) == 5.0
+    # without the anti-deadlock rule only the ego's own arrival starts the event
+    no_force = jnp.bool_(False)
+    assert float(earliest_event_time(jnp.float32(5.0), jnp.float32(4.2), never, no_force)) == NEVER
+    assert float(earliest_event_time(jnp.float32(5.0), jnp.float32(4.2), jnp.float32(4.6),
+                                     no_force)) == pytest.approx(4.6)  # fmt: skip
     t_ev = float(earliest_event_time(jnp.float32(5.0), jnp.float32(4.2), jnp.float32(4.9)))
     assert t_ev == pytest.approx(4.9)
 

@@ -57,21 +57,27 @@ class ActorForecast:
     valid: Array  # (A, K) bool, the actor is (may be) in the world then
 
 
-def earliest_event_time(t: Array, t_warn_point: Array, t_event: Array) -> Array:
+def earliest_event_time(
+    t: Array, t_warn_point: Array, t_event: Array, force_event: Array = True
+) -> Array:
     """() float32, s: the earliest time the protocol's event can begin, seen from ``t``.
 
     The event never begins before the ego reaches the warning point (the geometric trigger
-    lies at or beyond it and the anti-deadlock countdown starts there) and may begin at any
-    moment after: so ``t_event`` once it happened, ``t`` (now) once the warning point has been
-    reached, and ``NEVER`` before.  A waiting hazard is thus forecast as waiting until the
-    protocol makes its start possible, not from an extrapolation of the ego's own arrival.
+    lies at or beyond it and the anti-deadlock countdown starts there) and, with the
+    anti-deadlock rule on, may begin at any moment after: so ``t_event`` once it happened,
+    ``t`` (now) once the warning point has been reached, and ``NEVER`` before.  A waiting
+    hazard is thus forecast as waiting until the protocol makes its start possible, not from an
+    extrapolation of the ego's own arrival.  Without the rule (``force_event`` False: open-loop
+    data collection, Right-Turn Yield) only the ego's own arrival at the event point starts it,
+    so a pending event stays ``NEVER`` (a waiting ego would otherwise wait for itself).
 
     Args:
         t: () float32, s, now.
         t_warn_point: () float32, s, ego reached the warning point (``NEVER`` if not).
         t_event: () float32, s, event onset (``NEVER`` if pending).
+        force_event: () bool, the anti-deadlock rule may start the event.
     """
-    out = jnp.where(happened(t_warn_point), t, NEVER)
+    out = jnp.where(happened(t_warn_point) & force_event, t, NEVER)
     return jnp.where(happened(t_event), t_event, out).astype(jnp.float32)
 
 

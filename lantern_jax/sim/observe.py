@@ -95,7 +95,9 @@ def privileged_view(scenario: Scenario, state: State) -> PrivilegedView:
     """Every actor's 2-s forecast (:func:`~lantern_jax.dynamics.forecast.forecast_actors`) in
     the ego frame; a pending event may begin once the ego reaches the warning point."""
     ego, a, proto = state.ego, state.actors, state.protocol
-    t_early = earliest_event_time(state.t, proto.t_warn_point, proto.t_event)
+    t_early = earliest_event_time(
+        state.t, proto.t_warn_point, proto.t_event, scenario.config.force_event
+    )
     on = present(scenario.actors, a)
     fc = forecast_actors(
         scenario.actors, a, on, state.t, proto.t_event, t_early, FORECAST_STEPS, FORECAST_DT
