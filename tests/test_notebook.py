@@ -87,3 +87,17 @@ def test_stress_testing_notebook_runs(tmp_path, monkeypatch):
     assert "restart" in text and "CUS" in text  # the found failures
     images = [o for o in outputs if "image/png" in o.get("data", {})]
     assert len(images) >= 1, "the convergence plot"
+
+
+@pytest.mark.slow
+def test_train_and_evaluate_notebook_runs(tmp_path, monkeypatch):
+    outputs = _run("train_and_evaluate.py", tmp_path, monkeypatch)
+    errors = [o for o in outputs if o.get("output_type") == "error"]
+    assert not errors, [f"{e.get('ename')}: {e.get('evalue')}" for e in errors]
+    text = "\n".join(_text(o) for o in outputs)
+    assert "SMALL = True" in text
+    assert "LANTERN open-loop dataset" in text  # the dataset card
+    assert "best_val_l1_m" in text
+    assert "nb-coop (warning gain)" in text  # the closed-loop family table
+    images = [o for o in outputs if "image/png" in o.get("data", {})]
+    assert len(images) >= 1, "the learning curves"

@@ -13,7 +13,7 @@ from conftest import (
     MODE_STOP_PAST,
     select,
 )
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from lantern_jax import times
@@ -428,11 +428,14 @@ def test_pedestrian_clears_when_the_crossing_is_done_and_despawns(runs, family_r
 # property: marker order for every family under the expert
 # ---------------------------------------------------------------------------------------------
 @given(seed=st.integers(0, 2**31 - 1), weather=st.sampled_from(WEATHERS))
+@example(seed=510509, weather="clear_day")  # the expert finishes ahead of the RTY flow
 @settings(
     max_examples=5, deadline=None, database=None,
     suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
 )  # fmt: skip
 def test_marker_order_for_every_family(sim, seed, weather):
+    from lantern_jax.scoring.metrics import finalize
+
     rng = np.random.default_rng(seed)
     worlds = []
     for fam in FAMILIES:
@@ -443,8 +446,16 @@ def test_marker_order_for_every_family(sim, seed, weather):
         p = select(final.protocol, 2 * i)
         t_wp, t_ev, t_off = float(p.t_warn_point), float(p.t_event), float(p.t_warn_off)
         label = f"{fam} seed {seed} {weather}: {t_wp:.3f} {t_ev:.3f} {t_off:.3f}"
-        assert happened(t_wp) and happened(t_ev) and happened(t_off), label
-        assert t_wp <= t_ev < t_off, label
+        assert happened(t_wp) and happened(t_ev), label
+        # The warning terminates once the hazard is seen after the event or clears; an ego that
+        # finishes its route first (the expert through a gap ahead of Right-Turn Yield's flow)
+        # ends the execution with the termination still pending.
+        if happened(t_off):
+            assert t_ev < t_off, label
+        else:
+            progress = float(finalize(select(final.telemetry, 2 * i)).progress)
+            assert not happened(float(p.t_clear)) and progress >= 0.999, label
+        assert t_wp <= t_ev, label
         if i == RTY:
             assert t_ev == t_wp, label
         else:
