@@ -26,9 +26,10 @@ padded to one size, so one compilation serves all rounds.  This is an evaluation
 and every recorded route.
 
 The validator is part of what makes a suite: the manifest's generation report names it
-(``validator``), and a suite regenerates only with the validator that filtered it.  Manifests
-that name none (``lantern-v2``) were filtered by the first privileged reference, registered as
-``expert-v1`` (:data:`LEGACY_VALIDATOR`); new suites use ``expert``.
+(``validator``), and a suite regenerates only with the validator that filtered it.
+``lantern-v2`` was filtered by the first privileged reference, registered as ``expert-v1``
+(its report names it; a manifest that names none is taken to mean the same,
+:data:`LEGACY_VALIDATOR`); new suites use ``expert``.
 """
 
 from __future__ import annotations
@@ -69,7 +70,7 @@ MAX_TICKS = int(
 GATES = ("gate_collision", "gate_route_deviation", "gate_lane", "gate_rule", "gate_block")
 
 VALIDATOR = "expert"  # policy that filters newly generated suites
-LEGACY_VALIDATOR = "expert-v1"  # the validator of manifests that do not name one (lantern-v2)
+LEGACY_VALIDATOR = "expert-v1"  # the validator of manifests that do not name one
 
 _VALIDATOR_RUN = {}
 

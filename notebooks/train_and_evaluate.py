@@ -33,6 +33,7 @@ from pathlib import Path
 
 import matplotlib.pyplot as plt
 import pandas as pd
+from IPython.display import display
 
 from lantern_jax.dataset.generate import generate_dataset
 from lantern_jax.dataset.store import card_markdown
@@ -91,7 +92,8 @@ for name in ("base", "coop"):
 ax.set_xlabel("epoch")
 ax.set_ylabel("L1 (m)")
 ax.legend()
-plt.show()
+plt.close(fig)
+display(fig)
 
 # %% [markdown]
 # ## 4. Closed loop: with and without the warning
