@@ -63,41 +63,39 @@ def _run(name: str, tmp_path: Path, monkeypatch) -> list[dict]:
     return _outputs(nb)
 
 
-def test_quickstart_notebook_runs(tmp_path, monkeypatch):
-    outputs = _run("quickstart.py", tmp_path, monkeypatch)
+def _clean_run(name: str, tmp_path: Path, monkeypatch) -> tuple[str, int]:
+    """Run a notebook, fail on any error output; returns (all text output, PNG image count)."""
+    outputs = _run(name, tmp_path, monkeypatch)
     errors = [o for o in outputs if o.get("output_type") == "error"]
     assert not errors, [f"{e.get('ename')}: {e.get('evalue')}" for e in errors]
     text = "\n".join(_text(o) for o in outputs)
+    images = [o for o in outputs if "image/png" in o.get("data", {})]
+    return text, len(images)
+
+
+def test_quickstart_notebook_runs(tmp_path, monkeypatch):
+    text, n_images = _clean_run("quickstart.py", tmp_path, monkeypatch)
     assert "Overall" in text
     assert "Model (condition)" in text  # the text tables of lantern_jax.report
     assert "SMALL = True" in text
     assert "d soft CUS / d crossing speed" in text
-    images = [o for o in outputs if "image/png" in o.get("data", {})]
-    assert len(images) >= 3, f"{len(images)} PNG outputs (bird's-eye views and timeline expected)"
+    assert n_images >= 3, f"{n_images} PNG outputs (bird's-eye views and timeline expected)"
 
 
 @pytest.mark.slow
 def test_stress_testing_notebook_runs(tmp_path, monkeypatch):
-    outputs = _run("stress_testing.py", tmp_path, monkeypatch)
-    errors = [o for o in outputs if o.get("output_type") == "error"]
-    assert not errors, [f"{e.get('ename')}: {e.get('evalue')}" for e in errors]
-    text = "\n".join(_text(o) for o in outputs)
+    text, n_images = _clean_run("stress_testing.py", tmp_path, monkeypatch)
     assert "SMALL = True" in text
     assert "failure_rate" in text and "cmaes" in text  # the comparison table
     assert "restart" in text and "CUS" in text  # the found failures
-    images = [o for o in outputs if "image/png" in o.get("data", {})]
-    assert len(images) >= 1, "the convergence plot"
+    assert n_images >= 1, "the convergence plot"
 
 
 @pytest.mark.slow
 def test_train_and_evaluate_notebook_runs(tmp_path, monkeypatch):
-    outputs = _run("train_and_evaluate.py", tmp_path, monkeypatch)
-    errors = [o for o in outputs if o.get("output_type") == "error"]
-    assert not errors, [f"{e.get('ename')}: {e.get('evalue')}" for e in errors]
-    text = "\n".join(_text(o) for o in outputs)
+    text, n_images = _clean_run("train_and_evaluate.py", tmp_path, monkeypatch)
     assert "SMALL = True" in text
     assert "LANTERN open-loop dataset" in text  # the dataset card
     assert "best_val_l1_m" in text
     assert "nb-coop (warning gain)" in text  # the closed-loop family table
-    images = [o for o in outputs if "image/png" in o.get("data", {})]
-    assert len(images) >= 1, "the learning curves"
+    assert n_images >= 1, "the learning curves"
