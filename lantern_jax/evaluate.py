@@ -31,17 +31,17 @@ import pandas as pd
 from lantern_jax.constants import DT, FAMILIES
 from lantern_jax.policies.base import Policy, check_policy_output
 from lantern_jax.policies.registry import get_policy
-from lantern_jax.scenarios.suite import SUITE_ID, Suite, build_suite_scenarios, load_suite
+from lantern_jax.scenarios.suite import SUITE_ID, Suite, build_suite_batches, load_suite
 from lantern_jax.scenarios.warnings import paraphrase_text_ids
 from lantern_jax.scoring.aggregate import decomposition_table, family_scores
 from lantern_jax.scoring.metrics import finalize
 from lantern_jax.scoring.table import build_route_table
-from lantern_jax.sim.distributed import pad_batch, placement
+from lantern_jax.sim.distributed import placement
 from lantern_jax.sim.observe import observe
 from lantern_jax.sim.rollout import rollout_batch_parallel
 from lantern_jax.sim.state import init_state
 from lantern_jax.times import happened, time_or_nan
-from lantern_jax.world import Scenario, tree_stack
+from lantern_jax.world import Scenario
 
 CONDITIONS = ("warning", "no-warning")
 
@@ -96,17 +96,15 @@ def build_executions(suite: Suite, ablation: str = "none") -> Executions:
     """
     if ablation not in ABLATIONS:
         raise ValueError(f"unknown ablation {ablation!r}; valid: {', '.join(ABLATIONS)}")
-    sa, sb, _ = build_suite_scenarios(suite)
-    a = tree_stack(sa)
-    b = tree_stack(sb)
-    on, off = jnp.ones_like(a.config.is_route_a), jnp.zeros_like(a.config.is_route_a)
+    a, b = build_suite_batches(suite)
+    on, off = np.ones_like(a.config.is_route_a), np.zeros_like(a.config.is_route_a)
     a_warn = a.replace(config=a.config.replace(warning_enabled=on))
     a_none = a.replace(config=a.config.replace(warning_enabled=off))
     fn = ABLATIONS[ablation]
     if fn is not None:
         a_warn = a_warn.replace(config=fn(a_warn.config))
         a_none = a_none.replace(config=fn(a_none.config))
-    scenarios = jax.tree.map(lambda *x: jnp.concatenate(x), a_warn, a_none, b)
+    scenarios = jax.device_put(jax.tree.map(lambda *x: np.concatenate(x), a_warn, a_none, b))
     max_ticks = int(np.ceil(float(np.max(np.asarray(scenarios.config.timeout_s))) / DT))
     return Executions(
         scenarios=scenarios,
@@ -120,47 +118,64 @@ def build_executions(suite: Suite, ablation: str = "none") -> Executions:
 
 _COMPILED: dict[tuple, Any] = {}
 
-#: Two-phase evaluation of large batches: every execution runs up to ``COMPACT_AFTER_TICKS``;
-#: the few that are still going continue in groups of ``COMPACT_GROUP``, so that the whole batch
-#: does not step in lockstep behind its longest executions.  Batches smaller than
-#: ``COMPACT_MIN_BATCH`` run in one phase.
-COMPACT_AFTER_TICKS = 400
+#: Slot scheduling of large batches (``compact``): ``COMPACT_GROUP`` slots are stepped
+#: together ``REFILL_TICKS`` ticks per call; after each call a slot whose execution has ended
+#: takes the next waiting execution (longest timeout first), so that no slot idles behind a few
+#: long executions.  Batches smaller than ``COMPACT_MIN_BATCH`` run as one group to the end.
+#: Every call has the same shape, so one compiled program serves the whole evaluation.
 COMPACT_GROUP = 96
+REFILL_TICKS = 40
 COMPACT_MIN_BATCH = 256
 
 
-def compiled_rollout(act, max_ticks: int, start: bool = False, privileged: bool = False):
-    """The jitted batched rollout for a policy ``act`` (cached: repeated calls reuse it).
+def compiled_rollout(act, privileged: bool = False):
+    """The jitted batched rollout program for a policy ``act`` (cached per ``act``).
 
-    Split over every local device (:func:`~lantern_jax.sim.rollout.rollout_batch_parallel`);
-    the command line exposes one CPU device per core.  With ``start=True`` the function takes a
-    third argument, the batched states to continue.  ``privileged`` fills ``obs.privileged``
-    (``Policy.privileged``).
+    ``program(scenarios, policy_params, start, fresh, ticks)`` rolls a batch for up to
+    ``ticks`` (int32 scalar) more ticks: executions with ``fresh`` (bool, (B,)) start at their
+    scenario's initial state, the others continue from ``start``.  The horizon is an argument,
+    not a constant, so one compiled program serves the first steps and the continuation of
+    every group.  Split over every local device
+    (:func:`~lantern_jax.sim.rollout.rollout_batch_parallel`); ``privileged`` fills
+    ``obs.privileged`` (``Policy.privileged``).
     """
-    key = (act, max_ticks, start, privileged)
+    key = ("program", act, privileged)
     if key not in _COMPILED:
-        if start:
-            fn = jax.jit(
-                lambda scenarios, policy_params, s: rollout_batch_parallel(
-                    scenarios, act, policy_params, max_ticks, start=s, privileged=privileged
-                )
+
+        def program(scenarios, policy_params, start, fresh, ticks):
+            init = jax.vmap(init_state)(scenarios)
+            states = jax.tree.map(
+                lambda a, b: jnp.where(fresh.reshape(fresh.shape + (1,) * (a.ndim - 1)), a, b),
+                init,
+                start,
             )
-        else:
-            fn = jax.jit(
-                lambda scenarios, policy_params: rollout_batch_parallel(
-                    scenarios, act, policy_params, max_ticks, privileged=privileged
-                )
+            return rollout_batch_parallel(
+                scenarios, act, policy_params, ticks, start=states, privileged=privileged
             )
-        _COMPILED[key] = fn
+
+        _COMPILED[key] = jax.jit(program)
     return _COMPILED[key]
 
 
-def _executable(fn, *args):
-    """AOT-compile ``fn`` for ``args`` once (cached by function and argument shapes)."""
-    shapes = jax.tree.map(lambda x: (tuple(x.shape), str(x.dtype)), args)
+def _executable(fn, *args, timings: dict | None = None):
+    """AOT-compile ``fn`` for ``args`` once (cached by function and argument shapes).
+
+    ``timings`` (optional) receives the seconds of tracing and lowering (``"trace + lower"``)
+    and of XLA's compilation or the load from the persistent cache (``"XLA compile"``); both
+    0 when the program was already compiled in this process.
+    """
+    shapes = jax.tree.map(lambda x: (tuple(np.shape(x)), str(np.result_type(x))), args)
     key = ("exe", fn, jax.tree.structure(args), str(jax.tree.leaves(shapes)))
+    t_lower = t_compile = 0.0
     if key not in _COMPILED:
-        _COMPILED[key] = fn.lower(*args).compile()
+        t0 = time.perf_counter()
+        lowered = fn.lower(*args)
+        t1 = time.perf_counter()
+        _COMPILED[key] = lowered.compile()
+        t_lower, t_compile = t1 - t0, time.perf_counter() - t1
+    if timings is not None:
+        timings["trace + lower"] = t_lower
+        timings["XLA compile"] = t_compile
     return _COMPILED[key]
 
 
@@ -168,11 +183,11 @@ def _take(tree, idx):
     return jax.tree.map(lambda x: x[idx], tree)
 
 
-def _cut(tree, n: int):
-    """The first ``n`` executions (the rest is padding)."""
-    if jax.tree.leaves(tree)[0].shape[0] == n:
-        return tree
-    return jax.tree.map(lambda x: x[:n], tree)
+def group_size(n: int, multiple: int, compact: bool) -> int:
+    """Executions stepped together: the whole batch when not ``compact``, else
+    ``COMPACT_GROUP`` slots (never more than the batch), rounded up to ``multiple``."""
+    size = n if not compact else min(n, COMPACT_GROUP)
+    return -(-size // multiple) * multiple
 
 
 def run_executions(
@@ -182,58 +197,77 @@ def run_executions(
     max_ticks: int,
     compact: bool | None = None,
     privileged: bool = False,
+    timings: dict | None = None,
 ):
     """Roll out a batch of executions until all have ended; returns (final states, seconds
     spent compiling).
 
-    Large batches run in two phases (see ``COMPACT_*``): results are the same executions,
-    continued from their exact state, only grouped differently.  ``privileged`` must be the
-    policy's ``Policy.privileged`` flag.  Under JAX's distributed runtime (several processes)
-    every call runs on the global mesh, each process stepping its shard, and the final states
-    are gathered on every process (:mod:`lantern_jax.sim.distributed`).
+    One compiled program (:func:`compiled_rollout`) does all the stepping.  A small batch runs
+    as one group to the end; a large one (``compact``, see ``COMPACT_*``) is scheduled over a
+    fixed number of slots that are refilled with waiting executions as earlier ones end:
+    results are the same executions, continued from their exact state, only grouped
+    differently.  Scenarios and states stay on the host between calls (NumPy), so refilling
+    compiles nothing.  ``privileged`` must be the policy's ``Policy.privileged`` flag.  Under
+    JAX's distributed runtime (several processes) every call runs on the global mesh, each
+    process stepping its shard, and the final states are gathered on every process
+    (:mod:`lantern_jax.sim.distributed`).  ``timings`` (optional dict) receives
+    ``"trace + lower"``, ``"XLA compile"`` and ``"rollout"`` seconds.
+
+    Returns:
+        (final states as NumPy arrays with leading axis ``n``, seconds spent compiling).
     """
     n = jax.tree.leaves(scenarios)[0].shape[0]
     if compact is None:
-        compact = n >= COMPACT_MIN_BATCH and max_ticks > COMPACT_AFTER_TICKS
+        compact = n >= COMPACT_MIN_BATCH and max_ticks > REFILL_TICKS
     place = placement()
+    multiple = int(np.lcm(place.multiple, jax.local_device_count()))
+    group = group_size(n, multiple, compact)
+    host = jax.tree.map(np.asarray, scenarios)
     params = place.replicate(policy_params)
 
-    def put(tree):
-        return place.put(pad_batch(tree, place.multiple)[0])
-
     t0 = time.perf_counter()
-    if not compact:
-        sc = put(scenarios)
-        exe = _executable(compiled_rollout(act, max_ticks, privileged=privileged), sc, params)
-        return _cut(place.get(exe(sc, params)), n), time.perf_counter() - t0
-    first = compiled_rollout(act, COMPACT_AFTER_TICKS, privileged=privileged)
-    rest = compiled_rollout(act, max_ticks - COMPACT_AFTER_TICKS, start=True, privileged=privileged)
-    sc_all = put(scenarios)
-    exe1 = _executable(first, sc_all, params)
-    group = -(-min(COMPACT_GROUP, n) // place.multiple) * place.multiple
-    sc_g = _take(scenarios, np.arange(group) % n)
-    key = ("warm", rest, group)
-    if key not in _COMPILED:
-        # Compile the second phase now: a call on finished (done) states runs no tick.
-        s_shape = jax.eval_shape(first, sc_all, params)
-        dummy = jax.tree.map(lambda x: jnp.zeros((group, *x.shape[1:]), x.dtype), s_shape)
-        dummy = dummy.replace(done=jnp.ones((group,), bool))
-        jax.block_until_ready(rest(put(sc_g), params, put(dummy)))
-        _COMPILED[key] = True
+    program = compiled_rollout(act, privileged=privileged)
+    slot = np.arange(group) % n  # the execution in each slot (padding: repeats)
+    state_shape = jax.eval_shape(jax.vmap(init_state), _take(host, slot))
+    states = jax.tree.map(lambda x: np.zeros(x.shape, x.dtype), state_shape)
+    fresh = np.ones((group,), bool)
+    args = (place.put(_take(host, slot)), params, place.put(states), place.put(fresh))
+    exe = _executable(program, *args, place.replicate(np.int32(0)), timings=timings)
     t_compile = time.perf_counter() - t0
-    state = _cut(place.get(exe1(sc_all, params)), n)
-    todo = np.flatnonzero(~np.asarray(state.done))
-    for k in range(0, len(todo), group):
-        ids = todo[k : k + group]
-        padded = np.concatenate([ids, np.full(group - len(ids), ids[0])])
-        part = place.get(rest(put(_take(scenarios, padded)), params, put(_take(state, padded))))
-        # Write back with one fixed shape (padding rows go to index n and are dropped), so the
-        # update compiles once however many executions a group holds.
-        where = np.concatenate([ids, np.full(group - len(ids), n)])
-        state = jax.tree.map(
-            lambda full, p, where=where: full.at[where].set(p, mode="drop"), state, part
+
+    def call(ticks: int):
+        out = exe(
+            place.put(_take(host, slot)),
+            params,
+            place.put(states),
+            place.put(fresh),
+            place.replicate(np.int32(ticks)),
         )
-    return state, t_compile
+        return jax.tree.map(np.asarray, place.get(out))
+
+    if not compact:
+        final = _take(call(max_ticks), np.arange(n))
+    else:
+        timeout = np.asarray(host.config.timeout_s)
+        waiting = list(np.argsort(-timeout, kind="stable")[::-1])  # pop() = longest first
+        first = [waiting.pop() for _ in range(min(group, n))]
+        slot = np.array(first + first[:1] * (group - len(first)))  # padding: a copy of one
+        final = None
+        while True:
+            states = call(max(1, REFILL_TICKS))
+            if final is None:
+                final = jax.tree.map(lambda x: np.empty((n, *x.shape[1:]), x.dtype), states)
+            for full, part in zip(jax.tree.leaves(final), jax.tree.leaves(states), strict=True):
+                full[slot] = part
+            ended = states.done | (states.tick >= max_ticks)
+            fresh = np.zeros((group,), bool)
+            for j in np.flatnonzero(ended)[: len(waiting)]:
+                slot[j], fresh[j] = waiting.pop(), True
+            if ended.all() and not fresh.any():
+                break
+    if timings is not None:
+        timings["rollout"] = time.perf_counter() - t0 - t_compile
+    return final, t_compile
 
 
 def params_hash(params: Any) -> str:
@@ -269,6 +303,8 @@ class PolicyRun:
     route_table: pd.DataFrame
     seconds_compile: float
     seconds_run: float
+    #: wall seconds by phase: "trace + lower", "XLA compile", "rollout", "scoring"
+    timings: dict[str, float] = dataclasses.field(default_factory=dict)
 
 
 def run_policy(
@@ -288,11 +324,12 @@ def run_policy(
     surround = bool(getattr(pol.act, "surround", False))
     obs = jax.eval_shape(lambda sc: observe(sc, init_state(sc), pol.privileged, surround), sc0)
     check_policy_output(pol, params, obs)
+    timings: dict[str, float] = {}
     t0 = time.perf_counter()
     final, t_compile = run_executions(
-        pol.act, execs.scenarios, params, execs.max_ticks, privileged=pol.privileged
-    )
-    jax.block_until_ready(final)
+        pol.act, execs.scenarios, params, execs.max_ticks, privileged=pol.privileged,
+        timings=timings,
+    )  # fmt: skip
     t2 = time.perf_counter()
     t1 = t0 + t_compile
     m_struct = jax.tree.map(np.asarray, finalize(final.telemetry))
@@ -326,6 +363,7 @@ def run_policy(
             )
         )
     table = pd.concat(rows, ignore_index=True)
+    timings["scoring"] = time.perf_counter() - t2
     return PolicyRun(
         policy=model or pol.name,
         params_sha256=params_hash(params),
@@ -334,6 +372,7 @@ def run_policy(
         route_table=table,
         seconds_compile=t1 - t0,
         seconds_run=t2 - t1,
+        timings=timings,
     )
 
 
@@ -399,6 +438,8 @@ class EvalResult:
     manifest: dict
     runs: list[PolicyRun]
     premise: pd.DataFrame  # % of Route A executions with the hazard unseen (:func:`premise_table`)
+    #: wall seconds of the shared phases: "world build" and "tables" (per policy: ``runs``)
+    seconds: dict[str, float] = dataclasses.field(default_factory=dict)
 
 
 def _policies_to_run(policies, suite) -> list[Policy]:
@@ -510,10 +551,13 @@ def evaluate(
     if len(policy_params) != len(pols):
         raise ValueError(f"policy_params: {len(policy_params)} entries for {len(pols)} policies")
     s = load_suite(suite) if isinstance(suite, str) else suite
+    t0 = time.perf_counter()
     execs = build_executions(s, ablation)
+    t_build = time.perf_counter() - t0
     runs = _run_all(pols, list(policy_params), execs, s.suite_id, progress)
+    t0 = time.perf_counter()
     route = pd.concat([r.route_table for r in runs], ignore_index=True)
-    return EvalResult(
+    result = EvalResult(
         route_table=route,
         family_table=family_table(route),
         decomposition=decomposition_table(route).reset_index(),
@@ -521,3 +565,5 @@ def evaluate(
         runs=runs,
         premise=premise_table(route),
     )
+    result.seconds = {"world build": t_build, "tables": time.perf_counter() - t0}
+    return result

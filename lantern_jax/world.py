@@ -537,8 +537,14 @@ def present(actors: ActorScript, state: ActorState) -> Array:
 
 
 def tree_stack(items: list) -> Any:
-    """Stack a list of identically-shaped pytrees along a new leading batch axis."""
-    return jax.tree.map(lambda *xs: jnp.stack(xs), *items)
+    """Stack a list of identically-shaped pytrees along a new leading batch axis.
+
+    Concrete leaves are stacked on the host (NumPy, one copy per leaf, then one transfer);
+    traced leaves (inside ``jit``) with ``jnp.stack``.
+    """
+    if any(isinstance(x, jax.core.Tracer) for x in jax.tree.leaves(items)):
+        return jax.tree.map(lambda *xs: jnp.stack(xs), *items)
+    return jax.device_put(jax.tree.map(lambda *xs: np.stack(xs), *items))
 
 
 def tree_index(tree: Any, i: int) -> Any:

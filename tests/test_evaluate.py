@@ -429,20 +429,21 @@ def test_premise_table(base):
     assert t.loc["hidden at the warning point", "LWW"] == pytest.approx(share)
 
 
-def test_two_phase_evaluation_matches_one_phase(shipped, monkeypatch):
-    """Continuing the unfinished executions in small groups gives the same results as stepping
-    the whole batch in lockstep (continuous values to float32 rounding, discrete ones exactly)."""
+def test_slot_scheduling_matches_one_group(shipped, monkeypatch):
+    """Stepping the executions in a few refilled slots, 80 ticks per call, gives the same
+    results as stepping the whole batch in lockstep to the end (continuous values to float32
+    rounding, discrete ones exactly)."""
     import lantern_jax.evaluate as ev
     from lantern_jax.scoring.metrics import finalize
 
-    monkeypatch.setattr(ev, "COMPACT_AFTER_TICKS", 160)
+    monkeypatch.setattr(ev, "REFILL_TICKS", 80)
     monkeypatch.setattr(ev, "COMPACT_GROUP", 4)
     execs = build_executions(shipped.select(["pe_0001", "rty_0001", "or_0001"]))
     pol = get_policy("coop")
     params = pol.init(jax.random.PRNGKey(0))
     one, _ = ev.run_executions(pol.act, execs.scenarios, params, execs.max_ticks, compact=False)
     two, _ = ev.run_executions(pol.act, execs.scenarios, params, execs.max_ticks, compact=True)
-    assert int(np.max(np.asarray(one.tick))) > 160  # some executions needed phase two
+    assert int(np.max(np.asarray(one.tick))) > 160  # some executions needed several calls
     assert np.asarray(two.done).all()
     m1, m2 = finalize(one.telemetry), finalize(two.telemetry)
     for f in dataclasses.fields(m1):

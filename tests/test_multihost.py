@@ -2,9 +2,8 @@
 
 Two local processes with two CPU devices each (a global mesh of four devices, CPU collectives)
 run ``lantern-jax evaluate`` on one pair per family; a single process with one device runs the
-same command.  The batch (18 executions) is padded to 20 on the four-device mesh, and the
-two-phase evaluation is forced (``COMPACT_MIN_BATCH = 1``) so that both phases, the gather of
-the first phase's states and the regrouping of the unfinished executions run across processes.
+same command.  The slot scheduling is forced (``COMPACT_MIN_BATCH = 1``) so that the gather of
+each call's states and the refilling of slots with waiting executions run across processes.
 """
 
 from __future__ import annotations

@@ -11,10 +11,12 @@ the pytree with the right dtypes.
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import math
 from dataclasses import dataclass
 
-import jax.numpy as jnp
+import jax
 import numpy as np
 
 from lantern_jax.constants import (
@@ -135,16 +137,16 @@ def pack_actors(slots: list[ActorSpec | None], rot: np.ndarray) -> tuple[ActorSc
         state["yaw"][i] = math.remainder(yaw + math.atan2(rot[1, 0], rot[0, 0]), 2 * math.pi)
         state["speed"][i], state["s"][i], state["lat"][i] = v0, s0, 0.0
         state["active"][i] = True
-    return ActorScript(**_jnp_tree(scr)), ActorState(**_jnp_tree(state))
+    return ActorScript(**_device_tree(scr)), ActorState(**_device_tree(state))
 
 
 #: dtypes of the non-float32 fields of :class:`ExecutionConfig`.
 CONFIG_DTYPES = {
-    "family": jnp.int32, "hazard_index": jnp.int32, "ego_light": jnp.int32,
-    "template_id": jnp.int32, "text_id": jnp.int32, "noise_seed": jnp.uint32,
-    "override_text_id": jnp.int32, "override_anchor": jnp.int32, "override_frame": jnp.int32,
-    "is_route_a": jnp.bool_, "warning_enabled": jnp.bool_, "clear_on_ego_stop": jnp.bool_,
-    "despawn_on_clear": jnp.bool_, "force_event": jnp.bool_, "late_onset": jnp.bool_,
+    "family": np.int32, "hazard_index": np.int32, "ego_light": np.int32,
+    "template_id": np.int32, "text_id": np.int32, "noise_seed": np.uint32,
+    "override_text_id": np.int32, "override_anchor": np.int32, "override_frame": np.int32,
+    "is_route_a": np.bool_, "warning_enabled": np.bool_, "clear_on_ego_stop": np.bool_,
+    "despawn_on_clear": np.bool_, "force_event": np.bool_, "late_onset": np.bool_,
 }  # fmt: skip
 
 
@@ -164,13 +166,46 @@ def execution_config(fields: dict) -> ExecutionConfig:
         raise ValueError(
             f"ExecutionConfig: missing fields {sorted(missing)}, unknown fields {sorted(unknown)}"
         )
-    return ExecutionConfig(
-        **{k: jnp.asarray(fields[k], CONFIG_DTYPES.get(k, jnp.float32)) for k in names}
+    config = ExecutionConfig(
+        **{k: np.asarray(fields[k], CONFIG_DTYPES.get(k, np.float32)) for k in names}
     )
+    return config if _ON_HOST.get() else jax.device_put(config)
 
 
-def _jnp_tree(d: dict) -> dict:
-    return {k: jnp.asarray(v) for k, v in d.items()}
+def _host_array(value) -> np.ndarray:
+    """``value`` as a NumPy array with the dtype JAX would give it (64-bit types narrowed to
+    32 bits, as under JAX's default ``jax_enable_x64 = False``)."""
+    a = np.asarray(value)
+    if a.dtype == np.float64:
+        return a.astype(np.float32)
+    if a.dtype == np.int64:
+        return a.astype(np.int32)
+    return a
+
+
+#: While True (:func:`host_arrays`), assembled scenarios keep NumPy leaves instead of device
+#: arrays, so that a whole suite can be stacked on the host and transferred once.
+_ON_HOST: contextvars.ContextVar[bool] = contextvars.ContextVar("on_host", default=False)
+
+
+@contextlib.contextmanager
+def host_arrays():
+    """Within this context, :func:`assemble_scenario` and :func:`execution_config` return
+    pytrees of NumPy arrays (with JAX's dtypes) instead of device arrays: building many
+    scenarios to stack them costs no per-leaf transfer.  Such a scenario is fine as a ``jit``
+    argument; use device arrays (the default) for eager ``.at[]`` updates."""
+    token = _ON_HOST.set(True)
+    try:
+        yield
+    finally:
+        _ON_HOST.reset(token)
+
+
+def _device_tree(d: dict) -> dict:
+    """A dict of NumPy values as device arrays, in one transfer (NumPy under
+    :func:`host_arrays`)."""
+    tree = {k: _host_array(v) for k, v in d.items()}
+    return tree if _ON_HOST.get() else jax.device_put(tree)
 
 
 def assemble_scenario(
@@ -202,17 +237,13 @@ def assemble_scenario(
     )
     speed = config["v_ref"] if ego_speed is None else ego_speed
     ego0 = EgoState(
-        xy=jnp.asarray(route["xy"][0]),
-        yaw=jnp.float32(ego_yaw),
-        speed=jnp.float32(speed),
-        steer=jnp.float32(0.0),
-        accel=jnp.float32(0.0),
+        **_device_tree(dict(xy=route["xy"][0], yaw=ego_yaw, speed=speed, steer=0.0, accel=0.0))
     )
     return Scenario(
-        lanes=Lanes(**_jnp_tree(road.pack_lanes(road_map, rot))),
-        occluders=Occluders(**_jnp_tree(road.pack_occluders(road_map.occluders, rot))),
-        route=Route(**_jnp_tree(route)),
-        lights=TrafficLights(**_jnp_tree(road.pack_lights(road_map.lights, rot))),
+        lanes=Lanes(**_device_tree(road.pack_lanes(road_map, rot))),
+        occluders=Occluders(**_device_tree(road.pack_occluders(road_map.occluders, rot))),
+        route=Route(**_device_tree(route)),
+        lights=TrafficLights(**_device_tree(road.pack_lights(road_map.lights, rot))),
         actors=script,
         config=execution_config(config),
         ego0=ego0,

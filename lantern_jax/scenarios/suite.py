@@ -35,6 +35,7 @@ import numpy as np
 
 from lantern_jax.constants import FAMILIES, SUITE_ID, WEATHERS
 from lantern_jax.files import atomic_write
+from lantern_jax.scenarios.assemble import host_arrays
 from lantern_jax.scenarios.families import build_pair, param_errors, validate_params
 from lantern_jax.scenarios.premise import premise_error
 from lantern_jax.scenarios.spec import MIN_RECOVERY_M, SEED_MAX, content_hash
@@ -469,11 +470,29 @@ def load_suite(name_or_path: str | Path = SUITE_ID) -> Suite:
 
 
 def build_suite_scenarios(suite: Suite) -> tuple[list[Scenario], list[Scenario], list[dict]]:
-    """Build Route A and Route B scenarios of every pair (in suite order)."""
+    """Build Route A and Route B scenarios of every pair (in suite order).
+
+    The pairs' parameters are not checked again: a :class:`Suite` holds only parameters that
+    :func:`load_suite` (or the generator) validated.
+    """
     wa, wb, metas = [], [], []
     for p in suite.pairs:
-        a, b, meta = build_pair(p.params)
+        a, b, meta = build_pair(p.params, validate=False)
         wa.append(a)
         wb.append(b)
         metas.append(meta)
     return wa, wb, metas
+
+
+def build_suite_batches(suite: Suite) -> tuple[Scenario, Scenario]:
+    """The Route A and the Route B scenarios of every pair, each stacked along a leading pair
+    axis (suite order): built on the host (:func:`~lantern_jax.scenarios.assemble.host_arrays`)
+    and stacked there, so the batch costs one transfer instead of one per leaf and pair.
+
+    Returns:
+        ``(route_a, route_b)``, Scenario pytrees of NumPy arrays with leading axis ``len(suite)``.
+    """
+    with host_arrays():
+        wa, wb, _ = build_suite_scenarios(suite)
+    stack = lambda items: jax.tree.map(lambda *xs: np.stack(xs), *items)  # noqa: E731
+    return stack(wa), stack(wb)

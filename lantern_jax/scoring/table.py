@@ -268,12 +268,16 @@ def read_route_table(path: str | os.PathLike) -> pd.DataFrame:
 
 
 #: The reproducibility promise across batch composition (a pair alone or inside a larger suite,
-#: two-phase grouping) and CPU device count: ids, gates and every discrete column identical;
-#: CUS and every continuous column within this absolute tolerance (in the column's unit).  XLA
-#: compiles a differently shaped batch into a different program whose float32 rounding may
-#: differ in the last bits (measured on lantern-v1: at most 2e-6 on continuous columns and 8e-6
-#: CUS points).  The same batch on the same machine reproduces bit for bit.
+#: the group size of the evaluation) and CPU device count: ids, gates and every discrete column
+#: identical; CUS and every continuous column within ``REPRODUCIBLE_ATOL +
+#: REPRODUCIBLE_RTOL * |value|`` (in the column's unit).  XLA compiles a differently shaped batch
+#: into a different program whose float32 rounding may differ in the last bits, and the closed
+#: loop carries such a difference forward: measured on lantern-v2 between groups of 360 and of
+#: 90 executions, at most 7.6e-5 CUS points, 1.5e-5 m of clearance and 1.2e-4 s on a 24 s
+#: time-to-collision (5e-6 of the value, hence the relative term).  The same batch on the same
+#: machine reproduces bit for bit.
 REPRODUCIBLE_ATOL = 1e-4
+REPRODUCIBLE_RTOL = 1e-5
 
 ROW_KEYS = ("model", "condition", "pair_id")
 
@@ -286,7 +290,8 @@ def compare_route_tables(
     Returns:
         ``(promise holds, report lines)``: the promise is that both have the same columns and
         rows, identical text and integer (gate, flag, count) columns, NaN in the same places,
-        and float columns within ``atol``; the lines count the cells that differ at all.
+        and float columns within ``atol + REPRODUCIBLE_RTOL * |before|``; the lines count the
+        cells that differ at all.
     """
     if list(before.columns) != list(after.columns):
         return False, [f"columns differ: {sorted(set(before.columns) ^ set(after.columns))}"]
@@ -302,12 +307,15 @@ def compare_route_tables(
             nan_x, nan_y = np.isnan(xv), np.isnan(yv)
             same = (xv == yv) | (nan_x & nan_y)
             n_diff = int((~same).sum())
-            both = ~(nan_x | nan_y)
-            max_abs = float(np.max(np.abs(xv[both] - yv[both]), initial=0.0))
+            unequal = ~same & ~(nan_x | nan_y)  # equal infinities are the same, not inf - inf
+            max_abs = float(np.max(np.abs(xv[unequal] - yv[unequal]), initial=0.0))
             if n_diff:
                 lines.append(f"{col}: {n_diff} differ, max |diff| {max_abs:.3g}, "
                              f"NaN mismatches {int((nan_x != nan_y).sum())}")  # fmt: skip
-            ok &= bool((nan_x == nan_y).all()) and max_abs <= atol
+            bound = atol + REPRODUCIBLE_RTOL * np.abs(xv[unequal])
+            ok &= bool((nan_x == nan_y).all()) and bool(
+                (np.abs(xv[unequal] - yv[unequal]) <= bound).all()
+            )
         else:
             n_diff = int((x.astype(str) != y.astype(str)).sum())
             if n_diff:

@@ -82,7 +82,7 @@ def rollout_batch(
     scenarios: Scenario,
     act: ActFn,
     policy_params: Any,
-    max_ticks: int,
+    max_ticks: int | Array,
     chunk: int = 40,
     temperature: float | Array = 0.05,
     start: State | None = None,
@@ -94,7 +94,8 @@ def rollout_batch(
         scenarios: batched scenarios, (B, ...) leaves.
         act: policy ``act(policy_params, obs)`` for ONE scenario; it is vmapped here.
         policy_params: policy parameters shared by the batch.
-        max_ticks: static upper bound of the horizon (rounded up to whole chunks).
+        max_ticks: upper bound of the horizon (rounded up to whole chunks): a Python int, or a
+            traced int32 scalar, so that one compiled program serves every horizon.
         chunk: ticks per scanned chunk between checks of the batch's ``done`` mask.
         temperature: soft-score temperature.
         start: continue these batched states (from an earlier call) instead of starting at
@@ -131,7 +132,7 @@ def rollout_batch_parallel(
     scenarios: Scenario,
     act: ActFn,
     policy_params: Any,
-    max_ticks: int,
+    max_ticks: int | Array,
     chunk: int = 40,
     temperature: float | Array = 0.05,
     start: State | None = None,
