@@ -362,9 +362,21 @@ def _check_out(out: str) -> None:
 
 
 def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
-    """``lantern-jax evaluate``: run, print the tables, write the files."""
-    from lantern_jax.evaluate import ablation_names
+    """``lantern-jax evaluate``: run, print the tables, write the files (``--profile``: then
+    where the time went, :func:`_evaluate_breakdown`)."""
+    from lantern_jax.timing import Breakdown
 
+    bd = Breakdown()
+    bd.before_creation("start-up (Python, lantern_jax command line)")
+    with bd.phase("imports (JAX, evaluator, tables)"):
+        from lantern_jax.evaluate import PolicyError, ablation_names, evaluate
+        from lantern_jax.report import (
+            format_decomposition,
+            format_family_table,
+            format_premise_table,
+            ordered_tables,
+            write_outputs,
+        )
     _apply_config(args)
     if args.policy is not None and not any(n.strip() for v in args.policy for n in v.split(",")):
         raise UsageError("--policy: no policy name given (leave the option out for 'all')")
@@ -380,22 +392,14 @@ def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
         )
     _check_out(args.out)
     _stage(args, f"loading suite {args.suite}")
-    suite = _load_suite(args)
+    with bd.phase("suite load and validation"):
+        suite = _load_suite(args)
     _stage(
         args,
         f"suite {suite.suite_id}: {len(suite)} pairs (hash {suite.suite_sha256[:12]}); "
         f"building {3 * len(suite)} executions per policy (ablation {args.ablation}); "
         f"policies: {', '.join(policies)}",
     )
-    from lantern_jax.evaluate import PolicyError, evaluate
-    from lantern_jax.report import (
-        format_decomposition,
-        format_family_table,
-        format_premise_table,
-        ordered_tables,
-        write_outputs,
-    )
-
     t0 = time.perf_counter()
     try:
         result = evaluate(policies, suite=suite, ablation=args.ablation, progress=not args.quiet)
@@ -412,16 +416,20 @@ def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
             f"{run['name']}: compile {run['seconds_compile']:.1f} s, "
             f"rollout {run['seconds_run']:.2f} s",
         )
-    _stage(args, f"evaluation done in {time.perf_counter() - t0:.1f} s; writing {args.out}")
+    t_eval = time.perf_counter() - t0
+    _stage(args, f"evaluation done in {t_eval:.1f} s; writing {args.out}")
+    _evaluate_breakdown(bd, result, t_eval)
     try:
-        files = write_outputs(
-            result,
-            args.out,
-            extra_manifest={"command": shlex.join(["lantern-jax", *argv])},
-        )
+        with bd.phase("writing the result files"):
+            files = write_outputs(
+                result,
+                args.out,
+                extra_manifest={"command": shlex.join(["lantern-jax", *argv])},
+            )
     except OSError as e:
         print(f"lantern-jax: error: cannot write results to {args.out}: {e}", file=sys.stderr)
         return 1
+    t_print = time.perf_counter()
     m = result.manifest
     fam, dec = ordered_tables(result)
     print(
@@ -440,7 +448,27 @@ def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
     print(f"Wrote {len(files)} files:")
     for path in files.values():
         print(f"  {path}")
+    bd.add("printing the tables", time.perf_counter() - t_print)
+    if args.profile:
+        print()
+        print(bd.format("Where the time went"))
     return 0
+
+
+def _evaluate_breakdown(bd, result, seconds: float) -> None:
+    """Add the phases of :func:`lantern_jax.evaluate.evaluate` (``seconds`` of wall time in
+    all) to a breakdown: world build, per policy trace + lower, XLA compile, rollout and
+    scoring, then the tables; the remainder is the rest of the evaluation (checks, progress)."""
+    start = len(bd.phases)
+    bd.add(f"world build ({result.manifest['executions_per_policy']} executions)",
+           result.seconds.get("world build", 0.0))  # fmt: skip
+    for run in result.runs:
+        bd.add(f"policy {run.policy}", sum(run.timings.values()))
+        for label, value in run.timings.items():
+            bd.add(label, value, indent=1)
+    bd.add("tables (family, decomposition, premise)", result.seconds.get("tables", 0.0))
+    accounted = sum(p.seconds for p in bd.phases[start:] if p.indent == 0)
+    bd.add("rest of the evaluation (checks, progress)", max(0.0, seconds - accounted))
 
 
 def _print_suite(suite) -> None:
@@ -608,6 +636,22 @@ def cmd_ablations(args: argparse.Namespace, argv: Sequence[str]) -> int:
     return 0
 
 
+def _evaluate_breakdown(bd, result, seconds: float) -> None:
+    """Add the phases of :func:`lantern_jax.evaluate.evaluate` (``seconds`` of wall time in
+    all) to a breakdown: world build, per policy trace + lower, XLA compile, rollout and
+    scoring, then the tables; the remainder is the rest of the evaluation (checks, progress)."""
+    start = len(bd.phases)
+    bd.add(f"world build ({result.manifest['executions_per_policy']} executions)",
+           result.seconds.get("world build", 0.0))  # fmt: skip
+    for run in result.runs:
+        bd.add(f"policy {run.policy}", sum(run.timings.values()))
+        for label, value in run.timings.items():
+            bd.add(label, value, indent=1)
+    bd.add("tables (family, decomposition, premise)", result.seconds.get("tables", 0.0))
+    accounted = sum(p.seconds for p in bd.phases[start:] if p.indent == 0)
+    bd.add("rest of the evaluation (checks, progress)", max(0.0, seconds - accounted))
+
+
 def _one_policy(args: argparse.Namespace) -> str:
     if getattr(args, "checkpoint", None):
         return register_checkpoints([args.checkpoint])[0]
@@ -766,6 +810,13 @@ def build_parser() -> argparse.ArgumentParser:
         "as a whole, other entries of the folder are kept",
     )
     ev.add_argument("--quiet", action="store_true", help="no progress bar or stage lines")
+    ev.add_argument(
+        "--profile",
+        action="store_true",
+        help="after the tables, print where the wall time went: start-up, imports, suite "
+        "load, world build, per policy trace + lower, XLA compile, rollout and scoring, "
+        "tables, writing",
+    )
     ev.add_argument(
         "--coordinator",
         metavar="HOST:PORT",

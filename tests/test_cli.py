@@ -127,12 +127,22 @@ def test_printed_tables(evaluated):
 
 
 def test_pairs_option_gives_the_same_rows(evaluated, tmp_path):
+    """Also: ``--profile`` prints where the time went and changes no file."""
     res = run_cli(
         ["evaluate", "--policy", "coop", "--pairs", ",".join(PAIRS), "--out", str(tmp_path)]
-        + ["--quiet"]
+        + ["--quiet", "--profile"]
     )
     assert res.rc == 0, res.err
     assert "[lantern-jax]" not in res.err
+    assert "Where the time went" not in evaluated.out
+    profile = res.out.split("Where the time went", 1)[1]
+    for label in ("imports", "suite load", "world build (6 executions)", "policy coop",
+                  "trace + lower", "XLA compile", "rollout", "scoring", "tables",
+                  "writing the result files", "printing the tables", "total"):  # fmt: skip
+        assert label in profile, label
+    total = float(profile.splitlines()[-1].split()[1])
+    rows = [ln for ln in profile.splitlines()[1:-2] if not ln.startswith(" ")]
+    assert sum(float(ln.rsplit(None, 3)[1]) for ln in rows) <= total + 0.05
     name = "route_level_results.csv"
     assert (tmp_path / name).read_bytes() == (evaluated.out_dir / name).read_bytes()
 
