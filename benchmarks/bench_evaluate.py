@@ -4,11 +4,13 @@ scenario-ticks/s and peak memory.
 The timed call is exactly what ``evaluate`` runs (:func:`lantern_jax.evaluate.run_executions`):
 every pair of the suite under Route A with warning, Route A without warning and Route B
 (3 x 120 executions for ``lantern-v2``) in one jitted, vmapped rollout that stops when every
-execution has ended (large batches: a second phase continues the few long executions).
+execution has ended (large batches: a fixed number of slots, refilled with waiting executions
+as earlier ones end, all stepped by one compiled program).
 
 Usage::
 
     python benchmarks/bench_evaluate.py [--policy coop] [--suite lantern-v2] [--repeats 3]
+    python benchmarks/bench_evaluate.py --compile-cache /tmp/cc   # twice: cold, then warm
     LANTERN_JAX_CPU_DEVICES=1 python benchmarks/bench_evaluate.py   # one device only
 """
 
@@ -42,7 +44,17 @@ def main() -> None:
     ap.add_argument("--policy", default="coop")
     ap.add_argument("--suite", default="lantern-v2")
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument(
+        "--compile-cache",
+        default="off",
+        metavar="DIR|off",
+        help="JAX's persistent compilation cache folder (run twice to see a warm cache); "
+        "default off: a cold compile",
+    )
     args = ap.parse_args()
+    jax.config.update("jax_enable_compilation_cache", args.compile_cache != "off")
+    if args.compile_cache != "off":
+        jax.config.update("jax_compilation_cache_dir", args.compile_cache)
 
     suite = load_suite(args.suite)
     t0 = time.perf_counter()
@@ -52,8 +64,10 @@ def main() -> None:
     params = policy.init(jax.random.PRNGKey(0))
     t0 = time.perf_counter()
     run = dict(privileged=policy.privileged)
-    final, t_compile = run_executions(policy.act, execs.scenarios, params, execs.max_ticks, **run)
-    jax.block_until_ready(final)
+    first: dict[str, float] = {}
+    final, t_compile = run_executions(
+        policy.act, execs.scenarios, params, execs.max_ticks, timings=first, **run
+    )
     walls, cpus = [], []
     for _ in range(args.repeats):
         t0, c0 = time.perf_counter(), time.process_time()
@@ -64,13 +78,18 @@ def main() -> None:
     wall = float(np.min(walls))
     ticks = np.asarray(final.tick)
     stepped = int(ticks.max())
+    cache = args.compile_cache
     n = ticks.shape[0]
 
     print(f"machine: {platform.machine()} {os.cpu_count()} cores, {platform.platform()}")
     print(f"jax {jax.__version__} on {jax.default_backend()}, {jax.device_count()} device(s)")
     print(f"suite {suite.suite_id}: {len(suite.pairs)} pairs, {n} executions, policy {args.policy}")
+    print(f"persistent compilation cache: {cache}")
     print(f"build worlds        {t_build:8.2f} s")
-    print(f"compile             {t_compile:8.2f} s")
+    lower, xla = first["trace + lower"], first["XLA compile"]
+    print(f"compile             {t_compile:8.2f} s  (trace + lower {lower:.2f} s, XLA compile "
+          f"or cache load {xla:.2f} s; one program per policy)")  # fmt: skip
+    print(f"first run           {first['rollout']:8.2f} s  (the call that compiled)")
     print(f"wall after compile  {wall:8.2f} s  (best of {args.repeats}: "
           f"{', '.join(f'{w:.2f}' for w in walls)})")  # fmt: skip
     print(f"CPU after compile   {float(np.min(cpus)):8.2f} s  (process CPU time, all threads; "
