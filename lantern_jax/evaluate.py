@@ -270,6 +270,11 @@ def run_executions(
     return final, t_compile
 
 
+#: :func:`~lantern_jax.scoring.metrics.finalize` as one compiled program (op by op, its first
+#: call compiled each operation on its own: about a second).
+_finalize_jit = jax.jit(finalize)
+
+
 def params_hash(params: Any) -> str:
     """SHA-256 over the policy parameter leaves (shapes, dtypes and bytes)."""
     h = hashlib.sha256()
@@ -320,7 +325,7 @@ def run_policy(
     """
     pol = get_policy(policy) if isinstance(policy, str) else policy
     params = pol.init(jax.random.PRNGKey(0)) if policy_params is None else policy_params
-    sc0 = jax.tree.map(lambda x: x[0], execs.scenarios)
+    sc0 = jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape[1:], x.dtype), execs.scenarios)
     surround = bool(getattr(pol.act, "surround", False))
     obs = jax.eval_shape(lambda sc: observe(sc, init_state(sc), pol.privileged, surround), sc0)
     check_policy_output(pol, params, obs)
@@ -332,7 +337,7 @@ def run_policy(
     )  # fmt: skip
     t2 = time.perf_counter()
     t1 = t0 + t_compile
-    m_struct = jax.tree.map(np.asarray, finalize(final.telemetry))
+    m_struct = jax.tree.map(np.asarray, _finalize_jit(final.telemetry))
     metrics = {f.name: getattr(m_struct, f.name) for f in dataclasses.fields(m_struct)}
     proto = jax.tree.map(np.asarray, final.protocol)
     proto = {f.name: getattr(proto, f.name) for f in dataclasses.fields(proto)}

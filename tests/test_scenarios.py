@@ -640,3 +640,32 @@ def test_scene_deadline_knob_moves_the_reveal():
     assert float(moved.actors.trigger_deadline[1]) == pytest.approx(t_guard - 1.0)
     np.testing.assert_allclose(moved.actors0.xy, wa.actors0.xy, atol=1e-4)
     np.testing.assert_array_equal(moved.actors.trigger_deadline[2:], wa.actors.trigger_deadline[2:])
+
+
+def test_host_built_suite_batches_equal_the_device_built_pairs():
+    """``build_suite_batches`` (NumPy assembly, one stack on the host) gives exactly the leaves,
+    dtypes and shapes of building each pair as device arrays and stacking them."""
+    from lantern_jax.scenarios.assemble import host_arrays
+    from lantern_jax.scenarios.suite import build_suite_batches, build_suite_scenarios, load_suite
+
+    suite = load_suite().subset(1)
+    a_host, b_host = build_suite_batches(suite)
+    a_dev, b_dev, _ = build_suite_scenarios(suite)
+    for host, dev in ((a_host, tree_stack(a_dev)), (b_host, tree_stack(b_dev))):
+        assert jax.tree.structure(host) == jax.tree.structure(dev)
+        for path, h, d in zip(
+            jax.tree_util.tree_flatten_with_path(host)[0],
+            jax.tree.leaves(host),
+            jax.tree.leaves(dev),
+            strict=True,
+        ):
+            assert isinstance(h, np.ndarray), path[0]
+            assert h.dtype == d.dtype and h.shape == d.shape, path[0]
+            np.testing.assert_array_equal(h, np.asarray(d), err_msg=str(path[0]))
+    assert all(isinstance(x, jax.Array) for x in jax.tree.leaves(a_dev[0]))
+    with host_arrays():
+        a, _, _ = build_pair(suite.pairs[0].params)
+    assert all(isinstance(x, np.ndarray) for x in jax.tree.leaves(a))
+    assert all(
+        isinstance(x, jax.Array) for x in jax.tree.leaves(build_pair(suite.pairs[0].params)[0])
+    )
