@@ -5,8 +5,10 @@ The batch: the first ``--batch`` executions of the suite (Route A with warning, 
 Route B, in suite order), rolled out ``--warmup-ticks`` ticks with the policy, so that actors
 move, events have fired and warnings are shown.  Every stage then runs ``--repeats`` times on
 the same inputs (its own compiled program, so XLA cannot fuse it with its neighbours: the sum of
-the stages is an upper bound of the whole tick).  Also prints XLA's cost analysis of the whole
-tick (FLOPs and bytes per scenario-tick) and the achieved rate.
+the stages is an upper bound of the whole tick).  Also prints XLA's FLOP count of each stage and
+its cost analysis of the whole tick (FLOPs and bytes per scenario-tick) with the achieved rate.
+XLA counts the body of a loop once, so a stage with a loop (sensing tests one target actor per
+loop step) is undercounted by about the loop's trip count.
 
 Usage::
 
@@ -127,6 +129,13 @@ def stages(act, params, privileged: bool):
     return inputs, table, s_tick
 
 
+def flops_of(fn, args) -> float:
+    """XLA's FLOP count of the compiled ``fn`` for ``args``."""
+    cost = fn.lower(*args).compile().cost_analysis()
+    cost = cost[0] if isinstance(cost, list) else cost
+    return float(cost.get("flops", 0.0))
+
+
 def timed(fn, args, repeats: int) -> float:
     """Best-of-3 mean seconds of one call of a compiled ``fn``."""
     jax.block_until_ready(fn(*args))
@@ -165,12 +174,15 @@ def main() -> None:
     whole = timed(tick_fn, (sc, st, None), args.repeats)
     rows = []
     for label, fn in table.items():
-        rows.append((label, timed(jax.jit(jax.vmap(fn)), (sc, st, x), args.repeats)))
-    total = sum(s for _, s in rows)
+        jfn = jax.jit(jax.vmap(fn))
+        stage_args = (sc, st, x)
+        rows.append((label, timed(jfn, stage_args, args.repeats), flops_of(jfn, stage_args)))
+    total = sum(s for _, s, _ in rows)
     per = 1e6 / args.batch
-    print(f"{'stage':<40} {'us/scenario-tick':>17} {'share of stages':>16}")
-    for label, s in sorted(rows, key=lambda r: -r[1]):
-        print(f"{label:<40} {s * per:17.1f} {100 * s / total:15.1f} %")
+    print(f"{'stage':<40} {'us/scenario-tick':>17} {'share of stages':>16} {'kFLOP':>8}")
+    for label, s, f in sorted(rows, key=lambda r: -r[1]):
+        print(f"{label:<40} {s * per:17.1f} {100 * s / total:15.1f} % "
+              f"{f / args.batch / 1e3:8.1f}")  # fmt: skip
     print(f"{'sum of the stages':<40} {total * per:17.1f}")
     print(f"{'whole tick (one program)':<40} {whole * per:17.1f}")
     cost = tick_fn.lower(sc, st, None).compile().cost_analysis()
