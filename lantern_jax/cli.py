@@ -32,7 +32,9 @@ from __future__ import annotations
 import argparse
 import os
 import shlex
+import signal
 import sys
+import threading
 import time
 from collections.abc import Sequence
 
@@ -145,6 +147,7 @@ def initialize_distributed(args: argparse.Namespace) -> None:
 
 
 def _stage(args: argparse.Namespace, msg: str) -> None:
+    check_interrupt()
     if not getattr(args, "quiet", False):
         print(f"[lantern-jax] {msg}", file=sys.stderr, flush=True)
 
@@ -419,6 +422,7 @@ def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
     t_eval = time.perf_counter() - t0
     _stage(args, f"evaluation done in {t_eval:.1f} s; writing {args.out}")
     _evaluate_breakdown(bd, result, t_eval)
+    check_interrupt()
     try:
         with bd.phase("writing the result files"):
             files = write_outputs(
@@ -944,6 +948,29 @@ def _add_language_commands(sub) -> None:
     dg.set_defaults(func=cmd_diagnostics, pairs=None, pairs_per_family=None)
 
 
+#: Set by the command line's Ctrl-C handler; see :func:`check_interrupt`.
+_SIGINT_SEEN = False
+
+
+def _on_sigint(signum, frame) -> None:
+    """SIGINT handler of the command line: remember the interrupt, then raise it as usual."""
+    global _SIGINT_SEEN
+    _SIGINT_SEEN = True
+    raise KeyboardInterrupt
+
+
+def check_interrupt() -> None:
+    """Raise ``KeyboardInterrupt`` if Ctrl-C was pressed during this command.
+
+    Python raises the interrupt wherever the main thread next runs Python code; when that is a
+    finalizer run on the way back from a long native call (an XLA compile), the exception is
+    printed as "ignored" and lost, and the command would go on to write its results.  The
+    command line checks this flag at its stage boundaries and before it writes anything.
+    """
+    if _SIGINT_SEEN:
+        raise KeyboardInterrupt
+
+
 def _interrupted(exit_process: bool) -> int:
     print("lantern-jax: interrupted", file=sys.stderr)
     if exit_process:
@@ -965,10 +992,15 @@ def main(argv: Sequence[str] | None = None, exit_on_interrupt: bool | None = Non
         exit_on_interrupt: on Ctrl-C, end the process at once with exit code 130 instead of
             returning it (default: when ``argv`` is not given, i.e. when run as the program).
     """
+    global _SIGINT_SEEN
     expose_cpu_cores()
     if exit_on_interrupt is None:
         exit_on_interrupt = argv is None
     argv = list(sys.argv[1:] if argv is None else argv)
+    _SIGINT_SEEN = False
+    installed, previous = False, None
+    if threading.current_thread() is threading.main_thread():
+        previous, installed = signal.signal(signal.SIGINT, _on_sigint), True
     try:
         parser = build_parser()
         try:
@@ -980,12 +1012,19 @@ def main(argv: Sequence[str] | None = None, exit_on_interrupt: bool | None = Non
                 configure_compile_cache(not args.no_compile_cache)
             if getattr(args, "coordinator", None) or getattr(args, "num_processes", None):
                 initialize_distributed(args)
-            return args.func(args, argv)
+            code = args.func(args, argv)
+            check_interrupt()  # an interrupt that was raised but swallowed on the way
+            return code
         except (UsageError, CommandError) as e:
             print(f"lantern-jax {args.command}: error: {e}", file=sys.stderr)
             return 2
     except KeyboardInterrupt:
         return _interrupted(exit_on_interrupt)
+    finally:
+        if installed:
+            signal.signal(
+                signal.SIGINT, signal.default_int_handler if previous is None else previous
+            )
 
 
 if __name__ == "__main__":

@@ -690,3 +690,27 @@ def test_raising_policy_is_named(name, why, tmp_path, monkeypatch):
     assert res.rc == 1
     assert f"error: policy '{name}' failed" in res.err
     assert not out.exists() and leftovers(out) == []
+
+
+def test_a_swallowed_interrupt_still_ends_the_command_with_130(monkeypatch, tmp_path, capsys):
+    """Ctrl-C raised where Python ignores exceptions (a finalizer on the way back from a long
+    native call) must not let the command go on and report success."""
+    import signal as signal_module
+
+    from lantern_jax import cli
+
+    def swallowed(args, argv):
+        try:
+            signal_module.raise_signal(signal_module.SIGINT)
+        except KeyboardInterrupt:
+            pass  # what a finalizer does with it
+        return 0
+
+    monkeypatch.setattr(cli, "cmd_policies", swallowed)
+    before = signal_module.getsignal(signal_module.SIGINT)
+    assert cli.main(["policies"]) == 130
+    assert "lantern-jax: interrupted" in capsys.readouterr().err
+    assert signal_module.getsignal(signal_module.SIGINT) is before  # handler restored
+    cli._SIGINT_SEEN = True  # a stale flag from an earlier command is cleared on entry
+    monkeypatch.setattr(cli, "cmd_policies", lambda args, argv: 0)
+    assert cli.main(["policies"]) == 0
