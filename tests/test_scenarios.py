@@ -669,3 +669,19 @@ def test_host_built_suite_batches_equal_the_device_built_pairs():
     assert all(
         isinstance(x, jax.Array) for x in jax.tree.leaves(build_pair(suite.pairs[0].params)[0])
     )
+
+
+def test_a_pair_with_knob_values_builds_on_the_host():
+    """A found-suite pair carries knob values; its host-built batch equals the device build."""
+    from lantern_jax.scenarios.assemble import host_arrays
+    from lantern_jax.scenarios.families import KNOB_RANGES
+    from lantern_jax.scenarios.suite import load_suite
+
+    pair = next(p for p in load_suite().pairs if p.family == "PE")
+    name, (lo, hi) = next(iter(KNOB_RANGES["PE"].items()))
+    params = {**pair.params, "knobs": {name: 0.5 * (lo + hi)}}
+    with host_arrays():
+        host_a, _, _ = build_pair(params)
+    ref_a, _, _ = build_pair(params)
+    for h, d in zip(jax.tree.leaves(host_a), jax.tree.leaves(ref_a), strict=True):
+        np.testing.assert_array_equal(np.asarray(h), np.asarray(d))

@@ -190,7 +190,12 @@ def set_knobs(scenario: Scenario, **values: Array) -> Scenario:
 
     Example:
         ``set_knobs(scenario, hazard_speed=2.5, warn_lead=20.0)``
+
+    A scenario assembled on the host (NumPy leaves, :func:`~lantern_jax.scenarios.assemble.
+    host_arrays`) is taken as JAX arrays first, so the knobs' indexed updates apply to it too.
     """
+    if values:
+        scenario = jax.tree.map(jnp.asarray, scenario)
     for name, value in values.items():
         scenario = knob(name).set(scenario, value)
     return scenario
