@@ -640,22 +640,6 @@ def cmd_ablations(args: argparse.Namespace, argv: Sequence[str]) -> int:
     return 0
 
 
-def _evaluate_breakdown(bd, result, seconds: float) -> None:
-    """Add the phases of :func:`lantern_jax.evaluate.evaluate` (``seconds`` of wall time in
-    all) to a breakdown: world build, per policy trace + lower, XLA compile, rollout and
-    scoring, then the tables; the remainder is the rest of the evaluation (checks, progress)."""
-    start = len(bd.phases)
-    bd.add(f"world build ({result.manifest['executions_per_policy']} executions)",
-           result.seconds.get("world build", 0.0))  # fmt: skip
-    for run in result.runs:
-        bd.add(f"policy {run.policy}", sum(run.timings.values()))
-        for label, value in run.timings.items():
-            bd.add(label, value, indent=1)
-    bd.add("tables (family, decomposition, premise)", result.seconds.get("tables", 0.0))
-    accounted = sum(p.seconds for p in bd.phases[start:] if p.indent == 0)
-    bd.add("rest of the evaluation (checks, progress)", max(0.0, seconds - accounted))
-
-
 def _one_policy(args: argparse.Namespace) -> str:
     if getattr(args, "checkpoint", None):
         return register_checkpoints([args.checkpoint])[0]
