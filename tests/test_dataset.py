@@ -24,6 +24,7 @@ from lantern_jax.dataset.store import (
     DatasetError,
     column_array,
     load_frames,
+    load_sequences,
     read_card,
 )
 from lantern_jax.policies.registry import get_policy
@@ -103,6 +104,27 @@ def test_horizon_crossing_frames_are_exactly_the_flagged_ones(made):
     assert len(load_frames(folder)) == int((~frames["horizon_crossing"].astype(bool)).sum())
 
 
+def test_onset_only_rule_keeps_exactly_the_termination_crossing_frames(made):
+    """``exclude_crossing="onset"`` drops the frames whose horizon holds Route A's warning onset
+    (recomputed here from the sequences table) and keeps every other one, including those that
+    cross termination only."""
+    folder, _ = made
+    frames = load_frames(folder, exclude_crossing="none")
+    seqs = load_sequences(folder).set_index("sequence_id")
+    t = frames["t_s"].to_numpy(np.float64)
+    on = seqs["t_warn_on"].reindex(frames["sequence_id"]).to_numpy()
+    crosses_onset = (frames["route"].to_numpy() == "A") & (t < on) & (on <= t + 2.5)
+    kept = load_frames(folder, exclude_crossing="onset")
+    assert len(kept) == int((~crosses_onset).sum())
+    want = frames[~crosses_onset][["sequence_id", "frame"]].reset_index(drop=True)
+    assert kept[["sequence_id", "frame"]].equals(want)
+    only_termination = frames["horizon_crossing"].to_numpy(bool) & ~crosses_onset
+    assert only_termination.any(), "some frame should cross warning termination only"
+    assert len(kept) > len(load_frames(folder, exclude_crossing="both"))
+    sub = load_frames(folder, exclude_crossing="onset", columns=["obs.warning_active"])
+    assert list(sub.columns) == ["obs.warning_active"] and len(sub) == len(kept)
+
+
 def test_route_b_carries_no_warning_and_no_hazard(made):
     folder, _ = made
     frames = load_frames(folder, include_crossing=True)
@@ -163,6 +185,11 @@ def test_acceptance_rules_on_hand_made_records():
     crossing = fr.horizon_crossing(t, 3.0, 6.1)
     assert crossing[np.flatnonzero((t < 3.0) & (t + 2.5 >= 3.0))].all()
     assert not crossing[t >= 6.1].any() and not crossing[t < 0.5].any()
+    # per-frame marks (one per frame, e.g. each frame's own sequence onset) and marks that
+    # never happened
+    per_frame = fr.horizon_crossing(t, np.full(t.shape, 3.0), np.full(t.shape, 6.1))
+    np.testing.assert_array_equal(per_frame, crossing)
+    assert not fr.horizon_crossing(t, np.nan, 1e9).any()
 
 
 # ---------------------------------------------------------------------------------------------
@@ -191,6 +218,20 @@ def test_corrupted_shard_is_named(copy):
     path.write_bytes(bytes(data))
     with pytest.raises(DatasetError, match=r"frames-00001.parquet: content does not match"):
         load_frames(copy)
+
+
+def test_corrupted_sequences_shard_is_named(copy):
+    card = read_card(copy)
+    path = copy / card["shards"][0]["sequences"]
+    path.write_bytes(path.read_bytes()[:-7])
+    with pytest.raises(DatasetError, match=r"sequences-00000.parquet: content does not match"):
+        load_frames(copy, exclude_crossing="onset")
+
+
+def test_unknown_exclusion_rule_is_refused(made):
+    folder, _ = made
+    with pytest.raises(ValueError, match=r"exclude_crossing: 'termination' is not one of"):
+        load_frames(folder, exclude_crossing="termination")
 
 
 def test_schema_mismatch_is_named(copy):

@@ -274,6 +274,14 @@ def write(tmp_path, text: str):
         ("[train]\nname = 'x'\nrecipe = 'base'\nwidth = 10\nheads = 4\n", r"train\.heads"),
         ("[train]\nname = 'x'\nrecipe = 'base'\nlearning_rate = 1.0\n", r"learning_rate"),
         ("[train]\nname = 'x'\nrecipe = 'base'\nepochs = true\n", r"train\.epochs"),
+        (
+            "[train]\nname = 'x'\nrecipe = 'base'\nexclude_crossing = 'all'\n",
+            r"train\.exclude_crossing: 'all' not one of both, onset, none",
+        ),
+        (
+            "[train]\nname = 'x'\nrecipe = 'base'\nexclude_crossing = 1\n",
+            r"train\.exclude_crossing must be str",
+        ),
         ("[evaluate]\nname = 'x'\n", r"\[train\]"),
         ("[train\nname = 'x'\n", "not valid TOML"),
     ],

@@ -6,8 +6,9 @@ Per sequence (one recorded execution, host side, NumPy):
   positions 0.25 ... 2.5 s later exist): the ten waypoints are those positions in the frame's
   ego frame (x forward, y right, metres);
 * **horizon crossing** — a frame whose waypoint horizon ``(t, t + 2.5 s]`` contains the warning
-  onset or the warning termination is flagged (training excludes it by default: its labels mix
-  two warning states);
+  onset or the warning termination is flagged (training excludes it by default, the paper's
+  rule: its labels mix two warning states; see ``EXCLUDE_CROSSING`` in
+  :mod:`lantern_jax.dataset.store` for the alternatives);
 * **acceptance** (the paper's open-loop rules, appendix "Data Collection Details"): at least 95 %
   route completion, no collision, no low-speed tail longer than 40 retained frames; Route A also
   needs at least three retained frames before warning onset, the ordered timeline
@@ -111,10 +112,21 @@ def frame_indices(frames: Any) -> np.ndarray:
     return np.arange(max(n_live - NUM_WAYPOINTS, 0))
 
 
-def horizon_crossing(t: np.ndarray, t_on: float, t_off: float) -> np.ndarray:
-    """(F,) bool: the waypoint horizon ``(t, t + 2.5 s]`` contains warning onset or termination."""
+def horizon_crossing(t: np.ndarray, *marks: Any) -> np.ndarray:
+    """(F,) bool: the waypoint horizon ``(t, t + 2.5 s]`` contains one of the ``marks``.
+
+    Args:
+        t: (F,) float32, s, frame times.
+        marks: times (s), each a scalar or an (F,) array (one per frame, e.g. its sequence's
+            warning onset); a mark that did not happen (``NEVER`` or NaN) crosses nothing.
+            Marks are compared in ``t``'s dtype, so a recorded float32 time compares exactly.
+
+    Returns:
+        (F,) bool.
+    """
+    t = np.asarray(t)
     crosses = np.zeros(t.shape, bool)
-    for mark in (t_on, t_off):
-        if happened(mark):
-            crosses |= (t < mark) & (mark <= t + HORIZON_S)
+    for mark in marks:
+        m = np.asarray(mark, dtype=t.dtype)
+        crosses |= happened(m) & (t < m) & (m <= t + HORIZON_S)
     return crosses

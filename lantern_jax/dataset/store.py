@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from lantern_jax.dataset.frames import horizon_crossing
 from lantern_jax.files import atomic_write
 
 FORMAT_VERSION = 1
@@ -133,49 +134,112 @@ def shard_names(k: int) -> tuple[str, str]:
     return f"frames-{k:05d}.parquet", f"sequences-{k:05d}.parquet"
 
 
-def load_frames(
-    folder: str | Path, include_crossing: bool = False, columns: list[str] | None = None
-) -> pd.DataFrame:
-    """Every frame of a dataset folder, validated against its card.
+#: Which frames :func:`load_frames` drops for a waypoint horizon ``(t, t + 2.5 s]`` that
+#: crosses a warning mark:
+#:
+#: * ``"both"`` — onset or termination (the paper: "frames whose prediction horizon crosses
+#:   warning onset or termination are excluded"; the default, and what training uses unless
+#:   its config says otherwise);
+#: * ``"onset"`` — onset only: a frame whose horizon crosses termination keeps its label (the
+#:   warning was active at the frame, and its label is the driving that followed it).  With the
+#:   short warnings of this protocol (onset to event <= 2 s, termination when the hazard is first
+#:   seen) the paper's rule leaves no warning-active frame at all in four of six families; this
+#:   variant measures what that costs (README, "Learned policies");
+#: * ``"none"`` — every frame.
+EXCLUDE_CROSSING = ("both", "onset", "none")
 
-    Args:
-        folder: the dataset folder.
-        include_crossing: keep frames whose waypoint horizon crosses warning onset or
-            termination (excluded by default, as training does).
-        columns: only these columns (default: all).
 
-    Raises:
-        DatasetError: naming the card or shard that is missing, corrupted (hash mismatch), of
-            another format version, or whose columns differ from the card's schema.
-    """
+def _read_shards(folder: Path, card: dict, kind: str, columns: list[str] | None) -> pd.DataFrame:
+    """Every ``kind`` (``"frames"`` / ``"sequences"``) shard listed in the card, hash-checked."""
     import pyarrow.parquet as pq
 
-    folder = Path(folder)
-    card = read_card(folder)
-    if card is None:
-        raise DatasetError(f"{folder / CARD_JSON}: missing (not a dataset folder?)")
-    schema = card["frame_columns"]
+    schema = card["frame_columns"] if kind == "frames" else None
     parts = []
     for shard in card["shards"]:
-        path = folder / shard["frames"]
+        path = folder / shard[kind]
         if not path.exists():
             raise DatasetError(f"{path}: missing shard listed in {CARD_JSON}")
-        if file_sha256(path) != shard["frames_sha256"]:
+        if file_sha256(path) != shard[f"{kind}_sha256"]:
             raise DatasetError(f"{path}: content does not match its SHA-256 in {CARD_JSON}")
         try:
             table = pq.read_table(path, columns=columns)
         except Exception as e:  # noqa: BLE001 - any read failure is a corrupted shard
             raise DatasetError(f"{path}: not a readable Parquet shard ({e})") from None
-        names = table.column_names
-        want = columns or list(schema)
-        if sorted(names) != sorted(want):
-            raise DatasetError(f"{path}: columns {sorted(set(names) ^ set(want))} differ from the "
-                               f"card's schema")  # fmt: skip
+        if schema is not None:
+            names, want = table.column_names, columns or list(schema)
+            if sorted(names) != sorted(want):
+                raise DatasetError(f"{path}: columns {sorted(set(names) ^ set(want))} differ "
+                                   f"from the card's schema")  # fmt: skip
         parts.append(table.to_pandas())
-    frames = pd.concat(parts, ignore_index=True) if parts else pd.DataFrame(columns=list(schema))
-    if not include_crossing and "horizon_crossing" in frames:
-        frames = frames[~frames["horizon_crossing"].astype(bool)].reset_index(drop=True)
-    return frames
+    if parts:
+        return pd.concat(parts, ignore_index=True)
+    return pd.DataFrame(columns=list(schema) if schema is not None else columns)
+
+
+def _open_card(folder: Path) -> dict:
+    card = read_card(folder)
+    if card is None:
+        raise DatasetError(f"{folder / CARD_JSON}: missing (not a dataset folder?)")
+    return card
+
+
+def load_sequences(folder: str | Path, columns: list[str] | None = None) -> pd.DataFrame:
+    """Every recorded sequence of a dataset folder (accepted or not), validated against its card:
+    identity, acceptance and reason, frame count, parameters and the event timeline
+    (``t_warn_on``, ``t_event``, ``t_warn_off``, ``t_clear``, s; ``NEVER`` = did not happen).
+
+    Raises:
+        DatasetError: as :func:`load_frames`.
+    """
+    folder = Path(folder)
+    return _read_shards(folder, _open_card(folder), "sequences", columns)
+
+
+def load_frames(
+    folder: str | Path,
+    include_crossing: bool = False,
+    columns: list[str] | None = None,
+    exclude_crossing: str = "both",
+) -> pd.DataFrame:
+    """Every frame of a dataset folder, validated against its card.
+
+    Args:
+        folder: the dataset folder.
+        include_crossing: keep every frame (same as ``exclude_crossing="none"``).
+        columns: only these columns (default: all).
+        exclude_crossing: which horizon-crossing frames to drop, one of
+            :data:`EXCLUDE_CROSSING` (default ``"both"``, the paper's rule).
+
+    Raises:
+        DatasetError: naming the card or shard that is missing, corrupted (hash mismatch), of
+            another format version, or whose columns differ from the card's schema.
+        ValueError: an unknown ``exclude_crossing``.
+    """
+    if exclude_crossing not in EXCLUDE_CROSSING:
+        raise ValueError(
+            f"exclude_crossing: {exclude_crossing!r} is not one of {', '.join(EXCLUDE_CROSSING)}"
+        )
+    folder = Path(folder)
+    card = _open_card(folder)
+    rule = "none" if include_crossing else exclude_crossing
+    need = {
+        "both": ["horizon_crossing"], "onset": ["sequence_id", "route", "t_s"], "none": []
+    }[rule]  # fmt: skip
+    read = None if columns is None else list(dict.fromkeys([*columns, *need]))
+    frames = _read_shards(folder, card, "frames", read)
+    if rule == "both" and "horizon_crossing" in frames:
+        keep = ~frames["horizon_crossing"].astype(bool).to_numpy()
+    elif rule == "onset" and len(frames):
+        seq = load_sequences(folder, ["sequence_id", "t_warn_on"]).set_index("sequence_id")
+        onset = seq["t_warn_on"].reindex(frames["sequence_id"]).to_numpy()
+        # as in generation, a Route B sequence has no warning marks
+        onset = np.where(frames["route"].to_numpy() == "A", onset, np.nan)
+        t = frames["t_s"].to_numpy(np.float32)
+        keep = ~horizon_crossing(t, onset)
+    else:
+        keep = np.ones(len(frames), bool)
+    frames = frames[keep].reset_index(drop=True)
+    return frames if columns is None else frames[list(columns)]
 
 
 def column_array(frames: pd.DataFrame, name: str, shape: list[int]) -> np.ndarray:

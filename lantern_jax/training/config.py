@@ -21,6 +21,8 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
+from lantern_jax.dataset.store import EXCLUDE_CROSSING
+
 RECIPES = ("base", "coop", "surround", "distance")
 
 
@@ -50,6 +52,9 @@ class TrainConfig:
     val_fraction: float = 0.1  # share of sequences held out for validation (split by sequence)
     seed: int = 0
     max_minutes: float = 30.0  # stop (after the current epoch) when exceeded
+    # frames whose 2.5-s waypoint horizon crosses a warning mark that are left out: "both" (onset
+    # or termination, the paper's rule), "onset" or "none" (dataset.store.EXCLUDE_CROSSING)
+    exclude_crossing: str = "both"
 
     @property
     def rig(self) -> str:
@@ -123,6 +128,9 @@ def _check_ranges(path: str, cfg: TrainConfig) -> None:
     for key in ("base_mix", "warmup", "val_fraction"):
         if not 0.0 <= getattr(cfg, key) < 1.0:
             problems.append(f"{key}: must be in [0, 1)")
+    if cfg.exclude_crossing not in EXCLUDE_CROSSING:
+        problems.append(f"exclude_crossing: {cfg.exclude_crossing!r} not one of "
+                        f"{', '.join(EXCLUDE_CROSSING)}")  # fmt: skip
     if cfg.width % cfg.heads:
         problems.append(f"heads: {cfg.heads} does not divide width {cfg.width}")
     if problems:

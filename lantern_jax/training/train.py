@@ -3,7 +3,8 @@
 :func:`train` runs one configuration (:class:`~lantern_jax.training.config.TrainConfig`):
 
 * examples from the recipe (:func:`~lantern_jax.training.data.recipe_examples`), horizon-crossing
-  frames excluded, a validation split by sequence;
+  frames excluded as ``exclude_crossing`` says (the paper's rule by default), a validation split
+  by sequence;
 * AdamW with a one-cycle schedule (linear warm-up, cosine decay), an L1 loss on the ten
   waypoints (metres, ego frame), mini-batches shuffled by a seeded generator (``coop`` and
   ``distance`` draw ``base_mix`` of every batch from ordinary-driving frames);
@@ -106,7 +107,7 @@ def train(cfg: TrainConfig, progress: bool = True) -> dict:
     out = Path(cfg.out)
     out.mkdir(parents=True, exist_ok=True)
     card = read_card(Path(cfg.dataset))
-    frames = load_frames(cfg.dataset, include_crossing=False)
+    frames = load_frames(cfg.dataset, exclude_crossing=cfg.exclude_crossing)
     ex = recipe_examples(frames, card, cfg)
     train_idx, val_idx = split_by_sequence(ex, cfg.val_fraction, cfg.seed)
     ranges = ex.obs["surround_ranges" if cfg.rig == "surround" else "range_image"].shape[1]
