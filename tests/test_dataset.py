@@ -28,6 +28,8 @@ from lantern_jax.dataset.store import (
     read_card,
 )
 from lantern_jax.policies.registry import get_policy
+from lantern_jax.scenarios.duplicates import near_duplicate, route_samples
+from lantern_jax.scenarios.suite import PairSpec, Suite, load_suite
 from lantern_jax.sim.observe import observe
 from lantern_jax.sim.rollout import rollout
 
@@ -62,7 +64,7 @@ def test_waypoints_are_the_experts_actual_future(made):
     frame at tick 5 f — checked against an independent recorded rollout of the same scene."""
     folder, _ = made
     frames = load_frames(folder, include_crossing=True)
-    spec = plan_scenes(PAIRS, SEED)[0]
+    spec = plan_scenes(PAIRS, SEED, load_suite())[0]
     seq = f"{spec.family.lower()}_{spec.index:05d}_A"
     mine = frames[frames["sequence_id"] == seq]
     assert len(mine) > 5, "the first Route A sequence should have been accepted"
@@ -162,7 +164,7 @@ def test_same_seed_gives_identical_shards_and_resume_finishes_the_same(made, tmp
 def test_closed_loop_observation_equals_the_dataset_frame(made):
     """The observation a policy gets in the closed loop at tick 5 f equals frame f's stored
     observation, field by field (a policy trained on the data runs in the benchmark unchanged)."""
-    spec = plan_scenes(PAIRS, SEED)[0]
+    spec = plan_scenes(PAIRS, SEED, load_suite())[0]
     scenario = build_scenes([spec])[0][0]
     expert = get_policy("expert")
     params = expert.init(None)
@@ -190,6 +192,33 @@ def test_acceptance_rules_on_hand_made_records():
     per_frame = fr.horizon_crossing(t, np.full(t.shape, 3.0), np.full(t.shape, 6.1))
     np.testing.assert_array_equal(per_frame, crossing)
     assert not fr.horizon_crossing(t, np.nan, 1e9).any()
+
+
+def test_scenes_are_disjoint_from_the_suite_by_the_near_duplicate_rule():
+    """No planned scene's route is a near duplicate of a suite route of its family, and a
+    candidate whose geometry is a suite pair's is skipped and counted."""
+    suite = load_suite()
+    rejected: dict = {}
+    specs = plan_scenes(2, SEED, suite, rejected=rejected)
+    assert [s.family for s in specs] == [f for f in suite_families(suite) for _ in range(2)]
+    routes = {}
+    for p in suite.pairs:
+        routes.setdefault(p.family, []).append(np.asarray(p.route_2m))
+    built, _ = build_scenes(specs)
+    for spec, scenario in zip(specs, built, strict=True):
+        mine = route_samples(scenario)
+        assert not any(near_duplicate(mine, r) for r in routes[spec.family]), spec.index
+    # a suite holding the first unfiltered PE candidate: that candidate must be skipped
+    first = plan_scenes(1, SEED)[0]
+    twin = Suite("twin", (PairSpec("pe_0001", "PE", first.weather, first.params, "0" * 64),),
+                 "0" * 64, 0, {})  # fmt: skip
+    got: dict = {}
+    again = plan_scenes(1, SEED, twin, rejected=got)
+    assert got["PE"] >= 1 and again[0].sha256 != first.sha256
+
+
+def suite_families(suite):
+    return list(dict.fromkeys(p.family for p in suite.pairs))
 
 
 # ---------------------------------------------------------------------------------------------

@@ -169,12 +169,16 @@ def generate_dataset(
                          f"{pairs_per_family}, {chunk_pairs}")  # fmt: skip
     folder = Path(out)
     folder.mkdir(parents=True, exist_ok=True)
-    specs = plan_scenes(pairs_per_family, seed, load_suite())
+    near_duplicates: dict[str, int] = {}
+    specs = plan_scenes(
+        pairs_per_family, seed, load_suite(), rejected=near_duplicates, progress=progress
+    )
     chunks = [specs[i : i + chunk_pairs] for i in range(0, len(specs), chunk_pairs)]
     key = _plan_key(seed, pairs_per_family, chunk_pairs)
     card = read_card(folder)
     if card is None:
         card = _new_card(key, len(chunks))
+        card["suite_near_duplicates_skipped"] = near_duplicates
     elif any(card.get(k) != v for k, v in key.items()):
         raise DatasetError(f"{folder / 'dataset_card.json'}: written for another plan "
                            f"{ {k: card.get(k) for k in key} }, not {key}")  # fmt: skip

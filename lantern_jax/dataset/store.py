@@ -37,7 +37,7 @@ import pandas as pd
 from lantern_jax.dataset.frames import horizon_crossing
 from lantern_jax.files import atomic_write
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2  # 2: scenes disjoint from the suite by the near-duplicate rule
 CARD_JSON = "dataset_card.json"
 CARD_MD = "dataset_card.md"
 
@@ -122,6 +122,16 @@ def card_markdown(card: dict) -> str:
     if not counts.empty:
         lines += ["## Accepted sequences and frames per family and route", "",
                   counts.to_markdown(index=False), ""]  # fmt: skip
+    dup = card.get("suite_near_duplicates_skipped", {})
+    if dup:
+        lines += [
+            "## Candidates skipped as near duplicates of a suite route",
+            "",
+            "Sampled pairs whose route repeats a route of the frozen suite's same family "
+            "(the paper's near-duplicate rule); new candidates were drawn instead.",
+            "",
+        ]
+        lines += [f"* {k}: {v}" for k, v in dup.items()] + [""]
     rej = card.get("rejected", {})
     if rej:
         lines += ["## Rejected sequences by reason", ""]
