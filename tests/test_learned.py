@@ -25,7 +25,9 @@ from lantern_jax.policies.learned.checkpoint import (
     make_act,
     model_policy,
     new_model,
+    read_meta,
     save_model,
+    shipped_path,
 )
 from lantern_jax.policies.learned.features import (
     NAV_TEXTS,
@@ -300,6 +302,23 @@ def test_shipped_training_configs_load():
     for p in paths:
         cfg = load_config(p)
         assert cfg.name.startswith("learned-")
+
+
+def test_every_shipped_model_is_registered_and_loads():
+    """Each shipped checkpoint is a registered policy under the name it was trained under, with
+    its description, and its act gives finite waypoints."""
+    from lantern_jax.policies.registry import SHIPPED_MODELS, get_policy, policy_names
+
+    world = straight_scene([], length=120.0, speed=8.0)
+    assert set(SHIPPED_MODELS) <= set(policy_names())
+    for name, desc in SHIPPED_MODELS.items():
+        pol = get_policy(name)
+        assert pol.name == name and pol.description == desc
+        assert read_meta(shipped_path(name))["train_config"]["name"] == name
+        surround = bool(getattr(pol.act, "surround", False))
+        obs = observe(world, init_state(world), surround=surround)
+        plan = pol.act(pol.init(jax.random.PRNGKey(0)), obs)
+        assert plan.shape == (NUM_WAYPOINTS, 2) and bool(jnp.all(jnp.isfinite(plan)))
 
 
 def test_make_act_matches_model_call(obs, tables):

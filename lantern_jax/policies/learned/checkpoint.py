@@ -151,13 +151,6 @@ def load_model(path: str | Path, expect: ModelConfig | None = None) -> DrivingMo
 
 
 SHIPPED_DIR = "data/models"  # inside the package: the default checkpoints of the learned rows
-SHIPPED = {
-    "learned-base": "language interface trained on ordinary driving, never on warnings "
-                    "(the SimLingo analogue)",
-    "learned-coop": "learned-base fine-tuned on the LANTERN dataset mixed with base data "
-                    "(the Coop-SimLingo analogue)",
-    "learned-surround": "six-camera rig, no language (the VAD analogue)",
-}  # fmt: skip
 
 
 def shipped_path(name: str) -> Path:
@@ -181,5 +174,9 @@ def checkpoint_policy(path: str | Path, name: str | None = None) -> Policy:
     model = load_model(path)
     trained = meta.get("train_config", {})
     label = name or trained.get("name") or path.stem
-    desc = SHIPPED.get(label, f"learned {trained.get('recipe', '')} model from {path.name}")
+    from lantern_jax.policies.registry import SHIPPED_MODELS
+
+    desc = SHIPPED_MODELS.get(
+        label, f"learned {trained.get('recipe', '')} model from {path.name}"
+    )
     return model_policy(label, model, desc)
