@@ -176,7 +176,5 @@ def checkpoint_policy(path: str | Path, name: str | None = None) -> Policy:
     label = name or trained.get("name") or path.stem
     from lantern_jax.policies.registry import SHIPPED_MODELS
 
-    desc = SHIPPED_MODELS.get(
-        label, f"learned {trained.get('recipe', '')} model from {path.name}"
-    )
+    desc = SHIPPED_MODELS.get(label, f"learned {trained.get('recipe', '')} model from {path.name}")
     return model_policy(label, model, desc)
