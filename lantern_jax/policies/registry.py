@@ -13,6 +13,7 @@ from collections.abc import Callable
 
 from lantern_jax.policies import expert, learned_ppo, reference
 from lantern_jax.policies.base import Policy
+from lantern_jax.policies.learned.shipped import SHIPPED_MODELS
 
 _REGISTRY: dict[str, Callable[[], Policy]] = {
     "expert": expert.expert_policy,
@@ -31,19 +32,6 @@ def _shipped(name: str) -> Callable[[], Policy]:
 
     return factory
 
-
-#: The learned models whose checkpoints ship with the package (``data/models/``; README,
-#: "Learned warning-conditioned models"), with their descriptions: the paper's three learned
-#: rows, and ``learned-coop`` fine-tuned with onset-only horizon exclusion.
-SHIPPED_MODELS = {
-    "learned-base": "language interface trained on ordinary driving, never on warnings "
-                    "(the SimLingo analogue)",
-    "learned-coop": "learned-base fine-tuned on the LANTERN dataset mixed with base data "
-                    "(the Coop-SimLingo analogue)",
-    "learned-surround": "six-camera rig, no language (the VAD analogue)",
-    "learned-coop-onset-only": "learned-coop, fine-tuned keeping the frames whose horizon "
-                               "crosses warning termination (configs/train_coop_onset_only.toml)",
-}  # fmt: skip
 
 for _name in SHIPPED_MODELS:
     _REGISTRY[_name] = _shipped(_name)

@@ -29,6 +29,7 @@ from lantern_jax.observation import Observation
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.learned.features import features, nav_token_table
 from lantern_jax.policies.learned.model import DrivingModel, ModelConfig
+from lantern_jax.policies.learned.shipped import SHIPPED_MODELS
 
 Array = jax.Array
 
@@ -174,7 +175,5 @@ def checkpoint_policy(path: str | Path, name: str | None = None) -> Policy:
     model = load_model(path)
     trained = meta.get("train_config", {})
     label = name or trained.get("name") or path.stem
-    from lantern_jax.policies.registry import SHIPPED_MODELS
-
     desc = SHIPPED_MODELS.get(label, f"learned {trained.get('recipe', '')} model from {path.name}")
     return model_policy(label, model, desc)

@@ -1,0 +1,16 @@
+"""Names and descriptions of the learned models whose checkpoints ship with the package."""
+
+from __future__ import annotations
+
+#: The learned models whose checkpoints ship with the package (``data/models/``; README,
+#: "Learned warning-conditioned models"), with their descriptions: the paper's three learned
+#: rows, and ``learned-coop`` fine-tuned with onset-only horizon exclusion.
+SHIPPED_MODELS = {
+    "learned-base": "language interface trained on ordinary driving, never on warnings "
+                    "(the SimLingo analogue)",
+    "learned-coop": "learned-base fine-tuned on the LANTERN dataset mixed with base data "
+                    "(the Coop-SimLingo analogue)",
+    "learned-surround": "six-camera rig, no language (the VAD analogue)",
+    "learned-coop-onset-only": "learned-coop, fine-tuned keeping the frames whose horizon "
+                               "crosses warning termination (configs/train_coop_onset_only.toml)",
+}  # fmt: skip
