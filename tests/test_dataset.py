@@ -14,7 +14,7 @@ import jax
 import numpy as np
 import pytest
 
-from lantern_jax.constants import NUM_WAYPOINTS
+from lantern_jax.constants import FAMILIES, NUM_WAYPOINTS, WEATHERS
 from lantern_jax.dataset import frames as fr
 from lantern_jax.dataset.generate import generate_dataset
 from lantern_jax.dataset.record import FRAME_TICKS, record
@@ -29,6 +29,8 @@ from lantern_jax.dataset.store import (
 )
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.duplicates import near_duplicate, route_samples
+from lantern_jax.scenarios.families import build_pair, sample_params
+from lantern_jax.scenarios.spec import content_hash
 from lantern_jax.scenarios.suite import PairSpec, Suite, load_suite
 from lantern_jax.sim.observe import observe
 from lantern_jax.sim.rollout import rollout
@@ -215,6 +217,33 @@ def test_scenes_are_disjoint_from_the_suite_by_the_near_duplicate_rule():
     got: dict = {}
     again = plan_scenes(1, SEED, twin, rejected=got)
     assert got["PE"] >= 1 and again[0].sha256 != first.sha256
+
+
+def test_plan_equals_sampling_validated_params_one_by_one():
+    """The planner validates only the candidates that survive the duplicate tests; its plan
+    must be the one a plain loop over ``sample_params`` (validating every draw) gives."""
+    suite = load_suite()
+    routes = {}
+    for p in suite.pairs:
+        routes.setdefault(p.family, []).append(np.asarray(p.route_2m))
+    taken = {p.sha256 for p in suite.pairs}
+    expected = []
+    for fi, fam in enumerate(FAMILIES):
+        rng = np.random.default_rng([SEED, fi])
+        k = 0
+        while k < 2:
+            params = sample_params(fam, rng, WEATHERS[k % len(WEATHERS)])
+            h = content_hash(params)
+            if h in taken:
+                continue
+            taken.add(h)
+            route = route_samples(build_pair(params, validate=False)[0])
+            if any(near_duplicate(route, r) for r in routes[fam]):
+                continue
+            expected.append((fam, h))
+            k += 1
+    got = [(s.family, s.sha256) for s in plan_scenes(2, SEED, suite)]
+    assert got == expected
 
 
 def suite_families(suite):

@@ -29,7 +29,7 @@ import numpy as np
 from lantern_jax.constants import FAMILIES, WEATHERS
 from lantern_jax.scenarios.assemble import host_arrays
 from lantern_jax.scenarios.duplicates import near_duplicate, route_samples
-from lantern_jax.scenarios.families import build_pair, sample_params
+from lantern_jax.scenarios.families import build_pair, family, validate_params
 from lantern_jax.scenarios.spec import content_hash
 from lantern_jax.scenarios.suite import Suite
 from lantern_jax.world import Scenario
@@ -64,6 +64,18 @@ def _suite_routes(suite: Suite | None) -> dict[str, list[np.ndarray]]:
     return routes
 
 
+def _route_or_error(params: dict) -> np.ndarray:
+    """A sampled candidate's Route A route samples; an unbuildable candidate raises the
+    validation error that names its field (what
+    :func:`~lantern_jax.scenarios.families.sample_params` would have raised)."""
+    try:
+        with host_arrays():
+            return route_samples(build_pair(params, validate=False)[0])
+    except Exception:
+        validate_params(params)
+        raise
+
+
 def plan_scenes(
     pairs_per_family: int,
     seed: int,
@@ -75,7 +87,9 @@ def plan_scenes(
 
     A sampled candidate is skipped when its content hash is a suite pair's or an earlier
     candidate's, and when its Route A route is a near duplicate of a suite route of its family
-    (each candidate is built once, on the host, to get its route).
+    (each candidate is built once, on the host, to get its route); the survivors are validated
+    as :func:`~lantern_jax.scenarios.families.sample_params` validates, so the plan is the one
+    that sampling validated parameters one by one would give.
 
     Args:
         pairs_per_family: candidate pairs per family.
@@ -99,17 +113,19 @@ def plan_scenes(
         k = n_dup = 0
         while k < pairs_per_family:
             weather = WEATHERS[k % len(WEATHERS)]
-            params = sample_params(fam, rng, weather)
+            # the family's sampler draws exactly what sample_params draws; validation (a full
+            # feasibility check) is left for the candidates that survive the duplicate tests
+            params = family(fam).sample(rng, weather)
             h = content_hash(params)
             if h in taken:
                 continue
             taken.add(h)
             if suite_routes[fam]:
-                with host_arrays():
-                    route = route_samples(build_pair(params, validate=False)[0])
+                route = _route_or_error(params)
                 if any(near_duplicate(route, r) for r in suite_routes[fam]):
                     n_dup += 1
                     continue
+            validate_params(params)
             out.append(SceneSpec(len(out), fam, weather, params, h))
             k += 1
             if bar is not None:

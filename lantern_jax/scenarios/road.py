@@ -464,8 +464,9 @@ def distances_to_polyline(points: np.ndarray, xy: np.ndarray) -> np.ndarray:
     ab = b - a
     ll = np.maximum(np.sum(ab * ab, axis=1), 1e-18)
     t = np.clip(np.einsum("nmk,mk->nm", points[:, None, :] - a[None], ab) / ll, 0.0, 1.0)
-    q = a[None] + t[..., None] * ab[None]
-    return np.min(np.linalg.norm(points[:, None, :] - q, axis=-1), axis=1)
+    r = points[:, None, :] - (a[None] + t[..., None] * ab[None])
+    # squared lengths, one square root per point: the same bits as the norm of each (x, y)
+    return np.sqrt(np.min(r[..., 0] * r[..., 0] + r[..., 1] * r[..., 1], axis=1))
 
 
 def _polyline_distance(points: np.ndarray, xy: np.ndarray) -> float:
