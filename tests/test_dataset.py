@@ -16,9 +16,10 @@ import pytest
 
 from lantern_jax.constants import FAMILIES, NUM_WAYPOINTS, WEATHERS
 from lantern_jax.dataset import frames as fr
+from lantern_jax.dataset import generate as generate_module
 from lantern_jax.dataset.generate import generate_dataset
 from lantern_jax.dataset.record import FRAME_TICKS, record
-from lantern_jax.dataset.scenes import build_scenes, plan_scenes
+from lantern_jax.dataset.scenes import PLAN_JSON, build_scenes, plan_scenes, read_plan
 from lantern_jax.dataset.store import (
     CARD_JSON,
     DatasetError,
@@ -161,6 +162,28 @@ def test_same_seed_gives_identical_shards_and_resume_finishes_the_same(made, tmp
     assert [s["frames_sha256"] for s in resumed["shards"]] == [
         s["frames_sha256"] for s in card["shards"]
     ]
+
+
+def test_resume_records_from_the_kept_plan(made, tmp_path, monkeypatch):
+    """A resumed generation reads its scenes from ``plan.json`` instead of planning again, and
+    finishes with the same shards."""
+    folder, card = made
+    cut = tmp_path / "cut"
+    shutil.copytree(folder, cut)
+    first = json.loads((cut / CARD_JSON).read_text())
+    for key in ("frames", "sequences"):
+        (cut / first["shards"][1][key]).unlink()
+
+    def no_planning(*args, **kwargs):
+        raise AssertionError("planned again although plan.json holds the plan")
+
+    monkeypatch.setattr(generate_module, "plan_scenes", no_planning)
+    resumed = generate_dataset(cut, pairs_per_family=PAIRS, seed=SEED, chunk_pairs=CHUNK,
+                               progress=False)  # fmt: skip
+    assert [s["frames_sha256"] for s in resumed["shards"]] == [
+        s["frames_sha256"] for s in card["shards"]
+    ]
+    assert read_plan(cut, {"seed": SEED + 1}, "0" * 64) is None  # another plan: plan again
 
 
 def test_closed_loop_observation_equals_the_dataset_frame(made):
@@ -306,6 +329,19 @@ def test_incompatible_version_is_named(copy):
     (copy / CARD_JSON).write_text(json.dumps(card))
     with pytest.raises(DatasetError, match=r"dataset_card.json: format_version 99"):
         load_frames(copy)
+
+
+def test_tampered_plan_is_named(copy):
+    body = json.loads((copy / PLAN_JSON).read_text())
+    body["specs"][0]["params"]["route_length"] += 1.0
+    (copy / PLAN_JSON).write_text(json.dumps(body))
+    with pytest.raises(DatasetError, match=r"plan.json: scene 0 \(PE\) does not match"):
+        generate_dataset(copy, pairs_per_family=PAIRS, seed=SEED, chunk_pairs=CHUNK,
+                         progress=False)  # fmt: skip
+    (copy / PLAN_JSON).write_text("{not json")
+    with pytest.raises(DatasetError, match=r"plan.json: not a readable scene plan"):
+        generate_dataset(copy, pairs_per_family=PAIRS, seed=SEED, chunk_pairs=CHUNK,
+                         progress=False)  # fmt: skip
 
 
 def test_other_plan_is_refused(made):

@@ -6,7 +6,8 @@ seed (:func:`~lantern_jax.dataset.scenes.plan_scenes`); chunk ``k`` holds the ne
 (:mod:`~lantern_jax.dataset.record`), turned into frames and accepted or rejected
 (:mod:`~lantern_jax.dataset.frames`) and written as two shards plus an updated card
 (:mod:`~lantern_jax.dataset.store`).  A folder that already holds some chunks of the same plan is
-resumed from the next chunk; a folder of another plan (seed, size, chunking, format) is refused.
+resumed from the next chunk, from the scenes kept in its ``plan.json`` (they are not sampled and
+checked again); a folder of another plan (seed, size, chunking, format) is refused.
 """
 
 from __future__ import annotations
@@ -30,6 +31,8 @@ from lantern_jax.dataset.scenes import (
     SceneSpec,
     build_scenes,
     plan_scenes,
+    read_plan,
+    write_plan,
 )
 from lantern_jax.dataset.store import (
     FORMAT_VERSION,
@@ -169,19 +172,24 @@ def generate_dataset(
                          f"{pairs_per_family}, {chunk_pairs}")  # fmt: skip
     folder = Path(out)
     folder.mkdir(parents=True, exist_ok=True)
-    near_duplicates: dict[str, int] = {}
-    specs = plan_scenes(
-        pairs_per_family, seed, load_suite(), rejected=near_duplicates, progress=progress
-    )
-    chunks = [specs[i : i + chunk_pairs] for i in range(0, len(specs), chunk_pairs)]
     key = _plan_key(seed, pairs_per_family, chunk_pairs)
     card = read_card(folder)
-    if card is None:
-        card = _new_card(key, len(chunks))
-        card["suite_near_duplicates_skipped"] = near_duplicates
-    elif any(card.get(k) != v for k, v in key.items()):
+    if card is not None and any(card.get(k) != v for k, v in key.items()):
         raise DatasetError(f"{folder / 'dataset_card.json'}: written for another plan "
                            f"{ {k: card.get(k) for k in key} }, not {key}")  # fmt: skip
+    suite = load_suite()
+    specs = read_plan(folder, key, suite.suite_sha256) if card is not None else None
+    if specs is None:
+        near_duplicates: dict[str, int] = {}
+        specs = plan_scenes(
+            pairs_per_family, seed, suite, rejected=near_duplicates, progress=progress
+        )
+        write_plan(folder, key, suite.suite_sha256, specs)
+        if card is None:
+            card = _new_card(key, 0)
+            card["suite_near_duplicates_skipped"] = near_duplicates
+    chunks = [specs[i : i + chunk_pairs] for i in range(0, len(specs), chunk_pairs)]
+    card["chunks"] = len(chunks)
     expert = get_policy("expert")
     params = expert.init(jax.random.PRNGKey(0))
     recorder = batched_recorder(expert.act, int(np.ceil(MAX_SECONDS / (FRAME_TICKS * DT))))

@@ -22,11 +22,15 @@ scene.
 from __future__ import annotations
 
 import dataclasses
+import json
+from pathlib import Path
 
 import jax.numpy as jnp
 import numpy as np
 
 from lantern_jax.constants import FAMILIES, WEATHERS
+from lantern_jax.dataset.store import DatasetError
+from lantern_jax.files import atomic_write
 from lantern_jax.scenarios.assemble import host_arrays
 from lantern_jax.scenarios.duplicates import near_duplicate, route_samples
 from lantern_jax.scenarios.families import build_pair, family, validate_params
@@ -38,6 +42,7 @@ DATASET_SEED = 3272  # default generation seed
 PAPER_ROUTE_A = 1631  # sequences in the paper's release
 PAPER_ROUTE_B = 1641
 PAIRS_PER_FAMILY = 280  # default: 1680 pairs -> up to 1680 Route A + 1680 Route B sequences
+PLAN_JSON = "plan.json"  # the planned scenes, kept in the dataset folder for resuming
 
 
 @dataclasses.dataclass(frozen=True)
@@ -151,3 +156,44 @@ def build_scenes(specs: list[SceneSpec]) -> tuple[list[Scenario], list[Scenario]
         a_list.append(open_loop(a))
         b_list.append(open_loop(b))
     return a_list, b_list
+
+
+def write_plan(folder: str | Path, key: dict, suite_sha256: str, specs: list[SceneSpec]) -> None:
+    """Keep a plan in ``folder/plan.json`` (atomically), so that a resumed or repeated
+    generation records from the same scenes without sampling and checking them again.
+
+    Args:
+        folder: the dataset folder.
+        key: the plan's identity (seed, pairs per family, chunking, format version).
+        suite_sha256: hash of the suite the plan is disjoint from.
+        specs: the planned scenes.
+    """
+    body = dict(key, suite_sha256=suite_sha256, specs=[dataclasses.asdict(s) for s in specs])
+    atomic_write(Path(folder) / PLAN_JSON, json.dumps(body, sort_keys=True) + "\n")
+
+
+def read_plan(folder: str | Path, key: dict, suite_sha256: str) -> list[SceneSpec] | None:
+    """The plan kept in ``folder`` by :func:`write_plan`; None when there is none, or when it
+    was made for another key or suite (it is then planned again).
+
+    Raises:
+        DatasetError: naming the file when it cannot be read or a scene's parameters do not
+            match their recorded hash.
+    """
+    path = Path(folder) / PLAN_JSON
+    if not path.exists():
+        return None
+    try:
+        body = json.loads(path.read_text())
+        same = all(body.get(k) == v for k, v in key.items())
+        if not same or body.get("suite_sha256") != suite_sha256:
+            return None
+        specs = [SceneSpec(**d) for d in body["specs"]]
+    except (OSError, ValueError, TypeError, KeyError) as e:
+        raise DatasetError(f"{path}: not a readable scene plan ({e!r}); delete it to plan "
+                           "again") from None  # fmt: skip
+    for s in specs:
+        if content_hash(s.params) != s.sha256:
+            raise DatasetError(f"{path}: scene {s.index} ({s.family}) does not match its "
+                               "sha256; delete the file to plan again")  # fmt: skip
+    return specs
