@@ -117,7 +117,8 @@ def train(cfg: TrainConfig, progress: bool = True) -> dict:
     embedding = jnp.asarray(load_embedding(), jnp.float32)
     nav = jnp.asarray(nav_token_table())
     batches = _Batches(ex, train_idx, cfg)
-    steps = max(1, len(batches.epoch(0))) * cfg.epochs
+    per_epoch = max(1, len(batches.epoch(0)))
+    steps = per_epoch * cfg.epochs
     schedule = optax.warmup_cosine_decay_schedule(
         0.0, cfg.lr, max(1, int(cfg.warmup * steps)), steps, cfg.lr * 0.01
     )
@@ -143,7 +144,7 @@ def train(cfg: TrainConfig, progress: bool = True) -> dict:
         curve, best = restored.meta["curve"], tuple(restored.meta["best"])
         start = last + 1
     t_start, seen = time.perf_counter(), 0
-    bar = _progress(progress, cfg, start)
+    bar = _progress(progress, cfg, start * per_epoch, steps)
     for e in range(start, cfg.epochs):
         losses = []
         for idx in batches.epoch(e):
@@ -191,12 +192,13 @@ def _evaluate(loss_fn, params, ex: Examples, idx: np.ndarray, batch_size: int) -
     return total / max(count, 1) if count else float("nan")
 
 
-def _progress(on: bool, cfg: TrainConfig, start: int):
+def _progress(on: bool, cfg: TrainConfig, done: int, total: int):
+    """A progress bar over every batch of the run (``done`` of them already, when resumed)."""
     if not on:
         return None
     from tqdm.auto import tqdm
 
-    return tqdm(desc=f"train {cfg.name}", unit="batch", initial=0)
+    return tqdm(desc=f"train {cfg.name}", unit="batch", initial=done, total=total)
 
 
 def _plot_curve(curve: list[dict], path: Path, name: str) -> None:
