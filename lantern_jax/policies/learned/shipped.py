@@ -4,7 +4,8 @@ from __future__ import annotations
 
 #: The learned models whose checkpoints ship with the package (``data/models/``; README,
 #: "Learned warning-conditioned models"), with their descriptions: the paper's three learned
-#: rows, and ``learned-coop`` fine-tuned with onset-only horizon exclusion.
+#: rows, ``learned-coop`` fine-tuned with onset-only horizon exclusion, and the
+#: distance-conditioned models of the paper's language diagnostics (both exclusion rules).
 SHIPPED_MODELS = {
     "learned-base": "language interface trained on ordinary driving, never on warnings "
                     "(the SimLingo analogue)",
@@ -13,4 +14,9 @@ SHIPPED_MODELS = {
     "learned-surround": "six-camera rig, no language (the VAD analogue)",
     "learned-coop-onset-only": "learned-coop, fine-tuned keeping the frames whose horizon "
                                "crosses warning termination (configs/train_coop_onset_only.toml)",
+    "learned-distance": "learned-coop's recipe plus far-position counterexamples: Route B frames "
+                        "told of a hazard 100 m ahead (configs/train_distance.toml)",
+    "learned-distance-onset-only": "learned-distance, fine-tuned keeping the frames whose "
+                                   "horizon crosses warning termination "
+                                   "(configs/train_distance_onset_only.toml)",
 }  # fmt: skip
