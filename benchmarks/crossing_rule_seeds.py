@@ -13,9 +13,12 @@ use the warning::
     python benchmarks/crossing_rule_seeds.py --dataset data/lantern --seeds 0 1 2
 
 Both variants start from the same base model (``--base``, default: the shipped
-``learned-base``) and use ``configs/train_coop.toml`` otherwise.  It prints, per rule and seed,
-the number of training frames with an active warning, the per-family warning gain and the
-overall CUS in both conditions, then the mean and spread per rule, and writes them as CSV.
+``learned-base``) and use ``configs/train_coop.toml`` otherwise; ``--config
+configs/train_distance.toml`` runs the same comparison for the distance-conditioned recipe (its
+far counterexamples come on top of the dataset's warning-active frames counted here).  It
+prints, per rule and seed, the number of training frames with an active warning, the per-family
+warning gain and the overall CUS in both conditions, then the mean and spread per rule, and
+writes them as CSV.
 """
 
 from __future__ import annotations
@@ -36,8 +39,9 @@ ROOT = Path(__file__).resolve().parents[1]
 RULES = ("both", "onset")
 
 
-def run(dataset: str, seeds: list[int], base: str, out: Path, progress: bool) -> pd.DataFrame:
-    """Train and evaluate every (rule, seed); one row each."""
+def run(dataset: str, seeds: list[int], base: str, out: Path, progress: bool,
+        config: Path = ROOT / "configs" / "train_coop.toml") -> pd.DataFrame:  # fmt: skip
+    """Train and evaluate every (rule, seed) with a training config; one row each."""
     rows = []
     for rule in RULES:
         active = int(
@@ -46,9 +50,9 @@ def run(dataset: str, seeds: list[int], base: str, out: Path, progress: bool) ->
             ].sum()
         )
         for seed in seeds:
-            name = f"coop-{rule}-s{seed}"
+            name = f"{config.stem.removeprefix('train_')}-{rule}-s{seed}"
             cfg = load_config(
-                ROOT / "configs" / "train_coop.toml", name=name, dataset=dataset,
+                config, name=name, dataset=dataset,
                 out=str(out / name), init_from=base, seed=seed, exclude_crossing=rule,
             )  # fmt: skip
             summary = train(cfg, progress=progress)
@@ -71,11 +75,17 @@ def main() -> None:
     ap.add_argument("--dataset", default="data/lantern")
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument("--base", default=str(shipped_path("learned-base")))
+    ap.add_argument(
+        "--config",
+        type=Path,
+        default=ROOT / "configs" / "train_coop.toml",
+        help="training config of both variants (default: configs/train_coop.toml)",
+    )
     ap.add_argument("--csv", default="crossing_rule_seeds.csv")
     ap.add_argument("--quiet", action="store_true")
     a = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
-        df = run(a.dataset, a.seeds, a.base, Path(tmp), not a.quiet)
+        df = run(a.dataset, a.seeds, a.base, Path(tmp), not a.quiet, a.config)
     df.to_csv(a.csv, index=False)
     num = df.drop(columns=["seed"]).groupby("rule", sort=False)
     print("\nmean over seeds")
