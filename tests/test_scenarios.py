@@ -208,7 +208,8 @@ def _check_occluders(w, route):
             int(occ.kind[k]),
         )
         assert int(occ.kind[k]) in (OCC_BUILDING, OCC_WALL, OCC_PARKED_VEHICLE)
-        assert rd._polyline_distance(rd._box_outline(box), route) >= EGO_HALF_WIDTH + 0.5 - 1e-3
+        clearance = rd.distances_to_polyline(rd._box_outline(box), route).min()
+        assert clearance >= EGO_HALF_WIDTH + 0.5 - 1e-3
 
 
 def _check_background(w, meta):
@@ -685,3 +686,35 @@ def test_a_pair_with_knob_values_builds_on_the_host():
     ref_a, _, _ = build_pair(params)
     for h, d in zip(jax.tree.leaves(host_a), jax.tree.leaves(ref_a), strict=True):
         np.testing.assert_array_equal(np.asarray(h), np.asarray(d))
+
+
+# -- exact shortcuts of the planning geometry ----------------------------------------------------
+def _dense_min_distance(points, xy):
+    """Reference: every point against every segment, np.linalg.norm (the plain formula)."""
+    a, b = xy[:-1], xy[1:]
+    ab = b - a
+    ll = np.maximum((ab * ab).sum(axis=1), 1e-18)
+    t = np.clip(np.einsum("nmk,mk->nm", points[:, None, :] - a[None], ab) / ll, 0.0, 1.0)
+    q = a[None] + t[..., None] * ab[None]
+    return np.min(np.linalg.norm(points[:, None, :] - q, axis=-1), axis=1)
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), limit=st.floats(0.1, 30.0))
+def test_polyline_shortcuts_equal_the_dense_computation(seed, limit):
+    """The broad-phase minimum and the coarse-to-fine first hit give exactly what measuring
+    every point against every segment gives."""
+    rng = np.random.default_rng(seed)
+    xy = np.cumsum(rng.normal(size=(int(rng.integers(2, 40)), 2)) * 4.0, axis=0)
+    pts = rng.normal(size=(int(rng.integers(1, 30)), 2)) * 20.0
+    dense = _dense_min_distance(pts, xy)
+    np.testing.assert_array_equal(rd.distances_to_polyline(pts, xy), dense)
+    below = rd.polyline_distance_below(pts, xy, limit)
+    assert below == (dense.min() if dense.min() < limit else math.inf)
+    # samples every 0.05 m along a random curve, against another polyline
+    curve = np.cumsum(rng.normal(size=(6, 2)) * 10.0, axis=0)
+    samples = rd.point_at(curve, np.arange(0.0, rd.arc_length(curve)[-1], 0.05))
+    d = _dense_min_distance(samples, xy)
+    inside = np.flatnonzero(d <= limit)
+    expected = int(inside[0]) if inside.size else -1
+    assert rd.first_within(samples, xy, limit, 0.05) == expected

@@ -78,6 +78,7 @@ MIN_TURN_RADIUS = 8.0  # m, tightest connector the ego can follow (min radius ~7
 SHAPE_TRIES = 20  # skew draws before falling back to an unskewed junction
 SKEW_ARMS = ("E", "N", "W")
 RTY_SPAWN_MARGIN = 1.0  # m between a waiting flow vehicle and the junction box
+RTY_CONFLICT_STEP = 0.05  # m, arc resolution of the search for the RTY conflict point
 RTY_CONTEXT_HANDOVER_S = 0.1  # s after the event: the context flow continues as IDM traffic
 
 
@@ -133,11 +134,12 @@ def _rty_conflict(road_map: rj.RoadMap, route: road.RouteSpec):
     _, arm, k_out = ego_lanes("right", road_map.lanes_per_direction)
     lane = road_map.lane(rj.outbound_lane(road_map, arm, k_out)[0])
     thr = EGO_HALF_LENGTH + CAR_EXTENT[1] + CORRIDOR_MARGIN
-    s_route = np.arange(0.0, route.length, 0.05)
-    inside = road.distances_to_polyline(road.point_at(route.xy, s_route), lane.center) <= thr
-    if not inside.any():
+    s_route = np.arange(0.0, route.length, RTY_CONFLICT_STEP)
+    first = road.first_within(road.point_at(route.xy, s_route), lane.center, thr,
+                              RTY_CONFLICT_STEP)  # fmt: skip
+    if first < 0:
         raise ValueError("RTY.approach: the route never reaches the cross lane's corridor")
-    s_c = float(s_route[int(np.argmax(inside))])
+    s_c = float(s_route[first])
     s_x, _ = road.project(lane.center, road.point_at(route.xy, s_c))
     return s_c, s_x, lane
 
