@@ -23,6 +23,7 @@ from lantern_jax.dataset.scenes import PLAN_JSON, build_scenes, plan_scenes, rea
 from lantern_jax.dataset.store import (
     CARD_JSON,
     DatasetError,
+    card_markdown,
     column_array,
     load_frames,
     load_sequences,
@@ -60,6 +61,18 @@ def test_card_counts_add_up(made):
     frames = load_frames(folder, include_crossing=True)
     assert len(frames) == card["frames"] == sum(c["frames"] for c in card["counts"])
     assert (folder / "dataset_card.md").read_text().startswith("# LANTERN open-loop dataset")
+
+
+def test_card_summary_keeps_its_order_through_json(made):
+    """The Markdown card written after a resume (from the card read back from its sorted JSON)
+    equals the one written by the first run: columns and families in their fixed order."""
+    _, card = made
+    again = json.loads(json.dumps(card, sort_keys=True))
+    assert card_markdown(again) == card_markdown(card)
+    header = next(ln for ln in card_markdown(again).splitlines() if ln.startswith("| family"))
+    assert [c.strip() for c in header.strip("|").split("|")] == [
+        "family", "route", "sequences", "frames"
+    ]  # fmt: skip
 
 
 def test_waypoints_are_the_experts_actual_future(made):

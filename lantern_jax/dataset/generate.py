@@ -181,6 +181,7 @@ def generate_dataset(
     specs = read_plan(folder, key, suite.suite_sha256) if card is not None else None
     if specs is None:
         near_duplicates: dict[str, int] = {}
+        t_plan = time.perf_counter()
         specs = plan_scenes(
             pairs_per_family, seed, suite, rejected=near_duplicates, progress=progress
         )
@@ -188,6 +189,7 @@ def generate_dataset(
         if card is None:
             card = _new_card(key, 0)
             card["suite_near_duplicates_skipped"] = near_duplicates
+        card["plan_seconds"] = round(time.perf_counter() - t_plan, 1)
     chunks = [specs[i : i + chunk_pairs] for i in range(0, len(specs), chunk_pairs)]
     card["chunks"] = len(chunks)
     expert = get_policy("expert")

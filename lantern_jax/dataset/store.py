@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from lantern_jax.constants import FAMILIES
 from lantern_jax.dataset.frames import horizon_crossing
 from lantern_jax.files import atomic_write
 
@@ -107,6 +108,8 @@ def write_card(folder: Path, card: dict) -> None:
 def card_markdown(card: dict) -> str:
     """A human-readable summary of a dataset card."""
     counts = pd.DataFrame(card.get("counts", [])) if card.get("counts") else pd.DataFrame()
+    if not counts.empty:  # a card read back from JSON has its keys sorted: fix the order
+        counts = counts[["family", "route", "sequences", "frames"]]
     lines = [
         "# LANTERN open-loop dataset",
         "",
@@ -119,6 +122,9 @@ def card_markdown(card: dict) -> str:
         f"{card.get('frames', 0)} frames at 4 Hz.",
         "",
     ]
+    if "plan_seconds" in card:
+        lines += [f"Time: planning scenes {card['plan_seconds']:.0f} s, recording "
+                  f"{card.get('seconds', 0.0):.0f} s.", ""]  # fmt: skip
     if not counts.empty:
         lines += ["## Accepted sequences and frames per family and route", "",
                   counts.to_markdown(index=False), ""]  # fmt: skip
@@ -131,7 +137,8 @@ def card_markdown(card: dict) -> str:
             "(the paper's near-duplicate rule); new candidates were drawn instead.",
             "",
         ]
-        lines += [f"* {k}: {v}" for k, v in dup.items()] + [""]
+        order = sorted(dup, key=lambda f: (FAMILIES.index(f) if f in FAMILIES else 99, f))
+        lines += [f"* {k}: {dup[k]}" for k in order] + [""]
     rej = card.get("rejected", {})
     if rej:
         lines += ["## Rejected sequences by reason", ""]
