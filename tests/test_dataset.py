@@ -197,6 +197,14 @@ def test_resume_records_from_the_kept_plan(made, tmp_path, monkeypatch):
         s["frames_sha256"] for s in card["shards"]
     ]
     assert read_plan(cut, {"seed": SEED + 1}, "0" * 64) is None  # another plan: plan again
+    # a first chunk interrupted before the card was written: the kept plan is used too
+    fresh = tmp_path / "fresh"
+    fresh.mkdir()
+    shutil.copy(cut / PLAN_JSON, fresh / PLAN_JSON)
+    redone = generate_dataset(fresh, pairs_per_family=PAIRS, seed=SEED, chunk_pairs=CHUNK,
+                              progress=False)  # fmt: skip
+    assert redone["shards"] == resumed["shards"]
+    assert redone["suite_near_duplicates_skipped"] == card["suite_near_duplicates_skipped"]
 
 
 def test_closed_loop_observation_equals_the_dataset_frame(made):
@@ -349,6 +357,12 @@ def test_tampered_plan_is_named(copy):
     body["specs"][0]["params"]["route_length"] += 1.0
     (copy / PLAN_JSON).write_text(json.dumps(body))
     with pytest.raises(DatasetError, match=r"plan.json: scene 0 \(PE\) does not match"):
+        generate_dataset(copy, pairs_per_family=PAIRS, seed=SEED, chunk_pairs=CHUNK,
+                         progress=False)  # fmt: skip
+    body["specs"][0]["params"]["route_length"] -= 1.0
+    body["suite_sha256"] = "0" * 64
+    (copy / PLAN_JSON).write_text(json.dumps(body))
+    with pytest.raises(DatasetError, match=r"plan.json: made for another plan or suite"):
         generate_dataset(copy, pairs_per_family=PAIRS, seed=SEED, chunk_pairs=CHUNK,
                          progress=False)  # fmt: skip
     (copy / PLAN_JSON).write_text("{not json")

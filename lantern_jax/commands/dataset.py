@@ -42,7 +42,7 @@ def cmd_dataset(args: argparse.Namespace, argv: Sequence[str]) -> int:
         raise CommandError(str(e)) from None
     print(card_markdown(card))
     plan = card.get("plan_seconds")
-    planned = f"planning {plan:.0f} s (kept in plan.json), " if plan is not None else ""
+    planned = f"planning {plan:.0f} s (once, kept in plan.json), " if plan is not None else ""
     print(f"Generation time: {planned}recording {card['seconds']:.0f} s; files in {args.out}")
     return 0
 

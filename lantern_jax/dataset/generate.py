@@ -28,6 +28,7 @@ from lantern_jax.dataset.record import FRAME_TICKS, batched_recorder
 from lantern_jax.dataset.scenes import (
     DATASET_SEED,
     PAIRS_PER_FAMILY,
+    PLAN_JSON,
     SceneSpec,
     build_scenes,
     plan_scenes,
@@ -178,18 +179,24 @@ def generate_dataset(
         raise DatasetError(f"{folder / 'dataset_card.json'}: written for another plan "
                            f"{ {k: card.get(k) for k in key} }, not {key}")  # fmt: skip
     suite = load_suite()
-    specs = read_plan(folder, key, suite.suite_sha256) if card is not None else None
-    if specs is None:
+    kept = read_plan(folder, key, suite.suite_sha256)
+    if kept is None and card is not None and (folder / PLAN_JSON).exists():
+        raise DatasetError(f"{folder / PLAN_JSON}: made for another plan or suite than "
+                           "this folder's recorded chunks; start a new folder")  # fmt: skip
+    if kept is None:
         near_duplicates: dict[str, int] = {}
         t_plan = time.perf_counter()
         specs = plan_scenes(
             pairs_per_family, seed, suite, rejected=near_duplicates, progress=progress
         )
-        write_plan(folder, key, suite.suite_sha256, specs)
-        if card is None:
-            card = _new_card(key, 0)
-            card["suite_near_duplicates_skipped"] = near_duplicates
-        card["plan_seconds"] = round(time.perf_counter() - t_plan, 1)
+        info = dict(suite_near_duplicates_skipped=near_duplicates,
+                    plan_seconds=round(time.perf_counter() - t_plan, 1))  # fmt: skip
+        write_plan(folder, key, suite.suite_sha256, specs, info)
+    else:
+        specs, info = kept
+    if card is None:
+        card = _new_card(key, 0)
+    card.update(info)
     chunks = [specs[i : i + chunk_pairs] for i in range(0, len(specs), chunk_pairs)]
     card["chunks"] = len(chunks)
     expert = get_policy("expert")

@@ -158,7 +158,8 @@ def build_scenes(specs: list[SceneSpec]) -> tuple[list[Scenario], list[Scenario]
     return a_list, b_list
 
 
-def write_plan(folder: str | Path, key: dict, suite_sha256: str, specs: list[SceneSpec]) -> None:
+def write_plan(folder: str | Path, key: dict, suite_sha256: str, specs: list[SceneSpec],
+               info: dict | None = None) -> None:  # fmt: skip
     """Keep a plan in ``folder/plan.json`` (atomically), so that a resumed or repeated
     generation records from the same scenes without sampling and checking them again.
 
@@ -167,14 +168,18 @@ def write_plan(folder: str | Path, key: dict, suite_sha256: str, specs: list[Sce
         key: the plan's identity (seed, pairs per family, chunking, format version).
         suite_sha256: hash of the suite the plan is disjoint from.
         specs: the planned scenes.
+        info: what the card reports about planning (skipped near duplicates, seconds), given
+            back by :func:`read_plan`.
     """
-    body = dict(key, suite_sha256=suite_sha256, specs=[dataclasses.asdict(s) for s in specs])
+    body = dict(key, suite_sha256=suite_sha256, info=info or {},
+                specs=[dataclasses.asdict(s) for s in specs])  # fmt: skip
     atomic_write(Path(folder) / PLAN_JSON, json.dumps(body, sort_keys=True) + "\n")
 
 
-def read_plan(folder: str | Path, key: dict, suite_sha256: str) -> list[SceneSpec] | None:
-    """The plan kept in ``folder`` by :func:`write_plan`; None when there is none, or when it
-    was made for another key or suite (it is then planned again).
+def read_plan(folder: str | Path, key: dict, suite_sha256: str
+              ) -> tuple[list[SceneSpec], dict] | None:  # fmt: skip
+    """The plan kept in ``folder`` by :func:`write_plan` and its ``info``; None when there is
+    none, or when it was made for another key or suite (it is then planned again).
 
     Raises:
         DatasetError: naming the file when it cannot be read or a scene's parameters do not
@@ -189,6 +194,7 @@ def read_plan(folder: str | Path, key: dict, suite_sha256: str) -> list[SceneSpe
         if not same or body.get("suite_sha256") != suite_sha256:
             return None
         specs = [SceneSpec(**d) for d in body["specs"]]
+        info = dict(body.get("info", {}))
     except (OSError, ValueError, TypeError, KeyError) as e:
         raise DatasetError(f"{path}: not a readable scene plan ({e!r}); delete it to plan "
                            "again") from None  # fmt: skip
@@ -196,4 +202,4 @@ def read_plan(folder: str | Path, key: dict, suite_sha256: str) -> list[SceneSpe
         if content_hash(s.params) != s.sha256:
             raise DatasetError(f"{path}: scene {s.index} ({s.family}) does not match its "
                                "sha256; delete the file to plan again")  # fmt: skip
-    return specs
+    return specs, info
