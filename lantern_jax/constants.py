@@ -51,6 +51,11 @@ OCC_PARKED_VEHICLE = 2  # a parked (or waiting) truck or van
 OCCLUDER_KIND_NAMES = ("building", "wall", "parked_vehicle")
 NUM_OCCLUDER_KINDS = len(OCCLUDER_KIND_NAMES)
 
+# --- semantic classes of a range-image ray (what its first hit is) ----------------------------
+# an actor of kind KIND_* -> that kind; a static occluder of kind OCC_* -> NUM_ACTOR_KINDS + OCC_*
+RAY_CLASS_NAMES = KIND_NAMES + OCCLUDER_KIND_NAMES
+RAY_CLASS_NONE = -1  # the ray hits nothing within range
+
 # --- actor motion models ----------------------------------------------------------------------
 MOTION_SCRIPTED = 0  # path + speed profile + trigger time (closed form in time)
 MOTION_IDM = 1  # intelligent-driver-model car following along the actor's path

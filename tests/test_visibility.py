@@ -362,3 +362,61 @@ def test_ego_collides_with_an_occluder():
         jnp.float32(18.0), jnp.int32(0), jnp.asarray(False), jnp.asarray(False),
     )  # fmt: skip
     assert not bool(at_rest.collision)  # contacts at standstill are ignored (leaderboard)
+
+
+def test_six_camera_rig_is_blocked_by_static_occluders():
+    # The 360-degree rig of the dataset and of Observation.surround: a car parked 20 m behind the
+    # ego (x in [-22.3, -17.7], |y| <= 1) and a wall across the road between them (x in
+    # [-10.5, -9.5], |y| <= 6).  Camera at x = -1.5 (CAMERA_BACK_OFFSET behind the centre).
+    # Every sight line to a car point has |y| <= 1 * 8.5 / 16.2 < 6 at x = -10: blocked.  Ray 0
+    # of the rig looks straight back (bearing -pi): it meets the wall's face x = -9.5 at 8.0 m
+    # (a wall ray, class NUM_ACTOR_KINDS + OCC_WALL), or without the wall the car's face
+    # x = -17.7 at 16.2 m (class KIND_VEHICLE).
+    from lantern_jax.constants import (
+        KIND_VEHICLE,
+        NUM_ACTOR_KINDS,
+        RAY_CLASS_NAMES,
+        SURROUND_FOV,
+    )
+    from lantern_jax.scenarios.handmade import ActorSpec
+    from lantern_jax.sim.sense import SURROUND_RAYS, camera_view
+
+    assert vis.ray_angles(SURROUND_FOV, SURROUND_RAYS)[0] == pytest.approx(-math.pi)
+    car = ActorSpec(path=np.array([[-20.0, 0.0]]), extent=(2.3, 1.0))
+    wall = OccluderSpec(np.array([-10.0, 0.0]), math.pi / 2, (6.0, 0.5), OCC_WALL, "wall")
+    rig = jax.jit(lambda w: camera_view(w, w.ego0, w.actors0, SURROUND_FOV, SURROUND_RAYS))
+
+    open_view = rig(straight_scene([car], length=60.0))
+    assert bool(open_view.visible[0])
+    assert float(open_view.ranges[0]) == pytest.approx(16.2, abs=1e-4)
+    assert int(open_view.hit_class[0]) == KIND_VEHICLE
+
+    walled = rig(straight_scene([car], length=60.0, occluders=[wall]))
+    assert not bool(walled.visible[0])
+    assert float(walled.ranges[0]) == pytest.approx(8.0, abs=1e-4)
+    assert int(walled.hit_class[0]) == NUM_ACTOR_KINDS + OCC_WALL
+    assert RAY_CLASS_NAMES[int(walled.hit_class[0])] == "wall"
+
+
+def test_front_camera_view_equals_the_simulators_front_camera_on_a_junction():
+    # The dataset's front rig (camera_view at 110 deg) and the closed loop's front camera
+    # (sense) see the same world the same way, corner buildings included: LWW's first pair,
+    # whose wrong-way car waits hidden behind the buildings and the waiting truck.
+    from lantern_jax.scenarios.families import build_pair
+    from lantern_jax.scenarios.suite import load_suite
+    from lantern_jax.sim.sense import FRONT_RAYS, camera_view, sense
+
+    pair = next(p for p in load_suite().pairs if p.family == "LWW")
+    world = build_pair(pair.params)[0]
+    assert bool(np.asarray(world.occluders.valid).any())
+
+    @jax.jit
+    def both(w):
+        e = w.ego0
+        percept = sense(w, e, w.actors0, jnp.float32(0.0), jnp.float32(0.0), jnp.float32(0.0))
+        return percept, camera_view(w, e, w.actors0, FRONT_CAMERA_FOV, FRONT_RAYS)
+
+    percept, view = both(world)
+    np.testing.assert_array_equal(np.asarray(view.visible), np.asarray(percept.visible))
+    np.testing.assert_array_equal(np.asarray(view.ranges), np.asarray(percept.ranges))
+    assert not bool(view.visible[world.config.hazard_index])  # the premise: hidden at start

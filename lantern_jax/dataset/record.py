@@ -40,7 +40,8 @@ class FrameRecord:
     ego_xy: Array  # (2,) float32, m, world frame
     ego_yaw: Array  # () float32, rad
     obs: Observation  # the policy observation of this tick (front camera)
-    front_class: Array  # (FRONT_RAYS,) int32, KIND_* of each front ray's first hit (-1 none)
+    front_class: Array  # (FRONT_RAYS,) int32, class of each front ray's first hit
+    #                     (``constants.RAY_CLASS_NAMES``; -1 none)
     surround: CameraView  # the six-camera rig: visibility, SURROUND_RAYS ranges and classes
 
 
