@@ -6,7 +6,8 @@ A dataset folder holds, per generation chunk ``k``:
   ``route``, ``weather``, ``frame``, ``t_s``), every field of the policy observation as
   ``obs.<field>`` (front camera: visible objects, range image; ego state; navigation; the
   warning as text id, token ids, position and flags), ``front_class`` (semantic class per front
-  ray, ``constants.RAY_CLASS_NAMES``: actor kinds, then static occluder kinds), the six-camera rig as ``surround.visible``, ``surround.ranges``, ``surround.hit_class``,
+  ray, ``constants.RAY_CLASS_NAMES``: actor kinds, then static occluder kinds), the six-camera
+  rig as ``surround.visible``, ``surround.ranges``, ``surround.hit_class``,
   the ten expert ``waypoints`` (ego frame, x forward, y right, 0.25 s apart) and the
   ``horizon_crossing`` flag;
 * ``sequences-k.parquet`` — one row per recorded sequence, accepted or not (with the reason),
