@@ -113,7 +113,10 @@ def measure(
     hit_occ = geometry.overlap_with_boxes(ego.xy, ego.yaw, ego_ext, occ.center, occ.yaw, occ.extent)
     contact = jnp.any(overlap & present) | jnp.any(hit_occ & occ.valid)
     collision = contact & (ego.speed >= thresholds.COLLISION_MIN_SPEED_MPS)
-    dists = geometry.distance_to_boxes(ego.xy, ego.yaw, ego_ext, actors.xy, actors.yaw, ext)
+    # only the hazard's box distance is scored (TTC, clearance): one box pair, not A
+    hazard_dist = geometry.box_distance(
+        ego.xy, ego.yaw, ego_ext, actors.xy[h], actors.yaw[h], ext[h]
+    )
     ego_vel = ego.speed * jnp.stack([jnp.cos(ego.yaw), jnp.sin(ego.yaw)])
     hz_vel = actors.speed[h] * jnp.stack([jnp.cos(actors.yaw[h]), jnp.sin(actors.yaw[h])])
     crossed_stop = (arc_before < cfg.ego_stop_s) & (arc_now >= cfg.ego_stop_s)
@@ -131,7 +134,7 @@ def measure(
         hazard_present=present[h] & cfg.is_route_a,
         hazard_rel=actors.xy[h] - ego.xy,
         hazard_rel_vel=hz_vel - ego_vel,
-        hazard_box_dist=dists[h],
+        hazard_box_dist=hazard_dist,
         justified_stop=justified,
         fb_window=(progress >= fb_lo) & (progress <= fb_hi),
         controller_fault=fault,
