@@ -41,7 +41,7 @@ from lantern_jax.sim.observe import observe
 from lantern_jax.sim.rollout import rollout_batch_parallel
 from lantern_jax.sim.state import init_state
 from lantern_jax.times import happened, time_or_nan
-from lantern_jax.world import Scenario
+from lantern_jax.world import Scenario, trim_padding
 
 CONDITIONS = ("warning", "no-warning")
 
@@ -88,8 +88,13 @@ class Executions:
     max_ticks: int
 
 
-def build_executions(suite: Suite, ablation: str = "none") -> Executions:
+def build_executions(suite: Suite, ablation: str = "none", trim: bool = True) -> Executions:
     """Build the batched scenarios of every execution of a suite under an ablation.
+
+    With ``trim`` (default) the actor and lane slots past the last one any execution uses are
+    cut (:func:`~lantern_jax.world.trim_padding`: narrower per-tick work, same results to the
+    reproducibility promise); ``trim=False`` keeps the full slot capacity, one batch shape for
+    every suite of the same size.
 
     Raises:
         ValueError: listing the valid ablations for an unknown name.
@@ -104,7 +109,10 @@ def build_executions(suite: Suite, ablation: str = "none") -> Executions:
     if fn is not None:
         a_warn = a_warn.replace(config=fn(a_warn.config))
         a_none = a_none.replace(config=fn(a_none.config))
-    scenarios = jax.device_put(jax.tree.map(lambda *x: np.concatenate(x), a_warn, a_none, b))
+    scenarios = jax.tree.map(lambda *x: np.concatenate(x), a_warn, a_none, b)
+    if trim:
+        scenarios = trim_padding(scenarios)
+    scenarios = jax.device_put(scenarios)
     max_ticks = int(np.ceil(float(np.max(np.asarray(scenarios.config.timeout_s))) / DT))
     return Executions(
         scenarios=scenarios,

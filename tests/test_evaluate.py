@@ -452,3 +452,46 @@ def test_slot_scheduling_matches_one_group(shipped, monkeypatch):
             np.testing.assert_array_equal(a, b, err_msg=f.name)
         else:
             np.testing.assert_allclose(a, b, rtol=1e-4, atol=1e-4, err_msg=f.name)
+
+
+@pytest.mark.parametrize("policy", ["coop", pytest.param("expert", marks=pytest.mark.slow)])
+def test_trimmed_padding_changes_no_result(suite2, policy):
+    """Cutting the unused actor and lane slots (the default batch) keeps every valid slot and
+    every result: discrete outputs exactly, continuous ones to the reproducibility promise."""
+    from lantern_jax.evaluate import run_executions
+    from lantern_jax.scoring.metrics import finalize
+    from lantern_jax.scoring.table import REPRODUCIBLE_ATOL, REPRODUCIBLE_RTOL
+
+    full = build_executions(suite2, trim=False)
+    cut = build_executions(suite2)
+    for part in ("actors", "lanes"):
+        v_full = np.asarray(getattr(full.scenarios, part).valid)
+        v_cut = np.asarray(getattr(cut.scenarios, part).valid)
+        n = v_cut.shape[-1]
+        assert n < v_full.shape[-1], part  # these pairs leave trailing slots unused
+        np.testing.assert_array_equal(v_cut, v_full[:, :n])
+        assert not v_full[:, n:].any() and v_cut[:, -1].any()
+    pol = get_policy(policy)
+    params = pol.init(jax.random.PRNGKey(0))
+    got = [
+        finalize(run_executions(pol.act, e.scenarios, params, e.max_ticks, compact=False,
+                                privileged=pol.privileged)[0].telemetry)
+        for e in (full, cut)
+    ]  # fmt: skip
+    for f in dataclasses.fields(got[0]):
+        a, b = np.asarray(getattr(got[0], f.name)), np.asarray(getattr(got[1], f.name))
+        if a.dtype.kind in "bi":
+            np.testing.assert_array_equal(a, b, err_msg=f.name)
+        else:
+            np.testing.assert_allclose(
+                a, b, rtol=REPRODUCIBLE_RTOL, atol=REPRODUCIBLE_ATOL, err_msg=f.name
+            )
+
+
+def test_trim_padding_on_hand_built_slots():
+    """``used_slots`` counts up to the last valid slot of any batch member (at least one)."""
+    from lantern_jax.world import used_slots
+
+    assert used_slots(np.array([[True, False, False, False], [False, False, True, False]])) == 3
+    assert used_slots(np.zeros((2, 5), bool)) == 1
+    assert used_slots(np.array([False, True, False, True])) == 4
