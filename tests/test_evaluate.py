@@ -495,3 +495,19 @@ def test_trim_padding_on_hand_built_slots():
     assert used_slots(np.array([[True, False, False, False], [False, False, True, False]])) == 3
     assert used_slots(np.zeros((2, 5), bool)) == 1
     assert used_slots(np.array([False, True, False, True])) == 4
+
+
+def test_trimmed_batch_keeps_the_flat_observation_vector(suite2):
+    """Fixed-size consumers of the observation (the PPO policy, host models) read
+    ``observation_vector``: a trimmed batch gives the same vector, padded back to ``OBS_SIZE``."""
+    from lantern_jax.policies.features import OBS_SIZE, observation_vector
+    from lantern_jax.sim.observe import observe
+    from lantern_jax.sim.state import init_state
+
+    vec = jax.jit(jax.vmap(lambda sc: observation_vector(observe(sc, init_state(sc)))))
+    full = np.asarray(vec(build_executions(suite2, trim=False).scenarios))
+    cut_execs = build_executions(suite2)
+    assert cut_execs.scenarios.actors.valid.shape[-1] < 16
+    cut = np.asarray(vec(cut_execs.scenarios))
+    assert cut.shape == full.shape == (6, OBS_SIZE)
+    np.testing.assert_array_equal(cut, full)

@@ -62,6 +62,7 @@ from lantern_jax.constants import (
     WAYPOINT_DT,
 )
 from lantern_jax.observation import Observation
+from lantern_jax.scenarios.road import MAX_ACTORS
 
 Array = jax.Array
 
@@ -77,10 +78,14 @@ SIZE_SCALE = 5.0  # m
 RANGE_SCALE = 60.0  # m
 END_SCALE = 100.0  # m
 ACTOR_FEATURES = 12  # per actor slot (see the table)
+OBS_ACTOR_SLOTS = MAX_ACTORS  # actor slots of the vector: the built scenarios' capacity
 
 
 def _actor_features(obs: Observation) -> Array:
-    """(A * 12,) float32: the camera-visible actors (zeros for unseen slots)."""
+    """(max(A, OBS_ACTOR_SLOTS) * 12,) float32: the camera-visible actors (zeros for unseen
+    slots).  A batch whose unused trailing slots were cut (:func:`lantern_jax.world.trim_padding`)
+    is padded back with zeros, exactly what those empty slots gave, so the vector keeps
+    ``OBS_SIZE``."""
     seen = obs.visible.astype(jnp.float32)[:, None]
     kind = jax.nn.one_hot(obs.actor_kind, NUM_ACTOR_KINDS, dtype=jnp.float32)
     xy = jnp.where(obs.visible[:, None], obs.actor_xy, 0.0) / POS_SCALE
@@ -88,7 +93,9 @@ def _actor_features(obs: Observation) -> Array:
         [seen, xy, obs.actor_vel / SPEED_SCALE, obs.actor_dir, obs.actor_extent / SIZE_SCALE,
          kind], axis=-1,
     )  # fmt: skip
-    return (per * seen).reshape(-1)
+    per = per * seen
+    missing = max(OBS_ACTOR_SLOTS - per.shape[0], 0)
+    return jnp.pad(per, ((0, missing), (0, 0))).reshape(-1)
 
 
 def observation_vector(obs: Observation) -> Array:
@@ -123,7 +130,7 @@ def observation_vector(obs: Observation) -> Array:
     return jnp.concatenate([p.astype(f32) for p in parts])
 
 
-OBS_SIZE = 5 + 24 + 4 + 16 * ACTOR_FEATURES + 32 + 3 + 1 + 1 + 2 + NUM_TEXTS
+OBS_SIZE = 5 + 24 + 4 + OBS_ACTOR_SLOTS * ACTOR_FEATURES + 32 + 3 + 1 + 1 + 2 + NUM_TEXTS
 
 
 def action_to_waypoints(action: Array, speed: Array) -> Array:
