@@ -75,6 +75,8 @@ class SurroundView:
     visible: Array  # (A,) bool, the rig sees the actor (field of view, range, occlusion)
     ranges: Array  # (SURROUND_RAYS,) float32, m, distance to the first hit along each ray
     #                (capped at the sensing range; ray 0 points backwards, counter-clockwise)
+    hit_class: Array  # (SURROUND_RAYS,) int32, class of each ray's first hit
+    #                   (``constants.RAY_CLASS_NAMES``; -1: nothing within range)
 
 
 @struct.dataclass
@@ -97,6 +99,9 @@ class Observation:
     visible: Array  # (A,) bool, seen by the front camera now
     present: Array  # (A,) bool, privileged: exists in the world
     range_image: Array  # (NUM_RANGE_RAYS,) float32, m, front-camera ray ranges (capped)
+    range_class: Array  # (NUM_RANGE_RAYS,) int32, class of each front ray's first hit
+    #                     (``constants.RAY_CLASS_NAMES``: actor kinds, then static occluder
+    #                     kinds; -1: nothing within range)
     light_state: Array  # () int32, LIGHT_* of the ego's traffic light (GREEN when none)
     dist_to_stop: Array  # () float32, m, route distance from the ego centre to its stop line
     warning_active: Array  # () bool, a cooperative warning is being delivered now

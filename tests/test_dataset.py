@@ -224,6 +224,13 @@ def test_closed_loop_observation_equals_the_dataset_frame(made):
     for (path, a), (_, b) in pairs:
         np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-5, atol=1e-5,
                                    err_msg=jax.tree_util.keystr(path))  # fmt: skip
+    # the six-camera rig: Observation.surround of a surround policy equals the stored view
+    rig = jax.jit(lambda sc, st: observe(sc, st, surround=True).surround)(scenario, final)
+    for name in ("visible", "ranges", "hit_class"):
+        np.testing.assert_allclose(np.asarray(getattr(rig, name)),
+                                   np.asarray(getattr(recs.surround, name))[f],
+                                   rtol=1e-5, atol=1e-5, err_msg=name)  # fmt: skip
+    assert np.asarray(live.range_class).dtype == np.int32
 
 
 def test_acceptance_rules_on_hand_made_records():

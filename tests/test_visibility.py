@@ -419,4 +419,9 @@ def test_front_camera_view_equals_the_simulators_front_camera_on_a_junction():
     percept, view = both(world)
     np.testing.assert_array_equal(np.asarray(view.visible), np.asarray(percept.visible))
     np.testing.assert_array_equal(np.asarray(view.ranges), np.asarray(percept.ranges))
+    np.testing.assert_array_equal(np.asarray(view.hit_class), np.asarray(percept.range_class))
+    # some front rays end on a corner building (class NUM_ACTOR_KINDS + OCC_BUILDING)
+    from lantern_jax.constants import NUM_ACTOR_KINDS
+
+    assert (np.asarray(percept.range_class) == NUM_ACTOR_KINDS + OCC_BUILDING).any()
     assert not bool(view.visible[world.config.hazard_index])  # the premise: hidden at start

@@ -82,7 +82,6 @@ def _sequence_columns(seq_id: str, spec: SceneSpec, route: str, rec: Any, idx: n
         value = getattr(rec.obs, f.name)
         if value is not None:
             cols[f"obs.{f.name}"] = np.asarray(value)[idx]
-    cols["front_class"] = np.asarray(rec.front_class)[idx]
     for f in dataclasses.fields(rec.surround):
         cols[f"surround.{f.name}"] = np.asarray(getattr(rec.surround, f.name))[idx]
     cols["waypoints"] = wps

@@ -3,10 +3,10 @@
 One frame is kept every :data:`FRAME_TICKS` ticks, so frames are exactly 0.25 s apart — the
 spacing of the policy waypoints — and frame ``f + k`` is the expert's actual position ``k``
 waypoints after frame ``f``.  A frame holds the policy :class:`~lantern_jax.observation.Observation`
-of its tick (front camera: visible objects and range image, ego state, navigation, the warning
-as text ids and numbers), the six-camera rig's view (:func:`lantern_jax.sim.sense.camera_view`
-at 360 deg), the front camera's per-ray semantic classes, the ego's world pose, and whether the
-execution was still running.
+of its tick (front camera: visible objects, range image and each ray's semantic class; ego
+state, navigation, the warning as text ids and numbers), the six-camera rig's view
+(:func:`lantern_jax.sim.sense.camera_view` at 360 deg, the same fields as
+``Observation.surround``), the ego's world pose, and whether the execution was still running.
 """
 
 from __future__ import annotations
@@ -18,10 +18,10 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from lantern_jax.constants import FRONT_CAMERA_FOV, SURROUND_FOV
+from lantern_jax.constants import SURROUND_FOV
 from lantern_jax.observation import Observation
 from lantern_jax.sim.observe import observe
-from lantern_jax.sim.sense import FRONT_RAYS, SURROUND_RAYS, CameraView, camera_view
+from lantern_jax.sim.sense import SURROUND_RAYS, CameraView, camera_view
 from lantern_jax.sim.state import State, init_state
 from lantern_jax.sim.step import step
 from lantern_jax.world import Scenario
@@ -39,14 +39,12 @@ class FrameRecord:
     live: Array  # () bool, the execution had not ended at this frame
     ego_xy: Array  # (2,) float32, m, world frame
     ego_yaw: Array  # () float32, rad
-    obs: Observation  # the policy observation of this tick (front camera)
-    front_class: Array  # (FRONT_RAYS,) int32, class of each front ray's first hit
-    #                     (``constants.RAY_CLASS_NAMES``; -1 none)
+    obs: Observation  # the policy observation of this tick (front camera: visible objects,
+    #                   range image and each ray's class, ``obs.range_class``)
     surround: CameraView  # the six-camera rig: visibility, SURROUND_RAYS ranges and classes
 
 
 def _frame(scenario: Scenario, state: State) -> FrameRecord:
-    front = camera_view(scenario, state.ego, state.actors, FRONT_CAMERA_FOV, FRONT_RAYS)
     around = camera_view(scenario, state.ego, state.actors, SURROUND_FOV, SURROUND_RAYS)
     return FrameRecord(
         t=state.t,
@@ -54,7 +52,6 @@ def _frame(scenario: Scenario, state: State) -> FrameRecord:
         ego_xy=state.ego.xy,
         ego_yaw=state.ego.yaw,
         obs=observe(scenario, state),
-        front_class=front.hit_class,
         surround=around,
     )
 

@@ -5,9 +5,9 @@ A dataset folder holds, per generation chunk ``k``:
 * ``frames-k.parquet`` — one row per training frame: identity (``sequence_id``, ``family``,
   ``route``, ``weather``, ``frame``, ``t_s``), every field of the policy observation as
   ``obs.<field>`` (front camera: visible objects, range image; ego state; navigation; the
-  warning as text id, token ids, position and flags), ``front_class`` (semantic class per front
-  ray, ``constants.RAY_CLASS_NAMES``: actor kinds, then static occluder kinds), the six-camera
-  rig as ``surround.visible``, ``surround.ranges``, ``surround.hit_class``,
+  warning as text id, token ids, position and flags; ``obs.range_class`` is the semantic class
+  of each front ray, ``constants.RAY_CLASS_NAMES``: actor kinds, then static occluder kinds),
+  the six-camera rig as ``surround.visible``, ``surround.ranges``, ``surround.hit_class``,
   the ten expert ``waypoints`` (ego frame, x forward, y right, 0.25 s apart) and the
   ``horizon_crossing`` flag;
 * ``sequences-k.parquet`` — one row per recorded sequence, accepted or not (with the reason),
@@ -40,7 +40,8 @@ from lantern_jax.dataset.frames import horizon_crossing
 from lantern_jax.files import atomic_write
 
 # 2: scenes disjoint from the suite by the near-duplicate rule; 3: static occluders block the
-# six-camera rig, and rays that hit one are classed as building, wall or parked vehicle
+# six-camera rig, rays that hit one are classed as building, wall or parked vehicle, and the
+# front rays' classes are an observation field (obs.range_class, was front_class)
 FORMAT_VERSION = 3
 CARD_JSON = "dataset_card.json"
 CARD_MD = "dataset_card.md"

@@ -159,6 +159,7 @@ def observe(
         visible=percept.visible & on,
         present=on,
         range_image=percept.ranges,
+        range_class=percept.range_class,
         light_state=ego_light_state(scenario.lights, cfg.ego_light, state.t),
         dist_to_stop=dist_to_stop,
         **warning_fields(scenario, state),
@@ -170,4 +171,4 @@ def observe(
 def surround_view(scenario: Scenario, state: State) -> SurroundView:
     """The six-camera rig now (:func:`~lantern_jax.sim.sense.camera_view` at 360 deg)."""
     v = camera_view(scenario, state.ego, state.actors, SURROUND_FOV, SURROUND_RAYS)
-    return SurroundView(visible=v.visible, ranges=v.ranges)
+    return SurroundView(visible=v.visible, ranges=v.ranges, hit_class=v.hit_class)

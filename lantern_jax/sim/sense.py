@@ -29,6 +29,7 @@ class Percept:
 
     visible: Array  # (A,) bool, front-camera visibility of each actor
     ranges: Array  # (NUM_RANGE_RAYS,) float32, m, front-camera range image
+    range_class: Array  # (NUM_RANGE_RAYS,) int32, class of each ray's first hit (ray_classes)
     route_arc: Array  # () float32, m, ego projection onto the route (may be < 0 or > length)
     dist_to_route: Array  # () float32, m, ego centre distance from the route polyline
     progress: Array  # () float32, m, furthest route arc reached (monotone, clipped to length)
@@ -77,13 +78,13 @@ def sense(
     vis = visible_actors(
         cam_xy, cam_yaw, actors.xy, actors.yaw, boxes.extent, on, FRONT_CAMERA_FOV, rng, occ
     )
-    ranges, _ = range_image(
+    ranges, hit = range_image(
         cam_xy, cam_yaw, actors.xy, actors.yaw, boxes.extent, on, FRONT_CAMERA_FOV,
         NUM_RANGE_RAYS, rng, occ,
     )  # fmt: skip
     return Percept(
-        visible=vis, ranges=ranges, route_arc=route_arc, dist_to_route=dist_to_route,
-        progress=progress,
+        visible=vis, ranges=ranges, range_class=ray_classes(hit, boxes.kind, occ.kind),
+        route_arc=route_arc, dist_to_route=dist_to_route, progress=progress,
     )  # fmt: skip
 
 

@@ -41,7 +41,8 @@ class Examples:
                         self.sequence[idx], self.base_style[idx])  # fmt: skip
 
 
-SURROUND_COLUMNS = ("surround.visible", "surround.ranges")  # stored as surround_<field>
+# the six-camera rig, stored as surround_<field>
+SURROUND_COLUMNS = ("surround.visible", "surround.ranges", "surround.hit_class")
 
 
 def observation_columns(frames: pd.DataFrame, card: dict) -> dict[str, np.ndarray]:

@@ -53,7 +53,9 @@ def _observation(batch: dict[str, Any]) -> Observation:
     names = {f.name for f in dataclasses.fields(Observation)}
     obs = {k: v for k, v in batch.items() if k in names}
     if "surround_visible" in batch:
-        obs["surround"] = SurroundView(batch["surround_visible"], batch["surround_ranges"])
+        obs["surround"] = SurroundView(
+            batch["surround_visible"], batch["surround_ranges"], batch["surround_hit_class"]
+        )
     return Observation(**obs)
 
 
