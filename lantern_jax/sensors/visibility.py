@@ -151,28 +151,29 @@ def visible_actors(
     num = present.shape[0]
     box_c, box_yaw, box_e, occ_valid = _with_occluders(centers, yaws, extents, occluders)
 
-    pts = actor_sample_points(centers, yaws, extents)  # (A, 9, 2)
-    rel = pts - cam_xy
-    dist = safe_norm(rel)  # (A, 9)
-    in_view = _in_fov(rel, dist, cam_yaw, fov_deg) & (dist <= max_range)
-
-    # shorten each sight line by OCCLUSION_EPS: a box entered before its end blocks the point
-    far = dist > OCCLUSION_EPS
-    frac = jnp.where(far, 1.0 - OCCLUSION_EPS / jnp.where(far, dist, 1.0), 0.0)
-    ends = cam_xy + rel * frac[..., None]
     blockers = present[None, :] & ~jnp.eye(num, dtype=bool)  # (target, blocker actor)
     occ = jnp.broadcast_to(occ_valid[None, :], (num, occ_valid.shape[0]))
     blockers = jnp.concatenate([blockers, occ], axis=1)  # (target, A + K)
 
-    # One target per loop step: the loop boundary makes the compiler materialise the sight-line
-    # ends and box data once instead of re-deriving them for every (point, blocker) element.
+    # One target per loop step, its sample points derived inside the step: the loop boundary
+    # makes the compiler compute the actor poses once (they are its operands) instead of
+    # re-deriving the tick's whole actor update for every (point, coordinate) element.
     def one_target(args):
-        ends_t, blockers_t = args  # (9, 2), (A + K,)
-        hits = segments_hit_boxes(cam_xy, ends_t, box_c, box_yaw, box_e)  # (9, A + K)
-        return jnp.any(hits & blockers_t[None, :], axis=-1)
+        center, yaw, extent, blockers_t = args  # (2,), (), (2,), (A + K,)
+        pts = actor_sample_points(center, yaw, extent)  # (9, 2)
+        rel = pts - cam_xy
+        dist = safe_norm(rel)  # (9,)
+        in_view = _in_fov(rel, dist, cam_yaw, fov_deg) & (dist <= max_range)
+        # shorten each sight line by OCCLUSION_EPS: a box entered before its end blocks it
+        far = dist > OCCLUSION_EPS
+        frac = jnp.where(far, 1.0 - OCCLUSION_EPS / jnp.where(far, dist, 1.0), 0.0)
+        ends = cam_xy + rel * frac[..., None]
+        hits = segments_hit_boxes(cam_xy, ends, box_c, box_yaw, box_e)  # (9, A + K)
+        blocked = jnp.any(hits & blockers_t[None, :], axis=-1) & far
+        return jnp.any(in_view & ~blocked)
 
-    blocked = jax.lax.map(one_target, (ends, blockers)) & far
-    return present & jnp.any(in_view & ~blocked, axis=-1)
+    seen = jax.lax.map(one_target, (box_c[:num], box_yaw[:num], box_e[:num], blockers))
+    return present & seen
 
 
 def ray_angles(fov_deg: float, num_rays: int) -> np.ndarray:
@@ -242,10 +243,19 @@ def range_image(
     hittable = jnp.concatenate([jnp.asarray(present, bool), occ_valid])  # (A + K,)
     ang = cam_yaw + ray_angles(fov_deg, num_rays)
     dirs = jnp.stack([jnp.cos(ang), jnp.sin(ang)], axis=-1)  # (num_rays, 2)
-    t = rays_boxes_hit(cam_xy, dirs, box_c, box_yaw, box_e)  # (num_rays, A + K)
-    t = jnp.where(hittable[None, :], t, 2.0 * BIG)  # never within range
-    nearest = jnp.min(t, axis=-1)
+
+    def ray_chunk(dirs_c):
+        t = rays_boxes_hit(cam_xy, dirs_c, box_c, box_yaw, box_e)  # (chunk, A + K)
+        t = jnp.where(hittable[None, :], t, 2.0 * BIG)  # never within range
+        return jnp.min(t, axis=-1), jnp.argmin(t, axis=-1)
+
+    # Two loop steps of half the rays each when the count is even: the loop boundary makes the
+    # compiler compute the boxes' poses once (loop operands) instead of re-deriving the tick's
+    # actor update for every (ray, box) element.
+    chunks = 2 if num_rays % 2 == 0 else 1
+    nearest, first = jax.lax.map(ray_chunk, dirs.reshape(chunks, num_rays // chunks, 2))
+    nearest, first = nearest.reshape(num_rays), first.reshape(num_rays)
     hit = nearest <= max_range
     ranges = jnp.where(hit, nearest, max_range)
-    hit_index = jnp.where(hit, jnp.argmin(t, axis=-1), -1).astype(jnp.int32)
+    hit_index = jnp.where(hit, first, -1).astype(jnp.int32)
     return ranges, hit_index
