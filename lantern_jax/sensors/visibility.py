@@ -17,10 +17,13 @@ before reaching the point.  The target's own box never blocks its own points, no
 actors neither block nor are visible, occluders block but are never targets, and the ego's own
 box is not part of either set.  The range image sees both kinds of box.
 
-One scenario per call; the (A targets x 9 points) sight lines are tested against all A + K
-boxes in one broadcasted computation, and batches of scenarios are made with ``jax.vmap``
-outside.  ``fov_deg`` and ``num_rays`` are static Python numbers.  Occluders are static, so
-their trigonometry is loop-invariant inside a rollout's scan (the compiler hoists it).
+One scenario per call; batches of scenarios are made with ``jax.vmap`` outside.  Visibility
+tests one target per loop step (its 9 sight lines against all A + K boxes) and the range image
+runs its rays in two loop steps (:func:`~lantern_jax.split_map.split_map`): the loop boundaries
+make XLA compute the actor poses once instead of re-deriving the tick's actor update for every
+(point, box) or (ray, box) element.  ``fov_deg`` and ``num_rays`` are static Python numbers.
+Occluders are static, so their trigonometry is loop-invariant inside a rollout's scan (the
+compiler hoists it).
 """
 
 from __future__ import annotations
@@ -33,6 +36,7 @@ import numpy as np
 
 from lantern_jax.constants import BIG, CAMERA_BACK_OFFSET
 from lantern_jax.geometry import rays_boxes_hit, safe_norm, segments_hit_boxes
+from lantern_jax.split_map import split_map
 from lantern_jax.world import Occluders
 
 Array = jax.Array
@@ -244,17 +248,13 @@ def range_image(
     ang = cam_yaw + ray_angles(fov_deg, num_rays)
     dirs = jnp.stack([jnp.cos(ang), jnp.sin(ang)], axis=-1)  # (num_rays, 2)
 
-    def ray_chunk(dirs_c):
-        t = rays_boxes_hit(cam_xy, dirs_c, box_c, box_yaw, box_e)  # (chunk, A + K)
+    def nearest_hits(dirs_part):
+        t = rays_boxes_hit(cam_xy, dirs_part, box_c, box_yaw, box_e)  # (rays, A + K)
         t = jnp.where(hittable[None, :], t, 2.0 * BIG)  # never within range
         return jnp.min(t, axis=-1), jnp.argmin(t, axis=-1)
 
-    # Two loop steps of half the rays each when the count is even: the loop boundary makes the
-    # compiler compute the boxes' poses once (loop operands) instead of re-deriving the tick's
-    # actor update for every (ray, box) element.
-    chunks = 2 if num_rays % 2 == 0 else 1
-    nearest, first = jax.lax.map(ray_chunk, dirs.reshape(chunks, num_rays // chunks, 2))
-    nearest, first = nearest.reshape(num_rays), first.reshape(num_rays)
+    # in loop steps, so that the boxes' poses are computed once, not per (ray, box) element
+    nearest, first = split_map(nearest_hits, dirs)
     hit = nearest <= max_range
     ranges = jnp.where(hit, nearest, max_range)
     hit_index = jnp.where(hit, first, -1).astype(jnp.int32)
