@@ -18,7 +18,7 @@ PACKAGE = Path(lantern_jax.__file__).parent
 #: Layers from the bottom up; each entry is a top-level module or sub-package of lantern_jax.
 LAYERS: tuple[tuple[str, ...], ...] = (
     ("constants", "times", "timing"),  # values, the time sentinel, wall-clock breakdowns
-    ("geometry", "polyline"),  # pure JAX maths
+    ("geometry", "polyline", "split_map"),  # pure JAX maths and loop rewrites
     ("world", "observation", "files", "language"),  # scenario and observation types; I/O; tokens
     ("dynamics", "sensors", "scoring"),  # how things move, what is seen, how it is measured
     ("scenarios",),  # roads, families, protocol, warnings, suites (NumPy builders + JAX protocol)
