@@ -36,10 +36,8 @@ expose_cpu_cores()
 
 import jax  # noqa: E402
 import numpy as np  # noqa: E402
+from profile_tick import mid_run_states  # noqa: E402  (this folder's tick profiler)
 
-from lantern_jax.evaluate import build_executions, run_executions  # noqa: E402
-from lantern_jax.policies.registry import get_policy  # noqa: E402
-from lantern_jax.scenarios.suite import load_suite  # noqa: E402
 from lantern_jax.sim.step import step  # noqa: E402
 
 _SECTIONS = ("FileNames", "FunctionNames", "FileLocations", "StackFrames")
@@ -109,14 +107,7 @@ def main() -> None:
     ap.add_argument("--top", type=int, default=15)
     args = ap.parse_args()
 
-    execs = build_executions(load_suite())
-    pol = get_policy(args.policy)
-    params = pol.init(jax.random.PRNGKey(0))
-    idx = np.linspace(0, 3 * execs.num_pairs - 1, args.batch).astype(int)
-    sc = jax.tree.map(lambda x: np.asarray(x)[idx], execs.scenarios)
-    st, _ = run_executions(
-        pol.act, sc, params, args.warmup_ticks, compact=False, privileged=pol.privileged
-    )
+    pol, params, sc, st = mid_run_states(args.policy, args.batch, args.warmup_ticks)
     sc, st = jax.device_put((sc, st), jax.devices()[0])
     temp = np.float32(0.05)
 

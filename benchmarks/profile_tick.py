@@ -149,6 +149,25 @@ def timed(fn, args, repeats: int) -> float:
     return best
 
 
+def mid_run_states(policy: str, batch: int, warmup_ticks: int):
+    """``batch`` executions spread over the built-in suite (Route A with warning, Route A
+    without, Route B, in suite order), rolled out ``warmup_ticks`` ticks with ``policy``.
+
+    Returns:
+        (policy, params, scenarios, states): the registered policy, its parameters, and the
+        batched scenarios and mid-run states (host arrays).
+    """
+    execs = build_executions(load_suite())
+    pol = get_policy(policy)
+    params = pol.init(jax.random.PRNGKey(0))
+    idx = np.linspace(0, 3 * execs.num_pairs - 1, batch).astype(int)
+    sc = jax.tree.map(lambda x: np.asarray(x)[idx], execs.scenarios)
+    st, _ = run_executions(
+        pol.act, sc, params, warmup_ticks, compact=False, privileged=pol.privileged
+    )
+    return pol, params, sc, st
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--policy", default="coop")
@@ -157,14 +176,7 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=50)
     args = ap.parse_args()
 
-    execs = build_executions(load_suite())
-    pol = get_policy(args.policy)
-    params = pol.init(jax.random.PRNGKey(0))
-    idx = np.linspace(0, 3 * execs.num_pairs - 1, args.batch).astype(int)
-    sc = jax.tree.map(lambda x: np.asarray(x)[idx], execs.scenarios)
-    st, _ = run_executions(
-        pol.act, sc, params, args.warmup_ticks, compact=False, privileged=pol.privileged
-    )
+    pol, params, sc, st = mid_run_states(args.policy, args.batch, args.warmup_ticks)
     inputs, table, tick = stages(pol.act, params, pol.privileged)
     x = jax.jit(jax.vmap(inputs))(sc, st)
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores; jax {jax.__version__}, "
