@@ -405,8 +405,9 @@ def segments_hit_boxes(
     yaws, extents = _f32(yaws), _f32(extents)
     ca, sa = jnp.cos(yaws), jnp.sin(yaws)
     ex, ey = extents[:, 0], extents[:, 1]
-    # Materialise the per-box and per-segment inputs (x and y split) before the (N, A) test so
-    # that the compiler does not re-evaluate trigonometry and divisions inside the big fusion.
+    # The barrier keeps the algebraic simplifier from rewriting these inputs into the (N, A)
+    # test.  It does not make XLA compute them once: on CPU the barrier is expanded before the
+    # fusion passes (see lantern_jax.split_map, which is what does).
     sx, sy = starts[..., 0], starts[..., 1]
     qx, qy = ends[:, 0], ends[:, 1]
     ca, sa, cx, cy, sx, sy, qx, qy = jax.lax.optimization_barrier(

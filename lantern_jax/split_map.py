@@ -3,9 +3,11 @@
 XLA's CPU compiler fuses producers into their consumers and will re-evaluate a producer for
 every element of a larger consumer: an actor pose feeding a (rays x boxes) test is re-derived
 for every ray, together with everything upstream of it in the tick (IDM, path interpolation,
-event timing).  ``jax.lax.optimization_barrier`` does not stop this on CPU (the barrier is
-removed before fusion).  A loop boundary does: the operands of a ``while`` loop are computed
-into buffers before the loop starts, and its results are buffers too.
+event timing).  ``jax.lax.optimization_barrier`` does not stop this on CPU: XLA's CPU pipeline
+expands the barrier after its simplification passes and before layout assignment and fusion
+(its pass dumps show the order), so the barrier only shields values from the algebraic
+simplifier.  A loop boundary does stop it: the operands of a ``while`` loop are computed into
+buffers before the loop starts, and its results are buffers too.
 
 :func:`split_map` applies ``fn`` to the two halves of the items' leading axis in a two-step
 :func:`jax.lax.map` (one step cannot be used: the compiler inlines single-trip loops).  It is

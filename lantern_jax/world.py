@@ -568,7 +568,7 @@ def used_slots(valid: Any) -> int:
         Python int in ``[1, N]``.
     """
     v = np.asarray(valid, bool).reshape(-1, np.shape(valid)[-1]).any(axis=0)
-    return max(int(np.nonzero(v)[0].max()) + 1 if v.any() else 1, 1)
+    return int(np.nonzero(v)[0].max()) + 1 if v.any() else 1
 
 
 def trim_padding(scenario: Scenario) -> Scenario:

@@ -114,8 +114,8 @@ def _pose(script: ActorScript, s: Array, lat: Array, v_long: Array, v_lat: Array
     apart (x and y arrays) so that XLA vectorises over the (A, K) grid.
     """
     x0, y0, ux, uy, s0 = _segments(script)
-    # Materialise the arcs: fused into the (A, K, P) search below they would be recomputed
-    # for every path point.
+    # The barrier shields the arcs from the algebraic simplifier; it does not stop XLA on CPU
+    # from fusing them into the (A, K, P) search below (expanded before fusion, see split_map).
     s, lat, v_long, v_lat = jax.lax.optimization_barrier((s, lat, v_long, v_lat))
     n = jnp.sum(script.path_valid.astype(jnp.int32), -1)  # (A,)
     passed = jnp.sum(

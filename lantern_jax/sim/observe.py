@@ -115,8 +115,9 @@ def privileged_view(scenario: Scenario, state: State) -> PrivilegedView:
         forecast_speed=fc.speed,
         forecast_valid=fc.valid,
     )
-    # Materialise the forecast once: fused into the policy's box tests, XLA would recompute it
-    # for each of them (several times slower).
+    # The barrier shields the forecast from the algebraic simplifier only: on CPU it is
+    # expanded before the fusion passes, and the policy's box tests still re-derive the
+    # forecast (benchmarks/profile_kernels.py --policy expert shows it; see split_map).
     return jax.lax.optimization_barrier(view)
 
 

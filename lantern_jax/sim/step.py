@@ -75,6 +75,8 @@ def step(
     obs = observe(scenario, state, privileged, bool(getattr(act, "surround", False)))
     waypoints = act(policy_params, obs)
     if privileged:
+        # Shields the expert's plan from the algebraic simplifier; on CPU the barrier is
+        # expanded before fusion (see lantern_jax.split_map).
         waypoints = jax.lax.optimization_barrier(waypoints)
     ego, fault, plan = follow_plan(state.ego, waypoints, cfg.friction)
     t = state.t + DT
