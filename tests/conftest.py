@@ -16,6 +16,9 @@ runners fill the privileged observation (the ``expert`` needs it), so every mode
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -25,6 +28,25 @@ from lantern_jax.constants import NUM_WAYPOINTS, WAYPOINT_DT
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.sim.rollout import rollout, rollout_batch
 from lantern_jax.world import tree_stack
+
+#: JAX's persistent compilation cache for the whole test session, from its first compile on:
+#: ``$JAX_COMPILATION_CACHE_DIR`` when set (``.ci/run`` sets it), else ``.jax_cache/`` in the
+#: project root (git-ignored).  Without this, the first in-process command-line test would
+#: switch the cache on half-way through the session (``lantern-jax`` enables it by default), in
+#: the user's own cache folder.  Every program is kept, however short its compilation (JAX's
+#: default keeps only those of >= 1 s): the tests run about 2,300 small programs (eager
+#: operations, helpers), whose compilation is most of a warm run's time.  Both settings are
+#: exported, so the command-line and notebook subprocesses the tests start share them.
+COMPILE_CACHE_DIR = os.environ.setdefault(
+    "JAX_COMPILATION_CACHE_DIR", str(Path(__file__).resolve().parents[1] / ".jax_cache")
+)
+os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0")
+jax.config.update("jax_enable_compilation_cache", True)
+jax.config.update("jax_compilation_cache_dir", COMPILE_CACHE_DIR)
+jax.config.update(
+    "jax_persistent_cache_min_compile_time_secs",
+    float(os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"]),
+)
 
 HORIZON = 600  # ticks (30 s) of the shared runners
 BATCH = 12  # executions per call of the shared batched runner

@@ -1,0 +1,120 @@
+"""Where the test run's time goes: per test, wall seconds and the JAX compilation inside it.
+
+Runs pytest with this file as a plugin.  JAX reports every compilation through
+``jax.monitoring`` (tracing to a jaxpr, lowering to StableHLO, XLA's backend compile, or the
+load from the persistent cache); the plugin adds those durations up per test (fixture set-up
+included) and prints, after the run, the totals, the slowest tests with their compile share and
+their largest programs, and the seconds per test file.  Subprocesses (the command-line tests,
+notebook kernels) are not seen: their time counts as the test's wall time only.
+
+Usage (from the project root; every argument goes to pytest)::
+
+    python benchmarks/profile_tests.py                  # the default test run
+    python benchmarks/profile_tests.py -m slow          # the slow tests
+    python benchmarks/profile_tests.py tests/test_evaluate.py --top 10 --json times.json
+
+Without ``JAX_COMPILATION_CACHE_DIR`` every program is compiled afresh (a fresh clone's run);
+with it, programs compiled by an earlier run load from the cache.
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import json
+import os
+import sys
+import time
+
+import jax
+import pytest
+
+BACKEND = "/jax/core/compile/backend_compile_duration"
+TRACE = "/jax/core/compile/jaxpr_trace_duration"
+LOWER = "/jax/core/compile/jaxpr_to_mlir_module_duration"
+BIG_PROGRAM_S = 1.0  # s, a compilation at least this long is listed by name
+
+_current = ["(collection and session start)"]
+_per_test: dict[str, collections.Counter] = collections.defaultdict(collections.Counter)
+_programs: dict[str, collections.Counter] = collections.defaultdict(collections.Counter)
+
+
+def _listener(event: str, duration: float, **kwargs) -> None:
+    """``jax.monitoring`` duration listener: charge the event to the running test."""
+    if event not in (BACKEND, TRACE, LOWER):
+        return
+    acc = _per_test[_current[0]]
+    acc[event] += duration
+    if event == BACKEND:
+        acc["compiles"] += 1
+        if duration >= BIG_PROGRAM_S:
+            _programs[_current[0]][str(kwargs.get("fun_name", "?"))] += duration
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_protocol(item, nextitem):
+    """Charge set-up, call and tear-down of ``item`` (and their compilations) to it."""
+    _current[0] = item.nodeid
+    t0 = time.perf_counter()
+    yield
+    _per_test[item.nodeid]["wall"] += time.perf_counter() - t0
+    _current[0] = "(between tests)"
+
+
+def pytest_configure(config):
+    """Start listening once pytest has loaded the plugin."""
+    jax.monitoring.register_event_duration_secs_listener(_listener)
+
+
+def report(top: int) -> dict:
+    """Print the breakdown; returns it as a JSON-able dict."""
+    tests = {k: dict(v) for k, v in _per_test.items()}
+    total = {key: sum(v.get(key, 0.0) for v in tests.values())
+             for key in ("wall", BACKEND, TRACE, LOWER, "compiles")}  # fmt: skip
+    big = sum(sum(p.values()) for p in _programs.values())
+    n_big = sum(len(p) for p in _programs.values())
+    print()
+    print(f"tests {total['wall']:.0f} s wall; XLA compile {total[BACKEND]:.0f} s "
+          f"({total['compiles']:.0f} programs, {n_big} of them >= {BIG_PROGRAM_S:.0f} s "
+          f"taking {big:.0f} s), tracing {total[TRACE]:.0f} s, "
+          f"lowering {total[LOWER]:.0f} s")  # fmt: skip
+    head = f"{'wall s':>7} {'XLA s':>6} {'n':>4} {'trace+lower s':>13}"
+    print(f"\n{head}  test  [largest programs, s]")
+    for name, v in sorted(tests.items(), key=lambda kv: -kv[1].get("wall", 0.0))[:top]:
+        progs = ", ".join(f"{p} {s:.1f}" for p, s in _programs[name].most_common(3))
+        tl = v.get(TRACE, 0.0) + v.get(LOWER, 0.0)
+        print(f"{v.get('wall', 0.0):7.1f} {v.get(BACKEND, 0.0):6.1f} {v.get('compiles', 0):4.0f} "
+              f"{tl:13.1f}  {name}" + (f"  [{progs}]" if progs else ""))  # fmt: skip
+    files: collections.Counter = collections.Counter()
+    compile_files: collections.Counter = collections.Counter()
+    for name, v in tests.items():
+        files[name.split("::")[0]] += v.get("wall", 0.0)
+        compile_files[name.split("::")[0]] += v.get(BACKEND, 0.0)
+    print(f"\n{'wall s':>7} {'XLA s':>6}  file")
+    for f, s in files.most_common(top):
+        print(f"{s:7.1f} {compile_files[f]:6.1f}  {f}")
+    return {"total": total, "tests": tests,
+            "programs": {k: dict(v) for k, v in _programs.items()}}  # fmt: skip
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0], add_help=False)
+    ap.add_argument("--top", type=int, default=25, help="tests and files listed (default 25)")
+    ap.add_argument("--json", metavar="PATH", help="also write the breakdown as JSON")
+    ap.add_argument("--help-profile", action="help", help="this help (other arguments: pytest)")
+    args, pytest_args = ap.parse_known_args()
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    import profile_tests as plugin  # this file as a module: pytest registers its hooks
+
+    t0 = time.perf_counter()
+    code = pytest.main([*pytest_args, "-p", "no:cacheprovider"], plugins=[plugin])
+    print(f"\npytest exited with {int(code)} after {time.perf_counter() - t0:.0f} s")
+    out = plugin.report(args.top)
+    if args.json:
+        with open(args.json, "w") as fh:
+            json.dump(out, fh, indent=1)
+    return int(code)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
