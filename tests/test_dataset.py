@@ -297,6 +297,24 @@ def test_plan_equals_sampling_validated_params_one_by_one():
     assert got == expected
 
 
+def test_a_smaller_plan_is_the_first_scenes_of_every_family_of_a_larger_one():
+    """What lets the README say the shipped models were trained on the first 280 scenes of each
+    family of the default 380-pair plan: family by family, a smaller plan is a prefix."""
+    suite = load_suite()
+    small, large = plan_scenes(2, SEED, suite), plan_scenes(3, SEED, suite)
+    for fam in FAMILIES:
+        head = [s.sha256 for s in large if s.family == fam][:2]
+        assert [s.sha256 for s in small if s.family == fam] == head, fam
+
+
+def test_card_states_the_papers_release_next_to_ours(made):
+    _, card = made
+    text = card_markdown(card)
+    assert f"{card['frames']} frames at 4 Hz" in text
+    paper = "The paper's release: 3272 sequences (Route A 1631, Route B 1641), 236309 frames."
+    assert paper in text
+
+
 def suite_families(suite):
     return list(dict.fromkeys(p.family for p in suite.pairs))
 

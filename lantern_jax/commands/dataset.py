@@ -3,6 +3,7 @@
 ::
 
     lantern-jax dataset --out data/lantern              # the paper-scale default
+    lantern-jax dataset --out data/lantern --sequences 3360   # the shipped models' data
     lantern-jax dataset --out /tmp/small --sequences 120 --seed 1
 
 Expert rollouts on fresh Route A and Route B scenes of every family (disjoint from the frozen
@@ -49,7 +50,7 @@ def cmd_dataset(args: argparse.Namespace, argv: Sequence[str]) -> int:
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``dataset`` on the command line's sub-parsers."""
-    from lantern_jax.dataset.scenes import DATASET_SEED
+    from lantern_jax.dataset.scenes import DATASET_SEED, PAIRS_PER_FAMILY
 
     ds = sub.add_parser(
         "dataset",
@@ -59,8 +60,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     ds.add_argument("--out", required=True, metavar="DIR", help="dataset folder (resumable)")
     ds.add_argument("--sequences", type=int, metavar="N",
-                    help="about N sequences (Route A + Route B) instead of the paper-scale "
-                         "default")  # fmt: skip
+                    help="about N sequences (Route A + Route B: N/12 candidate pairs per "
+                         f"family) instead of the default {PAIRS_PER_FAMILY} pairs per family, "
+                         "sized to reach the paper's 236,309 frames")  # fmt: skip
     ds.add_argument("--seed", type=int, default=DATASET_SEED, help="generation seed")
     ds.add_argument("--quiet", action="store_true", help="no progress bar")
     ds.set_defaults(func=cmd_dataset)

@@ -41,7 +41,14 @@ from lantern_jax.world import Scenario
 DATASET_SEED = 3272  # default generation seed
 PAPER_ROUTE_A = 1631  # sequences in the paper's release
 PAPER_ROUTE_B = 1641
-PAIRS_PER_FAMILY = 280  # default: 1680 pairs -> up to 1680 Route A + 1680 Route B sequences
+PAPER_FRAMES = 236_309  # frames in the paper's release (4 Hz)
+# Default size: the paper's release is 3,272 sequences and 236,309 frames (72 frames each on
+# average); our sequences are shorter (54 frames: see the README, "Dataset"), so matching the
+# paper's sequence count gives 178k frames.  380 pairs per family is the round count whose
+# default run reaches the paper's frame count (seed 3272: 4,457 sequences, 240,881 frames);
+# 280 per family matched its sequence count.  The scenes of a smaller plan are the first ones of
+# every family in a larger plan of the same seed (:func:`plan_scenes`).
+PAIRS_PER_FAMILY = 380  # default: 2280 pairs -> up to 2280 Route A + 2280 Route B sequences
 PLAN_JSON = "plan.json"  # the planned scenes, kept in the dataset folder for resuming
 
 
@@ -102,8 +109,12 @@ def plan_scenes(
         suite: a frozen suite to stay disjoint from (default: none).
         rejected: if given, filled with the candidates skipped as near duplicates of the suite,
             per family (``{family: count}``).
-        progress: show a progress bar (the default plan samples and builds about 7,400
-            candidates for its 1,680 pairs: a few minutes on two CPU cores).
+        progress: show a progress bar (the default plan samples and builds about 9,900
+            candidates for its 2,280 pairs: about three minutes on two CPU cores).
+
+    Each family draws from its own stream (``seed``, family index) and stops after
+    ``pairs_per_family`` survivors, so the plan of a smaller ``pairs_per_family`` is, family by
+    family, the first scenes of a larger one.
     """
     taken = {p.sha256 for p in suite.pairs} if suite is not None else set()
     suite_routes = _suite_routes(suite)

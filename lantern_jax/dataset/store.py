@@ -111,6 +111,8 @@ def write_card(folder: Path, card: dict) -> None:
 
 def card_markdown(card: dict) -> str:
     """A human-readable summary of a dataset card."""
+    from lantern_jax.dataset.scenes import PAPER_FRAMES, PAPER_ROUTE_A, PAPER_ROUTE_B
+
     counts = pd.DataFrame(card.get("counts", [])) if card.get("counts") else pd.DataFrame()
     if not counts.empty:  # a card read back from JSON has its keys sorted: fix the order
         counts = counts[["family", "route", "sequences", "frames"]]
@@ -124,6 +126,9 @@ def card_markdown(card: dict) -> str:
         f"Sequences: {card.get('sequences_accepted', 0)} accepted "
         f"(Route A {card.get('route_a', 0)}, Route B {card.get('route_b', 0)}), "
         f"{card.get('frames', 0)} frames at 4 Hz.",
+        "",
+        f"The paper's release: {PAPER_ROUTE_A + PAPER_ROUTE_B} sequences (Route A "
+        f"{PAPER_ROUTE_A}, Route B {PAPER_ROUTE_B}), {PAPER_FRAMES} frames.",
         "",
     ]
     if "plan_seconds" in card:
