@@ -151,6 +151,34 @@ def _crossing_problem():
     return objective.Problem(space, scene, scene, cruise.act, None, 160, 0.1, "clearance")
 
 
+def test_cmaes_tells_its_own_samples_and_converges_on_a_bowl():
+    """CMA-ES gets back exactly the float64 samples it asked for, so it keeps track of the ones
+    it injects itself (selective mirrors, mean-shift samples): no "orphanated injected solution"
+    warning, and the search walks to the minimum of a bowl in the unconstrained space."""
+    import types
+    import warnings
+
+    from lantern_jax.stress import search
+
+    centre = np.array([0.7, -1.2, 0.4])
+    space = types.SimpleNamespace(dim=3, values=lambda z: np.asarray(z, np.float64))
+    problem = types.SimpleNamespace(space=space)
+
+    def verifier(values):
+        cus = np.sum((np.asarray(values, np.float64) - centre) ** 2, axis=1)
+        n = len(cus)
+        return search.Verdict(cus=cus, gates_passed=np.ones(n, bool),
+                              clearance_m=np.full(n, np.nan), expert_ok=np.ones(n, bool),
+                              failed=np.zeros(n, bool))  # fmt: skip
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        trace = search.cmaes_search(problem, verifier, budget_s=0.5, restarts=2, samples=2,
+                                    seed=0)  # fmt: skip
+    assert len(trace.evaluations) > 20
+    assert trace.lowest["cus"] < 1e-3
+
+
 @pytest.mark.slow
 def test_autodiff_agrees_with_finite_differences_on_a_smooth_scene():
     problem = _crossing_problem()

@@ -157,13 +157,16 @@ def cmaes_search(problem: Problem, verifier: Verifier, budget_s: float, restarts
     trace = Trace("cmaes", restarts)
     evals, t0 = 0, time.perf_counter()
     while time.perf_counter() - t0 < budget_s:
-        asked = [np.asarray(es.ask(), np.float32) for es in strategies]  # R x (M, K)
-        z = np.concatenate(asked)
+        # tell() must get the very arrays ask() returned: CMA-ES recognises its own injected
+        # samples (selective mirrors, mean-shift samples) by their exact float64 values, and a
+        # rounded copy would be updated as an ordinary sample ("orphanated injected solution")
+        asked = [es.ask() for es in strategies]  # R x M arrays (K,) float64
+        z = np.concatenate([np.asarray(a, np.float32) for a in asked])  # (R*M, K)
         values = np.asarray(space.values(z))
         verdict = verifier(values)
         fitness = verdict.fitness.reshape(restarts, samples)
         for r, es in enumerate(strategies):
-            es.tell(list(asked[r]), fitness[r].tolist())
+            es.tell(asked[r], fitness[r].tolist())
         evals += restarts * samples
         trace.record(owner, values, verdict, time.perf_counter() - t0, samples, evals)
     return trace
