@@ -139,30 +139,30 @@ COMPACT_MIN_BATCH = 256
 def compiled_rollout(act, privileged: bool = False):
     """The jitted batched rollout program for a policy ``act`` (cached per ``act``).
 
-    ``program(scenarios, policy_params, start, fresh, ticks)`` rolls a batch for up to
-    ``ticks`` (int32 scalar) more ticks: executions with ``fresh`` (bool, (B,)) start at their
-    scenario's initial state, the others continue from ``start``.  The horizon is an argument,
-    not a constant, so one compiled program serves the first steps and the continuation of
-    every group.  Split over every local device
-    (:func:`~lantern_jax.sim.rollout.rollout_batch_parallel`); ``privileged`` fills
+    ``program(scenarios, policy_params, start, ticks)`` rolls a batch on from the states
+    ``start`` for up to ``ticks`` (int32 scalar) more ticks.  The horizon is an argument, not a
+    constant, so one compiled program serves the first steps and the continuation of every
+    group.  Initial states come from :data:`initial_states` (a separate program shared by every
+    policy), so the policy's program holds no second copy of the sensing code.  Split over every
+    local device (:func:`~lantern_jax.sim.rollout.rollout_batch_parallel`); ``privileged`` fills
     ``obs.privileged`` (``Policy.privileged``).
     """
     key = ("program", act, privileged)
     if key not in _COMPILED:
 
-        def program(scenarios, policy_params, start, fresh, ticks):
-            init = jax.vmap(init_state)(scenarios)
-            states = jax.tree.map(
-                lambda a, b: jnp.where(fresh.reshape(fresh.shape + (1,) * (a.ndim - 1)), a, b),
-                init,
-                start,
-            )
+        def program(scenarios, policy_params, start, ticks):
             return rollout_batch_parallel(
-                scenarios, act, policy_params, ticks, start=states, privileged=privileged
+                scenarios, act, policy_params, ticks, start=start, privileged=privileged
             )
 
         _COMPILED[key] = jax.jit(program)
     return _COMPILED[key]
+
+
+#: ``jit(vmap(init_state))``: the executions' states at ``t = 0`` (ego, actors, the first
+#: sensing, empty telemetry).  It does not depend on the policy, so every policy (and every
+#: ablation of the same batch shape) reuses one compiled program.
+initial_states = jax.jit(jax.vmap(init_state))
 
 
 def _executable(fn, *args, timings: dict | None = None):
@@ -191,6 +191,13 @@ def _take(tree, idx):
     return jax.tree.map(lambda x: x[idx], tree)
 
 
+def _put_rows(array: np.ndarray, rows: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """A copy of ``array`` with ``array[rows] = values``."""
+    out = np.array(array)
+    out[rows] = values
+    return out
+
+
 def group_size(n: int, multiple: int, compact: bool) -> int:
     """Executions stepped together: the whole batch when not ``compact``, else
     ``COMPACT_GROUP`` slots (never more than the batch), rounded up to ``multiple``."""
@@ -214,8 +221,10 @@ def run_executions(
     as one group to the end; a large one (``compact``, see ``COMPACT_*``) is scheduled over a
     fixed number of slots that are refilled with waiting executions as earlier ones end:
     results are the same executions, continued from their exact state, only grouped
-    differently.  Scenarios and states stay on the host between calls (NumPy), so refilling
-    compiles nothing.  ``privileged`` must be the policy's ``Policy.privileged`` flag.  Under
+    differently.  A slot starts from its execution's state at ``t = 0`` given by
+    :data:`initial_states` (one compiled program per batch shape, shared by every policy).
+    Scenarios and states stay on the host between calls (NumPy), so refilling compiles
+    nothing.  ``privileged`` must be the policy's ``Policy.privileged`` flag.  Under
     JAX's distributed runtime (several processes) every call runs on the global mesh, each
     process stepping its shard, and the final states are gathered on every process
     (:mod:`lantern_jax.sim.distributed`).  ``timings`` (optional dict) receives
@@ -236,30 +245,41 @@ def run_executions(
     t0 = time.perf_counter()
     program = compiled_rollout(act, privileged=privileged)
     slot = np.arange(group) % n  # the execution in each slot (padding: repeats)
+    init_timings: dict[str, float] = {}
+    init_exe = _executable(initial_states, _take(host, slot), timings=init_timings)
     state_shape = jax.eval_shape(jax.vmap(init_state), _take(host, slot))
     states = jax.tree.map(lambda x: np.zeros(x.shape, x.dtype), state_shape)
-    fresh = np.ones((group,), bool)
-    args = (place.put(_take(host, slot)), params, place.put(states), place.put(fresh))
+    args = (place.put(_take(host, slot)), params, place.put(states))
     exe = _executable(program, *args, place.replicate(np.int32(0)), timings=timings)
+    if timings is not None:
+        for k, v in init_timings.items():
+            timings[k] += v
     t_compile = time.perf_counter() - t0
+
+    def initial(execs: np.ndarray):
+        """States at t = 0 of the executions ``execs`` (at most ``group``), on the host."""
+        block = np.resize(execs, group)  # the compiled shape; extra entries are repeats
+        out = jax.tree.map(np.asarray, init_exe(_take(host, block)))
+        return _take(out, np.arange(len(execs)))
 
     def call(ticks: int):
         out = exe(
             place.put(_take(host, slot)),
             params,
             place.put(states),
-            place.put(fresh),
             place.replicate(np.int32(ticks)),
         )
         return jax.tree.map(np.asarray, place.get(out))
 
     if not compact:
+        states = initial(slot)
         final = _take(call(max_ticks), np.arange(n))
     else:
         timeout = np.asarray(host.config.timeout_s)
         waiting = list(np.argsort(-timeout, kind="stable")[::-1])  # pop() = longest first
         first = [waiting.pop() for _ in range(min(group, n))]
         slot = np.array(first + first[:1] * (group - len(first)))  # padding: a copy of one
+        states = initial(slot)
         final = None
         while True:
             states = call(max(1, REFILL_TICKS))
@@ -268,11 +288,16 @@ def run_executions(
             for full, part in zip(jax.tree.leaves(final), jax.tree.leaves(states), strict=True):
                 full[slot] = part
             ended = states.done | (states.tick >= max_ticks)
-            fresh = np.zeros((group,), bool)
-            for j in np.flatnonzero(ended)[: len(waiting)]:
-                slot[j], fresh[j] = waiting.pop(), True
-            if ended.all() and not fresh.any():
+            refill = np.flatnonzero(ended)[: len(waiting)]
+            if ended.all() and not len(refill):
                 break
+            if len(refill):
+                slot[refill] = [waiting.pop() for _ in refill]
+                states = jax.tree.map(
+                    lambda old, new, rows=refill: _put_rows(old, rows, new),
+                    states,
+                    initial(slot[refill]),
+                )
     if timings is not None:
         timings["rollout"] = time.perf_counter() - t0 - t_compile
     return final, t_compile

@@ -441,8 +441,16 @@ def test_slot_scheduling_matches_one_group(shipped, monkeypatch):
     execs = build_executions(shipped.select(["pe_0001", "rty_0001", "or_0001"]))
     pol = get_policy("coop")
     params = pol.init(jax.random.PRNGKey(0))
+
+    def init_programs():
+        return {k for k in ev._COMPILED if k[0] == "exe" and k[1] is ev.initial_states}
+
+    known = init_programs()
     one, _ = ev.run_executions(pol.act, execs.scenarios, params, execs.max_ticks, compact=False)
     two, _ = ev.run_executions(pol.act, execs.scenarios, params, execs.max_ticks, compact=True)
+    # refilled slots start from the shared initial-state program: one per batch shape (9 and 4
+    # slots here), whatever the number of refills
+    assert len(init_programs() - known) <= 2 and len(init_programs()) >= 2
     assert int(np.max(np.asarray(one.tick))) > 160  # some executions needed several calls
     assert np.asarray(two.done).all()
     m1, m2 = finalize(one.telemetry), finalize(two.telemetry)
