@@ -39,10 +39,7 @@ from lantern_jax.scenarios.suite import Suite
 from lantern_jax.world import Scenario
 
 DATASET_SEED = 3272  # default generation seed
-PAPER_ROUTE_A = 1631  # sequences in the paper's release
-PAPER_ROUTE_B = 1641
-PAPER_FRAMES = 236_309  # frames in the paper's release (4 Hz)
-# Default size: the paper's release is 3,272 sequences and 236,309 frames (72 frames each on
+# Default size: the paper's release is 3,272 sequences and 236,309 frames (store.PAPER_*; 72 each on
 # average); our sequences are shorter (54 frames: see the README, "Dataset"), so matching the
 # paper's sequence count gives 178k frames.  380 pairs per family is the round count whose
 # default run reaches the paper's frame count (seed 3272: 4,457 sequences, 240,881 frames);

@@ -43,6 +43,9 @@ from lantern_jax.files import atomic_write
 # six-camera rig, rays that hit one are classed as building, wall or parked vehicle, and the
 # front rays' classes are an observation field (obs.range_class, was front_class)
 FORMAT_VERSION = 3
+PAPER_ROUTE_A = 1631  # sequences in the paper's release
+PAPER_ROUTE_B = 1641
+PAPER_FRAMES = 236_309  # frames in the paper's release (4 Hz)
 CARD_JSON = "dataset_card.json"
 CARD_MD = "dataset_card.md"
 
@@ -110,9 +113,7 @@ def write_card(folder: Path, card: dict) -> None:
 
 
 def card_markdown(card: dict) -> str:
-    """A human-readable summary of a dataset card."""
-    from lantern_jax.dataset.scenes import PAPER_FRAMES, PAPER_ROUTE_A, PAPER_ROUTE_B
-
+    """A human-readable summary of a dataset card (with the paper's release beside it)."""
     counts = pd.DataFrame(card.get("counts", [])) if card.get("counts") else pd.DataFrame()
     if not counts.empty:  # a card read back from JSON has its keys sorted: fix the order
         counts = counts[["family", "route", "sequences", "frames"]]
