@@ -247,20 +247,20 @@ def run_executions(
     slot = np.arange(group) % n  # the execution in each slot (padding: repeats)
     init_timings: dict[str, float] = {}
     init_exe = _executable(initial_states, _take(host, slot), timings=init_timings)
-    state_shape = jax.eval_shape(jax.vmap(init_state), _take(host, slot))
-    states = jax.tree.map(lambda x: np.zeros(x.shape, x.dtype), state_shape)
-    args = (place.put(_take(host, slot)), params, place.put(states))
-    exe = _executable(program, *args, place.replicate(np.int32(0)), timings=timings)
-    if timings is not None:
-        for k, v in init_timings.items():
-            timings[k] += v
-    t_compile = time.perf_counter() - t0
 
     def initial(execs: np.ndarray):
         """States at t = 0 of the executions ``execs`` (at most ``group``), on the host."""
         block = np.resize(execs, group)  # the compiled shape; extra entries are repeats
         out = jax.tree.map(np.asarray, init_exe(_take(host, block)))
         return _take(out, np.arange(len(execs)))
+
+    states = initial(slot)  # also the example arguments the program is compiled for
+    args = (place.put(_take(host, slot)), params, place.put(states))
+    exe = _executable(program, *args, place.replicate(np.int32(0)), timings=timings)
+    if timings is not None:
+        for k, v in init_timings.items():
+            timings[k] += v
+    t_compile = time.perf_counter() - t0
 
     def call(ticks: int):
         out = exe(
@@ -272,7 +272,6 @@ def run_executions(
         return jax.tree.map(np.asarray, place.get(out))
 
     if not compact:
-        states = initial(slot)
         final = _take(call(max_ticks), np.arange(n))
     else:
         timeout = np.asarray(host.config.timeout_s)
