@@ -405,7 +405,10 @@ def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
     )
     t0 = time.perf_counter()
     try:
-        result = evaluate(policies, suite=suite, ablation=args.ablation, progress=not args.quiet)
+        result = evaluate(
+            policies, suite=suite, ablation=args.ablation, progress=not args.quiet,
+            one_program=not getattr(args, "program_per_policy", False),
+        )  # fmt: skip
     except PolicyError as e:
         print(f"lantern-jax evaluate: error: {e}", file=sys.stderr)
         return 1
@@ -804,6 +807,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="after the tables, print where the wall time went: start-up, imports, suite "
         "load, world build, per policy trace + lower, XLA compile, rollout and scoring, "
         "tables, writing",
+    )
+    ev.add_argument(
+        "--program-per-policy",
+        action="store_true",
+        help="compile each policy's own rollout program (default: policies with different act "
+        "functions share one program that picks the policy at run time, so the simulator is "
+        "compiled once; results are the same to float32 rounding)",
     )
     ev.add_argument(
         "--coordinator",

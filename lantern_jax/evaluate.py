@@ -40,6 +40,7 @@ from lantern_jax.sim.distributed import placement
 from lantern_jax.sim.observe import observe
 from lantern_jax.sim.rollout import rollout_batch_parallel
 from lantern_jax.sim.state import init_state
+from lantern_jax.sim.switch import PolicySwitch, policy_switch, switch_params
 from lantern_jax.times import happened, time_or_nan
 from lantern_jax.world import Scenario, trim_padding
 
@@ -345,7 +346,11 @@ class PolicyRun:
 
 
 def run_policy(
-    policy: Policy | str, execs: Executions, policy_params: Any = None, model: str | None = None
+    policy: Policy | str,
+    execs: Executions,
+    policy_params: Any = None,
+    model: str | None = None,
+    shared: tuple[PolicySwitch, tuple] | None = None,
 ) -> PolicyRun:
     """Run one policy on prepared executions and build its route-level rows.
 
@@ -354,6 +359,9 @@ def run_policy(
         execs: from :func:`build_executions`.
         policy_params: policy parameters (default ``policy.init(PRNGKey(0))``).
         model: name used in the tables (default: the policy name).
+        shared: ``(switch, members' parameters)``: run the policy as its member of a
+            :class:`~lantern_jax.sim.switch.PolicySwitch` (one program for several policies,
+            see :func:`shared_program`); ``None`` compiles the policy's own program.
     """
     pol = get_policy(policy) if isinstance(policy, str) else policy
     params = pol.init(jax.random.PRNGKey(0)) if policy_params is None else policy_params
@@ -363,8 +371,14 @@ def run_policy(
     check_policy_output(pol, params, obs)
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
+    act, run_params, privileged = pol.act, params, pol.privileged
+    if shared is not None:
+        switch, members = shared
+        i = switch.index_of(pol.act)
+        members = (*members[:i], params, *members[i + 1 :])
+        act, run_params, privileged = switch, switch_params(switch, i, members), False
     final, t_compile = run_executions(
-        pol.act, execs.scenarios, params, execs.max_ticks, privileged=pol.privileged,
+        act, execs.scenarios, run_params, execs.max_ticks, privileged=privileged,
         timings=timings,
     )  # fmt: skip
     t2 = time.perf_counter()
@@ -498,10 +512,38 @@ def _policies_to_run(policies, suite) -> list[Policy]:
     return [get_policy(p) if isinstance(p, str) else p for p in policies]
 
 
+def shared_program(pols: list[Policy], policy_params: list) -> tuple[PolicySwitch, tuple] | None:
+    """One program for every policy of an evaluation, or ``None`` when they share one already.
+
+    Policies with the same ``act`` (``ego`` and ``coop``) already share a compiled program;
+    policies with different ones are joined in a :class:`~lantern_jax.sim.switch.PolicySwitch`
+    (members in order of first appearance), so the simulator is compiled once for all of them.
+    Returns ``(switch, members' parameters)`` for :func:`run_policy` (each member's parameters
+    those of its first policy; they fix the program's argument shapes), or ``None`` for fewer
+    than two distinct ``act`` functions.
+    """
+    members: dict[int, tuple] = {}
+    for pol, par in zip(pols, policy_params, strict=True):
+        if id(pol.act) not in members:
+            params = pol.init(jax.random.PRNGKey(0)) if par is None else par
+            members[id(pol.act)] = (pol.act, params)
+    if len(members) < 2:
+        return None
+    acts, params = zip(*members.values(), strict=True)
+    return policy_switch(acts), tuple(params)
+
+
 def _run_all(
-    pols: list[Policy], policy_params: list, execs: Executions, suite_id: str, progress: bool
+    pols: list[Policy],
+    policy_params: list,
+    execs: Executions,
+    suite_id: str,
+    progress: bool,
+    share: bool = True,
 ) -> list[PolicyRun]:
-    """Run every policy (progress bar per policy); a failing policy raises :class:`PolicyError`."""
+    """Run every policy (progress bar per policy); a failing policy raises :class:`PolicyError`.
+
+    With ``share`` the policies run in one program (:func:`shared_program`)."""
     bar = None
     if progress:
         from tqdm.auto import tqdm
@@ -509,11 +551,12 @@ def _run_all(
         bar = tqdm(total=len(pols), desc=f"evaluating on {suite_id}", unit="policy")
     runs: list[PolicyRun] = []
     try:
+        shared = shared_program(pols, policy_params) if share else None
         for pol, par in zip(pols, policy_params, strict=True):
             if bar is not None:
                 bar.set_postfix_str(f"{pol.name}: compile + {3 * execs.num_pairs} executions")
             try:
-                runs.append(run_policy(pol, execs, par))
+                runs.append(run_policy(pol, execs, par, shared=shared))
             except Exception as e:
                 lines = str(e).strip().splitlines() or [""]
                 why = lines[0] if len(lines) == 1 else f"{lines[0]} ... {lines[-1]}"
@@ -563,6 +606,7 @@ def evaluate(
     suite: Suite | str = SUITE_ID,
     ablation: str = "none",
     progress: bool = True,
+    one_program: bool = True,
 ) -> EvalResult:
     """Evaluate policies on a suite: one jitted, vmapped rollout call per policy, then score.
 
@@ -572,6 +616,9 @@ def evaluate(
         suite: a :class:`Suite` or a suite id / manifest path.
         ablation: one of :func:`ablation_names`.
         progress: show a progress bar.
+        one_program: run policies with different ``act`` functions in one compiled program
+            (:func:`shared_program`: the simulator is compiled once, not once per policy);
+            ``False`` compiles each policy's own program (results equal to float32 rounding).
 
     Returns:
         :class:`EvalResult` with the route-level table, the family table (with paired warning
@@ -591,7 +638,7 @@ def evaluate(
     t0 = time.perf_counter()
     execs = build_executions(s, ablation)
     t_build = time.perf_counter() - t0
-    runs = _run_all(pols, list(policy_params), execs, s.suite_id, progress)
+    runs = _run_all(pols, list(policy_params), execs, s.suite_id, progress, one_program)
     t0 = time.perf_counter()
     route = pd.concat([r.route_table for r in runs], ignore_index=True)
     result = EvalResult(

@@ -3,7 +3,8 @@ output failures, ablations.
 
 Every test runs on a two-pair suite (one PE pair, one LWW pair) or on one of its pairs alone.
 ``ego`` and ``coop`` share one act function (the privileged ``expert`` has its own), so they
-and every ablation reuse one compiled rollout per batch shape; module-scoped fixtures share the
+and every ablation reuse one compiled rollout per batch shape, and an evaluation of all three
+runs them in one program (:mod:`lantern_jax.sim.switch`); module-scoped fixtures share the
 runs.
 """
 
@@ -137,6 +138,16 @@ def test_one_device_equals_two(tmp_path):
         assert res.returncode == 0, res.stderr[-2000:]
         out[n] = read_route_table(folder / "route_level_results.csv")
     ok, report = compare_route_tables(out[1], out[2])
+    assert ok, report
+
+
+def test_one_program_serves_every_policy(base, suite2):
+    """``expert`` and ``ego``/``coop`` run in one compiled program (a policy switch): only the
+    first policy compiles, and each policy's rows equal those of its own program (the promise;
+    on the shipped suite they are identical to the bit)."""
+    assert [r.timings["XLA compile"] for r in base.runs[1:]] == [0.0, 0.0]
+    own = evaluate(["expert", "ego", "coop"], suite=suite2, progress=False, one_program=False)
+    ok, report = compare_route_tables(own.route_table, base.route_table)
     assert ok, report
 
 

@@ -39,6 +39,7 @@ from lantern_jax.sim.observe import observe
 from lantern_jax.sim.record import TickRecord, tick_record
 from lantern_jax.sim.sense import locate_on_route, sense
 from lantern_jax.sim.state import State, freeze
+from lantern_jax.sim.switch import PolicySwitch
 from lantern_jax.world import Scenario, present
 
 Array = jax.Array
@@ -56,7 +57,9 @@ def step(
     """Advance one execution by one tick (see the module docstring for the stages).
 
     Args:
-        act: the policy's ``act(policy_params, obs) -> (10, 2)`` waypoints.
+        act: the policy's ``act(policy_params, obs) -> (10, 2)`` waypoints, or a
+            :class:`~lantern_jax.sim.switch.PolicySwitch` of several (``policy_params`` then
+            :class:`~lantern_jax.sim.switch.SwitchParams`).
         policy_params: the policy's parameters.
         scenario: the execution's static scenario (closed over by the caller's scan).
         state: the state at the start of the tick.
@@ -71,9 +74,15 @@ def step(
     """
     cfg, script, h = scenario.config, scenario.actors, scenario.config.hazard_index
     # A privileged act function says so itself (``act.privileged``), so no caller can forget it.
-    privileged = privileged or bool(getattr(act, "privileged", False))
-    obs = observe(scenario, state, privileged, bool(getattr(act, "surround", False)))
-    waypoints = act(policy_params, obs)
+    if isinstance(act, PolicySwitch):
+        # Several policies in one program: the chosen member's branch adds what it reads.
+        obs = observe(scenario, state, False, False)
+        waypoints = act.choose(policy_params, obs, scenario, state)
+        privileged = act.any_privileged
+    else:
+        privileged = privileged or bool(getattr(act, "privileged", False))
+        obs = observe(scenario, state, privileged, bool(getattr(act, "surround", False)))
+        waypoints = act(policy_params, obs)
     if privileged:
         # Shields the expert's plan from the algebraic simplifier; on CPU the barrier is
         # expanded before fusion (see lantern_jax.split_map).
