@@ -581,18 +581,18 @@ def test_explicit_flags_win_over_the_config(tmp_path, monkeypatch):
     class Stop(Exception):
         pass
 
-    def capture(policies, suite, ablation, progress):
-        seen.update(policies=policies, pairs=len(suite), ablation=ablation)
+    def capture(policies, suite, ablation, progress, one_program):
+        seen.update(policies=policies, pairs=len(suite), ablation=ablation, one=one_program)
         raise Stop
 
     monkeypatch.setattr(ev, "evaluate", capture)
     argv = ["evaluate", "--config", str(cfg), "--policy", "coop", "--ablation", "none"]
     with pytest.raises(Stop):
         run_cli([*argv, "--pairs-per-family", "1", "--out", str(tmp_path / "o")])
-    assert seen == dict(policies=["coop"], pairs=6, ablation="none")
+    assert seen == dict(policies=["coop"], pairs=6, ablation="none", one=True)
     with pytest.raises(Stop):
-        run_cli(["evaluate", "--config", str(cfg)])
-    assert seen == dict(policies=["ego"], pairs=12, ablation="late_onset")
+        run_cli(["evaluate", "--config", str(cfg), "--program-per-policy"])
+    assert seen == dict(policies=["ego"], pairs=12, ablation="late_onset", one=False)
 
 
 # ---------------------------------------------------------------------------------------------
