@@ -20,6 +20,7 @@ from lantern_jax.policies.base import Policy
 from lantern_jax.scoring.cus import pair_components
 from lantern_jax.scoring.metrics import finalize
 from lantern_jax.sim.rollout import rollout_batch
+from lantern_jax.sim.switch import policy_switch, switch_params
 from lantern_jax.stress.objective import Problem
 
 FAIL_BELOW_CUS = 50.0  # CUS points: a pair below this counts as a failure (besides any gate)
@@ -80,7 +81,8 @@ class Verifier:
 
     Compiled functions are shared by every problem with the same policy ``act`` and knob names
     (the scenarios and parameters are arguments), so one compilation serves a whole table of
-    stress tests with the reference policies.
+    stress tests with the reference policies; the policy and the expert run as the two members
+    of one program (:mod:`lantern_jax.sim.switch`), so the simulator compiles once for both.
     """
 
     def __init__(self, problem: Problem, expert: Policy, threshold: float = FAIL_BELOW_CUS):
@@ -89,16 +91,25 @@ class Verifier:
         self.expert = expert
         self.expert_params = expert.init(jax.random.PRNGKey(0))
         self._pairs = _pair_builder(problem)
-        self._policy = _hard_metrics(problem.act)
-        self._expert = _hard_metrics(expert.act)
+        if problem.act is expert.act:
+            self._policy = self._expert = _hard_metrics(expert.act)
+            self._policy_params = self._expert_params = self.expert_params
+        else:
+            # The policy and the expert as members of one program: the simulator compiles
+            # once for both (lantern_jax.sim.switch).
+            switch = policy_switch((problem.act, expert.act))
+            members = (problem.policy_params, self.expert_params)
+            self._policy = self._expert = _hard_metrics(switch)
+            self._policy_params = switch_params(switch, 0, members)
+            self._expert_params = switch_params(switch, 1, members)
         self._nominal_b = None
 
     def _route_b(self, scs_b: Any, n: int):
         if self.problem.space.shared:
-            return self._policy(scs_b, self.problem.policy_params)
+            return self._policy(scs_b, self._policy_params)
         if self._nominal_b is None:  # Route B does not depend on the knobs: run it once (in the
             # batch shape Route A uses, so the compiled rollout is shared)
-            metrics = self._policy(scs_b, self.problem.policy_params)
+            metrics = self._policy(scs_b, self._policy_params)
             self._nominal_b = jax.tree.map(lambda x: x[:1], metrics)
         return jax.tree.map(lambda x: jnp.repeat(x, n, axis=0), self._nominal_b)
 
@@ -108,10 +119,10 @@ class Verifier:
         n = values.shape[0]
         p = self.problem
         scs_a, scs_b = self._pairs(p.scenario_a, p.scenario_b, values)
-        m_a = self._policy(scs_a, p.policy_params)
+        m_a = self._policy(scs_a, self._policy_params)
         m_b = self._route_b(scs_b, n)
         comps = jax.tree.map(np.asarray, pair_components(m_a, m_b, p.scenario_a.config.d_safe))
-        expert = jax.tree.map(np.asarray, self._expert(scs_a, self.expert_params))
+        expert = jax.tree.map(np.asarray, self._expert(scs_a, self._expert_params))
         expert_ok = np.all([getattr(expert, g) for g in ROUTE_A_GATES], axis=0)
         passed = np.asarray(comps["gate_product"]) > 0.5
         cus = np.asarray(comps["CUS"], np.float64)
