@@ -161,6 +161,9 @@ def switch_params(switch: PolicySwitch, index: int, members: tuple) -> SwitchPar
         index: the member that drives.
         members: every member's parameters, in member order; equal large arrays among them
             (:data:`SHARE_MIN_BYTES`) are kept once.
+
+    Raises:
+        ValueError: for an index outside the members or a parameter set per member missing.
     """
     if not 0 <= index < len(switch.members):
         raise ValueError(f"switch_params.index: {index} not in [0, {len(switch.members)})")
