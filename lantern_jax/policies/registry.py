@@ -9,6 +9,7 @@ A duplicate or unknown name is an error that lists the known names.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 
 from lantern_jax.policies import expert, learned_ppo, reference
@@ -25,6 +26,12 @@ _REGISTRY: dict[str, Callable[[], Policy]] = {
 
 
 def _shipped(name: str) -> Callable[[], Policy]:
+    """The factory of a shipped learned model: loads its checkpoint once per process and
+    returns that same policy afterwards.  Its ``act`` is the key of every compiled program
+    (:func:`lantern_jax.evaluate.compiled_rollout`), so a fresh ``act`` per call would compile
+    the whole rollout again on every evaluation that names the model."""
+
+    @functools.cache
     def factory() -> Policy:
         from lantern_jax.policies.learned.checkpoint import checkpoint_policy, shipped_path
 
