@@ -8,6 +8,7 @@ import types
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 import pytest
 
 from lantern_jax.evaluate import shared_program
@@ -15,7 +16,12 @@ from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.suite import build_suite_scenarios, load_suite
 from lantern_jax.sim.state import init_state
 from lantern_jax.sim.step import step
-from lantern_jax.sim.switch import SwitchParams, policy_switch, switch_params
+from lantern_jax.sim.switch import (
+    SHARE_MIN_BYTES,
+    SwitchParams,
+    policy_switch,
+    switch_params,
+)
 
 
 def _plan(obs):
@@ -70,6 +76,22 @@ def test_the_chosen_member_drives():
     plans = [sw.choose(switch_params(sw, i, (0.0, 0.0)), obs, None, None) for i in (0, 1)]
     assert float(jnp.max(jnp.abs(plans[0] - 3.0))) == 0.0
     assert float(jnp.max(jnp.abs(plans[1] - 4.0))) == 0.0
+
+
+def test_equal_large_arrays_enter_the_program_once():
+    """Members' equal arrays of at least SHARE_MIN_BYTES share one pool slot (the learned
+    models' embedding table); small ones do not; every member's parameters rebuild exactly."""
+    sw = policy_switch((plain_act, privileged_act))
+    big = np.arange(SHARE_MIN_BYTES // 4, dtype=np.float32)
+    small = np.ones(4, np.float32)
+    members = ({"emb": big, "w": small}, {"emb": big.copy(), "w": small.copy()})
+    sp = switch_params(sw, 1, members)
+    assert len(sp.pool) == 3  # one table, two small arrays
+    for i, m in enumerate(members):
+        got = sp.member(i)
+        np.testing.assert_array_equal(got["emb"], m["emb"])
+        np.testing.assert_array_equal(got["w"], m["w"])
+    assert sp.member(0)["emb"] is sp.member(1)["emb"]
 
 
 def test_switches_are_cached_by_members():

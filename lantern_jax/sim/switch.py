@@ -123,7 +123,7 @@ class PolicySwitch:
         return jax.lax.switch(params.index, branches, params.pool)
 
 
-_SWITCHES: dict[tuple[int, ...], PolicySwitch] = {}
+_SWITCHES: dict[tuple, PolicySwitch] = {}  # by the members themselves (functions hash by identity)
 
 
 def policy_switch(members) -> PolicySwitch:
@@ -131,11 +131,9 @@ def policy_switch(members) -> PolicySwitch:
     cached: the same members in the same order give the same object, hence one compiled
     program per process."""
     members = tuple(members)
-    key = tuple(map(id, members))
-    sw = _SWITCHES.get(key)
-    if sw is None or sw.members != members:
-        sw = _SWITCHES[key] = PolicySwitch(members)
-    return sw
+    if members not in _SWITCHES:
+        _SWITCHES[members] = PolicySwitch(members)
+    return _SWITCHES[members]
 
 
 #: bytes: leaves at least this large are compared by content when the pool is built (smaller
@@ -145,11 +143,9 @@ SHARE_MIN_BYTES = 1 << 20
 
 def _leaf_key(leaf: Any) -> tuple:
     """A key under which equal large arrays meet (content), other leaves by identity."""
-    if hasattr(leaf, "shape") and hasattr(leaf, "dtype"):
-        a = np.asarray(leaf)
-        if a.nbytes >= SHARE_MIN_BYTES:
-            digest = hashlib.sha256(np.ascontiguousarray(a).tobytes()).hexdigest()
-            return ("content", a.shape, str(a.dtype), digest)
+    if getattr(leaf, "nbytes", 0) >= SHARE_MIN_BYTES:  # NumPy and JAX arrays (no host copy
+        a = np.ascontiguousarray(leaf)  # of the small ones)
+        return ("content", a.shape, str(a.dtype), hashlib.sha256(a.tobytes()).hexdigest())
     return ("id", id(leaf))
 
 

@@ -92,24 +92,24 @@ class Verifier:
         self.expert_params = expert.init(jax.random.PRNGKey(0))
         self._pairs = _pair_builder(problem)
         if problem.act is expert.act:
-            self._policy = self._expert = _hard_metrics(expert.act)
-            self._policy_params = self._expert_params = self.expert_params
+            self._metrics = _hard_metrics(expert.act)
+            self._policy_params, self._expert_params = problem.policy_params, self.expert_params
         else:
             # The policy and the expert as members of one program: the simulator compiles
             # once for both (lantern_jax.sim.switch).
             switch = policy_switch((problem.act, expert.act))
             members = (problem.policy_params, self.expert_params)
-            self._policy = self._expert = _hard_metrics(switch)
+            self._metrics = _hard_metrics(switch)
             self._policy_params = switch_params(switch, 0, members)
             self._expert_params = switch_params(switch, 1, members)
         self._nominal_b = None
 
     def _route_b(self, scs_b: Any, n: int):
         if self.problem.space.shared:
-            return self._policy(scs_b, self._policy_params)
+            return self._metrics(scs_b, self._policy_params)
         if self._nominal_b is None:  # Route B does not depend on the knobs: run it once (in the
             # batch shape Route A uses, so the compiled rollout is shared)
-            metrics = self._policy(scs_b, self._policy_params)
+            metrics = self._metrics(scs_b, self._policy_params)
             self._nominal_b = jax.tree.map(lambda x: x[:1], metrics)
         return jax.tree.map(lambda x: jnp.repeat(x, n, axis=0), self._nominal_b)
 
@@ -119,10 +119,10 @@ class Verifier:
         n = values.shape[0]
         p = self.problem
         scs_a, scs_b = self._pairs(p.scenario_a, p.scenario_b, values)
-        m_a = self._policy(scs_a, self._policy_params)
+        m_a = self._metrics(scs_a, self._policy_params)
         m_b = self._route_b(scs_b, n)
         comps = jax.tree.map(np.asarray, pair_components(m_a, m_b, p.scenario_a.config.d_safe))
-        expert = jax.tree.map(np.asarray, self._expert(scs_a, self._expert_params))
+        expert = jax.tree.map(np.asarray, self._metrics(scs_a, self._expert_params))
         expert_ok = np.all([getattr(expert, g) for g in ROUTE_A_GATES], axis=0)
         passed = np.asarray(comps["gate_product"]) > 0.5
         cus = np.asarray(comps["CUS"], np.float64)
