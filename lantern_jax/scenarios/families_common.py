@@ -146,12 +146,13 @@ def place_background(
     boxes: list[tuple] = []
     if not sections:
         return placed
+    paths = [fit_path(sec.lane.center) for sec in sections]  # once, not per attempt
     for _ in range(n_target):
         for _attempt in range(30):
-            sec = sections[int(rng.integers(len(sections)))]
+            k = int(rng.integers(len(sections)))
+            sec, path = sections[k], paths[k]
             s0 = float(rng.uniform(sec.s_lo, sec.s_hi))
             v = round(float(rng.uniform(*BG_SPEED)), 3)
-            path = fit_path(sec.lane.center)
             xy = road.point_at(path, s0)
             box = (xy, road.heading_at(path, s0), CAR_EXTENT)
             if any(boxes_overlap(box, o, BG_MARGIN) for o in occupied):
