@@ -105,6 +105,9 @@ def main() -> None:
     ap.add_argument("--warmup-ticks", type=int, default=160)
     ap.add_argument("--calls", type=int, default=20)
     ap.add_argument("--top", type=int, default=15)
+    ap.add_argument("--scan", type=int, default=0,
+                    help="profile a scanned chunk of this many ticks, as the evaluation's "
+                         "rollout runs them (0: one tick on its own)")  # fmt: skip
     args = ap.parse_args()
 
     pol, params, sc, st = mid_run_states(args.policy, args.batch, args.warmup_ticks)
@@ -113,6 +116,17 @@ def main() -> None:
 
     def tick(s, x):
         return step(pol.act, params, s, x, temp, pol.privileged)[0]
+
+    ticks = max(args.scan, 1)
+    if args.scan:
+        # as rollout_batch runs them: work that does not change from tick to tick (the static
+        # scenario's own geometry) can be hoisted out of the scan by the compiler, which a
+        # lone tick cannot show
+        def one_tick(s, x):
+            return step(pol.act, params, s, x, temp, pol.privileged)[0]
+
+        def tick(s, x):
+            return jax.lax.scan(lambda c, _: (one_tick(s, c), None), x, None, length=ticks)[0]
 
     compiled = jax.jit(jax.vmap(tick)).lower(sc, st).compile()
     hlo = compiled.as_text()
@@ -136,12 +150,13 @@ def main() -> None:
             calls[e["name"]] += 1
     kernels_us = sum(v for k, v in total_us.items() if not k.startswith("while"))
     table = source_table(hlo)
-    per = 1.0 / args.calls
-    print(f"policy {args.policy}, batch {args.batch} mid-run states, {args.calls} calls, one "
-          f"device: kernels {kernels_us * per:,.0f} us per call "
+    per = 1.0 / (args.calls * ticks)  # per tick
+    what = f"{args.calls} calls of {ticks} scanned ticks" if args.scan else f"{args.calls} calls"
+    print(f"policy {args.policy}, batch {args.batch} mid-run states, {what}, one "
+          f"device: kernels {kernels_us * per:,.0f} us per tick "
           f"({kernels_us * per / args.batch:.1f} us per scenario-tick), "
           f"{len(names)} instructions in the compiled tick")  # fmt: skip
-    print(f"{'us/call':>8} {'share':>6} {'n/call':>6}  {'kernel':<38} {'shape':<28} source lines")
+    print(f"{'us/tick':>8} {'share':>6} {'n/tick':>6}  {'kernel':<38} {'shape':<28} source lines")
     for name, us in total_us.most_common(args.top):
         shape, lines = kernel_sources(hlo, name, table)
         share = f"{100 * us / kernels_us:5.1f}%" if not name.startswith("while") else "  loop"

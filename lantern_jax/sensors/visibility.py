@@ -82,10 +82,15 @@ def actor_sample_points(centers: Array, yaws: Array, extents: Array) -> Array:
         (..., 9, 2) float32 points, m, world frame: centre, corners (front-left, rear-left,
         rear-right, front-right), edge midpoints (front, left, rear, right).
     """
-    centers = jnp.asarray(centers, jnp.float32)
     yaws = jnp.asarray(yaws, jnp.float32)
+    return _sample_points(centers, jnp.cos(yaws), jnp.sin(yaws), extents)
+
+
+def _sample_points(centers: Array, cos: Array, sin: Array, extents: Array) -> Array:
+    """:func:`actor_sample_points` from the headings' cosines and sines (...) float32."""
+    centers = jnp.asarray(centers, jnp.float32)
     extents = jnp.asarray(extents, jnp.float32)
-    c, s = jnp.cos(yaws)[..., None], jnp.sin(yaws)[..., None]
+    c, s = cos[..., None], sin[..., None]
     lx = _SAMPLE_SX * extents[..., 0:1]
     ly = _SAMPLE_SY * extents[..., 1:2]
     x = centers[..., 0:1] + c * lx - s * ly
@@ -161,10 +166,12 @@ def visible_actors(
 
     # One target per loop step, its sample points derived inside the step: the loop boundary
     # makes the compiler compute the actor poses once (they are its operands) instead of
-    # re-deriving the tick's whole actor update for every (point, coordinate) element.
+    # re-deriving the tick's whole actor update for every (point, coordinate) element.  The
+    # headings' cosines and sines are operands too: inside the step the compiler would
+    # evaluate them once per sample point coordinate (18 times per target).
     def one_target(args):
-        center, yaw, extent, blockers_t = args  # (2,), (), (2,), (A + K,)
-        pts = actor_sample_points(center, yaw, extent)  # (9, 2)
+        center, cos, sin, extent, blockers_t = args  # (2,), (), (), (2,), (A + K,)
+        pts = _sample_points(center, cos, sin, extent)  # (9, 2)
         rel = pts - cam_xy
         dist = safe_norm(rel)  # (9,)
         in_view = _in_fov(rel, dist, cam_yaw, fov_deg) & (dist <= max_range)
@@ -176,7 +183,10 @@ def visible_actors(
         blocked = jnp.any(hits & blockers_t[None, :], axis=-1) & far
         return jnp.any(in_view & ~blocked)
 
-    seen = jax.lax.map(one_target, (box_c[:num], box_yaw[:num], box_e[:num], blockers))
+    yaw_t = box_yaw[:num]
+    seen = jax.lax.map(
+        one_target, (box_c[:num], jnp.cos(yaw_t), jnp.sin(yaw_t), box_e[:num], blockers)
+    )
     return present & seen
 
 
