@@ -10,7 +10,12 @@ source lines far from its own.
 
 Usage::
 
-    python benchmarks/profile_kernels.py [--policy coop] [--batch 96] [--top 15]
+    python benchmarks/profile_kernels.py [--policy coop] [--batch 96] [--top 15] [--scan 40]
+
+``--scan N`` times N ticks scanned in one program, as the evaluation's rollout runs them: work
+that does not change from tick to tick (the static scenario's own geometry) is then computed
+once before the loop, which a lone tick cannot show, so a rewrite that speeds up the lone tick
+can still slow the rollout.  Times are then per tick (the scan's total over N).
 
 Runs on one device; kernel times are wall times inside XLA's runtime and vary with the load
 of the machine (compare runs side by side).  A loop's own row covers its whole body; its body
