@@ -718,3 +718,30 @@ def test_polyline_shortcuts_equal_the_dense_computation(seed, limit):
     inside = np.flatnonzero(d <= limit)
     expected = int(inside[0]) if inside.size else -1
     assert rd.first_within(samples, xy, limit, 0.05) == expected
+
+
+@given(
+    st.lists(
+        st.tuples(st.floats(-500, 500, allow_nan=False), st.floats(-500, 500, allow_nan=False)),
+        min_size=0,
+        max_size=40,
+    )
+)
+@settings(max_examples=60, deadline=None)
+def test_host_arc_length_and_point_at_keep_numpys_values(points):
+    """The world builder's host helpers compute exactly what ``np.linalg.norm``, ``np.clip``
+    and ``np.stack`` gave (suite hashes depend on every bit of the built worlds)."""
+    xy = np.asarray(points, np.float64).reshape(-1, 2)
+    cs = rd.arc_length(xy)
+    want = (
+        np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(xy, axis=0), axis=1))])
+        if len(xy) >= 2
+        else np.zeros(len(xy))
+    )
+    np.testing.assert_array_equal(cs, want)
+    if len(xy) >= 2 and cs[-1] > 0:
+        s = np.array([-3.0, 0.0, 0.37 * cs[-1], cs[-1], cs[-1] + 5.0])
+        clipped = np.clip(s, 0.0, cs[-1])
+        ref = np.stack([np.interp(clipped, cs, xy[:, 0]), np.interp(clipped, cs, xy[:, 1])], -1)
+        np.testing.assert_array_equal(rd.point_at(xy, s), ref)
+        np.testing.assert_array_equal(rd.point_at(xy, 0.37 * cs[-1]), ref[2])
