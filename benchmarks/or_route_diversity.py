@@ -61,7 +61,9 @@ def straight_approach(rng: np.random.Generator, pieces: int) -> np.ndarray:
     s_b = reveal + p["object_ahead"] + 2.0
     length = rng.uniform(max(100.0, reveal + p["object_ahead"] + MIN_RECOVERY_M + 0.5), 133.0)
     kappas = [0.0] + [rng.uniform(-MAX_CURVATURE, MAX_CURVATURE) for _ in range(pieces)]
-    breaks = [s_b] + [s_b + rng.uniform(20.0, 50.0) for _ in range(pieces - 1)]
+    breaks = [s_b]
+    for _ in range(pieces - 1):  # every curvature piece but the last is 20-50 m long
+        breaks.append(breaks[-1] + rng.uniform(20.0, 50.0))
     return _route(Centerline(tuple(breaks), tuple(kappas)), length)
 
 

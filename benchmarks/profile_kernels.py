@@ -123,17 +123,15 @@ def main() -> None:
         return step(pol.act, params, s, x, temp, pol.privileged)[0]
 
     ticks = max(args.scan, 1)
+    program = tick
     if args.scan:
         # as rollout_batch runs them: work that does not change from tick to tick (the static
         # scenario's own geometry) can be hoisted out of the scan by the compiler, which a
         # lone tick cannot show
-        def one_tick(s, x):
-            return step(pol.act, params, s, x, temp, pol.privileged)[0]
+        def program(s, x):
+            return jax.lax.scan(lambda c, _: (tick(s, c), None), x, None, length=ticks)[0]
 
-        def tick(s, x):
-            return jax.lax.scan(lambda c, _: (one_tick(s, c), None), x, None, length=ticks)[0]
-
-    compiled = jax.jit(jax.vmap(tick)).lower(sc, st).compile()
+    compiled = jax.jit(jax.vmap(program)).lower(sc, st).compile()
     hlo = compiled.as_text()
     jax.block_until_ready(compiled(sc, st))
     with tempfile.TemporaryDirectory() as tmp:
