@@ -3,13 +3,13 @@ scenario-ticks/s and peak memory.
 
 The timed call is exactly what ``evaluate`` runs (:func:`lantern_jax.evaluate.run_executions`):
 every pair of the suite under Route A with warning, Route A without warning and Route B
-(3 x 120 executions for ``lantern-v2``) in one jitted, vmapped rollout that stops when every
+(3 x 120 executions for ``lantern-v3``) in one jitted, vmapped rollout that stops when every
 execution has ended (large batches: a fixed number of slots, refilled with waiting executions
 as earlier ones end, all stepped by one compiled program).
 
 Usage::
 
-    python benchmarks/bench_evaluate.py [--policy coop] [--suite lantern-v2] [--repeats 3]
+    python benchmarks/bench_evaluate.py [--policy coop] [--suite lantern-v3] [--repeats 3]
     python benchmarks/bench_evaluate.py --compile-cache /tmp/cc   # twice: cold, then warm
     LANTERN_JAX_CPU_DEVICES=1 python benchmarks/bench_evaluate.py   # one device only
 """
@@ -23,6 +23,7 @@ import resource
 import time
 
 from lantern_jax.cli import expose_cpu_cores
+from lantern_jax.constants import SUITE_ID  # noqa: E402
 
 expose_cpu_cores()  # one XLA CPU device per core (LANTERN_JAX_CPU_DEVICES=1 to disable)
 
@@ -42,7 +43,7 @@ def peak_rss_mb() -> float:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--policy", default="coop")
-    ap.add_argument("--suite", default="lantern-v2")
+    ap.add_argument("--suite", default=SUITE_ID)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument(
         "--compile-cache",

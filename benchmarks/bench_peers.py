@@ -1,7 +1,7 @@
 """Throughput next to a peer simulator, measured in one run: scenario-ticks per second of the
 whole-suite evaluation against highway-env's ``highway-v0``.
 
-Ours: every execution of the built-in suite (``lantern-v2``: 3 x 120) for one policy, exactly as
+Ours: every execution of the built-in suite (``lantern-v3``: 3 x 120) for one policy, exactly as
 ``evaluate`` runs it (:func:`lantern_jax.evaluate.run_executions`), after compile; a tick is one
 20 Hz step of the whole world of one execution (policy, IDM and scripted actors, ray-cast
 sensing, the temporal protocol and the score accumulators).  Only the ticks an execution really
@@ -31,6 +31,7 @@ import sys
 import time
 
 from lantern_jax.cli import expose_cpu_cores
+from lantern_jax.constants import SUITE_ID  # noqa: E402
 
 expose_cpu_cores()  # one XLA CPU device per core (LANTERN_JAX_CPU_DEVICES=1 to disable)
 
@@ -88,7 +89,7 @@ def run_peer(python: str, seconds: float) -> dict | None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--policy", default="coop")
-    ap.add_argument("--suite", default="lantern-v2")
+    ap.add_argument("--suite", default=SUITE_ID)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--peer-python", default=sys.executable, help="interpreter with highway-env")
     ap.add_argument("--peer-seconds", type=float, default=20.0, help="how long to step the peer")

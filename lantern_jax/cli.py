@@ -5,7 +5,7 @@
     lantern-jax evaluate                 # built-in suite, reference policies expert, ego, coop
     lantern-jax evaluate --policy coop --ablation late_onset --pairs-per-family 2 --out runs/x
     lantern-jax suite --list             # pairs, suite hash, generation report
-    lantern-jax suite --verify           # regenerate lantern-v2 from its seed, compare hashes
+    lantern-jax suite --verify           # regenerate lantern-v3 from its seed, compare hashes
     lantern-jax suite --regenerate suite.json
     lantern-jax evaluate --checkpoint runs/train/coop/learned-coop.msgpack --policy all
     lantern-jax policies
@@ -849,7 +849,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--validator",
         metavar="POLICY",
         help="policy of the dynamic validation for --regenerate (default: the one that "
-        "filtered --suite, as its manifest records; expert-v1 for lantern-v2)",
+        "filtered --suite, as its manifest records; expert-v1 for lantern-v3)",
     )
     su.add_argument(
         "--suite", default=SUITE_ID, metavar="ID|PATH", help="suite id or manifest path"

@@ -92,7 +92,7 @@ PE, VC, OR, LWW, RWW, RTY = range(6)
 WEATHERS = ("clear_day", "cloudy_day", "wet_day", "light_rain", "dusk")
 
 # --- the built-in frozen suite ------------------------------------------------------------------
-SUITE_ID = "lantern-v2"  # lantern_jax/data/<SUITE_ID>.json
+SUITE_ID = "lantern-v3"  # lantern_jax/data/<SUITE_ID>.json
 
 BIG = 1.0e6  # finite stand-in for "infinitely far" distances (keeps gradients finite)
 INF_TIME = 1.0e9  # s, stand-in for "not yet happened" times

@@ -8,7 +8,7 @@ protocol data of the batch (:data:`ABLATIONS`).
 Example::
 
     from lantern_jax.evaluate import evaluate
-    result = evaluate(["expert", "ego", "coop"])          # built-in suite lantern-v2
+    result = evaluate(["expert", "ego", "coop"])          # built-in suite lantern-v3
     print(result.family_table)
 """
 

@@ -29,7 +29,9 @@ The validator is part of what makes a suite: the manifest's generation report na
 (``validator``), and a suite regenerates only with the validator that filtered it.
 ``lantern-v2`` was filtered by the first privileged reference, registered as ``expert-v1``
 (its report names it; a manifest that names none is taken to mean the same,
-:data:`LEGACY_VALIDATOR`); new suites use ``expert``.
+:data:`LEGACY_VALIDATOR`).  ``lantern-v3`` (Obstacle Reveal on a straight approach) was
+generated from the same seed with the same validator, so that its pairs of the five other
+families are exactly those of ``lantern-v2``; new suites use ``expert`` by default.
 """
 
 from __future__ import annotations
@@ -59,7 +61,7 @@ from lantern_jax.world import Scenario, tree_stack
 
 DEFAULT_SEED = 20260611
 PAIRS_PER_SLOT = 4  # per family per weather profile
-CANDIDATES_PER_SLOT = 64  # at most, per slot
+CANDIDATES_PER_SLOT = 160  # at most, per slot (lantern-v3: OR needs up to ~100)
 ROUND_SIZE = 8  # candidates per unfilled slot and round
 EXPERT_MIN_PROGRESS = 0.99  # route completion the expert must reach on both routes
 ROUTE_DECIMALS = 3  # the manifest's route samples are rounded to 1 mm
@@ -228,7 +230,7 @@ def generate_suite(
 
     Args:
         seed: generation seed.
-        pairs_per_slot: accepted pairs per (weather, family) slot (4 for lantern-v2).
+        pairs_per_slot: accepted pairs per (weather, family) slot (4 for lantern-v3).
         candidates_per_slot: most candidates drawn per slot.
         progress: print one line per round.
         validator: registered policy of the dynamic validation (recorded in the report).

@@ -57,7 +57,7 @@ print("jax", jax.__version__, "on", jax.default_backend(), "| SMALL =", SMALL)
 # %% [markdown]
 # ## 1. The built-in suite
 #
-# `lantern-v2` has 120 pairs (20 per family). Loading it checks every pair against its SHA-256
+# `lantern-v3` has 120 pairs (20 per family). Loading it checks every pair against its SHA-256
 # content hash. The generation report records how often the privileged `expert` passed the
 # dynamic validation of a candidate pair before the suite was filtered.
 

@@ -260,7 +260,7 @@ def test_suite_regenerates(tmp_path, capsys):
     path = tmp_path / "fresh.json"
     assert cli.main(["suite", "--regenerate", str(path), "--verify", "--quiet"]) == 0
     out = capsys.readouterr().out
-    assert "OK: lantern-v2" in out
+    assert "OK: lantern-v3" in out
     fresh, shipped = load_suite(path), load_suite()
     assert fresh.suite_sha256 == shipped.suite_sha256
     assert [p.route_2m for p in fresh.pairs] == [p.route_2m for p in shipped.pairs]

@@ -534,3 +534,14 @@ def test_noisy_position_displaces_the_reported_position_by_exactly_two_metres():
         offsets.append(deltas[0])
     assert not np.allclose(offsets[0], offsets[1]) and not np.allclose(offsets[1], offsets[2])
     assert np.linalg.norm(np.asarray(position_offset(base))) == 0.0
+
+
+def test_or_object_stays_hidden_for_the_whole_approach(family_runs):
+    # The premise of Obstacle Reveal: on the straight approach ego, van and object stay lined
+    # up, so the front camera never sees the object before the ego reaches the warning point.
+    worlds, (final, rec) = family_runs
+    r = select(rec, 2 * FAMILIES.index("OR"))
+    p = select(final.protocol, 2 * FAMILIES.index("OR"))
+    approach = np.asarray(r.t) < float(p.t_warn_point)
+    assert approach.sum() > 20  # a real approach, not a start at the warning point
+    assert not np.asarray(r.visible)[approach, HAZARD].any()

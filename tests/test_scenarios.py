@@ -111,8 +111,12 @@ def test_pair_is_valid_and_matched(family, seed, weather):
     lo, hi = PARAM_RANGES[family]["route_length"].lo, PARAM_RANGES[family]["route_length"].hi
     assert lo - 1e-3 <= length <= hi + 1e-3
     # 2-m chords of a curve of radius >= 70 m are shorter than its arc by at most
-    # L (2 / 70)^2 / 24 = 5 mm over 164 m
-    assert abs(length - params["route_length"]) < 6e-3
+    # L (2 / 70)^2 / 24 = 5 mm over 164 m; OR's corner (radius R, arc A) adds A (2 / R)^2 / 24
+    tol = 6e-3
+    if family == "OR":
+        r = params["turn_radius"]
+        tol += math.radians(params["turn_angle"]) * r * (rd.ROUTE_SPACING / r) ** 2 / 24.0
+    assert abs(length - params["route_length"]) < tol
     route = route_np(wa)
     _, d = rd.project(route, meta["conflict_xy"])
     assert d < 1.0
@@ -626,6 +630,48 @@ def test_road_helpers():
     line45 = np.array([[0.0, -10.0], [10.0, 0.0]])
     s = rd.corridor_entry(line45, (0.0, 0.0), (1.0, 0.0), 2.0)
     assert s == pytest.approx(8.0 * math.sqrt(2.0))
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_or_road_is_straight_to_the_object_then_turns_the_corner(seed):
+    # The route (start-pose frame) runs along +x with no lateral offset up to 2 m past the
+    # object, then turns by turn_angle to turn_side at turn_radius (the corner's end heading).
+    from lantern_jax.scenarios.families_straight import OR_STRAIGHT_AFTER, or_centerline
+
+    params, wa, _, _ = make_pair("OR", seed)
+    line = or_centerline(params)
+    s_b = params["reveal_s"] + params["object_ahead"] + OR_STRAIGHT_AFTER
+    s = np.linspace(-20.0, s_b, 200)
+    xy, th = line.pose(s)
+    np.testing.assert_allclose(xy[:, 1], 0.0, atol=1e-9)
+    np.testing.assert_allclose(th, 0.0, atol=1e-12)
+    sign = 1.0 if params["turn_side"] == "left" else -1.0
+    arc = np.deg2rad(params["turn_angle"]) * params["turn_radius"]
+    assert float(line.heading(s_b + arc)) == pytest.approx(sign * np.deg2rad(params["turn_angle"]))
+    mid = s_b + 0.5 * arc  # on the corner: curvature sign / radius
+    assert (float(line.heading(mid + 0.5)) - float(line.heading(mid - 0.5))) == pytest.approx(
+        sign / params["turn_radius"], rel=1e-6
+    )
+    # the built route follows the same line (rotation undone)
+    route = route_np(wa)
+    yaw0 = float(wa.ego0.yaw)
+    rel = route - route[0]
+    c, si = np.cos(-yaw0), np.sin(-yaw0)
+    local = np.stack([c * rel[:, 0] - si * rel[:, 1], si * rel[:, 0] + c * rel[:, 1]], axis=1)
+    before = local[:, 0] < s_b - 1.0
+    np.testing.assert_allclose(local[before, 1], 0.0, atol=1e-3)
+
+
+def test_or_left_turn_needs_room_for_its_inner_kerb():
+    from lantern_jax.scenarios.families_straight import OR_INNER_KERB_MIN_R, or_left_kerb
+
+    p = sample_params("OR", np.random.default_rng(0))
+    p = dict(p, turn_side="left", lanes_fwd=3, lanes_back=2, lane_width=3.75)
+    tight = round(or_left_kerb(p) + OR_INNER_KERB_MIN_R - 1.0, 3)
+    with pytest.raises(ValueError, match=r"OR\.turn_radius: .* inner kerb"):
+        validate_params(dict(p, turn_radius=tight))
+    validate_params(dict(p, turn_radius=round(or_left_kerb(p) + OR_INNER_KERB_MIN_R + 0.01, 3)))
+    validate_params(dict(p, turn_side="right", turn_radius=15.0))  # inside is the ego's kerb
 
 
 def test_scene_deadline_knob_moves_the_reveal():

@@ -1,4 +1,4 @@
-"""The frozen suite lantern-v2: composition, hashes, tamper detection, static validation,
+"""The frozen suite lantern-v3: composition, hashes, tamper detection, static validation,
 geometric diversity (no near duplicates), the premise, recorded routes."""
 
 from __future__ import annotations
@@ -81,7 +81,7 @@ def test_manifest_structure_errors(raw, tmp_path):
     write_manifest(reordered, path)
     with pytest.raises(ValueError, match="suite hash mismatch"):
         load_suite(path)
-    with pytest.raises(FileNotFoundError, match="lantern-v2"):
+    with pytest.raises(FileNotFoundError, match="lantern-v3"):
         load_suite("lantern-v9")
 
 

@@ -5,7 +5,7 @@ The bank builds many of them once, stacks them along a leading axis together wit
 simulator state, and a reset becomes a jittable gather: ``index = randint(rng, 0, size)``.
 
 Training scenes are drawn from the family generators with their own seed (default
-:data:`TRAIN_SEED`, not the seed of the evaluation suite ``lantern-v2``) and pass the suite's
+:data:`TRAIN_SEED`, not the seed of the evaluation suite ``lantern-v3``) and pass the suite's
 static validation (:func:`lantern_jax.scenarios.suite.static_check`); the expert's dynamic
 validation is not run (a scene the expert fails is still a legitimate training scene).  Every
 pair contributes its three executions: Route A with the warning, Route A without it, Route B.
@@ -25,7 +25,7 @@ from lantern_jax.scenarios.suite import static_check
 from lantern_jax.sim.state import State, init_state
 from lantern_jax.world import Scenario, tree_stack
 
-TRAIN_SEED = 7_000_001  # seed of the training scenes (the suite lantern-v2 uses another one)
+TRAIN_SEED = 7_000_001  # seed of the training scenes (the suite lantern-v3 uses another one)
 ROUTES = ("A warning", "A no-warning", "B")
 
 

@@ -2,12 +2,13 @@
 
 Every pair is laid out on its own gently curved multi-lane road in road coordinates ``(s, d)``
 (:mod:`lantern_jax.scenarios.road_straight`: ``s`` = arc along the ego lane's centre = route arc,
-``d`` = lateral offset, + left), with its own lane count and width and a two-piece curvature
-(``curvature_1`` before ``curve_split``, ``curvature_2`` after, at most 1/70 m), and rotated
-afterwards by ``rotation_deg``.  The ego starts at ``s = 0``.  Background traffic uses only the
-opposing lanes (it never shares a lane with the ego or the scenario actors, which keeps the 55-m
-ego-lane corridor, the VC 25-m interaction region and the OR 14-m van zone free by
-construction).
+``d`` = lateral offset, + left), with its own lane count and width and rotated afterwards by
+``rotation_deg``.  PE and VC roads have a two-piece curvature (``curvature_1`` before
+``curve_split``, ``curvature_2`` after, at most 1/70 m); the OR road is straight up to just past
+the object and then turns a street corner (:func:`or_centerline`).  The ego starts at
+``s = 0``.  Background traffic uses only the opposing lanes (it never shares a lane with the ego
+or the scenario actors, which keeps the 55-m ego-lane corridor, the VC 25-m interaction region
+and the OR 14-m van zone free by construction).
 """
 
 from __future__ import annotations
@@ -84,7 +85,8 @@ OR_LANE_CHANGE_S = 2.5
 OR_STOP_LIMIT_S = 8.0
 OR_VAN_TRAVEL_MIN = 10.0  # m the van drives before its lane change
 OR_VAN_ZONE = 14.0  # m, no background vehicle starts this close to the van
-OR_REVEAL_SAMPLED = (35.0, 80.0)  # m, where the sampler puts the reveal point (in range)
+OR_REVEAL_SAMPLED = (30.0, 50.0)  # m, where the sampler puts the reveal point (in range; the
+# straight approach stays a small enough share of the route for routes to differ)
 OR_MIN_CLEARANCE = 0.3  # m, the van passes the object at least this far apart
 PREMISE_SAMPLES = 5  # van positions at which the OR premise is checked
 
@@ -342,17 +344,30 @@ def build_vc(p: dict):
 # ================================================================================================
 # OR
 # ================================================================================================
-OR_STRAIGHT_BEFORE = 2.0  # m of straight road before the warning point
-OR_STRAIGHT_AFTER = 2.0  # m of straight road past the object
+OR_STRAIGHT_AFTER = 2.0  # m of straight road past the object, before the turn
+OR_ROUTE_SAMPLED_MIN = 90.0  # m, the sampler's shortest route (the turn's share of the route)
+OR_INNER_KERB_MIN_R = 8.0  # m, smallest radius of the inner kerb of a left turn
 
 
 def or_centerline(p: dict) -> Centerline:
-    """The OR road: ``curvature_1`` up to 2 m before the warning point, straight from there to
-    2 m past the object, ``curvature_2`` beyond.  A lead van hides an object only when the two
-    are lined up on the ego's line of sight, i.e. on a straight stretch."""
-    s_a = max(or_conflict_s(p) - OR_WARN_LEAD - OR_STRAIGHT_BEFORE, 1.0)
+    """The OR road: straight from before the route start to 2 m past the object, then a turn of
+    ``turn_angle`` degrees to ``turn_side`` at the ego lane's radius ``turn_radius``, then
+    ``curvature_2``.
+
+    A lead van hides an object only while ego, van and object are lined up, so the approach is
+    straight; the routes differ by what follows the object (a street corner), which is what keeps
+    twenty of them apart under the near-duplicate rule (``benchmarks/or_route_diversity.py``).
+    """
     s_b = float(p["reveal_s"]) + float(p["object_ahead"]) + OR_STRAIGHT_AFTER
-    return Centerline((s_a, s_b), (float(p["curvature_1"]), 0.0, float(p["curvature_2"])))
+    radius = float(p["turn_radius"])
+    sign = 1.0 if p["turn_side"] == "left" else -1.0
+    arc = np.deg2rad(float(p["turn_angle"])) * radius
+    return Centerline((s_b, s_b + arc), (0.0, sign / radius, float(p["curvature_2"])))
+
+
+def or_left_kerb(p: dict) -> float:
+    """m, from the ego lane's centre to the road's left kerb (the inner kerb of a left turn)."""
+    return (int(p["lanes_fwd"]) - 1 + int(p["lanes_back"]) + 0.5) * float(p["lane_width"])
 
 
 def or_conflict_s(p: dict) -> float:
@@ -362,9 +377,18 @@ def or_conflict_s(p: dict) -> float:
 
 
 def sample_or(rng: np.random.Generator, weather: str) -> dict:
-    """Sample OR parameters (reveal point after a >= 10 m van drive, route >= object + 29 m)."""
+    """Sample OR parameters (reveal point after a >= 10 m van drive, route >= object + 29 m).
+
+    The reveal point is drawn in ``OR_REVEAL_SAMPLED`` (30-50 m of the documented 30-104 m) and
+    the route from ``OR_ROUTE_SAMPLED_MIN`` (90 m of 66-133 m), so that the straight approach is
+    at most about two thirds of the route and the corner after the object sets routes apart
+    under the near-duplicate rule; the corner's side, angle and radius last (a left turn's radius
+    leaves its inner kerb ``OR_INNER_KERB_MIN_R``).
+    """
     p = common_fields(rng, "OR", weather)
-    sample_straight(rng, "OR", p)
+    p["lane_width"] = draw(rng, "OR", "lane_width")
+    p["lanes_back"] = int(choose(rng, "OR", "lanes_back"))
+    p["curvature_2"] = draw(rng, "OR", "curvature_2", nd=6)
     p["v_ref"] = draw(rng, "OR", "v_ref")
     p["lead_speed_kmh"] = draw(rng, "OR", "lead_speed_kmh")
     p["lead_gap"] = draw(rng, "OR", "lead_gap")
@@ -378,7 +402,11 @@ def sample_or(rng: np.random.Generator, weather: str) -> dict:
     reveal_lo = max(OR_REVEAL_SAMPLED[0], p["lead_gap"] + OR_VAN_TRAVEL_MIN)
     p["reveal_s"] = draw(rng, "OR", "reveal_s", reveal_lo, OR_REVEAL_SAMPLED[1])
     need = p["reveal_s"] + p["object_ahead"] + MIN_RECOVERY_M + 0.5
-    p["route_length"] = draw(rng, "OR", "route_length", need)
+    p["route_length"] = draw(rng, "OR", "route_length", max(need, OR_ROUTE_SAMPLED_MIN))
+    p["turn_side"] = str(choose(rng, "OR", "turn_side"))
+    p["turn_angle"] = draw(rng, "OR", "turn_angle")
+    inner = or_left_kerb(p) + OR_INNER_KERB_MIN_R if p["turn_side"] == "left" else None
+    p["turn_radius"] = draw(rng, "OR", "turn_radius", inner)
     return p
 
 
@@ -399,6 +427,13 @@ def check_or(p: dict) -> None:
         raise ValueError(
             f"OR.object_ahead: the van would pass the object {gap:.2f} m apart (needs >= "
             f"{OR_MIN_CLEARANCE:g}); reveal further before it"
+        )
+    inner = float(p["turn_radius"]) - or_left_kerb(p)
+    if p["turn_side"] == "left" and inner < OR_INNER_KERB_MIN_R:
+        raise ValueError(
+            f"OR.turn_radius: {float(p['turn_radius'])!r} leaves the left turn's inner kerb a "
+            f"radius of {inner:.2f} m (needs >= {OR_INNER_KERB_MIN_R:g}: turn_radius >= "
+            f"{or_left_kerb(p) + OR_INNER_KERB_MIN_R:.2f} for this road)"
         )
 
 
@@ -429,7 +464,8 @@ def _min_object_ahead(p: dict, object_width: float) -> float:
 def build_or(p: dict):
     """OR: a lead van changes lane and reveals a stopped object in the ego lane.
 
-    ``lanes_fwd`` lanes in the ego direction (the ego in the rightmost one).  The van
+    ``lanes_fwd`` lanes in the ego direction (the ego in the rightmost one), straight from before
+    the route start to 2 m past the object, then a street corner (:func:`or_centerline`).  The van
     (``van_length`` x 2.2 m, role occluder) starts ``lead_gap`` ahead in the ego lane and drives
     at ``lead_speed_kmh`` without ever stopping.  It starts its lane change (one lane left over
     2.5 s) at the event, or at the latest when it reaches the reveal point ``reveal_s`` — its own
@@ -437,7 +473,8 @@ def build_or(p: dict):
     ``object_width`` wide, narrower than the van, role hazard) stands in the ego lane
     ``object_ahead`` m beyond the reveal point, and the guard keeps the van at least 0.3 m clear
     of it (:func:`or_van_object_clearance`, a feasibility rule).  The van hides the object from
-    the ego's camera until it moves aside.
+    the ego's camera until it moves aside: on the straight approach ego, van and object stay lined
+    up (across a bend the camera would see the object past the van).
 
     The conflict point C is **not** the object: with a lead vehicle between the ego and the
     object, an ego 12 m before the object (the paper's warning lead) would have the van's

@@ -203,7 +203,8 @@ PARAM_RANGES: dict[str, dict[str, Any]] = {
     },
     "OR": {
         **_COMMON,
-        **{k: v for k, v in _STRAIGHT.items() if k != "curve_split"},  # see or_centerline
+        # straight approach, then a street corner (see families_straight.or_centerline)
+        **{k: v for k, v in _STRAIGHT.items() if k not in ("curvature_1", "curve_split")},
         "v_ref": FloatRange(8.0, 10.0),
         "route_length": FloatRange(66.0, 133.0),
         "lead_speed_kmh": FloatRange(12.0, 20.0),
@@ -213,6 +214,9 @@ PARAM_RANGES: dict[str, dict[str, Any]] = {
         "van_length": FloatRange(5.0, 6.0),  # m
         "object_width": FloatRange(1.4, 2.0),  # m, narrower than the van (2.2 m)
         "lanes_fwd": Choice((2, 3)),  # the ego drives the rightmost one; the van moves left
+        "turn_side": Choice(("left", "right")),  # the corner 2 m past the object
+        "turn_angle": FloatRange(20.0, 90.0),  # deg
+        "turn_radius": FloatRange(15.0, 40.0),  # m, of the ego lane's centre line
     },
     "LWW": {
         **_COMMON,

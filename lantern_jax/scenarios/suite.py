@@ -1,4 +1,4 @@
-"""The frozen closed-loop suite ``lantern-v2``: pairs, static validation, manifest, loading.
+"""The frozen closed-loop suite ``lantern-v3``: pairs, static validation, manifest, loading.
 
 120 matched Route A/B pairs: 20 per family, five weather profiles x 24 pairs (4 per family per
 profile), as in the paper's appendix A.  A suite is generated from a seed by
@@ -13,7 +13,7 @@ share, whose hazard the front camera can see at the warning point (the premise,
 writing and loading.  Near duplicates within a family (:mod:`lantern_jax.scenarios.duplicates`)
 are rejected by generation, which knows the pairs already selected.
 
-The manifest (``lantern_jax/data/lantern-v2.json``) stores every pair's parameter dict, its
+The manifest (``lantern_jax/data/lantern-v3.json``) stores every pair's parameter dict, its
 SHA-256 content hash and its route resampled every 2 m (``route_2m``, world frame, so anyone
 can re-check near duplicates from the file alone), the suite hash, and the generation report
 (candidate counts, rejections by reason, the expert's pass rate before filtering).
@@ -432,7 +432,7 @@ def load_suite(name_or_path: str | Path = SUITE_ID) -> Suite:
     suite hash.
 
     Args:
-        name_or_path: a shipped suite id (``"lantern-v2"``) or the path of a manifest file.
+        name_or_path: a shipped suite id (``"lantern-v3"``) or the path of a manifest file.
 
     Returns:
         The :class:`Suite`.
