@@ -13,6 +13,8 @@ Usage (from the project root; every argument goes to pytest)::
     python benchmarks/profile_tests.py -m slow          # the slow tests
     python benchmarks/profile_tests.py tests/test_evaluate.py --top 10 --json times.json
 
+The tests run in this one process (``-n 0``), not in the worker processes the plain test
+command starts, so the figures add up the whole run's work rather than its wall time.
 Without ``JAX_COMPILATION_CACHE_DIR`` every program is compiled afresh (a fresh clone's run);
 with it, programs compiled by an earlier run load from the cache.
 """
@@ -107,7 +109,8 @@ def main() -> int:
     import profile_tests as plugin  # this file as a module: pytest registers its hooks
 
     t0 = time.perf_counter()
-    code = pytest.main([*pytest_args, "-p", "no:cacheprovider"], plugins=[plugin])
+    # in this process: the listener cannot see the compilations of worker processes
+    code = pytest.main([*pytest_args, "-n", "0", "-p", "no:cacheprovider"], plugins=[plugin])
     print(f"\npytest exited with {int(code)} after {time.perf_counter() - t0:.0f} s")
     out = plugin.report(args.top)
     if args.json:

@@ -48,6 +48,19 @@ jax.config.update(
     float(os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"]),
 )
 
+#: Most worker processes ``-n auto`` starts (pyproject's pytest options).  Every worker compiles
+#: its own programs and holds 1-2 GB; past one worker per core they only compete for it.
+MAX_WORKERS = 4
+
+
+def pytest_xdist_auto_num_workers(config) -> int:
+    """Worker count for ``-n auto``: ``$PYTEST_XDIST_AUTO_NUM_WORKERS`` when set, else one per
+    core this process may run on, at most :data:`MAX_WORKERS`."""
+    if os.environ.get("PYTEST_XDIST_AUTO_NUM_WORKERS"):
+        return int(os.environ["PYTEST_XDIST_AUTO_NUM_WORKERS"])
+    return max(1, min(len(os.sched_getaffinity(0)), MAX_WORKERS))
+
+
 HORIZON = 600  # ticks (30 s) of the shared runners
 BATCH = 12  # executions per call of the shared batched runner
 

@@ -308,6 +308,7 @@ def test_wording_command(manifest_path, tmp_path):
     assert (tmp_path / "wording.md").read_text().startswith("# Warning wording by ambiguity")
 
 
+@pytest.mark.slow
 def test_diagnostics_commands(shared_runner, tmp_path):
     res = run_cli(["diagnostics", "nonactionable", "--out", str(tmp_path), "--quiet"])
     assert res.rc == 0, res.err

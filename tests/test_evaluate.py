@@ -202,21 +202,37 @@ def test_wrong_output_shape_is_a_clear_error(shipped):
         evaluate([bad], suite=shipped.select([ALONE]), progress=False)
 
 
-def test_nan_waypoints_are_recorded_failures(base, suite2):
+def _nan_when_warned_fast(params, obs):
+    """``coop``, but NaN waypoints while the warning is active on a route faster than V_SPLIT."""
+    wps = reference_act(params, obs)
+    return jnp.where(obs.warning_active & (obs.v_ref > V_SPLIT), jnp.nan, wps)
+
+
+def _nan_late_on_pe_route_b(params, obs):
+    """``coop``, but NaN waypoints in the last 40 m of PE's Route B: the only execution of the
+    two-pair suite whose hazard slot is empty (no pedestrian at all, not even a despawned one)."""
+    wps = reference_act(params, obs)
+    pe_route_b = (obs.actor_extent[0, 0] == 0.0) & (obs.dist_to_route_end < 40.0)
+    return jnp.where(pe_route_b, jnp.nan, wps)
+
+
+@pytest.fixture(scope="module")
+def faulty(suite2):
+    """Both faulting policies in one evaluation (one compiled program for the two)."""
+    coop = get_policy("coop")
+    policies = [Policy("coop-nan", coop.init, _nan_when_warned_fast),
+                Policy("coop-nan-b", coop.init, _nan_late_on_pe_route_b)]  # fmt: skip
+    return evaluate(policies, suite=suite2, progress=False)
+
+
+def test_nan_waypoints_are_recorded_failures(base, suite2, faulty):
     """NaN waypoints in one execution of the batch fail that row's block gate (CUS 0); every
     other row equals the run of the intact policy."""
     v_ref = {p.pair_id: p.params["v_ref"] for p in suite2.pairs}
     assert v_ref["pe_0001"] > V_SPLIT > v_ref["lww_0001"]
-    coop = get_policy("coop")
-
-    def act(params, obs):
-        wps = reference_act(params, obs)
-        return jnp.where(obs.warning_active & (obs.v_ref > V_SPLIT), jnp.nan, wps)
-
-    nan_policy = Policy("coop-nan", coop.init, act)
-    r = evaluate([nan_policy], suite=suite2, progress=False)
-    validate_route_table(r.route_table)
-    got = r.route_table.set_index(["condition", "pair_id"]).drop(columns="model")
+    validate_route_table(faulty.route_table)
+    mine = faulty.route_table[faulty.route_table["model"] == "coop-nan"]
+    got = mine.set_index(["condition", "pair_id"]).drop(columns="model")
     want = (
         base.route_table[base.route_table["model"] == "coop"]
         .set_index(["condition", "pair_id"])
@@ -231,24 +247,16 @@ def test_nan_waypoints_are_recorded_failures(base, suite2):
     others = [k for k in want.index if k != hit]
     assert len(others) == 3
     pd.testing.assert_frame_equal(got.loc[others], want.loc[others], check_exact=True)
-    assert not r.family_table[["PE", "LWW", "Overall"]].isna().any().any()
+    ft = faulty.family_table
+    assert not ft.loc[ft["model"] == "coop-nan", ["PE", "LWW", "Overall"]].isna().any().any()
 
 
-def test_route_b_fault_is_recorded_and_fails_no_gate(base, suite2):
+def test_route_b_fault_is_recorded_and_fails_no_gate(base, faulty):
     """A policy that faults only on Route B: the row says so (route and time), Route A columns
     and every gate are those of the intact policy, and the fault costs only Route B progress (the
     paper: Route B infractions other than false braking affect the CUS only through P_B)."""
-
-    def act(params, obs):
-        wps = reference_act(params, obs)
-        # PE's Route B is the only execution here whose hazard slot is empty (no pedestrian at
-        # all, not even a despawned one); fault in its last 40 m.
-        pe_route_b = (obs.actor_extent[0, 0] == 0.0) & (obs.dist_to_route_end < 40.0)
-        return jnp.where(pe_route_b, jnp.nan, wps)
-
-    coop = get_policy("coop")
-    r = evaluate([Policy("coop-nan-b", coop.init, act)], suite=suite2, progress=False)
-    got = r.route_table.set_index(["condition", "pair_id"])
+    mine = faulty.route_table[faulty.route_table["model"] == "coop-nan-b"]
+    got = mine.set_index(["condition", "pair_id"])
     want = base.route_table[base.route_table["model"] == "coop"].set_index(["condition", "pair_id"])
     want = want.loc[got.index]
     pe = got.index.get_level_values("pair_id") == "pe_0001"
@@ -440,6 +448,7 @@ def test_premise_table(base):
     assert t.loc["hidden at the warning point", "LWW"] == pytest.approx(share)
 
 
+@pytest.mark.slow
 def test_slot_scheduling_matches_one_group(shipped, monkeypatch):
     """Stepping the executions in a few refilled slots, 80 ticks per call, gives the same
     results as stepping the whole batch in lockstep to the end (continuous values to float32

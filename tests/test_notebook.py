@@ -73,6 +73,7 @@ def _clean_run(name: str, tmp_path: Path, monkeypatch) -> tuple[str, int]:
     return text, len(images)
 
 
+@pytest.mark.slow
 def test_quickstart_notebook_runs(tmp_path, monkeypatch):
     text, n_images = _clean_run("quickstart.py", tmp_path, monkeypatch)
     assert "Overall" in text

@@ -159,6 +159,7 @@ def _soft_pair_gradient(suite, key: str, num_ticks: int | None, temp: float = 0.
     return float(value), float(grad)
 
 
+@pytest.mark.slow
 def test_soft_safety_gradient_through_a_short_rollout(suite):
     """d(soft Route A safety)/d(pedestrian crossing speed) over the first 13 s is finite and
     non-zero: the crossing speed moves the pedestrian relative to the ego, so the soft TTC and
