@@ -261,7 +261,12 @@ def range_image(
     def nearest_hits(dirs_part):
         t = rays_boxes_hit(cam_xy, dirs_part, box_c, box_yaw, box_e)  # (rays, A + K)
         t = jnp.where(hittable[None, :], t, 2.0 * BIG)  # never within range
-        return jnp.min(t, axis=-1), jnp.argmin(t, axis=-1)
+        nearest = jnp.min(t, axis=-1)
+        # the first box at the minimum, as argmin picks it, from two plain min-reductions:
+        # XLA on CPU runs argmin's (value, index) reduction far slower
+        boxes = jnp.arange(t.shape[-1], dtype=jnp.int32)
+        first = jnp.min(jnp.where(t <= nearest[:, None], boxes, t.shape[-1]), axis=-1)
+        return nearest, first
 
     # in loop steps, so that the boxes' poses are computed once, not per (ray, box) element
     nearest, first = split_map(nearest_hits, dirs)
