@@ -38,7 +38,7 @@ from lantern_jax.scoring.metrics import finalize
 from lantern_jax.scoring.table import build_route_table
 from lantern_jax.sim.distributed import placement
 from lantern_jax.sim.observe import observe
-from lantern_jax.sim.rollout import rollout_batch_parallel
+from lantern_jax.sim.rollout import rollout_scheduled_parallel
 from lantern_jax.sim.state import init_state
 from lantern_jax.sim.switch import PolicySwitch, policy_switch, switch_params
 from lantern_jax.times import happened, time_or_nan
@@ -127,34 +127,46 @@ def build_executions(suite: Suite, ablation: str = "none", trim: bool = True) ->
 
 _COMPILED: dict[tuple, Any] = {}
 
-#: Slot scheduling of large batches (``compact``): ``COMPACT_GROUP`` slots are stepped
-#: together ``REFILL_TICKS`` ticks per call; after each call a slot whose execution has ended
-#: takes the next waiting execution (longest timeout first), so that no slot idles behind a few
-#: long executions.  Batches smaller than ``COMPACT_MIN_BATCH`` run as one group to the end.
-#: Every call has the same shape, so one compiled program serves the whole evaluation.
-COMPACT_GROUP = 96
-REFILL_TICKS = 40
+#: Slot scheduling of large batches (``compact``): each device steps a fixed number of slots
+#: ``REFILL_TICKS`` ticks at a time, and a slot whose execution has ended takes the next
+#: waiting one (longest timeout first) inside the same compiled loop
+#: (:func:`~lantern_jax.sim.rollout.rollout_scheduled`), so that no slot idles behind a few
+#: long executions.  Batches smaller than ``COMPACT_MIN_BATCH`` step every execution at once.
+#: Slots per device by JAX backend (:func:`compact_slots`): on CPU (one device per core) 24
+#: stepped the suite fastest of 16-64 per device (``benchmarks/bench_evaluate.py``); other
+#: backends keep 96, the value before refills moved into the program (not re-measured there).
+COMPACT_SLOTS = {"cpu": 24}
+COMPACT_SLOTS_OTHER = 96
+REFILL_TICKS = 20
 COMPACT_MIN_BATCH = 256
 
 
-def compiled_rollout(act, privileged: bool = False):
-    """The jitted batched rollout program for a policy ``act`` (cached per ``act``).
+def compact_slots(backend: str | None = None) -> int:
+    """Slots per device of the slot scheduling on ``backend`` (default: JAX's default)."""
+    return COMPACT_SLOTS.get(backend or jax.default_backend(), COMPACT_SLOTS_OTHER)
 
-    ``program(scenarios, policy_params, start, ticks)`` rolls a batch on from the states
-    ``start`` for up to ``ticks`` (int32 scalar) more ticks.  The horizon is an argument, not a
-    constant, so one compiled program serves the first steps and the continuation of every
-    group.  Initial states come from :data:`initial_states` (a separate program shared by every
-    policy), so the policy's program holds no second copy of the sensing code.  Split over every
-    local device (:func:`~lantern_jax.sim.rollout.rollout_batch_parallel`); ``privileged`` fills
-    ``obs.privileged`` (``Policy.privileged``).
+
+def compiled_rollout(act, privileged: bool = False, slots: int = COMPACT_SLOTS_OTHER,
+                     chunk: int = REFILL_TICKS):  # fmt: skip
+    """The jitted scheduled rollout program for a policy ``act`` (cached per ``act``,
+    ``privileged``, ``slots`` and ``chunk``).
+
+    ``program(scenarios, policy_params, starts, max_ticks)`` rolls every execution of the
+    batch from its state in ``starts`` to its end through ``slots`` slots per device, refilled
+    every ``chunk`` ticks (:func:`~lantern_jax.sim.rollout.rollout_scheduled_parallel`); the
+    batch is dealt in equal blocks to the devices.  The horizon ``max_ticks`` (int32 scalar) is
+    an argument, not a constant, so one compiled program serves every horizon.  Initial states
+    come from :data:`initial_states` (a separate program shared by every policy), so the
+    policy's program holds no second copy of the sensing code.
     """
-    key = ("program", act, privileged)
+    key = ("program", act, privileged, slots, chunk)
     if key not in _COMPILED:
 
-        def program(scenarios, policy_params, start, ticks):
-            return rollout_batch_parallel(
-                scenarios, act, policy_params, ticks, start=start, privileged=privileged
-            )
+        def program(scenarios, policy_params, starts, max_ticks):
+            return rollout_scheduled_parallel(
+                scenarios, starts, act, policy_params, max_ticks, slots, chunk,
+                privileged=privileged,
+            )  # fmt: skip
 
         _COMPILED[key] = jax.jit(program)
     return _COMPILED[key]
@@ -192,18 +204,25 @@ def _take(tree, idx):
     return jax.tree.map(lambda x: x[idx], tree)
 
 
-def _put_rows(array: np.ndarray, rows: np.ndarray, values: np.ndarray) -> np.ndarray:
-    """A copy of ``array`` with ``array[rows] = values``."""
-    out = np.array(array)
-    out[rows] = values
-    return out
+def schedule_layout(timeout_s: np.ndarray, devices: int) -> np.ndarray:
+    """The order in which the devices' schedulers take a batch's executions.
 
+    Executions sorted by timeout, longest first (stable), are dealt round-robin to the
+    devices, so every device gets a similar mix of long and short ones and starts with its
+    longest; the batch is padded to a multiple of ``devices`` with copies of the shortest.
 
-def group_size(n: int, multiple: int, compact: bool) -> int:
-    """Executions stepped together: the whole batch when not ``compact``, else
-    ``COMPACT_GROUP`` slots (never more than the batch), rounded up to ``multiple``."""
-    size = n if not compact else min(n, COMPACT_GROUP)
-    return -(-size // multiple) * multiple
+    Args:
+        timeout_s: (n,) float, s, every execution's timeout.
+        devices: number of devices (blocks).
+
+    Returns:
+        (devices * ceil(n / devices),) int: execution index at each position of the
+        device-major layout (device ``d`` holds the ``d``-th block).
+    """
+    order = np.argsort(-np.asarray(timeout_s), kind="stable")
+    per_device = -(-len(order) // devices)
+    order = np.concatenate([order, np.repeat(order[-1:], per_device * devices - len(order))])
+    return order.reshape(per_device, devices).T.reshape(-1)
 
 
 def run_executions(
@@ -218,18 +237,18 @@ def run_executions(
     """Roll out a batch of executions until all have ended; returns (final states, seconds
     spent compiling).
 
-    One compiled program (:func:`compiled_rollout`) does all the stepping.  A small batch runs
-    as one group to the end; a large one (``compact``, see ``COMPACT_*``) is scheduled over a
-    fixed number of slots that are refilled with waiting executions as earlier ones end:
-    results are the same executions, continued from their exact state, only grouped
-    differently.  A slot starts from its execution's state at ``t = 0`` given by
-    :data:`initial_states` (one compiled program per batch shape, shared by every policy).
-    Scenarios and states stay on the host between calls (NumPy), so refilling compiles
-    nothing.  ``privileged`` must be the policy's ``Policy.privileged`` flag.  Under
-    JAX's distributed runtime (several processes) every call runs on the global mesh, each
-    process stepping its shard, and the final states are gathered on every process
-    (:mod:`lantern_jax.sim.distributed`).  ``timings`` (optional dict) receives
-    ``"trace + lower"``, ``"XLA compile"`` and ``"rollout"`` seconds.
+    One compiled program (:func:`compiled_rollout`) does all the stepping, in one call.  A
+    small batch steps every execution at once; a large one (``compact``, see ``COMPACT_*``
+    and :func:`compact_slots`) is stepped through a fixed number of slots per device,
+    refilled inside the program with the waiting executions as earlier ones end
+    (:func:`schedule_layout` deals them to the devices): the same executions, only grouped
+    differently.  Every execution starts from
+    its state at ``t = 0`` given by :data:`initial_states` (one compiled program per block
+    shape, shared by every policy).  ``privileged`` must be the policy's
+    ``Policy.privileged`` flag.  Under JAX's distributed runtime (several processes) the call
+    runs on the global mesh, each process stepping its devices' blocks, and the final states
+    are gathered on every process (:mod:`lantern_jax.sim.distributed`).  ``timings``
+    (optional dict) receives ``"trace + lower"``, ``"XLA compile"`` and ``"rollout"`` seconds.
 
     Returns:
         (final states as NumPy arrays with leading axis ``n``, seconds spent compiling).
@@ -238,66 +257,38 @@ def run_executions(
     if compact is None:
         compact = n >= COMPACT_MIN_BATCH and max_ticks > REFILL_TICKS
     place = placement()
-    multiple = int(np.lcm(place.multiple, jax.local_device_count()))
-    group = group_size(n, multiple, compact)
+    devices = jax.device_count()
     host = jax.tree.map(np.asarray, scenarios)
+    layout = schedule_layout(host.config.timeout_s, devices)
+    per_device = len(layout) // devices
+    slots = min(per_device, compact_slots()) if compact else per_device
     params = place.replicate(policy_params)
+    laid = _take(host, layout)
 
     t0 = time.perf_counter()
-    program = compiled_rollout(act, privileged=privileged)
-    slot = np.arange(group) % n  # the execution in each slot (padding: repeats)
+    block = min(len(layout), slots * devices)  # the initial-state program's batch shape
     init_timings: dict[str, float] = {}
-    init_exe = _executable(initial_states, _take(host, slot), timings=init_timings)
-
-    def initial(execs: np.ndarray):
-        """States at t = 0 of the executions ``execs`` (at most ``group``), on the host."""
-        block = np.resize(execs, group)  # the compiled shape; extra entries are repeats
-        out = jax.tree.map(np.asarray, init_exe(_take(host, block)))
-        return _take(out, np.arange(len(execs)))
-
-    states = initial(slot)  # also the example arguments the program is compiled for
-    args = (place.put(_take(host, slot)), params, place.put(states))
-    exe = _executable(program, *args, place.replicate(np.int32(0)), timings=timings)
+    init_exe = _executable(initial_states, _take(laid, np.arange(block)), timings=init_timings)
+    t_compile = time.perf_counter() - t0
+    parts = []
+    for lo in range(0, len(layout), block):
+        rows = np.resize(np.arange(lo, min(lo + block, len(layout))), block)
+        out = jax.tree.map(np.asarray, init_exe(_take(laid, rows)))
+        parts.append(_take(out, np.arange(min(block, len(layout) - lo))))
+    starts = jax.tree.map(lambda *x: np.concatenate(x), *parts)
+    args = (place.put(laid), params, place.put(starts), place.replicate(np.int32(max_ticks)))
+    t1 = time.perf_counter()
+    exe = _executable(compiled_rollout(act, privileged, slots, REFILL_TICKS), *args,
+                      timings=timings)  # fmt: skip
+    t_compile += time.perf_counter() - t1
     if timings is not None:
         for k, v in init_timings.items():
             timings[k] += v
-    t_compile = time.perf_counter() - t0
-
-    def call(ticks: int):
-        out = exe(
-            place.put(_take(host, slot)),
-            params,
-            place.put(states),
-            place.replicate(np.int32(ticks)),
-        )
-        return jax.tree.map(np.asarray, place.get(out))
-
-    if not compact:
-        final = _take(call(max_ticks), np.arange(n))
-    else:
-        timeout = np.asarray(host.config.timeout_s)
-        waiting = list(np.argsort(-timeout, kind="stable")[::-1])  # pop() = longest first
-        first = [waiting.pop() for _ in range(min(group, n))]
-        slot = np.array(first + first[:1] * (group - len(first)))  # padding: a copy of one
-        states = initial(slot)
-        final = None
-        while True:
-            states = call(max(1, REFILL_TICKS))
-            if final is None:
-                final = jax.tree.map(lambda x: np.empty((n, *x.shape[1:]), x.dtype), states)
-            for full, part in zip(jax.tree.leaves(final), jax.tree.leaves(states), strict=True):
-                full[slot] = part
-            ended = states.done | (states.tick >= max_ticks)
-            refill = np.flatnonzero(ended)[: len(waiting)]
-            if ended.all() and not len(refill):
-                break
-            if len(refill):
-                slot[refill] = [waiting.pop() for _ in refill]
-                states = jax.tree.map(
-                    lambda old, new, rows=refill: _put_rows(old, rows, new),
-                    states,
-                    initial(slot[refill]),
-                )
+    final = jax.tree.map(np.asarray, place.get(exe(*args)))
+    # back to the batch order: the first position of every execution (padding repeats one)
+    first = np.empty(n, int)
+    first[layout[::-1]] = np.arange(len(layout))[::-1]
+    final = _take(final, first)
     if timings is not None:
         timings["rollout"] = time.perf_counter() - t0 - t_compile
     return final, t_compile

@@ -457,7 +457,7 @@ def test_slot_scheduling_matches_one_group(shipped, monkeypatch):
     from lantern_jax.scoring.metrics import finalize
 
     monkeypatch.setattr(ev, "REFILL_TICKS", 80)
-    monkeypatch.setattr(ev, "COMPACT_GROUP", 4)
+    monkeypatch.setattr(ev, "compact_slots", lambda backend=None: 4 // jax.device_count())
     execs = build_executions(shipped.select(["pe_0001", "rty_0001", "or_0001"]))
     pol = get_policy("coop")
     params = pol.init(jax.random.PRNGKey(0))

@@ -9,7 +9,7 @@ states are gathered (``process_allgather``) so that every process can score the 
 :func:`placement` picks the right pair of functions for the current run:
 
 * one process — the batch stays as it is (the rollout splits it over the local devices
-  itself, :func:`lantern_jax.sim.rollout.rollout_batch_parallel`);
+  itself, :func:`lantern_jax.sim.rollout.rollout_scheduled_parallel`);
 * several processes — ``put`` builds global arrays sharded along the batch over
   :func:`batch_mesh` (every process builds the same host batch, each process then hands over
   only its own shard: ``jax.make_array_from_callback``), parameters are replicated, and

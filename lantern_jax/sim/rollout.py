@@ -12,6 +12,11 @@ Two drivers:
   ticks for a whole batch, which stops as soon as every execution has ended (finished
   executions are frozen by their ``done`` mask).  Not reverse-differentiable (while loop); use
   :func:`rollout` under ``vmap`` for gradients.
+* :func:`rollout_scheduled` — the evaluation driver for large batches: a fixed number of
+  *slots* is stepped in chunks of scanned ticks, and after each chunk a slot whose execution
+  has ended takes the next waiting one, inside the same ``lax.while_loop`` (no return to the
+  host), so the batch never waits in lockstep behind its longest executions.
+  :func:`rollout_scheduled_parallel` runs one such scheduler per device.
 """
 
 from __future__ import annotations
@@ -177,3 +182,151 @@ def rollout_batch_parallel(
     )
     final = run(scenarios, start)
     return jax.tree.map(lambda x: x[:n], final)
+
+
+def _take(tree: Any, idx: Array) -> Any:
+    return jax.tree.map(lambda x: x[idx], tree)
+
+
+def scheduled_map(
+    advance: Callable[[Any, Any], Any],
+    ended: Callable[[Any], Array],
+    items: Any,
+    starts: Any,
+    slots: int,
+) -> Any:
+    """Run every item's state to its end through ``slots`` slots, refilled as items end.
+
+    Slot ``i`` starts with item ``i``; the others wait in index order.  Every loop step
+    applies ``advance`` to every slot whose item has not ended (vmapped; an ended item's
+    state is kept as it is), keeps each slot's state as its item's latest, and gives every
+    slot whose item has ended the next waiting item, starting from its state in ``starts``;
+    ended slots are refilled in slot order.  The loop stops when every slot's item has ended
+    and none is waiting.
+
+    Args:
+        advance: ``advance(item, state) -> state`` for ONE item (one loop step of it).
+        ended: ``ended(states) -> (S,) bool`` for the slots' batched states.
+        items: (n, ...) pytree, the items' fixed data.
+        starts: (n, ...) pytree, the items' initial states.
+        slots: static, items stepped together (1 <= slots <= n).
+
+    Returns:
+        (n, ...) the final states, in the order of ``items``.
+    """
+    n = jax.tree.leaves(items)[0].shape[0]
+    if not 1 <= slots <= n:
+        raise ValueError(f"scheduled_map: slots must be in 1..{n} (the batch), got {slots}")
+
+    def where(mask, a, b):  # per-slot choice between two batched states
+        return jax.tree.map(lambda x, y: jnp.where(mask.reshape((-1,) + (1,) * (x.ndim - 1)),
+                                                   x, y), a, b)  # fmt: skip
+
+    def cond(loop):
+        return ~jnp.all(ended(loop[1]))
+
+    def body(loop):
+        running, states, final, waiting = loop  # (S,) int32, (S,) states, (n,) states, () int32
+        states = where(ended(states), states, jax.vmap(advance)(_take(items, running), states))
+        final = jax.tree.map(lambda f, x: f.at[running].set(x), final, states)
+        over = ended(states)
+        following = waiting + jnp.cumsum(over.astype(jnp.int32)) - 1
+        refill = over & (following < n)
+        running = jnp.where(refill, following, running)
+        states = where(refill, _take(starts, running), states)
+        return running, states, final, waiting + jnp.sum(refill.astype(jnp.int32))
+
+    running = jnp.arange(slots, dtype=jnp.int32)
+    loop = (running, _take(starts, running), starts, jnp.asarray(slots, jnp.int32))
+    return jax.lax.while_loop(cond, body, loop)[2]
+
+
+def rollout_scheduled(
+    scenarios: Scenario,
+    starts: State,
+    act: ActFn,
+    policy_params: Any,
+    max_ticks: int | Array,
+    slots: int,
+    chunk: int = 40,
+    temperature: float | Array = 0.05,
+    privileged: bool = False,
+) -> State:
+    """Roll ``n`` executions through ``slots`` slots until every one has ended
+    (:func:`scheduled_map` with ``chunk`` scanned ticks per loop step).
+
+    Slot ``i`` starts with execution ``i``; the others wait in index order (the caller orders
+    them, e.g. longest first).  An execution has ended when it is ``done`` or has stepped
+    ``max_ticks`` ticks.  An execution's ticks are those of :func:`rollout_batch`: only which
+    executions share a chunk differs.
+
+    Args:
+        scenarios: (n, ...) batched scenarios.
+        starts: (n, ...) their states to start from (e.g. ``vmap(init_state)(scenarios)``).
+        act: policy ``act(policy_params, obs)`` for ONE scenario; it is vmapped here.
+        policy_params: policy parameters shared by the batch.
+        max_ticks: horizon (rounded up to whole chunks); a Python int or a traced int32
+            scalar.
+        slots: static, executions stepped together (1 <= slots <= n).
+        chunk: static, ticks per loop step.
+        temperature: soft-score temperature.
+        privileged: static; fill ``obs.privileged`` (``Policy.privileged``).
+
+    Returns:
+        (n, ...) the final states, in the order of ``scenarios``.
+    """
+    temperature = jnp.asarray(temperature, jnp.float32)
+    max_ticks = jnp.asarray(max_ticks, jnp.int32)
+
+    def run_chunk(scenario: Scenario, state: State) -> State:
+        def body(s, _):
+            return step(act, policy_params, scenario, s, temperature, privileged)[0], None
+
+        return jax.lax.scan(body, state, None, length=chunk)[0]
+
+    def ended(states: State) -> Array:
+        return states.done | (states.tick >= max_ticks)
+
+    return scheduled_map(run_chunk, ended, scenarios, starts, slots)
+
+
+def rollout_scheduled_parallel(
+    scenarios: Scenario,
+    starts: State,
+    act: ActFn,
+    policy_params: Any,
+    max_ticks: int | Array,
+    slots: int,
+    chunk: int = 40,
+    temperature: float | Array = 0.05,
+    privileged: bool = False,
+) -> State:
+    """:func:`rollout_scheduled` on every device of :func:`batch_mesh`, each with its own
+    scheduler over its own block of the batch (no communication; each stops on its own).
+
+    The batch must divide by the device count: device ``d`` runs executions
+    ``d * n / D .. (d + 1) * n / D - 1`` with ``slots`` slots of its own (the caller deals the
+    executions so that every block is a similar mix).  With one device this is
+    :func:`rollout_scheduled`.
+    """
+    n_dev = jax.device_count()
+    if n_dev == 1:
+        return rollout_scheduled(
+            scenarios, starts, act, policy_params, max_ticks, slots, chunk, temperature, privileged
+        )
+    from jax.sharding import PartitionSpec
+
+    mesh = batch_mesh()
+    spec = jax.sharding.NamedSharding(mesh, PartitionSpec("batch"))
+    scenarios = jax.lax.with_sharding_constraint(scenarios, spec)
+    starts = jax.lax.with_sharding_constraint(starts, spec)
+    run = jax.shard_map(
+        lambda sc, st: rollout_scheduled(
+            sc, st, act, policy_params, max_ticks, slots, chunk, temperature, privileged
+        ),
+        mesh=mesh,
+        in_specs=(PartitionSpec("batch"), PartitionSpec("batch")),
+        out_specs=PartitionSpec("batch"),
+        check_vma=False,
+    )
+    return run(scenarios, starts)
