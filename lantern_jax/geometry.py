@@ -359,8 +359,21 @@ def ray_box_intersect(
     return _ray_hit_local(ox, oy, dx, dy, extent[0], extent[1])
 
 
+def _cos_sin(yaws: Array, headings: tuple[Array, Array] | None) -> tuple[Array, Array]:
+    """``(cos, sin)`` of ``yaws``, or ``headings`` when the caller has them already."""
+    if headings is not None:
+        return _f32(headings[0]), _f32(headings[1])
+    yaws = _f32(yaws)
+    return jnp.cos(yaws), jnp.sin(yaws)
+
+
 def rays_boxes_hit(
-    origins: Array, dirs: Array, centers: Array, yaws: Array, extents: Array
+    origins: Array,
+    dirs: Array,
+    centers: Array,
+    yaws: Array,
+    extents: Array,
+    headings: tuple[Array, Array] | None = None,
 ) -> Array:
     """Hit distances of ``N`` rays against ``A`` boxes in one broadcasted computation.
 
@@ -371,14 +384,17 @@ def rays_boxes_hit(
         centers: (A, 2) float32 box centres, m.
         yaws: (A,) float32 box headings, rad.
         extents: (A, 2) float32 box half extents, m.
+        headings: optional ``(cos(yaws), sin(yaws))``, each (A,) float32, computed once by a
+            caller that tests the same boxes many times (every trigonometric element is a
+            call into the scalar math library on CPU); ``yaws`` is then not read.
 
     Returns:
         (N, A) float32 distances along each ray to its first hit with each box, m; 0 when the
         origin is inside the box, ``constants.BIG`` on a miss (padded slots are not masked).
     """
     origins, dirs, centers = _f32(origins), _f32(dirs), _f32(centers)
-    yaws, extents = _f32(yaws), _f32(extents)
-    ca, sa = jnp.cos(yaws), jnp.sin(yaws)  # (A,)
+    extents = _f32(extents)
+    ca, sa = _cos_sin(yaws, headings)  # (A,)
     rel = origins[..., None, :] - centers  # (A, 2) for a shared origin, else (N, A, 2)
     ox, oy = _to_box_frame(rel[..., 0], rel[..., 1], ca, sa)
     dx, dy = _to_box_frame(dirs[:, None, 0], dirs[:, None, 1], ca, sa)  # (N, A)
@@ -386,7 +402,12 @@ def rays_boxes_hit(
 
 
 def segments_hit_boxes(
-    starts: Array, ends: Array, centers: Array, yaws: Array, extents: Array
+    starts: Array,
+    ends: Array,
+    centers: Array,
+    yaws: Array,
+    extents: Array,
+    headings: tuple[Array, Array] | None = None,
 ) -> Array:
     """Whether closed segments touch oriented boxes (separating axes, no divisions).
 
@@ -397,13 +418,15 @@ def segments_hit_boxes(
         centers: (A, 2) float32 box centres, m.
         yaws: (A,) float32 box headings, rad.
         extents: (A, 2) float32 box half extents, m.
+        headings: optional ``(cos(yaws), sin(yaws))``, each (A,) float32 (as
+            :func:`rays_boxes_hit`).
 
     Returns:
         (N, A) bool, True where segment n and box a share at least one point.
     """
     starts, ends, centers = _f32(starts), _f32(ends), _f32(centers)
-    yaws, extents = _f32(yaws), _f32(extents)
-    ca, sa = jnp.cos(yaws), jnp.sin(yaws)
+    extents = _f32(extents)
+    ca, sa = _cos_sin(yaws, headings)
     ex, ey = extents[:, 0], extents[:, 1]
     # The barrier keeps the algebraic simplifier from rewriting these inputs into the (N, A)
     # test.  It does not make XLA compute them once: on CPU the barrier is expanded before the

@@ -26,6 +26,8 @@ stopping before the overlap point rather than by yielding gaps.
 
 from __future__ import annotations
 
+import math
+
 import jax
 import jax.numpy as jnp
 from flax import struct
@@ -114,11 +116,22 @@ def route_point(route: Array, arc: Array) -> Array:
     return route[k] + u * (route[k + 1] - route[k])
 
 
+def turn_angles(d: Array, ref: Array) -> Array:
+    """Unsigned angles (rad, in [0, pi]) between vectors ``d`` (..., 2) and ``ref`` (..., 2).
+
+    ``atan2(|cross|, dot)``: the wrapped heading difference of the two directions, from one
+    arctangent and no heading of its own (XLA on CPU calls a scalar math library for every
+    trigonometric element).
+    """
+    cross = ref[..., 0] * d[..., 1] - ref[..., 1] * d[..., 0]
+    dot = ref[..., 0] * d[..., 0] + ref[..., 1] * d[..., 1]
+    return jnp.arctan2(jnp.abs(cross), dot)
+
+
 def curvature_speed_limit(route: Array, lat_accel: Array, decel: Array) -> Array:
     """() m/s, the highest current speed from which every curve ahead can be taken comfortably."""
     d = route[1:] - route[:-1]
-    heading = jnp.arctan2(d[:, 1], d[:, 0])
-    dh = jnp.abs(jnp.angle(jnp.exp(1j * (heading[1:] - heading[:-1]))))
+    dh = turn_angles(d[1:], d[:-1])  # heading change between consecutive segments
     kappa = dh / ROUTE_STEP  # (N-2,) 1/m
     v_curve = jnp.sqrt(lat_accel / jnp.maximum(kappa, 1e-4))
     arc = (jnp.arange(kappa.shape[0], dtype=jnp.float32) + 1.0) * ROUTE_STEP
@@ -128,10 +141,12 @@ def curvature_speed_limit(route: Array, lat_accel: Array, decel: Array) -> Array
 def turn_entry_arc(route: Array, threshold: float = 0.3) -> Array:
     """() m, arc at which the route heading first deviates by > ``threshold`` rad (BIG: none)."""
     d = route[1:] - route[:-1]
-    heading = jnp.arctan2(d[:, 1], d[:, 0])
-    dev = jnp.abs(jnp.angle(jnp.exp(1j * (heading - heading[0]))))
+    # angle(d, d[0]) > threshold, compared through its cosine (no arctangent per segment)
+    dot = d[:, 0] * d[0, 0] + d[:, 1] * d[0, 1]
+    norms = jnp.sqrt(jnp.sum(d * d, -1) * jnp.sum(d[0] * d[0]))
+    turned = dot < math.cos(threshold) * norms
     arcs = jnp.arange(d.shape[0], dtype=jnp.float32) * ROUTE_STEP
-    return jnp.min(jnp.where(dev > threshold, arcs, BIG))
+    return jnp.min(jnp.where(turned, arcs, BIG))
 
 
 # ---------------------------------------------------------------------------------------------

@@ -160,6 +160,7 @@ def visible_actors(
     num = present.shape[0]
     box_c, box_yaw, box_e, occ_valid = _with_occluders(centers, yaws, extents, occluders)
 
+    box_heading = (jnp.cos(box_yaw), jnp.sin(box_yaw))  # once, not in every loop step
     blockers = present[None, :] & ~jnp.eye(num, dtype=bool)  # (target, blocker actor)
     occ = jnp.broadcast_to(occ_valid[None, :], (num, occ_valid.shape[0]))
     blockers = jnp.concatenate([blockers, occ], axis=1)  # (target, A + K)
@@ -179,13 +180,12 @@ def visible_actors(
         far = dist > OCCLUSION_EPS
         frac = jnp.where(far, 1.0 - OCCLUSION_EPS / jnp.where(far, dist, 1.0), 0.0)
         ends = cam_xy + rel * frac[..., None]
-        hits = segments_hit_boxes(cam_xy, ends, box_c, box_yaw, box_e)  # (9, A + K)
+        hits = segments_hit_boxes(cam_xy, ends, box_c, box_yaw, box_e, box_heading)  # (9, A+K)
         blocked = jnp.any(hits & blockers_t[None, :], axis=-1) & far
         return jnp.any(in_view & ~blocked)
 
-    yaw_t = box_yaw[:num]
     seen = jax.lax.map(
-        one_target, (box_c[:num], jnp.cos(yaw_t), jnp.sin(yaw_t), box_e[:num], blockers)
+        one_target, (box_c[:num], box_heading[0][:num], box_heading[1][:num], box_e[:num], blockers)
     )
     return present & seen
 
@@ -255,11 +255,15 @@ def range_image(
     max_range = jnp.asarray(max_range, jnp.float32)
     box_c, box_yaw, box_e, occ_valid = _with_occluders(centers, yaws, extents, occluders)
     hittable = jnp.concatenate([jnp.asarray(present, bool), occ_valid])  # (A + K,)
-    ang = cam_yaw + ray_angles(fov_deg, num_rays)
-    dirs = jnp.stack([jnp.cos(ang), jnp.sin(ang)], axis=-1)  # (num_rays, 2)
+    # the fixed ray bearings' unit vectors, turned by the camera heading (one sine and cosine)
+    bearing = ray_angles(fov_deg, num_rays)
+    bx, by = np.cos(bearing).astype(np.float32), np.sin(bearing).astype(np.float32)
+    c, s = jnp.cos(cam_yaw), jnp.sin(cam_yaw)
+    dirs = jnp.stack([c * bx - s * by, s * bx + c * by], axis=-1)  # (num_rays, 2)
+    box_heading = (jnp.cos(box_yaw), jnp.sin(box_yaw))  # once, not in both loop steps
 
     def nearest_hits(dirs_part):
-        t = rays_boxes_hit(cam_xy, dirs_part, box_c, box_yaw, box_e)  # (rays, A + K)
+        t = rays_boxes_hit(cam_xy, dirs_part, box_c, box_yaw, box_e, box_heading)  # (rays, A+K)
         t = jnp.where(hittable[None, :], t, 2.0 * BIG)  # never within range
         nearest = jnp.min(t, axis=-1)
         # the first box at the minimum, as argmin picks it, from two plain min-reductions:
