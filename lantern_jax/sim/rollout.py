@@ -83,6 +83,43 @@ def rollout(
     return jax.lax.scan(body, init_state(scenario), None, length=num_ticks)
 
 
+def chunk_runner(
+    act: ActFn, policy_params: Any, chunk: int, temperature: Array, privileged: bool
+) -> Callable[[Scenario, State], State]:
+    """``run_chunk(scenario, state)``: ``chunk`` scanned ticks of ONE execution (the scan
+    carries the state; the scenario is closed over, so its tick-invariant work is hoisted)."""
+
+    def run_chunk(scenario: Scenario, state: State) -> State:
+        def body(s, _):
+            return step(act, policy_params, scenario, s, temperature, privileged)[0], None
+
+        return jax.lax.scan(body, state, None, length=chunk)[0]
+
+    return run_chunk
+
+
+def on_every_device(fn: Callable[..., Any], *batched: Any) -> Any:
+    """``fn(*blocks)`` on every device of :func:`batch_mesh`, each device given its block of
+    the leading (batch) axis of every argument (``None`` arguments stay ``None``); the results'
+    blocks are joined along the batch axis.  No communication: each device runs on its own.
+    The batch must divide by the device count."""
+    from jax.sharding import PartitionSpec
+
+    mesh = batch_mesh()  # every device of every process (lantern_jax.sim.distributed)
+    spec = jax.sharding.NamedSharding(mesh, PartitionSpec("batch"))
+    batched = tuple(
+        None if x is None else jax.lax.with_sharding_constraint(x, spec) for x in batched
+    )
+    run = jax.shard_map(
+        fn,
+        mesh=mesh,
+        in_specs=tuple(None if x is None else PartitionSpec("batch") for x in batched),
+        out_specs=PartitionSpec("batch"),
+        check_vma=False,
+    )
+    return run(*batched)
+
+
 def rollout_batch(
     scenarios: Scenario,
     act: ActFn,
@@ -112,14 +149,7 @@ def rollout_batch(
     """
     temperature = jnp.asarray(temperature, jnp.float32)
     n_chunks = -(-max_ticks // chunk)
-
-    def run_chunk(scenario: Scenario, state: State) -> State:
-        def body(s, _):
-            return step(act, policy_params, scenario, s, temperature, privileged)[0], None
-
-        return jax.lax.scan(body, state, None, length=chunk)[0]
-
-    batched_chunk = jax.vmap(run_chunk)
+    batched_chunk = jax.vmap(chunk_runner(act, policy_params, chunk, temperature, privileged))
 
     def cond(loop):
         i, states = loop
@@ -155,8 +185,6 @@ def rollout_batch_parallel(
         return rollout_batch(
             scenarios, act, policy_params, max_ticks, chunk, temperature, start, privileged
         )
-    from jax.sharding import PartitionSpec
-
     n = jax.tree.leaves(scenarios)[0].shape[0]
     pad = (-n) % n_dev
 
@@ -166,21 +194,13 @@ def rollout_batch_parallel(
     if pad:
         scenarios = pad_tree(scenarios)
         start = None if start is None else pad_tree(start)
-    mesh = batch_mesh()  # every device of every process (lantern_jax.sim.distributed)
-    spec = jax.sharding.NamedSharding(mesh, PartitionSpec("batch"))
-    scenarios = jax.lax.with_sharding_constraint(scenarios, spec)
-    if start is not None:
-        start = jax.lax.with_sharding_constraint(start, spec)
-    run = jax.shard_map(
+    final = on_every_device(
         lambda sc, s: rollout_batch(
             sc, act, policy_params, max_ticks, chunk, temperature, s, privileged
         ),
-        mesh=mesh,
-        in_specs=(PartitionSpec("batch"), PartitionSpec("batch") if start is not None else None),
-        out_specs=PartitionSpec("batch"),
-        check_vma=False,
+        scenarios,
+        start,
     )
-    final = run(scenarios, start)
     return jax.tree.map(lambda x: x[:n], final)
 
 
@@ -278,15 +298,10 @@ def rollout_scheduled(
     temperature = jnp.asarray(temperature, jnp.float32)
     max_ticks = jnp.asarray(max_ticks, jnp.int32)
 
-    def run_chunk(scenario: Scenario, state: State) -> State:
-        def body(s, _):
-            return step(act, policy_params, scenario, s, temperature, privileged)[0], None
-
-        return jax.lax.scan(body, state, None, length=chunk)[0]
-
     def ended(states: State) -> Array:
         return states.done | (states.tick >= max_ticks)
 
+    run_chunk = chunk_runner(act, policy_params, chunk, temperature, privileged)
     return scheduled_map(run_chunk, ended, scenarios, starts, slots)
 
 
@@ -309,24 +324,14 @@ def rollout_scheduled_parallel(
     executions so that every block is a similar mix).  With one device this is
     :func:`rollout_scheduled`.
     """
-    n_dev = jax.device_count()
-    if n_dev == 1:
+    if jax.device_count() == 1:
         return rollout_scheduled(
             scenarios, starts, act, policy_params, max_ticks, slots, chunk, temperature, privileged
         )
-    from jax.sharding import PartitionSpec
-
-    mesh = batch_mesh()
-    spec = jax.sharding.NamedSharding(mesh, PartitionSpec("batch"))
-    scenarios = jax.lax.with_sharding_constraint(scenarios, spec)
-    starts = jax.lax.with_sharding_constraint(starts, spec)
-    run = jax.shard_map(
+    return on_every_device(
         lambda sc, st: rollout_scheduled(
             sc, st, act, policy_params, max_ticks, slots, chunk, temperature, privileged
         ),
-        mesh=mesh,
-        in_specs=(PartitionSpec("batch"), PartitionSpec("batch")),
-        out_specs=PartitionSpec("batch"),
-        check_vma=False,
+        scenarios,
+        starts,
     )
-    return run(scenarios, starts)
