@@ -2,8 +2,9 @@
 
 Two local processes with two CPU devices each (a global mesh of four devices, CPU collectives)
 run ``lantern-jax evaluate`` on one pair per family; a single process with one device runs the
-same command.  The slot scheduling is forced (``COMPACT_MIN_BATCH = 1``) so that the gather of
-each call's states and the refilling of slots with waiting executions run across processes.
+same command.  The slot scheduling is forced (``COMPACT_MIN_BATCH = 1``, two slots per device)
+so that every device refills its slots with waiting executions inside the program, and the
+final states are gathered across processes.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from lantern_jax.scoring.table import compare_route_tables, read_route_table
 
 WORKER = (
     "import sys, lantern_jax.evaluate as e; e.COMPACT_MIN_BATCH = 1; "
+    "e.compact_slots = lambda backend=None: 2; "
     "from lantern_jax.cli import main; sys.exit(main(sys.argv[1:]))"
 )
 COMMAND = ["evaluate", "--policy", "ego", "--pairs-per-family", "1", "--quiet"]
