@@ -233,6 +233,7 @@ def run_executions(
     compact: bool | None = None,
     privileged: bool = False,
     timings: dict | None = None,
+    pad_to: int | None = None,
 ):
     """Roll out a batch of executions until all have ended; returns (final states, seconds
     spent compiling).
@@ -249,17 +250,29 @@ def run_executions(
     runs on the global mesh, each process stepping its devices' blocks, and the final states
     are gathered on every process (:mod:`lantern_jax.sim.distributed`).  ``timings``
     (optional dict) receives ``"trace + lower"``, ``"XLA compile"`` and ``"rollout"`` seconds.
+    ``pad_to`` (optional) pads the batch to that many executions with copies of the first
+    that start ended (never stepped, last in every device's queue), so that batches of
+    different sizes share one compiled program at little cost.
+
+    Raises:
+        ValueError: when ``pad_to`` is smaller than the batch.
 
     Returns:
         (final states as NumPy arrays with leading axis ``n``, seconds spent compiling).
     """
     n = jax.tree.leaves(scenarios)[0].shape[0]
+    total = n if pad_to is None else pad_to
+    if total < n:
+        raise ValueError(f"run_executions: pad_to={pad_to} is smaller than the batch ({n})")
     if compact is None:
-        compact = n >= COMPACT_MIN_BATCH and max_ticks > REFILL_TICKS
+        compact = total >= COMPACT_MIN_BATCH and max_ticks > REFILL_TICKS
     place = placement()
     devices = jax.device_count()
     host = jax.tree.map(np.asarray, scenarios)
-    layout = schedule_layout(host.config.timeout_s, devices)
+    if total > n:  # padding: copies of the first execution, queued after every real one
+        host = _take(host, np.concatenate([np.arange(n), np.zeros(total - n, int)]))
+    timeout = np.where(np.arange(total) < n, host.config.timeout_s, -np.inf)
+    layout = schedule_layout(timeout, devices)
     per_device = len(layout) // devices
     slots = min(per_device, compact_slots()) if compact else per_device
     params = place.replicate(policy_params)
@@ -276,6 +289,7 @@ def run_executions(
         out = jax.tree.map(np.asarray, init_exe(_take(laid, rows)))
         parts.append(_take(out, np.arange(min(block, len(layout) - lo))))
     starts = jax.tree.map(lambda *x: np.concatenate(x), *parts)
+    starts = starts.replace(done=starts.done | (layout >= n))  # padding starts ended
     args = (place.put(laid), params, place.put(starts), place.replicate(np.int32(max_ticks)))
     t1 = time.perf_counter()
     exe = _executable(compiled_rollout(act, privileged, slots, REFILL_TICKS), *args,
@@ -286,9 +300,9 @@ def run_executions(
             timings[k] += v
     final = jax.tree.map(np.asarray, place.get(exe(*args)))
     # back to the batch order: the first position of every execution (padding repeats one)
-    first = np.empty(n, int)
+    first = np.empty(total, int)
     first[layout[::-1]] = np.arange(len(layout))[::-1]
-    final = _take(final, first)
+    final = _take(final, first[:n])
     if timings is not None:
         timings["rollout"] = time.perf_counter() - t0 - t_compile
     return final, t_compile

@@ -20,8 +20,10 @@ are filled in rounds of ``ROUND_SIZE`` candidates per unfilled slot:
    near duplicate of a pair selected before it.
 
 Rounds stop when every slot holds ``pairs_per_slot`` pairs.  The batch of every expert call is
-padded to one size, so one compilation serves all rounds.  This is an evaluation-layer concern
-(it runs the simulator and a policy), so it lives above :mod:`lantern_jax.scenarios`.
+padded to one size with executions that are never stepped, so one compilation serves all
+rounds and a round of a few candidates costs only their own ticks.  This is an
+evaluation-layer concern (it runs the simulator and a policy), so it lives above
+:mod:`lantern_jax.scenarios`.
 :func:`verify_regeneration` regenerates a shipped suite from its seed and compares every hash
 and every recorded route.
 
@@ -43,6 +45,7 @@ import jax
 import numpy as np
 
 from lantern_jax.constants import DT, FAMILIES, WEATHERS
+from lantern_jax.evaluate import run_executions
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.duplicates import near_duplicate, route_samples
 from lantern_jax.scenarios.families import sample_params
@@ -55,7 +58,6 @@ from lantern_jax.scenarios.suite import (
     suite_hash,
 )
 from lantern_jax.scoring.metrics import finalize
-from lantern_jax.sim.rollout import rollout_batch
 from lantern_jax.times import happened
 from lantern_jax.world import Scenario, tree_stack
 
@@ -74,18 +76,15 @@ GATES = ("gate_collision", "gate_route_deviation", "gate_lane", "gate_rule", "ga
 VALIDATOR = "expert"  # policy that filters newly generated suites
 LEGACY_VALIDATOR = "expert-v1"  # the validator of manifests that do not name one
 
-_VALIDATOR_RUN = {}
+_VALIDATOR_PARAMS = {}
 
 
-def _validator_run(validator: str):
-    """The jitted batched rollout of a validator policy (built once per validator)."""
-    if validator not in _VALIDATOR_RUN:
+def _validator(validator: str):
+    """A validator policy and its parameters (initialised once per validator)."""
+    if validator not in _VALIDATOR_PARAMS:
         pol = get_policy(validator)
-        params = pol.init(jax.random.PRNGKey(0))
-        _VALIDATOR_RUN[validator] = jax.jit(
-            lambda sc: rollout_batch(sc, pol.act, params, MAX_TICKS, privileged=pol.privileged)
-        )
-    return _VALIDATOR_RUN[validator]
+        _VALIDATOR_PARAMS[validator] = (pol, pol.init(jax.random.PRNGKey(0)))
+    return _VALIDATOR_PARAMS[validator]
 
 
 def dynamic_check(
@@ -97,21 +96,27 @@ def dynamic_check(
     """Run the validator (a privileged expert) on Route A (warning) and Route B of many pairs
     in one batched call.
 
+    The executions are stepped as an evaluation steps them
+    (:func:`lantern_jax.evaluate.run_executions`: refilled slots on every device), the batch
+    padded with executions that are never stepped.
+
     Args:
         scenarios_a, scenarios_b: the pairs' Route A and Route B scenarios.
-        batch_size: pad the batch of ``2 n`` executions to this many (copies of the last one)
-            so that calls of different sizes share one compilation; None = no padding.
+        batch_size: pad the batch of ``2 n`` executions to this many (never stepped) so that
+            calls of different sizes share one compilation; None = no padding.
 
     Returns:
         (accepted (n,) bool, reasons list[str] — "" for accepted pairs).
     """
     n = len(scenarios_a)
     execs = list(scenarios_a) + list(scenarios_b)
-    if batch_size is not None:
-        if batch_size < len(execs):
-            raise ValueError(f"dynamic_check: {len(execs)} executions exceed batch {batch_size}")
-        execs += [execs[-1]] * (batch_size - len(execs))
-    final = _validator_run(validator)(tree_stack(execs))
+    if batch_size is not None and batch_size < len(execs):
+        raise ValueError(f"dynamic_check: {len(execs)} executions exceed batch {batch_size}")
+    pol, params = _validator(validator)
+    final, _ = run_executions(
+        pol.act, tree_stack(execs), params, MAX_TICKS, compact=True,
+        privileged=pol.privileged, pad_to=batch_size,
+    )  # fmt: skip
     m = jax.tree.map(np.asarray, finalize(final.telemetry))
     proto = jax.tree.map(np.asarray, final.protocol)
     ok, reasons = np.ones(n, bool), [""] * n

@@ -97,3 +97,29 @@ def test_property_layout_holds_every_execution_in_equal_blocks(timeouts, devices
     t = np.asarray(timeouts)[blocks]
     # every block starts with its longest execution and runs longest first
     assert (np.diff(t, axis=1) <= 0).all()
+
+
+def test_padding_executions_queue_after_every_real_one():
+    """``run_executions(pad_to=...)`` gives its padding rows a timeout of -inf: every device
+    takes them last (and they start ended, so they are never stepped)."""
+    timeouts = np.array([3.0, 9.0, 5.0, -np.inf, -np.inf, -np.inf])
+    layout = schedule_layout(timeouts, devices=2).reshape(2, -1)
+    np.testing.assert_array_equal(layout, [[1, 0, 4], [2, 3, 5]])
+
+
+def test_padding_below_the_batch_is_refused(shipped_pair_executions):
+    from lantern_jax.evaluate import run_executions
+    from lantern_jax.policies.registry import get_policy
+
+    ego = get_policy("ego")
+    with pytest.raises(ValueError, match=r"pad_to=2 is smaller than the batch \(3\)"):
+        run_executions(ego.act, shipped_pair_executions, {}, 10, pad_to=2)
+
+
+@pytest.fixture(scope="module")
+def shipped_pair_executions():
+    """The three executions of one shipped pair (built on the host, nothing compiled)."""
+    from lantern_jax.evaluate import build_executions
+    from lantern_jax.scenarios.suite import load_suite
+
+    return build_executions(load_suite().select(["pe_0001"])).scenarios
