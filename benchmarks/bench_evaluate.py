@@ -11,6 +11,7 @@ Usage::
 
     python benchmarks/bench_evaluate.py [--policy coop] [--suite lantern-v3] [--repeats 3]
     python benchmarks/bench_evaluate.py --compile-cache /tmp/cc   # twice: cold, then warm
+                                        # (the warm run loads the program store's programs)
     LANTERN_JAX_CPU_DEVICES=1 python benchmarks/bench_evaluate.py   # one device only
 """
 
@@ -49,8 +50,9 @@ def main() -> None:
         "--compile-cache",
         default="off",
         metavar="DIR|off",
-        help="JAX's persistent compilation cache folder (run twice to see a warm cache); "
-        "default off: a cold compile",
+        help="JAX's persistent compilation cache folder, which also holds the program store "
+        "(lantern_jax.program_store; run twice to see a warm start); default off: a cold "
+        "compile",
     )
     args = ap.parse_args()
     jax.config.update("jax_enable_compilation_cache", args.compile_cache != "off")
@@ -87,9 +89,10 @@ def main() -> None:
     print(f"suite {suite.suite_id}: {len(suite.pairs)} pairs, {n} executions, policy {args.policy}")
     print(f"persistent compilation cache: {cache}")
     print(f"build worlds        {t_build:8.2f} s")
-    lower, xla = first["trace + lower"], first["XLA compile"]
+    lower, xla, load = first["trace + lower"], first["XLA compile"], first["program load"]
     print(f"compile             {t_compile:8.2f} s  (trace + lower {lower:.2f} s, XLA compile "
-          f"or cache load {xla:.2f} s; one program per policy)")  # fmt: skip
+          f"or cache load {xla:.2f} s, program store load {load:.2f} s; one program per "
+          f"policy)")  # fmt: skip
     print(f"first run           {first['rollout']:8.2f} s  (the call that compiled)")
     print(f"wall after compile  {wall:8.2f} s  (best of {args.repeats}: "
           f"{', '.join(f'{w:.2f}' for w in walls)})")  # fmt: skip

@@ -28,6 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 import pandas as pd
 
+from lantern_jax import program_store
 from lantern_jax.constants import DT, FAMILIES
 from lantern_jax.policies.base import Policy, check_policy_output
 from lantern_jax.policies.registry import get_policy
@@ -178,25 +179,38 @@ def compiled_rollout(act, privileged: bool = False, slots: int = COMPACT_SLOTS_O
 initial_states = jax.jit(jax.vmap(init_state))
 
 
-def _executable(fn, *args, timings: dict | None = None):
+def _executable(fn, *args, timings: dict | None = None, identity: Any = None):
     """AOT-compile ``fn`` for ``args`` once (cached by function and argument shapes).
 
-    ``timings`` (optional) receives the seconds of tracing and lowering (``"trace + lower"``)
-    and of XLA's compilation or the load from the persistent cache (``"XLA compile"``); both
-    0 when the program was already compiled in this process.
+    With an ``identity`` (what determines the program besides the code and the arguments'
+    shapes, see :func:`lantern_jax.program_store.program_key`) the compiled program is also
+    kept on disk in the program store and, in a later process, loaded from there without
+    tracing, lowering or compiling.
+
+    ``timings`` (optional) receives the seconds of tracing and lowering (``"trace + lower"``),
+    of XLA's compilation or the load from JAX's persistent cache (``"XLA compile"``) and of a
+    load from the program store (``"program load"``); all 0 when the program was already
+    compiled in this process.
     """
     shapes = jax.tree.map(lambda x: (tuple(np.shape(x)), str(np.result_type(x))), args)
     key = ("exe", fn, jax.tree.structure(args), str(jax.tree.leaves(shapes)))
-    t_lower = t_compile = 0.0
+    spent = {"trace + lower": 0.0, "XLA compile": 0.0, "program load": 0.0}
     if key not in _COMPILED:
         t0 = time.perf_counter()
-        lowered = fn.lower(*args)
-        t1 = time.perf_counter()
-        _COMPILED[key] = lowered.compile()
-        t_lower, t_compile = t1 - t0, time.perf_counter() - t1
+        stored = program_store.program_key(identity, args) if identity is not None else None
+        exe = program_store.load(stored) if stored is not None else None
+        if exe is not None:
+            spent["program load"] = time.perf_counter() - t0
+        else:
+            lowered = fn.lower(*args)
+            t1 = time.perf_counter()
+            exe, fresh = program_store.compile_lowered(lowered)
+            spent["trace + lower"], spent["XLA compile"] = t1 - t0, time.perf_counter() - t1
+            if stored is not None and fresh:
+                program_store.save(stored, exe)
+        _COMPILED[key] = exe
     if timings is not None:
-        timings["trace + lower"] = t_lower
-        timings["XLA compile"] = t_compile
+        timings.update(spent)
     return _COMPILED[key]
 
 
@@ -281,7 +295,8 @@ def run_executions(
     t0 = time.perf_counter()
     block = min(len(layout), slots * devices)  # the initial-state program's batch shape
     init_timings: dict[str, float] = {}
-    init_exe = _executable(initial_states, _take(laid, np.arange(block)), timings=init_timings)
+    init_exe = _executable(initial_states, _take(laid, np.arange(block)), timings=init_timings,
+                           identity=("initial_states",))
     t_compile = time.perf_counter() - t0
     parts = []
     for lo in range(0, len(layout), block):
@@ -293,7 +308,7 @@ def run_executions(
     args = (place.put(laid), params, place.put(starts), place.replicate(np.int32(max_ticks)))
     t1 = time.perf_counter()
     exe = _executable(compiled_rollout(act, privileged, slots, REFILL_TICKS), *args,
-                      timings=timings)  # fmt: skip
+                      timings=timings, identity=("rollout", act, privileged, slots, REFILL_TICKS))
     t_compile += time.perf_counter() - t1
     if timings is not None:
         for k, v in init_timings.items():
@@ -388,7 +403,8 @@ def run_policy(
     )  # fmt: skip
     t2 = time.perf_counter()
     t1 = t0 + t_compile
-    m_struct = jax.tree.map(np.asarray, _finalize_jit(final.telemetry))
+    finalize_exe = _executable(_finalize_jit, final.telemetry, identity=("finalize",))
+    m_struct = jax.tree.map(np.asarray, finalize_exe(final.telemetry))
     metrics = {f.name: getattr(m_struct, f.name) for f in dataclasses.fields(m_struct)}
     proto = jax.tree.map(np.asarray, final.protocol)
     proto = {f.name: getattr(proto, f.name) for f in dataclasses.fields(proto)}

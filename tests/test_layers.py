@@ -19,7 +19,8 @@ PACKAGE = Path(lantern_jax.__file__).parent
 LAYERS: tuple[tuple[str, ...], ...] = (
     ("constants", "times", "timing"),  # values, the time sentinel, wall-clock breakdowns
     ("geometry", "polyline", "split_map"),  # pure JAX maths and loop rewrites
-    ("world", "observation", "files", "language"),  # scenario and observation types; I/O; tokens
+    # scenario and observation types; I/O (files, compiled programs on disk); tokens
+    ("world", "observation", "files", "program_store", "language"),
     ("dynamics", "sensors", "scoring"),  # how things move, what is seen, how it is measured
     ("scenarios",),  # roads, families, protocol, warnings, suites (NumPy builders + JAX protocol)
     ("policies",),  # reference planners and the registry

@@ -1,0 +1,201 @@
+"""The program store (:mod:`lantern_jax.program_store`): compiled evaluation programs kept on
+disk and loaded by a later process without tracing or compiling.
+
+* a new process loads a stored program instead of tracing it, with identical result files;
+  a program that JAX's own cache served is not stored;
+* what cannot be keyed with certainty (a policy from outside the package, a lambda, a user
+  object) is not stored, and everything that determines a program changes its key;
+* an unreadable entry is deleted and the program compiled again; the store keeps the most
+  recently used programs; it is off when JAX's compilation cache is off.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from lantern_jax import evaluate as evaluate_module
+from lantern_jax import program_store
+from lantern_jax.evaluate import evaluate
+from lantern_jax.policies.base import Policy
+from lantern_jax.policies.expert import expert_act
+from lantern_jax.policies.reference import reference_act
+from lantern_jax.policies.registry import get_policy
+from lantern_jax.scenarios.suite import load_suite
+
+PAIR = ["pe_0001"]
+
+
+@pytest.fixture
+def store(tmp_path, monkeypatch):
+    """A fresh store folder and an empty in-process program cache (restored afterwards)."""
+    monkeypatch.setattr(program_store, "store_dir", lambda: tmp_path)
+    monkeypatch.setattr(evaluate_module, "_COMPILED", {})
+    return tmp_path
+
+
+def _coop_user_act(params, obs):
+    """A policy defined outside the package (here: in a test module)."""
+    return reference_act(params, obs)
+
+
+def _evaluate_in_new_process(cache: Path, out: Path) -> float:
+    """``lantern-jax evaluate`` of ``coop`` on one pair in a fresh process with its own cache
+    folder; returns the seconds its profile gives to loads from the program store."""
+    env = dict(os.environ, LANTERN_JAX_CACHE_DIR=str(cache), LANTERN_JAX_CPU_DEVICES="1",
+               XLA_FLAGS="")  # fmt: skip
+    env.pop("JAX_COMPILATION_CACHE_DIR", None)
+    res = subprocess.run(
+        [sys.executable, "-m", "lantern_jax", "evaluate", "--policy", "coop", "--pairs",
+         ",".join(PAIR), "--out", str(out), "--quiet", "--profile"],
+        env=env, capture_output=True, text=True, timeout=600,
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr[-2000:]
+    profile = res.stdout.split("Where the time went", 1)[1]
+    rows = {}
+    for line in profile.splitlines()[1:]:  # label, seconds, share, "%"
+        if line.strip():
+            label, seconds, _, _ = line.strip().rsplit(None, 3)
+            rows[label] = float(seconds)
+    assert rows["trace + lower"] >= 0.0 and rows["XLA compile"] >= 0.0
+    return rows["program load"], rows["trace + lower"]
+
+
+def test_a_new_process_loads_the_stored_program_without_tracing_and_same_results(tmp_path):
+    cache = tmp_path / "cache"
+    load, lower = _evaluate_in_new_process(cache, tmp_path / "first")
+    assert load == 0.0 and lower > 0.0
+    # the initial-state program, the rollout and the scoring program
+    assert len(list((cache / program_store.STORE_SUBDIR).glob("*.program"))) == 3
+    load, lower = _evaluate_in_new_process(cache, tmp_path / "second")
+    assert load > 0.0 and lower == 0.0
+    for name in ("route_level_results.csv", "family_cus.csv", "decomposition.csv"):
+        assert (tmp_path / "first" / name).read_bytes() == (tmp_path / "second" / name).read_bytes()
+
+
+def test_a_program_served_by_jax_cache_is_not_fresh():
+    """What JAX's persistent cache served cannot be stored (see ``compile_lowered``)."""
+    if not jax.config.jax_enable_compilation_cache:
+        pytest.skip("needs the test session's persistent compilation cache")
+    salt = float(np.random.default_rng().uniform(1.0, 2.0))  # a program no run compiled before
+    x = np.arange(5, dtype=np.float32)
+    _, fresh = program_store.compile_lowered(jax.jit(lambda v: jnp.cos(v) * salt).lower(x))
+    assert fresh
+    # the same program again, through a new function object: JAX's cache serves it
+    # (the test session keeps every program, conftest.py)
+    _, fresh = program_store.compile_lowered(jax.jit(lambda v: jnp.cos(v) * salt).lower(x))
+    assert not fresh
+
+
+def test_a_policy_from_outside_the_package_is_compiled_not_stored(store, monkeypatch):
+    keyed = []
+    real = program_store.program_key
+
+    def spy(identity, args):
+        key = real(identity, args)
+        keyed.append((identity[0], key is not None))
+        return key
+
+    monkeypatch.setattr(program_store, "program_key", spy)
+    coop = get_policy("coop")
+    mine = Policy("mine", coop.init, _coop_user_act, "coop, defined in a test module")
+    result = evaluate([mine], suite=load_suite().select(PAIR), progress=False)
+    assert len(result.route_table) == 2  # it ran
+    # only the programs that do not depend on the policy can be keyed
+    assert sorted(keyed) == [("finalize", True), ("initial_states", True), ("rollout", False)]
+
+
+def test_describe_accepts_package_functions_and_refuses_what_it_cannot_vouch_for():
+    assert program_store.describe(expert_act) == program_store.describe(expert_act)
+    assert "privileged" in program_store.describe(expert_act)  # function attributes count
+    for bad in (lambda p, o: o, _coop_user_act, object(), functools.partial(_coop_user_act)):
+        with pytest.raises(program_store.Unkeyable):
+            program_store.describe(bad)
+    # a closure is described by what it closes over
+    learned = get_policy("learned-coop").act
+    surround = get_policy("learned-surround").act
+    assert program_store.describe(learned) != program_store.describe(surround)
+    # arrays by their bytes, not their repr (which elides)
+    a = np.zeros(5000, np.float32)
+    b = a.copy()
+    b[2500] = 1.0
+    assert program_store.describe(a) != program_store.describe(b)
+
+
+def test_everything_that_determines_a_program_changes_its_key(monkeypatch):
+    args = (np.zeros((3, 2), np.float32), {"v": jnp.ones(4)})
+    base = program_store.program_key(("rollout", expert_act, True, 24, 20), args)
+    assert base is not None and base == program_store.program_key(
+        ("rollout", expert_act, True, 24, 20), args
+    )
+    others = [
+        program_store.program_key(("rollout", reference_act, True, 24, 20), args),
+        program_store.program_key(("rollout", expert_act, False, 24, 20), args),
+        program_store.program_key(("rollout", expert_act, True, 16, 20), args),
+        program_store.program_key(
+            ("rollout", expert_act, True, 24, 20), (np.zeros((4, 2), np.float32), args[1])
+        ),
+        program_store.program_key(
+            ("rollout", expert_act, True, 24, 20), (np.zeros((3, 2), np.int32), args[1])
+        ),
+        program_store.program_key(
+            ("rollout", expert_act, True, 24, 20), (args[0], {"w": jnp.ones(4)})
+        ),
+    ]
+    flags = os.environ.get("XLA_FLAGS", "")
+    monkeypatch.setenv("XLA_FLAGS", flags + " --xla_cpu_enable_fast_math=false")
+    others.append(program_store.program_key(("rollout", expert_act, True, 24, 20), args))
+    monkeypatch.undo()
+    monkeypatch.setattr(program_store, "code_fingerprint", lambda: "edited")
+    others.append(program_store.program_key(("rollout", expert_act, True, 24, 20), args))
+    assert None not in others
+    assert len({base, *others}) == len(others) + 1
+    assert program_store.program_key(("rollout", _coop_user_act), args) is None
+
+
+def test_an_unreadable_entry_is_deleted_and_reported_missing(store):
+    (store / "deadbeef.program").write_bytes(b"not a program")
+    assert program_store.load("deadbeef") is None
+    assert not (store / "deadbeef.program").exists()
+    assert program_store.load("absent") is None
+
+
+def test_a_freshly_compiled_program_round_trips_through_the_store(store):
+    salt = float(np.random.default_rng().uniform(1.0, 2.0))  # a program no run compiled before
+    x = np.linspace(0.0, 1.0, 7, dtype=np.float32)
+    compiled, fresh = program_store.compile_lowered(jax.jit(lambda v: jnp.sin(v) * salt).lower(x))
+    assert fresh
+    assert program_store.save("k", compiled)
+    loaded = program_store.load("k")
+    np.testing.assert_array_equal(np.asarray(loaded(x)), np.asarray(compiled(x)))
+
+
+def test_prune_keeps_the_most_recently_used(tmp_path):
+    now = time.time()
+    for i in range(5):
+        p = tmp_path / f"p{i}.program"
+        p.write_bytes(b"x")
+        os.utime(p, (now - 100 + i, now - 100 + i))
+    removed = program_store.prune(tmp_path, keep=2)
+    assert sorted(p.name for p in removed) == ["p0.program", "p1.program", "p2.program"]
+    assert sorted(p.name for p in tmp_path.glob("*.program")) == ["p3.program", "p4.program"]
+
+
+def test_the_store_is_off_with_the_compilation_cache():
+    was = jax.config.jax_enable_compilation_cache
+    try:
+        jax.config.update("jax_enable_compilation_cache", False)
+        assert program_store.store_dir() is None
+        assert not program_store.save("k", None)
+        assert program_store.load("k") is None
+    finally:
+        jax.config.update("jax_enable_compilation_cache", was)
