@@ -12,7 +12,8 @@ callable program (about 0.7 s for ``coop``'s rollout, measured in the README's s
 **The key** (:func:`program_key`) is a SHA-256 over
 
 * every file of this package, its modules and data (:func:`code_fingerprint`): any edit is a
-  new key;
+  new key; and the public module-level values of its loaded modules (:func:`module_state`), so
+  that a constant set at run time (a threshold changed in a notebook) is a new key too;
 * the versions of jax, jaxlib, flax and NumPy and of Python, the backend (platform, its version,
   device kinds and ids, process count), ``XLA_FLAGS`` and the JAX options that change what a
   trace produces (:data:`JAX_OPTIONS`);
@@ -128,12 +129,42 @@ def _version(name: str) -> str:
         return "absent"
 
 
+def module_state() -> str:
+    """SHA-256 over the public module-level values of this package's loaded modules.
+
+    The files (:func:`code_fingerprint`) say what the code was when it was loaded, not what a
+    user set since: a threshold assigned in a notebook (``thresholds.W_PROGRESS_A = 0.5``) or a
+    function replaced in a test changes what a trace bakes into a program.  Plain values,
+    tuples, arrays and this package's dataclass objects are described in full, functions and
+    classes by the name they carry; values that cannot be described (caches, loggers) are left
+    out.  Names starting with ``_`` (private, often lazily filled caches) are left out too.
+    """
+    h = hashlib.sha256()
+    for name in sorted(n for n in sys.modules if _ours(n)):
+        module = sys.modules[name]
+        if module is None or name == __name__:
+            continue
+        for attr, value in sorted(vars(module).items()):
+            if attr.startswith("_") or isinstance(value, types.ModuleType):
+                continue
+            if isinstance(value, types.FunctionType | type):
+                text = f"{value.__module__}.{value.__qualname__}"
+            else:
+                try:
+                    text = describe(value)
+                except Unkeyable:
+                    continue
+            h.update(f"{name}.{attr}={text}\n".encode())
+    return h.hexdigest()
+
+
 def environment() -> dict[str, Any]:
     """What outside this package's code determines a compiled program (part of every key)."""
     devices = jax.devices()
     return dict(
         format=STORE_FORMAT,
         code=code_fingerprint(),
+        module_state=module_state(),
         python=sys.version_info[:2],
         packages={n: _version(n) for n in LIBRARIES},
         backend=jax.default_backend(),
@@ -230,9 +261,19 @@ def describe(obj: Any, _depth: int = 0) -> str:
     return f"repr:{cls.__module__}.{cls.__qualname__}:{text}"
 
 
+def _placement_text(sharding: Any) -> str:
+    """The sharding and the ids of its devices in order (a mesh's text names only its shape)."""
+    mesh = getattr(sharding, "mesh", None)
+    if mesh is not None and hasattr(mesh, "device_ids"):
+        ids = np.asarray(mesh.device_ids).tolist()
+    else:
+        ids = sorted(d.id for d in sharding.device_set)
+    return f"{sharding}@{ids}"
+
+
 def _leaf_text(x: Any) -> str:
     if isinstance(x, jax.Array):
-        return f"{x.shape}{x.dtype.str}:{x.weak_type}:{x.sharding}"
+        return f"{x.shape}{x.dtype.str}:{x.weak_type}:{_placement_text(x.sharding)}"
     if isinstance(x, np.ndarray | np.generic):
         return f"{np.shape(x)}{x.dtype.str}:host"
     if isinstance(x, bool | int | float):  # traced as weak-typed scalars

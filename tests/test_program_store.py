@@ -199,3 +199,16 @@ def test_the_store_is_off_with_the_compilation_cache():
         assert program_store.load("k") is None
     finally:
         jax.config.update("jax_enable_compilation_cache", was)
+
+
+def test_a_constant_changed_at_run_time_changes_the_key(monkeypatch):
+    """A threshold set in a notebook is baked into the next trace: the stored program of the
+    old value must not answer for it."""
+    from lantern_jax.scoring import thresholds
+
+    args = (np.zeros(3, np.float32),)
+    before = program_store.program_key(("finalize",), args)
+    monkeypatch.setattr(thresholds, "W_PROGRESS_A", thresholds.W_PROGRESS_A + 0.01)
+    assert program_store.program_key(("finalize",), args) != before
+    monkeypatch.undo()
+    assert program_store.program_key(("finalize",), args) == before
