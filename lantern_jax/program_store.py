@@ -129,6 +129,41 @@ def _version(name: str) -> str:
         return "absent"
 
 
+def _code_digest(obj: Any) -> str:
+    """SHA-256 of the bytecode of a function of this package (nested functions included), or
+    of a class's methods: the code as loaded, which a module reloaded in a notebook changes
+    even where the files were hashed before."""
+    if not _ours(getattr(obj, "__module__", None)):
+        return ""
+    if isinstance(obj, types.FunctionType):
+        functions = [obj]
+    else:
+        functions = [getattr(v, "__func__", v) for v in vars(obj).values()]
+        functions = [f for f in functions if isinstance(f, types.FunctionType)]
+    h = hashlib.sha256()
+    for f in functions:
+        h.update(_code_bytes(f.__code__))
+    return h.hexdigest()
+
+
+def _code_bytes(code: types.CodeType) -> bytes:
+    """A code object's bytecode, names and constants (nested code included) as bytes that are
+    the same in every process (``marshal`` output depends on reference counts; a frozenset's
+    order on the string hash seed)."""
+
+    def const(c: Any) -> str:
+        if isinstance(c, types.CodeType):
+            return _code_bytes(c).hex()
+        if isinstance(c, tuple):
+            return "(" + ",".join(const(x) for x in c) + ")"
+        if isinstance(c, frozenset):
+            return "{" + ",".join(sorted(const(x) for x in c)) + "}"
+        return repr(c)
+
+    names = (code.co_names, code.co_varnames, code.co_freevars, code.co_cellvars)
+    return b"|".join([code.co_code, repr(names).encode(), const(code.co_consts).encode()])
+
+
 def module_state() -> str:
     """SHA-256 over the public module-level values of this package's loaded modules.
 
@@ -136,8 +171,9 @@ def module_state() -> str:
     user set since: a threshold assigned in a notebook (``thresholds.W_PROGRESS_A = 0.5``) or a
     function replaced in a test changes what a trace bakes into a program.  Plain values,
     tuples, arrays and this package's dataclass objects are described in full, functions and
-    classes by the name they carry; values that cannot be described (caches, loggers) are left
-    out.  Names starting with ``_`` (private, often lazily filled caches) are left out too.
+    classes by the name they carry and the bytecode they hold (:func:`_code_digest`); values
+    that cannot be described (caches, loggers) are left out, and so are names starting with
+    ``_`` (private, often lazily filled caches).
     """
     h = hashlib.sha256()
     for name in sorted(n for n in sys.modules if _ours(n)):
@@ -148,7 +184,7 @@ def module_state() -> str:
             if attr.startswith("_") or isinstance(value, types.ModuleType):
                 continue
             if isinstance(value, types.FunctionType | type):
-                text = f"{value.__module__}.{value.__qualname__}"
+                text = f"{value.__module__}.{value.__qualname__}:{_code_digest(value)}"
             else:
                 try:
                     text = describe(value)

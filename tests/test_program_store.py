@@ -212,3 +212,19 @@ def test_a_constant_changed_at_run_time_changes_the_key(monkeypatch):
     assert program_store.program_key(("finalize",), args) != before
     monkeypatch.undo()
     assert program_store.program_key(("finalize",), args) == before
+
+
+def test_a_function_reloaded_under_the_same_name_changes_the_key(monkeypatch):
+    """A module reloaded in a notebook keeps its functions' names but not their code."""
+    from lantern_jax.policies import planner
+
+    original = planner.route_point
+
+    def route_point(route, arc):  # the same name, other code
+        return original(route, arc + 0.0)
+
+    route_point.__module__, route_point.__qualname__ = planner.__name__, "route_point"
+    args = (np.zeros(3, np.float32),)
+    before = program_store.program_key(("finalize",), args)
+    monkeypatch.setattr(planner, "route_point", route_point)
+    assert program_store.program_key(("finalize",), args) != before
