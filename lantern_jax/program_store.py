@@ -7,14 +7,16 @@ for the evaluation's rollout on a 2-core CPU) before the cache answers, and then
 executable (about 1.5 s).  This store keeps the *loaded-ready executable itself*
 (:mod:`jax.experimental.serialize_executable`), keyed by everything that determines the
 program, so that a second run of the same evaluation goes straight from its arguments to a
-callable program (about 0.7 s for ``coop``'s rollout, measured in the README's speed section).
+callable program (0.75-0.9 s for a policy's three programs, measured in the README's speed
+section).
 
 **The key** (:func:`program_key`) is a SHA-256 over
 
 * every file of this package, its modules and data (:func:`code_fingerprint`): any edit is a
-  new key; and the public module-level values of its loaded modules (:func:`module_state`), so
-  that a constant set at run time (a threshold changed in a notebook) is a new key too;
-* the versions of jax, jaxlib, flax and NumPy and of Python, the backend (platform, its version,
+  new key; and the public module-level values and bytecode of its loaded modules
+  (:func:`module_state`), so that a constant set at run time (a threshold changed in a
+  notebook) or a reloaded module is a new key too;
+* the versions of :data:`LIBRARIES` and of Python, the backend (platform, its version,
   device kinds and ids, process count), ``XLA_FLAGS`` and the JAX options that change what a
   trace produces (:data:`JAX_OPTIONS`);
 * what the caller names as the program's identity (for the rollout: the policy's ``act``
