@@ -31,13 +31,16 @@ from lantern_jax.sim.rollout import rollout
 from lantern_jax.world import tree_stack
 
 
-def first_seen_table(family: str, policy: str, suite: str = SUITE_ID) -> pd.DataFrame:
-    """One row per Route A execution of ``family`` (warning condition).
+def recorded_route_a(family: str, policy: str, suite: str = SUITE_ID):
+    """Roll out every Route A execution of ``family`` (warning condition) with full records.
 
-    Columns: ``pair``; ``t_warn_point`` (s, when the ego reached the warning point);
-    ``first_seen_s`` (s, first approach tick with the hazard visible, NaN if never);
-    ``distance_m`` and ``bearing_deg`` (ego to hazard centre at that tick, ego frame, + left);
-    ``seen_ticks`` and ``approach_ticks`` (visible / all ticks before the warning point).
+    Returns:
+        (suite, pair indices into ``suite.pairs``, batched scenarios, final states, tick
+        records), the last two as NumPy arrays with leading axis = execution; the horizon
+        covers the longest route timeout.
+
+    Raises:
+        ValueError: naming ``family`` when the suite has no pair of it.
     """
     s = load_suite(suite)
     wa, _, _ = build_suite_scenarios(s)
@@ -55,6 +58,18 @@ def first_seen_table(family: str, policy: str, suite: str = SUITE_ID) -> pd.Data
         )
     )
     final, rec = jax.tree.map(np.asarray, run(batch, params))
+    return s, idx, batch, final, rec
+
+
+def first_seen_table(family: str, policy: str, suite: str = SUITE_ID) -> pd.DataFrame:
+    """One row per Route A execution of ``family`` (warning condition).
+
+    Columns: ``pair``; ``t_warn_point`` (s, when the ego reached the warning point);
+    ``first_seen_s`` (s, first approach tick with the hazard visible, NaN if never);
+    ``distance_m`` and ``bearing_deg`` (ego to hazard centre at that tick, ego frame, + left);
+    ``seen_ticks`` and ``approach_ticks`` (visible / all ticks before the warning point).
+    """
+    s, idx, batch, final, rec = recorded_route_a(family, policy, suite)
     hazard = np.asarray(batch.config.hazard_index)
     rows = []
     for k, i in enumerate(idx):
