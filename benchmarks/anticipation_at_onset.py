@@ -10,7 +10,9 @@ the event, and for every execution scoring below ``--below``: how the event bega
 (geometric trigger, anti-deadlock rule, or coincident with the warning), the warning-to-event
 interval, the ego's speed at onset and its mean acceleration over the 0.5 s before the event,
 and where the hazard actor was then (ahead / left of the ego, m) with its speed and the
-ego's closing speed on it (m/s; > 0 = the ego gains on it)::
+ego's closing speed on it (m/s; > 0 = the ego gains on it; the hazard's velocity is taken from
+its positions at the onset tick and the next, so a hazard that starts moving in the onset tick,
+as Right-Turn Yield's flow does, shows its speed after the start)::
 
     python benchmarks/anticipation_at_onset.py                       # expert, every family
     python benchmarks/anticipation_at_onset.py --policy coop --family VC RTY
