@@ -17,14 +17,14 @@ as Right-Turn Yield's flow does, shows its speed after the start)::
     python benchmarks/anticipation_at_onset.py                       # expert, every family
     python benchmarks/anticipation_at_onset.py --policy coop --family VC RTY
 
-The rollouts are the simulator's own (``rollout(..., record=True)``); S_ant is the scorer's.
+The rollouts are the simulator's own (:func:`lantern_jax.diagnostics.run_recorded`); S_ant is
+the scorer's.
 """
 
 from __future__ import annotations
 
 import argparse
 
-import jax
 import numpy as np
 import pandas as pd
 from hazard_first_seen import recorded_route_a
@@ -33,9 +33,7 @@ from lantern_jax.constants import DT, FAMILIES
 from lantern_jax.policies.registry import policy_names
 from lantern_jax.scenarios.suite import SUITE_ID
 from lantern_jax.scoring.components import anticipation
-from lantern_jax.scoring.metrics import finalize
-
-WINDOW_TICKS = 10  # 0.5 s at 20 Hz: the length of the scorer's response window
+from lantern_jax.scoring.thresholds import REACT_WINDOW
 
 
 def onset_table(family: str, policy: str, suite: str = SUITE_ID) -> pd.DataFrame:
@@ -48,8 +46,7 @@ def onset_table(family: str, policy: str, suite: str = SUITE_ID) -> pd.DataFrame
     ``hazard_left_m`` (hazard centre in the ego frame at onset); ``hazard_speed`` (m/s) and
     ``closing_speed`` (m/s, ego speed minus the hazard's velocity along the ego heading).
     """
-    s, idx, batch, final, rec = recorded_route_a(family, policy, suite)
-    met = jax.tree.map(np.asarray, jax.vmap(finalize)(final.telemetry))
+    s, idx, batch, final, rec, met = recorded_route_a(family, policy, suite)
     s_ant = np.asarray(
         anticipation.score(met.t_ref_s, met.t_event_s, met.t_react_s,
                            met.anticipation_available, met.coincident_onset)
@@ -79,7 +76,7 @@ def onset_table(family: str, policy: str, suite: str = SUITE_ID) -> pd.DataFrame
             "S_ant": float(s_ant[k]),
             "react_after_onset_s": float(met.t_react_s[k]) - t_ref,
             "v_onset": float(rec.ego_speed[k][j]),
-            "a_pre_event": float(np.mean(rec.ego_accel[k][max(je - WINDOW_TICKS + 1, 0):je + 1])),
+            "a_pre_event": float(np.mean(rec.ego_accel[k][max(je - REACT_WINDOW + 1, 0):je + 1])),
             "hazard_ahead_m": float(d @ fwd),
             "hazard_left_m": float(d @ left),
             "hazard_speed": float(np.hypot(*vel)),

@@ -24,20 +24,21 @@ import jax
 import numpy as np
 import pandas as pd
 
-from lantern_jax.constants import DT, FAMILIES
+from lantern_jax.constants import FAMILIES
+from lantern_jax.diagnostics import run_recorded
 from lantern_jax.policies.registry import get_policy, policy_names
 from lantern_jax.scenarios.suite import SUITE_ID, build_suite_scenarios, load_suite
-from lantern_jax.sim.rollout import rollout
 from lantern_jax.world import tree_stack
 
 
 def recorded_route_a(family: str, policy: str, suite: str = SUITE_ID):
-    """Roll out every Route A execution of ``family`` (warning condition) with full records.
+    """Roll out every Route A execution of ``family`` (warning condition) with full records
+    (:func:`lantern_jax.diagnostics.run_recorded`).
 
     Returns:
         (suite, pair indices into ``suite.pairs``, batched scenarios, final states, tick
-        records), the last two as NumPy arrays with leading axis = execution; the horizon
-        covers the longest route timeout.
+        records, hard metrics), the last three as NumPy arrays with leading axis = execution;
+        the horizon covers the longest route timeout.
 
     Raises:
         ValueError: naming ``family`` when the suite has no pair of it.
@@ -48,17 +49,9 @@ def recorded_route_a(family: str, policy: str, suite: str = SUITE_ID):
     if not idx:
         raise ValueError(f"family: {family!r} has no pairs in suite {s.suite_id!r}")
     pol = get_policy(policy)
-    params = pol.init(jax.random.PRNGKey(0))
-    batch = tree_stack([wa[i] for i in idx])
-    horizon = int(np.ceil(float(np.max(np.asarray(batch.config.timeout_s))) / DT))
-    run = jax.jit(
-        jax.vmap(
-            lambda sc, p: rollout(sc, pol.act, p, horizon, record=True, privileged=pol.privileged),
-            in_axes=(0, None),
-        )
-    )
-    final, rec = jax.tree.map(np.asarray, run(batch, params))
-    return s, idx, batch, final, rec
+    scenarios = [wa[i] for i in idx]
+    final, rec, metrics = run_recorded(pol, pol.init(jax.random.PRNGKey(0)), scenarios)
+    return s, idx, tree_stack(scenarios), final, rec, metrics
 
 
 def first_seen_table(family: str, policy: str, suite: str = SUITE_ID) -> pd.DataFrame:
@@ -69,7 +62,7 @@ def first_seen_table(family: str, policy: str, suite: str = SUITE_ID) -> pd.Data
     ``distance_m`` and ``bearing_deg`` (ego to hazard centre at that tick, ego frame, + left);
     ``seen_ticks`` and ``approach_ticks`` (visible / all ticks before the warning point).
     """
-    s, idx, batch, final, rec = recorded_route_a(family, policy, suite)
+    s, idx, batch, final, rec, _ = recorded_route_a(family, policy, suite)
     hazard = np.asarray(batch.config.hazard_index)
     rows = []
     for k, i in enumerate(idx):
