@@ -295,8 +295,12 @@ def run_executions(
     t0 = time.perf_counter()
     block = min(len(layout), slots * devices)  # the initial-state program's batch shape
     init_timings: dict[str, float] = {}
-    init_exe = _executable(initial_states, _take(laid, np.arange(block)), timings=init_timings,
-                           identity=("initial_states",))
+    init_exe = _executable(
+        initial_states,
+        _take(laid, np.arange(block)),
+        timings=init_timings,
+        identity=("initial_states",),
+    )
     t_compile = time.perf_counter() - t0
     parts = []
     for lo in range(0, len(layout), block):
@@ -307,8 +311,12 @@ def run_executions(
     starts = starts.replace(done=starts.done | (layout >= n))  # padding starts ended
     args = (place.put(laid), params, place.put(starts), place.replicate(np.int32(max_ticks)))
     t1 = time.perf_counter()
-    exe = _executable(compiled_rollout(act, privileged, slots, REFILL_TICKS), *args,
-                      timings=timings, identity=("rollout", act, privileged, slots, REFILL_TICKS))
+    exe = _executable(
+        compiled_rollout(act, privileged, slots, REFILL_TICKS),
+        *args,
+        timings=timings,
+        identity=("rollout", act, privileged, slots, REFILL_TICKS),
+    )
     t_compile += time.perf_counter() - t1
     if timings is not None:
         for k, v in init_timings.items():

@@ -80,5 +80,7 @@ display(convergence_plot(traces, f"{pair.pair_id}: ego, warning condition"))
 for t in traces:
     for f in t.found:
         values = problem.space.as_dict(np.asarray(f["values"]))
-        print(f"{t.method:>8} restart {f['restart']}: CUS {f['cus']:.1f} at",
-              {k: round(v, 2) for k, v in values.items()})
+        print(
+            f"{t.method:>8} restart {f['restart']}: CUS {f['cus']:.1f} at",
+            {k: round(v, 2) for k, v in values.items()},
+        )
