@@ -66,15 +66,15 @@ def main() -> None:
     policy = get_policy(args.policy)
     params = policy.init(jax.random.PRNGKey(0))
     t0 = time.perf_counter()
-    run = dict(privileged=policy.privileged)
+    run = {}
     first: dict[str, float] = {}
     final, t_compile = run_executions(
-        policy.act, execs.scenarios, params, execs.max_ticks, timings=first, **run
+        policy, execs.scenarios, params, execs.max_ticks, timings=first, **run
     )
     walls, cpus = [], []
     for _ in range(args.repeats):
         t0, c0 = time.perf_counter(), time.process_time()
-        final, _ = run_executions(policy.act, execs.scenarios, params, execs.max_ticks, **run)
+        final, _ = run_executions(policy, execs.scenarios, params, execs.max_ticks, **run)
         jax.block_until_ready(final)
         walls.append(time.perf_counter() - t0)
         cpus.append(time.process_time() - c0)

@@ -39,10 +39,10 @@ def main() -> int:
     scenarios = build_executions(load_suite()).scenarios
     n = jax.tree.leaves(scenarios)[0].shape[0]
     w = host_models.make_weights()
-    acts = {"jax": host_models.jax_act(w), "host (NumPy)": host_models.numpy_policy(w).act}
+    policies = {"jax": host_models.jax_policy(w), "host (NumPy)": host_models.numpy_policy(w)}
     best = {}
-    for name, act in acts.items():
-        run = jax.jit(lambda sc, act=act: rollout_batch(sc, act, {}, args.ticks).done)
+    for name, pol in policies.items():
+        run = jax.jit(lambda sc, pol=pol: rollout_batch(sc, pol, {}, args.ticks).done)
         jax.block_until_ready(run(scenarios))  # compile
         times = []
         for _ in range(args.repeats):

@@ -101,13 +101,13 @@ def main() -> None:
     execs = build_executions(load_suite(args.suite))
     policy = get_policy(args.policy)
     params = policy.init(jax.random.PRNGKey(0))
-    run = dict(privileged=policy.privileged)
-    final, _ = run_executions(policy.act, execs.scenarios, params, execs.max_ticks, **run)
+    run = {}
+    final, _ = run_executions(policy, execs.scenarios, params, execs.max_ticks, **run)
     lived = int(np.sum(np.asarray(final.tick)))
     walls = []
     for _ in range(args.repeats):
         t0 = time.perf_counter()
-        run_executions(policy.act, execs.scenarios, params, execs.max_ticks, **run)
+        run_executions(policy, execs.scenarios, params, execs.max_ticks, **run)
         walls.append(time.perf_counter() - t0)
     wall = min(walls)
     ours = lived / wall

@@ -83,7 +83,7 @@ def main() -> None:
     def run(worlds):
         # One chunk of ``ticks`` ticks: a fixed horizon (the routes outlast it), split over the
         # local devices.
-        final = rollout_batch_parallel(worlds, policy.act, params, args.ticks, chunk=args.ticks)
+        final = rollout_batch_parallel(worlds, policy, params, args.ticks, chunk=args.ticks)
         return final.telemetry
 
     fn = jax.jit(run)

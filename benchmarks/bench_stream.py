@@ -28,7 +28,7 @@ from lantern_jax.stream import stream_executions, stress_source
 count, chunk = int(sys.argv[1]), int(sys.argv[2])
 source, max_ticks, _ = stress_source()
 ego = get_policy("ego")
-res = stream_executions(ego.act, ego.init(jax.random.PRNGKey(0)), source, count, max_ticks,
+res = stream_executions(ego, ego.init(jax.random.PRNGKey(0)), source, count, max_ticks,
                         chunk=min(chunk, count), progress=sys.stderr.isatty())
 run = res.seconds_total - res.seconds_compile
 print(json.dumps(dict(count=count, chunk=min(chunk, count), chunks=res.chunks,

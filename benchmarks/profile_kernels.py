@@ -120,7 +120,7 @@ def main() -> None:
     temp = np.float32(0.05)
 
     def tick(s, x):
-        return step(pol.act, params, s, x, temp, pol.privileged)[0]
+        return step(pol, params, s, x, temp)[0]
 
     ticks = max(args.scan, 1)
     program = tick

@@ -41,26 +41,35 @@ from lantern_jax.scenarios import protocol  # noqa: E402
 from lantern_jax.scenarios.suite import load_suite  # noqa: E402
 from lantern_jax.scoring.measure import execution_ended, justified_stop, measure  # noqa: E402
 from lantern_jax.scoring.telemetry import update_telemetry  # noqa: E402
-from lantern_jax.sim.observe import observe  # noqa: E402
+from lantern_jax.sim.observe import (  # noqa: E402
+    actors_in_ego_frame,
+    delivered_warning,
+    observe,
+    route_ahead,
+)
 from lantern_jax.sim.sense import locate_on_route, sense  # noqa: E402
 from lantern_jax.sim.step import step  # noqa: E402
 from lantern_jax.world import present  # noqa: E402
 
 
-def stages(act, params, privileged: bool):
+def stages(policy, params):
     """The stages of one tick as functions of (scenario, state, inputs of the stage)."""
     temp = jnp.float32(0.05)
 
     def inputs(sc, st):
         """Every intermediate of one tick (mirrors ``step``)."""
         cfg, script, h = sc.config, sc.actors, sc.config.hazard_index
-        obs = observe(sc, st, privileged)
-        wp = act(params, obs)
+        obs = observe(sc, st, policy.sensors)
+        wp, _ = policy.step(params, st.policy_carry, obs)
+        warned = delivered_warning(sc, st)[0]
+        truth = actors_in_ego_frame(sc, st)
         ego, fault, _ = follow_plan(st.ego, wp, cfg.friction)
         t = st.t + DT
         arc, dist, progress = locate_on_route(sc.route, ego.xy, st.percept.progress)
         light = ego_light_state(sc.lights, cfg.ego_light, t)
-        gap, lateral = corridor_gaps(obs)
+        gap, lateral = corridor_gaps(
+            route_ahead(sc, st)[0], truth["actor_xy"], truth["actor_dir"], truth["actor_extent"]
+        )
         pb = present(script, st.actors)
         held = protocol.ego_held(
             light, cfg.ego_stop_s - arc, gap, lateral, pb, script.role, st.actors.speed
@@ -73,7 +82,7 @@ def stages(act, params, privileged: bool):
         percept = sense(sc, ego, actors, arc, dist, progress)
         vis = percept.visible[h] & present(script, actors)[h]
         proto = protocol.advance_hazard(proto, cfg, t, vis, actors.s[h], ego.speed)
-        proto = protocol.record_onset(proto, st.protocol, cfg, vis, obs.warning_active)
+        proto = protocol.record_onset(proto, st.protocol, cfg, vis, warned)
         justified = justified_stop(
             light_holds_ego(light, cfg.ego_stop_s - arc), gap, lateral, pb,
             sc.route.length - arc,
@@ -83,10 +92,10 @@ def stages(act, params, privileged: bool):
                     justified=justified)  # fmt: skip
 
     def s_observe(sc, st, x):
-        return observe(sc, st, privileged)
+        return observe(sc, st, policy.sensors)
 
     def s_policy(sc, st, x):
-        return act(params, x["obs"])
+        return policy.step(params, st.policy_carry, x["obs"])
 
     def s_controller(sc, st, x):
         return follow_plan(st.ego, x["wp"], sc.config.friction)[:2]
@@ -115,7 +124,7 @@ def stages(act, params, privileged: bool):
         return tel, done
 
     def s_tick(sc, st, x):
-        return step(act, params, sc, st, temp, privileged)[0]
+        return step(policy, params, sc, st, temp)[0]
 
     table = {
         "observation (warning fields, corridor)": s_observe,
@@ -162,9 +171,7 @@ def mid_run_states(policy: str, batch: int, warmup_ticks: int):
     params = pol.init(jax.random.PRNGKey(0))
     idx = np.linspace(0, 3 * execs.num_pairs - 1, batch).astype(int)
     sc = jax.tree.map(lambda x: np.asarray(x)[idx], execs.scenarios)
-    st, _ = run_executions(
-        pol.act, sc, params, warmup_ticks, compact=False, privileged=pol.privileged
-    )
+    st, _ = run_executions(pol, sc, params, warmup_ticks, compact=False)
     return pol, params, sc, st
 
 
@@ -177,7 +184,7 @@ def main() -> None:
     args = ap.parse_args()
 
     pol, params, sc, st = mid_run_states(args.policy, args.batch, args.warmup_ticks)
-    inputs, table, tick = stages(pol.act, params, pol.privileged)
+    inputs, table, tick = stages(pol, params)
     x = jax.jit(jax.vmap(inputs))(sc, st)
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores; jax {jax.__version__}, "
           f"{jax.device_count()} device(s) (stages run on one); batch {args.batch} "

@@ -66,6 +66,11 @@ def jax_act(w: dict[str, np.ndarray]):
     return act
 
 
+def jax_policy(w: dict[str, np.ndarray], name: str = "jax-mlp") -> Policy:
+    """The JAX version as a policy with the same sensors as :func:`numpy_policy`."""
+    return Policy(name, lambda key: {}, jax_act(w), "the same MLP in JAX", sensors=("warning",))
+
+
 def numpy_policy(w: dict[str, np.ndarray], name: str = "numpy-mlp", fn=None) -> Policy:
     """The NumPy model (or ``fn``) as a host policy."""
     return host_policy(
@@ -75,7 +80,7 @@ def numpy_policy(w: dict[str, np.ndarray], name: str = "numpy-mlp", fn=None) -> 
         preprocess=observation_vector,
         postprocess=actions_to_waypoints,
         description="random MLP run on the host",
-        uses_warning=True,
+        sensors=("warning",),
     )
 
 

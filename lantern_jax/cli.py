@@ -14,6 +14,7 @@
     lantern-jax wording --policy coop    # warning wording by ambiguity (paper appendix table)
     lantern-jax diagnostics nonactionable --policy coop   # non-actionable warnings, empty road
     lantern-jax diagnostics distance --policy coop        # near vs far warning on Route B
+    lantern-jax diagnostics language --policy coop        # does the policy read the words?
     lantern-jax ablations --list         # the protocol ablations
     lantern-jax ablations --policy coop  # the paper's ablation table for one policy
 
@@ -578,11 +579,10 @@ def cmd_policies(args: argparse.Namespace, argv: Sequence[str]) -> int:
     rows = []
     for name in policy_names():
         p = get_policy(name)
-        flags = [f for f, on in (("privileged", p.privileged), ("warnings", p.uses_warning)) if on]
-        rows.append([name, ", ".join(flags) or "-", p.description])
+        rows.append([name, ", ".join(p.sensors), p.description])
     from tabulate import tabulate
 
-    print(tabulate(rows, headers=["policy", "uses", "description"], disable_numparse=True))
+    print(tabulate(rows, headers=["policy", "sensors", "description"], disable_numparse=True))
     return 0
 
 
@@ -697,11 +697,28 @@ def cmd_wording(args: argparse.Namespace, argv: Sequence[str]) -> int:
 
 
 def cmd_diagnostics(args: argparse.Namespace, argv: Sequence[str]) -> int:
-    """``lantern-jax diagnostics nonactionable|distance``."""
+    """``lantern-jax diagnostics nonactionable|distance|language``."""
     del argv
     policy = _one_policy(args)
     _check_out(args.out)
     from lantern_jax import diagnostics as dg
+
+    if args.which == "language":
+        suite = _load_suite(args)
+        _stage(args, f"{policy} on {suite.suite_id} ({len(suite)} pairs): delivered text, "
+                     "another family's text, empty text, no warning")  # fmt: skip
+        table = dg.language_table(policy, suite)
+        title = (
+            f"Language sensitivity  ({policy}, suite {suite.suite_id}; Route A CUS per family; "
+            "other family's text: PE<->LWW, VC<->RWW, OR<->RTY canonical texts at the same "
+            "position)"
+        )
+        note = (
+            "gain kept = (variant - no warning) / (delivered text - no warning); a policy that "
+            "reads the words keeps little of its gain under another family's text or an empty "
+            f"one ('-' where the gain is below {dg.MIN_GAIN_FOR_SHARE:.0f} point)."
+        )
+        return _print_and_write(args, {"language": (title, table)}, note)
 
     if args.which == "nonactionable":
         _stage(args, f"{policy}: non-actionable warnings on an empty road")
@@ -920,18 +937,30 @@ def _add_language_commands(sub) -> None:
     dg = sub.add_parser(
         "diagnostics",
         allow_abbrev=False,
-        help="non-actionable and distance-conditioned warning diagnostics",
+        help="non-actionable, distance-conditioned and language-sensitivity diagnostics",
         description="nonactionable: the paper's five non-actionable warnings on an empty road "
         "(max additional speed reduction, longest stop, route completion, criterion). "
         "distance: a family's warning at a near vs a far ego-frame position on Route B "
-        "(final predicted progress; closed-loop speed, stop and completion).",
+        "(final predicted progress; closed-loop speed, stop and completion). "
+        "language: the warning condition with the delivered text, another family's text at the "
+        "same position, an empty text and no warning (CUS per family, share of the gain kept).",
     )
-    dg.add_argument("which", choices=("nonactionable", "distance"), help="which diagnostic")
+    dg.add_argument(
+        "which", choices=("nonactionable", "distance", "language"), help="which diagnostic"
+    )
     dg.add_argument("--policy", default="coop", metavar="NAME", help="policy (default: coop)")
     dg.add_argument(
         "--checkpoint", metavar="PATH", help="a saved learned model (instead of --policy)"
     )
-    dg.add_argument("--suite", default=SUITE_ID, metavar="ID|PATH", help="suite (distance)")
+    dg.add_argument(
+        "--suite", default=SUITE_ID, metavar="ID|PATH", help="suite (distance, language)"
+    )
+    dg.add_argument(
+        "--pairs-per-family",
+        type=int,
+        metavar="N",
+        help="only the first N pairs of each family (language)",
+    )
     dg.add_argument("--family", default="PE", choices=FAMILIES, help="family (distance)")
     dg.add_argument("--routes", type=int, default=3, metavar="N", help="Route B count (distance)")
     dg.add_argument(
@@ -939,7 +968,7 @@ def _add_language_commands(sub) -> None:
     )
     dg.add_argument("--out", default="results/language", metavar="DIR", help="output folder")
     dg.add_argument("--quiet", action="store_true", help="no stage lines")
-    dg.set_defaults(func=cmd_diagnostics, pairs=None, pairs_per_family=None)
+    dg.set_defaults(func=cmd_diagnostics, pairs=None)
 
 
 #: Set by the command line's Ctrl-C handler; see :func:`check_interrupt`.

@@ -1,8 +1,8 @@
 """One-call evaluation of a policy on a suite: every pair under Route A with warning, Route A
 without warning and Route B, stepped in one jitted, vmapped call, then scored.
 
-Stateless policies see the same Route B under both conditions, so Route B runs once per policy
-and is paired with both Route A executions (DESIGN §2).  Ablations (paper §4.4) change only
+Route B carries no warning, so a policy sees the same Route B under both conditions: Route B
+runs once per policy and is paired with both Route A executions.  Ablations (paper §4.4) change only
 protocol data of the batch (:data:`ABLATIONS`).
 
 Example::
@@ -39,8 +39,9 @@ from lantern_jax.scoring.metrics import finalize
 from lantern_jax.scoring.table import build_route_table
 from lantern_jax.sim.distributed import placement
 from lantern_jax.sim.observe import observe
-from lantern_jax.sim.rollout import rollout_scheduled_parallel
+from lantern_jax.sim.rollout import rollout_scheduled_parallel, with_carry
 from lantern_jax.sim.state import init_state
+from lantern_jax.sim.step import Driver
 from lantern_jax.sim.switch import PolicySwitch, policy_switch, switch_params
 from lantern_jax.times import happened, time_or_nan
 from lantern_jax.world import Scenario, trim_padding
@@ -147,10 +148,18 @@ def compact_slots(backend: str | None = None) -> int:
     return COMPACT_SLOTS.get(backend or jax.default_backend(), COMPACT_SLOTS_OTHER)
 
 
-def compiled_rollout(act, privileged: bool = False, slots: int = COMPACT_SLOTS_OTHER,
+def program_identity(policy: Driver) -> tuple:
+    """What a rollout program of ``policy`` depends on besides its arguments: the policy's
+    program (:attr:`~lantern_jax.policies.base.Policy.program`) or a switch's members'."""
+    if isinstance(policy, PolicySwitch):
+        return ("switch", tuple(m.program for m in policy.members))
+    return ("policy", policy.program)
+
+
+def compiled_rollout(policy: Driver, slots: int = COMPACT_SLOTS_OTHER,
                      chunk: int = REFILL_TICKS):  # fmt: skip
-    """The jitted scheduled rollout program for a policy ``act`` (cached per ``act``,
-    ``privileged``, ``slots`` and ``chunk``).
+    """The jitted scheduled rollout program for a policy (cached per
+    :func:`program_identity`, ``slots`` and ``chunk``).
 
     ``program(scenarios, policy_params, starts, max_ticks)`` rolls every execution of the
     batch from its state in ``starts`` to its end through ``slots`` slots per device, refilled
@@ -160,14 +169,13 @@ def compiled_rollout(act, privileged: bool = False, slots: int = COMPACT_SLOTS_O
     come from :data:`initial_states` (a separate program shared by every policy), so the
     policy's program holds no second copy of the sensing code.
     """
-    key = ("program", act, privileged, slots, chunk)
+    key = ("program", program_identity(policy), slots, chunk)
     if key not in _COMPILED:
 
         def program(scenarios, policy_params, starts, max_ticks):
             return rollout_scheduled_parallel(
-                scenarios, starts, act, policy_params, max_ticks, slots, chunk,
-                privileged=privileged,
-            )  # fmt: skip
+                scenarios, starts, policy, policy_params, max_ticks, slots, chunk
+            )
 
         _COMPILED[key] = jax.jit(program)
     return _COMPILED[key]
@@ -240,12 +248,11 @@ def schedule_layout(timeout_s: np.ndarray, devices: int) -> np.ndarray:
 
 
 def run_executions(
-    act,
+    policy: Driver,
     scenarios: Scenario,
     policy_params: Any,
     max_ticks: int,
     compact: bool | None = None,
-    privileged: bool = False,
     timings: dict | None = None,
     pad_to: int | None = None,
 ):
@@ -259,11 +266,13 @@ def run_executions(
     (:func:`schedule_layout` deals them to the devices): the same executions, only grouped
     differently.  Every execution starts from
     its state at ``t = 0`` given by :data:`initial_states` (one compiled program per block
-    shape, shared by every policy).  ``privileged`` must be the policy's
-    ``Policy.privileged`` flag.  Under JAX's distributed runtime (several processes) the call
-    runs on the global mesh, each process stepping its devices' blocks, and the final states
-    are gathered on every process (:mod:`lantern_jax.sim.distributed`).  ``timings``
-    (optional dict) receives ``"trace + lower"``, ``"XLA compile"`` and ``"rollout"`` seconds.
+    shape, shared by every policy) and the policy's initial carry.  ``policy`` is a
+    :class:`~lantern_jax.policies.base.Policy` or a
+    :class:`~lantern_jax.sim.switch.PolicySwitch`.  Under JAX's distributed runtime (several
+    processes) the call runs on the global mesh, each process stepping its devices' blocks,
+    and the final states are gathered on every process (:mod:`lantern_jax.sim.distributed`).
+    ``timings`` (optional dict) receives ``"trace + lower"``, ``"XLA compile"`` and
+    ``"rollout"`` seconds.
     ``pad_to`` (optional) pads the batch to that many executions with copies of the first
     that start ended (never stepped, last in every device's queue), so that batches of
     different sizes share one compiled program at little cost.
@@ -309,13 +318,14 @@ def run_executions(
         parts.append(_take(out, np.arange(min(block, len(layout) - lo))))
     starts = jax.tree.map(lambda *x: np.concatenate(x), *parts)
     starts = starts.replace(done=starts.done | (layout >= n))  # padding starts ended
+    starts = jax.tree.map(np.asarray, with_carry(starts, policy, policy_params))
     args = (place.put(laid), params, place.put(starts), place.replicate(np.int32(max_ticks)))
     t1 = time.perf_counter()
     exe = _executable(
-        compiled_rollout(act, privileged, slots, REFILL_TICKS),
+        compiled_rollout(policy, slots, REFILL_TICKS),
         *args,
         timings=timings,
-        identity=("rollout", act, privileged, slots, REFILL_TICKS),
+        identity=("rollout", program_identity(policy), slots, REFILL_TICKS),
     )
     t_compile += time.perf_counter() - t1
     if timings is not None:
@@ -394,21 +404,19 @@ def run_policy(
     pol = get_policy(policy) if isinstance(policy, str) else policy
     params = pol.init(jax.random.PRNGKey(0)) if policy_params is None else policy_params
     sc0 = jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape[1:], x.dtype), execs.scenarios)
-    surround = bool(getattr(pol.act, "surround", False))
-    obs = jax.eval_shape(lambda sc: observe(sc, init_state(sc), pol.privileged, surround), sc0)
+    obs = jax.eval_shape(lambda sc: observe(sc, init_state(sc), pol.sensors), sc0)
     check_policy_output(pol, params, obs)
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
-    act, run_params, privileged = pol.act, params, pol.privileged
+    driver, run_params = pol, params
     if shared is not None:
         switch, members = shared
-        i = switch.index_of(pol.act)
+        i = switch.index_of(pol)
         members = (*members[:i], params, *members[i + 1 :])
-        act, run_params, privileged = switch, switch_params(switch, i, members), False
+        driver, run_params = switch, switch_params(switch, i, members)
     final, t_compile = run_executions(
-        act, execs.scenarios, run_params, execs.max_ticks, privileged=privileged,
-        timings=timings,
-    )  # fmt: skip
+        driver, execs.scenarios, run_params, execs.max_ticks, timings=timings
+    )
     t2 = time.perf_counter()
     t1 = t0 + t_compile
     finalize_exe = _executable(_finalize_jit, final.telemetry, identity=("finalize",))
@@ -544,22 +552,23 @@ def _policies_to_run(policies, suite) -> list[Policy]:
 def shared_program(pols: list[Policy], policy_params: list) -> tuple[PolicySwitch, tuple] | None:
     """One program for every policy of an evaluation, or ``None`` when they share one already.
 
-    Policies with the same ``act`` (``ego`` and ``coop``) already share a compiled program;
-    policies with different ones are joined in a :class:`~lantern_jax.sim.switch.PolicySwitch`
-    (members in order of first appearance), so the simulator is compiled once for all of them.
-    Returns ``(switch, members' parameters)`` for :func:`run_policy` (each member's parameters
-    those of its first policy; they fix the program's argument shapes), or ``None`` for fewer
-    than two distinct ``act`` functions.
+    Policies with the same program (:attr:`~lantern_jax.policies.base.Policy.program`: act
+    function, sensors, carry; e.g. two checkpoints of one architecture) already share a compiled
+    program; policies with different ones are joined in a
+    :class:`~lantern_jax.sim.switch.PolicySwitch` (members in order of first appearance), so
+    the simulator is compiled once for all of them.  Returns ``(switch, members' parameters)``
+    for :func:`run_policy` (each member's parameters those of its first policy; they fix the
+    program's argument shapes), or ``None`` for fewer than two distinct programs.
     """
-    members: dict[int, tuple] = {}
+    members: dict[tuple, tuple] = {}
     for pol, par in zip(pols, policy_params, strict=True):
-        if id(pol.act) not in members:
+        if pol.program not in members:
             params = pol.init(jax.random.PRNGKey(0)) if par is None else par
-            members[id(pol.act)] = (pol.act, params)
+            members[pol.program] = (pol, params)
     if len(members) < 2:
         return None
-    acts, params = zip(*members.values(), strict=True)
-    return policy_switch(acts), tuple(params)
+    reps, params = zip(*members.values(), strict=True)
+    return policy_switch(reps), tuple(params)
 
 
 def _run_all(

@@ -114,9 +114,8 @@ def dynamic_check(
         raise ValueError(f"dynamic_check: {len(execs)} executions exceed batch {batch_size}")
     pol, params = _validator(validator)
     final, _ = run_executions(
-        pol.act, tree_stack(execs), params, MAX_TICKS, compact=True,
-        privileged=pol.privileged, pad_to=batch_size,
-    )  # fmt: skip
+        pol, tree_stack(execs), params, MAX_TICKS, compact=True, pad_to=batch_size
+    )
     m = jax.tree.map(np.asarray, finalize(final.telemetry))
     proto = jax.tree.map(np.asarray, final.protocol)
     ok, reasons = np.ones(n, bool), [""] * n

@@ -27,10 +27,18 @@ Token conventions (used by the observation and by every language policy):
 
 * ``PAD_ID = 2`` (``</s>``, WordLlama's padding token) fills a text's row up to
   :data:`MAX_TOKENS`;
-* ``PLACEHOLDER_ID = 0`` (``<unk>``, never produced by this byte-fallback tokenizer) stands where
-  the template says ``<FRONT_CAR_POS>``; the position itself reaches a policy as numbers, never
-  as text;
+* ``NUMBER_ID = 0`` (``<unk>``, never produced by this byte-fallback tokenizer) is a **number
+  token**: the number a text writes there is carried beside the ids, in a value channel aligned
+  with the tokens (the tokenizer's number handling, see below);
 * no beginning-of-sequence token (WordLlama embeds without special tokens).
+
+**Numbers.**  A template says ``<FRONT_CAR_POS>`` where the delivered text writes the hazard's
+position as ``(x, y)`` (metres, one decimal, the paper's form).  The tokenizer writes that
+position as the ids of ``(``, a number token, ``,``, a number token and ``)``
+(:func:`position_tokens`), and the value channel holds ``x`` and ``y`` at the two number tokens
+(rounded to one decimal, exactly the digits the string shows) and zero everywhere else.  A text
+that states no position has no number token and an all-zero value channel.  This is the only way
+a number reaches a policy: there is no separate position field.
 
 A text is tokenised piece by piece: the words between placeholders, stripped of the single space
 that separates them from a placeholder, each go through the tokenizer as they are, so the ids of
@@ -65,8 +73,10 @@ VOCAB_SIZE = 32000  # tokens of the tokenizer and rows of the embedding
 EMBED_DIM = 256  # columns of the embedding
 MAX_TOKENS = 48  # fixed token length of a warning in the observation (longest bank text: 26)
 PAD_ID = 2  # '</s>', WordLlama's padding token
-PLACEHOLDER_ID = 0  # '<unk>', stands for <FRONT_CAR_POS>
+NUMBER_ID = 0  # '<unk>': a number token, its value in the aligned value channel
 PLACEHOLDER = "<FRONT_CAR_POS>"
+NUMBER_DECIMALS = 1  # a written number shows one decimal (the paper's "(x, y)")
+POSITION_PUNCTUATION = ("(", ",", ")")  # written around the two numbers of a position
 
 
 class LanguageAssetError(FileNotFoundError):
@@ -185,26 +195,61 @@ def check_template(text: str, placeholder: str = PLACEHOLDER) -> None:
             )
 
 
+@functools.lru_cache(maxsize=4)
+def position_tokens(root: str | None = None) -> tuple[int, ...]:
+    """The ids a written position ``(x, y)`` takes: ``(``, number, ``,``, number, ``)``.
+
+    The punctuation goes through the tokenizer piece by piece, as the words of a template do;
+    the two numbers are :data:`NUMBER_ID` (their values travel in the value channel).
+    """
+    tok = load_tokenizer(root)
+    opening, comma, closing = (
+        tuple(tok.encode(p, add_special_tokens=False).ids) for p in POSITION_PUNCTUATION
+    )
+    return (*opening, NUMBER_ID, *comma, NUMBER_ID, *closing)
+
+
 def tokenize(text: str, root: str | None = None, placeholder: str = PLACEHOLDER) -> list[int]:
-    """Token ids of a warning template, :data:`PLACEHOLDER_ID` where ``placeholder`` stands.
+    """Token ids of a warning template; where ``placeholder`` stands, the ids of a written
+    position (:func:`position_tokens`: two number tokens between punctuation).
 
     Args:
-        text: the template (see :func:`check_template`).
+        text: the template (see :func:`check_template`); ``""`` is the empty text (no ids).
         root: asset folder (default: the installed ``wordllama`` package).
 
     Returns:
         The ids, unpadded (no special tokens).
     """
+    if text == "":
+        return []
     check_template(text, placeholder)
     tok = load_tokenizer(root)
     ids: list[int] = []
     for i, part in enumerate(text.split(placeholder)):
         if i > 0:
-            ids.append(PLACEHOLDER_ID)
+            ids += position_tokens(root)
         piece = part.strip()
         if piece:
             ids += tok.encode(piece, add_special_tokens=False).ids
     return ids
+
+
+def number_slots(ids: Sequence[int]) -> list[int]:
+    """Indices of the number tokens in ``ids`` (padded or not), in order."""
+    return [i for i, v in enumerate(ids) if int(v) == NUMBER_ID]
+
+
+def round_number(x: Array) -> Array:
+    """A number as the text writes it: rounded to :data:`NUMBER_DECIMALS` decimals, in float32
+    as the simulator holds it (jittable; half-way cases to even)."""
+    scale = jnp.float32(10.0**NUMBER_DECIMALS)
+    return jnp.round(jnp.asarray(x, jnp.float32) * scale) / scale
+
+
+def format_number(x: float) -> str:
+    """A number as a text writes it: :func:`round_number` (so the string and the value channel
+    agree to the digit), :data:`NUMBER_DECIMALS` decimals, ``-0.0`` as ``0.0``."""
+    return f"{float(round_number(x)) + 0.0:.{NUMBER_DECIMALS}f}"
 
 
 def pad(ids: Sequence[int], length: int = MAX_TOKENS) -> np.ndarray:
@@ -220,26 +265,55 @@ def pad(ids: Sequence[int], length: int = MAX_TOKENS) -> np.ndarray:
     return out
 
 
-def detokenize(ids: Sequence[int], root: str | None = None, placeholder: str = PLACEHOLDER) -> str:
-    """The template back from its (possibly padded) token ids."""
+def detokenize(
+    ids: Sequence[int],
+    values: Sequence[float] | None = None,
+    root: str | None = None,
+    placeholder: str = PLACEHOLDER,
+) -> str:
+    """The text back from its (possibly padded) token ids.
+
+    Args:
+        ids: token ids.
+        values: the aligned value channel; with it a written position comes back as the
+            delivered string writes it (``(12.3, 0.5)``), without it as ``placeholder`` (the
+            template).
+        root: asset folder (default: the installed ``wordllama`` package).
+        placeholder: what stands for a position when ``values`` is not given.
+    """
     tok = load_tokenizer(root)
+    ids = [int(v) for v in ids]
+    vals = [0.0] * len(ids) if values is None else [float(v) for v in values]
+    pos = list(position_tokens(root))
     pieces: list[str] = []
     run: list[int] = []
-    for i in [int(v) for v in ids if int(v) != PAD_ID] + [None]:
-        if i is None or i == PLACEHOLDER_ID:
+    i = 0
+    while i < len(ids):
+        if ids[i] == PAD_ID:
+            i += 1
+            continue
+        if ids[i : i + len(pos)] == pos:
             if run:
                 pieces.append(tok.decode(run, skip_special_tokens=False))
             run = []
-            if i is not None:
-                pieces.append(placeholder)
-        else:
-            run.append(i)
+            nums = [vals[i + k] for k, t in enumerate(pos) if t == NUMBER_ID]
+            pieces.append(
+                placeholder
+                if values is None
+                else "(" + ", ".join(format_number(v) for v in nums) + ")"
+            )
+            i += len(pos)
+            continue
+        run.append(ids[i])
+        i += 1
+    if run:
+        pieces.append(tok.decode(run, skip_special_tokens=False))
     return " ".join(pieces)
 
 
 def word_mask(tokens: Array) -> Array:
-    """(..., L) bool: the word tokens of padded token rows (neither padding nor placeholder)."""
-    return (tokens != PAD_ID) & (tokens != PLACEHOLDER_ID)
+    """(..., L) bool: the word tokens of padded token rows (neither padding nor a number)."""
+    return (tokens != PAD_ID) & (tokens != NUMBER_ID)
 
 
 def pooled_embedding(table: Array, tokens: Array, normalize: bool = True) -> Array:

@@ -1,31 +1,34 @@
-"""What a policy observes at one tick (one scenario).
+"""What a policy observes at one tick (one scenario), and the sensors that decide it.
 
-The simulator (:mod:`lantern_jax.sim.observe`) produces it and every policy reads it, so the type
-lives below both.
+The simulator (:mod:`lantern_jax.sim.observe`) builds the observation from the sensors a policy
+declares (``Policy.sensors``) and from nothing else; every policy reads it, so the type lives
+below both.  A policy cannot read what its sensors do not deliver: the boundary is the
+simulator's, not a convention.
 
 All positions and vectors are in the **ego frame of the paper: x forward, y to the right**,
-metres, relative to the ego box centre.  Perception masks:
+metres, relative to the ego box centre.
 
-* ``visible`` — the front camera (110 deg frustum + unobstructed ray) sees the actor now;
-  onboard policies must only use actors with ``visible``.
-* ``present`` — the actor exists in the world (privileged; only the ``expert`` uses it).
+Sensors (:data:`SENSORS`; ``FRONT_CAMERA`` is every policy's and need not be named):
 
-The cooperative warning reaches a policy as language: ``warning_tokens`` are the token ids of
-the delivered text's template (:mod:`lantern_jax.language`: fixed length, ``PAD_ID`` padding, a
-``PLACEHOLDER_ID`` token where ``<FRONT_CAR_POS>`` stands), ``warning_pos`` the grounded position
-as numbers and ``warning_has_position`` whether the text states one at all (a high-ambiguity
-paraphrase or a non-actionable message does not: then ``warning_pos`` is zero and must not be
-read as a position).  ``render_warning(warning_text_id, warning_pos)`` gives the exact string.
+* ``"front_camera"`` — the 110 deg front camera: the actors it sees now (``visible``; their
+  position, velocity, heading, extent and kind) and its range image.  The route ahead, the
+  navigation targets, the ego's own state, its traffic light and stop line come with every
+  policy (map and ego state, as in CARLA's leaderboard sensors).
+* ``"surround_rig"`` — the six-camera 360 deg rig (:class:`SurroundView`); the actors it sees
+  join ``visible`` and the per-actor fields.
+* ``"warning"`` — the cooperative warning, **only as its delivered text**: ``warning_tokens``
+  (token ids of the grounded string) and ``warning_values`` (the numbers the string writes, at
+  its number tokens; :mod:`lantern_jax.language`, "Numbers").  No flag says a warning is on:
+  an all-padding row is no warning, and an empty text reads the same.  Without this sensor the
+  row is always padding.
+* ``"privileged"`` — ground truth (:class:`PrivilegedView`): every actor that exists, hidden
+  or not, and its forecast from the scenario's own scripts.  Only a privileged reference (the
+  ``expert``) declares it; its results are an upper reference, never a submission.
 
-``privileged`` holds what only a privileged policy may read (:class:`PrivilegedView`: every
-actor's forecast from its own script or motion model).  The simulator fills it only for a policy
-whose ``Policy.privileged`` flag is set (a static switch of the rollout), so ordinary policies
-pay nothing for it; for them it is ``None``.
-
-``surround`` is the six-camera rig (:class:`SurroundView`, 360 deg: visibility of every actor and
-its own range image), the sensor of the surround-view learned model (the VAD analogue).  It is
-filled only for a policy whose act function asks for it (``act.surround = True``, a static
-switch read by :func:`lantern_jax.sim.step.step`); for every other policy it is ``None``.
+**The sentinel.**  For an actor slot that the declared cameras do not see at this tick (hidden,
+out of range, not yet spawned, or padding), every per-actor field is exactly zero — position,
+velocity, heading, extent and kind — and ``visible`` is False.  A zero kind is also
+``KIND_VEHICLE``: read the kind only where ``visible`` holds.
 """
 
 from __future__ import annotations
@@ -35,9 +38,16 @@ import jax.numpy as jnp
 from flax import struct
 
 from lantern_jax.constants import EGO_HALF_LENGTH
+from lantern_jax.language import NUMBER_ID, PAD_ID
 from lantern_jax.polyline import project_uniform
 
 Array = jax.Array
+
+FRONT_CAMERA = "front_camera"  # every policy's camera (implied)
+SURROUND_RIG = "surround_rig"  # the six-camera 360 deg rig
+WARNING = "warning"  # the delivered warning text
+PRIVILEGED = "privileged"  # ground truth and scripted forecasts (reference experts only)
+SENSORS = (FRONT_CAMERA, SURROUND_RIG, WARNING, PRIVILEGED)
 
 NUM_ROUTE_POINTS = 24  # route points ahead in the observation
 ROUTE_STEP = 2.0  # m between observed route points
@@ -48,15 +58,25 @@ FORECAST_DT = 0.05  # s between forecast times
 
 @struct.dataclass
 class PrivilegedView:
-    """Privileged forecast of every actor slot (ego frame), from the actors' own scripts.
+    """Ground truth of every actor slot and its forecast (ego frame), from the actors' own
+    scripts.
 
-    Entry ``[i, k]`` is actor ``i`` at ``t + FORECAST_DT * (k + 1)``; one array per component
-    (x and y apart), which XLA vectorises far better than a trailing axis of 2.  A scenario actor
-    whose
-    trigger (the protocol's physical event) is still pending may start at any moment from the
-    earliest possible event onset on; its entry is then the box covering every such start
-    (:mod:`lantern_jax.dynamics.forecast`).
+    The ``actor_*`` fields are those of the observation without the camera's mask: every actor
+    that exists now (``present``), hidden or not; a slot with no actor holds the sentinel (zero).
+
+    Forecast entry ``[i, k]`` is actor ``i`` at ``t + FORECAST_DT * (k + 1)``; one array per
+    component (x and y apart), which XLA vectorises far better than a trailing axis of 2.  A
+    scenario actor whose trigger (the protocol's physical event) is still pending may start at
+    any moment from the earliest possible event onset on; its entry is then the box covering
+    every such start (:mod:`lantern_jax.dynamics.forecast`).
     """
+
+    present: Array  # (A,) bool, the actor exists in the world now
+    actor_xy: Array  # (A, 2) float32, m, box centres
+    actor_vel: Array  # (A, 2) float32, m/s, velocities
+    actor_dir: Array  # (A, 2) float32, unit heading vectors
+    actor_extent: Array  # (A, 2) float32, m, (half length, half width)
+    actor_kind: Array  # (A,) int32, KIND_*
 
     forecast_x: Array  # (A, K) float32, m, box centres (x forward)
     forecast_y: Array  # (A, K) float32, m, (y right)
@@ -81,7 +101,8 @@ class SurroundView:
 
 @struct.dataclass
 class Observation:
-    """One tick of policy input (no batch axis)."""
+    """One tick of policy input (no batch axis); see the module docstring for the sensors and
+    the zero sentinel of actors the policy does not see."""
 
     ego_speed: Array  # () float32, m/s
     ego_accel: Array  # () float32, m/s^2, last applied longitudinal acceleration
@@ -91,36 +112,77 @@ class Observation:
     #               starting at the ego's projection onto the route
     target_points: Array  # (2, 2) float32, m, navigation targets 10 m and 30 m ahead on the route
     dist_to_route_end: Array  # () float32, m
-    actor_xy: Array  # (A, 2) float32, m, actor box centres
-    actor_vel: Array  # (A, 2) float32, m/s, actor velocities
-    actor_dir: Array  # (A, 2) float32, unit heading vectors of the actors
-    actor_extent: Array  # (A, 2) float32, m, (half length, half width)
-    actor_kind: Array  # (A,) int32, KIND_*
-    visible: Array  # (A,) bool, seen by the front camera now
-    present: Array  # (A,) bool, privileged: exists in the world
+    actor_xy: Array  # (A, 2) float32, m, actor box centres (0 where not visible)
+    actor_vel: Array  # (A, 2) float32, m/s, actor velocities (0 where not visible)
+    actor_dir: Array  # (A, 2) float32, unit heading vectors of the actors (0 where not visible)
+    actor_extent: Array  # (A, 2) float32, m, (half length, half width) (0 where not visible)
+    actor_kind: Array  # (A,) int32, KIND_* (0 where not visible)
+    visible: Array  # (A,) bool, seen now by the declared cameras (front, and the rig if declared)
     range_image: Array  # (NUM_RANGE_RAYS,) float32, m, front-camera ray ranges (capped)
     range_class: Array  # (NUM_RANGE_RAYS,) int32, class of each front ray's first hit
     #                     (``constants.RAY_CLASS_NAMES``: actor kinds, then static occluder
     #                     kinds; -1: nothing within range)
     light_state: Array  # () int32, LIGHT_* of the ego's traffic light (GREEN when none)
     dist_to_stop: Array  # () float32, m, route distance from the ego centre to its stop line
-    warning_active: Array  # () bool, a cooperative warning is being delivered now
-    warning_text_id: Array  # () int32, text-bank id of the warning (-1 when inactive)
-    warning_pos: Array  # (2,) float32, m, grounded <FRONT_CAR_POS> (zeros when inactive or when
-    #                     the text states no position)
-    warning_has_position: Array  # () bool, the delivered text states a position (False when
-    #                              inactive)
-    warning_tokens: Array  # (MAX_TOKENS,) int32, token ids of the delivered template (all
-    #                        PAD_ID when inactive)
-    privileged: PrivilegedView | None = None  # only for privileged policies (else None)
-    surround: SurroundView | None = None  # only for surround-rig policies (else None)
+    warning_tokens: Array  # (MAX_TOKENS,) int32, token ids of the delivered text (all PAD_ID
+    #                        when none is delivered or the policy has no warning sensor)
+    warning_values: Array  # (MAX_TOKENS,) float32, the numbers the text writes (m), at its
+    #                        number tokens; 0 elsewhere
+    privileged: PrivilegedView | None = None  # only with the "privileged" sensor (else None)
+    surround: SurroundView | None = None  # only with the "surround_rig" sensor (else None)
 
 
-def corridor_gaps(obs: Observation) -> tuple[Array, Array]:
+def normalize_sensors(sensors) -> tuple[str, ...]:
+    """The canonical form of a sensor declaration: a sorted tuple of names from
+    :data:`SENSORS`, always including :data:`FRONT_CAMERA`.
+
+    Raises:
+        ValueError: naming an unknown sensor, or for a bare string (write ``("warning",)``).
+    """
+    if isinstance(sensors, str):
+        raise ValueError(
+            f"sensors: expected a collection of sensor names, got the string {sensors!r} "
+            f"(write ({sensors!r},)); known: {', '.join(SENSORS)}"
+        )
+    names = set(sensors) | {FRONT_CAMERA}
+    unknown = sorted(str(n) for n in names if n not in SENSORS)
+    if unknown:
+        raise ValueError(f"sensors: unknown {', '.join(unknown)}; known: {', '.join(SENSORS)}")
+    return tuple(sorted(names))
+
+
+def warning_delivered(obs: Observation) -> Array:
+    """() bool: the observation holds a warning text (any token that is not padding)."""
+    return jnp.any(obs.warning_tokens != PAD_ID)
+
+
+def stated_position(obs: Observation) -> tuple[Array, Array]:
+    """The position the warning text writes: its first two numbers, read from the value
+    channel at its number tokens.
+
+    Returns:
+        position: (2,) float32, m, ego frame (x forward, y right); zeros without two numbers.
+        stated: () bool, the text writes at least two numbers.
+    """
+    is_num = obs.warning_tokens == NUMBER_ID
+    rank = jnp.cumsum(is_num) - 1  # index of each number among the text's numbers
+    x = jnp.sum(jnp.where(is_num & (rank == 0), obs.warning_values, 0.0))
+    y = jnp.sum(jnp.where(is_num & (rank == 1), obs.warning_values, 0.0))
+    stated = jnp.sum(is_num) >= 2
+    return jnp.where(stated, jnp.stack([x, y]), 0.0), stated
+
+
+def corridor_gaps(
+    route: Array, actor_xy: Array, actor_dir: Array, actor_extent: Array
+) -> tuple[Array, Array]:
     """Route gap ahead of the ego and lateral clearance from the route of every actor.
 
-    Uses the observation's route points ahead of the ego and the actors in the ego frame, so the
-    projection runs on the ``NUM_ROUTE_POINTS`` observed route points rather than the whole route.
+    Args:
+        route: (NUM_ROUTE_POINTS, 2) float32, m, the route ahead in the ego frame (as observed).
+        actor_xy, actor_dir, actor_extent: (A, 2) float32, the actors in the ego frame.
+
+    The projection runs on the ``NUM_ROUTE_POINTS`` route points ahead rather than the whole
+    route.
     The actor's box is measured along and across the route at its projection (its heading
     against the route tangent there), so a long vehicle parked beside the lane is as far from
     the route as its side, not as its half length.
@@ -130,12 +192,11 @@ def corridor_gaps(obs: Observation) -> tuple[Array, Array]:
         lateral: (A,) float32, m, distance of the actor centre from the route minus its half
             extent across the route (<= 0: the box reaches the route centre line).
     """
-    route = obs.route
-    arc, dist = project_uniform(route, ROUTE_STEP, obs.actor_xy)
+    arc, dist = project_uniform(route, ROUTE_STEP, actor_xy)
     k = jnp.clip(jnp.floor(arc / ROUTE_STEP).astype(jnp.int32), 0, route.shape[0] - 2)
     d = route[k + 1] - route[k]  # (A, 2)
     tang = d / jnp.sqrt(jnp.maximum(jnp.sum(d * d, -1, keepdims=True), 1e-12))
-    cos = jnp.abs(jnp.sum(obs.actor_dir * tang, -1))
-    sin = jnp.abs(obs.actor_dir[:, 0] * tang[:, 1] - obs.actor_dir[:, 1] * tang[:, 0])
-    hl, hw = obs.actor_extent[:, 0], obs.actor_extent[:, 1]
+    cos = jnp.abs(jnp.sum(actor_dir * tang, -1))
+    sin = jnp.abs(actor_dir[:, 0] * tang[:, 1] - actor_dir[:, 1] * tang[:, 0])
+    hl, hw = actor_extent[:, 0], actor_extent[:, 1]
     return arc - EGO_HALF_LENGTH - (hl * cos + hw * sin), dist - (hl * sin + hw * cos)

@@ -87,7 +87,7 @@ class StreamResult:
 
 
 def stream_executions(
-    act,
+    policy,
     policy_params: Any,
     source: Source,
     count: int,
@@ -99,7 +99,7 @@ def stream_executions(
     """Run ``count`` executions from ``source`` in chunks of ``chunk``; keep their outputs.
 
     Args:
-        act: policy ``act`` (one execution).
+        policy: the :class:`~lantern_jax.policies.base.Policy` (one execution).
         policy_params: its parameters.
         source: ``source(ids: (chunk,) int) -> Scenario`` with a leading ``chunk`` axis.
         count: number of executions.
@@ -121,7 +121,7 @@ def stream_executions(
         for start in range(0, count, chunk):
             ids = np.arange(start, min(start + chunk, count))
             padded = np.concatenate([ids, np.full(chunk - len(ids), ids[0])])
-            final, tc = run_executions(act, source(padded), policy_params, max_ticks)
+            final, tc = run_executions(policy, source(padded), policy_params, max_ticks)
             out = (collect or _finalize)(final)
             if dataclasses.is_dataclass(out):
                 out = {f.name: getattr(out, f.name) for f in dataclasses.fields(out)}

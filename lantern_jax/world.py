@@ -155,7 +155,7 @@ class ProtocolState:
     clear_by_limit: Array  # () bool, clearance came from a safety/stop limit
     ego_still_time: Array  # () float32, s, continuous time the ego has been (almost) still
     hazard_visible_at_warn: Array  # () bool, the hazard was camera-visible at the warning point
-    warning_ticks: Array  # () int32, ticks at which the policy was shown an active warning
+    warning_ticks: Array  # () int32, ticks at which a warning was delivered
     hazard_seen_before_warn: Array  # () bool, the camera saw the hazard at some tick from t = 0
     #                                 up to (and including) the one reaching the warning point
 

@@ -134,7 +134,7 @@ world_a_nowarn = world_a.replace(config=world_a.config.replace(warning_enabled=j
 coop = get_policy("coop")
 coop_params = coop.init(jax.random.PRNGKey(0))
 num_ticks = horizon_ticks(float(world_a.config.timeout_s))  # the route's timeout
-run = jax.jit(lambda w: rollout(w, coop.act, coop_params, num_ticks, record=True))
+run = jax.jit(lambda w: rollout(w, coop, coop_params, num_ticks, record=True))
 
 final_w, rec_w = jax.device_get(run(world_a))
 final_nw, rec_nw = jax.device_get(run(world_a_nowarn))
@@ -189,8 +189,8 @@ TEMPERATURE = 0.05
 
 def soft_cus(crossing_speed):
     w_a = set_knobs(world_a, hazard_speed=crossing_speed)
-    final_a, _ = rollout(w_a, coop.act, coop_params, GRAD_TICKS, temperature=TEMPERATURE)
-    final_b, _ = rollout(world_b, coop.act, coop_params, GRAD_TICKS, temperature=TEMPERATURE)
+    final_a, _ = rollout(w_a, coop, coop_params, GRAD_TICKS, temperature=TEMPERATURE)
+    final_b, _ = rollout(world_b, coop, coop_params, GRAD_TICKS, temperature=TEMPERATURE)
     cus = soft_pair_cus(final_a.telemetry, final_b.telemetry, world_a.config.d_safe, TEMPERATURE)
     return cus, (final_a.done, final_b.done)
 

@@ -11,7 +11,9 @@ once per session and every test feeds them worlds of the same shapes:
 All three drive the same *probe* policy: its parameters ``(mode, value)`` pick one of the
 reference policies or a small scripted test behaviour (see ``MODE_*``), so one compilation serves
 every policy the tests need.  Under ``vmap`` each execution of a batch has its own mode.  The
-runners fill the privileged observation (the ``expert`` needs it), so every mode pays for it.
+probe declares every sensor the references need (the ``expert``'s ground truth, ``coop``'s
+warning text), so every mode pays for them; for ``ego`` and ``coop`` it hands the reference act
+function only what their own sensors would deliver (no ground truth; no text for ``ego``).
 """
 
 from __future__ import annotations
@@ -25,6 +27,9 @@ import numpy as np
 import pytest
 
 from lantern_jax.constants import NUM_WAYPOINTS, WAYPOINT_DT
+from lantern_jax.language import PAD_ID
+from lantern_jax.observation import FRONT_CAMERA, PRIVILEGED, WARNING
+from lantern_jax.policies.base import Policy
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.sim.rollout import rollout, rollout_batch
 from lantern_jax.world import tree_stack
@@ -78,21 +83,25 @@ def constant_speed_waypoints(speed: jax.Array) -> jax.Array:
     return jnp.stack([k * speed, jnp.zeros_like(k)], axis=-1)
 
 
-def _make_probe_act():
+def _make_probe_policy() -> Policy:
     ref = [get_policy(n) for n in ("ego", "coop")]
     act = ref[0].act
-    # ego and coop share one act function and differ only in their parameters, so a
-    # per-execution choice between them is a choice of parameters.
+    # ego and coop share one act function and differ only in their sensors (coop reads the
+    # warning text), so a per-execution choice between them is a choice of what it is shown.
     assert all(p.act is act for p in ref), "reference policies no longer share act"
-    ref_params = [p.init(jax.random.PRNGKey(0)) for p in ref]
+    ref_params = ref[0].init(jax.random.PRNGKey(0))
     expert = get_policy("expert")
     expert_params = expert.init(jax.random.PRNGKey(0))
 
     def probe_act(params, obs):
         mode, value = params
-        k = jnp.clip(mode - MODE_EGO, 0, 1)
-        chosen = jax.tree.map(lambda *xs: jnp.stack(xs)[k], *ref_params)
-        camera = act(chosen, obs).astype(jnp.float32)
+        text = mode == MODE_COOP
+        camera_obs = obs.replace(
+            privileged=None,
+            warning_tokens=jnp.where(text, obs.warning_tokens, PAD_ID),
+            warning_values=jnp.where(text, obs.warning_values, 0.0),
+        )
+        camera = act(ref_params, camera_obs).astype(jnp.float32)
         # the expert, also under the scripted behaviours that wrap it
         use_expert = (mode == MODE_EXPERT) | (mode > MODE_COOP)
         planned = jnp.where(use_expert, expert.act(expert_params, obs), camera)
@@ -104,7 +113,13 @@ def _make_probe_act():
         out = jnp.where(mode == MODE_CONST, constant_speed_waypoints(value), out)
         return out
 
-    return probe_act
+    return Policy(
+        "probe",
+        lambda key: (jnp.int32(MODE_EXPERT), jnp.float32(0.0)),
+        probe_act,
+        "test probe: a reference policy or a scripted behaviour chosen by its parameters",
+        sensors=(FRONT_CAMERA, WARNING, PRIVILEGED),
+    )
 
 
 def to_numpy(tree):
@@ -116,13 +131,13 @@ class Sim:
 
     def __init__(self) -> None:
         self.traces = {"single": 0, "batch": 0, "evaluate": 0}
-        act = _make_probe_act()
-        self.act = act
+        policy = _make_probe_policy()
+        self.policy = policy
 
         def one(world, mode, value, counter=None):
             if counter is not None:
                 self.traces[counter] += 1
-            return rollout(world, act, (mode, value), HORIZON, record=True, privileged=True)
+            return rollout(world, policy, (mode, value), HORIZON, record=True)
 
         def single(world, mode, value):
             return one(world, mode, value, "single")
@@ -133,7 +148,7 @@ class Sim:
 
         def evaluate(worlds, mode, value):
             self.traces["evaluate"] += 1
-            return rollout_batch(worlds, act, (mode, value), HORIZON, privileged=True)
+            return rollout_batch(worlds, policy, (mode, value), HORIZON)
 
         self.single_fn = jax.jit(single)
         self.batch_fn = jax.jit(batch)

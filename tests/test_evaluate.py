@@ -2,9 +2,9 @@
 output failures, ablations.
 
 Every test runs on a two-pair suite (one PE pair, one LWW pair) or on one of its pairs alone.
-``ego`` and ``coop`` share one act function (the privileged ``expert`` has its own), so they
-and every ablation reuse one compiled rollout per batch shape, and an evaluation of all three
-runs them in one program (:mod:`lantern_jax.sim.switch`); module-scoped fixtures share the
+``ego`` and ``coop`` share one act function and differ in their sensors (the privileged
+``expert`` has its own act), and an evaluation of all three runs them in one program
+(:mod:`lantern_jax.sim.switch`, ego and coop in one branch); module-scoped fixtures share the
 runs.
 """
 
@@ -19,7 +19,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from lantern_jax.constants import FAMILIES
+from lantern_jax.constants import FAMILIES, KIND_PEDESTRIAN
 from lantern_jax.evaluate import (
     CONDITIONS,
     ablation_names,
@@ -27,6 +27,7 @@ from lantern_jax.evaluate import (
     evaluate,
     params_hash,
 )
+from lantern_jax.observation import warning_delivered
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.reference import reference_act
 from lantern_jax.policies.registry import get_policy
@@ -203,25 +204,30 @@ def test_wrong_output_shape_is_a_clear_error(shipped):
 
 
 def _nan_when_warned_fast(params, obs):
-    """``coop``, but NaN waypoints while the warning is active on a route faster than V_SPLIT."""
+    """``coop``, but NaN waypoints while a warning is delivered on a route faster than
+    V_SPLIT."""
     wps = reference_act(params, obs)
-    return jnp.where(obs.warning_active & (obs.v_ref > V_SPLIT), jnp.nan, wps)
+    return jnp.where(warning_delivered(obs) & (obs.v_ref > V_SPLIT), jnp.nan, wps)
 
 
-def _nan_late_on_pe_route_b(params, obs):
-    """``coop``, but NaN waypoints in the last 40 m of PE's Route B: the only execution of the
-    two-pair suite whose hazard slot is empty (no pedestrian at all, not even a despawned one)."""
+def _nan_late_on_pe_route_b(params, saw_pedestrian, obs):
+    """``coop``, but NaN waypoints in the last 40 m of a fast route on which it never saw a
+    pedestrian: of the two-pair suite, only PE's Route B (the PE Route A executions see the
+    pedestrian emerge; the LWW route is slower than V_SPLIT).  Its carry remembers whether a
+    pedestrian was ever in view."""
     wps = reference_act(params, obs)
-    pe_route_b = (obs.actor_extent[0, 0] == 0.0) & (obs.dist_to_route_end < 40.0)
-    return jnp.where(pe_route_b, jnp.nan, wps)
+    saw_pedestrian = saw_pedestrian | jnp.any(obs.visible & (obs.actor_kind == KIND_PEDESTRIAN))
+    late = ~saw_pedestrian & (obs.v_ref > V_SPLIT) & (obs.dist_to_route_end < 40.0)
+    return jnp.where(late, jnp.nan, wps), saw_pedestrian
 
 
 @pytest.fixture(scope="module")
 def faulty(suite2):
     """Both faulting policies in one evaluation (one compiled program for the two)."""
     coop = get_policy("coop")
-    policies = [Policy("coop-nan", coop.init, _nan_when_warned_fast),
-                Policy("coop-nan-b", coop.init, _nan_late_on_pe_route_b)]  # fmt: skip
+    policies = [Policy("coop-nan", coop.init, _nan_when_warned_fast, sensors=coop.sensors),
+                Policy("coop-nan-b", coop.init, _nan_late_on_pe_route_b, sensors=coop.sensors,
+                       init_carry=lambda p: jnp.asarray(False))]  # fmt: skip
     return evaluate(policies, suite=suite2, progress=False)
 
 
@@ -466,8 +472,8 @@ def test_slot_scheduling_matches_one_group(shipped, monkeypatch):
         return {k for k in ev._COMPILED if k[0] == "exe" and k[1] is ev.initial_states}
 
     known = init_programs()
-    one, _ = ev.run_executions(pol.act, execs.scenarios, params, execs.max_ticks, compact=False)
-    two, _ = ev.run_executions(pol.act, execs.scenarios, params, execs.max_ticks, compact=True)
+    one, _ = ev.run_executions(pol, execs.scenarios, params, execs.max_ticks, compact=False)
+    two, _ = ev.run_executions(pol, execs.scenarios, params, execs.max_ticks, compact=True)
     # refilled slots start from the shared initial-state program: one per batch shape (9 and 4
     # slots here), whatever the number of refills
     assert len(init_programs() - known) <= 2 and len(init_programs()) >= 2
@@ -502,8 +508,7 @@ def test_trimmed_padding_changes_no_result(suite2, policy):
     pol = get_policy(policy)
     params = pol.init(jax.random.PRNGKey(0))
     got = [
-        finalize(run_executions(pol.act, e.scenarios, params, e.max_ticks, compact=False,
-                                privileged=pol.privileged)[0].telemetry)
+        finalize(run_executions(pol, e.scenarios, params, e.max_ticks, compact=False)[0].telemetry)
         for e in (full, cut)
     ]  # fmt: skip
     for f in dataclasses.fields(got[0]):

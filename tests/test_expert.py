@@ -142,7 +142,7 @@ def test_privileged_view_is_the_forecast_in_the_ego_frame():
     world = scripted_scene()
     state = init_state(world)
     view = jax.jit(privileged_view)(world, state)
-    obs = jax.jit(lambda w, s: observe(w, s, True))(world, state)
+    obs = jax.jit(lambda w, s: observe(w, s, ("privileged",)))(world, state)
     assert obs.privileged is not None
     np.testing.assert_array_equal(obs.privileged.forecast_x, view.forecast_x)
     # The ego stands at the origin facing +x: the ego frame is the world frame with y mirrored.
@@ -186,7 +186,7 @@ def test_ramp_arcs():
 
 
 def _expert_observation(world):
-    return jax.jit(lambda w: observe(w, init_state(w), True))(world)
+    return jax.jit(lambda w: observe(w, init_state(w), ("privileged",)))(world)
 
 
 def test_expert_cruises_on_an_empty_road_and_brakes_for_a_crossing_car():

@@ -3,9 +3,8 @@ Route B gate): the gate is about places on the route, so a warning-blind policy 
 the warning point fails it on every family's Route B, even when it drives on after 3 s, while
 the reference policies pass.
 
-The test policy is the camera planner plus a virtual stop just past the warning point while the
-clock is before ``t_go``; the clock reaches it through its parameters (``step`` is called with
-``(t, ...)`` on every tick), which no benchmark policy can do.
+The test policy is the camera planner plus a virtual stop just past the warning point while its
+own clock (its carry: seconds since the execution started) is before ``t_go``.
 """
 
 from __future__ import annotations
@@ -16,35 +15,37 @@ import numpy as np
 import pytest
 from conftest import MODE_COOP, MODE_EXPERT
 
-from lantern_jax.constants import EGO_HALF_LENGTH, FAMILIES
+from lantern_jax.constants import DT, EGO_HALF_LENGTH, FAMILIES
+from lantern_jax.policies.base import Policy
 from lantern_jax.policies.planner import default_planner_config, plan, stop_constraint
 from lantern_jax.scoring.metrics import finalize
-from lantern_jax.sim.state import init_state
-from lantern_jax.sim.step import step
+from lantern_jax.sim.rollout import rollout
 from lantern_jax.world import tree_stack
 
 HORIZON = 700  # ticks (35 s)
 PAST_WARNING = 1.0  # m, the ego centre comes to rest this far past the warning point
 
 
-def stop_at_warning_act(params, obs):
+def stop_at_warning_act(params, t, obs):
     """Camera planner with a stopped obstacle placed so that the ego stands 1 m past the
-    warning point (IDM standstill gap 1 m to the obstacle) while ``t < t_go``."""
-    t, end_at_warning, t_go = params
+    warning point (IDM standstill gap 1 m to the obstacle) while its clock ``t < t_go``."""
+    end_at_warning, t_go = params
     p = default_planner_config()
     to_warning = obs.dist_to_route_end - end_at_warning  # m of route to the warning point
     obstacle = to_warning + PAST_WARNING + EGO_HALF_LENGTH + 1.0
     extra = stop_constraint(p, obstacle, t < t_go)
-    return plan(p, obs, obs.visible, extra)[0]
+    return plan(p, obs, obs.visible, extra)[0], t + DT
+
+
+STOP_AT_WARNING = Policy(
+    "stop-at-warning", lambda key: None, stop_at_warning_act, init_carry=lambda p: jnp.float32(0.0)
+)
 
 
 @jax.jit
 def run_timed(worlds, end_at_warning, t_go):
     def one(world, e, tg):
-        def body(state, _):
-            return step(stop_at_warning_act, (state.t, e, tg), world, state, 0.05)[0], None
-
-        return jax.lax.scan(body, init_state(world), None, length=HORIZON)[0]
+        return rollout(world, STOP_AT_WARNING, (e, tg), HORIZON)[0]
 
     return jax.vmap(one)(worlds, end_at_warning, t_go)
 

@@ -41,7 +41,7 @@ def _scenes(n: int):
     return tree_stack([straight_scene([], speed=6.0 + k) for k in range(n)])
 
 
-_OBSERVE = jax.jit(jax.vmap(lambda sc: observe(sc, init_state(sc))))
+_OBSERVE = jax.jit(jax.vmap(lambda sc: observe(sc, init_state(sc), ("warning",))))
 
 
 def _observations(scenarios):
@@ -76,17 +76,17 @@ def test_one_call_per_tick_in_the_batched_rollout():
     host = host_models.numpy_policy(WEIGHTS, fn=counting)
     scenes = _scenes(3)
     # 40 ticks = one chunk of the early-exit driver; the batch does not end within it.
-    jax.block_until_ready(rollout_batch(scenes, host.act, {}, 40, chunk=40))
+    jax.block_until_ready(rollout_batch(scenes, host, {}, 40, chunk=40))
     assert counting.batches == [3] * 40
 
 
 @pytest.mark.slow
 def test_closed_loop_rollout_matches_the_jax_model():
     host = host_models.numpy_policy(WEIGHTS)
-    jax_act = host_models.jax_act(WEIGHTS)
+    jax_policy = host_models.jax_policy(WEIGHTS)
     scene = straight_scene([], speed=8.0)
-    run = lambda act: jax.jit(lambda sc: rollout(sc, act, {}, 120, record=True))(scene)  # noqa: E731
-    (_, rec_h), (_, rec_j) = run(host.act), run(jax_act)
+    run = lambda pol: jax.jit(lambda sc: rollout(sc, pol, {}, 120, record=True))(scene)  # noqa: E731
+    (_, rec_h), (_, rec_j) = run(host), run(jax_policy)
     # Same model, same observations -> same plans tick after tick (float32 rounding only).
     np.testing.assert_allclose(np.asarray(rec_h.waypoints), np.asarray(rec_j.waypoints), atol=1e-3)
     np.testing.assert_allclose(np.asarray(rec_h.ego_xy), np.asarray(rec_j.ego_xy), atol=1e-3)

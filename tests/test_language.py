@@ -31,7 +31,7 @@ def table():
 @pytest.mark.parametrize("text_id", range(len(TEMPLATES)))
 def test_canonical_templates_round_trip(text_id):
     ids = language.tokenize(TEMPLATES[text_id])
-    assert ids.count(language.PLACEHOLDER_ID) == 1
+    assert ids.count(language.NUMBER_ID) == 2  # the position's x and y
     assert language.detokenize(ids) == TEMPLATES[text_id]
     assert language.detokenize(language.pad(ids)) == TEMPLATES[text_id]  # padding is dropped
 
@@ -41,16 +41,25 @@ def test_every_bank_text_round_trips_through_its_table_row():
     assert rows.shape == (len(TEXT_BANK), language.MAX_TOKENS) and rows.dtype == np.int32
     for e in TEXT_BANK:
         assert language.detokenize(rows[e.text_id]) == e.text, e.text_id
+    assert (rows[warnings.EMPTY_TEXT_ID] == language.PAD_ID).all()  # the empty text: no tokens
 
 
 def test_tokens_equal_the_tokenizers_output(tok):
-    """Each piece between placeholders is exactly the tokenizer's encoding of that piece; a text
-    without a placeholder is exactly the tokenizer's encoding of the whole text."""
+    """Each piece between placeholders is exactly the tokenizer's encoding of that piece and a
+    position is the ids of ``( <number> , <number> )``; a text without a placeholder is exactly
+    the tokenizer's encoding of the whole text."""
+    position = [
+        *tok.encode("(", add_special_tokens=False).ids,
+        language.NUMBER_ID,
+        *tok.encode(",", add_special_tokens=False).ids,
+        language.NUMBER_ID,
+        *tok.encode(")", add_special_tokens=False).ids,
+    ]
     for e in TEXT_BANK:
         want: list[int] = []
         for i, piece in enumerate(e.text.split(TOKEN)):
             if i:
-                want.append(language.PLACEHOLDER_ID)
+                want += position
             if piece.strip():
                 want += tok.encode(piece.strip(), add_special_tokens=False).ids
         got = warnings.token_table()[e.text_id]
@@ -62,21 +71,36 @@ def test_tokens_equal_the_tokenizers_output(tok):
 
 
 def test_pieces_keep_the_full_texts_tokens(tok):
-    """Tokenising around the placeholder changes only the placeholder's own tokens: the words
-    before and after it get the ids they have in the full sentence."""
+    """Tokenising around the position changes only the position's own tokens: the words before
+    and after it get the ids they have in the full delivered sentence."""
     text = TEMPLATES[0]
-    full = tok.encode(text, add_special_tokens=False).ids
+    full = tok.encode(text.replace(TOKEN, "(14.2, 3.1)"), add_special_tokens=False).ids
     ids = language.tokenize(text)
-    k = ids.index(language.PLACEHOLDER_ID)
-    ph = tok.encode(TOKEN, add_special_tokens=False).ids  # '▁<', 'FR', 'ON', ... '>'
-    assert full == ids[:k] + ph + ids[k + 1 :]
+    k = ids.index(language.NUMBER_ID) - 1  # the opening parenthesis
+    tail = len(ids) - (k + len(language.position_tokens()))
+    assert full[:k] == ids[:k] and full[-tail:] == ids[-tail:]
 
 
-def test_placeholder_and_padding_never_come_from_text(tok):
-    """The byte-fallback tokenizer never emits <unk> (the placeholder) or </s> (padding)."""
+def test_number_and_padding_ids_never_come_from_text(tok):
+    """The byte-fallback tokenizer never emits <unk> (the number token) or </s> (padding)."""
     for text in [e.text.replace(TOKEN, "(14.2, -3.1)") for e in TEXT_BANK] + ["ünïcödé ✓ 🚗"]:
         ids = tok.encode(text, add_special_tokens=False).ids
-        assert language.PLACEHOLDER_ID not in ids and language.PAD_ID not in ids
+        assert language.NUMBER_ID not in ids and language.PAD_ID not in ids
+
+
+def test_the_value_channel_writes_the_position_as_the_text_does():
+    """The delivered string read back from tokens and values is exactly ``render_warning``."""
+    lookup = jax.jit(lambda i, p: warnings.warning_language(i, jnp.asarray(True), p))
+    for e in TEXT_BANK:
+        for pos in ((14.24, -3.15), (0.04, -0.04), (100.0, 0.5)):
+            tokens, values = lookup(jnp.int32(e.text_id), jnp.asarray(pos, jnp.float32))
+            got = warnings.warning_string(tokens, values)
+            assert got == warnings.render_warning(e.text_id, pos), (e.text_id, pos, got)
+            numbers = np.asarray(values)[np.asarray(tokens) == language.NUMBER_ID]
+            assert len(numbers) == (2 if e.has_position else 0)
+            assert (
+                np.count_nonzero(np.asarray(values)[np.asarray(tokens) != language.NUMBER_ID]) == 0
+            )
 
 
 @pytest.mark.parametrize(
@@ -86,7 +110,7 @@ def test_placeholder_and_padding_never_come_from_text(tok):
         "The car at<FRONT_CAR_POS> is stopped.",
         "The car at  <FRONT_CAR_POS> is stopped.",  # two spaces
         " The car is stopped.",  # leading space
-        "",
+        "   ",
     ],
 )
 def test_texts_that_would_not_round_trip_are_refused(text):
@@ -112,18 +136,19 @@ def test_token_table_is_built_once(monkeypatch):
     first = warnings.text_tables()
     assert len(calls) == len(TEXT_BANK)
     assert warnings.text_tables() is first
-    lookup = jax.jit(lambda i: warnings.text_language(i, jnp.asarray(True)))
+    lookup = jax.jit(lambda i: warnings.warning_language(i, jnp.asarray(True), jnp.ones(2)))
     for i in (0, 7, len(TEXT_BANK) - 1):
-        tokens, has_pos = lookup(jnp.int32(i))
-        np.testing.assert_array_equal(np.asarray(tokens), first[0][i])
-        assert bool(has_pos) == TEXT_BANK[i].has_position
+        tokens, values = lookup(jnp.int32(i))
+        np.testing.assert_array_equal(np.asarray(tokens), first.tokens[i])
+        assert bool(np.any(np.asarray(values) != 0)) == TEXT_BANK[i].has_position
     assert len(calls) == len(TEXT_BANK)  # lookups (traced or not) never tokenise again
 
 
 def test_lookup_of_inactive_or_unknown_text_is_padding():
     for tid, active in ((0, False), (-1, True), (len(TEXT_BANK), True)):
-        tokens, has_pos = warnings.text_language(jnp.int32(tid), jnp.asarray(active))
-        assert (np.asarray(tokens) == language.PAD_ID).all() and not bool(has_pos)
+        tokens, values = warnings.warning_language(jnp.int32(tid), jnp.asarray(active), jnp.ones(2))
+        assert (np.asarray(tokens) == language.PAD_ID).all()
+        assert not np.asarray(values).any()
 
 
 # ---------------------------------------------------------------------------------------------
@@ -175,7 +200,7 @@ def test_pooled_embedding_is_the_normalised_mean_of_word_tokens(table):
     rows = warnings.token_table()[:3]
     got = np.asarray(language.pooled_embedding(table, rows))
     for r, row in enumerate(rows):
-        words = row[(row != language.PAD_ID) & (row != language.PLACEHOLDER_ID)]
+        words = row[(row != language.PAD_ID) & (row != language.NUMBER_ID)]
         mean = table[words].astype(np.float64).mean(axis=0)
         np.testing.assert_allclose(got[r], mean / np.linalg.norm(mean), rtol=2e-5, atol=2e-6)
     np.testing.assert_allclose(np.linalg.norm(got, axis=-1), 1.0, rtol=1e-5)

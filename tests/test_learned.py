@@ -37,10 +37,11 @@ from lantern_jax.policies.learned.features import (
 )
 from lantern_jax.policies.learned.model import ModelConfig
 from lantern_jax.scenarios.handmade import straight_scene
-from lantern_jax.scenarios.warnings import text_tables
+from lantern_jax.scenarios.warnings import text_tables, warning_language
 from lantern_jax.sim.observe import observe
 from lantern_jax.sim.state import init_state
 from lantern_jax.training.config import ConfigError, load_config
+from lantern_jax.world import present
 
 SMALL = ModelConfig(width=16, heads=2)
 
@@ -49,7 +50,7 @@ SMALL = ModelConfig(width=16, heads=2)
 def obs():
     world = straight_scene([], length=120.0, speed=8.0, s_warn=22.0, s_event=31.0,
                            s_conflict=40.0, hazard_index=0, clear_s=22.0)  # fmt: skip
-    return jax.jit(lambda w: observe(w, init_state(w)))(world)
+    return jax.jit(lambda w: observe(w, init_state(w), ("warning",)))(world)
 
 
 @pytest.fixture(scope="module")
@@ -60,14 +61,11 @@ def tables():
 
 
 def warned(obs, text_id: int, pos=(30.0, 0.0)):
-    """The observation with the warning ``text_id`` active at ``pos`` (ego frame, m)."""
-    tokens, has_pos = text_tables()
-    return obs.replace(
-        warning_active=jnp.bool_(True), warning_text_id=jnp.int32(text_id),
-        warning_tokens=jnp.asarray(tokens[text_id]),
-        warning_has_position=jnp.bool_(has_pos[text_id]),
-        warning_pos=jnp.asarray(pos, jnp.float32),
-    )  # fmt: skip
+    """The observation with the warning ``text_id`` delivered at ``pos`` (ego frame, m)."""
+    tokens, values = warning_language(
+        jnp.int32(text_id), jnp.bool_(True), jnp.asarray(pos, jnp.float32)
+    )
+    return obs.replace(warning_tokens=tokens, warning_values=values)
 
 
 def test_features_shapes_and_ranges(obs, tables):
@@ -101,8 +99,8 @@ def test_warning_replaces_the_navigation_text(obs, tables):
     f1 = features(warned(obs, 0), "front", *tables)
     assert float(f1.warning) == 1.0
     assert not np.allclose(np.asarray(f0.text), np.asarray(f1.text))
-    tokens, has_pos = text_tables()
-    assert float(f1.has_position) == float(has_pos[0])
+    assert float(f1.has_position) == float(text_tables().has_position[0])
+    np.testing.assert_allclose(np.asarray(f1.position), np.array([30.0, 0.0]) / 50.0, atol=1e-6)
 
 
 def test_model_output_is_ordered_finite_waypoints(obs, tables):
@@ -139,7 +137,7 @@ def test_policy_act_is_pure_and_batchable(obs, tables):
     batch = jax.tree.map(lambda x: jnp.stack([x, x]), obs)
     two = jax.jit(jax.vmap(pol.act, (None, 0)))(params, batch)
     np.testing.assert_allclose(np.asarray(two[0]), np.asarray(one), atol=1e-5)
-    assert pol.uses_warning
+    assert pol.reads_warning and pol.sensors == ("front_camera", "warning")
 
 
 def test_overfits_a_tiny_set(obs, tables):
@@ -148,11 +146,10 @@ def test_overfits_a_tiny_set(obs, tables):
     rng = np.random.default_rng(0)
     n = 16
     batch = jax.tree.map(lambda x: jnp.stack([x] * n), obs)
-    tokens, _ = text_tables()
+    tokens = text_tables().tokens
     ids = np.arange(n) % 6
     speed = rng.uniform(0.0, 10.0, n).astype(np.float32)
     batch = batch.replace(
-        warning_active=jnp.ones(n, bool),
         warning_tokens=jnp.asarray(tokens[ids]),
         ego_speed=jnp.asarray(speed),
     )  # fmt: skip
@@ -317,8 +314,7 @@ def test_every_shipped_model_is_registered_and_loads():
         assert get_policy(name) is pol
         assert pol.name == name and pol.description == desc
         assert read_meta(shipped_path(name))["train_config"]["name"] == name
-        surround = bool(getattr(pol.act, "surround", False))
-        obs = observe(world, init_state(world), surround=surround)
+        obs = observe(world, init_state(world), pol.sensors)
         plan = pol.act(pol.init(jax.random.PRNGKey(0)), obs)
         assert plan.shape == (NUM_WAYPOINTS, 2) and bool(jnp.all(jnp.isfinite(plan)))
 
@@ -344,17 +340,18 @@ def test_surround_rig_reads_the_simulators_360_degree_view(tmp_path):
                            s_event=31.0, s_conflict=40.0, hazard_index=0, clear_s=22.0)  # fmt: skip
     state = init_state(world)
     assert observe(world, state).surround is None
-    around = jax.jit(lambda w, s: observe(w, s, surround=True))(world, state).surround
+    around = jax.jit(lambda w, s: observe(w, s, ("surround_rig",)))(world, state).surround
     rig = camera_view(world, state.ego, state.actors, SURROUND_FOV, SURROUND_RAYS)
-    np.testing.assert_array_equal(np.asarray(around.visible), np.asarray(rig.visible))
+    on = present(world.actors, state.actors)
+    np.testing.assert_array_equal(np.asarray(around.visible), np.asarray(rig.visible & on))
     np.testing.assert_array_equal(np.asarray(around.ranges), np.asarray(rig.ranges))
     assert around.ranges.shape == (SURROUND_RAYS,)
 
     cfg = ModelConfig(width=16, heads=2, rig="surround", language=False, ranges=SURROUND_RAYS)
     pol = model_policy("learned-surround-test", new_model(cfg, seed=1))
-    assert pol.act.surround
+    assert pol.surround and pol.sensors == ("front_camera", "surround_rig")
     with pytest.raises(ValueError, match="surround"):
         features(observe(world, state), "surround", *(pol.init(None).embedding,
                  pol.init(None).nav_tokens))  # fmt: skip
-    final, _ = jax.jit(lambda w: rollout(w, pol.act, pol.init(None), 40))(world)
+    final, _ = jax.jit(lambda w: rollout(w, pol, pol.init(None), 40))(world)
     assert np.isfinite(np.asarray(final.ego.xy)).all() and float(final.t) > 0

@@ -114,9 +114,12 @@ def test_a_policy_from_outside_the_package_is_compiled_not_stored(store, monkeyp
     assert sorted(keyed) == [("finalize", True), ("initial_states", True), ("rollout", False)]
 
 
-def test_describe_accepts_package_functions_and_refuses_what_it_cannot_vouch_for():
+def test_describe_accepts_package_functions_and_refuses_what_it_cannot_vouch_for(monkeypatch):
     assert program_store.describe(expert_act) == program_store.describe(expert_act)
-    assert "privileged" in program_store.describe(expert_act)  # function attributes count
+    plain = program_store.describe(expert_act)
+    monkeypatch.setattr(expert_act, "marked", True, raising=False)
+    assert program_store.describe(expert_act) != plain  # function attributes count
+    monkeypatch.delattr(expert_act, "marked")
     for bad in (lambda p, o: o, _coop_user_act, object(), functools.partial(_coop_user_act)):
         with pytest.raises(program_store.Unkeyable):
             program_store.describe(bad)

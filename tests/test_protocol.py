@@ -29,10 +29,13 @@ from lantern_jax.constants import (
     TRIGGER_EVENT,
     WEATHERS,
 )
+from lantern_jax.language import PAD_ID
+from lantern_jax.observation import WARNING, stated_position
 from lantern_jax.scenarios.families import build_pair, sample_params
 from lantern_jax.scenarios.families_straight import PED_CROSSING, PED_EXTENT, PED_SPEED
 from lantern_jax.scenarios.handmade import ActorSpec, no_lights, straight_scene
-from lantern_jax.sim.observe import observe
+from lantern_jax.scenarios.warnings import token_table
+from lantern_jax.sim.observe import delivered_warning, observe
 from lantern_jax.sim.sense import locate_on_route, sense
 from lantern_jax.sim.state import init_state
 from lantern_jax.world import ProtocolState, TrafficLights
@@ -373,19 +376,25 @@ def test_warning_position_in_observation_matches_hand_computation():
     def obs_fn(st):
         arc, dist, progress = locate_on_route(world.route, st.ego.xy, jnp.float32(0.0))
         st = st.replace(percept=sense(world, st.ego, st.actors, arc, dist, progress))
-        return observe(world, st)
+        return observe(world, st, (WARNING,)), delivered_warning(world, st)
 
-    obs = obs_fn(state)
-    assert bool(obs.warning_active)
-    assert int(obs.warning_text_id) == int(world.config.text_id)
+    obs, (active, text_id, pos) = obs_fn(state)
+    assert bool(active) and int(text_id) == int(world.config.text_id)
     expected = ego_frame(hazard, ego_xy, ego_yaw)
     assert expected[1] > 0.0  # to the right of the ego
-    np.testing.assert_allclose(np.asarray(obs.warning_pos), expected, atol=1e-4)
+    np.testing.assert_allclose(np.asarray(pos), expected, atol=1e-4)
+    # The policy reads the text: the template's tokens, the position as the text writes it.
+    np.testing.assert_array_equal(np.asarray(obs.warning_tokens), token_table()[text_id])
+    stated, has = stated_position(obs)
+    assert bool(has)
+    np.testing.assert_allclose(np.asarray(stated), np.round(expected, 1), atol=1e-5)
     # Same state before the warning point: nothing delivered.
     early = state.replace(protocol=state.protocol.replace(t_warn_point=jnp.float32(2.0)))
-    obs = obs_fn(early)
-    assert not bool(obs.warning_active) and int(obs.warning_text_id) == -1
-    np.testing.assert_array_equal(np.asarray(obs.warning_pos), 0.0)
+    obs, (active, text_id, pos) = obs_fn(early)
+    assert not bool(active) and int(text_id) == -1
+    np.testing.assert_array_equal(np.asarray(pos), 0.0)
+    assert (np.asarray(obs.warning_tokens) == PAD_ID).all()
+    np.testing.assert_array_equal(np.asarray(obs.warning_values), 0.0)
 
 
 def test_warning_position_along_a_rotated_family_rollout(family_runs):

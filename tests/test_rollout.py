@@ -26,6 +26,7 @@ from lantern_jax.constants import (
     ROLE_OCCLUDER,
     TRIGGER_EVENT,
 )
+from lantern_jax.policies.base import Policy
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.handmade import ActorSpec, straight_scene
 from lantern_jax.scenarios.knobs import set_knobs
@@ -266,15 +267,14 @@ def test_rollout_batch_traces_once_and_matches_fixed_horizon(sim, family_pairs):
 # ---------------------------------------------------------------------------------------------
 # gradients
 # ---------------------------------------------------------------------------------------------
-def _soft_clearance_grad(act, privileged: bool = False):
+def _soft_clearance_grad(policy: Policy):
     """``jit(value_and_grad)`` of the soft clearance accumulator of :func:`crossing_scene` with
     respect to the pedestrian's crossing speed ``v_post`` (3 m/s), over GRAD_TICKS ticks."""
     world = crossing_scene()
+    params = policy.init(jax.random.PRNGKey(0))
 
     def soft_clearance(v_post):
-        final, _ = rollout(
-            set_knobs(world, hazard_speed=v_post), act, None, GRAD_TICKS, privileged=privileged
-        )
+        final, _ = rollout(set_knobs(world, hazard_speed=v_post), policy, params, GRAD_TICKS)
         return final.telemetry.clearance.lse
 
     value, grad = jax.jit(jax.value_and_grad(soft_clearance))(jnp.float32(3.0))
@@ -283,7 +283,8 @@ def _soft_clearance_grad(act, privileged: bool = False):
 
 def test_gradient_through_simulator_core():
     """Scripted actor, protocol and telemetry are differentiable (constant-speed ego plan)."""
-    value, grad = _soft_clearance_grad(lambda _, obs: constant_speed_waypoints(8.0))
+    cruise = Policy("cruise", lambda key: None, lambda _, obs: constant_speed_waypoints(8.0))
+    value, grad = _soft_clearance_grad(cruise)
     assert np.isfinite(value)
     assert np.isfinite(grad) and abs(grad) > 1e-6
 
@@ -295,14 +296,14 @@ def test_expert_plan_gradient_wrt_observation_is_finite():
     expert = get_policy("expert")
     pp = expert.init(jax.random.PRNGKey(0))
     world = crossing_scene()
-    obs = jax.jit(lambda w: observe(w, init_state(w), privileged=True))(world)
+    obs = jax.jit(lambda w: observe(w, init_state(w), expert.sensors))(world)
 
     def plan_sum(route, actor_dir, forecast_x):
-        pv = obs.privileged.replace(forecast_x=forecast_x)
-        return jnp.sum(expert.act(pp, obs.replace(route=route, actor_dir=actor_dir, privileged=pv)))
+        pv = obs.privileged.replace(forecast_x=forecast_x, actor_dir=actor_dir)
+        return jnp.sum(expert.act(pp, obs.replace(route=route, privileged=pv)))
 
     grads = jax.jit(jax.grad(plan_sum, argnums=(0, 1, 2)))(
-        obs.route, obs.actor_dir, obs.privileged.forecast_x
+        obs.route, obs.privileged.actor_dir, obs.privileged.forecast_x
     )
     for g in grads:
         assert np.isfinite(np.asarray(g)).all()
@@ -314,15 +315,13 @@ def test_expert_refuses_an_ordinary_observation():
     world = crossing_scene()
     obs = jax.jit(lambda w: observe(w, init_state(w)))(world)
     assert obs.privileged is None
-    with pytest.raises(ValueError, match="privileged=True"):
+    with pytest.raises(ValueError, match="'privileged' sensor"):
         expert.act(expert.init(jax.random.PRNGKey(0)), obs)
 
 
 @pytest.mark.slow
 def test_gradient_through_expert_policy():
-    expert = get_policy("expert")
-    pp = expert.init(jax.random.PRNGKey(0))
-    value, grad = _soft_clearance_grad(lambda _, obs: expert.act(pp, obs), privileged=True)
+    value, grad = _soft_clearance_grad(get_policy("expert"))
     assert np.isfinite(value)
     assert np.isfinite(grad) and abs(grad) > 1e-6
 
@@ -469,7 +468,7 @@ def test_actor_capacity_changes_nothing(family_pairs):
     pp = get.init(jax.random.PRNGKey(0))
     scene = family_pairs["PE"][0]
     big = _with_capacity(scene, scene.actors.num + 8).validate()
-    run = jax.jit(lambda sc: rollout(sc, get.act, pp, 600)[0])
+    run = jax.jit(lambda sc: rollout(sc, get, pp, 600)[0])
     a, b = jax.device_get(run(scene)), jax.device_get(run(big))
     assert_trees_close(b.telemetry, a.telemetry, rtol=1e-6, atol=1e-6, what="telemetry")
     assert_trees_close(b.protocol, a.protocol, rtol=1e-6, atol=1e-6, what="protocol")

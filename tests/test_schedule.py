@@ -113,7 +113,7 @@ def test_padding_below_the_batch_is_refused(shipped_pair_executions):
 
     ego = get_policy("ego")
     with pytest.raises(ValueError, match=r"pad_to=2 is smaller than the batch \(3\)"):
-        run_executions(ego.act, shipped_pair_executions, {}, 10, pad_to=2)
+        run_executions(ego, shipped_pair_executions, {}, 10, pad_to=2)
 
 
 @pytest.fixture(scope="module")

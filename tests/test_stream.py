@@ -43,10 +43,10 @@ def test_chunks_give_the_one_batch_result(stress):
     ego = get_policy("ego")
     params = ego.init(jax.random.PRNGKey(0))
     count = 22  # 3 chunks of 8, the last one padded
-    streamed = stream_executions(ego.act, params, source, count, max_ticks, chunk=8,
+    streamed = stream_executions(ego, params, source, count, max_ticks, chunk=8,
                                  progress=False)  # fmt: skip
     assert streamed.chunks == 3
-    final, _ = run_executions(ego.act, source(np.arange(count)), params, max_ticks)
+    final, _ = run_executions(ego, source(np.arange(count)), params, max_ticks)
     whole = jax.tree.map(np.asarray, finalize(final.telemetry))
     for f in dataclasses.fields(whole):
         x, y = streamed.metrics[f.name], getattr(whole, f.name)

@@ -151,8 +151,8 @@ def _soft_pair_gradient(suite, key: str, num_ticks: int | None, temp: float = 0.
     n = horizon_ticks(float(a.config.timeout_s)) if num_ticks is None else num_ticks
 
     def score(v_post):
-        fa, _ = rollout(set_knobs(a, hazard_speed=v_post), pol.act, params, n, temperature=temp)
-        fb, _ = rollout(b, pol.act, params, n, temperature=temp)
+        fa, _ = rollout(set_knobs(a, hazard_speed=v_post), pol, params, n, temperature=temp)
+        fb, _ = rollout(b, pol, params, n, temperature=temp)
         return soft_pair_components(fa.telemetry, fb.telemetry, a.config.d_safe, temp)[key]
 
     value, grad = jax.jit(jax.value_and_grad(score))(jnp.float32(3.0))

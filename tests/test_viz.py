@@ -38,7 +38,7 @@ def pe_runs():
     world_nw = world.replace(config=world.config.replace(warning_enabled=jnp.asarray(False)))
     pol = get_policy("coop")
     params = pol.init(jax.random.PRNGKey(0))
-    run = jax.jit(lambda w: rollout(w, pol.act, params, NUM_TICKS, record=True))
+    run = jax.jit(lambda w: rollout(w, pol, params, NUM_TICKS, record=True))
     final_w, rec_w = run(world)
     final_nw, rec_nw = run(world_nw)
     return types.SimpleNamespace(

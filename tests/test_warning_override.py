@@ -14,13 +14,16 @@ from conftest import MODE_COOP, MODE_EXPERT, select
 
 from lantern_jax import language
 from lantern_jax.constants import DT, PE
+from lantern_jax.observation import WARNING, stated_position, warning_delivered
 from lantern_jax.scenarios.handmade import straight_scene
 from lantern_jax.scenarios.warnings import (
     get_text,
     non_actionable_text_ids,
+    render_warning,
     set_override,
     tier_text_ids,
     token_table,
+    warning_string,
 )
 from lantern_jax.sim.observe import observe
 from lantern_jax.sim.sense import locate_on_route, sense
@@ -171,7 +174,7 @@ def obs_fn():
     def fn(world, st):
         arc, dist, progress = locate_on_route(world.route, st.ego.xy, jnp.float32(0.0))
         st = st.replace(percept=sense(world, st.ego, st.actors, arc, dist, progress))
-        return observe(world, st)
+        return observe(world, st, (WARNING,))
 
     return fn
 
@@ -182,26 +185,30 @@ def test_observation_tokens_and_position_flag(obs_fn, text_id):
     state = init_state(world).replace(t=jnp.float32(1.0))
     obs = obs_fn(world, state)
     has = get_text(text_id).has_position
-    assert bool(obs.warning_active) and int(obs.warning_text_id) == text_id
-    assert bool(obs.warning_has_position) == has
-    np.testing.assert_array_equal(np.asarray(obs.warning_pos), [15.0, -2.0] if has else [0, 0])
+    assert bool(warning_delivered(obs))
     np.testing.assert_array_equal(np.asarray(obs.warning_tokens), token_table()[text_id])
     assert obs.warning_tokens.shape == (language.MAX_TOKENS,)
-    assert (np.asarray(obs.warning_tokens) == language.PLACEHOLDER_ID).sum() == int(has)
+    assert (np.asarray(obs.warning_tokens) == language.NUMBER_ID).sum() == 2 * int(has)
+    pos, stated = stated_position(obs)
+    assert bool(stated) == has
+    np.testing.assert_array_equal(np.asarray(pos), [15.0, -2.0] if has else [0, 0])
+    assert warning_string(obs.warning_tokens, obs.warning_values) == render_warning(
+        text_id, (15.0, -2.0)
+    )
     # Outside the window: nothing delivered, all padding.
     late = obs_fn(world, state.replace(t=jnp.float32(1.5)))
-    assert not bool(late.warning_active) and not bool(late.warning_has_position)
+    assert not bool(warning_delivered(late)) and not bool(stated_position(late)[1])
     assert (np.asarray(late.warning_tokens) == language.PAD_ID).all()
 
 
 def test_override_anchored_at_the_warning_point_waits_for_it(obs_fn):
     world = set_override(empty_road(), 0, (15.0, 0.0), "ego", 0.0, 2.0, "warning_point")
     state = init_state(world).replace(t=jnp.float32(5.0))
-    assert not bool(obs_fn(world, state).warning_active)  # the warning point never reached
+    assert not bool(warning_delivered(obs_fn(world, state)))  # the warning point never reached
     reached = state.replace(protocol=ProtocolState.initial().replace(t_warn_point=jnp.float32(4.0)))
-    assert bool(obs_fn(world, reached).warning_active)
+    assert bool(warning_delivered(obs_fn(world, reached)))
     after = reached.replace(t=jnp.float32(6.0))
-    assert not bool(obs_fn(world, after).warning_active)
+    assert not bool(warning_delivered(obs_fn(world, after)))
 
 
 @pytest.mark.parametrize(

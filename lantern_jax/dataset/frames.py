@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from lantern_jax.constants import NUM_WAYPOINTS, ROLE_HAZARD, WAYPOINT_DT
+from lantern_jax.language import PAD_ID
 from lantern_jax.times import happened
 
 MIN_COMPLETION = 0.95  # route completion of an accepted sequence
@@ -97,7 +98,7 @@ def rejection(
             return REASONS[5]
         if int(np.sum(t > max(off, clear))) < MIN_RECOVERY_FRAMES:
             return REASONS[6]
-    elif bool(np.any(np.asarray(frames.obs.warning_active)[live])) or bool(
+    elif bool(np.any(np.asarray(frames.obs.warning_tokens)[live] != PAD_ID)) or bool(
         np.any(valid & (roles == ROLE_HAZARD))
     ):
         return REASONS[7]

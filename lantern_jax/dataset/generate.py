@@ -24,7 +24,7 @@ import pandas as pd
 
 from lantern_jax.constants import DT, FAMILIES, WEATHERS
 from lantern_jax.dataset import frames as fr
-from lantern_jax.dataset.record import FRAME_TICKS, batched_recorder
+from lantern_jax.dataset.record import FRAME_TICKS, RIG_FIELDS, batched_recorder
 from lantern_jax.dataset.scenes import (
     DATASET_SEED,
     PAIRS_PER_FAMILY,
@@ -82,8 +82,10 @@ def _sequence_columns(seq_id: str, spec: SceneSpec, route: str, rec: Any, idx: n
         value = getattr(rec.obs, f.name)
         if value is not None:
             cols[f"obs.{f.name}"] = np.asarray(value)[idx]
-    for f in dataclasses.fields(rec.surround):
-        cols[f"surround.{f.name}"] = np.asarray(getattr(rec.surround, f.name))[idx]
+    for f in dataclasses.fields(rec.rig.surround):
+        cols[f"surround.{f.name}"] = np.asarray(getattr(rec.rig.surround, f.name))[idx]
+    for name in RIG_FIELDS:
+        cols[f"rig.{name}"] = np.asarray(getattr(rec.rig, name))[idx]
     cols["waypoints"] = wps
     on = float(protocol.t_warn_on) if route == "A" else float("nan")
     off = float(protocol.t_warn_off) if route == "A" else float("nan")
@@ -200,7 +202,7 @@ def generate_dataset(
     card["chunks"] = len(chunks)
     expert = get_policy("expert")
     params = expert.init(jax.random.PRNGKey(0))
-    recorder = batched_recorder(expert.act, int(np.ceil(MAX_SECONDS / (FRAME_TICKS * DT))))
+    recorder = batched_recorder(expert, int(np.ceil(MAX_SECONDS / (FRAME_TICKS * DT))))
     bar = None
     if progress:
         from tqdm.auto import tqdm

@@ -2,11 +2,12 @@
 
 One frame is kept every :data:`FRAME_TICKS` ticks, so frames are exactly 0.25 s apart — the
 spacing of the policy waypoints — and frame ``f + k`` is the expert's actual position ``k``
-waypoints after frame ``f``.  A frame holds the policy :class:`~lantern_jax.observation.Observation`
-of its tick (front camera: visible objects, range image and each ray's semantic class; ego
-state, navigation, the warning as text ids and numbers), the six-camera rig's view
-(:func:`lantern_jax.sim.sense.camera_view` at 360 deg, the same fields as
-``Observation.surround``), the ego's world pose, and whether the execution was still running.
+waypoints after frame ``f``.  A frame holds exactly what a learned policy would observe at its
+tick: the observation under :data:`FRONT_SENSORS` (front camera: visible objects, range image
+and each ray's semantic class; ego state, navigation; the warning as its token ids and value
+channel), and what the six-camera rig changes in it (:class:`RigFrame`: the rig's own view, and
+the actors and visibility under front camera plus rig), together with the ego's world pose and
+whether the execution was still running.
 """
 
 from __future__ import annotations
@@ -18,17 +19,40 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from lantern_jax.constants import SURROUND_FOV
-from lantern_jax.observation import Observation
+from lantern_jax.observation import (
+    FRONT_CAMERA,
+    SURROUND_RIG,
+    WARNING,
+    Observation,
+    SurroundView,
+)
+from lantern_jax.policies.base import Policy
 from lantern_jax.sim.observe import observe
-from lantern_jax.sim.sense import SURROUND_RAYS, CameraView, camera_view
-from lantern_jax.sim.state import State, init_state
+from lantern_jax.sim.rollout import start_state
+from lantern_jax.sim.state import State
 from lantern_jax.sim.step import step
 from lantern_jax.world import Scenario
 
 Array = jax.Array
 
 FRAME_TICKS = 5  # 20 Hz ticks per retained frame (4 Hz)
+FRONT_SENSORS = (FRONT_CAMERA, WARNING)  # the recorded observation's sensors
+RIG_SENSORS = (FRONT_CAMERA, SURROUND_RIG, WARNING)  # ... and those of the rig's variant
+#: the observation fields that the six-camera rig changes (besides ``surround``)
+RIG_FIELDS = ("visible", "actor_xy", "actor_vel", "actor_dir", "actor_extent", "actor_kind")
+
+
+@struct.dataclass
+class RigFrame:
+    """What the observation of a policy with the six-camera rig holds beyond the front one."""
+
+    surround: SurroundView  # the rig's visibility, SURROUND_RAYS ranges and classes
+    visible: Array  # (A,) bool, seen by the front camera or the rig
+    actor_xy: Array  # (A, 2) float32, m (zero where not seen), as in Observation
+    actor_vel: Array  # (A, 2) float32, m/s
+    actor_dir: Array  # (A, 2) float32
+    actor_extent: Array  # (A, 2) float32, m
+    actor_kind: Array  # (A,) int32
 
 
 @struct.dataclass
@@ -39,25 +63,25 @@ class FrameRecord:
     live: Array  # () bool, the execution had not ended at this frame
     ego_xy: Array  # (2,) float32, m, world frame
     ego_yaw: Array  # () float32, rad
-    obs: Observation  # the policy observation of this tick (front camera: visible objects,
-    #                   range image and each ray's class, ``obs.range_class``)
-    surround: CameraView  # the six-camera rig: visibility, SURROUND_RAYS ranges and classes
+    obs: Observation  # the observation under FRONT_SENSORS (front camera: visible objects,
+    #                   range image and each ray's class, ``obs.range_class``; warning text)
+    rig: RigFrame  # what the six-camera rig changes in it
 
 
 def _frame(scenario: Scenario, state: State) -> FrameRecord:
-    around = camera_view(scenario, state.ego, state.actors, SURROUND_FOV, SURROUND_RAYS)
+    rig_obs = observe(scenario, state, RIG_SENSORS)
     return FrameRecord(
         t=state.t,
         live=~state.done,
         ego_xy=state.ego.xy,
         ego_yaw=state.ego.yaw,
-        obs=observe(scenario, state),
-        surround=around,
+        obs=observe(scenario, state, FRONT_SENSORS),
+        rig=RigFrame(surround=rig_obs.surround, **{k: getattr(rig_obs, k) for k in RIG_FIELDS}),
     )
 
 
 def record(
-    scenario: Scenario, act: Callable[[Any, Any], Array], policy_params: Any, num_frames: int
+    scenario: Scenario, policy: Policy, policy_params: Any, num_frames: int
 ) -> tuple[FrameRecord, State]:
     """Roll one execution, keeping one frame every :data:`FRAME_TICKS` ticks (the first at
     ``t = 0``), until it ends or ``num_frames`` frames are kept.
@@ -69,12 +93,12 @@ def record(
         (frames with a leading axis ``num_frames``, the final state).
     """
     temperature = jnp.asarray(0.05, jnp.float32)
-    state0 = init_state(scenario)
+    state0 = start_state(scenario, policy, policy_params)
     shapes = jax.eval_shape(_frame, scenario, state0)
     empty = jax.tree.map(lambda x: jnp.zeros((num_frames, *x.shape), x.dtype), shapes)
 
     def tick(s, _):
-        return step(act, policy_params, scenario, s, temperature)[0], None
+        return step(policy, policy_params, scenario, s, temperature)[0], None
 
     def body(carry):
         i, state, frames = carry
@@ -94,12 +118,12 @@ def record(
 _RECORDERS: dict[tuple, Callable] = {}
 
 
-def batched_recorder(act: Callable[[Any, Any], Array], num_frames: int) -> Callable:
+def batched_recorder(policy: Policy, num_frames: int) -> Callable:
     """``jit(vmap(record))``: ``(scenarios, policy_params) -> (frames, final states)``; one
-    compiled function per (policy act, frame count), reused by later calls."""
-    key = (act, num_frames)
+    compiled function per (policy program, frame count), reused by later calls."""
+    key = (policy.program, num_frames)
     if key not in _RECORDERS:
         _RECORDERS[key] = jax.jit(
-            jax.vmap(lambda sc, params: record(sc, act, params, num_frames), in_axes=(0, None))
+            jax.vmap(lambda sc, params: record(sc, policy, params, num_frames), in_axes=(0, None))
         )
     return _RECORDERS[key]

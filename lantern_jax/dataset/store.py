@@ -3,13 +3,15 @@
 A dataset folder holds, per generation chunk ``k``:
 
 * ``frames-k.parquet`` — one row per training frame: identity (``sequence_id``, ``family``,
-  ``route``, ``weather``, ``frame``, ``t_s``), every field of the policy observation as
-  ``obs.<field>`` (front camera: visible objects, range image; ego state; navigation; the
-  warning as text id, token ids, position and flags; ``obs.range_class`` is the semantic class
-  of each front ray, ``constants.RAY_CLASS_NAMES``: actor kinds, then static occluder kinds),
-  the six-camera rig as ``surround.visible``, ``surround.ranges``, ``surround.hit_class``,
-  the ten expert ``waypoints`` (ego frame, x forward, y right, 0.25 s apart) and the
-  ``horizon_crossing`` flag;
+  ``route``, ``weather``, ``frame``, ``t_s``), every field of the policy observation under the
+  front camera and the warning sensor as ``obs.<field>`` (front camera: visible objects, range
+  image; ego state; navigation; the warning as its token ids and value channel;
+  ``obs.range_class`` is the semantic class of each front ray, ``constants.RAY_CLASS_NAMES``:
+  actor kinds, then static occluder kinds), the six-camera rig's own view as
+  ``surround.visible``, ``surround.ranges``, ``surround.hit_class``, and the fields the rig
+  changes in the observation (the actors seen by front camera or rig) as ``rig.visible``,
+  ``rig.actor_xy``, ... (``dataset.record``), the ten expert ``waypoints`` (ego frame, x
+  forward, y right, 0.25 s apart) and the ``horizon_crossing`` flag;
 * ``sequences-k.parquet`` — one row per recorded sequence, accepted or not (with the reason),
   with its event timeline and parameters;
 
@@ -41,8 +43,10 @@ from lantern_jax.files import atomic_write
 
 # 2: scenes disjoint from the suite by the near-duplicate rule; 3: static occluders block the
 # six-camera rig, rays that hit one are classed as building, wall or parked vehicle, and the
-# front rays' classes are an observation field (obs.range_class, was front_class)
-FORMAT_VERSION = 3
+# front rays' classes are an observation field (obs.range_class, was front_class); 4: the
+# observation holds only what the declared sensors deliver (unseen actors zero, the warning as
+# token ids and value channel only), and the rig's variant of the actor fields (rig.*)
+FORMAT_VERSION = 4
 PAPER_ROUTE_A = 1631  # sequences in the paper's release
 PAPER_ROUTE_B = 1641
 PAPER_FRAMES = 236_309  # frames in the paper's release (4 Hz)

@@ -5,10 +5,13 @@
 * ``reset(rng)`` draws a scene from a :class:`~lantern_jax.envs.bank.ScenarioBank` (``rng`` is
   a raw ``jax.random.PRNGKey``) and starts its execution;
 * ``step(state, action)`` maps the action (acceleration and curvature in [-1, 1]) to waypoints
-  (:func:`lantern_jax.policies.features.action_to_waypoints`) and runs one 20 Hz tick of the
-  simulator (:func:`lantern_jax.sim.step.step`: the same tick the evaluation runs);
-* the observation is :func:`lantern_jax.policies.features.observation_vector` (``OBS_SIZE``
-  slots, each documented there); the reward is documented in :mod:`lantern_jax.envs.reward`;
+  (:func:`lantern_jax.policies.features.action_to_waypoints`) and advances the world one 20 Hz
+  tick (:func:`lantern_jax.sim.step.transition`: the world's half of the tick the evaluation
+  runs; the agent is the policy);
+* the observation is :func:`lantern_jax.policies.features.observation_vector` of what the
+  sensors :data:`SENSORS` deliver (front camera and warning text; ``OBS_SIZE`` slots, each
+  documented there), built once per step; the reward is documented in
+  :mod:`lantern_jax.envs.reward`;
 * ``done`` = the execution is over (route completed, timeout, 30 m off the route, 20 s
   blocked) or a gate has failed.
 
@@ -34,17 +37,19 @@ from flax import struct
 
 from lantern_jax.envs.bank import ScenarioBank, build_bank
 from lantern_jax.envs.reward import running_score
+from lantern_jax.observation import FRONT_CAMERA, WARNING
 from lantern_jax.policies.features import ACTION_SIZE, OBS_SIZE, action_to_waypoints
 from lantern_jax.policies.features import observation_vector as flat
 from lantern_jax.scoring.components import progress
 from lantern_jax.sim.observe import observe
 from lantern_jax.sim.state import State
-from lantern_jax.sim.step import step as sim_step
+from lantern_jax.sim.step import transition
 
 Array = jax.Array
 
 TEMPERATURE = 0.05  # soft-accumulator temperature of the telemetry (unused by the reward)
 METRICS = ("progress", "gate_failure", "completed")
+SENSORS = (FRONT_CAMERA, WARNING)  # what the agent's observation vector is built from
 
 
 @struct.dataclass
@@ -77,7 +82,7 @@ class LanternEnv(Env):
         pipeline = EnvState(index=index, sim=sim, score=zero, failed=jnp.asarray(False))
         return BraxState(
             pipeline_state=pipeline,
-            obs=flat(observe(scenario, sim)),
+            obs=flat(observe(scenario, sim, SENSORS)),
             reward=zero,
             done=zero,
             metrics={k: zero for k in METRICS},
@@ -93,8 +98,8 @@ class LanternEnv(Env):
         """One tick under ``action`` ((2,) float32 in [-1, 1]: acceleration, curvature)."""
         ps: EnvState = state.pipeline_state
         scenario, _ = self.bank.take(ps.index)
-        act = lambda _params, obs: action_to_waypoints(action, obs.ego_speed)  # noqa: E731
-        sim, _ = sim_step(act, None, scenario, ps.sim, jnp.float32(TEMPERATURE))
+        waypoints = action_to_waypoints(action, ps.sim.ego.speed)
+        sim, _ = transition(scenario, ps.sim, waypoints, jnp.float32(TEMPERATURE))
         score, failed = running_score(sim.telemetry, sim.done, scenario.config.d_safe)
         # Once over, an episode stays over (brax may step a done state before a reset).
         over = ps.failed | ps.sim.done
@@ -111,7 +116,7 @@ class LanternEnv(Env):
         }
         return state.replace(
             pipeline_state=EnvState(index=ps.index, sim=sim, score=score, failed=failed),
-            obs=flat(observe(scenario, sim)),
+            obs=flat(observe(scenario, sim, SENSORS)),
             reward=(score - ps.score).astype(jnp.float32),
             done=done.astype(jnp.float32),
             # other keys (e.g. a wrapper's ``reward``) are kept, as brax environments do

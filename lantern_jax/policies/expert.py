@@ -90,7 +90,14 @@ from lantern_jax.constants import (
     NUM_WAYPOINTS,
     WAYPOINT_DT,
 )
-from lantern_jax.observation import FORECAST_DT, FORECAST_STEPS, ROUTE_STEP, Observation
+from lantern_jax.observation import (
+    FORECAST_DT,
+    FORECAST_STEPS,
+    FRONT_CAMERA,
+    PRIVILEGED,
+    ROUTE_STEP,
+    Observation,
+)
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.planner import curvature_speed_limit, route_point, route_tangent
 from lantern_jax.polyline import project_uniform
@@ -231,18 +238,18 @@ def actor_boxes(p: ExpertParams, obs: Observation, gap_acceptance: bool = True):
         float32 (ego frame, m), and (A, K) bool.
     """
     pv = obs.privileged
-    own_l, own_w = obs.actor_extent[:, 0:1], obs.actor_extent[:, 1:2]  # (A, 1)
+    own_l, own_w = pv.actor_extent[:, 0:1], pv.actor_extent[:, 1:2]  # (A, 1)
     k = jnp.arange(1, FORECAST_STEPS + 1, dtype=jnp.float32) / FORECAST_STEPS  # (K,)
-    car = (obs.actor_kind == KIND_VEHICLE)[:, None] & (pv.forecast_speed >= p.other_grow_speed)
-    walker = (obs.actor_kind == KIND_PEDESTRIAN)[:, None]
+    car = (pv.actor_kind == KIND_VEHICLE)[:, None] & (pv.forecast_speed >= p.other_grow_speed)
+    walker = (pv.actor_kind == KIND_PEDESTRIAN)[:, None]
     grow_l = jnp.where(car, own_l * (p.other_grow_x - 1.0), 0.0)
     grow_w = jnp.where(car, own_w * (jnp.maximum(p.other_grow_y * k[None, :], 1.0) - 1.0), 0.0)
     grow_l = jnp.where(walker, jnp.maximum(p.walker_min_extent - own_l, 0.0), grow_l)
     grow_w = jnp.where(walker, jnp.maximum(p.walker_min_extent - own_w, 0.0), grow_w)
     if gap_acceptance:
         grow_l = grow_l + pv.forecast_speed * p.pet
-    near = jnp.sum(obs.actor_xy * obs.actor_xy, -1) < p.radius * p.radius
-    valid = pv.forecast_valid & (obs.present & near)[:, None]
+    near = jnp.sum(pv.actor_xy * pv.actor_xy, -1) < p.radius * p.radius
+    valid = pv.forecast_valid & (pv.present & near)[:, None]
     box = (pv.forecast_x, pv.forecast_y, pv.forecast_ux, pv.forecast_uy,
            pv.forecast_half_length + grow_l, pv.forecast_half_width + grow_w)  # fmt: skip
     return box, valid
@@ -258,25 +265,25 @@ def leaders_and_trailers(p: ExpertParams, obs: Observation):
         lead (A,) bool, trail (A,) bool, gap (A,) m along the route from the ego front to the
         leader's rear, speed (A,) m/s of the leader along the route (>= 0).
     """
-    route = obs.route
-    arc, dist = project_uniform(route, ROUTE_STEP, obs.actor_xy)
+    route, gt = obs.route, obs.privileged
+    arc, dist = project_uniform(route, ROUTE_STEP, gt.actor_xy)
     # Behind the route start the distance is to the first segment's line, not its first point.
     u0 = route_tangent(route, jnp.float32(0.0))
-    rel = obs.actor_xy - route[0][None, :]
+    rel = gt.actor_xy - route[0][None, :]
     dist = jnp.where(arc < 0.0, jnp.abs(rel[:, 0] * u0[1] - rel[:, 1] * u0[0]), dist)
     tang = jax.vmap(lambda s: route_tangent(route, s))(jnp.maximum(arc, 0.0))
-    cos = jnp.sum(obs.actor_dir * tang, -1)
-    sin = jnp.abs(obs.actor_dir[:, 0] * tang[:, 1] - obs.actor_dir[:, 1] * tang[:, 0])
-    near = jnp.sum(obs.actor_xy * obs.actor_xy, -1) < p.radius * p.radius
-    body = obs.present & near & (obs.actor_kind != KIND_PEDESTRIAN)
-    aligned = (cos >= p.lead_cos) | (obs.actor_kind == KIND_STATIC)
+    cos = jnp.sum(gt.actor_dir * tang, -1)
+    sin = jnp.abs(gt.actor_dir[:, 0] * tang[:, 1] - gt.actor_dir[:, 1] * tang[:, 0])
+    near = jnp.sum(gt.actor_xy * gt.actor_xy, -1) < p.radius * p.radius
+    body = gt.present & near & (gt.actor_kind != KIND_PEDESTRIAN)
+    aligned = (cos >= p.lead_cos) | (gt.actor_kind == KIND_STATIC)
     on_route = body & aligned & (dist < p.lead_lateral)
     lead = on_route & (arc > 0.0) & (arc < p.lead_range)
     trail = on_route & (arc <= 0.0)
-    hl, hw = obs.actor_extent[:, 0], obs.actor_extent[:, 1]
+    hl, hw = gt.actor_extent[:, 0], gt.actor_extent[:, 1]
     half_along = hl * jnp.abs(cos) + hw * sin
     gap = jnp.where(lead, arc - EGO_HALF_LENGTH - half_along, BIG)
-    speed = jnp.maximum(jnp.sum(obs.actor_vel * tang, -1), 0.0)
+    speed = jnp.maximum(jnp.sum(gt.actor_vel * tang, -1), 0.0)
     return lead, trail, gap, speed
 
 
@@ -318,18 +325,19 @@ def constraints(p: ExpertParams, obs: Observation, v_free: Array) -> tuple[Leade
         (constraints with 2 A + 2 entries: leaders, walkers, red light, route end;
          () bool vehicle hazard).
     """
+    gt = obs.privileged
     lead, trail, lead_gap, lead_speed = leaders_and_trailers(p, obs)
     go, stop, go_tight = overlaps(p, obs, v_free)
     hit = go & ~lead & ~trail
-    walker = obs.actor_kind == KIND_PEDESTRIAN
+    walker = gt.actor_kind == KIND_PEDESTRIAN
     # Driving on escapes a vehicle that would still reach the stopped ego from the side or
     # from behind (a scripted actor does not yield) only when the driving-on forecast is
     # clear of it; otherwise, and always against an oncoming one, braking lowers the speed at
     # which they meet (or avoids the meeting where the actor's script ends first).
-    head_on = obs.actor_dir[:, 0] < -p.lead_cos
+    head_on = gt.actor_dir[:, 0] < -p.lead_cos
     escapes = stop & ~go_tight & ~head_on
     vehicle_hazard = jnp.any(hit & ~walker & ~escapes)
-    dist = jnp.sqrt(jnp.maximum(jnp.sum(obs.actor_xy * obs.actor_xy, -1), 1e-12))
+    dist = jnp.sqrt(jnp.maximum(jnp.sum(gt.actor_xy * gt.actor_xy, -1), 1e-12))
     walker_gap = jnp.where(hit & walker, dist - p.walker_length - EGO_HALF_LENGTH, BIG)
 
     red = obs.light_state == LIGHT_RED
@@ -339,7 +347,7 @@ def constraints(p: ExpertParams, obs: Observation, v_free: Array) -> tuple[Leade
     light_gap = jnp.where(holds, jnp.maximum(obs.dist_to_stop, 0.0), BIG)
     end_gap = jnp.maximum(obs.dist_to_route_end + EGO_HALF_LENGTH, 0.0)
 
-    n = obs.actor_xy.shape[0]
+    n = gt.actor_xy.shape[0]
     full = lambda x: jnp.full((n,), x, jnp.float32)  # noqa: E731
     one = lambda x: jnp.reshape(jnp.asarray(x, jnp.float32), (1,))  # noqa: E731
     c = Leaders(
@@ -374,16 +382,16 @@ def expert_act(params: ExpertParams, obs: Observation) -> Array:
 
     Args:
         params: :class:`ExpertParams`.
-        obs: one scenario's observation, with ``obs.privileged`` filled (the rollout must be
-            run with ``privileged=True``, as :class:`~lantern_jax.policies.base.Policy` says).
+        obs: one scenario's observation, with ``obs.privileged`` filled (the expert's
+            :class:`~lantern_jax.policies.base.Policy` declares the ``"privileged"`` sensor).
 
     Returns:
         (10, 2) float32 waypoints, ego frame (x forward, y right), 0.25 s apart.
     """
     if obs.privileged is None:
         raise ValueError(
-            "policy 'expert' needs the privileged observation: run the rollout with "
-            "privileged=True (Policy.privileged)"
+            "policy 'expert' needs the privileged observation: its Policy declares the "
+            "'privileged' sensor (run it through Policy, not its bare act function)"
         )
     p = params
     v_free = jnp.minimum(obs.v_ref, curvature_speed_limit(obs.route, p.lat_accel, p.b_fast))
@@ -402,18 +410,13 @@ def expert_act(params: ExpertParams, obs: Observation) -> Array:
     return jax.vmap(lambda a: route_point(obs.route, a))(arcs).astype(jnp.float32)
 
 
-#: The simulator reads this flag from the function itself (:func:`lantern_jax.sim.step.step`), so
-#: every rollout of the expert fills ``obs.privileged`` whichever entry point runs it.
-expert_act.privileged = True
-
-
 def expert_policy() -> Policy:
-    """The privileged expert (upper reference); needs ``privileged=True`` rollouts."""
+    """The privileged expert (upper reference): the ``"privileged"`` sensor."""
     return Policy(
         "expert",
         lambda key: default_expert_params(),
         expert_act,
         "privileged PDM-Lite-style planner: forecasts every actor from its script, brakes for "
-        "forecast overlaps, IDM behind leaders, walkers and red lights; ignores warnings",
-        privileged=True,
+        "forecast overlaps, IDM behind leaders, walkers and red lights; no warning sensor",
+        sensors=(FRONT_CAMERA, PRIVILEGED),
     )

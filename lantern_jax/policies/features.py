@@ -26,9 +26,12 @@ slots       size   content (scale)
 225-256     32     front-camera range image / 60 m, clipped to [0, 2]
 257-259     3      traffic light one-hot (green, yellow, red)
 260         1      route distance to the ego's stop line / 50 m, clipped to [-1, 2] (2 = none)
-261         1      warning active (0 / 1)
-262-263     2      grounded warning position (x, y) / 50 m, clipped to [-2, 2] (0 inactive)
-264-275     12     warning text one-hot over the text bank (all zeros when inactive)
+261         1      a warning text is delivered (any token that is not padding; 0 / 1)
+262-263     2      the position the text writes (its first two numbers, x, y) / 50 m, clipped
+                   to [-2, 2] (0 when no text or no position)
+264-275     12     which of the bank's first 12 texts (the canonical templates and each
+                   family's first paraphrase) the delivered text is, word for word (all zeros
+                   for any other text, or none)
 ==========  =====  ==========================================================================
 
 Action (:func:`action_to_waypoints`, ``ACTION_SIZE`` = 2, each in [-1, 1], clipped):
@@ -61,8 +64,9 @@ from lantern_jax.constants import (
     NUM_WAYPOINTS,
     WAYPOINT_DT,
 )
-from lantern_jax.observation import Observation
+from lantern_jax.observation import Observation, stated_position, warning_delivered
 from lantern_jax.scenarios.road import MAX_ACTORS
+from lantern_jax.scenarios.warnings import token_table
 
 Array = jax.Array
 
@@ -122,9 +126,11 @@ def observation_vector(obs: Observation) -> Array:
     ranges = jnp.clip(obs.range_image / RANGE_SCALE, 0.0, 2.0)
     light = jax.nn.one_hot(obs.light_state, 3, dtype=f32)
     stop = jnp.clip(obs.dist_to_stop / POS_SCALE, -1.0, 2.0)[None]
-    active = obs.warning_active.astype(f32)
-    warn_pos = jnp.clip(obs.warning_pos / POS_SCALE, -2.0, 2.0) * active
-    text = jax.nn.one_hot(obs.warning_text_id, NUM_TEXTS, dtype=f32) * active
+    active = warning_delivered(obs).astype(f32)
+    pos, _ = stated_position(obs)
+    warn_pos = jnp.clip(pos / POS_SCALE, -2.0, 2.0) * active
+    known = jnp.asarray(token_table()[:NUM_TEXTS])  # (NUM_TEXTS, MAX_TOKENS)
+    text = jnp.all(obs.warning_tokens[None, :] == known, axis=-1).astype(f32) * active
     parts = [scalars, route, targets, _actor_features(obs), ranges, light, stop, active[None],
              warn_pos, text]  # fmt: skip
     return jnp.concatenate([p.astype(f32) for p in parts])

@@ -4,8 +4,9 @@ The policy reads :func:`~lantern_jax.policies.features.observation_vector`, norm
 the observation statistics gathered during training, runs brax's default PPO policy network
 (fully connected, swish between layers, no activation after the last) and takes the mode of
 its tanh-squashed Gaussian, ``tanh(loc)``, as the action (acceleration, curvature), which
-:func:`~lantern_jax.policies.features.action_to_waypoints` turns into waypoints.  It ignores the
-language of the warning beyond its text id (the one-hot slots of the observation vector).
+:func:`~lantern_jax.policies.features.action_to_waypoints` turns into waypoints.  It reads the
+warning's words only as an exact match against twelve known texts (the one-hot slots of the
+observation vector) and its position from the numbers the text writes.
 
 Parameters come from a checkpoint file (msgpack written with ``flax.serialization``; no brax
 needed to run the policy): the one shipped in ``lantern_jax/data`` (:data:`SHIPPED_CHECKPOINT`),
@@ -30,7 +31,7 @@ import numpy as np
 from flax import serialization
 
 from lantern_jax.files import atomic_write
-from lantern_jax.observation import Observation
+from lantern_jax.observation import FRONT_CAMERA, WARNING, Observation
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.features import ACTION_SIZE, OBS_SIZE, action_to_waypoints
 from lantern_jax.policies.features import observation_vector as flat
@@ -128,12 +129,12 @@ def ppo_init(key: jax.Array) -> dict[str, Any]:
 
 
 def ppo_policy() -> Policy:
-    """The PPO-trained MLP policy (front camera, warning text id; see the module docstring)."""
+    """The PPO-trained MLP policy (front camera, warning text; see the module docstring)."""
     return Policy(
         "ppo",
         ppo_init,
         ppo_act,
         "MLP trained with PPO on the brax environment (acceleration, curvature); "
         f"checkpoint {checkpoint_path().name}",
-        uses_warning=True,
+        sensors=(FRONT_CAMERA, WARNING),
     )

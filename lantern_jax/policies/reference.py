@@ -1,36 +1,55 @@
 """The camera-based reference policies of the result tables, ``ego`` and ``coop`` (the
 privileged ``expert`` is :mod:`lantern_jax.policies.expert`), and ``expert-v1``.
 
-* ``ego`` — the planner restricted to what the front camera sees now; ignores warnings.
-* ``coop`` — ``ego`` plus warning handling: while a warning is active, the warned hazard becomes
-  a virtual constraint at its grounded position, chosen by what the warning text says:
+* ``ego`` — the planner over what the front camera sees now; it has no warning sensor.
+* ``coop`` — ``ego`` plus the warning sensor: it reads the delivered text with a **keyword rule**
+  over its tokens (:func:`text_response`) and turns what the text asks for into a virtual
+  constraint:
 
-  - "... is about to enter the ego lane" / "... is blocking the ego lane" (pedestrian, static
-    object): a stopped obstacle in the lane at the grounded distance ahead;
-  - "... will cut into the ego lane soon" (vehicle): a leader in the lane at the grounded
-    distance, moving with the nearest seen actor's velocity when one matches the position;
-  - "... will cross the ego ... path. Yield before turning ...": a yield stop before the turn
-    entry of the route (or right away when the ego is already turning).
+  ==============================  =====================================================
+  the text contains (any case)    response
+  ==============================  =====================================================
+  "yield"                         a yield stop before the turn entry of the route (or
+                                  right away when the ego is already turning); no
+                                  position needed
+  "cut into"                      a leader in the lane at the stated position, moving
+                                  with the nearest seen actor's velocity when one is
+                                  within 3 m of it
+  "ego lane"                      a stopped obstacle in the lane at the stated position
+  ==============================  =====================================================
 
-  The semantics come from the text bank (:mod:`lantern_jax.scenarios.warnings`), so a text the
-  policy does not understand (an unseen paraphrase or a non-actionable message) has no effect.
-* ``expert-v1`` — the same planner over every present actor, hidden ones included, with
-  constant-velocity forecasts: the first privileged reference, which validated (filtered) the
-  ``lantern-v2`` suite and, so that its pairs of the five families whose scenes did not change
-  stay exactly those of ``lantern-v2``, ``lantern-v3``.  It is kept so that the suite
-  regenerates exactly from its seed; it reacts to a waiting hazard only once it moves (see
-  :mod:`lantern_jax.policies.expert`).
+  The first row that matches decides.  The position is the text's two numbers (its value
+  channel); a text that writes none gets no position response, and a position behind the ego
+  is ignored.  The keywords are the canonical templates' own words (their six sentences each
+  match the row their family's scenario calls for); any other wording reaches the same rule,
+  so a paraphrase or a non-actionable message is answered by what its words match — for
+  better or worse (``lantern-jax wording`` and the language diagnostic measure it).
+* ``expert-v1`` — the same planner over every actor that exists (ground truth, the
+  ``"privileged"`` sensor), hidden ones included, with constant-velocity forecasts: the first
+  privileged reference, which validated (filtered) the ``lantern-v2`` suite and, so that its
+  pairs of the five families whose scenes did not change stay exactly those of ``lantern-v2``,
+  ``lantern-v3``.  It is kept so that the suite regenerates exactly from its seed; it reacts to
+  a waiting hazard only once it moves (see :mod:`lantern_jax.policies.expert`).
 """
 
 from __future__ import annotations
+
+import functools
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
+from lantern_jax import language
 from lantern_jax.constants import BIG
-from lantern_jax.observation import Observation
+from lantern_jax.observation import (
+    FRONT_CAMERA,
+    PRIVILEGED,
+    WARNING,
+    Observation,
+    stated_position,
+)
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.planner import (
     Constraints,
@@ -42,65 +61,86 @@ from lantern_jax.policies.planner import (
     stop_constraint,
     turn_entry_arc,
 )
-from lantern_jax.scenarios.families import (
-    RESPONSE_CUT_IN,
-    RESPONSE_LANE_OBSTACLE,
-    RESPONSE_YIELD_TURN,
-    family,
-)
-from lantern_jax.scenarios.warnings import TEXT_BANK
 
-# Response semantics of a warning text, as integer codes for the jitted policy.
-SEM_NONE = -1  # not understood / not actionable
-SEM_LANE_OBSTACLE = 0  # a stopped obstacle in the ego lane at the grounded position
-SEM_CUT_IN = 1  # a vehicle entering the ego lane at the grounded position
+# What a warning text asks ``coop`` for, as integer codes for the jitted policy.
+SEM_NONE = -1  # nothing the rule understands
+SEM_LANE_OBSTACLE = 0  # a stopped obstacle in the ego lane at the stated position
+SEM_CUT_IN = 1  # a vehicle entering the ego lane at the stated position
 SEM_YIELD_TURN = 2  # yield before the turn
 
-_RESPONSE_CODES = {
-    RESPONSE_LANE_OBSTACLE: SEM_LANE_OBSTACLE,
-    RESPONSE_CUT_IN: SEM_CUT_IN,
-    RESPONSE_YIELD_TURN: SEM_YIELD_TURN,
-}
+#: The keyword rule, in the order it is tried: (response, keywords).  A keyword matches when its
+#: token ids occur in the text (each spelling tokenised on its own, lower and capitalised).
+KEYWORD_RULE: tuple[tuple[int, tuple[str, ...]], ...] = (
+    (SEM_YIELD_TURN, ("yield",)),
+    (SEM_CUT_IN, ("cut into",)),
+    (SEM_LANE_OBSTACLE, ("ego lane",)),
+)
+MATCH_RADIUS_M = 3.0  # m, a seen actor this close to the stated position gives its velocity
 
 
-def text_semantics(understood_kinds: tuple[str, ...] = ("canonical",)) -> np.ndarray:
-    """(num_texts,) int32 response semantics per text-bank id for the ``coop`` policy.
+@functools.cache
+def keyword_tables() -> tuple[np.ndarray, np.ndarray]:
+    """The rule's keywords as token-id rows (outside ``jit``, once).
+
+    Returns:
+        ids: (K, M) int32, every spelling's token ids, padded with -1.
+        response: (K,) int32, the response code of each row (:data:`KEYWORD_RULE` order).
+    """
+    tok = language.load_tokenizer()
+    rows, codes = [], []
+    for code, words in KEYWORD_RULE:
+        for word in words:
+            for spelling in dict.fromkeys((word, word[:1].upper() + word[1:])):
+                rows.append(tok.encode(spelling, add_special_tokens=False).ids)
+                codes.append(code)
+    width = max(map(len, rows))
+    ids = np.full((len(rows), width), -1, np.int32)
+    for i, r in enumerate(rows):
+        ids[i, : len(r)] = r
+    return ids, np.asarray(codes, np.int32)
+
+
+def contains(tokens: jax.Array, keyword: jax.Array) -> jax.Array:
+    """() bool: the token row contains the keyword's ids in a run.
 
     Args:
-        understood_kinds: text kinds whose wording the policy was built for; other texts (e.g.
-            held-out paraphrases, non-actionable messages) and texts of no family map to
-            ``SEM_NONE``.
+        tokens: (L,) int32, a text's padded token ids.
+        keyword: (M,) int32, the keyword's ids padded with -1.
     """
-    out = np.full((len(TEXT_BANK),), SEM_NONE, np.int32)
-    for entry in TEXT_BANK:
-        if entry.kind in understood_kinds and entry.family >= 0:
-            out[entry.text_id] = _RESPONSE_CODES[family(entry.family).response]
-    return out
+    n = tokens.shape[0]
+    at = jnp.arange(n)[:, None] + jnp.arange(keyword.shape[0])[None, :]  # (L, M)
+    window = jnp.where(at < n, tokens[jnp.clip(at, 0, n - 1)], -2)
+    return jnp.any(jnp.all((window == keyword[None, :]) | (keyword[None, :] < 0), axis=1))
 
 
-def warning_constraints(
-    p: PlannerConfig, obs: Observation, semantics: jax.Array, seen: jax.Array
-) -> Constraints:
-    """Virtual constraints from the active warning (all inactive when there is none).
+def text_response(tokens: jax.Array) -> jax.Array:
+    """() int32: the response code the keyword rule gives a text (``SEM_NONE``: no keyword)."""
+    ids, codes = keyword_tables()
+    hits = jax.vmap(lambda k: contains(tokens, k))(jnp.asarray(ids))  # (K,)
+    first = jnp.argmax(hits)
+    return jnp.where(jnp.any(hits), jnp.asarray(codes)[first], SEM_NONE)
+
+
+def warning_constraints(p: PlannerConfig, obs: Observation, seen: jax.Array) -> Constraints:
+    """Virtual constraints from the delivered text (all inactive when there is none).
 
     Args:
         p: planner parameters.
-        obs: observation.
-        semantics: (num_texts,) int32 table from :func:`text_semantics`.
+        obs: observation (its warning tokens; all padding without the warning sensor).
         seen: (A,) bool, actors the policy sees (used to match a cut-in vehicle's velocity).
     """
-    tid = jnp.clip(obs.warning_text_id, 0, semantics.shape[0] - 1)
-    sem = jnp.where(obs.warning_active & (obs.warning_text_id >= 0), semantics[tid], SEM_NONE)
-    arc, _ = project_on_route(obs.route, obs.warning_pos)
-    ahead = arc > 0.0
+    sem = text_response(obs.warning_tokens)
+    pos, has_pos = stated_position(obs)
+    arc, _ = project_on_route(obs.route, pos)
+    ahead = has_pos & (arc > 0.0)
 
     obstacle = stop_constraint(p, arc - 1.0, (sem == SEM_LANE_OBSTACLE) & ahead)
 
-    # Cut-in: a leader at the grounded position, with a matched seen actor's speed.
-    rel = obs.actor_xy - obs.warning_pos[None, :]
+    # Cut-in: a leader at the stated position, with a matched seen actor's speed.
+    rel = obs.actor_xy - pos[None, :]
     d = jnp.where(seen, jnp.sum(rel * rel, axis=-1), BIG)  # squared distance (no sqrt)
     j = jnp.argmin(d)
-    matched = d[j] < 9.0  # within 3 m
+    matched = d[j] < MATCH_RADIUS_M**2
     v_match = jnp.where(matched, jnp.maximum(obs.actor_vel[j, 0], 0.0), 0.0)
     cut_gap = jnp.where((sem == SEM_CUT_IN) & ahead, jnp.maximum(arc - 2.0 * 2.45, 0.0), BIG)
     cut = Constraints(gap=cut_gap[None], speed=v_match[None], s0=jnp.full((1,), 2.0))
@@ -113,29 +153,19 @@ def warning_constraints(
 
 @struct.dataclass
 class ReferenceParams:
-    """Parameters of the reference policies: one act function, behaviour chosen by data.
-
-    Because ``ego``, ``coop`` and ``expert-v1`` share :func:`reference_act` and differ only in
-    these (traced) flags, evaluating them reuses one compiled rollout.
-    """
+    """Parameters of the reference policies (the planner's; one act function for all three,
+    their sensors make the difference)."""
 
     planner: PlannerConfig
-    privileged: jax.Array  # () bool, plan over every present actor (else: camera-visible only)
-    use_warning: jax.Array  # () bool, turn active warnings into virtual constraints
-
-
-_CANONICAL_SEMANTICS = None
-
-
-def _semantics_table() -> jax.Array:
-    global _CANONICAL_SEMANTICS
-    if _CANONICAL_SEMANTICS is None:
-        _CANONICAL_SEMANTICS = np.asarray(text_semantics(("canonical",)))
-    return jnp.asarray(_CANONICAL_SEMANTICS)
 
 
 def reference_act(params: ReferenceParams, obs: Observation) -> jax.Array:
     """The shared act function of the reference policies.
+
+    It plans over the actors its sensors give it: the cameras' (``obs.visible``), or every
+    actor that exists when it has the privileged sensor (``expert-v1``); and it answers the
+    warning text with the keyword rule when it has the warning sensor (``coop``; without it
+    the text is always empty and the rule gives nothing).
 
     Args:
         params: :class:`ReferenceParams`.
@@ -144,55 +174,52 @@ def reference_act(params: ReferenceParams, obs: Observation) -> jax.Array:
     Returns:
         (10, 2) float32 waypoints, ego frame (x forward, y right), 0.25 s apart.
     """
-    seen = jnp.where(params.privileged, obs.present, obs.visible)
-    extra = warning_constraints(params.planner, obs, _semantics_table(), seen)
-    extra = extra.replace(gap=jnp.where(params.use_warning, extra.gap, BIG))
-    return plan(params.planner, obs, seen, extra)[0]
+    if obs.privileged is not None:
+        truth = obs.privileged
+        obs = obs.replace(
+            actor_xy=truth.actor_xy, actor_vel=truth.actor_vel, actor_dir=truth.actor_dir,
+            actor_extent=truth.actor_extent, actor_kind=truth.actor_kind, visible=truth.present,
+        )  # fmt: skip
+    extra = warning_constraints(params.planner, obs, obs.visible)
+    return plan(params.planner, obs, obs.visible, extra)[0]
 
 
-def _make_init(privileged: bool, use_warning: bool):
-    def init(key: jax.Array) -> ReferenceParams:
-        del key
-        return ReferenceParams(
-            planner=default_planner_config(),
-            privileged=jnp.asarray(privileged),
-            use_warning=jnp.asarray(use_warning),
-        )
-
-    return init
+def reference_params(key: jax.Array) -> ReferenceParams:
+    """The reference policies' parameters (the default planner; ``key`` is unused)."""
+    del key
+    return ReferenceParams(planner=default_planner_config())
 
 
 def legacy_expert_policy() -> Policy:
-    """``expert-v1``: the planner over all present actors (the ``lantern-v3`` suite validator).
-
-    It reads ``obs.present`` (in every observation), not the privileged forecast, so it runs in
-    an ordinary rollout.
-    """
+    """``expert-v1``: the planner over every actor that exists (the ``lantern-v3`` suite
+    validator)."""
     return Policy(
         "expert-v1",
-        _make_init(True, False),
+        reference_params,
         reference_act,
         "the lantern-v3 suite validator: the ego planner over every present actor with "
         "constant-velocity forecasts (kept so lantern-v3 regenerates exactly)",
+        sensors=(FRONT_CAMERA, PRIVILEGED),
     )
 
 
 def ego_policy() -> Policy:
-    """The planner restricted to the front camera; ignores warnings."""
+    """The planner restricted to the front camera; no warning sensor."""
     return Policy(
         "ego",
-        _make_init(False, False),
+        reference_params,
         reference_act,
-        "the same planner restricted to the front camera; ignores warnings",
+        "the same planner restricted to the front camera; no warning sensor",
     )
 
 
 def coop_policy() -> Policy:
-    """``ego`` plus cooperative-warning handling."""
+    """``ego`` plus the warning sensor, read by the keyword rule."""
     return Policy(
         "coop",
-        _make_init(False, True),
+        reference_params,
         reference_act,
-        "front-camera planner + cooperative warnings as virtual constraints",
-        uses_warning=True,
+        "front-camera planner + the warning text read by a keyword rule (yield / cut into / "
+        "ego lane) as virtual constraints",
+        sensors=(FRONT_CAMERA, WARNING),
     )

@@ -11,7 +11,7 @@ and a gradient with respect to a knob is an ordinary JAX gradient::
 
     def objective(speed):
         sc = set_knobs(scenario, hazard_speed=speed)
-        final, _ = rollout(sc, act, policy_params, num_ticks)
+        final, _ = rollout(sc, policy, policy_params, num_ticks)
         return final.telemetry...
 
     jax.grad(objective)(jnp.float32(3.0))

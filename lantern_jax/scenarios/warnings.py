@@ -15,6 +15,7 @@ ids         entries
 6-11        first low-ambiguity paraphrase of each family (:func:`paraphrase_text_id`)
 12-59       per family (8 each, family order): low 2-3, medium 1-3, high 1-3
 60-64       the five non-actionable warnings of the paper's appendix, verbatim (no family)
+65          the empty text (:data:`EMPTY_TEXT_ID`; no words)
 ==========  ==================================================================================
 
 Ambiguity tiers of the paraphrases (paper appendix "Additional Ablation Analysis"):
@@ -24,8 +25,8 @@ Ambiguity tiers of the paraphrases (paper appendix "Additional Ablation Analysis
 * **high** — only a generic description of the impending interaction, **no position**.
 
 A text states a position exactly when it contains ``<FRONT_CAR_POS>``; one that does not (the
-high tier, the non-actionable texts) delivers no position to the policy, and the observation says
-so (``Observation.warning_has_position`` False, ``warning_pos`` zero).
+high tier, the non-actionable texts) delivers no position to the policy: its tokens hold no
+number token and its value channel is all zero.
 
 Distance-conditioned warnings (paper appendix "Diagnostics with Non-Actionable Language
 Inputs") are a family's canonical text grounded at a near or a far position
@@ -33,12 +34,18 @@ Inputs") are a family's canonical text grounded at a near or a far position
 warning override (``ExecutionConfig.override_*``); ``render_warning(0, (12.0, 0.5))`` is the
 string a language model reads.
 
-Inside the simulator a warning is ``(active, text_id, grounded position)``: the token ids of
-every text are computed once, outside ``jit``, into :func:`token_table` (text id -> padded ids,
-:mod:`lantern_jax.language`), which a rollout indexes by id; strings are produced outside
-``jit`` by :func:`render_warning`.  Texts added with :func:`add_text` after a rollout was
-compiled are unknown to that compiled rollout (it reads them as padding with no position): add
-texts before compiling.
+Inside the simulator a warning is ``(active, text_id, grounded position)``; a policy never sees
+those three.  It reads only the delivered text as tokens: :func:`warning_language` looks the
+text's token ids up in :func:`text_tables` (built once, outside ``jit``) and writes the grounded
+position into the value channel at the text's two number tokens (:mod:`lantern_jax.language`,
+"Numbers").  No warning, or a text the bank does not hold, reads as all padding.  Strings are
+produced outside ``jit`` by :func:`render_warning`.  Texts added with :func:`add_text` after a
+rollout was compiled are unknown to that compiled rollout (it reads them as padding): add texts
+before compiling.
+
+The bank's last built-in entry is the **empty text** (:data:`EMPTY_TEXT_ID`, kind ``"empty"``):
+a warning delivered with no words at all, used by the language-sensitivity diagnostic to check
+that a policy's response comes from the words.  A policy cannot tell it from no warning.
 """
 
 from __future__ import annotations
@@ -65,7 +72,7 @@ from lantern_jax.world import Scenario
 Array = jax.Array
 
 TOKEN = language.PLACEHOLDER  # "<FRONT_CAR_POS>"
-TEXT_KINDS = ("canonical", "paraphrase", "non_actionable")
+TEXT_KINDS = ("canonical", "paraphrase", "non_actionable", "empty")
 TIERS = ("low", "medium", "high")
 NO_FAMILY = -1  # family of a text that belongs to no scenario family (non-actionable)
 
@@ -242,7 +249,12 @@ def _family_index(family: int | str, allow_none: bool = False) -> int:
 
 
 def _check_entry(kind: str, tier: str, text: str) -> None:
-    """Bank rules: spacing around the placeholder, at most one position, tiers consistent."""
+    """Bank rules: spacing around the placeholder, at most one position, tiers consistent; only
+    the empty text is empty."""
+    if kind == "empty":
+        if text != "" or tier:
+            raise ValueError(f"text: the empty text has no words and no tier, got {text!r}")
+        return
     language.check_template(text, TOKEN)
     n = text.count(TOKEN)
     if n > 1:
@@ -267,6 +279,7 @@ def _initial_bank() -> list[WarningText]:
                 bank.append(WarningText(len(bank), f, "paraphrase", text, tier))
     for text in NON_ACTIONABLE:
         bank.append(WarningText(len(bank), NO_FAMILY, "non_actionable", text))
+    bank.append(WarningText(len(bank), NO_FAMILY, "empty", ""))
     for e in bank:
         _check_entry(e.kind, e.tier, e.text)
     return bank
@@ -274,6 +287,8 @@ def _initial_bank() -> list[WarningText]:
 
 #: The text bank; canonical entries first so that ``text_id == family`` for them.
 TEXT_BANK: list[WarningText] = _initial_bank()
+#: Id of the empty text (no words; see the module docstring).
+EMPTY_TEXT_ID = next(e.text_id for e in TEXT_BANK if e.kind == "empty")
 
 
 def paraphrase_text_id(family: int) -> int:
@@ -311,8 +326,10 @@ def add_text(family: int | str, kind: str, text: str, tier: str = "") -> int:
     """
     if kind not in TEXT_KINDS:
         raise ValueError(f"kind: {kind!r} not one of {{{', '.join(TEXT_KINDS)}}}")
-    if kind == "canonical":
-        raise ValueError("kind: the canonical texts are fixed (ids 0-5)")
+    if kind in ("canonical", "empty"):
+        raise ValueError(
+            f"kind: the {kind} texts are fixed; add a paraphrase or a non-actionable text"
+        )
     f = _family_index(family, allow_none=kind == "non_actionable")
     _check_entry(kind, tier, text)
     entry = WarningText(len(TEXT_BANK), f, kind, text, tier)
@@ -403,12 +420,12 @@ def paraphrase_tiers(config) -> np.ndarray:
 # rendering, grounding and the token tables
 # ---------------------------------------------------------------------------------------------
 def format_position(pos_ego_xy) -> str:
-    """``"(x, y)"`` with one decimal (``-0.0`` printed as ``0.0``)."""
+    """``"(x, y)"`` as a warning writes it (:func:`lantern_jax.language.format_number`: one
+    decimal, from the float32 value the simulator holds; ``-0.0`` printed as ``0.0``)."""
     p = np.asarray(pos_ego_xy, np.float64).reshape(-1)
     if p.shape != (2,) or not np.all(np.isfinite(p)):
         raise ValueError(f"pos_ego_xy: expected two finite numbers, got {pos_ego_xy!r}")
-    x, y = (round(float(v), 1) + 0.0 for v in p)
-    return f"({x:.1f}, {y:.1f})"
+    return "(" + ", ".join(language.format_number(v) for v in p) + ")"
 
 
 def render_warning(text_id: int, pos_ego_xy=None) -> str:
@@ -446,16 +463,34 @@ def ground_position(hazard_xy: jax.Array, ego_xy: jax.Array, ego_yaw: jax.Array)
     return world_to_ego(jnp.asarray(hazard_xy), jnp.asarray(ego_xy), jnp.asarray(ego_yaw))
 
 
-_TABLES: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+@dataclass(frozen=True)
+class TextTables:
+    """What a rollout looks up by text id (built once per bank size, read-only NumPy arrays).
+
+    Attributes:
+        tokens: (num_texts, MAX_TOKENS) int32, padded token ids of every text, a written
+            position as two number tokens (:func:`lantern_jax.language.tokenize`).
+        x_slot: (num_texts,) int32, index of the number token that writes the position's x
+            (-1: the text states no position).
+        y_slot: (num_texts,) int32, likewise for y.
+    """
+
+    tokens: np.ndarray
+    x_slot: np.ndarray
+    y_slot: np.ndarray
+
+    @property
+    def has_position(self) -> np.ndarray:
+        """(num_texts,) bool: the text states a position."""
+        return self.x_slot >= 0
 
 
-def text_tables() -> tuple[np.ndarray, np.ndarray]:
-    """The per-text tables a rollout indexes by text id, built once per bank size.
+_TABLES: dict[int, TextTables] = {}
 
-    Returns:
-        tokens: (num_texts, MAX_TOKENS) int32, padded token ids of every template
-            (:func:`lantern_jax.language.tokenize`, placeholder id where it grounds a position).
-        has_position: (num_texts,) bool, the text states a position.
+
+def text_tables() -> TextTables:
+    """The per-text tables a rollout indexes by text id (:class:`TextTables`), built once per
+    bank size.
 
     Raises:
         lantern_jax.language.LanguageAssetError: when the tokenizer file is missing.
@@ -463,7 +498,7 @@ def text_tables() -> tuple[np.ndarray, np.ndarray]:
     """
     n = len(TEXT_BANK)
     if n not in _TABLES:
-        rows = []
+        rows, xs, ys = [], [], []
         for e in TEXT_BANK:
             ids = language.tokenize(e.text)
             if len(ids) > language.MAX_TOKENS:
@@ -471,38 +506,58 @@ def text_tables() -> tuple[np.ndarray, np.ndarray]:
                     f"text {e.text_id}: {len(ids)} tokens exceed MAX_TOKENS "
                     f"{language.MAX_TOKENS}: {e.text!r}"
                 )
+            slots = language.number_slots(ids)
             rows.append(language.pad(ids))
-        tokens = np.stack(rows)
-        has_pos = np.array([e.has_position for e in TEXT_BANK], bool)
-        tokens.setflags(write=False)
-        has_pos.setflags(write=False)
+            xs.append(slots[0] if slots else -1)
+            ys.append(slots[1] if slots else -1)
+        tables = TextTables(
+            tokens=np.stack(rows), x_slot=np.asarray(xs, np.int32), y_slot=np.asarray(ys, np.int32)
+        )
+        for a in (tables.tokens, tables.x_slot, tables.y_slot):
+            a.setflags(write=False)
         _TABLES.clear()
-        _TABLES[n] = (tokens, has_pos)
+        _TABLES[n] = tables
     return _TABLES[n]
 
 
 def token_table() -> np.ndarray:
     """(num_texts, MAX_TOKENS) int32, padded token ids of every text (see :func:`text_tables`)."""
-    return text_tables()[0]
+    return text_tables().tokens
 
 
-def text_language(text_id: Array, active: Array) -> tuple[Array, Array]:
-    """Token ids and position flag of the delivered text (jittable; one table lookup).
+def warning_language(text_id: Array, active: Array, position: Array) -> tuple[Array, Array]:
+    """The delivered text as a policy reads it: token ids and the aligned value channel
+    (jittable; one table lookup).
 
     Args:
         text_id: () int32, delivered text id (-1 or out of the bank: unknown).
         active: () bool, a warning is delivered now.
+        position: (2,) float32, m, the grounded position (ego frame, x forward, y right); it
+            enters the value channel rounded as the text writes it, and only for a text that
+            states a position.
 
     Returns:
         tokens: (MAX_TOKENS,) int32, all ``PAD_ID`` when inactive or unknown.
-        has_position: () bool, the delivered text states a position.
+        values: (MAX_TOKENS,) float32, the position's x and y at the text's two number tokens,
+            zero elsewhere (all zero when inactive, unknown or stating no position).
     """
-    tokens_np, has_pos_np = text_tables()
-    n = tokens_np.shape[0]
+    tables = text_tables()
+    n = tables.tokens.shape[0]
     known = active & (text_id >= 0) & (text_id < n)
     i = jnp.clip(text_id, 0, n - 1)
-    tokens = jnp.where(known, jnp.asarray(tokens_np)[i], language.PAD_ID)
-    return tokens.astype(jnp.int32), known & jnp.asarray(has_pos_np)[i]
+    tokens = jnp.where(known, jnp.asarray(tables.tokens)[i], language.PAD_ID).astype(jnp.int32)
+    slots = jnp.arange(language.MAX_TOKENS, dtype=jnp.int32)
+    written = language.round_number(position)
+    x_at = known & (slots == jnp.asarray(tables.x_slot)[i])
+    y_at = known & (slots == jnp.asarray(tables.y_slot)[i])
+    values = jnp.where(x_at, written[0], 0.0) + jnp.where(y_at, written[1], 0.0)
+    return tokens, values.astype(jnp.float32)
+
+
+def warning_string(tokens, values) -> str:
+    """The string a policy read, from its observation's token ids and value channel (outside
+    ``jit``; ``""`` for no warning)."""
+    return language.detokenize(np.asarray(tokens), np.asarray(values))
 
 
 # ---------------------------------------------------------------------------------------------

@@ -91,7 +91,7 @@ def build_route_table(
         t_warn_on: (n,) s, start of warning delivery (``NaN`` = none).  Default: ``t_ref_s`` for
             rows whose condition is ``"warning"``, ``NaN`` otherwise.
         d_safe: (n,) m, clearance normalisers; default from the family (2 m PE/OR, else 3 m).
-        warning_ticks: (n,) int, ticks at which the Route A policy was shown an active warning
+        warning_ticks: (n,) int, ticks at which a warning was delivered on Route A
             (default 0).
         hidden_at_warning, hidden_before_warning: (n,) bool, the Route A hazard was hidden from
             the front camera at the warning point / for the whole approach up to it (see the

@@ -1,15 +1,20 @@
-"""The policy observation (:class:`~lantern_jax.observation.Observation`) of one scenario.
+"""The policy observation (:class:`~lantern_jax.observation.Observation`) of one scenario,
+built from the sensors the policy declares and from nothing else.
 
 Built from the static :class:`~lantern_jax.world.Scenario` and the dynamic
 :class:`~lantern_jax.sim.state.State` at the start of a tick: the route ahead in the ego frame,
-the actors in the ego frame (with the camera's visibility mask), the range image, the ego's
-light and stop line, and the cooperative warning (active flag, text id, token ids, grounded
-position and whether the text states one).
+the actors the declared cameras see now (every other slot holds the zero sentinel), the front
+camera's range image, the ego's light and stop line, and — with the ``"warning"`` sensor — the
+delivered warning as token ids and the value channel of the numbers it writes.
 
-With ``privileged=True`` (a static switch, set for policies whose ``Policy.privileged`` flag is
-on) it also fills ``Observation.privileged``: every actor's forecast over the next 2 s from its
-own script or motion model (:mod:`lantern_jax.dynamics.forecast`), in the ego frame.  Ordinary
-policies get ``None`` there and the forecast is never computed for them.
+With the ``"privileged"`` sensor (a static switch) it also fills ``Observation.privileged``:
+every actor's ground truth and its forecast over the next 2 s from its own script or motion
+model (:mod:`lantern_jax.dynamics.forecast`).  With ``"surround_rig"`` it fills
+``Observation.surround`` and adds what the rig sees to the actors.  Ordinary policies get
+``None`` there and pay nothing for them.
+
+The simulator's own decisions (protocol, measurement) never read an observation: they use the
+ground truth (:func:`actors_in_ego_frame`, :func:`delivered_warning`).
 """
 
 from __future__ import annotations
@@ -21,11 +26,16 @@ from lantern_jax import geometry, polyline
 from lantern_jax.constants import BIG, OVERRIDE_FRAME_EGO, SURROUND_FOV
 from lantern_jax.dynamics.forecast import earliest_event_time, forecast_actors
 from lantern_jax.dynamics.lights import ego_light_state
+from lantern_jax.language import MAX_TOKENS, PAD_ID
 from lantern_jax.observation import (
     FORECAST_DT,
     FORECAST_STEPS,
+    FRONT_CAMERA,
     NUM_ROUTE_POINTS,
+    PRIVILEGED,
     ROUTE_STEP,
+    SURROUND_RIG,
+    WARNING,
     Observation,
     PrivilegedView,
     SurroundView,
@@ -38,6 +48,7 @@ from lantern_jax.world import Scenario, present
 Array = jax.Array
 
 NAV_TARGETS_M = (10.0, 30.0)  # m ahead on the route: the two navigation target points
+DEFAULT_SENSORS = (FRONT_CAMERA,)
 
 
 def position_offset(scenario: Scenario) -> Array:
@@ -65,16 +76,21 @@ def grounded_position(scenario: Scenario, state: State) -> Array:
     return geometry.world_to_ego(h, state.ego.xy, state.ego.yaw)
 
 
-def warning_fields(scenario: Scenario, state: State) -> dict[str, Array]:
-    """The warning fields of the observation: what is delivered (protocol or override), its
-    tokens (one lookup in the text table built outside ``jit``) and its position.
+def delivered_warning(scenario: Scenario, state: State) -> tuple[Array, Array, Array]:
+    """What is delivered now: the protocol's warning or the override (ground truth, not a
+    policy input).
 
     The override position is exact (no position-noise ablation): world-frame positions are
     grounded into the current ego frame, ego-frame positions are delivered as they are.
+
+    Returns:
+        active: () bool, a warning is delivered.
+        text_id: () int32, its text-bank id (-1 when none).
+        position: (2,) float32, m, ego frame, the position its text grounds (zeros when none or
+            when the text states no position).
     """
     cfg, ego = scenario.config, state.ego
     active, text_id, overridden = protocol.delivered_warning(state.protocol, cfg, state.t)
-    tokens, has_position = warnings.text_language(text_id, active)
     fixed = jnp.stack([cfg.override_x, cfg.override_y])
     override_pos = jnp.where(
         cfg.override_frame == OVERRIDE_FRAME_EGO,
@@ -82,30 +98,94 @@ def warning_fields(scenario: Scenario, state: State) -> dict[str, Array]:
         geometry.world_to_ego(fixed, ego.xy, ego.yaw),
     )
     pos = jnp.where(overridden, override_pos, grounded_position(scenario, state))
-    return dict(
-        warning_active=active,
-        warning_text_id=text_id,
-        warning_pos=jnp.where(has_position, pos, 0.0),
-        warning_has_position=has_position,
-        warning_tokens=tokens,
+    n = warnings.text_tables().has_position.shape[0]
+    states_position = jnp.asarray(warnings.text_tables().has_position)[jnp.clip(text_id, 0, n - 1)]
+    stated = active & (text_id >= 0) & (text_id < n) & states_position
+    return active, text_id, jnp.where(stated, pos, 0.0)
+
+
+def route_ahead(scenario: Scenario, state: State) -> tuple[Array, Array]:
+    """The route ahead in the ego frame.
+
+    Returns:
+        route: (NUM_ROUTE_POINTS, 2) float32, m, ``ROUTE_STEP`` apart from the ego's projection.
+        targets: (2, 2) float32, m, the navigation targets ``NAV_TARGETS_M`` ahead.
+    """
+    ego, r = state.ego, scenario.route
+    at = state.percept.route_arc
+    arcs = at + ROUTE_STEP * jnp.arange(NUM_ROUTE_POINTS, dtype=jnp.float32)
+    pts = jax.vmap(lambda s: polyline.interpolate(r.xy, r.s, r.valid, s)[0])(arcs)
+    targets = jax.vmap(lambda s: polyline.interpolate(r.xy, r.s, r.valid, s)[0])(
+        at + jnp.asarray(NAV_TARGETS_M)
+    )
+    return (
+        geometry.world_to_ego(pts, ego.xy, ego.yaw),
+        geometry.world_to_ego(targets, ego.xy, ego.yaw),
     )
 
 
-def privileged_view(scenario: Scenario, state: State) -> PrivilegedView:
-    """Every actor's 2-s forecast (:func:`~lantern_jax.dynamics.forecast.forecast_actors`) in
-    the ego frame; a pending event may begin once the ego reaches the warning point."""
+def actors_in_ego_frame(scenario: Scenario, state: State) -> dict[str, Array]:
+    """Ground truth of every actor slot in the ego frame (the simulator's, never a policy's
+    input unless it is privileged).
+
+    Returns:
+        ``present`` (A,) bool and ``actor_xy``, ``actor_vel``, ``actor_dir``, ``actor_extent``
+        (A, 2) float32 and ``actor_kind`` (A,) int32, zero where no actor is present.
+    """
+    ego, a = state.ego, state.actors
+    on = present(scenario.actors, a)
+    heading = jnp.stack([jnp.cos(a.yaw), jnp.sin(a.yaw)], -1)
+    fields = dict(
+        actor_xy=geometry.world_to_ego(a.xy, ego.xy, ego.yaw),
+        actor_vel=geometry.world_to_ego_vec(heading * a.speed[:, None], ego.yaw),
+        actor_dir=geometry.world_to_ego_vec(heading, ego.yaw),
+        actor_extent=scenario.actors.extent,
+        actor_kind=scenario.actors.kind,
+    )
+    return dict(present=on, **mask_actors(fields, on))
+
+
+def mask_actors(fields: dict[str, Array], seen: Array) -> dict[str, Array]:
+    """Per-actor fields with every slot outside ``seen`` ((A,) bool) set to the zero sentinel."""
+    return {
+        k: jnp.where(seen.reshape(seen.shape + (1,) * (v.ndim - 1)), v, jnp.zeros_like(v))
+        for k, v in fields.items()
+    }
+
+
+def warning_fields(scenario: Scenario, state: State) -> dict[str, Array]:
+    """The warning as a policy with the ``"warning"`` sensor reads it: the delivered text's
+    token ids and value channel (:func:`~lantern_jax.scenarios.warnings.warning_language`)."""
+    active, text_id, pos = delivered_warning(scenario, state)
+    tokens, values = warnings.warning_language(text_id, active, pos)
+    return dict(warning_tokens=tokens, warning_values=values)
+
+
+def no_warning_fields() -> dict[str, Array]:
+    """The warning fields of a policy without the ``"warning"`` sensor: always no text."""
+    return dict(
+        warning_tokens=jnp.full((MAX_TOKENS,), PAD_ID, jnp.int32),
+        warning_values=jnp.zeros((MAX_TOKENS,), jnp.float32),
+    )
+
+
+def forecast_view(scenario: Scenario, state: State, truth: dict[str, Array]) -> PrivilegedView:
+    """Ground truth ``truth`` (:func:`actors_in_ego_frame`) and every actor's 2-s forecast
+    (:func:`~lantern_jax.dynamics.forecast.forecast_actors`) in the ego frame; a pending event
+    may begin once the ego reaches the warning point."""
     ego, a, proto = state.ego, state.actors, state.protocol
     t_early = earliest_event_time(
         state.t, proto.t_warn_point, proto.t_event, scenario.config.force_event
     )
-    on = present(scenario.actors, a)
     fc = forecast_actors(
-        scenario.actors, a, on, state.t, proto.t_event, t_early, FORECAST_STEPS, FORECAST_DT
-    )
+        scenario.actors, a, truth["present"], state.t, proto.t_event, t_early, FORECAST_STEPS,
+        FORECAST_DT,
+    )  # fmt: skip
     # world -> ego frame (x forward, y right), component-wise (see geometry.world_to_ego_vec)
     c, s = jnp.cos(ego.yaw), jnp.sin(ego.yaw)
     dx, dy = fc.x - ego.xy[0], fc.y - ego.xy[1]
     view = PrivilegedView(
+        **truth,
         forecast_x=c * dx + s * dy,
         forecast_y=s * dx - c * dy,
         forecast_ux=c * fc.ux + s * fc.uy,
@@ -121,55 +201,53 @@ def privileged_view(scenario: Scenario, state: State) -> PrivilegedView:
     return jax.lax.optimization_barrier(view)
 
 
-def observe(
-    scenario: Scenario, state: State, privileged: bool = False, surround: bool = False
-) -> Observation:
-    """Build the policy observation of the current tick.
-
-    Args:
-        scenario: the execution's static scenario.
-        state: the simulator state at time ``state.t`` (its percept is that of the same tick).
-        privileged: static; also fill ``Observation.privileged`` (:func:`privileged_view`).
-        surround: static; also fill ``Observation.surround`` (:func:`surround_view`).
-    """
-    ego, a, r, cfg = state.ego, state.actors, scenario.route, scenario.config
-    percept = state.percept
-    arcs = percept.route_arc + ROUTE_STEP * jnp.arange(NUM_ROUTE_POINTS, dtype=jnp.float32)
-    pts = jax.vmap(lambda s: polyline.interpolate(r.xy, r.s, r.valid, s)[0])(arcs)
-    route = geometry.world_to_ego(pts, ego.xy, ego.yaw)
-    targets = jax.vmap(lambda s: polyline.interpolate(r.xy, r.s, r.valid, s)[0])(
-        percept.route_arc + jnp.asarray(NAV_TARGETS_M)
-    )
-    heading = jnp.stack([jnp.cos(a.yaw), jnp.sin(a.yaw)], -1)
-    vel_w = heading * a.speed[:, None]
-    on = present(scenario.actors, a)
-    dist_to_stop = jnp.where(cfg.ego_stop_s < BIG * 0.5, cfg.ego_stop_s - percept.route_arc, BIG)
-    return Observation(
-        ego_speed=ego.speed,
-        ego_accel=ego.accel,
-        ego_steer=ego.steer,
-        v_ref=cfg.v_ref,
-        route=route,
-        target_points=geometry.world_to_ego(targets, ego.xy, ego.yaw),
-        dist_to_route_end=r.length - percept.route_arc,
-        actor_xy=jnp.where(on[:, None], geometry.world_to_ego(a.xy, ego.xy, ego.yaw), BIG),
-        actor_vel=jnp.where(on[:, None], geometry.world_to_ego_vec(vel_w, ego.yaw), 0.0),
-        actor_dir=geometry.world_to_ego_vec(heading, ego.yaw),
-        actor_extent=scenario.actors.extent,
-        actor_kind=scenario.actors.kind,
-        visible=percept.visible & on,
-        present=on,
-        range_image=percept.ranges,
-        range_class=percept.range_class,
-        light_state=ego_light_state(scenario.lights, cfg.ego_light, state.t),
-        dist_to_stop=dist_to_stop,
-        **warning_fields(scenario, state),
-        privileged=privileged_view(scenario, state) if privileged else None,
-        surround=surround_view(scenario, state) if surround else None,
-    )
+def privileged_view(scenario: Scenario, state: State) -> PrivilegedView:
+    """The ``"privileged"`` sensor: ground truth and forecasts (:func:`forecast_view`)."""
+    return forecast_view(scenario, state, actors_in_ego_frame(scenario, state))
 
 
 def surround_view(scenario: Scenario, state: State) -> SurroundView:
     """The six-camera rig now (:func:`~lantern_jax.sim.sense.camera_view` at 360 deg)."""
     v = camera_view(scenario, state.ego, state.actors, SURROUND_FOV, SURROUND_RAYS)
-    return SurroundView(visible=v.visible, ranges=v.ranges, hit_class=v.hit_class)
+    on = present(scenario.actors, state.actors)
+    return SurroundView(visible=v.visible & on, ranges=v.ranges, hit_class=v.hit_class)
+
+
+def observe(
+    scenario: Scenario, state: State, sensors: tuple[str, ...] = DEFAULT_SENSORS
+) -> Observation:
+    """Build the observation of the current tick from the declared sensors only.
+
+    Args:
+        scenario: the execution's static scenario.
+        state: the simulator state at time ``state.t`` (its percept is that of the same tick).
+        sensors: static; the policy's sensor names
+            (:func:`~lantern_jax.observation.normalize_sensors`; ``Policy.sensors``).
+    """
+    r, cfg, percept = scenario.route, scenario.config, state.percept
+    route, targets = route_ahead(scenario, state)
+    truth = actors_in_ego_frame(scenario, state)
+    seen = percept.visible & truth["present"]
+    surround = surround_view(scenario, state) if SURROUND_RIG in sensors else None
+    if surround is not None:
+        seen = seen | surround.visible
+    actor_fields = {k: v for k, v in truth.items() if k != "present"}
+    dist_to_stop = jnp.where(cfg.ego_stop_s < BIG * 0.5, cfg.ego_stop_s - percept.route_arc, BIG)
+    return Observation(
+        ego_speed=state.ego.speed,
+        ego_accel=state.ego.accel,
+        ego_steer=state.ego.steer,
+        v_ref=cfg.v_ref,
+        route=route,
+        target_points=targets,
+        dist_to_route_end=r.length - percept.route_arc,
+        **mask_actors(actor_fields, seen),
+        visible=seen,
+        range_image=percept.ranges,
+        range_class=percept.range_class,
+        light_state=ego_light_state(scenario.lights, cfg.ego_light, state.t),
+        dist_to_stop=dist_to_stop,
+        **(warning_fields(scenario, state) if WARNING in sensors else no_warning_fields()),
+        privileged=forecast_view(scenario, state, truth) if PRIVILEGED in sensors else None,
+        surround=surround,
+    )

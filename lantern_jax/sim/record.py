@@ -6,7 +6,6 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from lantern_jax.observation import Observation
 from lantern_jax.sim.state import State
 from lantern_jax.world import Scenario, present
 
@@ -17,9 +16,10 @@ Array = jax.Array
 class TickRecord:
     """What is kept per tick when full trajectories are recorded (for plots).
 
-    State fields (``t``, ego, actors, visibility) are those at the END of the tick; the policy
-    fields (``warning_active``, ``warning_text_id``, ``warning_pos``, ``waypoints``) are what the
-    policy saw and returned at the START of it.  After an execution has ended, records repeat its
+    State fields (``t``, ego, actors, visibility) are those at the END of the tick; the warning
+    fields (``warning_active``, ``warning_text_id``, ``warning_pos``: what was delivered, as the
+    simulator knows it) and ``waypoints`` (what the policy returned) are those of the START of
+    it.  After an execution has ended, records repeat its
     final state (``done`` True) with the policy fields zeroed (text id -1).
     """
 
@@ -34,21 +34,27 @@ class TickRecord:
     visible: Array  # (A,) bool
     warning_active: Array  # () bool
     warning_text_id: Array  # () int32, delivered text id (-1 when none)
-    warning_pos: Array  # (2,) m, ego frame
+    warning_pos: Array  # (2,) m, ego frame, the position its text grounds (0 when none)
     waypoints: Array  # (10, 2) m, ego frame
     light: Array  # () int32
     done: Array  # () bool
 
 
 def tick_record(
-    scenario: Scenario, new: State, obs: Observation, plan: Array, light: Array, live: Array
+    scenario: Scenario,
+    new: State,
+    warning: tuple[Array, Array, Array],
+    plan: Array,
+    light: Array,
+    live: Array,
 ) -> TickRecord:
     """The record of one tick.
 
     Args:
         scenario: the execution's static scenario.
         new: the state at the end of the tick (frozen if the execution had ended before it).
-        obs: the observation the policy read at the start of the tick.
+        warning: ``(active, text_id, position)`` delivered at the start of the tick
+            (:func:`lantern_jax.sim.observe.delivered_warning`).
         plan: (10, 2) float32, m, the (fault-sanitised) waypoints the policy returned.
         light: () int32, the ego's light state at the end of the tick.
         live: () bool, the execution had not ended before this tick.
@@ -64,9 +70,9 @@ def tick_record(
         actor_yaw=new.actors.yaw,
         actor_present=on,
         visible=new.percept.visible & on,
-        warning_active=obs.warning_active & live,
-        warning_text_id=jnp.where(live, obs.warning_text_id, -1),
-        warning_pos=jnp.where(live, obs.warning_pos, 0.0),
+        warning_active=warning[0] & live,
+        warning_text_id=jnp.where(live, warning[1], -1),
+        warning_pos=jnp.where(live, warning[2], 0.0),
         waypoints=jnp.where(live, plan, 0.0),
         light=light,
         done=new.done,

@@ -31,11 +31,25 @@ from lantern_jax.constants import DT
 from lantern_jax.sim.distributed import batch_mesh
 from lantern_jax.sim.record import TickRecord
 from lantern_jax.sim.state import State, init_state
-from lantern_jax.sim.step import step
+from lantern_jax.sim.step import Driver, step
 from lantern_jax.world import Scenario
 
 Array = jax.Array
-ActFn = Callable[[Any, Any], Array]
+
+
+def start_state(scenario: Scenario, policy: Driver, policy_params: Any) -> State:
+    """The state of one execution at ``t = 0`` with the policy's initial carry."""
+    return init_state(scenario, policy.initial_carry(policy_params))
+
+
+def with_carry(states: State, policy: Driver, policy_params: Any) -> State:
+    """Batched start states (from ``vmap(init_state)``, no carry) given the policy's initial
+    carry in every execution."""
+    n = states.t.shape[0]
+    carry = policy.initial_carry(policy_params)
+    return states.replace(
+        policy_carry=jax.tree.map(lambda c: jnp.broadcast_to(c, (n, *jnp.shape(c))), carry)
+    )
 
 
 def horizon_ticks(seconds: float) -> int:
@@ -45,19 +59,19 @@ def horizon_ticks(seconds: float) -> int:
 
 def rollout(
     scenario: Scenario,
-    act: ActFn,
+    policy: Driver,
     policy_params: Any,
     num_ticks: int,
     record: bool = False,
     temperature: float | Array = 0.05,
     remat: bool = False,
-    privileged: bool = False,
 ) -> tuple[State, TickRecord | None]:
     """Roll one execution forward for ``num_ticks`` ticks (frozen once it has ended).
 
     Args:
         scenario: the execution's static scenario (closed over by the scan).
-        act: policy ``act(policy_params, obs) -> (10, 2)``.
+        policy: the :class:`~lantern_jax.policies.base.Policy` (its sensors decide what it
+            observes; its carry starts from ``init_carry``).
         policy_params: policy parameters.
         num_ticks: static horizon.
         record: also return the per-tick :class:`TickRecord` (leading axis ``num_ticks``).
@@ -65,8 +79,6 @@ def rollout(
         remat: recompute each tick's internals in the backward pass instead of storing them
             (``jax.checkpoint``): reverse-mode memory then grows with the carried state only,
             for a second forward pass of compute.
-        privileged: static; fill ``obs.privileged`` for a privileged policy
-            (``Policy.privileged``, e.g. the ``expert``).
 
     Returns:
         (final state, records or None).
@@ -74,24 +86,25 @@ def rollout(
     temperature = jnp.asarray(temperature, jnp.float32)
 
     def body(state, _):
-        new, rec = step(act, policy_params, scenario, state, temperature, privileged)
+        new, rec = step(policy, policy_params, scenario, state, temperature)
         return new, (rec if record else None)
 
     if remat:
         body = jax.checkpoint(body)
 
-    return jax.lax.scan(body, init_state(scenario), None, length=num_ticks)
+    start = start_state(scenario, policy, policy_params)
+    return jax.lax.scan(body, start, None, length=num_ticks)
 
 
 def chunk_runner(
-    act: ActFn, policy_params: Any, chunk: int, temperature: Array, privileged: bool
+    policy: Driver, policy_params: Any, chunk: int, temperature: Array
 ) -> Callable[[Scenario, State], State]:
     """``run_chunk(scenario, state)``: ``chunk`` scanned ticks of ONE execution (the scan
     carries the state; the scenario is closed over, so its tick-invariant work is hoisted)."""
 
     def run_chunk(scenario: Scenario, state: State) -> State:
         def body(s, _):
-            return step(act, policy_params, scenario, s, temperature, privileged)[0], None
+            return step(policy, policy_params, scenario, s, temperature)[0], None
 
         return jax.lax.scan(body, state, None, length=chunk)[0]
 
@@ -122,19 +135,18 @@ def on_every_device(fn: Callable[..., Any], *batched: Any) -> Any:
 
 def rollout_batch(
     scenarios: Scenario,
-    act: ActFn,
+    policy: Driver,
     policy_params: Any,
     max_ticks: int | Array,
     chunk: int = 40,
     temperature: float | Array = 0.05,
     start: State | None = None,
-    privileged: bool = False,
 ) -> State:
     """Roll a batch of executions (leading axis on every leaf) until all have ended.
 
     Args:
         scenarios: batched scenarios, (B, ...) leaves.
-        act: policy ``act(policy_params, obs)`` for ONE scenario; it is vmapped here.
+        policy: the policy (or a policy switch), written for ONE scenario; it is vmapped here.
         policy_params: policy parameters shared by the batch.
         max_ticks: upper bound of the horizon (rounded up to whole chunks): a Python int, or a
             traced int32 scalar, so that one compiled program serves every horizon.
@@ -142,14 +154,13 @@ def rollout_batch(
         temperature: soft-score temperature.
         start: continue these batched states (from an earlier call) instead of starting at
             the scenarios' initial state.
-        privileged: static; fill ``obs.privileged`` (``Policy.privileged``).
 
     Returns:
         The batched final states.
     """
     temperature = jnp.asarray(temperature, jnp.float32)
     n_chunks = -(-max_ticks // chunk)
-    batched_chunk = jax.vmap(chunk_runner(act, policy_params, chunk, temperature, privileged))
+    batched_chunk = jax.vmap(chunk_runner(policy, policy_params, chunk, temperature))
 
     def cond(loop):
         i, states = loop
@@ -159,19 +170,20 @@ def rollout_batch(
         i, states = loop
         return i + 1, batched_chunk(scenarios, states)
 
-    states = jax.vmap(init_state)(scenarios) if start is None else start
+    if start is None:
+        start = with_carry(jax.vmap(init_state)(scenarios), policy, policy_params)
+    states = start
     return jax.lax.while_loop(cond, body, (jnp.asarray(0, jnp.int32), states))[1]
 
 
 def rollout_batch_parallel(
     scenarios: Scenario,
-    act: ActFn,
+    policy: Driver,
     policy_params: Any,
     max_ticks: int | Array,
     chunk: int = 40,
     temperature: float | Array = 0.05,
     start: State | None = None,
-    privileged: bool = False,
 ) -> State:
     """:func:`rollout_batch` split over all local devices (e.g. the CPU cores exposed with
     ``--xla_force_host_platform_device_count``), each shard stopping independently.
@@ -182,9 +194,7 @@ def rollout_batch_parallel(
     """
     n_dev = jax.device_count()
     if n_dev == 1:
-        return rollout_batch(
-            scenarios, act, policy_params, max_ticks, chunk, temperature, start, privileged
-        )
+        return rollout_batch(scenarios, policy, policy_params, max_ticks, chunk, temperature, start)
     n = jax.tree.leaves(scenarios)[0].shape[0]
     pad = (-n) % n_dev
 
@@ -194,10 +204,10 @@ def rollout_batch_parallel(
     if pad:
         scenarios = pad_tree(scenarios)
         start = None if start is None else pad_tree(start)
+    if start is None:
+        start = with_carry(jax.vmap(init_state)(scenarios), policy, policy_params)
     final = on_every_device(
-        lambda sc, s: rollout_batch(
-            sc, act, policy_params, max_ticks, chunk, temperature, s, privileged
-        ),
+        lambda sc, s: rollout_batch(sc, policy, policy_params, max_ticks, chunk, temperature, s),
         scenarios,
         start,
     )
@@ -264,13 +274,12 @@ def scheduled_map(
 def rollout_scheduled(
     scenarios: Scenario,
     starts: State,
-    act: ActFn,
+    policy: Driver,
     policy_params: Any,
     max_ticks: int | Array,
     slots: int,
     chunk: int = 40,
     temperature: float | Array = 0.05,
-    privileged: bool = False,
 ) -> State:
     """Roll ``n`` executions through ``slots`` slots until every one has ended
     (:func:`scheduled_map` with ``chunk`` scanned ticks per loop step).
@@ -282,15 +291,16 @@ def rollout_scheduled(
 
     Args:
         scenarios: (n, ...) batched scenarios.
-        starts: (n, ...) their states to start from (e.g. ``vmap(init_state)(scenarios)``).
-        act: policy ``act(policy_params, obs)`` for ONE scenario; it is vmapped here.
+        starts: (n, ...) their states to start from (e.g. :func:`with_carry` of
+            ``vmap(init_state)(scenarios)``); a slot that takes the next execution takes its
+            start state, the policy's initial carry included.
+        policy: the policy (or a policy switch), written for ONE scenario; it is vmapped here.
         policy_params: policy parameters shared by the batch.
         max_ticks: horizon (rounded up to whole chunks); a Python int or a traced int32
             scalar.
         slots: static, executions stepped together (1 <= slots <= n).
         chunk: static, ticks per loop step.
         temperature: soft-score temperature.
-        privileged: static; fill ``obs.privileged`` (``Policy.privileged``).
 
     Returns:
         (n, ...) the final states, in the order of ``scenarios``.
@@ -301,20 +311,19 @@ def rollout_scheduled(
     def ended(states: State) -> Array:
         return states.done | (states.tick >= max_ticks)
 
-    run_chunk = chunk_runner(act, policy_params, chunk, temperature, privileged)
+    run_chunk = chunk_runner(policy, policy_params, chunk, temperature)
     return scheduled_map(run_chunk, ended, scenarios, starts, slots)
 
 
 def rollout_scheduled_parallel(
     scenarios: Scenario,
     starts: State,
-    act: ActFn,
+    policy: Driver,
     policy_params: Any,
     max_ticks: int | Array,
     slots: int,
     chunk: int = 40,
     temperature: float | Array = 0.05,
-    privileged: bool = False,
 ) -> State:
     """:func:`rollout_scheduled` on every device of :func:`batch_mesh`, each with its own
     scheduler over its own block of the batch (no communication; each stops on its own).
@@ -326,11 +335,11 @@ def rollout_scheduled_parallel(
     """
     if jax.device_count() == 1:
         return rollout_scheduled(
-            scenarios, starts, act, policy_params, max_ticks, slots, chunk, temperature, privileged
+            scenarios, starts, policy, policy_params, max_ticks, slots, chunk, temperature
         )
     return on_every_device(
         lambda sc, st: rollout_scheduled(
-            sc, st, act, policy_params, max_ticks, slots, chunk, temperature, privileged
+            sc, st, policy, policy_params, max_ticks, slots, chunk, temperature
         ),
         scenarios,
         starts,

@@ -7,6 +7,8 @@ conditions; :func:`freeze` keeps an execution that has ended exactly as it was.
 
 from __future__ import annotations
 
+from typing import Any
+
 import jax
 import jax.numpy as jnp
 from flax import struct
@@ -31,11 +33,15 @@ class State:
     telemetry: Telemetry  # scoring accumulators
     done: Array  # () bool, the execution has ended (state frozen)
     fault: Array  # () bool, a controller fault happened at some tick
+    #: the policy's memory (``Policy.init_carry``'s pytree; ``()`` for a stateless policy),
+    #: reset with the rest of the state when an execution starts
+    policy_carry: Any = ()
 
 
-def init_state(scenario: Scenario) -> State:
+def init_state(scenario: Scenario, policy_carry: Any = ()) -> State:
     """The state at ``t = 0``: the scenario's initial ego and actors, sensed (a hazard seen
-    already counts as seen before the warning point); empty telemetry."""
+    already counts as seen before the warning point); empty telemetry; the policy's initial
+    carry ``policy_carry``."""
     zero = jnp.asarray(0.0, jnp.float32)
     arc, dist, progress = locate_on_route(scenario.route, scenario.ego0.xy, zero)
     percept = sense(scenario, scenario.ego0, scenario.actors0, arc, dist, progress)
@@ -51,6 +57,7 @@ def init_state(scenario: Scenario) -> State:
         telemetry=init_telemetry(),
         done=jnp.asarray(False),
         fault=jnp.asarray(False),
+        policy_carry=policy_carry,
     )
 
 

@@ -6,26 +6,30 @@ the program does not depend on the policy, so evaluating several policies with o
 that holds all of them, and picks one by an index that is an ordinary (unbatched) argument,
 compiles the simulator once instead of once per policy.
 
-``act = policy_switch((act_0, act_1, ...))`` is an ``act`` function for
-:func:`lantern_jax.sim.step.step` whose parameters are :class:`SwitchParams`: the index of the
-member that drives and the parameters of every member (the others' only fix the program's
-argument shapes).  The step builds the plain observation once, and only the chosen member's
-branch of a ``lax.switch`` computes what that member alone needs: the privileged forecast
-(``act.privileged``) or the six-camera rig (``act.surround``).  Under ``vmap`` the index is not
-batched (every execution of a call runs the same member), so the switch stays a real branch and
-the other members cost nothing at run time.
+``switch = policy_switch((policy_0, policy_1, ...))`` drives :func:`lantern_jax.sim.step.step`
+with parameters :class:`SwitchParams`: the index of the member that drives and the parameters
+of every member (the others' only fix the program's argument shapes).  A member is a policy's
+program (:attr:`~lantern_jax.policies.base.Policy.program`: act function, sensors, carry), so
+policies that differ only in their parameters are one member.  The step builds the cameras'
+observation once; a ``lax.switch`` over *branches* runs the chosen member's act function and
+adds, in that branch only, what it alone reads: ground truth and forecasts (``"privileged"``)
+or the six-camera rig (``"surround_rig"``).  Members whose act function, those sensors and
+carry agree share a branch; whether the member receives the warning text is then a per-member
+table entry (``ego`` and ``coop`` share one planner branch, ``coop`` with the text).  A stateful
+member has a branch of its own; the switch's carry holds every branch's carry.  Under ``vmap``
+the index is not batched (every execution of a call runs the same member), so the switch stays
+a real branch and the other members cost nothing at run time.
 
-A switch is cached by its members (the same tuple of ``act`` functions gives the same switch
-object), so every evaluation with the same members reuses one compiled program.  Results equal
-those of the member's own program to float32 rounding: XLA fuses the branch's operations apart
-from the rest of the tick, so the last bits of a few values can differ (the evaluation's
-reproducibility promise, :data:`lantern_jax.scoring.table.REPRODUCIBLE_ATOL`, covers that).
+A switch is cached by its members, so every evaluation with the same members reuses one
+compiled program.  Results equal those of the member's own program to float32 rounding: XLA
+fuses the branch's operations apart from the rest of the tick, so the last bits of a few values
+can differ (the evaluation's reproducibility promise,
+:data:`lantern_jax.scoring.table.REPRODUCIBLE_ATOL`, covers that).
 """
 
 from __future__ import annotations
 
 import hashlib
-from collections.abc import Callable
 from typing import Any
 
 import jax
@@ -33,13 +37,20 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
-from lantern_jax.observation import Observation
-from lantern_jax.sim.observe import privileged_view, surround_view
+from lantern_jax.language import PAD_ID
+from lantern_jax.observation import WARNING
+from lantern_jax.policies.base import Policy
+from lantern_jax.sim.observe import (
+    actors_in_ego_frame,
+    forecast_view,
+    mask_actors,
+    observe,
+    surround_view,
+)
 from lantern_jax.sim.state import State
 from lantern_jax.world import Scenario
 
 Array = jax.Array
-ActFn = Callable[[Any, Observation], Array]
 
 
 @struct.dataclass
@@ -62,78 +73,154 @@ class SwitchParams:
         return jax.tree.unflatten(treedef, [self.pool[j] for j in places])
 
 
+def _branch_key(policy: Policy, index: int) -> tuple:
+    """Members with equal keys share a branch: same act function, same sensors apart from the
+    warning, stateless (a stateful member gets a branch of its own)."""
+    if policy.stateful:
+        return ("stateful", index)
+    others = tuple(x for x in policy.sensors if x != WARNING)
+    return ("stateless", policy.act, others)
+
+
 class PolicySwitch:
-    """An ``act`` function made of several: see the module docstring.
+    """Several policies' programs as one driver: see the module docstring.
 
     Attributes:
-        members: the member ``act`` functions, in index order (distinct).
+        members: one representative :class:`~lantern_jax.policies.base.Policy` per member, in
+            index order (distinct programs).
+        branch_of: per member, the index of its branch.
+        any_privileged: some member reads ground truth (its plan is shielded as in its own
+            program, see :mod:`lantern_jax.sim.step`).
     """
 
-    def __init__(self, members: tuple[ActFn, ...]) -> None:
+    def __init__(self, members: tuple[Policy, ...]) -> None:
         if len(members) < 2:
             raise ValueError(f"policy_switch: needs at least 2 members, got {len(members)}")
-        if len(set(map(id, members))) != len(members):
-            raise ValueError("policy_switch: members must be distinct act functions")
+        if len({m.program for m in members}) != len(members):
+            raise ValueError("policy_switch: members must be distinct programs (Policy.program)")
         self.members = tuple(members)
-        #: Some member reads the privileged forecast (its plan is shielded as in its own
-        #: program, see sim.step).
-        self.any_privileged = any(bool(getattr(a, "privileged", False)) for a in members)
-
-    def __call__(self, params: SwitchParams, obs: Observation) -> Array:
-        raise TypeError(
-            "a PolicySwitch is run by lantern_jax.sim.step.step (it needs the scenario and "
-            "state to build each member's observation), not called on an observation"
+        keys: dict[tuple, int] = {}
+        self.branch_of = tuple(
+            keys.setdefault(_branch_key(m, i), len(keys)) for i, m in enumerate(members)
         )
+        self.num_branches = len(keys)
+        #: per branch, its first member (whose act function and carry the branch runs)
+        self.branch_lead = tuple(self.branch_of.index(b) for b in range(self.num_branches))
+        self.any_privileged = any(m.privileged for m in members)
+        self.any_warning = any(m.reads_warning for m in members)
 
-    def index_of(self, act: ActFn) -> int:
-        """The member index of ``act``.
+    def index_of(self, policy: Policy) -> int:
+        """The member index of ``policy`` (the member with its program).
 
         Raises:
-            ValueError: when ``act`` is not a member.
+            ValueError: when no member has its program.
         """
-        for i, a in enumerate(self.members):
-            if a is act:
+        for i, m in enumerate(self.members):
+            if m.program == policy.program:
                 return i
-        raise ValueError(f"policy_switch: {act!r} is not a member of this switch")
+        raise ValueError(f"policy_switch: policy {policy.name!r} is not a member of this switch")
+
+    def initial_carry(self, params: SwitchParams) -> tuple:
+        """The switch's carry at the start of an execution: per branch, its member's initial
+        carry (the driving member's from its own parameters)."""
+        return tuple(
+            self.members[lead].initial_carry(params.member(lead)) for lead in self.branch_lead
+        )
 
     def choose(
-        self, params: SwitchParams, obs: Observation, scenario: Scenario, state: State
-    ) -> Array:
-        """(10, 2) float32 waypoints of the member ``params.index`` for one execution.
+        self, params: SwitchParams, carry: tuple, scenario: Scenario, state: State
+    ) -> tuple[Array, tuple]:
+        """Waypoints and new carry of the member ``params.index`` for one execution.
 
         Args:
             params: :class:`SwitchParams`.
-            obs: the plain observation of the tick (no forecast, no rig), shared by the members.
-            scenario, state: the execution now; a branch builds from them what only its
-                member reads.
-        """
+            carry: the switch's carry (:meth:`initial_carry`).
+            scenario, state: the execution now; the cameras' observation is built once, and a
+                branch adds from them what only its members read.
 
-        def branch(member: ActFn, i: int):
-            def run(pool: tuple) -> Array:
+        Returns:
+            ((10, 2) float32 waypoints, the new carry).
+        """
+        sensors = (WARNING,) if self.any_warning else ()
+        obs = observe(scenario, state, sensors)
+        warned = jnp.asarray([m.reads_warning for m in self.members])[params.index]
+        obs = obs.replace(
+            warning_tokens=jnp.where(warned, obs.warning_tokens, PAD_ID),
+            warning_values=jnp.where(warned, obs.warning_values, 0.0),
+        )
+
+        def branch(b: int):
+            lead = self.members[self.branch_lead[b]]
+
+            def run(operands):
+                pool, carries = operands
                 o = obs
-                if getattr(member, "privileged", False):
-                    o = o.replace(privileged=privileged_view(scenario, state))
-                if getattr(member, "surround", False):
-                    o = o.replace(surround=surround_view(scenario, state))
-                return jnp.asarray(member(params.replace(pool=pool).member(i), o), jnp.float32)
+                if lead.surround:
+                    rig = surround_view(scenario, state)
+                    truth = actors_in_ego_frame(scenario, state)
+                    seen = o.visible | rig.visible
+                    fields = {k: v for k, v in truth.items() if k != "present"}
+                    o = o.replace(surround=rig, visible=seen, **mask_actors(fields, seen))
+                if lead.privileged:
+                    o = o.replace(
+                        privileged=forecast_view(
+                            scenario, state, actors_in_ego_frame(scenario, state)
+                        )
+                    )
+                # every member of this branch has the lead's act and carry; the parameters are
+                # those of the member that drives
+                ps = params.replace(pool=pool)
+                mine = [i for i, bi in enumerate(self.branch_of) if bi == b]
+                if len({_signature(ps.member(i)) for i in mine}) == 1:
+                    wp, c = lead.step(_select(ps, mine, params.index), carries[b], o)
+                else:  # parameters of other shapes: one call per member
+                    calls = [lambda i=i: lead.step(ps.member(i), carries[b], o) for i in mine]
+                    local = jnp.argmax(jnp.asarray(mine) == params.index)
+                    wp, c = jax.lax.switch(local, calls)
+                out = tuple(c if k == b else carries[k] for k in range(self.num_branches))
+                return jnp.asarray(wp, jnp.float32), out
 
             return run
 
-        branches = [branch(m, i) for i, m in enumerate(self.members)]
-        return jax.lax.switch(params.index, branches, params.pool)
+        branches = [branch(b) for b in range(self.num_branches)]
+        b_index = jnp.asarray(self.branch_of, jnp.int32)[params.index]
+        return jax.lax.switch(b_index, branches, (params.pool, carry))
 
 
-_SWITCHES: dict[tuple, PolicySwitch] = {}  # by the members themselves (functions hash by identity)
+def _signature(tree: Any) -> tuple:
+    """Tree structure, shapes and dtypes of a parameter tree."""
+    leaves, treedef = jax.tree.flatten(tree)
+    return treedef, tuple((tuple(jnp.shape(x)), str(jnp.result_type(x))) for x in leaves)
+
+
+def _select(params: SwitchParams, mine: list[int], index: Array) -> Any:
+    """The driving member's parameters among members ``mine`` of one branch (one parameter
+    signature): leaf by leaf, a selection by the run-time ``index``; a leaf that every member
+    shares (one pool entry) is taken as it is."""
+    treedef, first = params.layout[mine[0]]
+    leaves = []
+    for k, place in enumerate(first):
+        places = [params.layout[i][1][k] for i in mine]
+        leaf = params.pool[place]
+        if len(set(places)) > 1:
+            for i, pl in zip(mine[1:], places[1:], strict=True):
+                leaf = jnp.where(index == i, params.pool[pl], leaf)
+        leaves.append(leaf)
+    return jax.tree.unflatten(treedef, leaves)
+
+
+_SWITCHES: dict[tuple, PolicySwitch] = {}  # by the members' programs
 
 
 def policy_switch(members) -> PolicySwitch:
-    """The :class:`PolicySwitch` of ``members`` (a sequence of distinct ``act`` functions),
-    cached: the same members in the same order give the same object, hence one compiled
-    program per process."""
+    """The :class:`PolicySwitch` of ``members`` (policies of distinct programs), cached: the
+    same programs in the same order give the same object, hence one compiled program per
+    process."""
     members = tuple(members)
-    if members not in _SWITCHES:
-        _SWITCHES[members] = PolicySwitch(members)
-    return _SWITCHES[members]
+    key = tuple(m.program for m in members)
+    if key not in _SWITCHES:
+        _SWITCHES[key] = PolicySwitch(members)
+    return _SWITCHES[key]
 
 
 #: bytes: leaves at least this large are compared by content when the pool is built (smaller

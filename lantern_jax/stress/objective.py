@@ -32,6 +32,7 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
+from lantern_jax.policies.base import Policy
 from lantern_jax.scoring import thresholds
 from lantern_jax.scoring.cus import soft_execution_terms
 from lantern_jax.scoring.smooth import softmin_decode
@@ -58,7 +59,7 @@ class Problem:
     space: SearchSpace
     scenario_a: Scenario  # Route A with the condition (warning on/off) already set
     scenario_b: Scenario
-    act: Callable[[Any, Any], Array]
+    policy: Policy
     policy_params: Any
     horizon: int  # ticks of the soft rollouts
     temperature: float  # soft-score temperature (m, s, m/s in the relaxed quantities)
@@ -71,7 +72,10 @@ class Problem:
 
     def static(self) -> tuple:
         """What a compilation depends on besides the arrays."""
-        return (self.space.names, self.act, self.horizon, float(self.temperature), self.objective)
+        return (
+            self.space.names, self.policy.program, self.horizon, float(self.temperature),
+            self.objective,
+        )  # fmt: skip
 
 
 def candidate_values(data: tuple, z: Array) -> Array:
@@ -94,7 +98,7 @@ def soft_objective(problem: Problem, z: Array, data: tuple | None = None) -> Arr
     sc_a, sc_b, policy_params, _, _ = data
     sc_a, _ = problem.space.apply(sc_a, sc_b, candidate_values(data, z))
     final, _ = rollout(
-        sc_a, problem.act, policy_params, problem.horizon,
+        sc_a, problem.policy, policy_params, problem.horizon,
         temperature=problem.temperature, remat=True,
     )  # fmt: skip
     tel, temp = final.telemetry, problem.temperature

@@ -64,7 +64,7 @@ def make_problem(pair: PairSpec, policy: Policy, space: SearchSpace, cfg: Stress
     reach = float(a.config.s_conflict) / float(a.config.v_ref) + INTERACTION_TAIL_S
     horizon = int(min(np.ceil(reach / DT), np.ceil(float(a.config.timeout_s) / DT)))
     params = policy.init(jax.random.PRNGKey(0))
-    return Problem(space, a, b, policy.act, params, horizon, cfg.temperature, cfg.objective)
+    return Problem(space, a, b, policy, params, horizon, cfg.temperature, cfg.objective)
 
 
 def stress_test(

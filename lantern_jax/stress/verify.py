@@ -53,13 +53,14 @@ MAX_VERIFY_TICKS = 1800  # ticks (90 s) >= the longest route timeout (20 s + 164
 _COMPILED: dict[tuple, Any] = {}
 
 
-def _hard_metrics(act: Any) -> Any:
-    """``jit((scenarios, policy_params) -> ExecutionMetrics)``, one compilation per policy act."""
-    key = ("metrics", act)
+def _hard_metrics(policy: Any) -> Any:
+    """``jit((scenarios, policy_params) -> ExecutionMetrics)``, one compilation per policy
+    program (a :class:`~lantern_jax.policies.base.Policy` or a policy switch)."""
+    key = ("metrics", getattr(policy, "program", policy))
     if key not in _COMPILED:
         _COMPILED[key] = jax.jit(
             lambda scs, params: finalize(
-                rollout_batch(scs, act, params, MAX_VERIFY_TICKS).telemetry
+                rollout_batch(scs, policy, params, MAX_VERIFY_TICKS).telemetry
             )
         )
     return _COMPILED[key]
@@ -91,13 +92,13 @@ class Verifier:
         self.expert = expert
         self.expert_params = expert.init(jax.random.PRNGKey(0))
         self._pairs = _pair_builder(problem)
-        if problem.act is expert.act:
-            self._metrics = _hard_metrics(expert.act)
+        if problem.policy.program == expert.program:
+            self._metrics = _hard_metrics(expert)
             self._policy_params, self._expert_params = problem.policy_params, self.expert_params
         else:
             # The policy and the expert as members of one program: the simulator compiles
             # once for both (lantern_jax.sim.switch).
-            switch = policy_switch((problem.act, expert.act))
+            switch = policy_switch((problem.policy, expert))
             members = (problem.policy_params, self.expert_params)
             self._metrics = _hard_metrics(switch)
             self._policy_params = switch_params(switch, 0, members)

@@ -1,8 +1,10 @@
 """Training examples from the open-loop dataset: observations, targets and recipes.
 
 Every example is a policy :class:`~lantern_jax.observation.Observation` rebuilt from a dataset
-frame's ``obs.<field>`` columns (so training and the closed loop feed the model through the same
-feature code) and the frame's ten expert waypoints.  :func:`recipe_examples` selects and edits
+frame's ``obs.<field>`` columns — for the six-camera rig with the ``rig.<field>`` and
+``surround.<field>`` columns in their place (:mod:`lantern_jax.dataset.record`) — so training
+and the closed loop feed the model exactly the observation its sensors deliver, through the
+same feature code; and the frame's ten expert waypoints.  :func:`recipe_examples` selects and edits
 frames as the training recipe says (:mod:`lantern_jax.training.config`); the validation split
 holds out whole sequences.
 """
@@ -16,7 +18,9 @@ import numpy as np
 import pandas as pd
 
 from lantern_jax.constants import FAMILIES, NUM_WAYPOINTS
+from lantern_jax.dataset.record import RIG_FIELDS
 from lantern_jax.dataset.store import column_array
+from lantern_jax.language import PAD_ID
 from lantern_jax.observation import Observation
 from lantern_jax.training.config import TrainConfig
 
@@ -41,16 +45,20 @@ class Examples:
                         self.sequence[idx], self.base_style[idx])  # fmt: skip
 
 
-# the six-camera rig, stored as surround_<field>
+# the six-camera rig's own view, as surround_<field> (Observation.surround)
 SURROUND_COLUMNS = ("surround.visible", "surround.ranges", "surround.hit_class")
 
 
-def observation_columns(frames: pd.DataFrame, card: dict) -> dict[str, np.ndarray]:
-    """Observation fields from a dataset's ``obs.<field>`` columns.
+def observation_columns(
+    frames: pd.DataFrame, card: dict, rig: str = "front"
+) -> dict[str, np.ndarray]:
+    """Observation fields from a dataset's ``obs.<field>`` columns; for ``rig="surround"`` the
+    fields the six-camera rig changes come from its ``rig.<field>`` columns and its own view
+    from the ``surround.<field>`` columns (as ``surround_<field>``).
 
     Raises:
-        ValueError: naming an Observation field the dataset does not store (a dataset recorded
-            by another version of the simulator).
+        ValueError: naming a column the dataset does not store (a dataset recorded by another
+            version of the simulator).
     """
     shapes = card["frame_columns"]
     out = {}
@@ -61,34 +69,40 @@ def observation_columns(frames: pd.DataFrame, card: dict) -> dict[str, np.ndarra
                 continue  # an optional field (e.g. privileged data) the dataset does not carry
             raise ValueError(f"dataset: column {col!r} missing (recorded by another version?)")
         out[f.name] = column_array(frames, col, shapes[col])
-    for name in SURROUND_COLUMNS:  # the six-camera rig (Observation.surround)
-        if name in shapes:
-            out[name.replace(".", "_")] = column_array(frames, name, shapes[name])
+    if rig == "surround":
+        for name in (*SURROUND_COLUMNS, *(f"rig.{k}" for k in RIG_FIELDS)):
+            if name not in shapes:
+                raise ValueError(f"dataset: column {name!r} missing (recorded by another version?)")
+            value = column_array(frames, name, shapes[name])
+            out[name[len("rig.") :] if name.startswith("rig.") else name.replace(".", "_")] = value
     return out
 
 
-def examples_from_frames(frames: pd.DataFrame, card: dict) -> Examples:
-    """Every frame as an example."""
-    obs = observation_columns(frames, card)
+def examples_from_frames(frames: pd.DataFrame, card: dict, rig: str = "front") -> Examples:
+    """Every frame as an example (observations as ``rig`` sees them)."""
+    obs = observation_columns(frames, card, rig)
     targets = column_array(frames, "waypoints", [NUM_WAYPOINTS, 2]).astype(np.float32)
-    return Examples(obs, targets, frames["sequence_id"].to_numpy(str),
-                    ~obs["warning_active"].astype(bool))  # fmt: skip
+    no_text = np.all(obs["warning_tokens"] == PAD_ID, axis=-1)
+    return Examples(obs, targets, frames["sequence_id"].to_numpy(str), no_text)
 
 
 def _far_counterexamples(ex: Examples, frames: pd.DataFrame, far_m: float) -> Examples:
-    """Route B frames told of their family's hazard far ahead, with the ordinary trajectory."""
+    """Route B frames told of their family's hazard far ahead (its canonical text, grounded at
+    ``(far_m, 0.5)`` m), with the ordinary trajectory."""
+    from lantern_jax.language import round_number
     from lantern_jax.scenarios.warnings import text_tables
 
     is_b = frames["route"].to_numpy(str) == "B"
     sel = ex.take(np.flatnonzero(is_b))
-    tokens, has_pos = text_tables()
+    tables = text_tables()
     fam = np.asarray([FAMILIES.index(f) for f in frames["family"].to_numpy(str)[is_b]])
     obs = dict(sel.obs)
-    obs["warning_active"] = np.ones(len(sel), bool)
-    obs["warning_text_id"] = fam.astype(np.int32)  # the canonical text of the family
-    obs["warning_tokens"] = tokens[fam]
-    obs["warning_has_position"] = has_pos[fam].astype(bool)
-    obs["warning_pos"] = np.tile(np.asarray([[far_m, 0.5]], np.float32), (len(sel), 1))
+    values = np.zeros(obs["warning_values"].shape, np.float32)
+    rows = np.arange(len(sel))
+    values[rows, tables.x_slot[fam]] = float(round_number(far_m))
+    values[rows, tables.y_slot[fam]] = float(round_number(0.5))
+    obs["warning_tokens"] = tables.tokens[fam]
+    obs["warning_values"] = values
     return Examples(obs, sel.targets, sel.sequence, np.zeros(len(sel), bool))
 
 
@@ -102,7 +116,7 @@ def concat(parts: list[Examples]) -> Examples:
 
 def recipe_examples(frames: pd.DataFrame, card: dict, cfg: TrainConfig) -> Examples:
     """The examples of a recipe (see :mod:`lantern_jax.training.config`)."""
-    ex = examples_from_frames(frames, card)
+    ex = examples_from_frames(frames, card, cfg.rig)
     if cfg.recipe == "base":
         return ex.take(np.flatnonzero(ex.base_style))
     if cfg.recipe == "distance":

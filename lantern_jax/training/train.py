@@ -49,7 +49,8 @@ def model_config(cfg: TrainConfig, ranges: int) -> ModelConfig:
 
 
 def _observation(batch: dict[str, Any]) -> Observation:
-    """An Observation from example columns (``surround_*`` columns form its surround view)."""
+    """An Observation from example columns (``surround_*`` columns form its six-camera view,
+    :func:`~lantern_jax.training.data.observation_columns`)."""
     names = {f.name for f in dataclasses.fields(Observation)}
     obs = {k: v for k, v in batch.items() if k in names}
     if "surround_visible" in batch:

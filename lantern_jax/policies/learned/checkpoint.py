@@ -25,7 +25,7 @@ import jax
 import jax.numpy as jnp
 from flax import nnx, serialization, struct
 
-from lantern_jax.observation import Observation
+from lantern_jax.observation import FRONT_CAMERA, SURROUND_RIG, WARNING, Observation
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.learned.features import features, nav_token_table
 from lantern_jax.policies.learned.model import DrivingModel, ModelConfig
@@ -59,8 +59,18 @@ def make_act(config: ModelConfig, graphdef: Any):
         model = nnx.merge(graphdef, params.model)
         return model(features(obs, config.rig, params.embedding, params.nav_tokens))
 
-    act.surround = config.rig == "surround"  # the simulator fills Observation.surround for it
     return act
+
+
+def model_sensors(config: ModelConfig) -> tuple[str, ...]:
+    """The sensors a model architecture reads: the front camera, the six-camera rig for the
+    surround rig, the warning text for a language model."""
+    sensors = [FRONT_CAMERA]
+    if config.rig == "surround":
+        sensors.append(SURROUND_RIG)
+    if config.language:
+        sensors.append(WARNING)
+    return tuple(sensors)
 
 
 def learned_params(model: DrivingModel, embedding: Array | None = None) -> LearnedParams:
@@ -79,9 +89,8 @@ def model_policy(name: str, model: DrivingModel, description: str = "",
     """A trained model as a :class:`~lantern_jax.policies.base.Policy`."""
     graphdef, _ = nnx.split(model)
     params = learned_params(model, embedding)
-    uses_warning = model.config.language
     return Policy(name, lambda key: params, make_act(model.config, graphdef), description,
-                  uses_warning=uses_warning)  # fmt: skip
+                  sensors=model_sensors(model.config))  # fmt: skip
 
 
 def save_model(model: DrivingModel, path: str | Path, info: dict | None = None) -> Path:

@@ -9,10 +9,11 @@ loop (the simulator's observation), so a trained model sees identical inputs in 
 * ``objects`` — one token per actor slot the rig sees (position, velocity, heading, extent, kind
   one-hot), masked by that rig's visibility (front camera or the six-camera rig);
 * ``ranges`` — that rig's range image, scaled to [0, 1];
-* the **text channel** — the pooled WordLlama embedding of the active warning's tokens, or of a
-  navigation instruction rendered from the route ahead ("Turn left at the junction ahead.")
-  when no warning is active; plus the stated position (ego frame, scaled) and whether there is
-  one.  Language-free models ignore it.
+* the **text channel** — the pooled WordLlama embedding of the delivered warning's tokens, or of
+  a navigation instruction rendered from the route ahead ("Turn left at the junction ahead.")
+  when no text is delivered; plus the position the text writes (its first two numbers, ego
+  frame, scaled) and whether it writes one.  Everything here comes from the text itself:
+  whether a warning is on is whether any token is delivered.  Language-free models ignore it.
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ import numpy as np
 from flax import struct
 
 from lantern_jax.constants import NUM_ACTOR_KINDS
-from lantern_jax.observation import Observation
+from lantern_jax.observation import Observation, stated_position, warning_delivered
 from lantern_jax.polyline import safe_atan2
 
 Array = jax.Array
@@ -54,8 +55,8 @@ class Features:
     ranges: Array  # (N,) float32 in [0, 1]
     text: Array  # (D,) float32, pooled embedding of the warning or the navigation instruction
     position: Array  # (2,) float32, stated position (ego frame, scaled; zeros when none)
-    has_position: Array  # () float32, 1 when the active warning states a position
-    warning: Array  # () float32, 1 while a warning is active
+    has_position: Array  # () float32, 1 when the delivered text writes a position
+    warning: Array  # () float32, 1 while a text is delivered
 
 
 @functools.cache
@@ -106,7 +107,6 @@ def features(obs: Observation, rig: str, embedding: Array, nav_tokens: Array) ->
                 "policy through act, whose surround flag makes the simulator fill it)"
             )
         mask, ranges = obs.surround.visible, obs.surround.ranges
-    mask = mask & obs.present
     kind = jax.nn.one_hot(obs.actor_kind, NUM_ACTOR_KINDS)
     xy = jnp.where(mask[:, None], obs.actor_xy, 0.0)
     objects = jnp.concatenate(
@@ -114,11 +114,12 @@ def features(obs: Observation, rig: str, embedding: Array, nav_tokens: Array) ->
          jnp.linalg.norm(xy, axis=-1, keepdims=True) / POS_SCALE_M,
          jnp.ones_like(xy[:, :1]), kind], axis=-1,
     ) * mask[:, None]  # fmt: skip
-    active = obs.warning_active
+    active = warning_delivered(obs)
     nav = nav_tokens[navigation_instruction(obs.route)]
     tokens = jnp.where(active, obs.warning_tokens, nav)
     text = pooled_embedding(embedding, tokens)
-    has_pos = active & obs.warning_has_position
+    pos, has_pos = stated_position(obs)
+    has_pos = active & has_pos
     return Features(
         ego=ego.astype(jnp.float32),
         route=route.astype(jnp.float32),
@@ -126,7 +127,7 @@ def features(obs: Observation, rig: str, embedding: Array, nav_tokens: Array) ->
         mask=mask,
         ranges=jnp.clip(ranges / RANGE_SCALE_M, 0.0, 1.0).astype(jnp.float32),
         text=text,
-        position=jnp.where(has_pos, obs.warning_pos / POS_SCALE_M, 0.0).astype(jnp.float32),
+        position=jnp.where(has_pos, pos / POS_SCALE_M, 0.0).astype(jnp.float32),
         has_position=has_pos.astype(jnp.float32),
         warning=active.astype(jnp.float32),
     )
