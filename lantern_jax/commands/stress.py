@@ -13,8 +13,8 @@ suite (default: the family's first pair), prints the comparison table and writes
 from __future__ import annotations
 
 import argparse
+import sys
 from collections.abc import Sequence
-from pathlib import Path
 
 from lantern_jax.commands import CommandError
 
@@ -76,14 +76,17 @@ def cmd_stress(args: argparse.Namespace, argv: Sequence[str]) -> int:
     from lantern_jax.stress.space import search_space
 
     space = search_space(args.family, knobs, _ranges(args.range))
-    files = report.write_results(args.out, pairs[0], space, traces)
     title = f"{pairs[0].pair_id} ({args.family}), {args.policy}, {args.condition}, {args.objective}"
     fig = convergence_plot(traces, title)
-    fig.savefig(Path(args.out) / "convergence.png", dpi=110)
+    try:
+        files = report.write_results(args.out, pairs[0], space, traces, fig)
+    except OSError as e:
+        print(f"lantern-jax: error: cannot write results to {args.out}: {e}", file=sys.stderr)
+        return 1
     table = report.comparison_table(traces)
     print(f"Stress test  ({title}; {args.budget_s:g} s per method, {args.restarts} restarts)")
     print(tabulate(table, headers="keys", showindex=False, floatfmt=".2f"))
-    print(f"Wrote {len(files) + 1} files to {args.out}")
+    print(f"Wrote {len(files)} files to {args.out}")
     return 0
 
 
