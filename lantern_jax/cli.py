@@ -428,11 +428,7 @@ def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
     check_interrupt()
     try:
         with bd.phase("writing the result files"):
-            files = write_outputs(
-                result,
-                args.out,
-                extra_manifest={"command": shlex.join(["lantern-jax", *argv])},
-            )
+            files = write_outputs(result, args.out, run_record=_run_record(argv))
     except OSError as e:
         print(f"lantern-jax: error: cannot write results to {args.out}: {e}", file=sys.stderr)
         return 1
@@ -460,6 +456,11 @@ def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
         print()
         print(bd.format("Where the time went"))
     return 0
+
+
+def _run_record(argv: Sequence[str]) -> dict:
+    """What the run record of a result set says about this command (besides the timings)."""
+    return {"command": shlex.join(["lantern-jax", *argv])}
 
 
 def _evaluate_breakdown(bd, result, seconds: float) -> None:
@@ -624,9 +625,7 @@ def cmd_ablations(args: argparse.Namespace, argv: Sequence[str]) -> int:
         return 1
     _stage(args, f"done in {time.perf_counter() - t0:.1f} s; writing {args.out}")
     try:
-        files = write_ablation_outputs(
-            result, args.out, extra_manifest={"command": shlex.join(["lantern-jax", *argv])}
-        )
+        files = write_ablation_outputs(result, args.out, run_record=_run_record(argv))
     except OSError as e:
         print(f"lantern-jax: error: cannot write results to {args.out}: {e}", file=sys.stderr)
         return 1
