@@ -7,7 +7,7 @@
     lantern-jax suite --list             # pairs, suite hash, generation report
     lantern-jax suite --verify           # regenerate lantern-v3 from its seed, compare hashes
     lantern-jax suite --regenerate suite.json
-    lantern-jax evaluate --checkpoint runs/train/coop/learned-coop.msgpack --policy all
+    lantern-jax evaluate --checkpoint my-coop=runs/train/coop/learned-coop.msgpack --policy all
     lantern-jax policies
     lantern-jax dataset --out data/lantern            # the open-loop training dataset
     lantern-jax train --config configs/train_base.toml
@@ -332,24 +332,45 @@ def _apply_config(args: argparse.Namespace) -> None:
         setattr(args, key, value)
 
 
-def register_checkpoints(paths: Sequence[str] | None) -> list[str]:
-    """Register saved learned models (``--checkpoint``) as policies; returns their names.
+def _checkpoint_item(item: str) -> tuple[str | None, str]:
+    """``(name, path)`` of a ``--checkpoint`` value: ``NAME=PATH`` or just ``PATH`` (an
+    existing file whose name holds ``=`` is a path)."""
+    from lantern_jax.policies.names import name_problem
+
+    name, sep, path = item.partition("=")
+    if sep and not name_problem(name) and not os.path.exists(item):
+        return name, path
+    return None, item
+
+
+def register_checkpoints(paths: Sequence[str] | None, source: str = "--checkpoint") -> list[str]:
+    """Register saved learned models (``--checkpoint PATH`` or ``NAME=PATH``) as policies;
+    returns their names.
+
+    Args:
+        paths: the values given (each one or comma-separated checkpoints), or None.
+        source: where they came from, for the messages (an option or a config key).
 
     Raises:
-        UsageError: naming the file for a missing or mismatching checkpoint.
+        UsageError: naming the file for a missing, invalid or mismatching checkpoint, one whose
+            name is already registered for another policy, or when values were given but
+            name no checkpoint.
     """
     from lantern_jax.policies.learned.checkpoint import CheckpointError
     from lantern_jax.policies.registry import register_checkpoint
 
     names = []
     for item in paths or []:
-        for path in (p.strip() for p in item.split(",")):
-            if not path:
+        for value in (p.strip() for p in item.split(",")):
+            if not value:
                 continue
+            name, path = _checkpoint_item(value)
             try:
-                names.append(register_checkpoint(path))
+                names.append(register_checkpoint(path, name))
             except CheckpointError as e:
-                raise UsageError(f"--checkpoint: {e}") from None
+                raise UsageError(f"{source}: {e}") from None
+    if paths is not None and not names:
+        raise UsageError(f"{source}: no checkpoint given (leave the option out for none)")
     return names
 
 
