@@ -178,11 +178,20 @@ def suite_to_manifest(suite, suite_id: str | None = None) -> dict:
     )
 
 
-def resolve_policies(names: Sequence[str] | None) -> list[str]:
+def _source(args: argparse.Namespace, key: str) -> str:
+    """Where the value of option ``key`` came from: ``--key`` or ``config FILE: key``."""
+    return getattr(args, "sources", {}).get(key) or "--" + key.replace("_", "-")
+
+
+def resolve_policies(names: Sequence[str] | None, source: str = "--policy") -> list[str]:
     """Expand ``all`` and comma-separated lists; check every name against the registry.
 
+    Args:
+        names: the values given (each a name or comma-separated names).
+        source: where they came from, for the messages (an option or a config key).
+
     Raises:
-        UsageError: naming the unknown policy and listing the known ones.
+        UsageError: naming the unknown policy and where it came from, listing the known ones.
     """
     from lantern_jax.policies.registry import get_policy, policy_names
 
@@ -197,13 +206,13 @@ def resolve_policies(names: Sequence[str] | None) -> list[str]:
                     get_policy(n)
                 except KeyError:
                     raise UsageError(
-                        f"unknown policy {n!r}; known policies: {', '.join(policy_names())} "
-                        f"(or 'all' = {', '.join(REFERENCE_POLICIES)})"
+                        f"{source}: unknown policy {n!r}; known policies: "
+                        f"{', '.join(policy_names())} (or 'all' = {', '.join(REFERENCE_POLICIES)})"
                     ) from None
                 if n not in out:
                     out.append(n)
     if not out:
-        raise UsageError("no policy given")
+        raise UsageError(f"{source}: no policy given")
     return out
 
 
@@ -213,25 +222,26 @@ def _load_suite(args: argparse.Namespace):
     try:
         suite = load_suite(args.suite)
     except FileNotFoundError as e:
-        raise UsageError(str(e).strip("'\"")) from None
+        raise UsageError(f"{_source(args, 'suite')}: " + str(e).strip("'\"")) from None
     except SuiteError as e:
         raise UsageError(str(e)) from None
     given = getattr(args, "pairs", None)
     if given is not None:
+        src = _source(args, "pairs")
         pairs = [p.strip() for item in given for p in item.split(",")]
         pairs = [p for p in pairs if p]
         if not pairs:
-            raise UsageError("--pairs: no pair id given (leave the option out for every pair)")
+            raise UsageError(f"{src}: no pair id given (leave the option out for every pair)")
         try:
             suite = suite.select(pairs)
         except KeyError as e:
-            raise UsageError(str(e).strip("'\"")) from None
+            raise UsageError(f"{src}: " + str(e).strip("'\"")) from None
         except ValueError as e:
-            raise UsageError(f"--pairs: {e}") from None
+            raise UsageError(f"{src}: {e}") from None
     n = getattr(args, "pairs_per_family", None)
     if n is not None:
         if n < 1:
-            raise UsageError(f"--pairs-per-family must be >= 1 (got {n})")
+            raise UsageError(f"{_source(args, 'pairs_per_family')} must be >= 1 (got {n})")
         suite = suite.subset(n)
     if len(suite) == 0:
         raise UsageError(f"suite {suite.suite_id!r} has no pairs")
@@ -274,17 +284,16 @@ def load_config(path: str) -> dict:
 
     Raises:
         UsageError: naming the file and the offending key for a key outside the table, an
-            unknown key, a wrong type or an empty selection.
+            unknown key, a wrong type, an empty selection or a pair count below 1.
     """
-    import tomllib
+    from lantern_jax.files import read_toml
 
     try:
-        with open(path, "rb") as fh:
-            raw = tomllib.load(fh)
+        raw = read_toml(path)
     except OSError as e:
-        raise UsageError(f"cannot read config {path}: {e}") from e
-    except tomllib.TOMLDecodeError as e:
-        raise UsageError(f"config {path}: not valid TOML ({e})") from e
+        raise UsageError(f"cannot read config {path}: {e}") from None
+    except ValueError as e:
+        raise UsageError(f"config {path}: not valid TOML ({e})") from None
     outside = [k for k in raw if k != CONFIG_TABLE]
     if outside:
         raise UsageError(
@@ -312,6 +321,8 @@ def load_config(path: str) -> dict:
         names = [n.strip() for v in items for n in v.split(",")]
         if isinstance(value, str | list) and not any(names):
             raise UsageError(f"config {path}: {key} is empty (leave the key out for the default)")
+        if key == "pairs_per_family" and value < 1:
+            raise UsageError(f"config {path}: {key} must be >= 1 (got {value})")
     return cfg
 
 
@@ -320,12 +331,16 @@ def _apply_config(args: argparse.Namespace) -> None:
     sets them, else from :data:`EVALUATE_DEFAULTS`.
 
     Options are parsed with ``None`` as their default, so an option given on the command line
-    (even with its default value) always wins over the file.
+    (even with its default value) always wins over the file.  ``args.sources`` records the
+    options the file gave, so that a message names the file and key (:func:`_source`).
     """
     cfg = load_config(args.config) if args.config else {}
+    args.sources = {}
     for key, default in EVALUATE_DEFAULTS.items():
         if getattr(args, key) is not None:
             continue
+        if key in cfg:
+            args.sources[key] = f"config {args.config}: {key}"
         value = cfg.get(key, default)
         if key in ("policy", "pairs", "checkpoint") and value is not None:
             value = [value] if isinstance(value, str) else [",".join(value)]
@@ -374,7 +389,7 @@ def register_checkpoints(paths: Sequence[str] | None, source: str = "--checkpoin
     return names
 
 
-def _check_out(out: str) -> None:
+def _check_out(out: str, source: str = "--out") -> None:
     """Refuse an output folder that cannot receive the result set, before evaluating."""
     from lantern_jax.files import OutputFolderError
     from lantern_jax.report import check_output_folder
@@ -382,7 +397,7 @@ def _check_out(out: str) -> None:
     try:
         check_output_folder(out)
     except OutputFolderError as e:
-        raise UsageError(f"--out: {e}") from None
+        raise UsageError(f"{source}: {e}") from None
 
 
 def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
@@ -404,17 +419,18 @@ def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
     _apply_config(args)
     if args.policy is not None and not any(n.strip() for v in args.policy for n in v.split(",")):
         raise UsageError("--policy: no policy name given (leave the option out for 'all')")
-    checkpoints = register_checkpoints(args.checkpoint)
+    checkpoints = register_checkpoints(args.checkpoint, _source(args, "checkpoint"))
     if checkpoints and args.policy is None:
         policies = checkpoints
     else:
-        policies = resolve_policies(args.policy) + checkpoints
+        policies = resolve_policies(args.policy, _source(args, "policy")) + checkpoints
         policies = list(dict.fromkeys(policies))
     if args.ablation not in ablation_names():
         raise UsageError(
-            f"unknown ablation {args.ablation!r}; valid ablations: {', '.join(ablation_names())}"
+            f"{_source(args, 'ablation')}: unknown ablation {args.ablation!r}; valid ablations: "
+            f"{', '.join(ablation_names())}"
         )
-    _check_out(args.out)
+    _check_out(args.out, _source(args, "out"))
     _stage(args, f"loading suite {args.suite}")
     with bd.phase("suite load and validation"):
         suite = _load_suite(args)

@@ -156,6 +156,25 @@ def atomic_write(path: str | os.PathLike, data: bytes | str) -> Path:
     return path
 
 
+def read_toml(path: str | os.PathLike) -> dict:
+    """Parse a TOML file; a UTF-8 byte-order mark at its start (as some editors write one) is
+    accepted.
+
+    Raises:
+        OSError: when the file cannot be read.
+        ValueError: when it is not UTF-8 or not valid TOML (the message says where).
+    """
+    import tomllib
+
+    with open(path, "rb") as fh:
+        data = fh.read()
+    try:
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        raise ValueError(f"not UTF-8 text ({e})") from None
+    return tomllib.loads(text)
+
+
 def is_temporary_of(entry: str, names: Collection[str]) -> bool:
     """Whether ``entry`` is a temporary file :func:`atomic_write` made for one of ``names``."""
     return entry.endswith(".tmp") and any(entry.startswith(f".{name_stem(n)}.") for n in names)
