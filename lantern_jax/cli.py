@@ -22,9 +22,10 @@ Options may also come from an experiment file (``--config``, TOML, one ``[evalua
 must be spelled out in full (no abbreviations).
 
 Exit codes: 0 success, 1 failure (a policy that fails, results that cannot be written, a suite
-that does not regenerate), 2 usage errors (unknown policy, ablation, suite or pair; an invalid
-suite file or config; an empty selection; an output folder that cannot be written — all found
-before anything is compiled), 130 interrupted (Ctrl-C).
+that does not regenerate, standard output that cannot be written), 2 usage errors (unknown
+policy, ablation, suite or pair; an invalid suite file, checkpoint or config; an empty
+selection; an output folder that cannot be written — all found before anything is compiled),
+130 interrupted (Ctrl-C), 141 the reader of standard output went away (``| head``).
 """
 
 from __future__ import annotations
@@ -46,6 +47,9 @@ from lantern_jax.constants import FAMILIES, SUITE_ID
 
 REFERENCE_POLICIES = ("expert", "ego", "coop")
 EXIT_INTERRUPTED = 130
+#: Exit code when the reader of standard output has gone (128 + SIGPIPE, as a shell reports a
+#: command that a closed pipe stopped).
+EXIT_STDOUT_CLOSED = 141
 
 #: Defaults of the ``evaluate`` options an experiment file may set (used when neither the
 #: command line nor the file gives one).
@@ -71,20 +75,29 @@ ABLATION_DESCRIPTIONS = {
 }
 
 
+#: Environment variable that sets the number of XLA CPU devices of the command line.
+CPU_DEVICES_ENV = "LANTERN_JAX_CPU_DEVICES"
+
+
 def expose_cpu_cores() -> None:
     """Expose one XLA CPU device per core, so that the evaluator can split its batch over them.
 
     Only possible before JAX starts; skipped when JAX is already imported, when ``XLA_FLAGS``
     already sets a device count, or when ``LANTERN_JAX_CPU_DEVICES`` says otherwise (e.g. 1).
-    """
-    import os
 
+    Raises:
+        UsageError: when ``LANTERN_JAX_CPU_DEVICES`` is not a whole number >= 1.
+    """
+    given = os.environ.get(CPU_DEVICES_ENV)
+    if given is not None and not (given.strip().isdigit() and int(given) >= 1):
+        raise UsageError(f"environment variable {CPU_DEVICES_ENV}: expected a whole number "
+                         f">= 1, got {given!r}")  # fmt: skip
     if "jax" in sys.modules:
         return
     flags = os.environ.get("XLA_FLAGS", "")
     if "xla_force_host_platform_device_count" in flags:
         return
-    n = int(os.environ.get("LANTERN_JAX_CPU_DEVICES", os.cpu_count() or 1))
+    n = int(given) if given is not None else os.cpu_count() or 1
     if n > 1:
         os.environ["XLA_FLAGS"] = f"{flags} --xla_force_host_platform_device_count={n}".strip()
 
@@ -1014,6 +1027,46 @@ def _interrupted(exit_process: bool) -> int:
     return EXIT_INTERRUPTED
 
 
+class _StdoutError(Exception):
+    """Standard output could not be written (the ``OSError`` is the cause)."""
+
+
+class _GuardedStdout:
+    """Standard output during a command: a failed write or flush raises :class:`_StdoutError`,
+    so that it is told apart from a failure to write a result file."""
+
+    def __init__(self, stream) -> None:
+        self._stream = stream
+
+    def write(self, text: str) -> int:
+        """Write to the stream; see the class docstring."""
+        try:
+            return self._stream.write(text)
+        except OSError as e:
+            raise _StdoutError from e
+
+    def flush(self) -> None:
+        """Flush the stream; see the class docstring."""
+        try:
+            self._stream.flush()
+        except OSError as e:
+            raise _StdoutError from e
+
+    def __getattr__(self, name: str):
+        return getattr(self._stream, name)
+
+
+def _detach_stdout() -> None:
+    """Point standard output at the null device, so that the interpreter's own last flush of
+    what is left in the buffer does not fail again with a second report."""
+    try:
+        fd = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(fd, sys.stdout.fileno())
+        os.close(fd)
+    except (OSError, ValueError):  # no file descriptor (output captured in memory)
+        pass
+
+
 def main(argv: Sequence[str] | None = None, exit_on_interrupt: bool | None = None) -> int:
     """Run the command line; returns the exit code.
 
@@ -1023,7 +1076,11 @@ def main(argv: Sequence[str] | None = None, exit_on_interrupt: bool | None = Non
             returning it (default: when ``argv`` is not given, i.e. when run as the program).
     """
     global _SIGINT_SEEN
-    expose_cpu_cores()
+    try:
+        expose_cpu_cores()
+    except UsageError as e:
+        print(f"lantern-jax: error: {e}", file=sys.stderr)
+        return 2
     if exit_on_interrupt is None:
         exit_on_interrupt = argv is None
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -1031,6 +1088,8 @@ def main(argv: Sequence[str] | None = None, exit_on_interrupt: bool | None = Non
     installed, previous = False, None
     if threading.current_thread() is threading.main_thread():
         previous, installed = signal.signal(signal.SIGINT, _on_sigint), True
+    stdout = sys.stdout
+    sys.stdout = _GuardedStdout(stdout)
     try:
         parser = build_parser()
         try:
@@ -1044,13 +1103,23 @@ def main(argv: Sequence[str] | None = None, exit_on_interrupt: bool | None = Non
                 initialize_distributed(args)
             code = args.func(args, argv)
             check_interrupt()  # an interrupt that was raised but swallowed on the way
+            sys.stdout.flush()  # a full disk or a closed pipe is reported here, not at exit
             return code
         except (UsageError, CommandError) as e:
             print(f"lantern-jax {args.command}: error: {e}", file=sys.stderr)
             return 2
     except KeyboardInterrupt:
         return _interrupted(exit_on_interrupt)
+    except _StdoutError as e:
+        sys.stdout = stdout
+        _detach_stdout()
+        if isinstance(e.__cause__, BrokenPipeError):  # the reader left (``| head -1``)
+            return EXIT_STDOUT_CLOSED
+        why = getattr(e.__cause__, "strerror", None) or e.__cause__
+        print(f"lantern-jax: error: cannot write to standard output ({why})", file=sys.stderr)
+        return 1
     finally:
+        sys.stdout = stdout
         if installed:
             signal.signal(
                 signal.SIGINT, signal.default_int_handler if previous is None else previous
