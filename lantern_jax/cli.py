@@ -31,6 +31,7 @@ selection; an output folder that cannot be written — all found before anything
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import shlex
 import signal
@@ -46,6 +47,8 @@ from lantern_jax.commands import train as train_command
 from lantern_jax.constants import FAMILIES, SUITE_ID
 
 REFERENCE_POLICIES = ("expert", "ego", "coop")
+#: The policy ``wording`` and ``diagnostics`` run when given neither --policy nor --checkpoint.
+ONE_POLICY_DEFAULT = "coop"
 EXIT_INTERRUPTED = 130
 #: Exit code when the reader of standard output has gone (128 + SIGPIPE, as a shell reports a
 #: command that a closed pipe stopped).
@@ -693,9 +696,14 @@ def cmd_ablations(args: argparse.Namespace, argv: Sequence[str]) -> int:
 
 
 def _one_policy(args: argparse.Namespace) -> str:
-    if getattr(args, "checkpoint", None):
+    """The one policy of ``wording`` / ``diagnostics``: ``--checkpoint`` or ``--policy`` (default
+    ``coop``), never both."""
+    if args.checkpoint is not None:
+        if args.policy is not None:
+            raise UsageError("--policy and --checkpoint: give one of them (a checkpoint is the "
+                             "policy that is run)")  # fmt: skip
         return register_checkpoints([args.checkpoint])[0]
-    names = resolve_policies([args.policy])
+    names = resolve_policies([args.policy or ONE_POLICY_DEFAULT])
     if len(names) != 1:
         raise UsageError(f"--policy: give one policy name, got {', '.join(names)}")
     return names[0]
@@ -745,9 +753,17 @@ def cmd_wording(args: argparse.Namespace, argv: Sequence[str]) -> int:
     return _print_and_write(args, {"wording": (title, table)}, note)
 
 
+#: Options of ``diagnostics`` that only the distance diagnostic reads.
+DISTANCE_OPTIONS = ("suite", "family", "routes", "window")
+
+
 def cmd_diagnostics(args: argparse.Namespace, argv: Sequence[str]) -> int:
     """``lantern-jax diagnostics nonactionable|distance``."""
     del argv
+    given = [f"--{k}" for k in DISTANCE_OPTIONS if getattr(args, k) is not None]
+    if args.which == "nonactionable" and given:
+        raise UsageError(f"{', '.join(given)}: only the distance diagnostic reads "
+                         f"{'it' if len(given) == 1 else 'them'}")  # fmt: skip
     policy = _one_policy(args)
     _check_out(args.out)
     from lantern_jax import diagnostics as dg
@@ -764,11 +780,19 @@ def cmd_diagnostics(args: argparse.Namespace, argv: Sequence[str]) -> int:
             "non-actionable = dv_max < 2 m/s, no stop >= 1 s, RC drop <= 5 points."
         )
         return _print_and_write(args, {"nonactionable": (title, table)}, note)
-    suite = _load_suite(args)
+    args.suite = args.suite or SUITE_ID
+    args.family = args.family or dg.DISTANCE_FAMILY
+    args.routes = dg.DISTANCE_ROUTES if args.routes is None else args.routes
+    args.window = dg.DISTANCE_WINDOW_S if args.window is None else args.window
     if args.routes < 1:
         raise UsageError(f"--routes must be >= 1 (got {args.routes})")
-    if not args.window > 0:
-        raise UsageError(f"--window must be > 0 s (got {args.window})")
+    if not (math.isfinite(args.window) and args.window > 0):
+        raise UsageError(f"--window must be a finite number of seconds > 0 (got {args.window})")
+    suite = _load_suite(args)
+    available = sum(p.family == args.family for p in suite.pairs)
+    if args.routes > available:
+        raise UsageError(f"--routes {args.routes}: suite {suite.suite_id} has {available} "
+                         f"{args.family} pairs")  # fmt: skip
     _stage(args, f"{policy}: near vs far {args.family} warning on Route B of {suite.suite_id}")
     try:
         open_loop, closed_loop = dg.distance_table(
@@ -954,7 +978,7 @@ def _add_language_commands(sub) -> None:
         "paraphrases of three ambiguity tiers (three disjoint thirds of the suite), print and "
         "write the paraphrase CUS, matched canonical CUS, retention and collision rate per tier.",
     )
-    wo.add_argument("--policy", default="coop", metavar="NAME", help="policy (default: coop)")
+    wo.add_argument("--policy", metavar="NAME", help=f"policy (default: {ONE_POLICY_DEFAULT})")
     wo.add_argument(
         "--checkpoint", metavar="PATH", help="a saved learned model (instead of --policy)"
     )
@@ -976,16 +1000,22 @@ def _add_language_commands(sub) -> None:
         "(final predicted progress; closed-loop speed, stop and completion).",
     )
     dg.add_argument("which", choices=("nonactionable", "distance"), help="which diagnostic")
-    dg.add_argument("--policy", default="coop", metavar="NAME", help="policy (default: coop)")
+    dg.add_argument("--policy", metavar="NAME", help=f"policy (default: {ONE_POLICY_DEFAULT})")
     dg.add_argument(
         "--checkpoint", metavar="PATH", help="a saved learned model (instead of --policy)"
     )
-    dg.add_argument("--suite", default=SUITE_ID, metavar="ID|PATH", help="suite (distance)")
-    dg.add_argument("--family", default="PE", choices=FAMILIES, help="family (distance)")
-    dg.add_argument("--routes", type=int, default=3, metavar="N", help="Route B count (distance)")
+    dg.add_argument("--suite", metavar="ID|PATH", help=f"suite (distance; default: {SUITE_ID})")
     dg.add_argument(
-        "--window", type=float, default=5.0, metavar="S", help="warning window, s (distance)"
+        "--family", choices=FAMILIES, help="family (distance; default: diagnostics.DISTANCE_FAMILY)"
     )
+    dg.add_argument(
+        "--routes", type=int, metavar="N",
+        help="Route B count (distance; default: diagnostics.DISTANCE_ROUTES)",
+    )  # fmt: skip
+    dg.add_argument(
+        "--window", type=float, metavar="S",
+        help="warning window, s (distance; default: diagnostics.DISTANCE_WINDOW_S)",
+    )  # fmt: skip
     dg.add_argument("--out", default="results/language", metavar="DIR", help="output folder")
     dg.add_argument("--quiet", action="store_true", help="no stage lines")
     dg.set_defaults(func=cmd_diagnostics, pairs=None, pairs_per_family=None)

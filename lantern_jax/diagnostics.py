@@ -64,6 +64,8 @@ EMPTY_ROAD_LENGTH_M = 150.0  # m, the non-actionable diagnostic's empty straight
 EMPTY_ROAD_SPEED_MPS = 8.0  # m/s, its reference (and initial) speed
 ONSET_S = 2.0  # s, non-actionable warnings are delivered from this time to the end
 DISTANCE_WINDOW_S = 5.0  # s, distance-conditioned warning window after the warning point
+DISTANCE_FAMILY = "PE"  # the family whose warning the distance diagnostic moves
+DISTANCE_ROUTES = 3  # Route B scenes of the distance diagnostic (the family's first pairs)
 
 
 def _policy(policy: Policy | str, policy_params: Any) -> tuple[Policy, Any]:
@@ -293,7 +295,10 @@ def plan_length(waypoints: np.ndarray) -> float:
 
 
 def distance_scenarios(
-    suite: Suite, family: str = "PE", routes: int = 3, window_s: float = DISTANCE_WINDOW_S
+    suite: Suite,
+    family: str = DISTANCE_FAMILY,
+    routes: int = DISTANCE_ROUTES,
+    window_s: float = DISTANCE_WINDOW_S,
 ) -> tuple[list[str], list[Scenario]]:
     """Route B of the first ``routes`` pairs of ``family``, each as ``[no warning, near, far]``.
 
@@ -321,8 +326,8 @@ def distance_table(
     policy: Policy | str,
     suite: Suite | str = SUITE_ID,
     policy_params: Any = None,
-    family: str = "PE",
-    routes: int = 3,
+    family: str = DISTANCE_FAMILY,
+    routes: int = DISTANCE_ROUTES,
     window_s: float = DISTANCE_WINDOW_S,
 ) -> tuple[pd.DataFrame, pd.DataFrame]:
     """The distance-conditioned diagnostic for one policy.
