@@ -301,7 +301,8 @@ def _markdown(title: str, note: str, table: str) -> bytes:
 def check_output_folder(out_dir: str | os.PathLike) -> Path:
     """Check that ``out_dir`` can receive a result set, before an evaluation is started.
 
-    Nothing existing is changed (a probe folder is created and removed beside it).
+    Nothing existing is changed (a probe folder is created and removed beside it, or inside it
+    when the set will be written in place, :func:`lantern_jax.files.in_place_reason`).
 
     Args:
         out_dir: the output folder (may not exist yet).
