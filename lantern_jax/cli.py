@@ -7,7 +7,7 @@
     lantern-jax suite --list             # pairs, suite hash, generation report
     lantern-jax suite --verify           # regenerate lantern-v3 from its seed, compare hashes
     lantern-jax suite --regenerate suite.json
-    lantern-jax evaluate --checkpoint runs/train/coop/learned-coop.msgpack --policy all
+    lantern-jax evaluate --checkpoint my-coop=runs/train/coop/learned-coop.msgpack --policy all
     lantern-jax policies
     lantern-jax dataset --out data/lantern            # the open-loop training dataset
     lantern-jax train --config configs/train_base.toml
@@ -23,14 +23,16 @@ Options may also come from an experiment file (``--config``, TOML, one ``[evalua
 must be spelled out in full (no abbreviations).
 
 Exit codes: 0 success, 1 failure (a policy that fails, results that cannot be written, a suite
-that does not regenerate), 2 usage errors (unknown policy, ablation, suite or pair; an invalid
-suite file or config; an empty selection; an output folder that cannot be written — all found
-before anything is compiled), 130 interrupted (Ctrl-C).
+that does not regenerate, standard output that cannot be written), 2 usage errors (unknown
+policy, ablation, suite or pair; an invalid suite file, checkpoint or config; an empty
+selection; an output folder that cannot be written — all found before anything is compiled),
+130 interrupted (Ctrl-C), 141 the reader of standard output went away (``| head``).
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import shlex
 import signal
@@ -46,7 +48,12 @@ from lantern_jax.commands import train as train_command
 from lantern_jax.constants import FAMILIES, SUITE_ID
 
 REFERENCE_POLICIES = ("expert", "ego", "coop")
+#: The policy ``wording`` and ``diagnostics`` run when given neither --policy nor --checkpoint.
+ONE_POLICY_DEFAULT = "coop"
 EXIT_INTERRUPTED = 130
+#: Exit code when the reader of standard output has gone (128 + SIGPIPE, as a shell reports a
+#: command that a closed pipe stopped).
+EXIT_STDOUT_CLOSED = 141
 
 #: Defaults of the ``evaluate`` options an experiment file may set (used when neither the
 #: command line nor the file gives one).
@@ -72,20 +79,29 @@ ABLATION_DESCRIPTIONS = {
 }
 
 
+#: Environment variable that sets the number of XLA CPU devices of the command line.
+CPU_DEVICES_ENV = "LANTERN_JAX_CPU_DEVICES"
+
+
 def expose_cpu_cores() -> None:
     """Expose one XLA CPU device per core, so that the evaluator can split its batch over them.
 
     Only possible before JAX starts; skipped when JAX is already imported, when ``XLA_FLAGS``
     already sets a device count, or when ``LANTERN_JAX_CPU_DEVICES`` says otherwise (e.g. 1).
-    """
-    import os
 
+    Raises:
+        UsageError: when ``LANTERN_JAX_CPU_DEVICES`` is not a whole number >= 1.
+    """
+    given = os.environ.get(CPU_DEVICES_ENV)
+    if given is not None and not (given.strip().isdigit() and int(given) >= 1):
+        raise UsageError(f"environment variable {CPU_DEVICES_ENV}: expected a whole number "
+                         f">= 1, got {given!r}")  # fmt: skip
     if "jax" in sys.modules:
         return
     flags = os.environ.get("XLA_FLAGS", "")
     if "xla_force_host_platform_device_count" in flags:
         return
-    n = int(os.environ.get("LANTERN_JAX_CPU_DEVICES", os.cpu_count() or 1))
+    n = int(given) if given is not None else os.cpu_count() or 1
     if n > 1:
         os.environ["XLA_FLAGS"] = f"{flags} --xla_force_host_platform_device_count={n}".strip()
 
@@ -179,11 +195,20 @@ def suite_to_manifest(suite, suite_id: str | None = None) -> dict:
     )
 
 
-def resolve_policies(names: Sequence[str] | None) -> list[str]:
+def _source(args: argparse.Namespace, key: str) -> str:
+    """Where the value of option ``key`` came from: ``--key`` or ``config FILE: key``."""
+    return getattr(args, "sources", {}).get(key) or "--" + key.replace("_", "-")
+
+
+def resolve_policies(names: Sequence[str] | None, source: str = "--policy") -> list[str]:
     """Expand ``all`` and comma-separated lists; check every name against the registry.
 
+    Args:
+        names: the values given (each a name or comma-separated names).
+        source: where they came from, for the messages (an option or a config key).
+
     Raises:
-        UsageError: naming the unknown policy and listing the known ones.
+        UsageError: naming the unknown policy and where it came from, listing the known ones.
     """
     from lantern_jax.policies.registry import get_policy, policy_names
 
@@ -198,13 +223,13 @@ def resolve_policies(names: Sequence[str] | None) -> list[str]:
                     get_policy(n)
                 except KeyError:
                     raise UsageError(
-                        f"unknown policy {n!r}; known policies: {', '.join(policy_names())} "
-                        f"(or 'all' = {', '.join(REFERENCE_POLICIES)})"
+                        f"{source}: unknown policy {n!r}; known policies: "
+                        f"{', '.join(policy_names())} (or 'all' = {', '.join(REFERENCE_POLICIES)})"
                     ) from None
                 if n not in out:
                     out.append(n)
     if not out:
-        raise UsageError("no policy given")
+        raise UsageError(f"{source}: no policy given")
     return out
 
 
@@ -214,25 +239,26 @@ def _load_suite(args: argparse.Namespace):
     try:
         suite = load_suite(args.suite)
     except FileNotFoundError as e:
-        raise UsageError(str(e).strip("'\"")) from None
+        raise UsageError(f"{_source(args, 'suite')}: " + str(e).strip("'\"")) from None
     except SuiteError as e:
         raise UsageError(str(e)) from None
     given = getattr(args, "pairs", None)
     if given is not None:
+        src = _source(args, "pairs")
         pairs = [p.strip() for item in given for p in item.split(",")]
         pairs = [p for p in pairs if p]
         if not pairs:
-            raise UsageError("--pairs: no pair id given (leave the option out for every pair)")
+            raise UsageError(f"{src}: no pair id given (leave the option out for every pair)")
         try:
             suite = suite.select(pairs)
         except KeyError as e:
-            raise UsageError(str(e).strip("'\"")) from None
+            raise UsageError(f"{src}: " + str(e).strip("'\"")) from None
         except ValueError as e:
-            raise UsageError(f"--pairs: {e}") from None
+            raise UsageError(f"{src}: {e}") from None
     n = getattr(args, "pairs_per_family", None)
     if n is not None:
         if n < 1:
-            raise UsageError(f"--pairs-per-family must be >= 1 (got {n})")
+            raise UsageError(f"{_source(args, 'pairs_per_family')} must be >= 1 (got {n})")
         suite = suite.subset(n)
     if len(suite) == 0:
         raise UsageError(f"suite {suite.suite_id!r} has no pairs")
@@ -275,17 +301,16 @@ def load_config(path: str) -> dict:
 
     Raises:
         UsageError: naming the file and the offending key for a key outside the table, an
-            unknown key, a wrong type or an empty selection.
+            unknown key, a wrong type, an empty selection or a pair count below 1.
     """
-    import tomllib
+    from lantern_jax.files import read_toml
 
     try:
-        with open(path, "rb") as fh:
-            raw = tomllib.load(fh)
+        raw = read_toml(path)
     except OSError as e:
-        raise UsageError(f"cannot read config {path}: {e}") from e
-    except tomllib.TOMLDecodeError as e:
-        raise UsageError(f"config {path}: not valid TOML ({e})") from e
+        raise UsageError(f"cannot read config {path}: {e}") from None
+    except ValueError as e:
+        raise UsageError(f"config {path}: not valid TOML ({e})") from None
     outside = [k for k in raw if k != CONFIG_TABLE]
     if outside:
         raise UsageError(
@@ -313,6 +338,8 @@ def load_config(path: str) -> dict:
         names = [n.strip() for v in items for n in v.split(",")]
         if isinstance(value, str | list) and not any(names):
             raise UsageError(f"config {path}: {key} is empty (leave the key out for the default)")
+        if key == "pairs_per_family" and value < 1:
+            raise UsageError(f"config {path}: {key} must be >= 1 (got {value})")
     return cfg
 
 
@@ -321,40 +348,65 @@ def _apply_config(args: argparse.Namespace) -> None:
     sets them, else from :data:`EVALUATE_DEFAULTS`.
 
     Options are parsed with ``None`` as their default, so an option given on the command line
-    (even with its default value) always wins over the file.
+    (even with its default value) always wins over the file.  ``args.sources`` records the
+    options the file gave, so that a message names the file and key (:func:`_source`).
     """
     cfg = load_config(args.config) if args.config else {}
+    args.sources = {}
     for key, default in EVALUATE_DEFAULTS.items():
         if getattr(args, key) is not None:
             continue
+        if key in cfg:
+            args.sources[key] = f"config {args.config}: {key}"
         value = cfg.get(key, default)
         if key in ("policy", "pairs", "checkpoint") and value is not None:
             value = [value] if isinstance(value, str) else [",".join(value)]
         setattr(args, key, value)
 
 
-def register_checkpoints(paths: Sequence[str] | None) -> list[str]:
-    """Register saved learned models (``--checkpoint``) as policies; returns their names.
+def _checkpoint_item(item: str) -> tuple[str | None, str]:
+    """``(name, path)`` of a ``--checkpoint`` value: ``NAME=PATH`` or just ``PATH`` (an
+    existing file whose name holds ``=`` is a path)."""
+    from lantern_jax.policies.names import name_problem
+
+    name, sep, path = item.partition("=")
+    if sep and not name_problem(name) and not os.path.exists(item):
+        return name, path
+    return None, item
+
+
+def register_checkpoints(paths: Sequence[str] | None, source: str = "--checkpoint") -> list[str]:
+    """Register saved learned models (``--checkpoint PATH`` or ``NAME=PATH``) as policies;
+    returns their names.
+
+    Args:
+        paths: the values given (each one or comma-separated checkpoints), or None.
+        source: where they came from, for the messages (an option or a config key).
 
     Raises:
-        UsageError: naming the file for a missing or mismatching checkpoint.
+        UsageError: naming the file for a missing, invalid or mismatching checkpoint, one whose
+            name is already registered for another policy, or when values were given but
+            name no checkpoint.
     """
     from lantern_jax.policies.learned.checkpoint import CheckpointError
     from lantern_jax.policies.registry import register_checkpoint
 
     names = []
     for item in paths or []:
-        for path in (p.strip() for p in item.split(",")):
-            if not path:
+        for value in (p.strip() for p in item.split(",")):
+            if not value:
                 continue
+            name, path = _checkpoint_item(value)
             try:
-                names.append(register_checkpoint(path))
+                names.append(register_checkpoint(path, name))
             except CheckpointError as e:
-                raise UsageError(f"--checkpoint: {e}") from None
+                raise UsageError(f"{source}: {e}") from None
+    if paths is not None and not names:
+        raise UsageError(f"{source}: no checkpoint given (leave the option out for none)")
     return names
 
 
-def _check_out(out: str) -> None:
+def _check_out(out: str, source: str = "--out") -> None:
     """Refuse an output folder that cannot receive the result set, before evaluating."""
     from lantern_jax.files import OutputFolderError
     from lantern_jax.report import check_output_folder
@@ -362,7 +414,7 @@ def _check_out(out: str) -> None:
     try:
         check_output_folder(out)
     except OutputFolderError as e:
-        raise UsageError(f"--out: {e}") from None
+        raise UsageError(f"{source}: {e}") from None
 
 
 def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
@@ -384,17 +436,18 @@ def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
     _apply_config(args)
     if args.policy is not None and not any(n.strip() for v in args.policy for n in v.split(",")):
         raise UsageError("--policy: no policy name given (leave the option out for 'all')")
-    checkpoints = register_checkpoints(args.checkpoint)
+    checkpoints = register_checkpoints(args.checkpoint, _source(args, "checkpoint"))
     if checkpoints and args.policy is None:
         policies = checkpoints
     else:
-        policies = resolve_policies(args.policy) + checkpoints
+        policies = resolve_policies(args.policy, _source(args, "policy")) + checkpoints
         policies = list(dict.fromkeys(policies))
     if args.ablation not in ablation_names():
         raise UsageError(
-            f"unknown ablation {args.ablation!r}; valid ablations: {', '.join(ablation_names())}"
+            f"{_source(args, 'ablation')}: unknown ablation {args.ablation!r}; valid ablations: "
+            f"{', '.join(ablation_names())}"
         )
-    _check_out(args.out)
+    _check_out(args.out, _source(args, "out"))
     _stage(args, f"loading suite {args.suite}")
     with bd.phase("suite load and validation"):
         suite = _load_suite(args)
@@ -429,11 +482,7 @@ def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
     check_interrupt()
     try:
         with bd.phase("writing the result files"):
-            files = write_outputs(
-                result,
-                args.out,
-                extra_manifest={"command": shlex.join(["lantern-jax", *argv])},
-            )
+            files = write_outputs(result, args.out, run_record=_run_record(argv))
     except OSError as e:
         print(f"lantern-jax: error: cannot write results to {args.out}: {e}", file=sys.stderr)
         return 1
@@ -461,6 +510,11 @@ def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
         print()
         print(bd.format("Where the time went"))
     return 0
+
+
+def _run_record(argv: Sequence[str]) -> dict:
+    """What the run record of a result set says about this command (besides the timings)."""
+    return {"command": shlex.join(["lantern-jax", *argv])}
 
 
 def _evaluate_breakdown(bd, result, seconds: float) -> None:
@@ -624,9 +678,7 @@ def cmd_ablations(args: argparse.Namespace, argv: Sequence[str]) -> int:
         return 1
     _stage(args, f"done in {time.perf_counter() - t0:.1f} s; writing {args.out}")
     try:
-        files = write_ablation_outputs(
-            result, args.out, extra_manifest={"command": shlex.join(["lantern-jax", *argv])}
-        )
+        files = write_ablation_outputs(result, args.out, run_record=_run_record(argv))
     except OSError as e:
         print(f"lantern-jax: error: cannot write results to {args.out}: {e}", file=sys.stderr)
         return 1
@@ -644,9 +696,14 @@ def cmd_ablations(args: argparse.Namespace, argv: Sequence[str]) -> int:
 
 
 def _one_policy(args: argparse.Namespace) -> str:
-    if getattr(args, "checkpoint", None):
+    """The one policy of ``wording`` / ``diagnostics``: ``--checkpoint`` or ``--policy`` (default
+    ``coop``), never both."""
+    if args.checkpoint is not None:
+        if args.policy is not None:
+            raise UsageError("--policy and --checkpoint: give one of them (a checkpoint is the "
+                             "policy that is run)")  # fmt: skip
         return register_checkpoints([args.checkpoint])[0]
-    names = resolve_policies([args.policy])
+    names = resolve_policies([args.policy or ONE_POLICY_DEFAULT])
     if len(names) != 1:
         raise UsageError(f"--policy: give one policy name, got {', '.join(names)}")
     return names[0]
@@ -696,14 +753,29 @@ def cmd_wording(args: argparse.Namespace, argv: Sequence[str]) -> int:
     return _print_and_write(args, {"wording": (title, table)}, note)
 
 
+#: Options of ``diagnostics`` that only the distance diagnostic reads.
+DISTANCE_OPTIONS = ("suite", "family", "routes", "window")
+
+
 def cmd_diagnostics(args: argparse.Namespace, argv: Sequence[str]) -> int:
     """``lantern-jax diagnostics nonactionable|distance|language``."""
     del argv
+    reads = {"nonactionable": (), "distance": DISTANCE_OPTIONS,
+             "language": ("suite", "pairs_per_family")}[args.which]  # fmt: skip
+    given = [
+        f"--{k.replace('_', '-')}"
+        for k in (*DISTANCE_OPTIONS, "pairs_per_family")
+        if getattr(args, k) is not None and k not in reads
+    ]
+    if given:
+        raise UsageError(f"{', '.join(given)}: the {args.which} diagnostic does not read "
+                         f"{'it' if len(given) == 1 else 'them'}")  # fmt: skip
     policy = _one_policy(args)
     _check_out(args.out)
     from lantern_jax import diagnostics as dg
 
     if args.which == "language":
+        args.suite = args.suite or SUITE_ID
         suite = _load_suite(args)
         _stage(args, f"{policy} on {suite.suite_id} ({len(suite)} pairs): delivered text, "
                      "another family's text, empty text, no warning")  # fmt: skip
@@ -732,11 +804,19 @@ def cmd_diagnostics(args: argparse.Namespace, argv: Sequence[str]) -> int:
             "non-actionable = dv_max < 2 m/s, no stop >= 1 s, RC drop <= 5 points."
         )
         return _print_and_write(args, {"nonactionable": (title, table)}, note)
-    suite = _load_suite(args)
+    args.suite = args.suite or SUITE_ID
+    args.family = args.family or dg.DISTANCE_FAMILY
+    args.routes = dg.DISTANCE_ROUTES if args.routes is None else args.routes
+    args.window = dg.DISTANCE_WINDOW_S if args.window is None else args.window
     if args.routes < 1:
         raise UsageError(f"--routes must be >= 1 (got {args.routes})")
-    if not args.window > 0:
-        raise UsageError(f"--window must be > 0 s (got {args.window})")
+    if not (math.isfinite(args.window) and args.window > 0):
+        raise UsageError(f"--window must be a finite number of seconds > 0 (got {args.window})")
+    suite = _load_suite(args)
+    available = sum(p.family == args.family for p in suite.pairs)
+    if args.routes > available:
+        raise UsageError(f"--routes {args.routes}: suite {suite.suite_id} has {available} "
+                         f"{args.family} pairs")  # fmt: skip
     _stage(args, f"{policy}: near vs far {args.family} warning on Route B of {suite.suite_id}")
     try:
         open_loop, closed_loop = dg.distance_table(
@@ -922,7 +1002,7 @@ def _add_language_commands(sub) -> None:
         "paraphrases of three ambiguity tiers (three disjoint thirds of the suite), print and "
         "write the paraphrase CUS, matched canonical CUS, retention and collision rate per tier.",
     )
-    wo.add_argument("--policy", default="coop", metavar="NAME", help="policy (default: coop)")
+    wo.add_argument("--policy", metavar="NAME", help=f"policy (default: {ONE_POLICY_DEFAULT})")
     wo.add_argument(
         "--checkpoint", metavar="PATH", help="a saved learned model (instead of --policy)"
     )
@@ -948,12 +1028,12 @@ def _add_language_commands(sub) -> None:
     dg.add_argument(
         "which", choices=("nonactionable", "distance", "language"), help="which diagnostic"
     )
-    dg.add_argument("--policy", default="coop", metavar="NAME", help="policy (default: coop)")
+    dg.add_argument("--policy", metavar="NAME", help=f"policy (default: {ONE_POLICY_DEFAULT})")
     dg.add_argument(
         "--checkpoint", metavar="PATH", help="a saved learned model (instead of --policy)"
     )
     dg.add_argument(
-        "--suite", default=SUITE_ID, metavar="ID|PATH", help="suite (distance, language)"
+        "--suite", metavar="ID|PATH", help=f"suite (distance, language; default: {SUITE_ID})"
     )
     dg.add_argument(
         "--pairs-per-family",
@@ -961,11 +1041,17 @@ def _add_language_commands(sub) -> None:
         metavar="N",
         help="only the first N pairs of each family (language)",
     )
-    dg.add_argument("--family", default="PE", choices=FAMILIES, help="family (distance)")
-    dg.add_argument("--routes", type=int, default=3, metavar="N", help="Route B count (distance)")
     dg.add_argument(
-        "--window", type=float, default=5.0, metavar="S", help="warning window, s (distance)"
+        "--family", choices=FAMILIES, help="family (distance; default: diagnostics.DISTANCE_FAMILY)"
     )
+    dg.add_argument(
+        "--routes", type=int, metavar="N",
+        help="Route B count (distance; default: diagnostics.DISTANCE_ROUTES)",
+    )  # fmt: skip
+    dg.add_argument(
+        "--window", type=float, metavar="S",
+        help="warning window, s (distance; default: diagnostics.DISTANCE_WINDOW_S)",
+    )  # fmt: skip
     dg.add_argument("--out", default="results/language", metavar="DIR", help="output folder")
     dg.add_argument("--quiet", action="store_true", help="no stage lines")
     dg.set_defaults(func=cmd_diagnostics, pairs=None)
@@ -1007,6 +1093,46 @@ def _interrupted(exit_process: bool) -> int:
     return EXIT_INTERRUPTED
 
 
+class _StdoutError(Exception):
+    """Standard output could not be written (the ``OSError`` is the cause)."""
+
+
+class _GuardedStdout:
+    """Standard output during a command: a failed write or flush raises :class:`_StdoutError`,
+    so that it is told apart from a failure to write a result file."""
+
+    def __init__(self, stream) -> None:
+        self._stream = stream
+
+    def write(self, text: str) -> int:
+        """Write to the stream; see the class docstring."""
+        try:
+            return self._stream.write(text)
+        except OSError as e:
+            raise _StdoutError from e
+
+    def flush(self) -> None:
+        """Flush the stream; see the class docstring."""
+        try:
+            self._stream.flush()
+        except OSError as e:
+            raise _StdoutError from e
+
+    def __getattr__(self, name: str):
+        return getattr(self._stream, name)
+
+
+def _detach_stdout() -> None:
+    """Point standard output at the null device, so that the interpreter's own last flush of
+    what is left in the buffer does not fail again with a second report."""
+    try:
+        fd = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(fd, sys.stdout.fileno())
+        os.close(fd)
+    except (OSError, ValueError):  # no file descriptor (output captured in memory)
+        pass
+
+
 def main(argv: Sequence[str] | None = None, exit_on_interrupt: bool | None = None) -> int:
     """Run the command line; returns the exit code.
 
@@ -1016,7 +1142,11 @@ def main(argv: Sequence[str] | None = None, exit_on_interrupt: bool | None = Non
             returning it (default: when ``argv`` is not given, i.e. when run as the program).
     """
     global _SIGINT_SEEN
-    expose_cpu_cores()
+    try:
+        expose_cpu_cores()
+    except UsageError as e:
+        print(f"lantern-jax: error: {e}", file=sys.stderr)
+        return 2
     if exit_on_interrupt is None:
         exit_on_interrupt = argv is None
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -1024,6 +1154,8 @@ def main(argv: Sequence[str] | None = None, exit_on_interrupt: bool | None = Non
     installed, previous = False, None
     if threading.current_thread() is threading.main_thread():
         previous, installed = signal.signal(signal.SIGINT, _on_sigint), True
+    stdout = sys.stdout
+    sys.stdout = _GuardedStdout(stdout)
     try:
         parser = build_parser()
         try:
@@ -1037,13 +1169,23 @@ def main(argv: Sequence[str] | None = None, exit_on_interrupt: bool | None = Non
                 initialize_distributed(args)
             code = args.func(args, argv)
             check_interrupt()  # an interrupt that was raised but swallowed on the way
+            sys.stdout.flush()  # a full disk or a closed pipe is reported here, not at exit
             return code
         except (UsageError, CommandError) as e:
             print(f"lantern-jax {args.command}: error: {e}", file=sys.stderr)
             return 2
     except KeyboardInterrupt:
         return _interrupted(exit_on_interrupt)
+    except _StdoutError as e:
+        sys.stdout = stdout
+        _detach_stdout()
+        if isinstance(e.__cause__, BrokenPipeError):  # the reader left (``| head -1``)
+            return EXIT_STDOUT_CLOSED
+        why = getattr(e.__cause__, "strerror", None) or e.__cause__
+        print(f"lantern-jax: error: cannot write to standard output ({why})", file=sys.stderr)
+        return 1
     finally:
+        sys.stdout = stdout
         if installed:
             signal.signal(
                 signal.SIGINT, signal.default_int_handler if previous is None else previous

@@ -79,6 +79,8 @@ DISTANCE_WINDOW_S = 5.0  # s, distance-conditioned warning window after the warn
 OTHER_FAMILY = {f: (f + 3) % len(FAMILIES) for f in range(len(FAMILIES))}
 LANGUAGE_VARIANTS = ("delivered text", "other family's text", "empty text", "no warning")
 MIN_GAIN_FOR_SHARE = 1.0  # CUS points: a smaller warning gain gets no "share kept" (it is noise)
+DISTANCE_FAMILY = "PE"  # the family whose warning the distance diagnostic moves
+DISTANCE_ROUTES = 3  # Route B scenes of the distance diagnostic (the family's first pairs)
 
 
 def _policy(policy: Policy | str, policy_params: Any) -> tuple[Policy, Any]:
@@ -307,7 +309,10 @@ def plan_length(waypoints: np.ndarray) -> float:
 
 
 def distance_scenarios(
-    suite: Suite, family: str = "PE", routes: int = 3, window_s: float = DISTANCE_WINDOW_S
+    suite: Suite,
+    family: str = DISTANCE_FAMILY,
+    routes: int = DISTANCE_ROUTES,
+    window_s: float = DISTANCE_WINDOW_S,
 ) -> tuple[list[str], list[Scenario]]:
     """Route B of the first ``routes`` pairs of ``family``, each as ``[no warning, near, far]``.
 
@@ -335,8 +340,8 @@ def distance_table(
     policy: Policy | str,
     suite: Suite | str = SUITE_ID,
     policy_params: Any = None,
-    family: str = "PE",
-    routes: int = 3,
+    family: str = DISTANCE_FAMILY,
+    routes: int = DISTANCE_ROUTES,
     window_s: float = DISTANCE_WINDOW_S,
 ) -> tuple[pd.DataFrame, pd.DataFrame]:
     """The distance-conditioned diagnostic for one policy.

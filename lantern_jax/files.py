@@ -24,6 +24,23 @@ left alone.
 Where the exchange is not available (not Linux, or a file system without it) step 2 is two
 renames (``results`` -> ``.results.old-…``, staging -> ``results``); a kill between them leaves
 no ``results/`` until the next run puts the old folder back.
+
+**Some folders are never moved.**  A folder that is a mount point (a bind mount, a tmpfs,
+Docker's ``-v host:/app/results``: its name cannot be exchanged) or that is or holds the current
+folder or the home folder (``--out .``) is written *in place* (:func:`in_place_reason`):
+the set is staged in a hidden folder inside it, the set's last file (its manifest) is removed
+first, every other file replaces its old version atomically and the last file is written last,
+so the folder holds a complete set exactly when it holds that last file.  The same happens,
+with a warning, when an exchange fails with "Device or resource busy" although no mount point
+was detected.  :class:`StagedFolder` logs which way a set was written when it is not the
+exchange.
+
+When the process runs as root and the folder belongs to another user, the new folder and its
+files are given the old folder's owner, group and mode.
+
+Names of leftovers and temporary files are built from the target's name, shortened with a
+hash of it where the full name would not fit a file name (:data:`NAME_MAX` bytes), so a
+target whose own name is that long can still be written.
 """
 
 from __future__ import annotations
@@ -31,17 +48,28 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import ctypes.util
+import errno
+import hashlib
+import logging
 import os
+import re
 import secrets
 import shutil
 import sys
 import tempfile
-from collections.abc import Collection
+from collections.abc import Collection, Sequence
 from pathlib import Path
+
+log = logging.getLogger(__name__)
 
 STAGING_TAG = "staging"
 OLD_TAG = "old"
 PROBE_TAG = "probe"
+#: Longest file name (bytes) the common file systems accept.
+NAME_MAX = 255
+#: Bytes of a leftover's or temporary file's name beyond the target's own name (dot, tag,
+#: process id, random token, suffix), with room to spare.
+_NAME_EXTRA = 48
 
 
 class OutputFolderError(OSError):
@@ -62,6 +90,33 @@ def _fsync_dir(path: Path) -> None:
             os.fsync(fd)
         finally:
             os.close(fd)
+
+
+def name_stem(name: str) -> str:
+    """The part of a leftover's or temporary file's name that stands for ``name``: ``name``
+    itself, or where that would make the name too long for the file system, its first bytes
+    and a hash of all of it (the same for the same ``name``, so leftovers are found again).
+
+    Args:
+        name: a file or folder name.
+    """
+    raw = name.encode()
+    if len(raw) + _NAME_EXTRA <= NAME_MAX:
+        return name
+    digest = hashlib.sha256(raw).hexdigest()[:16]
+    head = raw[: NAME_MAX - _NAME_EXTRA - len(digest) - 1].decode("utf-8", "ignore")
+    return f"{head}~{digest}"
+
+
+def _adopt_owner(path: Path, like: os.stat_result) -> None:
+    """Give ``path`` the owner and group of ``like`` (only a process running as root can, and
+    only where they differ)."""
+    if os.geteuid() != 0:
+        return
+    st = os.lstat(path)
+    if (st.st_uid, st.st_gid) != (like.st_uid, like.st_gid):
+        with contextlib.suppress(OSError):
+            os.lchown(path, like.st_uid, like.st_gid)
 
 
 def atomic_write(path: str | os.PathLike, data: bytes | str) -> Path:
@@ -85,7 +140,7 @@ def atomic_write(path: str | os.PathLike, data: bytes | str) -> Path:
         raise IsADirectoryError(f"cannot write {path}: it is a folder, not a file")
     payload = data.encode("utf-8") if isinstance(data, str) else bytes(data)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    fd, tmp = tempfile.mkstemp(prefix=f".{name_stem(path.name)}.", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as fh:
             fh.write(payload)
@@ -101,9 +156,28 @@ def atomic_write(path: str | os.PathLike, data: bytes | str) -> Path:
     return path
 
 
+def read_toml(path: str | os.PathLike) -> dict:
+    """Parse a TOML file; a UTF-8 byte-order mark at its start (as some editors write one) is
+    accepted.
+
+    Raises:
+        OSError: when the file cannot be read.
+        ValueError: when it is not UTF-8 or not valid TOML (the message says where).
+    """
+    import tomllib
+
+    with open(path, "rb") as fh:
+        data = fh.read()
+    try:
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        raise ValueError(f"not UTF-8 text ({e})") from None
+    return tomllib.loads(text)
+
+
 def is_temporary_of(entry: str, names: Collection[str]) -> bool:
     """Whether ``entry`` is a temporary file :func:`atomic_write` made for one of ``names``."""
-    return entry.endswith(".tmp") and any(entry.startswith(f".{n}.") for n in names)
+    return entry.endswith(".tmp") and any(entry.startswith(f".{name_stem(n)}.") for n in names)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -143,17 +217,36 @@ def exchange(a: Path, b: Path) -> bool:
 
 
 def _leftover_name(target: Path, tag: str) -> str:
-    return f".{target.name}.{tag}-{os.getpid()}-{secrets.token_hex(4)}"
+    return f".{name_stem(target.name)}.{tag}-{os.getpid()}-{secrets.token_hex(4)}"
 
 
 def _leftover_owner(entry: str, target: Path) -> int | None:
     """The process id in a leftover's name, or None when ``entry`` is not one of ours."""
     for tag in (STAGING_TAG, OLD_TAG, PROBE_TAG):
-        prefix = f".{target.name}.{tag}-"
+        prefix = f".{name_stem(target.name)}.{tag}-"
         if entry.startswith(prefix):
             pid = entry[len(prefix) :].split("-")[0]
             return int(pid) if pid.isdigit() else None
     return None
+
+
+@contextlib.contextmanager
+def _locked(folder: Path):
+    """Hold an exclusive lock on ``folder`` (``flock`` on the folder itself, so no lock file is
+    left behind) while two writers of sets into it could otherwise interleave; without the
+    lock where the system has none."""
+    try:
+        import fcntl
+
+        fd = os.open(folder, os.O_RDONLY)
+    except (ImportError, OSError):
+        yield
+        return
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)  # releases the lock
 
 
 def _alive(pid: int) -> bool:
@@ -188,7 +281,8 @@ def _empty_into(src: Path, target: Path, owned: Collection[str]) -> None:
 
 
 def clean_leftovers(target: str | os.PathLike, owned: Collection[str]) -> list[Path]:
-    """Tidy what an interrupted :class:`StagedFolder` left beside ``target``.
+    """Tidy what an interrupted :class:`StagedFolder` left beside ``target`` (or, for a set
+    written in place, inside it).
 
     A missing ``target`` whose old folder was moved aside gets it back; result files of
     leftover folders are deleted and their other entries moved back into ``target``; temporary
@@ -207,11 +301,12 @@ def clean_leftovers(target: str | os.PathLike, owned: Collection[str]) -> list[P
     if not parent.is_dir():
         return []
     stale = []
-    for entry in sorted(os.listdir(parent)):
-        pid = _leftover_owner(entry, target)
-        if pid is not None and not _alive(pid):
-            stale.append(parent / entry)
-    olds = [p for p in stale if f".{OLD_TAG}-" in p.name]
+    for folder in (parent, target) if target.is_dir() else (parent,):
+        for entry in sorted(os.listdir(folder)):
+            pid = _leftover_owner(entry, target)
+            if pid is not None and not _alive(pid):
+                stale.append(folder / entry)
+    olds = [p for p in stale if f".{OLD_TAG}-" in p.name and p.parent == parent]
     if not os.path.lexists(target) and olds:
         os.rename(olds[0], target)  # a kill between the two renames of the fallback
         stale.remove(olds[0])
@@ -227,11 +322,63 @@ def clean_leftovers(target: str | os.PathLike, owned: Collection[str]) -> list[P
     return stale
 
 
-def check_target_folder(target: str | os.PathLike) -> Path:
-    """Check, without touching any existing file, that a folder can receive a staged result set.
+def _mount_points() -> set[str]:
+    """Every mount point of this process (``/proc/self/mountinfo``; bind mounts of a folder of
+    the same file system included, which :func:`os.path.ismount` does not see)."""
+    try:
+        with open("/proc/self/mountinfo", encoding="utf-8", errors="surrogateescape") as fh:
+            lines = fh.read().splitlines()
+    except OSError:
+        return set()
+    points = set()
+    for line in lines:
+        fields = line.split(" ")
+        if len(fields) > 4:  # the fifth field, with " ", tab, newline, "\" octal-escaped
+            points.add(re.sub(r"\\([0-7]{3})", lambda m: chr(int(m.group(1), 8)), fields[4]))
+    return points
+
+
+def is_mount_point(path: str | os.PathLike) -> bool:
+    """Whether ``path`` (resolved) is where a file system or a bind mount is attached."""
+    resolved = os.path.realpath(path)
+    return os.path.ismount(resolved) or resolved in _mount_points()
+
+
+def _holds(folder: str, inner: str) -> bool:
+    """Whether ``inner`` is ``folder`` or lies inside it (both resolved)."""
+    return inner == folder or inner.startswith(folder.rstrip(os.sep) + os.sep)
+
+
+def in_place_reason(target: str | os.PathLike) -> str | None:
+    """Why a set must be written *into* the existing folder ``target`` instead of replacing the
+    folder as a whole, or None when it may be replaced (see the module docstring).
+
+    Args:
+        target: the result folder.
+    """
+    resolved = os.path.realpath(target)
+    if not os.path.isdir(resolved):
+        return None
+    with contextlib.suppress(OSError):
+        if _holds(resolved, os.path.realpath(os.getcwd())):
+            return "it is (or holds) the current folder"
+    home = os.path.realpath(os.path.expanduser("~"))
+    if _holds(resolved, home):
+        return "it is (or holds) the home folder"
+    if is_mount_point(resolved):
+        return "it is a mount point (its name cannot be exchanged)"
+    return None
+
+
+def check_target_folder(target: str | os.PathLike, in_place: bool | None = None) -> Path:
+    """Check, without touching any existing file, that a folder can receive a staged result set
+    (the folder that must be writable: the target itself where the set is written in place,
+    :func:`in_place_reason`, else the folder that holds it).
 
     Args:
         target: the result folder (may not exist yet).
+        in_place: whether files are written into the folder itself (a dataset or training
+            run folder, resumed in place); default: as :class:`StagedFolder` will decide.
 
     Returns:
         The resolved target path.
@@ -252,12 +399,15 @@ def check_target_folder(target: str | os.PathLike) -> Path:
         raise OutputFolderError(f"output folder {target}: {anc} is a file, not a folder")
     if resolved.is_dir() and not os.access(resolved, os.W_OK | os.X_OK):
         raise OutputFolderError(f"output folder {target}: not writable")
-    probe = anc / _leftover_name(resolved, PROBE_TAG)
+    if in_place is None:
+        in_place = in_place_reason(resolved) is not None
+    where = resolved if in_place and resolved.is_dir() else anc
+    probe = where / _leftover_name(resolved, PROBE_TAG)
     try:
         probe.mkdir()
     except OSError as e:
         raise OutputFolderError(
-            f"output folder {target}: cannot create folders in {anc} ({e.strerror or e})"
+            f"output folder {target}: cannot create folders in {where} ({e.strerror or e})"
         ) from None
     probe.rmdir()
     return resolved
@@ -273,26 +423,41 @@ class StagedFolder:
             stage.commit()
 
     Leaving the block without :meth:`commit` (an error, Ctrl-C) removes the staging folder and
-    leaves ``target`` as it was.
+    leaves ``target`` as it was.  Two processes writing sets into one folder at once each
+    commit under a lock on the folder that holds it: the folder ends with one of the two
+    complete sets.
 
     Args:
         target: the result folder; created or replaced by :meth:`commit`.  A symbolic link is
             followed (the folder it points to is replaced).
-        owned: names of the files that make up a set.  Other entries of an existing ``target``
-            are carried over into the new folder.
+        owned: names of the files that make up a set, the set's marker last (written last and
+            removed first when the set is written in place).  Other entries of an existing
+            ``target`` are carried over into the new folder.
+
+    Attributes:
+        in_place: why the set was (or will be) written into the existing folder file by file
+            (:func:`in_place_reason`, or an exchange that failed), else None.
 
     Raises:
         OutputFolderError: from :func:`check_target_folder`.
     """
 
-    def __init__(self, target: str | os.PathLike, owned: Collection[str]) -> None:
+    def __init__(self, target: str | os.PathLike, owned: Sequence[str]) -> None:
         self.target = check_target_folder(target)
         self.owned = frozenset(owned)
+        self.last = list(owned)[-1] if owned else None
         self.target.parent.mkdir(parents=True, exist_ok=True)
-        clean_leftovers(self.target, self.owned)
-        self.path = self.target.parent / _leftover_name(self.target, STAGING_TAG)
+        with _locked(self.target.parent):
+            clean_leftovers(self.target, self.owned)
+        self.in_place = in_place_reason(self.target)
+        home = self.target if self.in_place else self.target.parent
+        self.path = home / _leftover_name(self.target, STAGING_TAG)
         self.path.mkdir()
         self._done = False
+        if self.in_place:
+            log.warning("output folder %s: %s; its result files are replaced one by one (each "
+                        "atomically, %s last), not as a whole set", target, self.in_place,
+                        self.last)  # fmt: skip
 
     def __enter__(self) -> StagedFolder:
         return self
@@ -307,7 +472,8 @@ class StagedFolder:
         self._done = True
 
     def commit(self) -> Path:
-        """Move the staged files into place as a whole (module docstring, steps 1-4).
+        """Move the staged files into place as a whole (module docstring, steps 1-4), or one by
+        one into a folder that must be written in place.
 
         Returns:
             The target folder.
@@ -318,25 +484,77 @@ class StagedFolder:
                 with open(p, "rb") as fh:
                     os.fsync(fh.fileno())
         _fsync_dir(self.path)
+        with _locked(self.target.parent):  # another process's set goes in before or after
+            return self._commit()
+
+    def _commit(self) -> Path:
         target = self.target
+        if self.in_place:
+            return self._commit_in_place()
         if not os.path.lexists(target):
             os.rename(self.path, target)
-        else:
-            with contextlib.suppress(OSError):
-                os.chmod(self.path, os.stat(target).st_mode & 0o7777)
-            if exchange(self.path, target):
-                old = self.path  # the staging name now holds the old folder
-            else:
-                old = target.parent / _leftover_name(target, OLD_TAG)
-                os.rename(target, old)
-                try:
-                    os.rename(self.path, target)
-                except BaseException:
-                    os.rename(old, target)
-                    raise
-            self._done = True  # from here on the old folder is never discarded, only emptied
+            self._done = True
             _fsync_dir(target.parent)
-            _empty_into(old, target, self.owned)
-        self._done = True
+            return target
+        like = os.stat(target)
+        with contextlib.suppress(OSError):
+            os.chmod(self.path, like.st_mode & 0o7777)
+        for p in (self.path, *self.path.iterdir()):
+            _adopt_owner(p, like)
+        try:
+            swapped = exchange(self.path, target)
+        except OSError as e:
+            if e.errno != errno.EBUSY:
+                raise
+            return self._busy(e)
+        if swapped:
+            old = self.path  # the staging name now holds the old folder
+        else:
+            old = target.parent / _leftover_name(target, OLD_TAG)
+            try:
+                os.rename(target, old)
+            except OSError as e:
+                if e.errno != errno.EBUSY:
+                    raise
+                return self._busy(e)
+            try:
+                os.rename(self.path, target)
+            except BaseException:
+                os.rename(old, target)
+                raise
+        self._done = True  # from here on the old folder is never discarded, only emptied
         _fsync_dir(target.parent)
+        _empty_into(old, target, self.owned)
+        _fsync_dir(target.parent)
+        return target
+
+    def _busy(self, error: OSError) -> Path:
+        """The folder's name cannot move (a mount point that was not detected): write the set
+        into it instead, and say so."""
+        self.in_place = f"its name cannot be exchanged ({error.strerror})"
+        log.warning("output folder %s: %s; its result files were replaced one by one (each "
+                    "atomically, %s last) instead", self.target, self.in_place,
+                    self.last)  # fmt: skip
+        return self._commit_in_place()
+
+    def _commit_in_place(self) -> Path:
+        """The set's marker (last file) is removed, every other file replaces its old version
+        atomically, the marker comes last; the staging folder is removed."""
+        target, like = self.target, os.stat(self.target)
+        staged = sorted(os.listdir(self.path), key=lambda n: n == self.last)
+        if self.last is not None:
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(target / self.last)
+        for name in staged:
+            src, dst = self.path / name, target / name
+            try:
+                os.replace(src, dst)
+            except OSError as e:
+                if e.errno != errno.EXDEV:
+                    raise
+                atomic_write(dst, src.read_bytes())  # staged on another file system
+            _adopt_owner(dst, like)
+        self._done = True
+        _fsync_dir(target)
+        shutil.rmtree(self.path, ignore_errors=True)
         return target

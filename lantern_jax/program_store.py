@@ -35,9 +35,13 @@ serialized and are not stored either, and neither is a program that JAX's own ca
 **Where**: the ``lantern-programs`` folder inside JAX's persistent compilation cache folder,
 whenever that cache is on (``lantern-jax`` turns it on by default; ``--no-compile-cache`` and
 ``jax.config.update("jax_enable_compilation_cache", False)`` turn the store off with it), and
-never under JAX's distributed runtime.  Files are written atomically; at most
-:data:`MAX_PROGRAMS` are kept, the least recently used removed first.  An entry that cannot be
-read back (truncated, from another build) is deleted and the program compiled again.
+never under JAX's distributed runtime.  Files are written atomically (two processes storing
+the same program leave one whole entry); at most :data:`MAX_PROGRAMS` are kept, the least
+recently used removed first.  An entry records its own key and the SHA-256 of its executable:
+an entry that cannot be read back (truncated, corrupted, of another store format) or that holds
+another program than its name says (entries swapped or copied under another name) is deleted
+with a warning and the program compiled again (JAX's persistent cache still serves the XLA
+compilation).
 
 Loading an executable runs code from the file, like JAX's own cache: keep the cache folder
 writable by you alone.
@@ -72,7 +76,7 @@ STORE_SUBDIR = "lantern-programs"
 #: Most programs kept (least recently used removed first); an evaluation program is 5-15 MB.
 MAX_PROGRAMS = 32
 #: Bumped when the file layout changes (old entries then simply miss).
-STORE_FORMAT = 1
+STORE_FORMAT = 2
 #: JAX options that change what a trace or a compilation produces.
 JAX_OPTIONS = (
     "jax_enable_x64",
@@ -376,7 +380,8 @@ def _devices_of(compiled: Any) -> list[int] | None:
 
 def load(key: str) -> Any | None:
     """The stored program ``key`` as a callable :class:`jax.stages.Compiled`, or ``None`` when
-    there is none (or it cannot be read back: the entry is then deleted)."""
+    there is none (or it cannot be read back or holds another program: the entry is then
+    deleted, with a warning)."""
     folder = store_dir()
     if folder is None:
         return None
@@ -388,7 +393,15 @@ def load(key: str) -> Any | None:
     try:
         from jax.experimental import serialize_executable as se
 
-        payload, in_tree, out_tree, ids = pickle.loads(blob)
+        record = pickle.loads(blob)
+        if not (isinstance(record, tuple) and len(record) == 6):
+            raise ValueError(f"not an entry of store format {STORE_FORMAT}")
+        stored_key, digest, payload, in_tree, out_tree, ids = record
+        if stored_key != key:
+            raise ValueError(f"it holds program {str(stored_key)[:12]}..., not {key[:12]}... "
+                             "(swapped or copied under another name)")  # fmt: skip
+        if hashlib.sha256(payload).hexdigest() != digest:
+            raise ValueError("its executable does not match its SHA-256 (corrupted)")
         by_id = {d.id: d for d in jax.devices()}
         compiled = se.deserialize_and_load(
             payload, in_tree, out_tree, execution_devices=[by_id[i] for i in ids]
@@ -416,7 +429,8 @@ def save(key: str, compiled: Any) -> bool:
         from jax.experimental import serialize_executable as se
 
         payload, in_tree, out_tree = se.serialize(compiled)
-        blob = pickle.dumps((payload, in_tree, out_tree, ids), protocol=pickle.HIGHEST_PROTOCOL)
+        record = (key, hashlib.sha256(payload).hexdigest(), payload, in_tree, out_tree, ids)
+        blob = pickle.dumps(record, protocol=pickle.HIGHEST_PROTOCOL)
         folder.mkdir(parents=True, exist_ok=True)
         atomic_write(folder / (key + _SUFFIX), blob)
     except Exception as e:  # noqa: BLE001  (not serializable or not writable: not stored)

@@ -12,12 +12,17 @@
   ``route_level_results.schema.json`` units, dtypes and missing-value rules of that CSV
   ``family_cus.csv`` / ``.md``        per-family CUS and Overall, warning-gain rows included
   ``decomposition.csv`` / ``.md``     components, Gate Pass and per-gate failure rates (%)
+  ``run_record.json``                 what this run was, not what it found: the command line
+                                      and each policy's compile and rollout seconds
   ``reproducibility_manifest.json``   suite hash, seeds, policy parameter hashes, package
-                                      versions, ablation, and the SHA-256 of every file above
+                                      versions, devices, ablation, and the SHA-256 of every
+                                      file above but the run record (written last)
   ==================================  =========================================================
 
-CSV and Markdown files depend only on the results (fixed float format, no timestamps), so the
-same inputs give byte-identical files.
+Every file but the run record depends only on the inputs and the results (fixed float format,
+no timestamps, no wall times), so the same inputs on the same machine give byte-identical
+files, the manifest included (:func:`split_manifest` moves what is a record of one run out of
+it).
 """
 
 from __future__ import annotations
@@ -48,8 +53,13 @@ DECOMPOSITION_CSV = "decomposition.csv"
 FAMILY_MD = "family_cus.md"
 DECOMPOSITION_MD = "decomposition.md"
 MANIFEST_JSON = "reproducibility_manifest.json"
+RUN_RECORD_JSON = "run_record.json"
+#: Keys of a manifest (at any depth) that record this run rather than what it computed: they go
+#: to the run record (:func:`split_manifest`).
+RUN_RECORD_KEYS = ("seconds_compile", "seconds_run")
 
-#: Every file :func:`write_outputs` writes, in writing order.
+#: Every file :func:`write_outputs` writes, in writing order (the manifest, which names the
+#: others, last).
 OUTPUT_FILES = (
     ROUTE_CSV,
     schema_path_for(ROUTE_CSV).name,
@@ -57,6 +67,7 @@ OUTPUT_FILES = (
     DECOMPOSITION_CSV,
     FAMILY_MD,
     DECOMPOSITION_MD,
+    RUN_RECORD_JSON,
     MANIFEST_JSON,
 )
 
@@ -228,6 +239,61 @@ def _sha256(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
+def split_manifest(manifest: dict) -> tuple[dict, dict]:
+    """Separate what is reproducible from what is a record of this run.
+
+    Args:
+        manifest: an evaluation's or ablation run's manifest.
+
+    Returns:
+        ``(reproducible, record)``: the manifest without the :data:`RUN_RECORD_KEYS` (at any
+        depth), and those keys at the same places (list items keep their ``name``).
+    """
+
+    def split(obj: Any) -> tuple[Any, Any]:
+        if isinstance(obj, dict):
+            keep, rec = {}, {}
+            for k, v in obj.items():
+                if k in RUN_RECORD_KEYS:
+                    rec[k] = v
+                    continue
+                keep[k], sub = split(v)
+                if sub:
+                    rec[k] = sub
+            if rec and "name" in obj:
+                rec = {"name": obj["name"], **rec}
+            return keep, rec
+        if isinstance(obj, list):
+            parts = [split(v) for v in obj]
+            recs = [r for _, r in parts]
+            return [k for k, _ in parts], recs if any(recs) else None
+        return obj, None
+
+    keep, rec = split(manifest)
+    return keep, rec
+
+
+def _how_written(stage: StagedFolder, record: dict | None) -> dict:
+    """The run record's entries, with why the set is written into its folder file by file
+    when it is (:attr:`lantern_jax.files.StagedFolder.in_place`)."""
+    return {**(record or {}), **({"written_in_place": stage.in_place} if stage.in_place else {})}
+
+
+def _write_manifests(out: Path, manifest: dict, record: dict | None, written: list[Path],
+                     name: str) -> None:  # fmt: skip
+    """The run record (``record`` plus what :func:`split_manifest` takes out of ``manifest``),
+    then the manifest ``name`` with the SHA-256 of every file in ``written``."""
+    reproducible, timings = split_manifest(manifest)
+    run = {**(record or {}), **timings}
+    text = json.dumps(run, indent=2, default=_jsonable, allow_nan=False) + "\n"
+    atomic_write(out / RUN_RECORD_JSON, text.encode())
+    reproducible["files"] = [
+        dict(name=p.name, sha256=_sha256(p), bytes=p.stat().st_size) for p in written
+    ]
+    text = json.dumps(reproducible, indent=2, default=_jsonable, allow_nan=False) + "\n"
+    atomic_write(out / name, text.encode())
+
+
 def _markdown(title: str, note: str, table: str) -> bytes:
     return f"# {title}\n\n{note}\n\n{table}\n".encode()
 
@@ -235,7 +301,8 @@ def _markdown(title: str, note: str, table: str) -> bytes:
 def check_output_folder(out_dir: str | os.PathLike) -> Path:
     """Check that ``out_dir`` can receive a result set, before an evaluation is started.
 
-    Nothing existing is changed (a probe folder is created and removed beside it).
+    Nothing existing is changed (a probe folder is created and removed beside it, or inside it
+    when the set will be written in place, :func:`lantern_jax.files.in_place_reason`).
 
     Args:
         out_dir: the output folder (may not exist yet).
@@ -250,7 +317,8 @@ def check_output_folder(out_dir: str | os.PathLike) -> Path:
     return check_target_folder(out_dir)
 
 
-def _write_set(result: EvalResult, out: Path, extra_manifest: dict | None) -> None:
+def _write_set(result: EvalResult, out: Path, extra_manifest: dict | None,
+               run_record: dict | None) -> None:  # fmt: skip
     """Write every file of a result set into the (staging) folder ``out``."""
     route = write_route_table(result.route_table, out / ROUTE_CSV)
     written = [route, schema_path_for(route)]
@@ -289,15 +357,14 @@ def _write_set(result: EvalResult, out: Path, extra_manifest: dict | None) -> No
 
     manifest = dict(result.manifest)
     manifest.update(extra_manifest or {})
-    manifest["files"] = [
-        dict(name=p.name, sha256=_sha256(p), bytes=p.stat().st_size) for p in written
-    ]
-    text = json.dumps(manifest, indent=2, default=_jsonable, allow_nan=False) + "\n"
-    atomic_write(out / MANIFEST_JSON, text.encode())
+    _write_manifests(out, manifest, run_record, written, MANIFEST_JSON)
 
 
 def write_outputs(
-    result: EvalResult, out_dir: str | os.PathLike, extra_manifest: dict | None = None
+    result: EvalResult,
+    out_dir: str | os.PathLike,
+    extra_manifest: dict | None = None,
+    run_record: dict | None = None,
 ) -> dict[str, Path]:
     """Write every file of an evaluation (see the module docstring) as one whole set.
 
@@ -310,7 +377,9 @@ def write_outputs(
     Args:
         result: from :func:`lantern_jax.evaluate.evaluate`.
         out_dir: output folder (created if needed).
-        extra_manifest: more entries for the reproducibility manifest (e.g. the command line).
+        extra_manifest: more entries for the reproducibility manifest (they must be the same
+            for the same inputs).
+        run_record: more entries for the run record (e.g. the command line).
 
     Returns:
         File name -> path, for every file written (:data:`OUTPUT_FILES`).
@@ -321,7 +390,7 @@ def write_outputs(
         lantern_jax.files.OutputFolderError: when ``out_dir`` cannot receive the set.
     """
     with StagedFolder(out_dir, OUTPUT_FILES) as stage:
-        _write_set(result, stage.path, extra_manifest)
+        _write_set(result, stage.path, extra_manifest, _how_written(stage, run_record))
         stage.commit()
     out = Path(out_dir)
     return {name: out / name for name in OUTPUT_FILES}
@@ -334,12 +403,13 @@ ABLATION_CSV = "ablations.csv"
 ABLATION_MD = "ablations.md"
 ABLATION_ROUTE_CSV = "ablation_route_level_results.csv"
 ABLATION_MANIFEST = "ablations_manifest.json"
-#: Every file :func:`write_ablation_outputs` writes.
+#: Every file :func:`write_ablation_outputs` writes (the manifest last).
 ABLATION_FILES = (
     ABLATION_CSV,
     ABLATION_MD,
     ABLATION_ROUTE_CSV,
     schema_path_for(ABLATION_ROUTE_CSV).name,
+    RUN_RECORD_JSON,
     ABLATION_MANIFEST,
 )
 
@@ -373,10 +443,14 @@ def format_ablation_table(
 
 
 def write_ablation_outputs(
-    result: AblationResult, out_dir: str | os.PathLike, extra_manifest: dict | None = None
+    result: AblationResult,
+    out_dir: str | os.PathLike,
+    extra_manifest: dict | None = None,
+    run_record: dict | None = None,
 ) -> dict[str, Path]:
     """Write the ablation table (CSV, Markdown), every variant's route-level rows (with the
-    schema) and a manifest as one whole set (:class:`lantern_jax.files.StagedFolder`).
+    schema), a run record and a manifest as one whole set
+    (:class:`lantern_jax.files.StagedFolder`; the arguments as :func:`write_outputs`).
 
     Returns:
         File name -> path, for every file of :data:`ABLATION_FILES`.
@@ -397,11 +471,8 @@ def write_ablation_outputs(
         written.append(atomic_write(out / ABLATION_MD, md))
         manifest = dict(m)
         manifest.update(extra_manifest or {})
-        manifest["files"] = [
-            dict(name=p.name, sha256=_sha256(p), bytes=p.stat().st_size) for p in written
-        ]
-        text = json.dumps(manifest, indent=2, default=_jsonable, allow_nan=False) + "\n"
-        atomic_write(out / ABLATION_MANIFEST, text.encode())
+        _write_manifests(out, manifest, _how_written(stage, run_record), written,
+                         ABLATION_MANIFEST)  # fmt: skip
         stage.commit()
     target = Path(out_dir)
     return {name: target / name for name in ABLATION_FILES}

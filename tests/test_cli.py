@@ -99,9 +99,12 @@ def test_manifest(evaluated, manifest_path):
     coop = get_policy("coop")
     assert m["policies"][0]["name"] == "coop"
     assert m["policies"][0]["params_sha256"] == params_hash(coop.init(jax.random.PRNGKey(0)))
-    assert m["command"].startswith("lantern-jax evaluate --policy coop")
+    record = json.loads((evaluated.out_dir / "run_record.json").read_text())
+    assert record["command"].startswith("lantern-jax evaluate --policy coop")
+    assert record["policies"][0]["name"] == "coop" and record["policies"][0]["seconds_run"] > 0
+    assert "command" not in m and "seconds_run" not in m["policies"][0]
     listed = {f["name"]: f["sha256"] for f in m["files"]}
-    assert set(listed) == set(OUTPUT_FILES) - {"reproducibility_manifest.json"}
+    assert set(listed) == set(OUTPUT_FILES) - {"reproducibility_manifest.json", "run_record.json"}
     for name, digest in listed.items():
         assert hashlib.sha256((evaluated.out_dir / name).read_bytes()).hexdigest() == digest
 

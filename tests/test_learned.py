@@ -243,9 +243,13 @@ def test_unknown_config_field_is_refused(saved):
 
 
 def test_weights_of_another_shape_are_refused(saved, tmp_path):
-    """A description edited to another width (hash still matching its weights)."""
+    """A description edited to another width (its own hash recomputed, the weights' hash still
+    matching the weights)."""
+    from lantern_jax.policies.learned.checkpoint import description_hash
+
     meta = json.loads(saved.with_suffix(".json").read_text())
     meta["config"]["width"] = 32
+    meta["sha256"] = description_hash(meta)
     saved.with_suffix(".json").write_text(json.dumps(meta))
     with pytest.raises(CheckpointError, match="shape|does not fit"):
         load_model(saved)

@@ -28,7 +28,12 @@ def cmd_dataset(args: argparse.Namespace, argv: Sequence[str]) -> int:
     from lantern_jax.dataset.generate import generate_dataset
     from lantern_jax.dataset.scenes import PAIRS_PER_FAMILY
     from lantern_jax.dataset.store import DatasetError, card_markdown
+    from lantern_jax.files import OutputFolderError, check_target_folder
 
+    try:
+        check_target_folder(args.out, in_place=True)
+    except OutputFolderError as e:
+        raise CommandError(f"--out: {e}") from None
     if args.sequences is not None:
         if args.sequences < 2 * len(FAMILIES):
             raise CommandError(f"--sequences: at least {2 * len(FAMILIES)} (one Route A and one "

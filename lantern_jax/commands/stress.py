@@ -13,8 +13,9 @@ suite (default: the family's first pair), prints the comparison table and writes
 from __future__ import annotations
 
 import argparse
+import math
+import sys
 from collections.abc import Sequence
-from pathlib import Path
 
 from lantern_jax.commands import CommandError
 
@@ -30,7 +31,29 @@ def _ranges(items: Sequence[str] | None) -> dict[str, tuple[float, float]]:
             out[name.strip()] = (float(lo), float(hi))
         except ValueError:
             raise CommandError(f"--range {item!r}: expected KNOB=LO:HI") from None
+        if not (math.isfinite(out[name.strip()][0]) and math.isfinite(out[name.strip()][1])):
+            raise CommandError(f"--range {item!r}: LO and HI must be finite numbers")
     return out
+
+
+def _check_numbers(args: argparse.Namespace, methods: tuple[str, ...]) -> None:
+    """Refuse search settings that cannot run, before anything is compiled."""
+    least_samples = 2 if "cmaes" in methods else 1  # CMA-ES needs a population of two
+    checks = (
+        ("--budget-s", args.budget_s, math.isfinite(args.budget_s) and args.budget_s > 0,
+         "a finite number of seconds > 0"),
+        ("--restarts", args.restarts, args.restarts >= 1, "a whole number >= 1"),
+        ("--samples", args.samples, args.samples >= least_samples,
+         f"a whole number >= {least_samples}" + (" (CMA-ES's population)" if
+                                                 least_samples == 2 else "")),
+        ("--sigma", args.sigma, math.isfinite(args.sigma) and args.sigma >= 0,
+         "a finite number >= 0"),
+        ("--temperature", args.temperature,
+         math.isfinite(args.temperature) and args.temperature > 0, "a finite number > 0"),
+    )  # fmt: skip
+    for flag, value, ok, want in checks:
+        if not ok:
+            raise CommandError(f"{flag}: must be {want}, got {value:g}")
 
 
 def cmd_stress(args: argparse.Namespace, argv: Sequence[str]) -> int:
@@ -50,8 +73,8 @@ def cmd_stress(args: argparse.Namespace, argv: Sequence[str]) -> int:
     bad = [m for m in methods if m not in search.METHODS]
     if bad or not methods:
         raise CommandError(f"--methods: {bad or 'none'}; valid: {', '.join(search.METHODS)}")
-    if not args.budget_s > 0:
-        raise CommandError(f"--budget-s: must be > 0, got {args.budget_s:g}")
+    _check_numbers(args, methods)
+    ranges = _ranges(args.range)
     try:
         check_output_folder(args.out)
         suite = load_suite(args.suite) if args.suite else load_suite()
@@ -69,21 +92,24 @@ def cmd_stress(args: argparse.Namespace, argv: Sequence[str]) -> int:
         condition=args.condition, seed=args.seed, methods=methods,
     )  # fmt: skip
     try:
-        _, traces = report.stress_test(pairs[0], args.policy, cfg, suite, knobs,
-                                       _ranges(args.range), progress=not args.quiet)  # fmt: skip
+        _, traces = report.stress_test(pairs[0], args.policy, cfg, suite, knobs, ranges,
+                                       progress=not args.quiet)  # fmt: skip
     except (ValueError, KeyError) as e:
         raise CommandError(str(e).strip("'\"")) from None
     from lantern_jax.stress.space import search_space
 
-    space = search_space(args.family, knobs, _ranges(args.range))
-    files = report.write_results(args.out, pairs[0], space, traces)
+    space = search_space(args.family, knobs, ranges)
     title = f"{pairs[0].pair_id} ({args.family}), {args.policy}, {args.condition}, {args.objective}"
     fig = convergence_plot(traces, title)
-    fig.savefig(Path(args.out) / "convergence.png", dpi=110)
+    try:
+        files = report.write_results(args.out, pairs[0], space, traces, fig)
+    except OSError as e:
+        print(f"lantern-jax: error: cannot write results to {args.out}: {e}", file=sys.stderr)
+        return 1
     table = report.comparison_table(traces)
     print(f"Stress test  ({title}; {args.budget_s:g} s per method, {args.restarts} restarts)")
     print(tabulate(table, headers="keys", showindex=False, floatfmt=".2f"))
-    print(f"Wrote {len(files) + 1} files to {args.out}")
+    print(f"Wrote {len(files)} files to {args.out}")
     return 0
 
 

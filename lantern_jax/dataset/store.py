@@ -22,8 +22,9 @@ each column's shape).
 
 Every shard is written atomically (temporary file + rename) and the card is rewritten after
 each chunk, so an interrupted generation resumes from the next chunk and never leaves a half
-shard that loads.  :func:`load_frames` refuses a missing or corrupted shard, a schema mismatch or
-a folder written by an incompatible version, naming the file.
+shard that loads.  :func:`load_frames` refuses a missing or corrupted shard, a schema mismatch, a
+folder written by an incompatible version or one whose generation did not finish, naming the
+file.
 """
 
 from __future__ import annotations
@@ -208,9 +209,17 @@ def _read_shards(folder: Path, card: dict, kind: str, columns: list[str] | None)
 
 
 def _open_card(folder: Path) -> dict:
+    """The card of a dataset folder whose generation finished (an interrupted one would give a
+    part of the dataset as if it were the whole)."""
     card = read_card(folder)
     if card is None:
         raise DatasetError(f"{folder / CARD_JSON}: missing (not a dataset folder?)")
+    if card.get("chunks_done") != card.get("chunks"):
+        raise DatasetError(
+            f"{folder / CARD_JSON}: {card.get('chunks_done')} of {card.get('chunks')} chunks "
+            f"recorded (the generation was interrupted); run the same 'lantern-jax dataset "
+            f"--out {folder}' command again to finish it"
+        )
     return card
 
 

@@ -4,7 +4,11 @@
     register_policy("mine", lambda: Policy("mine", init, act, "my planner"))
     policy = get_policy("mine")
 
-A duplicate or unknown name is an error that lists the known names.
+A duplicate or unknown name is an error that lists the known names, and so is a name the
+command line could not select (:mod:`lantern_jax.policies.names`).  A saved model registers
+under the name it was trained under (or one given); a name that is already taken — a built-in
+policy, a shipped model, another checkpoint — is refused unless it is the very same checkpoint
+(same description hash), so rows labelled with a name always come from the policy of that name.
 """
 
 from __future__ import annotations
@@ -15,6 +19,7 @@ from collections.abc import Callable
 from lantern_jax.policies import expert, learned_ppo, reference
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.learned.shipped import SHIPPED_MODELS
+from lantern_jax.policies.names import name_problem
 
 _REGISTRY: dict[str, Callable[[], Policy]] = {
     "expert": expert.expert_policy,
@@ -44,10 +49,20 @@ for _name in SHIPPED_MODELS:
     _REGISTRY[_name] = _shipped(_name)
 
 
+#: Description hash (``sha256`` of the ``.json``) of every checkpoint registered by name.
+_CHECKPOINT_HASHES: dict[str, str] = {}
+
+
 def register_policy(name: str, factory: Callable[[], Policy]) -> None:
-    """Register a policy factory under ``name``; a duplicate name is an error."""
+    """Register a policy factory under ``name``.
+
+    Raises:
+        ValueError: for a name already registered or one the command line cannot select.
+    """
     if name in _REGISTRY:
         raise ValueError(f"policy {name!r} is already registered; known: {sorted(_REGISTRY)}")
+    if name_problem(name):
+        raise ValueError(f"policy name: {name_problem(name)}")
     _REGISTRY[name] = factory
 
 
@@ -62,13 +77,54 @@ def get_policy(name: str) -> Policy:
     return _REGISTRY[name]()
 
 
+def _registered_hash(name: str) -> str | None:
+    """The description hash of the checkpoint registered as ``name`` (a shipped model's from
+    its file), or None for a policy that is not a checkpoint."""
+    if name in SHIPPED_MODELS and name not in _CHECKPOINT_HASHES:
+        from lantern_jax.policies.learned.checkpoint import (
+            DESCRIPTION_HASH,
+            read_meta,
+            shipped_path,
+        )
+
+        return read_meta(shipped_path(name)).get(DESCRIPTION_HASH)
+    return _CHECKPOINT_HASHES.get(name)
+
+
 def register_checkpoint(path: str, name: str | None = None) -> str:
     """Register a saved learned model (``.msgpack`` + ``.json``) as a policy; returns its name
-    (the name it was trained under unless given)."""
-    from lantern_jax.policies.learned.checkpoint import checkpoint_policy
+    (the name it was trained under unless given).
+
+    Registering the same checkpoint (same description hash) under the same name again is
+    allowed and changes nothing.
+
+    Raises:
+        CheckpointError: for a missing or invalid checkpoint, or a name that is already
+            registered for another policy (a built-in one, a shipped model or another
+            checkpoint).
+    """
+    from lantern_jax.policies.learned.checkpoint import (
+        DESCRIPTION_HASH,
+        CheckpointError,
+        checkpoint_policy,
+        read_meta,
+    )
 
     policy = checkpoint_policy(path, name)
+    digest = read_meta(path).get(DESCRIPTION_HASH)
+    if policy.name in _REGISTRY:
+        if _registered_hash(policy.name) == digest:
+            return policy.name
+        if policy.name in SHIPPED_MODELS:
+            what = "a shipped model"
+        else:
+            what = "another checkpoint" if policy.name in _CHECKPOINT_HASHES else "built in"
+        raise CheckpointError(
+            f"{path}: name {policy.name!r} is already registered ({what}); the rows of a name "
+            "must come from one policy: register it under another name"
+        )  # fmt: skip
     _REGISTRY[policy.name] = lambda: policy
+    _CHECKPOINT_HASHES[policy.name] = digest
     return policy.name
 
 

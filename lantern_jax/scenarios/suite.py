@@ -208,6 +208,15 @@ def _shipped_path(name: str):
     return resources.files("lantern_jax") / "data" / f"{name}.json"
 
 
+def shipped_suite_hash(suite_id: str) -> str | None:
+    """The suite hash of the shipped suite ``suite_id`` (as its file records it, which
+    :func:`load_suite` checks), or None when no suite of that id ships."""
+    res = _shipped_path(suite_id)
+    if suite_id != SUITE_ID or not res.is_file():
+        return None
+    return json.loads(res.read_text(encoding="utf-8"))["suite_sha256"]
+
+
 class SuiteError(ValueError):
     """A suite file that is not valid.
 
@@ -429,7 +438,8 @@ def load_suite(name_or_path: str | Path = SUITE_ID) -> Suite:
     pair, known family and weather labels that agree with the parameters, every parameter's
     type and range and the family's feasibility rules (:func:`~lantern_jax.scenarios.spec.
     param_errors`), duplicate keys, pair ids and scenarios, each pair's content hash and the
-    suite hash.
+    suite hash; a file that carries the id of a shipped suite must carry its pairs too (its
+    suite hash).
 
     Args:
         name_or_path: a shipped suite id (``"lantern-v3"``) or the path of a manifest file.
@@ -466,6 +476,13 @@ def load_suite(name_or_path: str | Path = SUITE_ID) -> Suite:
     errs, suite = _manifest_errors(raw)
     if errs:
         raise SuiteError(source, [f"suite {source}: {m}" for m in errs])
+    shipped = shipped_suite_hash(suite.suite_id) if looks_like_path else None
+    if shipped is not None and suite.suite_sha256 != shipped:
+        raise SuiteError(source, [
+            f"suite {source}: suite_id: {suite.suite_id!r} is the shipped suite's id, but the "
+            f"pairs hash to {suite.suite_sha256[:12]}... (shipped: {shipped[:12]}...); give an "
+            "edited suite an id of its own"
+        ])  # fmt: skip
     return suite
 
 

@@ -16,8 +16,10 @@ surrogate.
 from __future__ import annotations
 
 import dataclasses
+import io
 import json
 from pathlib import Path
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -25,7 +27,7 @@ import numpy as np
 import pandas as pd
 
 from lantern_jax.constants import DT
-from lantern_jax.files import atomic_write
+from lantern_jax.files import StagedFolder, atomic_write
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.families import build_pair
@@ -171,21 +173,31 @@ def found_table(space: SearchSpace, traces: list[search.Trace]) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=cols)
 
 
+#: Every file :func:`write_results` writes (the plot only when one is given).
+RESULT_FILES = ("comparison.csv", "found.csv", "convergence.png", "found_suite.json")
+
+
 def write_results(out: str | Path, pair: PairSpec, space: SearchSpace,
-                  traces: list[search.Trace]) -> dict[str, Path]:  # fmt: skip
-    """Write ``comparison.csv``, ``found.csv`` and ``found_suite.json`` into ``out``."""
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    files = {
-        "comparison.csv": out / "comparison.csv",
-        "found.csv": out / "found.csv",
-        "found_suite.json": out / "found_suite.json",
-    }
-    atomic_write(files["comparison.csv"], comparison_table(traces).to_csv(index=False))
-    atomic_write(files["found.csv"], found_table(space, traces).to_csv(index=False))
-    manifest = found_suite(pair, space, traces)
-    atomic_write(files["found_suite.json"], json.dumps(manifest, indent=1) + "\n")
-    return files
+                  traces: list[search.Trace], figure: Any = None) -> dict[str, Path]:  # fmt: skip
+    """Write ``comparison.csv``, ``found.csv``, ``found_suite.json`` and, given a matplotlib
+    ``figure``, ``convergence.png`` into ``out`` as one whole set
+    (:class:`lantern_jax.files.StagedFolder`: a kill leaves the old set or the new one).
+
+    Returns:
+        File name -> path, for every file written.
+    """
+    names = [n for n in RESULT_FILES if figure is not None or not n.endswith(".png")]
+    with StagedFolder(out, RESULT_FILES) as stage:
+        atomic_write(stage.path / "comparison.csv", comparison_table(traces).to_csv(index=False))
+        atomic_write(stage.path / "found.csv", found_table(space, traces).to_csv(index=False))
+        if figure is not None:
+            buf = io.BytesIO()
+            figure.savefig(buf, format="png", dpi=110)
+            atomic_write(stage.path / "convergence.png", buf.getvalue())
+        manifest = found_suite(pair, space, traces)
+        atomic_write(stage.path / "found_suite.json", json.dumps(manifest, indent=1) + "\n")
+        stage.commit()
+    return {n: Path(out) / n for n in names}
 
 
 def gradient_quality(

@@ -17,11 +17,13 @@ carries — the paper's three learned rows:
 from __future__ import annotations
 
 import dataclasses
-import tomllib
+import math
 from pathlib import Path
 from typing import Any
 
 from lantern_jax.dataset.store import EXCLUDE_CROSSING
+from lantern_jax.files import read_toml
+from lantern_jax.policies.names import name_problem
 
 RECIPES = ("base", "coop", "surround", "distance")
 
@@ -70,7 +72,7 @@ class TrainConfig:
 _FIELDS = {f.name: f for f in dataclasses.fields(TrainConfig)}
 
 
-def _check_type(path: str, key: str, value: Any) -> Any:
+def _check_type(key: str, value: Any) -> Any:
     want = _FIELDS[key].type
     if want == "float" and isinstance(value, int | float) and not isinstance(value, bool):
         return float(value)
@@ -78,7 +80,7 @@ def _check_type(path: str, key: str, value: Any) -> Any:
         return value
     if want == "str" and isinstance(value, str):
         return value
-    raise ConfigError(f"config {path}: train.{key} must be {want}, got {value!r}")
+    raise ConfigError(f"must be {want}, got {value!r}")
 
 
 def load_config(path: str | Path, **overrides: Any) -> TrainConfig:
@@ -90,11 +92,10 @@ def load_config(path: str | Path, **overrides: Any) -> TrainConfig:
     """
     path = str(path)
     try:
-        with open(path, "rb") as fh:
-            raw = tomllib.load(fh)
+        raw = read_toml(path)
     except OSError as e:
         raise ConfigError(f"cannot read config {path}: {e}") from None
-    except tomllib.TOMLDecodeError as e:
+    except ValueError as e:
         raise ConfigError(f"config {path}: not valid TOML ({e})") from None
     outside = sorted(k for k in raw if k != "train")
     if outside or not isinstance(raw.get("train"), dict):
@@ -102,36 +103,62 @@ def load_config(path: str | Path, **overrides: Any) -> TrainConfig:
     table = {**raw["train"], **{k: v for k, v in overrides.items() if v is not None}}
     for key in table:
         if key not in _FIELDS:
-            raise ConfigError(f"config {path}: train.{key}: unknown key; valid: "
+            raise ConfigError(f"{_where(path, key, overrides)}: unknown key; valid: "
                               f"{', '.join(_FIELDS)}")  # fmt: skip
-    values = {k: _check_type(path, k, v) for k, v in table.items()}
+    values = {}
+    for key, value in table.items():
+        try:
+            values[key] = _check_type(key, value)
+        except ConfigError as e:
+            raise ConfigError(f"{_where(path, key, overrides)} {e}") from None
     for key in ("name", "recipe"):
         if key not in values:
             raise ConfigError(f"config {path}: train.{key}: missing")
     cfg = TrainConfig(**values)
-    _check_ranges(path, cfg)
+    problem = _range_problem(cfg)
+    if problem:
+        raise ConfigError(f"{_where(path, problem[0], overrides)}: {problem[1]}")
     return cfg
 
 
-def _check_ranges(path: str, cfg: TrainConfig) -> None:
+def _where(path: str, key: str, overrides: dict[str, Any]) -> str:
+    """Where a value came from: the command line's ``--key`` or the file's ``train.key``."""
+    if overrides.get(key) is not None:
+        return f"--{key.replace('_', '-')}"
+    return f"config {path}: train.{key}"
+
+
+def _range_problem(cfg: TrainConfig) -> tuple[str, str] | None:
+    """(key, problem) of the first value out of range, or None."""
     problems = []
+    name = name_problem(cfg.name)
+    if name:
+        problems.append(("name", f"{name} (it names the exported files and the policy)"))
+    for f in dataclasses.fields(cfg):
+        value = getattr(cfg, f.name)
+        if isinstance(value, float) and not math.isfinite(value):
+            problems.append((f.name, f"must be a finite number, got {value}"))
     if cfg.recipe not in RECIPES:
-        problems.append(f"recipe: {cfg.recipe!r} not one of {', '.join(RECIPES)}")
+        problems.append(("recipe", f"{cfg.recipe!r} not one of {', '.join(RECIPES)}"))
     if cfg.recipe in ("coop", "distance") and not cfg.init_from:
-        problems.append(f"init_from: the {cfg.recipe} recipe fine-tunes a base model; give it")
+        problems.append(("init_from", f"the {cfg.recipe} recipe fine-tunes a base model; give it"))
     for key in ("epochs", "batch_size", "width", "heads", "layers"):
         if getattr(cfg, key) < 1:
-            problems.append(f"{key}: must be >= 1")
+            problems.append((key, f"must be >= 1, got {getattr(cfg, key)}"))
     for key in ("lr", "max_minutes", "far_m"):
         if not getattr(cfg, key) > 0:
-            problems.append(f"{key}: must be > 0")
-    for key in ("base_mix", "warmup", "val_fraction"):
+            problems.append((key, f"must be > 0, got {getattr(cfg, key)}"))
+    if not cfg.weight_decay >= 0:
+        problems.append(("weight_decay", f"must be >= 0, got {cfg.weight_decay}"))
+    for key in ("base_mix", "warmup"):
         if not 0.0 <= getattr(cfg, key) < 1.0:
-            problems.append(f"{key}: must be in [0, 1)")
+            problems.append((key, f"must be in [0, 1), got {getattr(cfg, key)}"))
+    if not 0.0 < cfg.val_fraction < 1.0:
+        why = "the best model is chosen on the held-out sequences"
+        problems.append(("val_fraction", f"must be in (0, 1) ({why}), got {cfg.val_fraction}"))
     if cfg.exclude_crossing not in EXCLUDE_CROSSING:
-        problems.append(f"exclude_crossing: {cfg.exclude_crossing!r} not one of "
-                        f"{', '.join(EXCLUDE_CROSSING)}")  # fmt: skip
+        problems.append(("exclude_crossing", f"{cfg.exclude_crossing!r} not one of "
+                                             f"{', '.join(EXCLUDE_CROSSING)}"))  # fmt: skip
     if cfg.width % cfg.heads:
-        problems.append(f"heads: {cfg.heads} does not divide width {cfg.width}")
-    if problems:
-        raise ConfigError(f"config {path}: train.{problems[0]}")
+        problems.append(("heads", f"{cfg.heads} does not divide width {cfg.width}"))
+    return problems[0] if problems else None
