@@ -373,13 +373,8 @@ def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
     bd.before_creation("start-up (Python, lantern_jax command line)")
     with bd.phase("imports (JAX, evaluator, tables)"):
         from lantern_jax.evaluate import PolicyError, ablation_names, evaluate
-        from lantern_jax.report import (
-            format_decomposition,
-            format_family_table,
-            format_premise_table,
-            ordered_tables,
-            write_outputs,
-        )
+        from lantern_jax.report import write_outputs
+        from lantern_jax.scoring.uncertainty import SEED
     _apply_config(args)
     if args.policy is not None and not any(n.strip() for v in args.policy for n in v.split(",")):
         raise UsageError("--policy: no policy name given (leave the option out for 'all')")
@@ -408,6 +403,7 @@ def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
         result = evaluate(
             policies, suite=suite, ablation=args.ablation, progress=not args.quiet,
             one_program=not getattr(args, "program_per_policy", False),
+            bootstrap_seed=SEED if args.bootstrap_seed is None else args.bootstrap_seed,
         )  # fmt: skip
     except PolicyError as e:
         print(f"lantern-jax evaluate: error: {e}", file=sys.stderr)
@@ -437,20 +433,7 @@ def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
         print(f"lantern-jax: error: cannot write results to {args.out}: {e}", file=sys.stderr)
         return 1
     t_print = time.perf_counter()
-    m = result.manifest
-    fam, dec = ordered_tables(result)
-    print(
-        f"Per-family CUS  (suite {m['suite_id']}, {m['num_pairs']} pairs, "
-        f"ablation {m['ablation']}; warning gain = warning - no-warning)"
-    )
-    print(format_family_table(fam))
-    print()
-    print("CUS decomposition  (components: mean x 100; Gate Pass and gate failures: % of pairs)")
-    print(format_decomposition(dec))
-    print()
-    print("The premise: hazard hidden from the front camera (% of Route A executions, all "
-          "models and conditions)")  # fmt: skip
-    print(format_premise_table(result.premise))
+    print_tables(result)
     print()
     print(f"Wrote {len(files)} files:")
     for path in files.values():
@@ -460,6 +443,37 @@ def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
         print()
         print(bd.format("Where the time went"))
     return 0
+
+
+def print_tables(result) -> None:
+    """Print an evaluation's family table, decomposition and premise table with intervals."""
+    from lantern_jax.report import (
+        format_decomposition,
+        format_family_table,
+        format_premise_table,
+        interval_note,
+        ordered_tables,
+    )
+
+    m = result.manifest
+    fam, dec = ordered_tables(result)
+    iv = result.intervals
+    print(
+        f"Per-family CUS  (suite {m['suite_id']}, {m['num_pairs']} pairs, "
+        f"ablation {m['ablation']}; warning gain = warning - no-warning)"
+    )
+    print(format_family_table(fam, intervals=iv.family if iv else None))
+    print()
+    print("CUS decomposition  (components: mean x 100; Gate Pass and gate failures: % of pairs; "
+          "Route B efficiency beside the CUS: B-Time/Exp. % of the expert's time, B-Slow s "
+          "below half the reference speed unjustified)")  # fmt: skip
+    print(format_decomposition(dec, intervals=iv.decomposition if iv else None))
+    print()
+    print("The premise: hazard hidden from the front camera (% of Route A executions, all "
+          "models and conditions)")  # fmt: skip
+    print(format_premise_table(result.premise, intervals=iv.premise if iv else None))
+    if iv is not None:
+        print(interval_note(m.get("intervals")))
 
 
 def _evaluate_breakdown(bd, result, seconds: float) -> None:
@@ -474,6 +488,7 @@ def _evaluate_breakdown(bd, result, seconds: float) -> None:
         for label, value in run.timings.items():
             bd.add(label, value, indent=1)
     bd.add("tables (family, decomposition, premise)", result.seconds.get("tables", 0.0))
+    bd.add("intervals (pair-level bootstrap)", result.seconds.get("intervals", 0.0))
     accounted = sum(p.seconds for p in bd.phases[start:] if p.indent == 0)
     bd.add("rest of the evaluation (checks, progress)", max(0.0, seconds - accounted))
 
@@ -801,6 +816,13 @@ def build_parser() -> argparse.ArgumentParser:
         "as a whole, other entries of the folder are kept",
     )
     ev.add_argument("--quiet", action="store_true", help="no progress bar or stage lines")
+    ev.add_argument(
+        "--bootstrap-seed",
+        type=int,
+        metavar="N",
+        help="seed of the pair-level bootstrap behind every interval (default: the project's "
+        "fixed seed, lantern_jax.scoring.uncertainty.SEED); recorded in the manifest",
+    )
     ev.add_argument(
         "--profile",
         action="store_true",

@@ -10,6 +10,7 @@ import contextlib
 import hashlib
 import io
 import json
+import math
 import os
 import subprocess
 import sys
@@ -25,8 +26,10 @@ from lantern_jax.evaluate import ablation_names, params_hash
 from lantern_jax.policies.registry import get_policy, policy_names
 from lantern_jax.report import OUTPUT_FILES
 from lantern_jax.scenarios.suite import load_suite, write_manifest
+from lantern_jax.scoring import uncertainty
 from lantern_jax.scoring.aggregate import DECOMPOSITION_COLUMNS
 from lantern_jax.scoring.table import read_route_table, schema_columns, validate_route_table
+from lantern_jax.scoring.uncertainty import interval_columns
 
 PAIRS = ["pe_0001", "lww_0001"]
 
@@ -77,16 +80,25 @@ def test_route_csv(evaluated):
 
 
 def test_family_and_decomposition_csv(evaluated):
+    def with_intervals(columns):
+        return [x for c in columns for x in (c, *interval_columns(c))]
+
     fam = pd.read_csv(evaluated.out_dir / "family_cus.csv")
-    assert list(fam.columns) == ["model", "condition", *FAMILIES, "Overall"]
+    assert list(fam.columns) == ["model", "condition", *with_intervals([*FAMILIES, "Overall"])]
     assert list(fam["condition"]) == ["warning", "no-warning", "warning gain"]
     gain = fam.iloc[2]
     assert gain["PE"] == pytest.approx(fam.iloc[0]["PE"] - fam.iloc[1]["PE"], abs=2e-6)
+    # one PE and one LWW pair: a degenerate interval at the estimate, n = 1, 0 elsewhere
+    assert gain["PE_lo"] == pytest.approx(gain["PE"], abs=2e-6)
+    assert gain["PE_hi"] == pytest.approx(gain["PE"], abs=2e-6)
+    assert list(fam.loc[0, [f"{f}_n" for f in FAMILIES]]) == [1, 0, 0, 1, 0, 0]
+    assert fam.loc[0, "Overall_n"] == 2 and math.isnan(fam.loc[0, "VC_lo"])
     dec = pd.read_csv(evaluated.out_dir / "decomposition.csv")
-    assert list(dec.columns) == ["model", "condition", *DECOMPOSITION_COLUMNS]
+    assert list(dec.columns) == ["model", "condition", *with_intervals(DECOMPOSITION_COLUMNS)]
     assert list(dec["condition"]) == ["warning", "no-warning"]
     md = (evaluated.out_dir / "family_cus.md").read_text()
     assert "| Model (condition)" in md and "coop (warning gain)" in md
+    assert "PE n=1" in md and "*" in md  # n per column, cells of fewer than MIN_N pairs flagged
 
 
 def test_manifest(evaluated, manifest_path):
@@ -100,6 +112,8 @@ def test_manifest(evaluated, manifest_path):
     assert m["policies"][0]["name"] == "coop"
     assert m["policies"][0]["params_sha256"] == params_hash(coop.init(jax.random.PRNGKey(0)))
     assert m["command"].startswith("lantern-jax evaluate --policy coop")
+    assert m["intervals"]["seed"] == uncertainty.SEED
+    assert m["intervals"]["confidence"] == uncertainty.CONFIDENCE
     listed = {f["name"]: f["sha256"] for f in m["files"]}
     assert set(listed) == set(OUTPUT_FILES) - {"reproducibility_manifest.json"}
     for name, digest in listed.items():

@@ -86,7 +86,9 @@ def test_decomposition_table():
     for i, (pa, pb, st, sc, sa, sr, g) in enumerate(rows):
         values = {"A_progress": pa, "B_progress": pb, "S_ttc": st, "S_clear": sc, "S_ant": sa}
         gate_values = dict(zip(gates, g, strict=True))
-        recs.append({**base, "pair_id": f"p{i}", **values, "S_rec": sr, **gate_values})
+        # Route B efficiency: times 1.0, 1.5, NaN (not completed), 1.0 of the expert's
+        effic = {"B_time_vs_expert": (1.0, 1.5, nan, 1.0)[i], "B_slow_s": (0.0, 3.0, 6.0, 0.0)[i]}
+        recs.append({**base, "pair_id": f"p{i}", **values, "S_rec": sr, **gate_values, **effic})
     out = decomposition_table(pd.DataFrame(recs))
     assert list(out.columns) == list(DECOMPOSITION_COLUMNS)
     r = out.loc[("m", "warning")]
@@ -102,6 +104,8 @@ def test_decomposition_table():
     assert r["LC-A"] == pytest.approx(25.0)
     assert r["Block-A"] == pytest.approx(25.0)
     assert r["False Brake-B"] == pytest.approx(25.0)
+    assert r["B-Time/Exp."] == pytest.approx(100.0 * 3.5 / 3)  # NaN skipped: (1 + 1.5 + 1) / 3
+    assert r["B-Slow (s)"] == pytest.approx(2.25)  # (0 + 3 + 6 + 0) / 4
 
 
 # ------------------------------------------------------------------------------------ the table
