@@ -4,6 +4,7 @@
 
     lantern-jax evaluate                 # built-in suite, reference policies expert, ego, coop
     lantern-jax evaluate --policy coop --ablation late_onset --pairs-per-family 2 --out runs/x
+    lantern-jax evaluate --fresh-suites 2 --seed 424242 --out runs/suites   # 3 suites, spread
     lantern-jax suite --list             # pairs, suite hash, generation report
     lantern-jax suite --verify           # regenerate lantern-v3 from its seed, compare hashes
     lantern-jax suite --regenerate suite.json
@@ -16,6 +17,7 @@
     lantern-jax diagnostics distance --policy coop        # near vs far warning on Route B
     lantern-jax ablations --list         # the protocol ablations
     lantern-jax ablations --policy coop  # the paper's ablation table for one policy
+    lantern-jax compare results --policy coop --policy expert   # paired difference, p-values
 
 Options may also come from an experiment file (``--config``, TOML, one ``[evaluate]`` table; see
 :func:`load_config`); an option given on the command line always wins over the file.  Options
@@ -39,6 +41,7 @@ import time
 from collections.abc import Sequence
 
 from lantern_jax.commands import CommandError
+from lantern_jax.commands import compare as compare_command
 from lantern_jax.commands import dataset as dataset_command
 from lantern_jax.commands import stress as stress_command
 from lantern_jax.commands import train as train_command
@@ -373,7 +376,7 @@ def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
     bd.before_creation("start-up (Python, lantern_jax command line)")
     with bd.phase("imports (JAX, evaluator, tables)"):
         from lantern_jax.evaluate import PolicyError, ablation_names, evaluate
-        from lantern_jax.report import write_outputs
+        from lantern_jax.report import format_tables, write_outputs
         from lantern_jax.scoring.uncertainty import SEED
     _apply_config(args)
     if args.policy is not None and not any(n.strip() for v in args.policy for n in v.split(",")):
@@ -392,6 +395,22 @@ def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
     _stage(args, f"loading suite {args.suite}")
     with bd.phase("suite load and validation"):
         suite = _load_suite(args)
+    boot_seed = SEED if args.bootstrap_seed is None else args.bootstrap_seed
+    if args.seed is not None and args.fresh_suites is None:
+        raise UsageError("--seed is the fresh suites' generation seed; give --fresh-suites K too")
+    if args.fresh_suites is not None:
+        from lantern_jax.commands.fresh_suites import run_fresh_suites
+
+        kwargs = dict(
+            ablation=args.ablation,
+            bootstrap_seed=boot_seed,
+            one_program=not getattr(args, "program_per_policy", False),
+        )
+        try:
+            return run_fresh_suites(args, argv, policies, suite, lambda m: _stage(args, m), kwargs)
+        except PolicyError as e:
+            print(f"lantern-jax evaluate: error: {e}", file=sys.stderr)
+            return 1
     _stage(
         args,
         f"suite {suite.suite_id}: {len(suite)} pairs (hash {suite.suite_sha256[:12]}); "
@@ -403,7 +422,7 @@ def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
         result = evaluate(
             policies, suite=suite, ablation=args.ablation, progress=not args.quiet,
             one_program=not getattr(args, "program_per_policy", False),
-            bootstrap_seed=SEED if args.bootstrap_seed is None else args.bootstrap_seed,
+            bootstrap_seed=boot_seed,
         )  # fmt: skip
     except PolicyError as e:
         print(f"lantern-jax evaluate: error: {e}", file=sys.stderr)
@@ -433,7 +452,7 @@ def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
         print(f"lantern-jax: error: cannot write results to {args.out}: {e}", file=sys.stderr)
         return 1
     t_print = time.perf_counter()
-    print_tables(result)
+    print(format_tables(result))
     print()
     print(f"Wrote {len(files)} files:")
     for path in files.values():
@@ -443,37 +462,6 @@ def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
         print()
         print(bd.format("Where the time went"))
     return 0
-
-
-def print_tables(result) -> None:
-    """Print an evaluation's family table, decomposition and premise table with intervals."""
-    from lantern_jax.report import (
-        format_decomposition,
-        format_family_table,
-        format_premise_table,
-        interval_note,
-        ordered_tables,
-    )
-
-    m = result.manifest
-    fam, dec = ordered_tables(result)
-    iv = result.intervals
-    print(
-        f"Per-family CUS  (suite {m['suite_id']}, {m['num_pairs']} pairs, "
-        f"ablation {m['ablation']}; warning gain = warning - no-warning)"
-    )
-    print(format_family_table(fam, intervals=iv.family if iv else None))
-    print()
-    print("CUS decomposition  (components: mean x 100; Gate Pass and gate failures: % of pairs; "
-          "Route B efficiency beside the CUS: B-Time/Exp. % of the expert's time, B-Slow s "
-          "below half the reference speed unjustified)")  # fmt: skip
-    print(format_decomposition(dec, intervals=iv.decomposition if iv else None))
-    print()
-    print("The premise: hazard hidden from the front camera (% of Route A executions, all "
-          "models and conditions)")  # fmt: skip
-    print(format_premise_table(result.premise, intervals=iv.premise if iv else None))
-    if iv is not None:
-        print(interval_note(m.get("intervals")))
 
 
 def _evaluate_breakdown(bd, result, seconds: float) -> None:
@@ -824,6 +812,20 @@ def build_parser() -> argparse.ArgumentParser:
         "fixed seed, lantern_jax.scoring.uncertainty.SEED); recorded in the manifest",
     )
     ev.add_argument(
+        "--fresh-suites",
+        type=int,
+        metavar="K",
+        help="also generate K fresh suites (the --suite's design and validator, seeds S .. "
+        "S + K - 1 from --seed), evaluate --suite and each of them, and report every suite's "
+        "tables and the mean and spread across suites (OUT/across_suites.md)",
+    )
+    ev.add_argument(
+        "--seed",
+        type=int,
+        metavar="S",
+        help="generation seed of the first fresh suite (with --fresh-suites)",
+    )
+    ev.add_argument(
         "--profile",
         action="store_true",
         help="after the tables, print where the wall time went: start-up, imports, suite "
@@ -911,6 +913,7 @@ def build_parser() -> argparse.ArgumentParser:
     ab.add_argument("--quiet", action="store_true", help="no progress bar or stage lines")
     ab.set_defaults(func=cmd_ablations)
     stress_command.add_parser(sub)
+    compare_command.add_parser(sub)
     dataset_command.add_parser(sub)
     train_command.add_parser(sub)
     _add_language_commands(sub)

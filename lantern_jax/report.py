@@ -338,6 +338,31 @@ def with_interval_columns(
     return out
 
 
+def format_tables(result: EvalResult) -> str:
+    """The main command's three tables of an evaluation, with their intervals and legend: the
+    per-family CUS, the decomposition (Route B efficiency beside it) and the premise."""
+    m = result.manifest
+    fam, dec = ordered_tables(result)
+    iv = result.intervals
+    parts = [
+        f"Per-family CUS  (suite {m['suite_id']}, {m['num_pairs']} pairs, "
+        f"ablation {m['ablation']}; warning gain = warning - no-warning)",
+        format_family_table(fam, intervals=iv.family if iv else None),
+        "",
+        "CUS decomposition  (components: mean x 100; Gate Pass and gate failures: % of pairs; "
+        "Route B efficiency beside the CUS: B-Time/Exp. % of the expert's time, B-Slow s "
+        "below half the reference speed unjustified)",
+        format_decomposition(dec, intervals=iv.decomposition if iv else None),
+        "",
+        "The premise: hazard hidden from the front camera (% of Route A executions, all "
+        "models and conditions)",
+        format_premise_table(result.premise, intervals=iv.premise if iv else None),
+    ]
+    if iv is not None:
+        parts.append(interval_note(m.get("intervals")))
+    return "\n".join(parts)
+
+
 # ---------------------------------------------------------------------------------------------
 # files
 # ---------------------------------------------------------------------------------------------

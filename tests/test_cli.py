@@ -161,6 +161,84 @@ def test_pairs_option_gives_the_same_rows(evaluated, tmp_path):
     assert (tmp_path / name).read_bytes() == (evaluated.out_dir / name).read_bytes()
 
 
+def test_compare_a_policy_against_itself_gives_zero_with_p_one(evaluated, tmp_path):
+    """The same result set twice (one policy in two result sets over the same pairs)."""
+    res = run_cli(["compare", str(evaluated.out_dir), str(evaluated.out_dir), "--policy", "coop",
+                   "--out", str(tmp_path)])  # fmt: skip
+    assert res.rc == 0, res.err
+    table = pd.read_csv(tmp_path / "comparison.csv")
+    assert set(table["condition"]) == {"warning", "no-warning", "warning gain"}
+    shared = table[table["n"] > 0]
+    assert (shared["difference"] == 0.0).all() and (shared["p"] == 1.0).all()
+    assert set(table.loc[table["family"] == "Overall", "n"]) == {len(PAIRS)}
+    md = (tmp_path / "comparison.md").read_text()
+    assert md.startswith("# Paired comparison of mean CUS") and "| Condition" in md
+    assert "1.000" in res.out
+
+
+def test_compare_refuses_a_bad_selection_and_other_suites(evaluated, tmp_path):
+    res = run_cli(["compare", str(evaluated.out_dir), "--policy", "coop"])
+    assert res.rc == 2 and "two --policy names" in res.err
+    res = run_cli(["compare", str(evaluated.out_dir), "--policy", "coop", "--policy", "expert"])
+    assert res.rc == 2 and "'expert': not in" in res.err
+    res = run_cli(["compare", str(tmp_path), "--policy", "coop", "--policy", "ego"])
+    assert res.rc == 2 and "no result set there" in res.err
+    other = tmp_path / "other"
+    other.mkdir()
+    for name in ("route_level_results.csv", "reproducibility_manifest.json"):
+        text = (evaluated.out_dir / name).read_text()
+        if name.endswith(".json"):
+            m = json.loads(text)
+            m["suite_sha256"] = "0" * 64
+            text = json.dumps(m)
+        (other / name).write_text(text)
+    res = run_cli(["compare", str(evaluated.out_dir), str(other), "--policy", "coop",
+                   "--out", str(tmp_path / "cmp")])  # fmt: skip
+    assert res.rc == 2 and "different suites" in res.err
+
+
+def test_fresh_suites_evaluate_every_suite_and_report_the_spread(
+    manifest_path, tmp_path, monkeypatch
+):
+    """``--fresh-suites``: generation is replaced by the two-pair suite re-labelled with the
+    requested seed (the orchestration, files and records are what is tested; the generator
+    has its own tests), so every suite holds the same pairs and the spread across suites is 0."""
+    import lantern_jax.generate as generate
+
+    base = load_suite(manifest_path)
+    calls = []
+
+    def fake_generate(seed, progress=True, validator="expert"):
+        calls.append((seed, validator))
+        return dict(cli.suite_to_manifest(base), seed=seed)
+
+    monkeypatch.setattr(generate, "generate_suite", fake_generate)
+    argv = ["evaluate", "--policy", "coop", "--suite", str(manifest_path), "--quiet",
+            "--fresh-suites", "2", "--seed", "500", "--out", str(tmp_path)]  # fmt: skip
+    res = run_cli(argv)
+    assert res.rc == 0, res.err
+    assert calls == [(500, "expert-v1"), (501, "expert-v1")]  # the base suite's validator
+    record = json.loads((tmp_path / "across_suites.json").read_text())
+    ids = [s["suite_id"] for s in record["suites"]]
+    assert ids == ["two-pairs", "lantern-v3-seed500", "lantern-v3-seed501"]
+    assert [s["suite_seed"] for s in record["suites"][1:]] == [500, 501]
+    assert {s["suite_sha256"] for s in record["suites"]} == {base.suite_sha256}
+    for sid in ids:
+        assert (tmp_path / sid / "family_cus.csv").is_file(), sid
+    across = pd.read_csv(tmp_path / "across_suites.csv")
+    assert (across["suites"] == 3).all()
+    assert across["Overall_sd"].abs().max() == pytest.approx(0.0, abs=1e-9)
+    assert "Per-family CUS across 3 suites" in res.out
+    # a second run loads the written manifests instead of generating them again
+    calls.clear()
+    assert run_cli(argv).rc == 0 and calls == []
+    res = run_cli(["evaluate", "--policy", "coop", "--suite", str(manifest_path),
+                   "--fresh-suites", "1", "--out", str(tmp_path)])  # fmt: skip
+    assert res.rc == 2 and "needs --seed" in res.err
+    res = run_cli(["evaluate", "--policy", "coop", "--seed", "3", "--out", str(tmp_path)])
+    assert res.rc == 2 and "--fresh-suites" in res.err
+
+
 def test_unknown_policy_exits_2_listing_names(capsys):
     assert cli.main(["evaluate", "--policy", "nosuch"]) == 2
     err = capsys.readouterr().err

@@ -168,20 +168,23 @@ def pooled(res: Resampling, values: np.ndarray, pairs: np.ndarray | None = None)
     return _weighted_means(w, np.asarray(values, np.float64))
 
 
-def by_family(res: Resampling, values: np.ndarray) -> np.ndarray:
+def by_family(res: Resampling, values: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
     """Replicates of every family's mean and of their macro-average.
 
     Args:
         res: the draws.
         values: (n, G) per-pair values in ``res.pair_ids`` order.
+        weights: (R, n) weights to use instead of the draws (e.g. ``ones((1, n))`` for the
+            estimate on the original pairs).
 
     Returns:
-        (B, F + 1, G): the NaN-skipping mean of each family of ``constants.FAMILIES`` (NaN
-        for a family without pairs), then ``Overall``, the mean over the families that have
-        non-NaN values in the data (the tables' macro-average).
+        (R, F + 1, G) (R = B by default): the NaN-skipping mean of each family of
+        ``constants.FAMILIES`` (NaN for a family without values), then ``Overall``, the mean
+        over the families with a value (the tables' macro-average).
     """
     values = np.asarray(values, np.float64)
-    fam = np.stack([pooled(res, values, res.family_mask(f)) for f in FAMILIES], axis=1)
+    w = res.weights if weights is None else np.asarray(weights, np.float64)
+    fam = np.stack([_weighted_means(w * res.family_mask(f), values) for f in FAMILIES], axis=1)
     kept = np.where(np.isnan(fam), 0.0, fam)
     ok = ~np.isnan(fam)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -259,6 +262,9 @@ def pair_matrix(
     """
     keys = list(dict.fromkeys(map(tuple, df[list(by)].itertuples(index=False))))
     wide = df.pivot(index="pair_id", columns=list(by), values=column)
+    wide.columns = pd.MultiIndex.from_tuples(
+        [c if isinstance(c, tuple) else (c,) for c in wide.columns]
+    )
     wide = wide.reindex(index=list(res.pair_ids), columns=pd.MultiIndex.from_tuples(keys))
     return wide.to_numpy(np.float64), keys
 
