@@ -612,7 +612,7 @@ def cmd_ablations(args: argparse.Namespace, argv: Sequence[str]) -> int:
     suite = _load_suite(args)
     from lantern_jax.ablations import VARIANTS, run_ablations
     from lantern_jax.evaluate import PolicyError
-    from lantern_jax.report import format_ablation_table, write_ablation_outputs
+    from lantern_jax.report import format_ablation_table, interval_note, write_ablation_outputs
 
     _stage(
         args,
@@ -638,7 +638,8 @@ def cmd_ablations(args: argparse.Namespace, argv: Sequence[str]) -> int:
         f"Ablations  (suite {m['suite_id']}, {m['num_pairs']} pairs, policy {policies[0]}, "
         "warning condition; all entries 0-100)"
     )
-    print(format_ablation_table(result.table))
+    print(format_ablation_table(result.table, intervals=result.intervals))
+    print(interval_note(m.get("intervals")))
     print()
     print(f"Wrote {len(files)} files:")
     for path in files.values():
@@ -661,9 +662,10 @@ def _print_and_write(args: argparse.Namespace, tables: dict, note: str) -> int:
 
     from lantern_jax.diagnostics import write_tables
 
-    for title, df in tables.values():
+    for title, df, *display in tables.values():
         print(title)
-        print(tabulate(df, headers="keys", showindex=False, floatfmt=".1f"))
+        print(tabulate(display[0] if display else df, headers="keys", showindex=False,
+                       floatfmt=".1f", disable_numparse=bool(display)))  # fmt: skip
         print()
     if note:
         print(note)
@@ -686,7 +688,8 @@ def cmd_wording(args: argparse.Namespace, argv: Sequence[str]) -> int:
     suite = _load_suite(args)
     _stage(args, f"{policy} on {suite.suite_id} ({len(suite)} pairs): canonical and tiered "
                  "paraphrase warnings")  # fmt: skip
-    from lantern_jax.diagnostics import wording_table
+    from lantern_jax.diagnostics import WORDING_COLUMNS, wording_table
+    from lantern_jax.report import interval_display, interval_note
 
     table = wording_table(policy, suite)
     title = (
@@ -694,9 +697,12 @@ def cmd_wording(args: argparse.Namespace, argv: Sequence[str]) -> int:
         "retention = paraphrase / matched canonical CUS)"
     )
     note = (
-        "Matched no-warning = the same pairs without any warning (what ignoring the text scores)."
+        "Matched no-warning = the same pairs without any warning (what ignoring the text scores). "
+        + interval_note(over="each row's route pairs; retention paired")
+        + "."
     )
-    return _print_and_write(args, {"wording": (title, table)}, note)
+    display = interval_display(table, WORDING_COLUMNS, "n")
+    return _print_and_write(args, {"wording": (title, table, display)}, note)
 
 
 def cmd_diagnostics(args: argparse.Namespace, argv: Sequence[str]) -> int:
@@ -715,7 +721,8 @@ def cmd_diagnostics(args: argparse.Namespace, argv: Sequence[str]) -> int:
         )
         note = (
             "dv_max: largest additional speed reduction vs no warning; Stop: longest standstill; "
-            "non-actionable = dv_max < 2 m/s, no stop >= 1 s, RC drop <= 5 points."
+            "non-actionable = dv_max < 2 m/s, no stop >= 1 s, RC drop <= 5 points. Each row is "
+            "one execution on one road (n = 1): there is no sample to give an interval."
         )
         return _print_and_write(args, {"nonactionable": (title, table)}, note)
     suite = _load_suite(args)
@@ -743,7 +750,18 @@ def cmd_diagnostics(args: argparse.Namespace, argv: Sequence[str]) -> int:
             closed_loop,
         ),
     }
-    return _print_and_write(args, tables, "Retention = far / no-warning predicted progress.")
+    from lantern_jax.report import interval_display, interval_note
+
+    summary = dg.distance_summary(open_loop)
+    tables["distance_summary"] = (
+        f"Over the {len(open_loop)} routes: mean predicted progress (m) and retention",
+        summary,
+        interval_display(summary, dg.DISTANCE_COLUMNS, "Routes"),
+    )
+    note = (
+        f"Retention = far / no-warning predicted progress. Summary: {interval_note(over='routes')}."
+    )
+    return _print_and_write(args, tables, note)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -150,14 +150,21 @@ def format_interval(
     return text
 
 
-def interval_note(settings: dict | None = None) -> str:
-    """The legend of the interval cells (from a manifest's ``intervals`` settings)."""
+PAIRS_STRATIFIED = "route pairs, stratified by family; differences paired"
+
+
+def interval_note(settings: dict | None = None, over: str = PAIRS_STRATIFIED) -> str:
+    """The legend of the interval cells.
+
+    Args:
+        settings: a manifest's ``intervals`` entry (resamples and seed are then named).
+        over: what is resampled.
+    """
     st = settings or {}
-    how = f"{st['resamples']} resamples, seed {st['seed']}; " if "seed" in st else ""
+    how = f"; {st['resamples']} resamples, seed {st['seed']}" if "seed" in st else ""
     return (
-        f"[lo, hi] / ±: {CONFIDENCE:.0%} percentile bootstrap interval over route pairs, "
-        f"stratified by family ({how}warning gains paired); "
-        f"{FLAG} fewer than {MIN_N} pairs (interval unreliable)"
+        f"[lo, hi] / ±: {CONFIDENCE:.0%} percentile bootstrap interval over {over}{how}; "
+        f"{FLAG} fewer than {MIN_N} (interval unreliable)"
     )
 
 
@@ -303,6 +310,27 @@ def format_premise_table(
         disable_numparse=True,
         colalign=("left", *["right"] * len(FAMILY_COLUMNS)),
     )
+
+
+def interval_display(df: pd.DataFrame, columns: Sequence[str], n: str | int) -> pd.DataFrame:
+    """A table with intervals as its readers see it: each of ``columns`` as
+    ``59.3 [55.0, 63.1]`` (:data:`FLAG` below ``MIN_N``) and its ``_lo`` / ``_hi`` columns
+    dropped (the CSV keeps the numbers).
+
+    Args:
+        df: the table, with ``<c>_lo`` and ``<c>_hi`` for every column of ``columns``.
+        columns: the value columns.
+        n: the column holding each row's pair count, or one count for every row.
+    """
+    out = df.copy()
+    counts = out[n] if isinstance(n, str) else pd.Series(n, index=out.index)
+    for c in columns:
+        lo, hi = interval_columns(c)[:2]
+        out[c] = [
+            format_interval(v, a, b, k)
+            for v, a, b, k in zip(out[c], out[lo], out[hi], counts, strict=True)
+        ]
+    return out.drop(columns=[x for c in columns for x in interval_columns(c)[:2]])
 
 
 def with_interval_columns(
@@ -520,7 +548,10 @@ ABLATION_FILES = (
 
 
 def format_ablation_table(
-    df: pd.DataFrame, condition: str = "warning", tablefmt: str = "simple"
+    df: pd.DataFrame,
+    condition: str = "warning",
+    tablefmt: str = "simple",
+    intervals: pd.DataFrame | None = None,
 ) -> str:
     """The ablation table (one row per model and variant) of one condition as text.
 
@@ -528,22 +559,34 @@ def format_ablation_table(
         df: :attr:`lantern_jax.ablations.AblationResult.table`.
         condition: the condition to show (the paper's table is the warning condition).
         tablefmt: a tabulate format.
+        intervals: :attr:`~lantern_jax.ablations.AblationResult.intervals`; each cell then
+            reads ``79.6 ±3.4`` (half the interval's width), :data:`FLAG` below ``MIN_N`` pairs,
+            and a ``Pairs`` column is added.
     """
     from lantern_jax.ablations import TABLE_COLUMNS
 
     sub = df[df["condition"] == condition]
     multi = sub["model"].nunique() > 1
-    rows = [
-        [f"{r['label']} ({r['model']})" if multi else r["label"]]
-        + [_fmt(r[c]) for c in TABLE_COLUMNS]
-        for _, r in sub.iterrows()
-    ]
+    ivs = _interval_rows(intervals, ("model", "condition", "variant"))
+    rows = []
+    for r in sub.to_dict("records"):
+        label = [f"{r['label']} ({r['model']})" if multi else r["label"]]
+        iv = ivs.get((r["model"], r["condition"], r["variant"])) if ivs else None
+        if iv is None:
+            rows.append(label + [_fmt(r[c]) for c in TABLE_COLUMNS])
+            continue
+        pairs = max(int(iv[interval_columns(c)[2]]) for c in TABLE_COLUMNS)
+        rows.append(label + [str(pairs)] + [
+            _interval_cell(r, iv, c, False, "pm", iv[interval_columns(c)[2]] != pairs)
+            for c in TABLE_COLUMNS
+        ])  # fmt: skip
+    extra = ["Pairs"] if ivs else []
     return tabulate(
         rows,
-        headers=["Variant", *TABLE_COLUMNS],
+        headers=["Variant", *extra, *TABLE_COLUMNS],
         tablefmt=tablefmt,
         disable_numparse=True,
-        colalign=("left", *["right"] * len(TABLE_COLUMNS)),
+        colalign=("left", *["right"] * (len(extra) + len(TABLE_COLUMNS))),
     )
 
 
@@ -560,15 +603,26 @@ def write_ablation_outputs(
         out = stage.path
         route = write_route_table(result.route_table, out / ABLATION_ROUTE_CSV)
         written = [route, schema_path_for(route)]
-        written.append(atomic_write(out / ABLATION_CSV, _csv_bytes(result.table)))
+        from lantern_jax.ablations import TABLE_COLUMNS
+
+        keys = ("model", "condition", "variant")
+        table = with_interval_columns(result.table, result.intervals, keys, TABLE_COLUMNS)
+        written.append(atomic_write(out / ABLATION_CSV, _csv_bytes(table)))
         m = result.manifest
+        legend = (
+            f" {interval_note(m.get('intervals'))}; the CSV has each column's `_lo`, `_hi` and "
+            "`_n`."
+            if result.intervals is not None
+            else ""
+        )
         note = (
             f"Suite `{m.get('suite_id', '?')}` ({m.get('num_pairs', '?')} pairs), warning "
             "condition. CUS: Overall (macro-average over families); A-Prog., Ant., Rec.: means "
             "x 100; Event Exp.: % of Route A executions whose event began; Coll.-A, Block-A: % "
-            "of pairs failing the gate."
+            f"of pairs failing the gate.{legend}"
         )
-        md = _markdown("Ablations", note, format_ablation_table(result.table, tablefmt="github"))
+        text = format_ablation_table(result.table, tablefmt="github", intervals=result.intervals)
+        md = _markdown("Ablations", note, text)
         written.append(atomic_write(out / ABLATION_MD, md))
         manifest = dict(m)
         manifest.update(extra_manifest or {})

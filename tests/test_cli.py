@@ -324,7 +324,9 @@ def test_ablations_table_command(manifest_path, tmp_path):
     for col in TABLE_COLUMNS:
         assert col in res.out
     table = pd.read_csv(out_dir / "ablations.csv")
-    assert list(table.columns) == ["model", "condition", "variant", "label", *TABLE_COLUMNS]
+    with_intervals = [x for c in TABLE_COLUMNS for x in (c, *interval_columns(c))]
+    assert list(table.columns) == ["model", "condition", "variant", "label", *with_intervals]
+    assert (table["CUS_n"] == len(PAIRS)).all() and "Pairs" in res.out
     warned = table[table["condition"] == "warning"].set_index("variant")
     assert list(warned.index) == [v for v, _ in VARIANTS]
     assert warned.loc["none", "Event Exp."] == 100.0

@@ -170,3 +170,15 @@ def test_across_suites_gives_mean_and_spread_per_cell():
     assert out["Overall"] == pytest.approx(74.0) and out["Overall_sd"] == pytest.approx(4.0)
     assert out["PE"] == pytest.approx(61.0) and out["PE_sd"] == pytest.approx(1.0)
     assert out["Overall_min"] == 70.0 and out["Overall_max"] == 78.0 and out["suites"] == 3
+
+
+def test_sample_interval_of_a_plain_sample():
+    """Tables whose unit is not a suite pair (restarts of a search, routes of a diagnostic)."""
+    lo, hi, n = u.sample_interval(np.ones(8))
+    assert lo == hi == 1.0 and n == 8
+    lo, hi, n = u.sample_interval(np.r_[np.zeros(20), np.ones(20)])
+    assert lo < 0.5 < hi and n == 40
+    # the binomial standard error of 0.5 over 40 restarts is 0.079: a 95 % interval ~ +-0.155
+    assert hi - lo == pytest.approx(2 * 1.96 * math.sqrt(0.25 / 40), abs=0.05)
+    lo, hi, n = u.sample_interval(np.array([[1.0, np.nan], [3.0, 2.0]]))
+    assert list(n) == [2, 1] and hi[1] == lo[1] == 2.0

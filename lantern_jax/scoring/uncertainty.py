@@ -100,37 +100,62 @@ def resampling(
 
     Args:
         pair_ids: the pairs (any order; repeated ids with the same family are one pair).
-        families: family code of each entry of ``pair_ids``.
+        families: the stratum of each entry of ``pair_ids`` (the family code for route pairs;
+            any label for other samples).
         resamples: B, the number of replicates.
         seed: seed of ``numpy.random.default_rng``.
 
     Returns:
-        The :class:`Resampling`; families are drawn in ``constants.FAMILIES`` order, each from
-        the same generator, so the same pairs and seed always give the same draws.
+        The :class:`Resampling`; strata are drawn in sorted order, each from the same
+        generator, so the same pairs and seed always give the same draws.
 
     Raises:
-        ValueError: for a pair listed under two families, or an unknown family code.
+        ValueError: for a pair listed under two strata.
     """
     fam_of = {}
     for p, f in zip(pair_ids, families, strict=True):
         if fam_of.setdefault(str(p), str(f)) != str(f):
             raise ValueError(f"pair {p!r} listed under families {fam_of[str(p)]} and {f}")
-    unknown = sorted(set(fam_of.values()) - set(FAMILIES))
-    if unknown:
-        raise ValueError(f"unknown family code(s) {unknown}; known: {FAMILIES}")
     ids = tuple(sorted(fam_of))
     fams = tuple(fam_of[p] for p in ids)
     rng = np.random.default_rng(seed)
     weights = np.zeros((resamples, len(ids)))
-    for f in FAMILIES:
+    for f in sorted(set(fams)):
         cols = np.flatnonzero(np.asarray(fams) == f)
         k = len(cols)
-        if k == 0:
-            continue
         draws = rng.integers(0, k, size=(resamples, k)) + k * np.arange(resamples)[:, None]
         counts = np.bincount(draws.ravel(), minlength=resamples * k).reshape(resamples, k)
         weights[:, cols] = counts
     return Resampling(pair_ids=ids, families=fams, weights=weights, seed=seed)
+
+
+def sample_interval(
+    values: np.ndarray,
+    strata: Sequence[str] | None = None,
+    seed: int = SEED,
+    resamples: int = RESAMPLES,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Interval of the NaN-skipping mean of each column of a plain sample (rows resampled,
+    within ``strata`` when given): for tables whose unit is not a suite pair (restarts of a
+    search, routes of a diagnostic).
+
+    Args:
+        values: (n,) or (n, G) the sample.
+        strata: (n,) stratum of each row (default: one stratum).
+        seed: the bootstrap's seed.
+        resamples: its replicates.
+
+    Returns:
+        ``(lo, hi, n)``, each (G,) (or scalars for a 1-D sample); n counts non-NaN rows.
+    """
+    v = np.asarray(values, np.float64)
+    flat = v.ndim == 1
+    v = v[:, None] if flat else v
+    ids = [f"{k:08d}" for k in range(len(v))]
+    res = resampling(ids, ["all"] * len(v) if strata is None else list(strata), resamples, seed)
+    lo, hi = interval(pooled(res, v))
+    n = counts(res, v)
+    return (lo[0], hi[0], n[0]) if flat else (lo, hi, n)
 
 
 def table_resampling(
