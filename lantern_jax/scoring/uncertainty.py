@@ -269,29 +269,52 @@ def p_value(replicates: np.ndarray, estimate: np.ndarray) -> np.ndarray:
 # ---------------------------------------------------------------------------------------------
 # per-pair matrices of a route table
 # ---------------------------------------------------------------------------------------------
+def pair_matrices(
+    df: pd.DataFrame, res: Resampling, columns: Sequence[str], by: Sequence[str] = GROUP_COLUMNS
+) -> tuple[np.ndarray, list[tuple]]:
+    """Columns of route-level rows as (pairs x groups) matrices, built in one pass.
+
+    Args:
+        df: rows with ``pair_id``, the ``by`` columns and ``columns`` (at most one row per pair
+            and group).
+        res: the draws (fixes the pair order).
+        columns: the value columns.
+        by: the grouping columns.
+
+    Returns:
+        ``(values (C, n, G) float64 in res.pair_ids order, NaN where a group lacks the pair;
+        group keys in order of first appearance)``.
+
+    Raises:
+        ValueError: for a pair given twice in one group, or a pair the draws do not hold.
+    """
+    keys = list(dict.fromkeys(map(tuple, df[list(by)].itertuples(index=False))))
+    g_of = {k: i for i, k in enumerate(keys)}
+    p_of = {p: i for i, p in enumerate(res.pair_ids)}
+    try:
+        rows = np.fromiter((p_of[p] for p in df["pair_id"]), int, len(df))
+    except KeyError as e:
+        raise ValueError(f"pair {e.args[0]!r} is not among the resampled pairs") from None
+    cols = np.fromiter((g_of[k] for k in map(tuple, df[list(by)].itertuples(index=False))), int,
+                       len(df))  # fmt: skip
+    if len(set(zip(rows.tolist(), cols.tolist(), strict=True))) != len(df):
+        raise ValueError(f"a pair appears twice in one group of {list(by)}")
+    out = np.full((len(columns), len(res.pair_ids), len(keys)), np.nan)
+    out[:, rows, cols] = df[list(columns)].to_numpy(np.float64).T
+    return out, keys
+
+
 def pair_matrix(
     df: pd.DataFrame, res: Resampling, column: str, by: Sequence[str] = GROUP_COLUMNS
 ) -> tuple[np.ndarray, list[tuple]]:
-    """One column of route-level rows as a (pairs x groups) matrix.
-
-    Args:
-        df: rows with ``pair_id``, the ``by`` columns and ``column`` (one row per pair and
-            group).
-        res: the draws (fixes the pair order).
-        column: the value column.
-        by: the grouping columns.
+    """One column of route-level rows as a (pairs x groups) matrix (:func:`pair_matrices`).
 
     Returns:
         ``(values (n, G) float64 in res.pair_ids order, NaN where a group lacks the pair;
         group keys in order of first appearance)``.
     """
-    keys = list(dict.fromkeys(map(tuple, df[list(by)].itertuples(index=False))))
-    wide = df.pivot(index="pair_id", columns=list(by), values=column)
-    wide.columns = pd.MultiIndex.from_tuples(
-        [c if isinstance(c, tuple) else (c,) for c in wide.columns]
-    )
-    wide = wide.reindex(index=list(res.pair_ids), columns=pd.MultiIndex.from_tuples(keys))
-    return wide.to_numpy(np.float64), keys
+    values, keys = pair_matrices(df, res, [column], by)
+    return values[0], keys
 
 
 def _rows(keys: list[tuple], by: Sequence[str], columns: Sequence[str], lo, hi, n) -> list[dict]:
@@ -349,12 +372,21 @@ def pooled_intervals(
     Returns:
         The ``by`` columns, then ``<c>_lo, <c>_hi, <c>_n`` for every column.
     """
-    los, his, ns, keys = [], [], [], None
-    for col in columns:
-        v, keys = pair_matrix(values, res, col, by)
-        lo, hi = interval(pooled(res, v))
-        los.append(lo), his.append(hi), ns.append(counts(res, v))
-    return pd.DataFrame(_rows(keys or [], by, columns, np.stack(los), np.stack(his), np.stack(ns)))
+    v, keys = pair_matrices(values, res, columns, by)  # (C, n, G)
+    c, n, g = v.shape
+    flat = v.transpose(1, 0, 2).reshape(n, c * g)  # one matrix product for every column
+    lo, hi = interval(pooled(res, flat))
+    shape = (c, g)
+    return pd.DataFrame(
+        _rows(
+            keys,
+            by,
+            columns,
+            lo.reshape(shape),
+            hi.reshape(shape),
+            counts(res, flat).reshape(shape),
+        )
+    )
 
 
 def decomposition_intervals(route_table: pd.DataFrame, res: Resampling) -> pd.DataFrame:
