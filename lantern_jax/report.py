@@ -257,26 +257,38 @@ def format_decomposition(
     missing = [c for c in DECOMPOSITION_COLUMNS if c not in df.columns]
     if missing:
         raise ValueError(f"decomposition table: missing column(s) {missing}")
-    ivs = _interval_rows(intervals, ("model", "condition"))
+    keys = ("model", "condition")
+    records = df[[*keys, *DECOMPOSITION_COLUMNS]].to_dict("records")
+    labels = [_label(r["model"], r["condition"]) for r in records]
+    return _pm_table(records, labels, intervals, keys, DECOMPOSITION_COLUMNS,
+                     "Model (condition)", tablefmt)  # fmt: skip
+
+
+def _pm_table(
+    records: list[dict], labels: list[str], intervals: pd.DataFrame | None,
+    keys: tuple[str, ...], columns: Sequence[str], first: str, tablefmt: str,
+) -> str:  # fmt: skip
+    """A table of ``value ±half-width`` cells: one row per record, labelled; with intervals a
+    ``Pairs`` column (the row's pairs) and ``n=`` on cells that average fewer pairs."""
+    ivs = _interval_rows(intervals, keys)
     rows = []
-    for rec in df[["model", "condition", *DECOMPOSITION_COLUMNS]].to_dict("records"):
-        iv = ivs.get((rec["model"], rec["condition"])) if ivs else None
-        label = [_label(rec["model"], rec["condition"])]
+    for rec, label in zip(records, labels, strict=True):
+        iv = ivs.get(tuple(rec[k] for k in keys)) if ivs else None
         if iv is None:
-            rows.append(label + [_fmt(rec[c]) for c in DECOMPOSITION_COLUMNS])
+            rows.append([label] + [_fmt(rec[c]) for c in columns])
             continue
-        pairs = max(int(iv[interval_columns(c)[2]]) for c in DECOMPOSITION_COLUMNS)
-        rows.append(label + [str(pairs)] + [
+        pairs = max(int(iv[interval_columns(c)[2]]) for c in columns)
+        rows.append([label, str(pairs)] + [
             _interval_cell(rec, iv, c, False, "pm", iv[interval_columns(c)[2]] != pairs)
-            for c in DECOMPOSITION_COLUMNS
+            for c in columns
         ])  # fmt: skip
     extra = ["Pairs"] if ivs else []
     return tabulate(
         rows,
-        headers=["Model (condition)", *extra, *DECOMPOSITION_COLUMNS],
+        headers=[first, *extra, *columns],
         tablefmt=tablefmt,
         disable_numparse=True,
-        colalign=("left", *["right"] * (len(extra) + len(DECOMPOSITION_COLUMNS))),
+        colalign=("left", *["right"] * (len(extra) + len(columns))),
     )
 
 
@@ -567,27 +579,10 @@ def format_ablation_table(
 
     sub = df[df["condition"] == condition]
     multi = sub["model"].nunique() > 1
-    ivs = _interval_rows(intervals, ("model", "condition", "variant"))
-    rows = []
-    for r in sub.to_dict("records"):
-        label = [f"{r['label']} ({r['model']})" if multi else r["label"]]
-        iv = ivs.get((r["model"], r["condition"], r["variant"])) if ivs else None
-        if iv is None:
-            rows.append(label + [_fmt(r[c]) for c in TABLE_COLUMNS])
-            continue
-        pairs = max(int(iv[interval_columns(c)[2]]) for c in TABLE_COLUMNS)
-        rows.append(label + [str(pairs)] + [
-            _interval_cell(r, iv, c, False, "pm", iv[interval_columns(c)[2]] != pairs)
-            for c in TABLE_COLUMNS
-        ])  # fmt: skip
-    extra = ["Pairs"] if ivs else []
-    return tabulate(
-        rows,
-        headers=["Variant", *extra, *TABLE_COLUMNS],
-        tablefmt=tablefmt,
-        disable_numparse=True,
-        colalign=("left", *["right"] * (len(extra) + len(TABLE_COLUMNS))),
-    )
+    records = sub.to_dict("records")
+    labels = [f"{r['label']} ({r['model']})" if multi else r["label"] for r in records]
+    keys = ("model", "condition", "variant")
+    return _pm_table(records, labels, intervals, keys, TABLE_COLUMNS, "Variant", tablefmt)
 
 
 def write_ablation_outputs(

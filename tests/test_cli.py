@@ -75,6 +75,9 @@ def test_route_csv(evaluated):
         (c, p) for c in ("warning", "no-warning") for p in PAIRS
     }
     assert set(df["model"]) == {"coop"}
+    # Route B efficiency: completed routes have a time; no expert in the set, so no ratio
+    assert (df["B_time_s"] > 0).all() and (df["B_slow_s"] >= 0).all()
+    assert df["B_time_vs_expert"].isna().all()
     schema = json.loads((evaluated.out_dir / "route_level_results.schema.json").read_text())
     assert [c["name"] for c in schema["columns"]] == header
 

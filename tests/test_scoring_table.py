@@ -28,6 +28,7 @@ from lantern_jax.scoring.table import (
     schema_columns,
     schema_path_for,
     validate_route_table,
+    with_time_vs_reference,
     write_route_table,
 )
 from lantern_jax.scoring.telemetry import fold_telemetry
@@ -198,3 +199,18 @@ def test_write_and_read_round_trip(tmp_path, batch_metrics):
     validate_route_table(back)
     pd.testing.assert_frame_equal(back, df, check_dtype=False)
     assert family_scores(back).shape == (2, 7)
+
+
+def test_route_b_time_relative_to_the_expert_on_the_same_pair():
+    nan = math.nan
+    rows = [  # (model, condition, pair, Route B time)
+        ("expert", "warning", "p0", 10.0), ("expert", "no-warning", "p0", 10.0),
+        ("coop", "warning", "p0", 12.0), ("coop", "no-warning", "p0", 12.0),
+        ("expert", "warning", "p1", nan), ("coop", "warning", "p1", 9.0),  # expert unfinished
+        ("coop", "warning", "p2", 8.0),  # no expert row
+    ]  # fmt: skip
+    df = pd.DataFrame(rows, columns=["model", "condition", "pair_id", "B_time_s"])
+    out = with_time_vs_reference(df)
+    assert list(out["B_time_vs_expert"][:4]) == [1.0, 1.0, 1.2, 1.2]
+    assert out["B_time_vs_expert"][4:].isna().all()
+    assert "B_time_vs_expert" not in df.columns  # the input is left as it was
