@@ -34,8 +34,8 @@ import numpy as np
 import pandas as pd
 from tabulate import tabulate
 
-from lantern_jax.constants import FAMILIES
 from lantern_jax.files import StagedFolder, atomic_write, check_target_folder
+from lantern_jax.scoring import uncertainty
 from lantern_jax.scoring.aggregate import DECOMPOSITION_COLUMNS
 from lantern_jax.scoring.table import schema_path_for, write_route_table
 from lantern_jax.scoring.uncertainty import CONFIDENCE, MIN_N, interval_columns
@@ -62,8 +62,8 @@ OUTPUT_FILES = (
     MANIFEST_JSON,
 )
 
-FAMILY_COLUMNS = (*FAMILIES, "Overall")
-GAIN_CONDITION = "warning gain"
+FAMILY_COLUMNS = uncertainty.FAMILY_COLUMNS
+GAIN_CONDITION = uncertainty.GAIN
 FLAG = "*"  # marks a cell averaging fewer than uncertainty.MIN_N pairs
 CONDITION_ORDER = ("warning", "no-warning", GAIN_CONDITION)
 CSV_FLOAT_FORMAT = "%.6f"
