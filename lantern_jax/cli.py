@@ -377,7 +377,6 @@ def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
     with bd.phase("imports (JAX, evaluator, tables)"):
         from lantern_jax.evaluate import PolicyError, ablation_names, evaluate
         from lantern_jax.report import format_tables, write_outputs
-        from lantern_jax.scoring.uncertainty import SEED
     _apply_config(args)
     if args.policy is not None and not any(n.strip() for v in args.policy for n in v.split(",")):
         raise UsageError("--policy: no policy name given (leave the option out for 'all')")
@@ -395,7 +394,8 @@ def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
     _stage(args, f"loading suite {args.suite}")
     with bd.phase("suite load and validation"):
         suite = _load_suite(args)
-    boot_seed = SEED if args.bootstrap_seed is None else args.bootstrap_seed
+    # the bootstrap's seed only when given (evaluate's default is the project's fixed seed)
+    boot = {} if args.bootstrap_seed is None else {"bootstrap_seed": args.bootstrap_seed}
     if args.seed is not None and args.fresh_suites is None:
         raise UsageError("--seed is the fresh suites' generation seed; give --fresh-suites K too")
     if args.fresh_suites is not None:
@@ -403,8 +403,8 @@ def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
 
         kwargs = dict(
             ablation=args.ablation,
-            bootstrap_seed=boot_seed,
             one_program=not getattr(args, "program_per_policy", False),
+            **boot,
         )
         try:
             return run_fresh_suites(args, argv, policies, suite, lambda m: _stage(args, m), kwargs)
@@ -421,8 +421,7 @@ def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
     try:
         result = evaluate(
             policies, suite=suite, ablation=args.ablation, progress=not args.quiet,
-            one_program=not getattr(args, "program_per_policy", False),
-            bootstrap_seed=boot_seed,
+            one_program=not getattr(args, "program_per_policy", False), **boot,
         )  # fmt: skip
     except PolicyError as e:
         print(f"lantern-jax evaluate: error: {e}", file=sys.stderr)
