@@ -36,7 +36,7 @@ from lantern_jax.scenarios.suite import SUITE_ID, Suite, build_suite_batches, lo
 from lantern_jax.scenarios.warnings import paraphrase_text_ids
 from lantern_jax.scoring.aggregate import decomposition_table, family_scores
 from lantern_jax.scoring.metrics import finalize
-from lantern_jax.scoring.table import build_route_table, with_time_vs_reference
+from lantern_jax.scoring.table import build_route_table
 from lantern_jax.scoring.uncertainty import SEED, TableIntervals, table_intervals
 from lantern_jax.sim.distributed import placement
 from lantern_jax.sim.observe import observe
@@ -681,7 +681,7 @@ def evaluate(
     t_build = time.perf_counter() - t0
     runs = _run_all(pols, list(policy_params), execs, s.suite_id, progress, one_program)
     t0 = time.perf_counter()
-    route = with_time_vs_reference(pd.concat([r.route_table for r in runs], ignore_index=True))
+    route = pd.concat([r.route_table for r in runs], ignore_index=True)
     tables = dict(
         family_table=family_table(route),
         decomposition=decomposition_table(route).reset_index(),

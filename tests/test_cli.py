@@ -75,9 +75,8 @@ def test_route_csv(evaluated):
         (c, p) for c in ("warning", "no-warning") for p in PAIRS
     }
     assert set(df["model"]) == {"coop"}
-    # Route B efficiency: completed routes have a time; no expert in the set, so no ratio
+    # Route B efficiency: every route completed, so every pair has its time
     assert (df["B_time_s"] > 0).all() and (df["B_slow_s"] >= 0).all()
-    assert df["B_time_vs_expert"].isna().all()
     schema = json.loads((evaluated.out_dir / "route_level_results.schema.json").read_text())
     assert [c["name"] for c in schema["columns"]] == header
 
@@ -396,8 +395,12 @@ def test_wording_command(manifest_path, tmp_path):
     assert res.rc == 0, res.err
     assert "Low ambiguity" in res.out and "All tiers" in res.out and "Retention" in res.out
     table = pd.read_csv(tmp_path / "wording.csv")
-    assert list(table.columns) == ["Wording", "n", "Paraphrase CUS", "Matched canonical",
-                                   "Retention (%)", "Coll. (%)", "Matched no-warning"]  # fmt: skip
+    values = ["Paraphrase CUS", "Matched canonical", "Retention (%)", "Coll. (%)",
+              "Matched no-warning"]  # fmt: skip
+    bounds = [x for c in values for x in interval_columns(c)[:2]]
+    assert list(table.columns) == ["Wording", "n", *values, *bounds]
+    held = table[table["n"] > 0]  # a tier may hold none of the two pairs
+    assert (held["Paraphrase CUS_lo"] <= held["Paraphrase CUS"] + 0.05).all()  # CSV: 4 digits
     assert table["n"].iloc[-1] == len(PAIRS)
     # coop ignores paraphrases: the paraphrase CUS is the no-warning CUS (CSV keeps 4 digits)
     all_tiers = table.iloc[-1]

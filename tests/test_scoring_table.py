@@ -18,6 +18,7 @@ from lantern_jax.scoring.aggregate import (
     DECOMPOSITION_COLUMNS,
     decomposition_table,
     family_scores,
+    with_time_vs_reference,
 )
 from lantern_jax.scoring.metrics import finalize
 from lantern_jax.scoring.sample import TickSample
@@ -28,7 +29,6 @@ from lantern_jax.scoring.table import (
     schema_columns,
     schema_path_for,
     validate_route_table,
-    with_time_vs_reference,
     write_route_table,
 )
 from lantern_jax.scoring.telemetry import fold_telemetry
@@ -87,10 +87,14 @@ def test_decomposition_table():
     for i, (pa, pb, st, sc, sa, sr, g) in enumerate(rows):
         values = {"A_progress": pa, "B_progress": pb, "S_ttc": st, "S_clear": sc, "S_ant": sa}
         gate_values = dict(zip(gates, g, strict=True))
-        # Route B efficiency: times 1.0, 1.5, NaN (not completed), 1.0 of the expert's
-        effic = {"B_time_vs_expert": (1.0, 1.5, nan, 1.0)[i], "B_slow_s": (0.0, 3.0, 6.0, 0.0)[i]}
+        # Route B efficiency: 1.0, 1.5, NaN (not completed), 1.0 times the expert's 10 s
+        effic = {"B_time_s": (10.0, 15.0, nan, 10.0)[i], "B_slow_s": (0.0, 3.0, 6.0, 0.0)[i]}
         recs.append({**base, "pair_id": f"p{i}", **values, "S_rec": sr, **gate_values, **effic})
-    out = decomposition_table(pd.DataFrame(recs))
+    expert = [{**r, "model": "expert", "B_time_s": 10.0} for r in recs]
+    out = decomposition_table(pd.DataFrame(recs + expert))
+    assert out.loc[("expert", "warning"), "B-Time/Exp."] == 100.0
+    alone = decomposition_table(pd.DataFrame(recs)).loc[("m", "warning")]
+    assert math.isnan(alone["B-Time/Exp."])  # no expert in the rows: no yardstick
     assert list(out.columns) == list(DECOMPOSITION_COLUMNS)
     r = out.loc[("m", "warning")]
     assert r["A-Prog."] == pytest.approx(87.5)  # (1 + .5 + 1 + 1) / 4

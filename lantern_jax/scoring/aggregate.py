@@ -14,10 +14,10 @@ Input: a route-level DataFrame (one row per (model, condition, pair); see
   ``Coll.-A``, ``RD-A``, ``LC-A``, ``Rule-A``, ``Block-A``, ``False Brake-B`` are the
   percentages of pairs failing each gate.
 * Route B efficiency, beside the CUS (never inside it; :data:`EFFICIENCY_COLUMNS`):
-  ``B-Time/Exp.`` is the mean x 100 of ``B_time_vs_expert`` (Route B time to completion over
-  the privileged expert's on the same pair; 100 = as fast as the expert), ``B-Slow (s)`` the
-  mean of ``B_slow_s`` (seconds below half the reference speed with nothing justifying it);
-  both skip ``NaN`` like the components.
+  ``B-Time/Exp.`` is the mean x 100 of each pair's ``B_time_s`` over the privileged expert's
+  on the same pair (:func:`with_time_vs_reference`; 100 = as fast as the expert; NaN when the
+  rows hold no ``expert``), ``B-Slow (s)`` the mean of ``B_slow_s`` (seconds below half the
+  reference speed with nothing justifying it); both skip ``NaN`` like the components.
 """
 
 from __future__ import annotations
@@ -47,9 +47,15 @@ FAILURE_COLUMNS = {
     "Block-A": "gate_block",
     "False Brake-B": "gate_false_brake",
 }
-#: Route B efficiency, beside the CUS: column -> (route-table column, scale of its mean).
+#: The policy whose Route B time is every model's yardstick (``B-Time/Exp.``): the privileged
+#: expert, which sees every actor's forecast and slows only for what is there.
+EFFICIENCY_REFERENCE = "expert"
+#: The per-pair ratio behind ``B-Time/Exp.`` (:func:`with_time_vs_reference`; not a route-table
+#: column: it depends on the result set holding the reference).
+TIME_VS_REFERENCE = "B_time_vs_expert"
+#: Route B efficiency, beside the CUS: column -> (per-pair column, scale of its mean).
 EFFICIENCY_COLUMNS = {
-    "B-Time/Exp.": ("B_time_vs_expert", 100.0),
+    "B-Time/Exp.": (TIME_VS_REFERENCE, 100.0),
     "B-Slow (s)": ("B_slow_s", 1.0),
 }
 #: Per-pair mean columns of the decomposition: column -> (route-table column, scale).
@@ -58,6 +64,28 @@ MEAN_COLUMNS = {
     **EFFICIENCY_COLUMNS,
 }
 DECOMPOSITION_COLUMNS = (*COMPONENT_COLUMNS, "Gate Pass", *FAILURE_COLUMNS, *EFFICIENCY_COLUMNS)
+
+
+def with_time_vs_reference(df: pd.DataFrame, reference: str = EFFICIENCY_REFERENCE) -> pd.DataFrame:
+    """``df`` with a ``B_time_vs_expert`` column: every row's Route B time over the reference
+    policy's on the same pair (:data:`TIME_VS_REFERENCE`).
+
+    A stateless policy's Route B is one execution per pair, shared by both conditions, so the
+    reference is the pair's first ``reference`` row.
+
+    Args:
+        df: route-level rows (``model``, ``pair_id``, ``B_time_s``).
+        reference: the reference model's name.
+
+    Returns:
+        A copy of ``df``; the ratio is NaN where the pair has no reference row or either
+        Route B was not completed (``B_time_s`` NaN).
+    """
+    out = df.copy()
+    ref = df.loc[df["model"] == reference].drop_duplicates("pair_id").set_index("pair_id")
+    ref_time = out["pair_id"].map(ref["B_time_s"]).to_numpy(np.float64)
+    out[TIME_VS_REFERENCE] = out["B_time_s"].to_numpy(np.float64) / ref_time
+    return out
 
 
 def _check(df: pd.DataFrame, columns: Sequence[str]) -> None:
@@ -97,8 +125,9 @@ def decomposition_table(df: pd.DataFrame, by: Sequence[str] = GROUP_COLUMNS) -> 
         DataFrame indexed by ``by`` with columns :data:`DECOMPOSITION_COLUMNS`.
     """
     by = list(by)
-    means = [col for col, _ in MEAN_COLUMNS.values()]
-    _check(df, [*by, *means, *FAILURE_COLUMNS.values()])
+    means = [col for col, _ in MEAN_COLUMNS.values() if col != TIME_VS_REFERENCE]
+    _check(df, [*by, "pair_id", "B_time_s", *means, *FAILURE_COLUMNS.values()])
+    df = with_time_vs_reference(df)
     rows = []
     for key, g in df.groupby(by, sort=True):
         key = key if isinstance(key, tuple) else (key,)
@@ -130,6 +159,7 @@ def decomposition_pair_values(df: pd.DataFrame) -> pd.DataFrame:
         failure column 100 / 0 for failing its gate.
     """
     keys = [c for c in (*GROUP_COLUMNS, "pair_id", "family") if c in df.columns]
+    df = with_time_vs_reference(df)
     out = df[keys].copy()
     for name, (col, scale) in MEAN_COLUMNS.items():
         out[name] = scale * df[col].to_numpy(float)

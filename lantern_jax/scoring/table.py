@@ -25,9 +25,6 @@ from lantern_jax.scoring.metrics import ExecutionMetrics
 
 KEY_COLUMNS = ("model", "condition", "pair_id")
 WARNING_CONDITION = "warning"
-#: The policy whose Route B time is every model's yardstick (``B_time_vs_expert``): the
-#: privileged expert, which sees every actor's forecast and slows only for what is there.
-EFFICIENCY_REFERENCE = "expert"
 
 
 def load_schema() -> dict:
@@ -165,35 +162,12 @@ def build_route_table(
         "B_false_brake_stop_s": f64(b.false_brake_max_stop_s),
         "B_time_s": f64(b.t_complete_s),
         "B_slow_s": f64(b.slow_unjustified_s),
-        "B_time_vs_expert": np.full(n, np.nan),  # filled by with_time_vs_reference
     }
     df = pd.DataFrame(data)
     for name, dtype in schema_columns():
         if dtype == "string":
             df[name] = df[name].astype(object)
     return df[[c for c, _ in schema_columns()]]
-
-
-def with_time_vs_reference(df: pd.DataFrame, reference: str = EFFICIENCY_REFERENCE) -> pd.DataFrame:
-    """``df`` with ``B_time_vs_expert`` filled: every row's Route B time over the reference
-    policy's on the same pair.
-
-    A stateless policy's Route B is one execution per pair, shared by both conditions, so the
-    reference is the pair's first ``reference`` row.
-
-    Args:
-        df: route-level rows (``model``, ``pair_id``, ``B_time_s``).
-        reference: the reference model's name.
-
-    Returns:
-        A copy of ``df``; ``B_time_vs_expert`` is NaN where the pair has no reference row or
-        either Route B was not completed (``B_time_s`` NaN).
-    """
-    out = df.copy()
-    ref = df.loc[df["model"] == reference].drop_duplicates("pair_id").set_index("pair_id")
-    ref_time = out["pair_id"].map(ref["B_time_s"]).to_numpy(np.float64)
-    out["B_time_vs_expert"] = out["B_time_s"].to_numpy(np.float64) / ref_time
-    return out
 
 
 def _dtype_ok(series: pd.Series, dtype: str) -> bool:
