@@ -34,7 +34,21 @@ from lantern_jax.constants import DT, SUITE_ID
 from lantern_jax.evaluate import CONDITIONS, EvalResult, evaluate, package_versions
 from lantern_jax.policies.base import Policy
 from lantern_jax.scenarios.suite import Suite, load_suite
-from lantern_jax.scoring.aggregate import decomposition_table, family_scores
+from lantern_jax.scoring.aggregate import (
+    GROUP_COLUMNS,
+    decomposition_pair_values,
+    decomposition_table,
+    family_scores,
+)
+from lantern_jax.scoring.uncertainty import (
+    OVERALL,
+    SEED,
+    family_intervals,
+    interval_columns,
+    pooled_intervals,
+    settings,
+    table_resampling,
+)
 
 #: (ablation name, row label) in the paper's order; "none" is the full protocol.
 VARIANTS: tuple[tuple[str, str], ...] = (
@@ -56,6 +70,9 @@ class AblationResult:
     route_table: pd.DataFrame  # every variant's route rows; condition "<c>" or "<c>:<variant>"
     manifest: dict
     results: dict[str, EvalResult]  # per variant
+    #: model, condition, variant, then <c>_lo, <c>_hi, <c>_n per TABLE_COLUMNS
+    #: (:func:`ablation_intervals`)
+    intervals: pd.DataFrame | None = None
 
 
 def variant_condition(condition: str, variant: str) -> str:
@@ -88,12 +105,32 @@ def ablation_rows(route_table: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=["model", "condition", *TABLE_COLUMNS])
 
 
+def ablation_intervals(route_table: pd.DataFrame, seed: int = SEED) -> pd.DataFrame:
+    """Pair-level bootstrap intervals of :func:`ablation_rows` (one variant's route rows):
+    ``CUS`` as the family table's ``Overall`` (stratified, macro-average), the other columns
+    pooled over the group's pairs (:mod:`lantern_jax.scoring.uncertainty`).
+
+    Returns:
+        ``model, condition`` then ``<c>_lo, <c>_hi, <c>_n`` for every :data:`TABLE_COLUMNS`.
+    """
+    res = table_resampling(route_table, seed=seed)
+    fam = family_intervals(route_table, res)
+    fam = fam[fam["condition"].isin(set(route_table["condition"]))]
+    names = dict(zip(interval_columns(OVERALL), interval_columns("CUS"), strict=True))
+    cus = fam[[*GROUP_COLUMNS, *names]].rename(columns=names)
+    values = decomposition_pair_values(route_table)
+    values["Event Exp."] = 100.0 * (route_table["event_exposed"].to_numpy() == 1)
+    rest = pooled_intervals(values, res, TABLE_COLUMNS[1:], GROUP_COLUMNS)
+    return cus.merge(rest, on=list(GROUP_COLUMNS), how="left")
+
+
 def run_ablations(
     policy: str | Policy,
     suite: Suite | str = SUITE_ID,
     policy_params: Any = None,
     variants: Sequence[str] | None = None,
     progress: bool = True,
+    bootstrap_seed: int = SEED,
 ) -> AblationResult:
     """Evaluate ``policy`` under the full protocol and every variant; build the table.
 
@@ -103,6 +140,7 @@ def run_ablations(
         policy_params: the policy's parameters (default: its ``init``).
         variants: ablation names to run (default: all of :data:`VARIANTS`, in that order).
         progress: show progress bars.
+        bootstrap_seed: seed of the intervals' bootstrap (recorded in the manifest).
 
     Raises:
         ValueError: for an unknown variant (listing the valid ones).
@@ -113,14 +151,20 @@ def run_ablations(
     if unknown:
         raise ValueError(f"unknown ablation(s) {unknown}; valid: {', '.join(known)}")
     s = load_suite(suite) if isinstance(suite, str) else suite
-    results, tables, routes = {}, [], []
+    results, tables, routes, intervals = {}, [], [], []
     for v in names:
-        r = evaluate([policy], [policy_params], suite=s, ablation=v, progress=progress)
+        r = evaluate(
+            [policy], [policy_params], suite=s, ablation=v, progress=progress,
+            bootstrap_seed=bootstrap_seed,
+        )  # fmt: skip
         results[v] = r
         t = ablation_rows(r.route_table)
         t.insert(2, "variant", v)
         t.insert(3, "label", known[v])
         tables.append(t)
+        iv = ablation_intervals(r.route_table, bootstrap_seed)
+        iv.insert(2, "variant", v)
+        intervals.append(iv)
         rt = r.route_table.copy()
         rt["condition"] = [variant_condition(c, v) for c in rt["condition"]]
         routes.append(rt)
@@ -130,11 +174,13 @@ def run_ablations(
         num_pairs=len(s.pairs), conditions=list(CONDITIONS), dt_s=DT,
         variants=[dict(name=v, label=known[v], policies=results[v].manifest["policies"])
                   for v in names],
-        policy_init_seed=first["policy_init_seed"], packages=package_versions(),
+        policy_init_seed=first["policy_init_seed"], intervals=settings(bootstrap_seed),
+        packages=package_versions(),
     )  # fmt: skip
     return AblationResult(
         table=pd.concat(tables, ignore_index=True),
         route_table=pd.concat(routes, ignore_index=True),
         manifest=manifest,
         results=results,
+        intervals=pd.concat(intervals, ignore_index=True),
     )

@@ -4,6 +4,7 @@
 
     lantern-jax evaluate                 # built-in suite, reference policies expert, ego, coop
     lantern-jax evaluate --policy coop --ablation late_onset --pairs-per-family 2 --out runs/x
+    lantern-jax evaluate --fresh-suites 2 --seed 424242 --out runs/suites   # 3 suites, spread
     lantern-jax suite --list             # pairs, suite hash, generation report
     lantern-jax suite --verify           # regenerate lantern-v3 from its seed, compare hashes
     lantern-jax suite --regenerate suite.json
@@ -17,6 +18,7 @@
     lantern-jax diagnostics language --policy coop        # does the policy read the words?
     lantern-jax ablations --list         # the protocol ablations
     lantern-jax ablations --policy coop  # the paper's ablation table for one policy
+    lantern-jax compare results --policy coop --policy expert   # paired difference, p-values
 
 Options may also come from an experiment file (``--config``, TOML, one ``[evaluate]`` table; see
 :func:`load_config`); an option given on the command line always wins over the file.  Options
@@ -42,6 +44,7 @@ import time
 from collections.abc import Sequence
 
 from lantern_jax.commands import CommandError
+from lantern_jax.commands import compare as compare_command
 from lantern_jax.commands import dataset as dataset_command
 from lantern_jax.commands import stress as stress_command
 from lantern_jax.commands import train as train_command
@@ -426,13 +429,7 @@ def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
     bd.before_creation("start-up (Python, lantern_jax command line)")
     with bd.phase("imports (JAX, evaluator, tables)"):
         from lantern_jax.evaluate import PolicyError, ablation_names, evaluate
-        from lantern_jax.report import (
-            format_decomposition,
-            format_family_table,
-            format_premise_table,
-            ordered_tables,
-            write_outputs,
-        )
+        from lantern_jax.report import format_tables, write_outputs
     _apply_config(args)
     if args.policy is not None and not any(n.strip() for v in args.policy for n in v.split(",")):
         raise UsageError("--policy: no policy name given (leave the option out for 'all')")
@@ -451,6 +448,23 @@ def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
     _stage(args, f"loading suite {args.suite}")
     with bd.phase("suite load and validation"):
         suite = _load_suite(args)
+    # the bootstrap's seed only when given (evaluate's default is the project's fixed seed)
+    boot = {} if args.bootstrap_seed is None else {"bootstrap_seed": args.bootstrap_seed}
+    if args.seed is not None and args.fresh_suites is None:
+        raise UsageError("--seed is the fresh suites' generation seed; give --fresh-suites K too")
+    if args.fresh_suites is not None:
+        from lantern_jax.commands.fresh_suites import run_fresh_suites
+
+        kwargs = dict(
+            ablation=args.ablation,
+            one_program=not getattr(args, "program_per_policy", False),
+            **boot,
+        )
+        try:
+            return run_fresh_suites(args, argv, policies, suite, lambda m: _stage(args, m), kwargs)
+        except PolicyError as e:
+            print(f"lantern-jax evaluate: error: {e}", file=sys.stderr)
+            return 1
     _stage(
         args,
         f"suite {suite.suite_id}: {len(suite)} pairs (hash {suite.suite_sha256[:12]}); "
@@ -461,7 +475,7 @@ def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
     try:
         result = evaluate(
             policies, suite=suite, ablation=args.ablation, progress=not args.quiet,
-            one_program=not getattr(args, "program_per_policy", False),
+            one_program=not getattr(args, "program_per_policy", False), **boot,
         )  # fmt: skip
     except PolicyError as e:
         print(f"lantern-jax evaluate: error: {e}", file=sys.stderr)
@@ -487,20 +501,7 @@ def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
         print(f"lantern-jax: error: cannot write results to {args.out}: {e}", file=sys.stderr)
         return 1
     t_print = time.perf_counter()
-    m = result.manifest
-    fam, dec = ordered_tables(result)
-    print(
-        f"Per-family CUS  (suite {m['suite_id']}, {m['num_pairs']} pairs, "
-        f"ablation {m['ablation']}; warning gain = warning - no-warning)"
-    )
-    print(format_family_table(fam))
-    print()
-    print("CUS decomposition  (components: mean x 100; Gate Pass and gate failures: % of pairs)")
-    print(format_decomposition(dec))
-    print()
-    print("The premise: hazard hidden from the front camera (% of Route A executions, all "
-          "models and conditions)")  # fmt: skip
-    print(format_premise_table(result.premise))
+    print(format_tables(result))
     print()
     print(f"Wrote {len(files)} files:")
     for path in files.values():
@@ -529,6 +530,7 @@ def _evaluate_breakdown(bd, result, seconds: float) -> None:
         for label, value in run.timings.items():
             bd.add(label, value, indent=1)
     bd.add("tables (family, decomposition, premise)", result.seconds.get("tables", 0.0))
+    bd.add("intervals (pair-level bootstrap)", result.seconds.get("intervals", 0.0))
     accounted = sum(p.seconds for p in bd.phases[start:] if p.indent == 0)
     bd.add("rest of the evaluation (checks, progress)", max(0.0, seconds - accounted))
 
@@ -663,7 +665,7 @@ def cmd_ablations(args: argparse.Namespace, argv: Sequence[str]) -> int:
     suite = _load_suite(args)
     from lantern_jax.ablations import VARIANTS, run_ablations
     from lantern_jax.evaluate import PolicyError
-    from lantern_jax.report import format_ablation_table, write_ablation_outputs
+    from lantern_jax.report import format_ablation_table, interval_note, write_ablation_outputs
 
     _stage(
         args,
@@ -687,7 +689,8 @@ def cmd_ablations(args: argparse.Namespace, argv: Sequence[str]) -> int:
         f"Ablations  (suite {m['suite_id']}, {m['num_pairs']} pairs, policy {policies[0]}, "
         "warning condition; all entries 0-100)"
     )
-    print(format_ablation_table(result.table))
+    print(format_ablation_table(result.table, intervals=result.intervals))
+    print(interval_note(m.get("intervals")))
     print()
     print(f"Wrote {len(files)} files:")
     for path in files.values():
@@ -715,9 +718,10 @@ def _print_and_write(args: argparse.Namespace, tables: dict, note: str) -> int:
 
     from lantern_jax.diagnostics import write_tables
 
-    for title, df in tables.values():
+    for title, df, *display in tables.values():
         print(title)
-        print(tabulate(df, headers="keys", showindex=False, floatfmt=".1f"))
+        print(tabulate(display[0] if display else df, headers="keys", showindex=False,
+                       floatfmt=".1f", disable_numparse=bool(display)))  # fmt: skip
         print()
     if note:
         print(note)
@@ -740,7 +744,8 @@ def cmd_wording(args: argparse.Namespace, argv: Sequence[str]) -> int:
     suite = _load_suite(args)
     _stage(args, f"{policy} on {suite.suite_id} ({len(suite)} pairs): canonical and tiered "
                  "paraphrase warnings")  # fmt: skip
-    from lantern_jax.diagnostics import wording_table
+    from lantern_jax.diagnostics import WORDING_COLUMNS, wording_table
+    from lantern_jax.report import interval_display, interval_note
 
     table = wording_table(policy, suite)
     title = (
@@ -748,9 +753,12 @@ def cmd_wording(args: argparse.Namespace, argv: Sequence[str]) -> int:
         "retention = paraphrase / matched canonical CUS)"
     )
     note = (
-        "Matched no-warning = the same pairs without any warning (what ignoring the text scores)."
+        "Matched no-warning = the same pairs without any warning (what ignoring the text scores). "
+        + interval_note(over="each row's route pairs; retention paired")
+        + "."
     )
-    return _print_and_write(args, {"wording": (title, table)}, note)
+    display = interval_display(table, WORDING_COLUMNS, "n")
+    return _print_and_write(args, {"wording": (title, table, display)}, note)
 
 
 #: Options of ``diagnostics`` that only the distance diagnostic reads.
@@ -801,7 +809,8 @@ def cmd_diagnostics(args: argparse.Namespace, argv: Sequence[str]) -> int:
         )
         note = (
             "dv_max: largest additional speed reduction vs no warning; Stop: longest standstill; "
-            "non-actionable = dv_max < 2 m/s, no stop >= 1 s, RC drop <= 5 points."
+            "non-actionable = dv_max < 2 m/s, no stop >= 1 s, RC drop <= 5 points. Each row is "
+            "one execution on one road (n = 1): there is no sample to give an interval."
         )
         return _print_and_write(args, {"nonactionable": (title, table)}, note)
     args.suite = args.suite or SUITE_ID
@@ -837,7 +846,18 @@ def cmd_diagnostics(args: argparse.Namespace, argv: Sequence[str]) -> int:
             closed_loop,
         ),
     }
-    return _print_and_write(args, tables, "Retention = far / no-warning predicted progress.")
+    from lantern_jax.report import interval_display, interval_note
+
+    summary = dg.distance_summary(open_loop)
+    tables["distance_summary"] = (
+        f"Over the {len(open_loop)} routes: mean predicted progress (m) and retention",
+        summary,
+        interval_display(summary, dg.DISTANCE_COLUMNS, "Routes"),
+    )
+    note = (
+        f"Retention = far / no-warning predicted progress. Summary: {interval_note(over='routes')}."
+    )
+    return _print_and_write(args, tables, note)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -898,6 +918,27 @@ def build_parser() -> argparse.ArgumentParser:
         "as a whole, other entries of the folder are kept",
     )
     ev.add_argument("--quiet", action="store_true", help="no progress bar or stage lines")
+    ev.add_argument(
+        "--bootstrap-seed",
+        type=int,
+        metavar="N",
+        help="seed of the pair-level bootstrap behind every interval (default: the project's "
+        "fixed seed, lantern_jax.scoring.uncertainty.SEED); recorded in the manifest",
+    )
+    ev.add_argument(
+        "--fresh-suites",
+        type=int,
+        metavar="K",
+        help="also generate K fresh suites (the --suite's design and validator, seeds S .. "
+        "S + K - 1 from --seed), evaluate --suite and each of them, and report every suite's "
+        "tables and the mean and spread across suites (OUT/across_suites.md)",
+    )
+    ev.add_argument(
+        "--seed",
+        type=int,
+        metavar="S",
+        help="generation seed of the first fresh suite (with --fresh-suites)",
+    )
     ev.add_argument(
         "--profile",
         action="store_true",
@@ -986,6 +1027,7 @@ def build_parser() -> argparse.ArgumentParser:
     ab.add_argument("--quiet", action="store_true", help="no progress bar or stage lines")
     ab.set_defaults(func=cmd_ablations)
     stress_command.add_parser(sub)
+    compare_command.add_parser(sub)
     dataset_command.add_parser(sub)
     train_command.add_parser(sub)
     _add_language_commands(sub)

@@ -66,6 +66,14 @@ from lantern_jax.scoring.thresholds import (
     NONACTIONABLE_MAX_STOP_S,
     STILL_SPEED_MPS,
 )
+from lantern_jax.scoring.uncertainty import (
+    SEED,
+    interval,
+    interval_columns,
+    pooled,
+    resampling,
+    sample_interval,
+)
 from lantern_jax.sim.rollout import rollout
 from lantern_jax.world import Scenario, tree_stack
 
@@ -92,6 +100,84 @@ def _policy(policy: Policy | str, policy_params: Any) -> tuple[Policy, Any]:
 # ---------------------------------------------------------------------------------------------
 # warning wording by ambiguity
 # ---------------------------------------------------------------------------------------------
+def _tier_groups(
+    canonical: pd.DataFrame, paraphrase: pd.DataFrame, tiers: np.ndarray, pair_ids: list[str]
+) -> list[tuple[str, list[str]]]:
+    """``(label, pair ids)`` of every tier and of all tiers, leaving out pairs whose CUS is
+    missing on either side (``canonical`` and ``paraphrase`` indexed by ``pair_id``)."""
+    groups = [(f"{t.capitalize()} ambiguity", tiers == k) for k, t in enumerate(TIERS)]
+    groups.append(("All tiers", np.ones(len(pair_ids), bool)))
+    out = []
+    for label, mask in groups:
+        ids = [i for i, m in zip(pair_ids, mask, strict=True) if m]
+        ok = [
+            i
+            for i in ids
+            if np.isfinite(canonical.at[i, "CUS"]) and np.isfinite(paraphrase.at[i, "CUS"])
+        ]
+        out.append((label, ok))
+    return out
+
+
+#: The wording table's value columns (each with an interval, :func:`wording_intervals`).
+WORDING_COLUMNS = (
+    "Paraphrase CUS",
+    "Matched canonical",
+    "Retention (%)",
+    "Coll. (%)",
+    "Matched no-warning",
+)
+
+
+def wording_intervals(
+    canonical: pd.DataFrame,
+    paraphrase: pd.DataFrame,
+    no_warning: pd.DataFrame,
+    tiers: np.ndarray,
+    pair_ids: list[str],
+    seed: int = SEED,
+) -> pd.DataFrame:
+    """Pair-level bootstrap intervals of the wording table (:func:`tier_rows` plus the matched
+    no-warning CUS), resampling each row's pairs (all of a row's values with the same draws,
+    so retention, the ratio of each replicate's two means, has a paired interval).  Not
+    stratified by family: a tier of a small suite holds one or two pairs of a family, which a
+    stratified draw could not vary.
+
+    Args:
+        canonical, paraphrase, no_warning: route-level rows (``pair_id``, ``CUS``,
+            ``gate_collision``) of the three runs.
+        tiers: (n,) int, tier index of every pair of ``pair_ids``.
+        pair_ids: (n,) pair ids in the order of ``tiers``.
+        seed: the bootstrap's seed.
+
+    Returns:
+        One row per tier and one for all tiers: ``<c>_lo, <c>_hi`` for every
+        :data:`WORDING_COLUMNS` (the rows of :func:`tier_rows`, in order).
+    """
+    c, p = canonical.set_index("pair_id"), paraphrase.set_index("pair_id")
+    nw = no_warning.set_index("pair_id")
+    rows = []
+    for _, ok in _tier_groups(c, p, tiers, pair_ids):
+        row = {}
+        if ok:
+            values = np.column_stack([
+                p.loc[ok, "CUS"], c.loc[ok, "CUS"],
+                100.0 * (p.loc[ok, "gate_collision"].to_numpy() == 0), nw.loc[ok, "CUS"],
+            ])  # fmt: skip
+            res = resampling(ok, ["all"] * len(ok), seed=seed)
+            reps = pooled(res, values)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                ret = np.where(reps[:, 1] > 0, 100.0 * reps[:, 0] / reps[:, 1], np.nan)
+            lo, hi = interval(np.column_stack([reps[:, 0], reps[:, 1], ret, reps[:, 2:]]))
+        else:
+            lo = hi = np.full(len(WORDING_COLUMNS), np.nan)
+        for k, col in enumerate(WORDING_COLUMNS):
+            names = interval_columns(col)
+            row[names[0]], row[names[1]] = float(lo[k]), float(hi[k])
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
 def tier_rows(
     canonical: pd.DataFrame,
     paraphrase: pd.DataFrame,
@@ -116,11 +202,7 @@ def tier_rows(
     c = canonical.set_index("pair_id")
     p = paraphrase.set_index("pair_id")
     rows = []
-    groups = [(f"{t.capitalize()} ambiguity", tiers == k) for k, t in enumerate(TIERS)]
-    groups.append(("All tiers", np.ones(len(pair_ids), bool)))
-    for label, mask in groups:
-        ids = [i for i, m in zip(pair_ids, mask, strict=True) if m]
-        ok = [i for i in ids if np.isfinite(c.at[i, "CUS"]) and np.isfinite(p.at[i, "CUS"])]
+    for label, ok in _tier_groups(c, p, tiers, pair_ids):
         para = float(p.loc[ok, "CUS"].mean()) if ok else np.nan
         canon = float(c.loc[ok, "CUS"].mean()) if ok else np.nan
         coll = 100.0 * float((p.loc[ok, "gate_collision"] == 0).mean()) if ok else np.nan
@@ -138,13 +220,17 @@ def tier_rows(
 
 
 def wording_table(
-    policy: Policy | str, suite: Suite | str = SUITE_ID, policy_params: Any = None
+    policy: Policy | str,
+    suite: Suite | str = SUITE_ID,
+    policy_params: Any = None,
+    bootstrap_seed: int = SEED,
 ) -> pd.DataFrame:
     """Warning wording by ambiguity for one policy on a suite (paper appendix table).
 
     Runs the suite twice (canonical templates; tiered held-out paraphrases), both in the
     warning condition of Route A, and adds each tier's matched no-warning CUS, which shows what
-    a policy that ignores a text would score on those pairs.
+    a policy that ignores a text would score on those pairs, and every value's pair-level
+    bootstrap interval (:func:`wording_intervals`: ``<c>_lo``, ``<c>_hi`` columns).
     """
     s = load_suite(suite) if isinstance(suite, str) else suite
     pol, params = _policy(policy, policy_params)
@@ -158,13 +244,14 @@ def wording_table(
     pair_ids = [p.pair_id for p in s.pairs]
     canon, para = (r[r["condition"] == "warning"] for r in runs.values())
     table = tier_rows(canon, para, tiers, pair_ids)
-    none = runs["none"]
-    none = none[none["condition"] == "no-warning"].set_index("pair_id")["CUS"]
+    none_rows = runs["none"][runs["none"]["condition"] == "no-warning"]
+    none = none_rows.set_index("pair_id")["CUS"]
     groups = [tiers == k for k in range(len(TIERS))] + [np.ones(len(pair_ids), bool)]
     table["Matched no-warning"] = [
         float(none.loc[[i for i, m in zip(pair_ids, g, strict=True) if m]].mean()) for g in groups
     ]
-    return table
+    intervals = wording_intervals(canon, para, none_rows, tiers, pair_ids, bootstrap_seed)
+    return pd.concat([table, intervals], axis=1)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -387,6 +474,28 @@ def distance_table(
     return pd.DataFrame(opened), pd.DataFrame(closed)
 
 
+#: The distance diagnostic's open-loop columns summarised over routes.
+DISTANCE_COLUMNS = ("no-warning", "near", "far", "Retention (%)")
+
+
+def distance_summary(open_loop: pd.DataFrame, seed: int = SEED) -> pd.DataFrame:
+    """The open-loop distance table over its routes: the mean of every column with its
+    bootstrap interval over the routes (the routes are the sample; few routes give a flagged,
+    unreliable interval).
+
+    Returns:
+        One row: ``Routes`` (n), then ``<c>, <c>_lo, <c>_hi`` for every
+        :data:`DISTANCE_COLUMNS`.
+    """
+    values = open_loop[list(DISTANCE_COLUMNS)].to_numpy(np.float64)
+    lo, hi, _ = sample_interval(values, seed=seed)
+    row: dict[str, Any] = {"Routes": len(open_loop)}
+    for k, c in enumerate(DISTANCE_COLUMNS):
+        names = interval_columns(c)
+        row.update({c: float(np.nanmean(values[:, k])), names[0]: lo[k], names[1]: hi[k]})
+    return pd.DataFrame([row])
+
+
 # ---------------------------------------------------------------------------------------------
 # language sensitivity
 # ---------------------------------------------------------------------------------------------
@@ -451,12 +560,13 @@ def language_table(
 # ---------------------------------------------------------------------------------------------
 # files
 # ---------------------------------------------------------------------------------------------
-def write_tables(tables: dict[str, tuple[str, pd.DataFrame]], out_dir: str | os.PathLike) -> list:
+def write_tables(tables: dict[str, tuple], out_dir: str | os.PathLike) -> list:
     """Write ``name.csv`` and ``name.md`` for every table as one set (other files of
     ``out_dir`` are kept; :class:`lantern_jax.files.StagedFolder`).
 
     Args:
-        tables: file stem -> (title, table).
+        tables: file stem -> (title, table) or (title, table, display): the CSV holds the
+            table, the Markdown the display (cells with intervals) when there is one.
         out_dir: output folder (created if needed).
 
     Returns:
@@ -464,9 +574,9 @@ def write_tables(tables: dict[str, tuple[str, pd.DataFrame]], out_dir: str | os.
     """
     names = [f"{stem}{ext}" for stem in tables for ext in (".csv", ".md")]
     with StagedFolder(out_dir, names) as stage:
-        for stem, (title, df) in tables.items():
+        for stem, (title, df, *display) in tables.items():
             (stage.path / f"{stem}.csv").write_text(df.to_csv(index=False, float_format="%.4g"))
-            md = df.to_markdown(index=False, floatfmt=".1f")
+            md = (display[0] if display else df).to_markdown(index=False, floatfmt=".1f")
             (stage.path / f"{stem}.md").write_text(f"# {title}\n\n{md}\n")
         stage.commit()
     return [os.path.join(out_dir, n) for n in names]

@@ -37,6 +37,7 @@ from lantern_jax.scenarios.warnings import paraphrase_text_ids
 from lantern_jax.scoring.aggregate import decomposition_table, family_scores
 from lantern_jax.scoring.metrics import finalize
 from lantern_jax.scoring.table import build_route_table
+from lantern_jax.scoring.uncertainty import SEED, TableIntervals, table_intervals
 from lantern_jax.sim.distributed import placement
 from lantern_jax.sim.observe import observe
 from lantern_jax.sim.rollout import rollout_scheduled_parallel, with_carry
@@ -526,7 +527,11 @@ class EvalResult:
     manifest: dict
     runs: list[PolicyRun]
     premise: pd.DataFrame  # % of Route A executions with the hazard unseen (:func:`premise_table`)
-    #: wall seconds of the shared phases: "world build" and "tables" (per policy: ``runs``)
+    #: pair-level bootstrap intervals (``uncertainty.CONFIDENCE``) and counts of the three tables
+    #: (:func:`lantern_jax.scoring.uncertainty.table_intervals`)
+    intervals: TableIntervals | None = None
+    #: wall seconds of the shared phases: "world build", "tables" and "intervals" (per policy:
+    #: ``runs``)
     seconds: dict[str, float] = dataclasses.field(default_factory=dict)
 
 
@@ -610,8 +615,11 @@ def _run_all(
     return runs
 
 
-def _manifest(s: Suite, ablation: str, execs: Executions, runs: list[PolicyRun]) -> dict:
-    """The reproducibility manifest of an evaluation."""
+def _manifest(
+    s: Suite, ablation: str, execs: Executions, runs: list[PolicyRun], intervals: dict
+) -> dict:
+    """The reproducibility manifest of an evaluation (``intervals``: the bootstrap's settings,
+    :func:`lantern_jax.scoring.uncertainty.settings`)."""
     return dict(
         suite_id=s.suite_id,
         suite_sha256=s.suite_sha256,
@@ -632,6 +640,7 @@ def _manifest(s: Suite, ablation: str, execs: Executions, runs: list[PolicyRun])
             for r in runs
         ],
         policy_init_seed=0,
+        intervals=intervals,
         devices=jax.device_count(),  # every process's devices (the global mesh)
         processes=jax.process_count(),
         packages=package_versions(),
@@ -645,6 +654,7 @@ def evaluate(
     ablation: str = "none",
     progress: bool = True,
     one_program: bool = True,
+    bootstrap_seed: int = SEED,
 ) -> EvalResult:
     """Evaluate policies on a suite: one jitted, vmapped rollout call per policy, then score.
 
@@ -657,10 +667,12 @@ def evaluate(
         one_program: run policies with different ``act`` functions in one compiled program
             (:func:`shared_program`: the simulator is compiled once, not once per policy);
             ``False`` compiles each policy's own program (results equal to float32 rounding).
+        bootstrap_seed: seed of the pair-level bootstrap of the tables' intervals (recorded in
+            the manifest).
 
     Returns:
         :class:`EvalResult` with the route-level table, the family table (with paired warning
-        gains), the decomposition table and the reproducibility manifest.
+        gains), the decomposition table, their intervals and the reproducibility manifest.
 
     Raises:
         ValueError: for no policies, a policy given twice (rows are keyed by policy name), or
@@ -679,13 +691,20 @@ def evaluate(
     runs = _run_all(pols, list(policy_params), execs, s.suite_id, progress, one_program)
     t0 = time.perf_counter()
     route = pd.concat([r.route_table for r in runs], ignore_index=True)
-    result = EvalResult(
-        route_table=route,
+    tables = dict(
         family_table=family_table(route),
         decomposition=decomposition_table(route).reset_index(),
-        manifest=_manifest(s, ablation, execs, runs),
-        runs=runs,
         premise=premise_table(route),
     )
-    result.seconds = {"world build": t_build, "tables": time.perf_counter() - t0}
+    t1 = time.perf_counter()
+    intervals = table_intervals(route, PREMISE_ROWS, seed=bootstrap_seed)
+    t2 = time.perf_counter()
+    result = EvalResult(
+        route_table=route,
+        manifest=_manifest(s, ablation, execs, runs, intervals.settings),
+        runs=runs,
+        intervals=intervals,
+        **tables,
+    )
+    result.seconds = {"world build": t_build, "tables": t1 - t0, "intervals": t2 - t1}
     return result

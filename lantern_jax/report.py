@@ -31,6 +31,7 @@ import hashlib
 import json
 import math
 import os
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -38,10 +39,11 @@ import numpy as np
 import pandas as pd
 from tabulate import tabulate
 
-from lantern_jax.constants import FAMILIES
 from lantern_jax.files import StagedFolder, atomic_write, check_target_folder
+from lantern_jax.scoring import uncertainty
 from lantern_jax.scoring.aggregate import DECOMPOSITION_COLUMNS
 from lantern_jax.scoring.table import schema_path_for, write_route_table
+from lantern_jax.scoring.uncertainty import CONFIDENCE, MIN_N, interval_columns
 
 if TYPE_CHECKING:
     from lantern_jax.ablations import AblationResult
@@ -71,8 +73,9 @@ OUTPUT_FILES = (
     MANIFEST_JSON,
 )
 
-FAMILY_COLUMNS = (*FAMILIES, "Overall")
-GAIN_CONDITION = "warning gain"
+FAMILY_COLUMNS = uncertainty.FAMILY_COLUMNS
+GAIN_CONDITION = uncertainty.GAIN
+FLAG = "*"  # marks a cell averaging fewer than uncertainty.MIN_N pairs
 CONDITION_ORDER = ("warning", "no-warning", GAIN_CONDITION)
 CSV_FLOAT_FORMAT = "%.6f"
 MISSING = "-"
@@ -129,82 +132,200 @@ def _label(model: str, condition: str) -> str:
     return f"{model} ({condition})"
 
 
-def format_family_table(df: pd.DataFrame, tablefmt: str = "simple") -> str:
+def format_interval(
+    value: Any, lo: Any, hi: Any, n: Any = None, signed: bool = False, style: str = "ci"
+) -> str:
+    """One estimate with its interval, as the tables print it.
+
+    Args:
+        value: the point estimate (NaN / None: :data:`MISSING`).
+        lo, hi: its interval (NaN: the estimate alone).
+        n: the pairs behind it; fewer than ``uncertainty.MIN_N`` appends :data:`FLAG`.
+        signed: print signs (differences).
+        style: ``"ci"`` for ``79.6 [76.1, 82.9]``, ``"pm"`` for ``79.6 ±3.4`` (half the
+            interval's width).
+
+    Returns:
+        The cell text.
+    """
+    text = _fmt(value, signed)
+    if text == MISSING:
+        return text
+    if lo is not None and hi is not None and math.isfinite(lo) and math.isfinite(hi):
+        if style == "pm":
+            text += f" ±{_fmt(0.5 * (float(hi) - float(lo)))}"
+        else:
+            text += f" [{_fmt(lo, signed)}, {_fmt(hi, signed)}]"
+    if n is not None and int(n) < MIN_N:
+        text += FLAG
+    return text
+
+
+PAIRS_STRATIFIED = "route pairs, stratified by family; differences paired"
+
+
+def interval_note(settings: dict | None = None, over: str = PAIRS_STRATIFIED) -> str:
+    """The legend of the interval cells.
+
+    Args:
+        settings: a manifest's ``intervals`` entry (resamples and seed are then named).
+        over: what is resampled.
+    """
+    st = settings or {}
+    how = f"; {st['resamples']} resamples, seed {st['seed']}" if "seed" in st else ""
+    return (
+        f"[lo, hi] / ±: {CONFIDENCE:.0%} percentile bootstrap interval over {over}{how}; "
+        f"{FLAG} fewer than {MIN_N} (interval unreliable)"
+    )
+
+
+def _interval_rows(intervals: pd.DataFrame | None, keys: tuple[str, ...]) -> dict:
+    """Interval-table rows by key tuple (empty without intervals)."""
+    if intervals is None:
+        return {}
+    return {tuple(r[k] for k in keys): r for r in intervals.to_dict("records")}
+
+
+def _counts_header(columns, rows: list[dict]) -> list[str]:
+    """Column headers with ``n=`` when every row of a column averages the same pairs."""
+    out = []
+    for c in columns:
+        ns = {r.get(interval_columns(c)[2]) for r in rows}
+        out.append(f"{c} n={ns.pop()}" if len(ns) == 1 and None not in ns else c)
+    return out
+
+
+def _interval_cell(rec: dict, iv: dict | None, column: str, signed: bool, style: str,
+                   show_n: bool) -> str:  # fmt: skip
+    if iv is None:
+        return _fmt(rec[column], signed)
+    lo, hi, n = (iv.get(k) for k in interval_columns(column))
+    text = format_interval(rec[column], lo, hi, n, signed, style)
+    return f"{text} n={n}" if show_n and n is not None and text != MISSING else text
+
+
+def format_family_table(
+    df: pd.DataFrame, tablefmt: str = "simple", intervals: pd.DataFrame | None = None
+) -> str:
     """Per-family CUS table as text.
 
     Args:
         df: :attr:`EvalResult.family_table` (columns ``model, condition, PE, VC, OR, LWW, RWW,
             RTY, Overall``; CUS points 0..100).
         tablefmt: a tabulate format (``"simple"`` for the terminal, ``"github"`` for Markdown).
+        intervals: the family table's intervals (``EvalResult.intervals.family``); each cell
+            then reads ``79.6 [76.1, 82.9]`` and the headers carry the pairs per cell.
 
     Returns:
         One row per ``model (condition)``, one decimal; ``warning gain`` rows carry a sign;
-        ``-`` marks a family without pairs.
+        ``-`` marks a family without pairs; :data:`FLAG` a cell of fewer than ``MIN_N`` pairs.
     """
     df = _with_keys(df)
     missing = [c for c in FAMILY_COLUMNS if c not in df.columns]
     if missing:
         raise ValueError(f"family table: missing column(s) {missing}")
-    rows = []
+    ivs = _interval_rows(intervals, ("model", "condition"))
+    rows, used = [], []
     for r in df.itertuples(index=False):
         rec = dict(zip(df.columns, r, strict=True))
+        iv = ivs.get((rec["model"], rec["condition"])) if ivs else None
+        used.append(iv or {})
         signed = rec["condition"] == GAIN_CONDITION
         rows.append(
             [_label(rec["model"], rec["condition"])]
-            + [_fmt(rec[c], signed) for c in FAMILY_COLUMNS]
+            + [_interval_cell(rec, iv, c, signed, "ci", False) for c in FAMILY_COLUMNS]
         )
     return tabulate(
         rows,
-        headers=["Model (condition)", *FAMILY_COLUMNS],
+        headers=["Model (condition)", *(_counts_header(FAMILY_COLUMNS, used) if ivs else
+                                        FAMILY_COLUMNS)],
         tablefmt=tablefmt,
         disable_numparse=True,
         colalign=("left", *["right"] * len(FAMILY_COLUMNS)),
-    )
+    )  # fmt: skip
 
 
-def format_decomposition(df: pd.DataFrame, tablefmt: str = "simple") -> str:
+def format_decomposition(
+    df: pd.DataFrame, tablefmt: str = "simple", intervals: pd.DataFrame | None = None
+) -> str:
     """CUS decomposition table as text.
 
     Args:
         df: :attr:`EvalResult.decomposition` (``model, condition`` as columns or index, then
-            ``A-Prog. TTC Clear. Ant. Rec. B-Prog.`` (means x 100), ``Gate Pass`` (%) and the
-            failure rates ``Coll.-A RD-A LC-A Rule-A Block-A False Brake-B`` (%)).
+            ``A-Prog. TTC Clear. Ant. Rec. B-Prog.`` (means x 100), ``Gate Pass`` (%), the
+            failure rates ``Coll.-A RD-A LC-A Rule-A Block-A False Brake-B`` (%) and the Route
+            B efficiency ``B-Time/Exp.`` (% of the expert's time) and ``B-Slow (s)``).
         tablefmt: a tabulate format.
+        intervals: the decomposition's intervals (``EvalResult.intervals.decomposition``);
+            each cell then reads ``40.9 ±3.1`` (half the interval's width), with ``n=`` where
+            fewer pairs than the row's have the value, and a ``Pairs`` column is added.
 
     Returns:
         One row per ``model (condition)`` (warning first), one decimal; ``-`` marks a component
-        that no pair has.
+        that no pair has; :data:`FLAG` a cell of fewer than ``MIN_N`` pairs.
     """
     df = order_rows(df)
     missing = [c for c in DECOMPOSITION_COLUMNS if c not in df.columns]
     if missing:
         raise ValueError(f"decomposition table: missing column(s) {missing}")
-    rows = [
-        [_label(m, c)] + [_fmt(v) for v in vals]
-        for m, c, *vals in df[["model", "condition", *DECOMPOSITION_COLUMNS]].itertuples(
-            index=False
-        )
-    ]
+    keys = ("model", "condition")
+    records = df[[*keys, *DECOMPOSITION_COLUMNS]].to_dict("records")
+    labels = [_label(r["model"], r["condition"]) for r in records]
+    return _pm_table(records, labels, intervals, keys, DECOMPOSITION_COLUMNS,
+                     "Model (condition)", tablefmt)  # fmt: skip
+
+
+def _pm_table(
+    records: list[dict], labels: list[str], intervals: pd.DataFrame | None,
+    keys: tuple[str, ...], columns: Sequence[str], first: str, tablefmt: str,
+) -> str:  # fmt: skip
+    """A table of ``value ±half-width`` cells: one row per record, labelled; with intervals a
+    ``Pairs`` column (the row's pairs) and ``n=`` on cells that average fewer pairs."""
+    ivs = _interval_rows(intervals, keys)
+    rows = []
+    for rec, label in zip(records, labels, strict=True):
+        iv = ivs.get(tuple(rec[k] for k in keys)) if ivs else None
+        if iv is None:
+            rows.append([label] + [_fmt(rec[c]) for c in columns])
+            continue
+        pairs = max(int(iv[interval_columns(c)[2]]) for c in columns)
+        rows.append([label, str(pairs)] + [
+            _interval_cell(rec, iv, c, False, "pm", iv[interval_columns(c)[2]] != pairs)
+            for c in columns
+        ])  # fmt: skip
+    extra = ["Pairs"] if ivs else []
     return tabulate(
         rows,
-        headers=["Model (condition)", *DECOMPOSITION_COLUMNS],
+        headers=[first, *extra, *columns],
         tablefmt=tablefmt,
         disable_numparse=True,
-        colalign=("left", *["right"] * len(DECOMPOSITION_COLUMNS)),
+        colalign=("left", *["right"] * (len(extra) + len(columns))),
     )
 
 
-def format_premise_table(df: pd.DataFrame, tablefmt: str = "simple") -> str:
+def format_premise_table(
+    df: pd.DataFrame, tablefmt: str = "simple", intervals: pd.DataFrame | None = None
+) -> str:
     """The premise table (:func:`lantern_jax.evaluate.premise_table`) as text: one row per
-    measure (% with one decimal), then the execution counts."""
+    measure (% with one decimal; with ``intervals``, ``EvalResult.intervals.premise``, also
+    its interval), then the execution counts and, with intervals, the pairs resampled."""
+    ivs = _interval_rows(intervals, ("measure",))
     rows = []
     for rec in df.to_dict("records"):
-        is_count = rec["measure"] == "Route A executions"
+        if rec["measure"] == "Route A executions":
+            rows.append([rec["measure"]] + [
+                "-" if not math.isfinite(rec[c]) else f"{rec[c]:.0f}" for c in FAMILY_COLUMNS
+            ])  # fmt: skip
+            continue
+        iv = ivs.get((rec["measure"],)) if ivs else None
         rows.append([rec["measure"]] + [
-            "-" if not math.isfinite(rec[c]) else (f"{rec[c]:.0f}" if is_count else
-                                                   f"{rec[c]:.1f}")
+            "-" if not math.isfinite(rec[c]) else _interval_cell(rec, iv, c, False, "ci", False)
             for c in FAMILY_COLUMNS
         ])  # fmt: skip
+    if ivs:
+        first = next(iter(ivs.values()))
+        rows.append(["pairs (resampled)"] + [str(first[interval_columns(c)[2]])
+                                             for c in FAMILY_COLUMNS])  # fmt: skip
     return tabulate(
         rows,
         headers=["", *FAMILY_COLUMNS],
@@ -212,6 +333,85 @@ def format_premise_table(df: pd.DataFrame, tablefmt: str = "simple") -> str:
         disable_numparse=True,
         colalign=("left", *["right"] * len(FAMILY_COLUMNS)),
     )
+
+
+def interval_display(df: pd.DataFrame, columns: Sequence[str], n: str | int) -> pd.DataFrame:
+    """A table with intervals as its readers see it: each of ``columns`` as
+    ``59.3 [55.0, 63.1]`` (:data:`FLAG` below ``MIN_N``) and its ``_lo`` / ``_hi`` columns
+    dropped (the CSV keeps the numbers).
+
+    Args:
+        df: the table, with ``<c>_lo`` and ``<c>_hi`` for every column of ``columns``.
+        columns: the value columns.
+        n: the column holding each row's pair count, or one count for every row.
+    """
+    out = df.copy()
+    counts = out[n] if isinstance(n, str) else pd.Series(n, index=out.index)
+    for c in columns:
+        lo, hi = interval_columns(c)[:2]
+        out[c] = [
+            format_interval(v, a, b, k)
+            for v, a, b, k in zip(out[c], out[lo], out[hi], counts, strict=True)
+        ]
+    return out.drop(columns=[x for c in columns for x in interval_columns(c)[:2]])
+
+
+def with_interval_columns(
+    points: pd.DataFrame, intervals: pd.DataFrame | None, keys: Sequence[str],
+    columns: Sequence[str],
+) -> pd.DataFrame:  # fmt: skip
+    """A table's point estimates with each column's ``_lo, _hi, _n`` right after it (the
+    result files' layout); ``points`` unchanged without intervals.
+
+    Args:
+        points: the table (``keys`` and ``columns``).
+        intervals: its interval table (``keys`` and ``<c>_lo, <c>_hi, <c>_n``), or None.
+        keys: the row keys shared by both.
+        columns: the value columns, in order.
+
+    Raises:
+        ValueError: when a row of ``points`` has no interval row.
+    """
+    if intervals is None:
+        return points
+    keys = list(keys)
+    merged = points.merge(intervals, on=keys, how="left", validate="one_to_one")
+    lacking = merged[merged[interval_columns(columns[0])[0]].isna()
+                     & merged[interval_columns(columns[0])[2]].isna()]  # fmt: skip
+    if len(lacking):
+        raise ValueError(f"intervals: no row for {lacking[keys].to_dict('records')}")
+    order = [k for k in points.columns if k not in columns]
+    for c in columns:
+        order += [c, *interval_columns(c)]
+    out = merged[order]
+    for c in columns:
+        out = out.astype({interval_columns(c)[2]: "int64"})
+    return out
+
+
+def format_tables(result: EvalResult) -> str:
+    """The main command's three tables of an evaluation, with their intervals and legend: the
+    per-family CUS, the decomposition (Route B efficiency beside it) and the premise."""
+    m = result.manifest
+    fam, dec = ordered_tables(result)
+    iv = result.intervals
+    parts = [
+        f"Per-family CUS  (suite {m['suite_id']}, {m['num_pairs']} pairs, "
+        f"ablation {m['ablation']}; warning gain = warning - no-warning)",
+        format_family_table(fam, intervals=iv.family if iv else None),
+        "",
+        "CUS decomposition  (components: mean x 100; Gate Pass and gate failures: % of pairs; "
+        "Route B efficiency beside the CUS: B-Time/Exp. % of the expert's time, B-Slow s "
+        "below half the reference speed unjustified)",
+        format_decomposition(dec, intervals=iv.decomposition if iv else None),
+        "",
+        "The premise: hazard hidden from the front camera (% of Route A executions, all "
+        "models and conditions)",
+        format_premise_table(result.premise, intervals=iv.premise if iv else None),
+    ]
+    if iv is not None:
+        parts.append(interval_note(m.get("intervals")))
+    return "\n".join(parts)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -324,13 +524,25 @@ def _write_set(result: EvalResult, out: Path, extra_manifest: dict | None,
     written = [route, schema_path_for(route)]
 
     fam, dec = ordered_tables(result)
-    for name, df in ((FAMILY_CSV, fam), (DECOMPOSITION_CSV, dec)):
-        written.append(atomic_write(out / name, _csv_bytes(df)))
+    iv = result.intervals
+    keys = ("model", "condition")
+    fam_iv, dec_iv = (iv.family, iv.decomposition) if iv is not None else (None, None)
+    for name, df, ivs, cols in (
+        (FAMILY_CSV, fam, fam_iv, FAMILY_COLUMNS),
+        (DECOMPOSITION_CSV, dec, dec_iv, DECOMPOSITION_COLUMNS),
+    ):
+        table = with_interval_columns(df, ivs, keys, cols)
+        written.append(atomic_write(out / name, _csv_bytes(table)))
 
     m = result.manifest
     where = (
         f"Suite `{m.get('suite_id', '?')}` ({m.get('num_pairs', '?')} pairs), "
         f"ablation `{m.get('ablation', 'none')}`."
+    )
+    legend = (
+        f" {interval_note(m.get('intervals'))}; the CSV has each column's `_lo`, `_hi` and `_n`."
+        if iv is not None
+        else ""
     )
     written.append(
         atomic_write(
@@ -338,8 +550,8 @@ def _write_set(result: EvalResult, out: Path, extra_manifest: dict | None,
             _markdown(
                 "Per-family CUS",
                 f"{where} Mean CUS (0-100) per family; Overall is the macro-average over "
-                "families. `warning gain` = warning - no-warning.",
-                format_family_table(fam, tablefmt="github"),
+                f"families. `warning gain` = warning - no-warning.{legend}",
+                format_family_table(fam, tablefmt="github", intervals=fam_iv),
             ),
         )
     )
@@ -349,8 +561,11 @@ def _write_set(result: EvalResult, out: Path, extra_manifest: dict | None,
             _markdown(
                 "CUS decomposition",
                 f"{where} Components are means x 100 over available pairs; Gate Pass and the "
-                "gate columns (-A: Route A, -B: Route B) are percentages of pairs.",
-                format_decomposition(dec, tablefmt="github"),
+                "gate columns (-A: Route A, -B: Route B) are percentages of pairs; B-Time/Exp. "
+                "(Route B time to completion, % of the expert's on the same pair) and B-Slow "
+                "(s below half the reference speed with nothing justifying it) measure Route "
+                f"B efficiency beside the CUS, not in it.{legend}",
+                format_decomposition(dec, tablefmt="github", intervals=dec_iv),
             ),
         )
     )
@@ -415,7 +630,10 @@ ABLATION_FILES = (
 
 
 def format_ablation_table(
-    df: pd.DataFrame, condition: str = "warning", tablefmt: str = "simple"
+    df: pd.DataFrame,
+    condition: str = "warning",
+    tablefmt: str = "simple",
+    intervals: pd.DataFrame | None = None,
 ) -> str:
     """The ablation table (one row per model and variant) of one condition as text.
 
@@ -423,23 +641,18 @@ def format_ablation_table(
         df: :attr:`lantern_jax.ablations.AblationResult.table`.
         condition: the condition to show (the paper's table is the warning condition).
         tablefmt: a tabulate format.
+        intervals: :attr:`~lantern_jax.ablations.AblationResult.intervals`; each cell then
+            reads ``79.6 ±3.4`` (half the interval's width), :data:`FLAG` below ``MIN_N`` pairs,
+            and a ``Pairs`` column is added.
     """
     from lantern_jax.ablations import TABLE_COLUMNS
 
     sub = df[df["condition"] == condition]
     multi = sub["model"].nunique() > 1
-    rows = [
-        [f"{r['label']} ({r['model']})" if multi else r["label"]]
-        + [_fmt(r[c]) for c in TABLE_COLUMNS]
-        for _, r in sub.iterrows()
-    ]
-    return tabulate(
-        rows,
-        headers=["Variant", *TABLE_COLUMNS],
-        tablefmt=tablefmt,
-        disable_numparse=True,
-        colalign=("left", *["right"] * len(TABLE_COLUMNS)),
-    )
+    records = sub.to_dict("records")
+    labels = [f"{r['label']} ({r['model']})" if multi else r["label"] for r in records]
+    keys = ("model", "condition", "variant")
+    return _pm_table(records, labels, intervals, keys, TABLE_COLUMNS, "Variant", tablefmt)
 
 
 def write_ablation_outputs(
@@ -459,15 +672,26 @@ def write_ablation_outputs(
         out = stage.path
         route = write_route_table(result.route_table, out / ABLATION_ROUTE_CSV)
         written = [route, schema_path_for(route)]
-        written.append(atomic_write(out / ABLATION_CSV, _csv_bytes(result.table)))
+        from lantern_jax.ablations import TABLE_COLUMNS
+
+        keys = ("model", "condition", "variant")
+        table = with_interval_columns(result.table, result.intervals, keys, TABLE_COLUMNS)
+        written.append(atomic_write(out / ABLATION_CSV, _csv_bytes(table)))
         m = result.manifest
+        legend = (
+            f" {interval_note(m.get('intervals'))}; the CSV has each column's `_lo`, `_hi` and "
+            "`_n`."
+            if result.intervals is not None
+            else ""
+        )
         note = (
             f"Suite `{m.get('suite_id', '?')}` ({m.get('num_pairs', '?')} pairs), warning "
             "condition. CUS: Overall (macro-average over families); A-Prog., Ant., Rec.: means "
             "x 100; Event Exp.: % of Route A executions whose event began; Coll.-A, Block-A: % "
-            "of pairs failing the gate."
+            f"of pairs failing the gate.{legend}"
         )
-        md = _markdown("Ablations", note, format_ablation_table(result.table, tablefmt="github"))
+        text = format_ablation_table(result.table, tablefmt="github", intervals=result.intervals)
+        md = _markdown("Ablations", note, text)
         written.append(atomic_write(out / ABLATION_MD, md))
         manifest = dict(m)
         manifest.update(extra_manifest or {})

@@ -21,7 +21,7 @@ FIELDS = (
 )  # fmt: skip
 BOOL_FIELDS = (
     "outside_lanes", "red_light_violation", "collision", "hazard_present", "justified_stop",
-    "fb_window", "controller_fault", "is_route_a", "coincident_onset",
+    "fb_window", "controller_fault", "is_route_a", "coincident_onset", "slow_unjustified",
 )  # fmt: skip
 
 EGO_HALF_LENGTH, EGO_HALF_WIDTH, PED_HALF = 2.45, 1.06, 0.3
@@ -125,6 +125,7 @@ def make_trajectory(
         "hazard_rel_vel": rel_vel,
         "hazard_box_dist": np.where(present, box, 1.0e6),
         "justified_stop": np.zeros(n, bool),
+        "slow_unjustified": slow_unjustified(v, np.zeros(n, bool), v0),
         "fb_window": (progress >= fb_lo) & (progress <= fb_hi),
         "controller_fault": np.zeros(n, bool),
         "t_warn_point": marker(k_wp),
@@ -135,6 +136,11 @@ def make_trajectory(
         "coincident_onset": np.full(n, coincident),
     }
     return as_float32(tr)
+
+
+def slow_unjustified(speed: np.ndarray, justified: np.ndarray, v_ref: float) -> np.ndarray:
+    """(n,) bool, the measurement's slow flag: below half the reference speed, unjustified."""
+    return (np.asarray(speed) < 0.5 * v_ref) & ~np.asarray(justified, bool)
 
 
 def as_float32(tr: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -149,9 +155,10 @@ def random_trajectory(seed: int, route_a: bool = True) -> dict[str, np.ndarray]:
     """A randomized execution exercising windows, rings, gates and the missing-value rules."""
     rng = np.random.default_rng(seed)
     n = int(rng.integers(260, 420))
+    v0 = float(rng.uniform(5.0, 10.0))
     tr = make_trajectory(
         n=n,
-        v0=float(rng.uniform(5.0, 10.0)),
+        v0=v0,
         x_warn=float(rng.uniform(15.0, 40.0)),
         event_delay=float(rng.choice([1.0, 1.5, 2.0])),
         coincident=bool(rng.random() < 0.3),
@@ -182,6 +189,7 @@ def random_trajectory(seed: int, route_a: bool = True) -> dict[str, np.ndarray]:
         k = int(np.argmax(tr["t_warn_point"] < 0.5 * INF_TIME))
         m = int(rng.integers(5, 40))
         tr["ego_speed"][k : k + m] = 0.05
+    tr["slow_unjustified"] = slow_unjustified(tr["ego_speed"], tr["justified_stop"], v0)
     return tr
 
 
@@ -340,6 +348,8 @@ def reference_execution(tr: dict[str, np.ndarray]) -> dict[str, float]:
         "gate_false_brake": not fb_fail,
         "controller_fault": _hap(t_fault),
         "t_first_failure_s": tt(t_fail),
+        "t_complete_s": float(t[int(np.argmax(completed_k))]) if completed_k.any() else nan,
+        "slow_unjustified_s": float(np.sum(g["slow_unjustified"])) * DT,
     }
 
 

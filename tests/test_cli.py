@@ -10,6 +10,7 @@ import contextlib
 import hashlib
 import io
 import json
+import math
 import os
 import subprocess
 import sys
@@ -25,8 +26,10 @@ from lantern_jax.evaluate import ablation_names, params_hash
 from lantern_jax.policies.registry import get_policy, policy_names
 from lantern_jax.report import OUTPUT_FILES
 from lantern_jax.scenarios.suite import load_suite, write_manifest
+from lantern_jax.scoring import uncertainty
 from lantern_jax.scoring.aggregate import DECOMPOSITION_COLUMNS
 from lantern_jax.scoring.table import read_route_table, schema_columns, validate_route_table
+from lantern_jax.scoring.uncertainty import interval_columns
 
 PAIRS = ["pe_0001", "lww_0001"]
 
@@ -72,21 +75,32 @@ def test_route_csv(evaluated):
         (c, p) for c in ("warning", "no-warning") for p in PAIRS
     }
     assert set(df["model"]) == {"coop"}
+    # Route B efficiency: every route completed, so every pair has its time
+    assert (df["B_time_s"] > 0).all() and (df["B_slow_s"] >= 0).all()
     schema = json.loads((evaluated.out_dir / "route_level_results.schema.json").read_text())
     assert [c["name"] for c in schema["columns"]] == header
 
 
 def test_family_and_decomposition_csv(evaluated):
+    def with_intervals(columns):
+        return [x for c in columns for x in (c, *interval_columns(c))]
+
     fam = pd.read_csv(evaluated.out_dir / "family_cus.csv")
-    assert list(fam.columns) == ["model", "condition", *FAMILIES, "Overall"]
+    assert list(fam.columns) == ["model", "condition", *with_intervals([*FAMILIES, "Overall"])]
     assert list(fam["condition"]) == ["warning", "no-warning", "warning gain"]
     gain = fam.iloc[2]
     assert gain["PE"] == pytest.approx(fam.iloc[0]["PE"] - fam.iloc[1]["PE"], abs=2e-6)
+    # one PE and one LWW pair: a degenerate interval at the estimate, n = 1, 0 elsewhere
+    assert gain["PE_lo"] == pytest.approx(gain["PE"], abs=2e-6)
+    assert gain["PE_hi"] == pytest.approx(gain["PE"], abs=2e-6)
+    assert list(fam.loc[0, [f"{f}_n" for f in FAMILIES]]) == [1, 0, 0, 1, 0, 0]
+    assert fam.loc[0, "Overall_n"] == 2 and math.isnan(fam.loc[0, "VC_lo"])
     dec = pd.read_csv(evaluated.out_dir / "decomposition.csv")
-    assert list(dec.columns) == ["model", "condition", *DECOMPOSITION_COLUMNS]
+    assert list(dec.columns) == ["model", "condition", *with_intervals(DECOMPOSITION_COLUMNS)]
     assert list(dec["condition"]) == ["warning", "no-warning"]
     md = (evaluated.out_dir / "family_cus.md").read_text()
     assert "| Model (condition)" in md and "coop (warning gain)" in md
+    assert "PE n=1" in md and "*" in md  # n per column, cells of fewer than MIN_N pairs flagged
 
 
 def test_manifest(evaluated, manifest_path):
@@ -103,6 +117,8 @@ def test_manifest(evaluated, manifest_path):
     assert record["command"].startswith("lantern-jax evaluate --policy coop")
     assert record["policies"][0]["name"] == "coop" and record["policies"][0]["seconds_run"] > 0
     assert "command" not in m and "seconds_run" not in m["policies"][0]
+    assert m["intervals"]["seed"] == uncertainty.SEED
+    assert m["intervals"]["confidence"] == uncertainty.CONFIDENCE
     listed = {f["name"]: f["sha256"] for f in m["files"]}
     assert set(listed) == set(OUTPUT_FILES) - {"reproducibility_manifest.json", "run_record.json"}
     for name, digest in listed.items():
@@ -148,6 +164,84 @@ def test_pairs_option_gives_the_same_rows(evaluated, tmp_path):
     assert sum(float(ln.rsplit(None, 3)[1]) for ln in rows) <= total + 0.05
     name = "route_level_results.csv"
     assert (tmp_path / name).read_bytes() == (evaluated.out_dir / name).read_bytes()
+
+
+def test_compare_a_policy_against_itself_gives_zero_with_p_one(evaluated, tmp_path):
+    """The same result set twice (one policy in two result sets over the same pairs)."""
+    res = run_cli(["compare", str(evaluated.out_dir), str(evaluated.out_dir), "--policy", "coop",
+                   "--out", str(tmp_path)])  # fmt: skip
+    assert res.rc == 0, res.err
+    table = pd.read_csv(tmp_path / "comparison.csv")
+    assert set(table["condition"]) == {"warning", "no-warning", "warning gain"}
+    shared = table[table["n"] > 0]
+    assert (shared["difference"] == 0.0).all() and (shared["p"] == 1.0).all()
+    assert set(table.loc[table["family"] == "Overall", "n"]) == {len(PAIRS)}
+    md = (tmp_path / "comparison.md").read_text()
+    assert md.startswith("# Paired comparison of mean CUS") and "| Condition" in md
+    assert "1.000" in res.out
+
+
+def test_compare_refuses_a_bad_selection_and_other_suites(evaluated, tmp_path):
+    res = run_cli(["compare", str(evaluated.out_dir), "--policy", "coop"])
+    assert res.rc == 2 and "two --policy names" in res.err
+    res = run_cli(["compare", str(evaluated.out_dir), "--policy", "coop", "--policy", "expert"])
+    assert res.rc == 2 and "'expert': not in" in res.err
+    res = run_cli(["compare", str(tmp_path), "--policy", "coop", "--policy", "ego"])
+    assert res.rc == 2 and "no result set there" in res.err
+    other = tmp_path / "other"
+    other.mkdir()
+    for name in ("route_level_results.csv", "reproducibility_manifest.json"):
+        text = (evaluated.out_dir / name).read_text()
+        if name.endswith(".json"):
+            m = json.loads(text)
+            m["suite_sha256"] = "0" * 64
+            text = json.dumps(m)
+        (other / name).write_text(text)
+    res = run_cli(["compare", str(evaluated.out_dir), str(other), "--policy", "coop",
+                   "--out", str(tmp_path / "cmp")])  # fmt: skip
+    assert res.rc == 2 and "different suites" in res.err
+
+
+def test_fresh_suites_evaluate_every_suite_and_report_the_spread(
+    manifest_path, tmp_path, monkeypatch
+):
+    """``--fresh-suites``: generation is replaced by the two-pair suite re-labelled with the
+    requested seed (the orchestration, files and records are what is tested; the generator
+    has its own tests), so every suite holds the same pairs and the spread across suites is 0."""
+    import lantern_jax.generate as generate
+
+    base = load_suite(manifest_path)
+    calls = []
+
+    def fake_generate(seed, progress=True, validator="expert"):
+        calls.append((seed, validator))
+        return dict(cli.suite_to_manifest(base), seed=seed)
+
+    monkeypatch.setattr(generate, "generate_suite", fake_generate)
+    argv = ["evaluate", "--policy", "coop", "--suite", str(manifest_path), "--quiet",
+            "--fresh-suites", "2", "--seed", "500", "--out", str(tmp_path)]  # fmt: skip
+    res = run_cli(argv)
+    assert res.rc == 0, res.err
+    assert calls == [(500, "expert-v1"), (501, "expert-v1")]  # the base suite's validator
+    record = json.loads((tmp_path / "across_suites.json").read_text())
+    ids = [s["suite_id"] for s in record["suites"]]
+    assert ids == ["two-pairs", "lantern-v3-seed500", "lantern-v3-seed501"]
+    assert [s["suite_seed"] for s in record["suites"][1:]] == [500, 501]
+    assert {s["suite_sha256"] for s in record["suites"]} == {base.suite_sha256}
+    for sid in ids:
+        assert (tmp_path / sid / "family_cus.csv").is_file(), sid
+    across = pd.read_csv(tmp_path / "across_suites.csv")
+    assert (across["suites"] == 3).all()
+    assert across["Overall_sd"].abs().max() == pytest.approx(0.0, abs=1e-9)
+    assert "Per-family CUS across 3 suites" in res.out
+    # a second run loads the written manifests instead of generating them again
+    calls.clear()
+    assert run_cli(argv).rc == 0 and calls == []
+    res = run_cli(["evaluate", "--policy", "coop", "--suite", str(manifest_path),
+                   "--fresh-suites", "1", "--out", str(tmp_path)])  # fmt: skip
+    assert res.rc == 2 and "needs --seed" in res.err
+    res = run_cli(["evaluate", "--policy", "coop", "--seed", "3", "--out", str(tmp_path)])
+    assert res.rc == 2 and "--fresh-suites" in res.err
 
 
 def test_unknown_policy_exits_2_listing_names(capsys):
@@ -235,7 +329,9 @@ def test_ablations_table_command(manifest_path, tmp_path):
     for col in TABLE_COLUMNS:
         assert col in res.out
     table = pd.read_csv(out_dir / "ablations.csv")
-    assert list(table.columns) == ["model", "condition", "variant", "label", *TABLE_COLUMNS]
+    with_intervals = [x for c in TABLE_COLUMNS for x in (c, *interval_columns(c))]
+    assert list(table.columns) == ["model", "condition", "variant", "label", *with_intervals]
+    assert (table["CUS_n"] == len(PAIRS)).all() and "Pairs" in res.out
     warned = table[table["condition"] == "warning"].set_index("variant")
     assert list(warned.index) == [v for v, _ in VARIANTS]
     assert warned.loc["none", "Event Exp."] == 100.0
@@ -302,8 +398,12 @@ def test_wording_command(manifest_path, tmp_path):
     assert res.rc == 0, res.err
     assert "Low ambiguity" in res.out and "All tiers" in res.out and "Retention" in res.out
     table = pd.read_csv(tmp_path / "wording.csv")
-    assert list(table.columns) == ["Wording", "n", "Paraphrase CUS", "Matched canonical",
-                                   "Retention (%)", "Coll. (%)", "Matched no-warning"]  # fmt: skip
+    values = ["Paraphrase CUS", "Matched canonical", "Retention (%)", "Coll. (%)",
+              "Matched no-warning"]  # fmt: skip
+    bounds = [x for c in values for x in interval_columns(c)[:2]]
+    assert list(table.columns) == ["Wording", "n", *values, *bounds]
+    held = table[table["n"] > 0]  # a tier may hold none of the two pairs
+    assert (held["Paraphrase CUS_lo"] <= held["Paraphrase CUS"] + 0.05).all()  # CSV: 4 digits
     assert table["n"].iloc[-1] == len(PAIRS)
     # coop ignores paraphrases: the paraphrase CUS is the no-warning CUS (CSV keeps 4 digits)
     all_tiers = table.iloc[-1]

@@ -92,6 +92,16 @@ def test_result_tables(base, suite2):
     assert ft[absent].isna().all().all()
     np.testing.assert_allclose(ft["Overall"], ft[present].mean(axis=1), rtol=0, atol=1e-9)
     assert len(base.decomposition) == 3 * len(CONDITIONS)
+    # Route B efficiency: the expert is the yardstick, so its own time is 100 % of it
+    dec = base.decomposition.set_index(["model", "condition"])["B-Time/Exp."]
+    assert (dec.loc["expert"] == 100.0).all() and dec.notna().all()
+    # intervals: one row per table row, each holding its point estimate
+    fam_iv = base.intervals.family.set_index(["model", "condition"])
+    for r in ft.to_dict("records"):
+        iv = fam_iv.loc[(r["model"], r["condition"])]
+        assert iv["Overall_lo"] - 1e-9 <= r["Overall"] <= iv["Overall_hi"] + 1e-9
+        assert iv["PE_n"] == 1 and iv["VC_n"] == 0 and iv["Overall_n"] == 2
+    assert len(base.intervals.decomposition) == len(base.decomposition)
     m = base.manifest
     assert m["suite_sha256"] == suite2.suite_sha256
     assert m["num_pairs"] == 2 and m["ablation"] == "none"

@@ -37,7 +37,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
         "training",
     ),  # evaluation, suites, stress testing, data, language diagnostics, ablations,
     #               brax env, chunks, training
-    ("report", "viz"),  # tables, files, plots
+    ("report", "viz", "compare"),  # tables, files, plots, differences between evaluations
     ("cli", "commands", "__main__"),  # the command line
 )
 LAYER_OF = {name: i for i, names in enumerate(LAYERS) for name in names}

@@ -31,7 +31,8 @@ from lantern_jax.times import NEVER
 
 N = 60  # ticks of every tiny trajectory (3 s); t[k] = (k + 1) * DT
 BOOLS = ("outside_lanes", "red_light_violation", "collision", "hazard_present", "justified_stop",
-         "fb_window", "controller_fault", "is_route_a", "coincident_onset")  # fmt: skip
+         "fb_window", "controller_fault", "is_route_a", "coincident_onset",
+         "slow_unjustified")  # fmt: skip
 
 
 def quiet(n: int = N, speed: float = 5.0) -> dict[str, np.ndarray]:

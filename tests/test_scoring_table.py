@@ -18,6 +18,7 @@ from lantern_jax.scoring.aggregate import (
     DECOMPOSITION_COLUMNS,
     decomposition_table,
     family_scores,
+    with_time_vs_reference,
 )
 from lantern_jax.scoring.metrics import finalize
 from lantern_jax.scoring.sample import TickSample
@@ -86,8 +87,14 @@ def test_decomposition_table():
     for i, (pa, pb, st, sc, sa, sr, g) in enumerate(rows):
         values = {"A_progress": pa, "B_progress": pb, "S_ttc": st, "S_clear": sc, "S_ant": sa}
         gate_values = dict(zip(gates, g, strict=True))
-        recs.append({**base, "pair_id": f"p{i}", **values, "S_rec": sr, **gate_values})
-    out = decomposition_table(pd.DataFrame(recs))
+        # Route B efficiency: 1.0, 1.5, NaN (not completed), 1.0 times the expert's 10 s
+        effic = {"B_time_s": (10.0, 15.0, nan, 10.0)[i], "B_slow_s": (0.0, 3.0, 6.0, 0.0)[i]}
+        recs.append({**base, "pair_id": f"p{i}", **values, "S_rec": sr, **gate_values, **effic})
+    expert = [{**r, "model": "expert", "B_time_s": 10.0} for r in recs]
+    out = decomposition_table(pd.DataFrame(recs + expert))
+    assert out.loc[("expert", "warning"), "B-Time/Exp."] == 100.0
+    alone = decomposition_table(pd.DataFrame(recs)).loc[("m", "warning")]
+    assert math.isnan(alone["B-Time/Exp."])  # no expert in the rows: no yardstick
     assert list(out.columns) == list(DECOMPOSITION_COLUMNS)
     r = out.loc[("m", "warning")]
     assert r["A-Prog."] == pytest.approx(87.5)  # (1 + .5 + 1 + 1) / 4
@@ -102,6 +109,8 @@ def test_decomposition_table():
     assert r["LC-A"] == pytest.approx(25.0)
     assert r["Block-A"] == pytest.approx(25.0)
     assert r["False Brake-B"] == pytest.approx(25.0)
+    assert r["B-Time/Exp."] == pytest.approx(100.0 * 3.5 / 3)  # NaN skipped: (1 + 1.5 + 1) / 3
+    assert r["B-Slow (s)"] == pytest.approx(2.25)  # (0 + 3 + 6 + 0) / 4
 
 
 # ------------------------------------------------------------------------------------ the table
@@ -194,3 +203,18 @@ def test_write_and_read_round_trip(tmp_path, batch_metrics):
     validate_route_table(back)
     pd.testing.assert_frame_equal(back, df, check_dtype=False)
     assert family_scores(back).shape == (2, 7)
+
+
+def test_route_b_time_relative_to_the_expert_on_the_same_pair():
+    nan = math.nan
+    rows = [  # (model, condition, pair, Route B time)
+        ("expert", "warning", "p0", 10.0), ("expert", "no-warning", "p0", 10.0),
+        ("coop", "warning", "p0", 12.0), ("coop", "no-warning", "p0", 12.0),
+        ("expert", "warning", "p1", nan), ("coop", "warning", "p1", 9.0),  # expert unfinished
+        ("coop", "warning", "p2", 8.0),  # no expert row
+    ]  # fmt: skip
+    df = pd.DataFrame(rows, columns=["model", "condition", "pair_id", "B_time_s"])
+    out = with_time_vs_reference(df)
+    assert list(out["B_time_vs_expert"][:4]) == [1.0, 1.0, 1.2, 1.2]
+    assert out["B_time_vs_expert"][4:].isna().all()
+    assert "B_time_vs_expert" not in df.columns  # the input is left as it was

@@ -227,6 +227,8 @@ def test_a_small_stress_test_end_to_end(suite, tmp_path):
     table = report.comparison_table(traces)
     assert list(table["method"]) == ["gradient", "random", "cmaes"]
     assert (table["failure_rate"] > 0).all()  # ego never sees the hidden pedestrian in time
+    assert (table["failure_rate_lo"] <= table["failure_rate"]).all()
+    assert (table["failure_rate"] <= table["failure_rate_hi"]).all()
     files = report.write_results(tmp_path, pair, problem.space, traces)
     manifest = json.loads(files["found_suite.json"].read_text())
     assert manifest["pairs"], "nothing was found"

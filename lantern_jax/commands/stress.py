@@ -62,7 +62,7 @@ def cmd_stress(args: argparse.Namespace, argv: Sequence[str]) -> int:
     from tabulate import tabulate
 
     from lantern_jax.constants import FAMILIES
-    from lantern_jax.report import check_output_folder
+    from lantern_jax.report import check_output_folder, interval_note
     from lantern_jax.scenarios.suite import load_suite
     from lantern_jax.stress import report, search
     from lantern_jax.viz.stress import convergence_plot
@@ -109,6 +109,7 @@ def cmd_stress(args: argparse.Namespace, argv: Sequence[str]) -> int:
     table = report.comparison_table(traces)
     print(f"Stress test  ({title}; {args.budget_s:g} s per method, {args.restarts} restarts)")
     print(tabulate(table, headers="keys", showindex=False, floatfmt=".2f"))
+    print(f"failure_rate_lo, _hi: {interval_note(over='restarts')}")
     print(f"Wrote {len(files)} files to {args.out}")
     return 0
 

@@ -13,6 +13,11 @@ Input: a route-level DataFrame (one row per (model, condition, pair); see
   mean, not counted as 0).  ``Gate Pass`` is the percentage of pairs passing all six gates;
   ``Coll.-A``, ``RD-A``, ``LC-A``, ``Rule-A``, ``Block-A``, ``False Brake-B`` are the
   percentages of pairs failing each gate.
+* Route B efficiency, beside the CUS (never inside it; :data:`EFFICIENCY_COLUMNS`):
+  ``B-Time/Exp.`` is the mean x 100 of each pair's ``B_time_s`` over the privileged expert's
+  on the same pair (:func:`with_time_vs_reference`; 100 = as fast as the expert; NaN when the
+  rows hold no ``expert``), ``B-Slow (s)`` the mean of ``B_slow_s`` (seconds below half the
+  reference speed with nothing justifying it); both skip ``NaN`` like the components.
 """
 
 from __future__ import annotations
@@ -42,7 +47,45 @@ FAILURE_COLUMNS = {
     "Block-A": "gate_block",
     "False Brake-B": "gate_false_brake",
 }
-DECOMPOSITION_COLUMNS = (*COMPONENT_COLUMNS, "Gate Pass", *FAILURE_COLUMNS)
+#: The policy whose Route B time is every model's yardstick (``B-Time/Exp.``): the privileged
+#: expert, which sees every actor's forecast and slows only for what is there.
+EFFICIENCY_REFERENCE = "expert"
+#: The per-pair ratio behind ``B-Time/Exp.`` (:func:`with_time_vs_reference`; not a route-table
+#: column: it depends on the result set holding the reference).
+TIME_VS_REFERENCE = "B_time_vs_expert"
+#: Route B efficiency, beside the CUS: column -> (per-pair column, scale of its mean).
+EFFICIENCY_COLUMNS = {
+    "B-Time/Exp.": (TIME_VS_REFERENCE, 100.0),
+    "B-Slow (s)": ("B_slow_s", 1.0),
+}
+#: Per-pair mean columns of the decomposition: column -> (route-table column, scale).
+MEAN_COLUMNS = {
+    **{name: (col, 100.0) for name, col in COMPONENT_COLUMNS.items()},
+    **EFFICIENCY_COLUMNS,
+}
+DECOMPOSITION_COLUMNS = (*COMPONENT_COLUMNS, "Gate Pass", *FAILURE_COLUMNS, *EFFICIENCY_COLUMNS)
+
+
+def with_time_vs_reference(df: pd.DataFrame, reference: str = EFFICIENCY_REFERENCE) -> pd.DataFrame:
+    """``df`` with a ``B_time_vs_expert`` column: every row's Route B time over the reference
+    policy's on the same pair (:data:`TIME_VS_REFERENCE`).
+
+    A stateless policy's Route B is one execution per pair, shared by both conditions, so the
+    reference is the pair's first ``reference`` row.
+
+    Args:
+        df: route-level rows (``model``, ``pair_id``, ``B_time_s``).
+        reference: the reference model's name.
+
+    Returns:
+        A copy of ``df``; the ratio is NaN where the pair has no reference row or either
+        Route B was not completed (``B_time_s`` NaN).
+    """
+    out = df.copy()
+    ref = df.loc[df["model"] == reference].drop_duplicates("pair_id").set_index("pair_id")
+    ref_time = out["pair_id"].map(ref["B_time_s"]).to_numpy(np.float64)
+    out[TIME_VS_REFERENCE] = out["B_time_s"].to_numpy(np.float64) / ref_time
+    return out
 
 
 def _check(df: pd.DataFrame, columns: Sequence[str]) -> None:
@@ -75,20 +118,23 @@ def family_scores(df: pd.DataFrame, by: Sequence[str] = GROUP_COLUMNS) -> pd.Dat
 
 
 def decomposition_table(df: pd.DataFrame, by: Sequence[str] = GROUP_COLUMNS) -> pd.DataFrame:
-    """Components (means x 100, NaN-skipping), Gate Pass (%) and per-gate failure rates (%).
+    """Components (means x 100, NaN-skipping), Gate Pass (%), per-gate failure rates (%) and
+    the Route B efficiency columns (NaN-skipping means).
 
     Returns:
         DataFrame indexed by ``by`` with columns :data:`DECOMPOSITION_COLUMNS`.
     """
     by = list(by)
-    _check(df, [*by, *COMPONENT_COLUMNS.values(), *FAILURE_COLUMNS.values()])
+    means = [col for col, _ in MEAN_COLUMNS.values() if col != TIME_VS_REFERENCE]
+    _check(df, [*by, "pair_id", "B_time_s", *means, *FAILURE_COLUMNS.values()])
+    df = with_time_vs_reference(df)
     rows = []
     for key, g in df.groupby(by, sort=True):
         key = key if isinstance(key, tuple) else (key,)
         row = dict(zip(by, key, strict=True))
-        for name, col in COMPONENT_COLUMNS.items():
+        for name, (col, scale) in MEAN_COLUMNS.items():
             x = g[col].to_numpy(float)
-            row[name] = 100.0 * float(np.nanmean(x)) if np.any(~np.isnan(x)) else np.nan
+            row[name] = scale * float(np.nanmean(x)) if np.any(~np.isnan(x)) else np.nan
         gates = g[list(FAILURE_COLUMNS.values())].to_numpy(float)
         row["Gate Pass"] = 100.0 * float(np.mean(np.all(gates == 1, axis=1)))
         for name, col in FAILURE_COLUMNS.items():
@@ -96,3 +142,29 @@ def decomposition_table(df: pd.DataFrame, by: Sequence[str] = GROUP_COLUMNS) -> 
         rows.append(row)
     out = pd.DataFrame(rows, columns=[*by, *DECOMPOSITION_COLUMNS])
     return out.set_index(by)
+
+
+def decomposition_pair_values(df: pd.DataFrame) -> pd.DataFrame:
+    """Every decomposition column as a per-pair value, so that each table cell is the
+    NaN-skipping mean of its column over the group's pairs (and a bootstrap of those pairs
+    resamples exactly what the cell averages).
+
+    Args:
+        df: route-level rows.
+
+    Returns:
+        ``df``'s ``model, condition, pair_id, family`` and one column per
+        :data:`DECOMPOSITION_COLUMNS`: components and efficiency scaled as in the table
+        (``NaN`` where unavailable), ``Gate Pass`` 100 / 0 for passing all six gates, every
+        failure column 100 / 0 for failing its gate.
+    """
+    keys = [c for c in (*GROUP_COLUMNS, "pair_id", "family") if c in df.columns]
+    df = with_time_vs_reference(df)
+    out = df[keys].copy()
+    for name, (col, scale) in MEAN_COLUMNS.items():
+        out[name] = scale * df[col].to_numpy(float)
+    gates = df[list(FAILURE_COLUMNS.values())].to_numpy(float)
+    out["Gate Pass"] = 100.0 * np.all(gates == 1, axis=1)
+    for name, col in FAILURE_COLUMNS.items():
+        out[name] = 100.0 * (df[col].to_numpy(float) == 0)
+    return out[[*keys, *DECOMPOSITION_COLUMNS]]

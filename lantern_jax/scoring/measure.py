@@ -15,6 +15,9 @@ looks at is decided here, with thresholds from :mod:`lantern_jax.scoring.thresho
   box reaches into the ego's path (within the ego half width + 0.5 m of the route centre line,
   measured across the route) within 15 m ahead, or the route end is within 10 m; a vehicle
   parked beside the lane is no excuse, and neither is a warning;
+* slow driving with nothing to justify it (the efficiency diagnostic beside the CUS,
+  :mod:`lantern_jax.scoring.components.efficiency`): the ego below ``SLOW_SPEED_FRACTION`` of
+  the route's reference speed while :func:`justified_stop` finds no excuse;
 * whether the ego's progress lies in the Route B false-brake stretch
   (:func:`lantern_jax.scoring.components.false_brake.matched_window`);
 * the controlled hazard's relative position and velocity and box distance (TTC, clearance).
@@ -136,6 +139,7 @@ def measure(
         hazard_rel_vel=hz_vel - ego_vel,
         hazard_box_dist=hazard_dist,
         justified_stop=justified,
+        slow_unjustified=(ego.speed < thresholds.SLOW_SPEED_FRACTION * cfg.v_ref) & ~justified,
         fb_window=(progress >= fb_lo) & (progress <= fb_hi),
         controller_fault=fault,
         t_warn_point=protocol.t_warn_point,

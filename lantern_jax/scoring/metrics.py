@@ -42,6 +42,7 @@ from lantern_jax.scoring.components import (
     block,
     clearance,
     collision,
+    efficiency,
     false_brake,
     lane,
     progress,
@@ -101,6 +102,9 @@ class ExecutionMetrics:
     max_still_s: Array  # () float32, s, longest standstill with the route unfinished
     false_brake_max_stop_s: Array  # () float32, s, longest unjustified stop touching the matched
     #                                stretch of route (Route B false brake)
+    t_complete_s: Array  # () float32, s, first tick in the route's end zone (NaN: not completed)
+    slow_unjustified_s: Array  # () float32, s, below half the reference speed with nothing
+    #                            justifying it (efficiency diagnostic, not part of the CUS)
 
 
 def first_failure_time(tel: Telemetry) -> Array:
@@ -176,4 +180,6 @@ def finalize(tel: Telemetry) -> ExecutionMetrics:
         outside_lanes_s=lane.outside_s(tel.lane),
         max_still_s=block.max_still_s(tel.block),
         false_brake_max_stop_s=false_brake.max_stop_s(tel.false_brake),
+        t_complete_s=time_or_nan(tel.efficiency.t_complete),
+        slow_unjustified_s=efficiency.slow_s(tel.efficiency),
     )

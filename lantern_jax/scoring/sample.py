@@ -32,6 +32,8 @@ class TickSample:
     hazard_box_dist: Array  # () m, box-surface distance ego-hazard (0 when overlapping)
     justified_stop: Array  # () bool, a light, lead vehicle, obstacle, conflict or route end
     #                         justifies standing still (Route B false-brake excuse)
+    slow_unjustified: Array  # () bool, ego speed below SLOW_SPEED_FRACTION of the route reference
+    #                          speed while nothing justifies it (the efficiency diagnostic)
     fb_window: Array  # () bool, the ego's route progress lies in the stretch matched to Route A's
     #                    warning-to-event approach (Route B false brake)
     controller_fault: Array  # () bool, the policy produced NaN/inf waypoints this tick

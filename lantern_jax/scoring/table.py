@@ -160,6 +160,8 @@ def build_route_table(
         "warning_delivered": (shown > 0).astype(np.int64),
         "event_exposed": np.asarray(a.event_exposed).astype(np.int64),
         "B_false_brake_stop_s": f64(b.false_brake_max_stop_s),
+        "B_time_s": f64(b.t_complete_s),
+        "B_slow_s": f64(b.slow_unjustified_s),
     }
     df = pd.DataFrame(data)
     for name, dtype in schema_columns():

@@ -27,6 +27,7 @@ from lantern_jax.scoring.components import (
     clearance,
     collision,
     context,
+    efficiency,
     false_brake,
     lane,
     recovery,
@@ -54,6 +55,7 @@ class Telemetry:
     rule: rule.RuleState  # G_rule
     block: block.BlockState  # G_block: standstill, controller fault (timeout from the context)
     false_brake: false_brake.FalseBrakeState  # G_FB (Route B)
+    efficiency: efficiency.EfficiencyState  # completion time, unjustified slow time (not CUS)
 
 
 def init_telemetry() -> Telemetry:
@@ -70,6 +72,7 @@ def init_telemetry() -> Telemetry:
         rule=rule.init(),
         block=block.init(),
         false_brake=false_brake.init(),
+        efficiency=efficiency.init(),
     )
 
 
@@ -88,6 +91,7 @@ def _step(tel: Telemetry, s: TickSample, temp: Array) -> Telemetry:
         rule=rule.update(tel.rule, s, tick, temp),
         block=block.update(tel.block, s, tick, temp),
         false_brake=false_brake.update(tel.false_brake, s, tick, temp),
+        efficiency=efficiency.update(tel.efficiency, s, tick, temp),
     )
 
 

@@ -75,6 +75,9 @@ FALSE_BRAKE = ticks(FALSE_BRAKE_S)  # 20 ticks
 FALSE_BRAKE_COINCIDENT_LEAD_M = 10.0  # m, coincident warning/event points (RTY): the matched
 #                                       stretch starts this far before the warning point
 
+# --- route efficiency (a diagnostic beside the CUS, scoring/components/efficiency.py) -----------
+SLOW_SPEED_FRACTION = 0.5  # the ego is "slow" below this fraction of the route reference speed
+
 # --- weights -----------------------------------------------------------------------------------
 W_ROUTE_A = 0.85
 W_ROUTE_B = 0.15

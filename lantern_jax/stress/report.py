@@ -3,7 +3,8 @@
 :func:`stress_test` builds the :class:`~lantern_jax.stress.objective.Problem` of one suite pair
 and policy, runs the methods at equal budget and returns their traces; :func:`comparison_table`
 turns the traces into the comparison (one row per method, KING's measures: share of restarts
-that found a verified failure within the budget, time and evaluations to the first failure —
+that found a verified failure within the budget, with its bootstrap interval over the
+restarts, time and evaluations to the first failure —
 median, and the mean of the fastest half as KING's t@50 — and the lowest hard CUS found);
 :func:`write_results` writes ``comparison.csv``, ``found.csv`` and ``found_suite.json`` (the
 found failures as ordinary suite pairs with knob overrides, so ``lantern-jax evaluate --suite``
@@ -33,6 +34,7 @@ from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.families import build_pair
 from lantern_jax.scenarios.spec import content_hash
 from lantern_jax.scenarios.suite import PairSpec, Suite, suite_hash
+from lantern_jax.scoring.uncertainty import SEED, sample_interval
 from lantern_jax.stress import search
 from lantern_jax.stress.objective import Problem, batched_objective, estimate
 from lantern_jax.stress.space import SearchSpace, search_space
@@ -125,15 +127,20 @@ def _fastest_half_mean(x: np.ndarray, restarts: int) -> float:
     return float(np.mean(done[:half])) if len(done) >= half else float("nan")
 
 
-def comparison_table(traces: list[search.Trace]) -> pd.DataFrame:
-    """One row per method (see the module docstring)."""
+def comparison_table(traces: list[search.Trace], seed: int = SEED) -> pd.DataFrame:
+    """One row per method (see the module docstring); the share of restarts that found a
+    failure has its bootstrap interval over the restarts (``failure_rate_lo``, ``_hi``; the
+    restarts are the sample, ``restarts`` their number)."""
     rows = []
     for t in traces:
         found = ~np.isnan(t.first_seconds)
+        lo, hi, _ = sample_interval(found.astype(np.float64), seed=seed)
         rows.append(dict(
             method=t.method,
             restarts=t.restarts,
             failure_rate=float(np.mean(found)),
+            failure_rate_lo=float(lo),
+            failure_rate_hi=float(hi),
             median_s_to_first=float(np.nanmedian(t.first_seconds)) if found.any() else np.nan,
             t50_s=_fastest_half_mean(t.first_seconds, t.restarts),
             median_evals_to_first=(float(np.nanmedian(t.first_evaluations)) if found.any()

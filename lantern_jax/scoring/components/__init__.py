@@ -34,6 +34,8 @@ lane               ``G_lane``
 rule               ``G_rule``
 block              ``G_block``: 20 s standstill, timeout, controller fault
 false_brake        ``G_FB`` (Route B)
+efficiency         route completion time and unjustified slow time: a diagnostic beside the
+                   CUS, not a component of it (no soft form, no weight)
 =================  ======================================================================
 """
 
@@ -43,6 +45,7 @@ from lantern_jax.scoring.components import (
     clearance,
     collision,
     context,
+    efficiency,
     false_brake,
     lane,
     progress,
@@ -72,6 +75,7 @@ __all__ = [
     "clearance",
     "collision",
     "context",
+    "efficiency",
     "false_brake",
     "lane",
     "progress",
