@@ -31,9 +31,9 @@ expose_cpu_cores()  # one XLA CPU device per core (LANTERN_JAX_CPU_DEVICES=1 to 
 import jax  # noqa: E402
 import numpy as np  # noqa: E402
 
-from lantern_jax.evaluate import build_executions, run_executions  # noqa: E402
 from lantern_jax.policies.registry import get_policy  # noqa: E402
 from lantern_jax.scenarios.suite import load_suite  # noqa: E402
+from lantern_jax.sim.engine import build_executions, run_executions  # noqa: E402
 
 
 def peak_rss_mb() -> float:

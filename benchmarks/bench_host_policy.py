@@ -23,9 +23,9 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))
 import host_models  # noqa: E402
 
-from lantern_jax.evaluate import build_executions  # noqa: E402
 from lantern_jax.policies.features import observation_vector  # noqa: E402
 from lantern_jax.scenarios.suite import load_suite  # noqa: E402
+from lantern_jax.sim.engine import build_executions  # noqa: E402
 from lantern_jax.sim.observe import observe  # noqa: E402
 from lantern_jax.sim.rollout import rollout_batch  # noqa: E402
 from lantern_jax.sim.state import init_state  # noqa: E402

@@ -39,9 +39,9 @@ import jax  # noqa: E402
 import numpy as np  # noqa: E402
 
 from lantern_jax.constants import DT  # noqa: E402
-from lantern_jax.evaluate import build_executions, run_executions  # noqa: E402
 from lantern_jax.policies.registry import get_policy  # noqa: E402
 from lantern_jax.scenarios.suite import load_suite  # noqa: E402
+from lantern_jax.sim.engine import build_executions, run_executions  # noqa: E402
 
 #: Runs in the peer's interpreter; prints one JSON line.
 HIGHWAY_ENV_SNIPPET = r"""

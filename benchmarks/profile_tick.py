@@ -27,114 +27,40 @@ from lantern_jax.cli import expose_cpu_cores
 expose_cpu_cores()  # one XLA CPU device per core (LANTERN_JAX_CPU_DEVICES=1 to disable)
 
 import jax  # noqa: E402
-import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
-from lantern_jax.constants import DT  # noqa: E402
-from lantern_jax.dynamics.actors import step_actors  # noqa: E402
-from lantern_jax.dynamics.controller import follow_plan  # noqa: E402
-from lantern_jax.dynamics.lights import ego_light_state, light_holds_ego, light_states  # noqa: E402
-from lantern_jax.evaluate import build_executions, run_executions  # noqa: E402
-from lantern_jax.observation import corridor_gaps  # noqa: E402
 from lantern_jax.policies.registry import get_policy  # noqa: E402
-from lantern_jax.scenarios import protocol  # noqa: E402
 from lantern_jax.scenarios.suite import load_suite  # noqa: E402
-from lantern_jax.scoring.measure import execution_ended, justified_stop, measure  # noqa: E402
-from lantern_jax.scoring.telemetry import update_telemetry  # noqa: E402
-from lantern_jax.sim.observe import (  # noqa: E402
-    actors_in_ego_frame,
-    delivered_warning,
-    observe,
-    route_ahead,
-)
-from lantern_jax.sim.sense import locate_on_route, sense  # noqa: E402
-from lantern_jax.sim.step import step  # noqa: E402
-from lantern_jax.world import present  # noqa: E402
+from lantern_jax.sim.engine import build_executions, run_executions  # noqa: E402
+from lantern_jax.sim.observe import observe  # noqa: E402
+from lantern_jax.sim.settings import DEFAULT_SETTINGS  # noqa: E402
+from lantern_jax.sim.step import TRANSITION_STAGES, step, transition_outputs  # noqa: E402
 
 
-def stages(policy, params):
-    """The stages of one tick as functions of (scenario, state, inputs of the stage)."""
-    temp = jnp.float32(0.05)
+def stages(policy, params, settings=DEFAULT_SETTINGS):
+    """The stages of one tick as functions of (scenario, state, inputs of the stage): the
+    observation and the policy's answer, then :data:`lantern_jax.sim.step.TRANSITION_STAGES`."""
 
     def inputs(sc, st):
-        """Every intermediate of one tick (mirrors ``step``)."""
-        cfg, script, h = sc.config, sc.actors, sc.config.hazard_index
-        obs = observe(sc, st, policy.sensors)
+        """Every intermediate of one tick (the same code as ``step``)."""
+        obs = observe(sc, st, policy.sensors, settings.bank)
         wp, _ = policy.step(params, st.policy_carry, obs)
-        warned = delivered_warning(sc, st)[0]
-        truth = actors_in_ego_frame(sc, st)
-        ego, fault, _ = follow_plan(st.ego, wp, cfg.friction)
-        t = st.t + DT
-        arc, dist, progress = locate_on_route(sc.route, ego.xy, st.percept.progress)
-        light = ego_light_state(sc.lights, cfg.ego_light, t)
-        gap, lateral = corridor_gaps(
-            route_ahead(sc, st)[0], truth["actor_xy"], truth["actor_dir"], truth["actor_extent"]
-        )
-        pb = present(script, st.actors)
-        held = protocol.ego_held(
-            light, cfg.ego_stop_s - arc, gap, lateral, pb, script.role, st.actors.speed
-        )
-        proto = protocol.advance_markers(st.protocol, cfg, t, st.percept.progress, progress, held)
-        actors = step_actors(
-            st.actors, script, t, proto.t_event, light_states(sc.lights, t), ego.xy, ego.yaw,
-            ego.speed,
-        )  # fmt: skip
-        percept = sense(sc, ego, actors, arc, dist, progress)
-        vis = percept.visible[h] & present(script, actors)[h]
-        proto = protocol.advance_hazard(proto, cfg, t, vis, actors.s[h], ego.speed)
-        proto = protocol.record_onset(proto, st.protocol, cfg, vis, warned)
-        justified = justified_stop(
-            light_holds_ego(light, cfg.ego_stop_s - arc), gap, lateral, pb,
-            sc.route.length - arc,
-        )  # fmt: skip
-        return dict(obs=obs, wp=wp, ego=ego, fault=fault, t=t, arc=arc, dist=dist,
-                    progress=progress, light=light, proto=proto, actors=actors,
-                    justified=justified)  # fmt: skip
+        return dict(obs=obs, **transition_outputs(sc, st, wp, settings))
 
     def s_observe(sc, st, x):
-        return observe(sc, st, policy.sensors)
+        return observe(sc, st, policy.sensors, settings.bank)
 
     def s_policy(sc, st, x):
         return policy.step(params, st.policy_carry, x["obs"])
 
-    def s_controller(sc, st, x):
-        return follow_plan(st.ego, x["wp"], sc.config.friction)[:2]
-
-    def s_route(sc, st, x):
-        return locate_on_route(sc.route, x["ego"].xy, st.percept.progress)
-
-    def s_actors(sc, st, x):
-        e = x["ego"]
-        lights = light_states(sc.lights, x["t"])
-        return step_actors(
-            st.actors, sc.actors, x["t"], x["proto"].t_event, lights, e.xy, e.yaw, e.speed
-        )
-
-    def s_sense(sc, st, x):
-        return sense(sc, x["ego"], x["actors"], x["arc"], x["dist"], x["progress"])
-
-    def s_score(sc, st, x):
-        sample = measure(
-            sc, x["ego"], x["actors"], present(sc.actors, x["actors"]), x["proto"], x["t"],
-            x["progress"], x["dist"], st.percept.route_arc, x["arc"], x["light"],
-            x["justified"], x["fault"],
-        )  # fmt: skip
-        tel = update_telemetry(st.telemetry, sample, temp)
-        done = execution_ended(sc, x["t"], x["progress"], x["dist"], x["proto"].ego_still_time)
-        return tel, done
+    def staged(stage):
+        return lambda sc, st, x: stage(sc, st, x, settings)
 
     def s_tick(sc, st, x):
-        return step(policy, params, sc, st, temp)[0]
+        return step(policy, params, sc, st, settings)[0]
 
-    table = {
-        "observation (warning fields, corridor)": s_observe,
-        "policy act": s_policy,
-        "controller + bicycle": s_controller,
-        "route projection": s_route,
-        "actors (IDM, scripts, lights)": s_actors,
-        "sensing (visibility, range image)": s_sense,
-        "measurement + telemetry + end test": s_score,
-    }
+    table = {"observation (warning text, corridor)": s_observe, "policy act": s_policy}
+    table.update({label: staged(stage) for label, stage in TRANSITION_STAGES})
     return inputs, table, s_tick
 
 

@@ -2,8 +2,8 @@
 "Sensitivity to warning timing, event activation, localization, and wording").
 
 :func:`run_ablations` evaluates one policy under the full temporal protocol and each of its five
-variants (:data:`VARIANTS`; every variant changes one rule of the protocol, see
-:data:`lantern_jax.evaluate.ABLATIONS`) on the same suite, with the same Route B control and
+variants (:data:`lantern_jax.scenarios.ablations.ABLATIONS`; every variant changes one rule of
+the protocol) on the same suite, with the same Route B control and
 the same CUS, and collects one row per variant:
 
 =============  ===================================================================================
@@ -30,9 +30,10 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from lantern_jax.constants import DT, SUITE_ID
-from lantern_jax.evaluate import CONDITIONS, EvalResult, evaluate, package_versions
+from lantern_jax.constants import CONDITIONS, DT, SUITE_ID
+from lantern_jax.evaluate import EvalResult, evaluate, package_versions
 from lantern_jax.policies.base import Policy
+from lantern_jax.scenarios.ablations import ABLATIONS, get_ablation
 from lantern_jax.scenarios.suite import Suite, load_suite
 from lantern_jax.scoring.aggregate import (
     GROUP_COLUMNS,
@@ -50,15 +51,6 @@ from lantern_jax.scoring.uncertainty import (
     table_resampling,
 )
 
-#: (ablation name, row label) in the paper's order; "none" is the full protocol.
-VARIANTS: tuple[tuple[str, str], ...] = (
-    ("none", "Full temporal protocol"),
-    ("late_onset", "Late warning onset"),
-    ("warning_beyond_termination", "Warning beyond termination"),
-    ("no_anti_deadlock", "No anti-deadlock rule"),
-    ("noisy_position", "Noisy warning position"),
-    ("held_out_paraphrase", "Held-out warning paraphrase"),
-)
 TABLE_COLUMNS = ("CUS", "A-Prog.", "Event Exp.", "Ant.", "Rec.", "Coll.-A", "Block-A")
 
 
@@ -138,18 +130,18 @@ def run_ablations(
         policy: a registered name or a :class:`Policy`.
         suite: a :class:`Suite` or a suite id / manifest path.
         policy_params: the policy's parameters (default: its ``init``).
-        variants: ablation names to run (default: all of :data:`VARIANTS`, in that order).
+        variants: ablation names to run (default: every one of
+            :data:`~lantern_jax.scenarios.ablations.ABLATIONS`, in that order).
         progress: show progress bars.
         bootstrap_seed: seed of the intervals' bootstrap (recorded in the manifest).
 
     Raises:
         ValueError: for an unknown variant (listing the valid ones).
     """
-    known = dict(VARIANTS)
-    names = [v for v, _ in VARIANTS] if variants is None else list(variants)
-    unknown = [v for v in names if v not in known]
-    if unknown:
-        raise ValueError(f"unknown ablation(s) {unknown}; valid: {', '.join(known)}")
+    known = {a.name: a.label for a in ABLATIONS}
+    names = list(known) if variants is None else list(variants)
+    for v in names:
+        get_ablation(v)  # refuses an unknown name, listing the valid ones
     s = load_suite(suite) if isinstance(suite, str) else suite
     results, tables, routes, intervals = {}, [], [], []
     for v in names:

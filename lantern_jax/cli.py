@@ -70,17 +70,6 @@ EVALUATE_DEFAULTS = {
     "out": "results",
 }
 
-ABLATION_DESCRIPTIONS = {
-    "none": "the standard protocol",
-    "late_onset": "warning delivered from the physical event on, not from the warning point",
-    "warning_beyond_termination": "warning held 10 s beyond its termination",
-    "no_anti_deadlock": "no anti-deadlock countdown: the event waits for the ego indefinitely",
-    "noisy_position": "the reported hazard position displaced once per execution by exactly "
-    "2 m in a seeded random direction",
-    "held_out_paraphrase": "every warning text replaced by a held-out paraphrase of its pair's "
-    "ambiguity tier (low / medium / high, three disjoint thirds of the suite)",
-}
-
 
 #: Environment variable that sets the number of XLA CPU devices of the command line.
 CPU_DEVICES_ENV = "LANTERN_JAX_CPU_DEVICES"
@@ -645,9 +634,9 @@ def cmd_policies(args: argparse.Namespace, argv: Sequence[str]) -> int:
 def _list_ablations() -> None:
     from tabulate import tabulate
 
-    from lantern_jax.evaluate import ablation_names
+    from lantern_jax.scenarios.ablations import ABLATIONS
 
-    rows = [[n, ABLATION_DESCRIPTIONS.get(n, "")] for n in ablation_names()]
+    rows = [[a.name, a.description] for a in ABLATIONS]
     print(tabulate(rows, headers=["ablation", "description"], disable_numparse=True))
 
 
@@ -663,14 +652,15 @@ def cmd_ablations(args: argparse.Namespace, argv: Sequence[str]) -> int:
         raise UsageError(f"--policy: give one policy, got {', '.join(policies)}")
     _check_out(args.out)
     suite = _load_suite(args)
-    from lantern_jax.ablations import VARIANTS, run_ablations
+    from lantern_jax.ablations import run_ablations
     from lantern_jax.evaluate import PolicyError
     from lantern_jax.report import format_ablation_table, interval_note, write_ablation_outputs
+    from lantern_jax.scenarios.ablations import ABLATIONS
 
     _stage(
         args,
         f"suite {suite.suite_id}: {len(suite)} pairs; policy {policies[0]}; "
-        f"{len(VARIANTS)} protocol variants x {3 * len(suite)} executions",
+        f"{len(ABLATIONS)} protocol variants x {3 * len(suite)} executions",
     )
     t0 = time.perf_counter()
     try:

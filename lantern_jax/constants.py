@@ -88,6 +88,9 @@ FAMILY_NAMES = (
 )
 PE, VC, OR, LWW, RWW, RTY = range(6)
 
+# --- the two conditions of every Route A execution (result tables' "condition" column) --------
+CONDITIONS = ("warning", "no-warning")
+
 # --- weather profiles of the frozen suite -----------------------------------------------------
 WEATHERS = ("clear_day", "cloudy_day", "wet_day", "light_rain", "dusk")
 

@@ -36,6 +36,7 @@ point, and the same runs also give the closed-loop effect.  The empty-road route
 from __future__ import annotations
 
 import dataclasses
+import functools
 import os
 from typing import Any
 
@@ -61,10 +62,10 @@ from lantern_jax.scenarios.warnings import (
 )
 from lantern_jax.scoring.metrics import finalize
 from lantern_jax.scoring.thresholds import (
+    DEFAULT_SCORING,
     NONACTIONABLE_MAX_DV_MPS,
     NONACTIONABLE_MAX_RC_DROP,
     NONACTIONABLE_MAX_STOP_S,
-    STILL_SPEED_MPS,
 )
 from lantern_jax.scoring.uncertainty import (
     SEED,
@@ -74,7 +75,9 @@ from lantern_jax.scoring.uncertainty import (
     resampling,
     sample_interval,
 )
+from lantern_jax.sim.engine import Program
 from lantern_jax.sim.rollout import rollout
+from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings
 from lantern_jax.world import Scenario, tree_stack
 
 EMPTY_ROAD_LENGTH_M = 150.0  # m, the non-actionable diagnostic's empty straight route
@@ -257,10 +260,15 @@ def wording_table(
 # ---------------------------------------------------------------------------------------------
 # recorded rollouts of a few executions
 # ---------------------------------------------------------------------------------------------
-_RUNNERS: dict[tuple, Any] = {}
+@functools.partial(jax.jit, static_argnames=("program", "horizon"))
+def _recorded(batch, params, settings, *, program: Program, horizon: int):
+    """Recorded rollouts of a batch; compiled once per (policy program, horizon)."""
+    return jax.vmap(lambda sc: rollout(sc, program.driver, params, horizon, True, settings))(batch)
 
 
-def run_recorded(policy: Policy, params: Any, scenarios: list[Scenario]) -> tuple[Any, Any, Any]:
+def run_recorded(
+    policy: Policy, params: Any, scenarios: list[Scenario], settings: Settings = DEFAULT_SETTINGS
+) -> tuple[Any, Any, Any]:
     """Roll out a few executions with full records (one jitted, vmapped call).
 
     Returns:
@@ -269,13 +277,8 @@ def run_recorded(policy: Policy, params: Any, scenarios: list[Scenario]) -> tupl
     """
     batch = tree_stack(scenarios)
     horizon = int(np.ceil(float(np.max(np.asarray(batch.config.timeout_s))) / DT))
-    key = (policy.program, horizon)
-    if key not in _RUNNERS:
-        _RUNNERS[key] = jax.jit(
-            jax.vmap(lambda sc, p: rollout(sc, policy, p, horizon, record=True), in_axes=(0, None))
-        )
-    final, rec = _RUNNERS[key](batch, params)
-    metrics = jax.vmap(finalize)(final.telemetry)
+    final, rec = _recorded(batch, params, settings, program=Program(policy), horizon=horizon)
+    metrics = jax.vmap(lambda t: finalize(t, settings.scoring))(final.telemetry)
     return jax.tree.map(np.asarray, (final, rec, metrics))
 
 
@@ -287,14 +290,16 @@ def live_mask(rec: Any) -> np.ndarray:
 
 
 def longest_stop_s(speed: np.ndarray, live: np.ndarray) -> float:
-    """s, the longest run of live ticks with speed below ``STILL_SPEED_MPS``.
+    """s, the longest run of live ticks with speed below the block gate's standstill speed
+    (``ScoringSettings.still_speed_mps``).
 
     Args:
         speed: (T,) m/s, speed at the end of every tick.
         live: (T,) bool, the tick was simulated.
     """
     best = run = 0
-    for still in (np.asarray(speed) < STILL_SPEED_MPS) & np.asarray(live, bool):
+    still_speed = DEFAULT_SCORING.still_speed_mps
+    for still in (np.asarray(speed) < still_speed) & np.asarray(live, bool):
         run = run + 1 if still else 0
         best = max(best, run)
     return best * DT

@@ -45,7 +45,6 @@ import jax
 import numpy as np
 
 from lantern_jax.constants import DT, FAMILIES, WEATHERS
-from lantern_jax.evaluate import run_executions
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.duplicates import near_duplicate, route_samples
 from lantern_jax.scenarios.families import sample_params
@@ -59,6 +58,7 @@ from lantern_jax.scenarios.suite import (
     suite_hash,
 )
 from lantern_jax.scoring.metrics import finalize
+from lantern_jax.sim.engine import run_executions
 from lantern_jax.times import happened
 from lantern_jax.world import Scenario, tree_stack
 

@@ -13,17 +13,20 @@ section).
 **The key** (:func:`program_key`) is a SHA-256 over
 
 * every file of this package, its modules and data (:func:`code_fingerprint`): any edit is a
-  new key; and the public module-level values and bytecode of its loaded modules
-  (:func:`module_state`), so that a constant set at run time (a threshold changed in a
-  notebook) or a reloaded module is a new key too;
+  new key (also one made while a process runs, e.g. a module edited and reloaded);
 * the versions of :data:`LIBRARIES` and of Python, the backend (platform, its version,
   device kinds and ids, process count), ``XLA_FLAGS`` and the JAX options that change what a
   trace produces (:data:`JAX_OPTIONS`);
-* what the caller names as the program's identity (for the rollout: the policy's ``act``
-  function, its ``privileged`` flag and the slot layout), described by :func:`describe`:
+* what the caller names as the program's identity (for the rollout: the policy's program --
+  act function, sensors, carry -- and the slot layout), described by :func:`describe`:
   functions by module and qualified name plus everything they close over, this package's
   objects by their fields, arrays by their bytes;
-* the arguments' tree structure and every leaf's shape, dtype and placement.
+* the arguments' tree structure (the static part of the settings included: tick windows, the
+  text bank) and every leaf's shape, dtype and placement.
+
+Every value a user may change is an argument (:class:`lantern_jax.sim.settings.Settings`, the
+policy's parameters), never baked into the program, so the key needs no picture of the
+package's module state: a changed threshold runs the stored program with its new value.
 
 A program whose identity cannot be described with certainty (a function from outside this
 package, such as a user's own policy or a host-callback model; an object whose text form hides
@@ -112,15 +115,28 @@ def store_dir() -> Path | None:
     return Path(base) / STORE_SUBDIR
 
 
-@functools.cache
+def _package_files() -> list[Path]:
+    root = Path(__file__).resolve().parent
+    return [
+        p for p in sorted(root.rglob("*"))
+        if p.is_file() and "__pycache__" not in p.parts and p.suffix != ".pyc"
+    ]  # fmt: skip
+
+
 def code_fingerprint() -> str:
     """SHA-256 over the path and bytes of every file of this package: its modules and the
-    data they may read while a program is traced (once per process, ~3 MB)."""
+    data they may read while a program is traced (~3 MB; hashed again only when a file's size
+    or modification time changed, e.g. a module edited and reloaded in a notebook)."""
+    files = _package_files()
+    return _fingerprint(tuple((str(p), p.stat().st_mtime_ns, p.stat().st_size) for p in files))
+
+
+@functools.lru_cache(maxsize=4)
+def _fingerprint(signature: tuple) -> str:
     root = Path(__file__).resolve().parent
     h = hashlib.sha256()
-    for path in sorted(root.rglob("*")):
-        if not path.is_file() or "__pycache__" in path.parts or path.suffix == ".pyc":
-            continue
+    for name, _, _ in signature:
+        path = Path(name)
         h.update(str(path.relative_to(root)).encode())
         h.update(b"\0")
         h.update(path.read_bytes())
@@ -135,78 +151,12 @@ def _version(name: str) -> str:
         return "absent"
 
 
-def _code_digest(obj: Any) -> str:
-    """SHA-256 of the bytecode of a function of this package (nested functions included), or
-    of a class's methods: the code as loaded, which a module reloaded in a notebook changes
-    even where the files were hashed before."""
-    if not _ours(getattr(obj, "__module__", None)):
-        return ""
-    if isinstance(obj, types.FunctionType):
-        functions = [obj]
-    else:
-        functions = [getattr(v, "__func__", v) for v in vars(obj).values()]
-        functions = [f for f in functions if isinstance(f, types.FunctionType)]
-    h = hashlib.sha256()
-    for f in functions:
-        h.update(_code_bytes(f.__code__))
-    return h.hexdigest()
-
-
-def _code_bytes(code: types.CodeType) -> bytes:
-    """A code object's bytecode, names and constants (nested code included) as bytes that are
-    the same in every process (``marshal`` output depends on reference counts; a frozenset's
-    order on the string hash seed)."""
-
-    def const(c: Any) -> str:
-        if isinstance(c, types.CodeType):
-            return _code_bytes(c).hex()
-        if isinstance(c, tuple):
-            return "(" + ",".join(const(x) for x in c) + ")"
-        if isinstance(c, frozenset):
-            return "{" + ",".join(sorted(const(x) for x in c)) + "}"
-        return repr(c)
-
-    names = (code.co_names, code.co_varnames, code.co_freevars, code.co_cellvars)
-    return b"|".join([code.co_code, repr(names).encode(), const(code.co_consts).encode()])
-
-
-def module_state() -> str:
-    """SHA-256 over the public module-level values of this package's loaded modules.
-
-    The files (:func:`code_fingerprint`) say what the code was when it was loaded, not what a
-    user set since: a threshold assigned in a notebook (``thresholds.W_PROGRESS_A = 0.5``) or a
-    function replaced in a test changes what a trace bakes into a program.  Plain values,
-    tuples, arrays and this package's dataclass objects are described in full, functions and
-    classes by the name they carry and the bytecode they hold (:func:`_code_digest`); values
-    that cannot be described (caches, loggers) are left out, and so are names starting with
-    ``_`` (private, often lazily filled caches).
-    """
-    h = hashlib.sha256()
-    for name in sorted(n for n in sys.modules if _ours(n)):
-        module = sys.modules[name]
-        if module is None or name == __name__:
-            continue
-        for attr, value in sorted(vars(module).items()):
-            if attr.startswith("_") or isinstance(value, types.ModuleType):
-                continue
-            if isinstance(value, types.FunctionType | type):
-                text = f"{value.__module__}.{value.__qualname__}:{_code_digest(value)}"
-            else:
-                try:
-                    text = describe(value)
-                except Unkeyable:
-                    continue
-            h.update(f"{name}.{attr}={text}\n".encode())
-    return h.hexdigest()
-
-
 def environment() -> dict[str, Any]:
     """What outside this package's code determines a compiled program (part of every key)."""
     devices = jax.devices()
     return dict(
         format=STORE_FORMAT,
         code=code_fingerprint(),
-        module_state=module_state(),
         python=sys.version_info[:2],
         packages={n: _version(n) for n in LIBRARIES},
         backend=jax.default_backend(),

@@ -27,10 +27,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from lantern_jax.constants import DT, SUITE_ID
-from lantern_jax.evaluate import build_executions, run_executions
 from lantern_jax.scenarios.knobs import get_knobs, set_knobs
 from lantern_jax.scenarios.suite import Suite, load_suite
 from lantern_jax.scoring.metrics import finalize
+from lantern_jax.sim.engine import build_executions, run_executions
 from lantern_jax.world import Scenario
 
 Source = Callable[[np.ndarray], Scenario]

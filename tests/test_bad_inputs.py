@@ -1464,7 +1464,7 @@ def test_sigint_during_compile_exits_130(tmp_path):
     seen = []
     for line in proc.stderr:  # the rollout's XLA compilation starts after this line
         seen.append(line)
-        if "Finished jaxpr to MLIR module conversion jit(program)" in line:
+        if "Finished jaxpr to MLIR module conversion jit(_scheduled)" in line:
             break
     else:
         pytest.fail("no rollout compilation seen:\n" + "".join(seen[-20:]))

@@ -315,8 +315,9 @@ def test_ablations_list_and_bad_policy(capsys):
 def test_ablations_table_command(manifest_path, tmp_path):
     """``lantern-jax ablations --policy coop`` runs the six protocol variants, prints the
     paper's table and writes it (same batch shape as ``evaluated``: one compile)."""
-    from lantern_jax.ablations import TABLE_COLUMNS, VARIANTS
+    from lantern_jax.ablations import TABLE_COLUMNS
     from lantern_jax.report import ABLATION_FILES
+    from lantern_jax.scenarios.ablations import ABLATIONS
 
     out_dir = tmp_path / "abl"
     res = run_cli(["ablations", "--policy", "coop", "--suite", str(manifest_path),
@@ -324,8 +325,8 @@ def test_ablations_table_command(manifest_path, tmp_path):
     assert res.rc == 0, res.err
     for name in ABLATION_FILES:
         assert (out_dir / name).is_file(), name
-    for _, label in VARIANTS:
-        assert label in res.out
+    for ablation in ABLATIONS:
+        assert ablation.label in res.out
     for col in TABLE_COLUMNS:
         assert col in res.out
     table = pd.read_csv(out_dir / "ablations.csv")
@@ -333,13 +334,15 @@ def test_ablations_table_command(manifest_path, tmp_path):
     assert list(table.columns) == ["model", "condition", "variant", "label", *with_intervals]
     assert (table["CUS_n"] == len(PAIRS)).all() and "Pairs" in res.out
     warned = table[table["condition"] == "warning"].set_index("variant")
-    assert list(warned.index) == [v for v, _ in VARIANTS]
+    assert list(warned.index) == [a.name for a in ABLATIONS]
     assert warned.loc["none", "Event Exp."] == 100.0
     # late onset: the warning arrives with the event, nothing to anticipate with
     assert warned.loc["late_onset", "Ant."] <= warned.loc["none", "Ant."]
     routes = validate_route_table(read_route_table(out_dir / "ablation_route_level_results.csv"))
     assert set(routes["condition"]) == {
-        c if v == "none" else f"{c}:{v}" for c in ("warning", "no-warning") for v, _ in VARIANTS
+        c if v == "none" else f"{c}:{v}"
+        for c in ("warning", "no-warning")
+        for v in (a.name for a in ABLATIONS)
     }
 
 

@@ -469,8 +469,9 @@ def test_slot_scheduling_matches_one_group(shipped, monkeypatch):
     """Stepping the executions in a few refilled slots, 80 ticks per call, gives the same
     results as stepping the whole batch in lockstep to the end (continuous values to float32
     rounding, discrete ones exactly)."""
-    import lantern_jax.evaluate as ev
     from lantern_jax.scoring.metrics import finalize
+    from lantern_jax.scoring.thresholds import DEFAULT_SCORING
+    from lantern_jax.sim import engine as ev
 
     monkeypatch.setattr(ev, "REFILL_TICKS", 80)
     monkeypatch.setattr(ev, "compact_slots", lambda backend=None: 4 // jax.device_count())
@@ -479,7 +480,7 @@ def test_slot_scheduling_matches_one_group(shipped, monkeypatch):
     params = pol.init(jax.random.PRNGKey(0))
 
     def init_programs():
-        return {k for k in ev._COMPILED if k[0] == "exe" and k[1] is ev.initial_states}
+        return {k for k in ev._EXECUTABLES if k[0] is ev.initial_states}
 
     known = init_programs()
     one, _ = ev.run_executions(pol, execs.scenarios, params, execs.max_ticks, compact=False)
@@ -489,7 +490,7 @@ def test_slot_scheduling_matches_one_group(shipped, monkeypatch):
     assert len(init_programs() - known) <= 2 and len(init_programs()) >= 2
     assert int(np.max(np.asarray(one.tick))) > 160  # some executions needed several calls
     assert np.asarray(two.done).all()
-    m1, m2 = finalize(one.telemetry), finalize(two.telemetry)
+    m1, m2 = finalize(one.telemetry, DEFAULT_SCORING), finalize(two.telemetry, DEFAULT_SCORING)
     for f in dataclasses.fields(m1):
         a, b = np.asarray(getattr(m1, f.name)), np.asarray(getattr(m2, f.name))
         if a.dtype.kind == "b":

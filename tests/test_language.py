@@ -12,7 +12,7 @@ import pytest
 
 from lantern_jax import language
 from lantern_jax.scenarios import warnings
-from lantern_jax.scenarios.warnings import TEMPLATES, TEXT_BANK, TOKEN
+from lantern_jax.scenarios.warnings import DEFAULT_BANK, TEMPLATES, TOKEN
 
 
 @pytest.fixture(scope="module")
@@ -38,8 +38,8 @@ def test_canonical_templates_round_trip(text_id):
 
 def test_every_bank_text_round_trips_through_its_table_row():
     rows = warnings.token_table()
-    assert rows.shape == (len(TEXT_BANK), language.MAX_TOKENS) and rows.dtype == np.int32
-    for e in TEXT_BANK:
+    assert rows.shape == (len(DEFAULT_BANK), language.MAX_TOKENS) and rows.dtype == np.int32
+    for e in DEFAULT_BANK:
         assert language.detokenize(rows[e.text_id]) == e.text, e.text_id
     assert (rows[warnings.EMPTY_TEXT_ID] == language.PAD_ID).all()  # the empty text: no tokens
 
@@ -55,7 +55,7 @@ def test_tokens_equal_the_tokenizers_output(tok):
         language.NUMBER_ID,
         *tok.encode(")", add_special_tokens=False).ids,
     ]
-    for e in TEXT_BANK:
+    for e in DEFAULT_BANK:
         want: list[int] = []
         for i, piece in enumerate(e.text.split(TOKEN)):
             if i:
@@ -83,7 +83,7 @@ def test_pieces_keep_the_full_texts_tokens(tok):
 
 def test_number_and_padding_ids_never_come_from_text(tok):
     """The byte-fallback tokenizer never emits <unk> (the number token) or </s> (padding)."""
-    for text in [e.text.replace(TOKEN, "(14.2, -3.1)") for e in TEXT_BANK] + ["ünïcödé ✓ 🚗"]:
+    for text in [e.text.replace(TOKEN, "(14.2, -3.1)") for e in DEFAULT_BANK] + ["ünïcödé ✓ 🚗"]:
         ids = tok.encode(text, add_special_tokens=False).ids
         assert language.NUMBER_ID not in ids and language.PAD_ID not in ids
 
@@ -91,7 +91,7 @@ def test_number_and_padding_ids_never_come_from_text(tok):
 def test_the_value_channel_writes_the_position_as_the_text_does():
     """The delivered string read back from tokens and values is exactly ``render_warning``."""
     lookup = jax.jit(lambda i, p: warnings.warning_language(i, jnp.asarray(True), p))
-    for e in TEXT_BANK:
+    for e in DEFAULT_BANK:
         for pos in ((14.24, -3.15), (0.04, -0.04), (100.0, 0.5)):
             tokens, values = lookup(jnp.int32(e.text_id), jnp.asarray(pos, jnp.float32))
             got = warnings.warning_string(tokens, values)
@@ -132,20 +132,20 @@ def test_token_table_is_built_once(monkeypatch):
         return real(text, *a, **k)
 
     monkeypatch.setattr(language, "tokenize", counting)
-    monkeypatch.setattr(warnings, "_TABLES", {})
+    warnings._text_tables.cache_clear()
     first = warnings.text_tables()
-    assert len(calls) == len(TEXT_BANK)
+    assert len(calls) == len(DEFAULT_BANK)
     assert warnings.text_tables() is first
     lookup = jax.jit(lambda i: warnings.warning_language(i, jnp.asarray(True), jnp.ones(2)))
-    for i in (0, 7, len(TEXT_BANK) - 1):
+    for i in (0, 7, len(DEFAULT_BANK) - 1):
         tokens, values = lookup(jnp.int32(i))
         np.testing.assert_array_equal(np.asarray(tokens), first.tokens[i])
-        assert bool(np.any(np.asarray(values) != 0)) == TEXT_BANK[i].has_position
-    assert len(calls) == len(TEXT_BANK)  # lookups (traced or not) never tokenise again
+        assert bool(np.any(np.asarray(values) != 0)) == DEFAULT_BANK[i].has_position
+    assert len(calls) == len(DEFAULT_BANK)  # lookups (traced or not) never tokenise again
 
 
 def test_lookup_of_inactive_or_unknown_text_is_padding():
-    for tid, active in ((0, False), (-1, True), (len(TEXT_BANK), True)):
+    for tid, active in ((0, False), (-1, True), (len(DEFAULT_BANK), True)):
         tokens, values = warnings.warning_language(jnp.int32(tid), jnp.asarray(active), jnp.ones(2))
         assert (np.asarray(tokens) == language.PAD_ID).all()
         assert not np.asarray(values).any()

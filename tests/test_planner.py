@@ -55,4 +55,4 @@ def test_turn_entry_is_the_first_segment_that_leaves_the_first_heading():
     route = jnp.asarray(arc_route(5, 0.1))  # segment k >= 5 turns by 0.1 (k - 4) rad
     # deviations 0.1, 0.2, 0.3, 0.4 ...: the first above 0.3 rad is segment 8
     assert float(turn_entry_arc(route, 0.3 + 1e-3)) == 8 * ROUTE_STEP
-    assert float(turn_entry_arc(jnp.asarray(arc_route(NUM_ROUTE_POINTS, 0.0)))) == BIG
+    assert float(turn_entry_arc(jnp.asarray(arc_route(NUM_ROUTE_POINTS, 0.0)), 0.3)) == BIG

@@ -222,9 +222,9 @@ def test_a_carry_resets_when_a_slot_takes_the_next_execution(six_pairs, monkeypa
     """Through two slots per device refilled every 20 ticks, every execution's final count is
     the number of ticks its own warning was delivered (a carry left over from the slot's
     previous execution would add to it)."""
-    import lantern_jax.evaluate as ev
+    from lantern_jax.sim import engine
 
-    monkeypatch.setattr(ev, "compact_slots", lambda backend=None: 2)
+    monkeypatch.setattr(engine, "compact_slots", lambda backend=None: 2)
     execs = build_executions(six_pairs)
     final, _ = run_executions(_warning_counter(), execs.scenarios, None, execs.max_ticks,
                               compact=True)  # fmt: skip

@@ -11,6 +11,7 @@ disk and loaded by a later process without tracing or compiling.
 
 from __future__ import annotations
 
+import collections
 import functools
 import os
 import subprocess
@@ -23,7 +24,6 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from lantern_jax import evaluate as evaluate_module
 from lantern_jax import program_store
 from lantern_jax.evaluate import evaluate
 from lantern_jax.policies.base import Policy
@@ -31,6 +31,9 @@ from lantern_jax.policies.expert import expert_act
 from lantern_jax.policies.reference import reference_act
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.suite import load_suite
+from lantern_jax.sim import engine
+from lantern_jax.sim.rollout import chunk_runner
+from lantern_jax.sim.settings import DEFAULT_SETTINGS
 
 PAIR = ["pe_0001"]
 
@@ -39,7 +42,7 @@ PAIR = ["pe_0001"]
 def store(tmp_path, monkeypatch):
     """A fresh store folder and an empty in-process program cache (restored afterwards)."""
     monkeypatch.setattr(program_store, "store_dir", lambda: tmp_path)
-    monkeypatch.setattr(evaluate_module, "_COMPILED", {})
+    monkeypatch.setattr(engine, "_EXECUTABLES", collections.OrderedDict())
     return tmp_path
 
 
@@ -124,9 +127,17 @@ def test_describe_accepts_package_functions_and_refuses_what_it_cannot_vouch_for
         with pytest.raises(program_store.Unkeyable):
             program_store.describe(bad)
     # a closure is described by what it closes over
-    learned = get_policy("learned-coop").act
-    surround = get_policy("learned-surround").act
-    assert program_store.describe(learned) != program_store.describe(surround)
+    coop = get_policy("coop")
+    short = chunk_runner(coop, None, 20, DEFAULT_SETTINGS)
+    assert program_store.describe(short) == program_store.describe(
+        chunk_runner(coop, None, 20, DEFAULT_SETTINGS)
+    )
+    assert program_store.describe(short) != program_store.describe(
+        chunk_runner(coop, None, 40, DEFAULT_SETTINGS)
+    )
+    # policies: their program (act, sensors, carry); learned models by architecture
+    learned, surround = get_policy("learned-coop"), get_policy("learned-surround")
+    assert program_store.describe(learned.program) != program_store.describe(surround.program)
     # arrays by their bytes, not their repr (which elides)
     a = np.zeros(5000, np.float32)
     b = a.copy()
@@ -204,30 +215,44 @@ def test_the_store_is_off_with_the_compilation_cache():
         jax.config.update("jax_enable_compilation_cache", was)
 
 
-def test_a_constant_changed_at_run_time_changes_the_key(monkeypatch):
-    """A threshold set in a notebook is baked into the next trace: the stored program of the
-    old value must not answer for it."""
-    from lantern_jax.scoring import thresholds
+def test_static_settings_change_the_key_and_traced_ones_do_not():
+    """Settings are arguments: their static part (tick windows, the text bank) is in the
+    arguments' tree structure, so a change is another key; a traced value (a threshold) runs the
+    same stored program with the new value."""
+    args = (DEFAULT_SETTINGS,)
+    base = program_store.program_key(("finalize",), args)
+    window = DEFAULT_SETTINGS.replace(scoring=DEFAULT_SETTINGS.scoring.replace(react_window_s=3.0))
+    bank = DEFAULT_SETTINGS.replace(
+        bank=DEFAULT_SETTINGS.bank.with_text("PE", "non_actionable", "Road works ahead.")
+    )
+    closing = DEFAULT_SETTINGS.replace(
+        scoring=DEFAULT_SETTINGS.scoring.replace(closing_min_mps=2.0)
+    )
+    assert program_store.program_key(("finalize",), (window,)) != base
+    assert program_store.program_key(("finalize",), (bank,)) != base
+    assert program_store.program_key(("finalize",), (closing,)) == base
 
+
+def test_an_edited_package_file_changes_the_key(tmp_path, monkeypatch):
+    """A module edited (and reloaded in a notebook) is new code: the fingerprint of the
+    package's files changes with a file's bytes."""
+    edited = tmp_path / "module.py"
+    edited.write_text("X = 1\n")
+    files = program_store._package_files()
+    monkeypatch.setattr(program_store, "_package_files", lambda: [*files, edited])
+    monkeypatch.setattr(program_store, "_fingerprint", _unrooted_fingerprint)
     args = (np.zeros(3, np.float32),)
     before = program_store.program_key(("finalize",), args)
-    monkeypatch.setattr(thresholds, "W_PROGRESS_A", thresholds.W_PROGRESS_A + 0.01)
-    assert program_store.program_key(("finalize",), args) != before
-    monkeypatch.undo()
     assert program_store.program_key(("finalize",), args) == before
-
-
-def test_a_function_reloaded_under_the_same_name_changes_the_key(monkeypatch):
-    """A module reloaded in a notebook keeps its functions' names but not their code."""
-    from lantern_jax.policies import planner
-
-    original = planner.route_point
-
-    def route_point(route, arc):  # the same name, other code
-        return original(route, arc + 0.0)
-
-    route_point.__module__, route_point.__qualname__ = planner.__name__, "route_point"
-    args = (np.zeros(3, np.float32),)
-    before = program_store.program_key(("finalize",), args)
-    monkeypatch.setattr(planner, "route_point", route_point)
+    edited.write_text("X = 22\n")  # other bytes (and size)
     assert program_store.program_key(("finalize",), args) != before
+
+
+def _unrooted_fingerprint(signature: tuple) -> str:
+    """``program_store._fingerprint`` for files outside the package folder too."""
+    import hashlib
+
+    h = hashlib.sha256()
+    for name, _, _ in signature:
+        h.update(name.encode() + b"\0" + Path(name).read_bytes())
+    return h.hexdigest()

@@ -46,8 +46,8 @@ from lantern_jax.scenarios.spec import (
     content_hash,
 )
 from lantern_jax.scenarios.warnings import (
+    DEFAULT_BANK,
     TEMPLATES,
-    TEXT_BANK,
     TOKEN,
     ground_position,
     render_warning,
@@ -538,13 +538,13 @@ def test_render_warning_exact():
         "The vehicle at position (0.0, 0.0) will cut into the ego lane soon."
     )
     with pytest.raises(ValueError, match="text_id"):
-        render_warning(len(TEXT_BANK) + 100, (0.0, 0.0))
+        render_warning(len(DEFAULT_BANK) + 100, (0.0, 0.0))
 
 
 def test_text_bank_canonical_ids():
     assert len(TEMPLATES) == 6
     for i in range(len(FAMILIES)):
-        e = TEXT_BANK[i]
+        e = DEFAULT_BANK[i]
         assert (e.text_id, e.family, e.kind) == (i, i, "canonical")
         assert e.text == TEMPLATES[i] and e.text.count(TOKEN) == 1
     assert TEMPLATES[5] == (

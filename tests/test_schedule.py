@@ -16,7 +16,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from lantern_jax.evaluate import schedule_layout
+from lantern_jax.sim.engine import schedule_layout
 from lantern_jax.sim.rollout import scheduled_map
 
 CHUNK = 3  # ticks per loop step of the toy items
@@ -108,8 +108,8 @@ def test_padding_executions_queue_after_every_real_one():
 
 
 def test_padding_below_the_batch_is_refused(shipped_pair_executions):
-    from lantern_jax.evaluate import run_executions
     from lantern_jax.policies.registry import get_policy
+    from lantern_jax.sim.engine import run_executions
 
     ego = get_policy("ego")
     with pytest.raises(ValueError, match=r"pad_to=2 is smaller than the batch \(3\)"):
@@ -119,7 +119,7 @@ def test_padding_below_the_batch_is_refused(shipped_pair_executions):
 @pytest.fixture(scope="module")
 def shipped_pair_executions():
     """The three executions of one shipped pair (built on the host, nothing compiled)."""
-    from lantern_jax.evaluate import build_executions
     from lantern_jax.scenarios.suite import load_suite
+    from lantern_jax.sim.engine import build_executions
 
     return build_executions(load_suite().select(["pe_0001"])).scenarios

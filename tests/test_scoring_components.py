@@ -27,6 +27,7 @@ from lantern_jax.scoring.components import (
     ttc,
 )
 from lantern_jax.scoring.sample import TickSample
+from lantern_jax.scoring.thresholds import DEFAULT_SCORING as S
 from lantern_jax.times import NEVER
 
 N = 60  # ticks of every tiny trajectory (3 s); t[k] = (k + 1) * DT
@@ -62,12 +63,15 @@ def at(k: int) -> float:
 
 @functools.partial(jax.jit, static_argnums=0)
 def _fold(unit, stacked: TickSample, temperature):
+    settings = S.replace(temperature=temperature)
+
     def body(carry, s):
         ctx, state = carry
-        ctx, tick = context.update(ctx, s, temperature)
-        return (ctx, unit.update(state, s, tick, temperature)), None
+        ctx, tick = context.update(ctx, s, settings)
+        return (ctx, unit.update(state, s, tick, settings)), None
 
-    (ctx, state), _ = jax.lax.scan(body, (context.init(), unit.init()), stacked)
+    init = (context.init(settings), unit.init(settings))
+    (ctx, state), _ = jax.lax.scan(body, init, stacked)
     return ctx, state
 
 
@@ -95,10 +99,10 @@ def test_context_v_pre_rings_and_window_masks():
     tr["ego_speed"] = 6.0 + 0.1 * np.arange(N)
     tr["t_warn_point"][:], tr["t_event"][:] = at(3), at(8)
     ticks = samples(tr)
-    ctx = context.init()
+    ctx = context.init(S)
     for k in range(6):  # fold ticks 0..5
         row = jax.tree.map(lambda x, k=k: x[k], ticks)
-        ctx, tick = context.update(ctx, row, jnp.float32(0.01))
+        ctx, tick = context.update(ctx, row, S.replace(temperature=jnp.float32(0.01)))
     assert f(ctx.v_pre) == pytest.approx(6.2) and bool(ctx.v_pre_set)
     assert int(ctx.n_ticks) == 6 and f(ctx.t_last) == at(5)
     assert f(ctx.time_ring[-1]) == at(5) and f(ctx.time_ring[-7]) == 0.0  # 6 ticks, zero-filled
@@ -119,7 +123,7 @@ def test_telemetry_fold_equals_each_unit_folded_alone():
     tr["hazard_rel_vel"][:, 0] = -2.0
     # same program shape as the single-unit fold (traced temperature); two separately compiled
     # programs may still round a division differently, hence the 1e-6 relative tolerance
-    tel = jax.jit(fold_telemetry)(samples(tr), jnp.float32(0.01))
+    tel = jax.jit(fold_telemetry)(samples(tr), S.replace(temperature=jnp.float32(0.01)))
     for unit in UNITS_WITH_STATE:
         name = unit.__name__.rsplit(".", 1)[-1]
         ctx, st = fold(unit, tr)
@@ -153,20 +157,20 @@ def test_ttc_of_a_closing_hazard():
     value, valid = ttc.hard(st, ctx, NEVER)
     assert bool(valid)
     assert f(value) == pytest.approx(2.9, abs=1e-5)
-    assert f(ttc.score(value)) == pytest.approx(2.9 / 3.0, abs=1e-6)
+    assert f(ttc.score(value, S)) == pytest.approx(2.9 / 3.0, abs=1e-6)
     # closing at 2 m/s from 6 m, the first tick alone in the window: TTC 3 s -> S_TTC 1.0
     tr = ttc_case()
     tr["t_clear"][:] = at(0)
-    assert ttc_min(tr) == pytest.approx(3.0) and f(ttc.score(ttc_min(tr))) == 1.0
+    assert ttc_min(tr) == pytest.approx(3.0) and f(ttc.score(ttc_min(tr), S)) == 1.0
 
 
 def test_ttc_no_closing_trend_overlap_and_window():
     # moving apart at 2 m/s: no sample -> TTC inf -> S_TTC 1
     tr = ttc_case(closing_speed=-2.0)
-    assert math.isinf(ttc_min(tr)) and f(ttc.score(ttc_min(tr))) == 1.0
+    assert math.isinf(ttc_min(tr)) and f(ttc.score(ttc_min(tr), S)) == 1.0
     # an overlap (box distance 0) inside the window is a sample of 0 even without closing
     tr["hazard_box_dist"][1] = 0.0
-    assert ttc_min(tr) == 0.0 and f(ttc.score(ttc_min(tr))) == 0.0
+    assert ttc_min(tr) == 0.0 and f(ttc.score(ttc_min(tr), S)) == 0.0
     # the same overlap before t_ref does not count
     tr["t_warn_point"][:] = at(2)
     assert math.isinf(ttc_min(tr))
@@ -270,10 +274,10 @@ def test_recovery_latency():
     ctx, st = fold(recovery, recovery_case())
     rl, valid = recovery.hard(st, ctx, NEVER)
     assert bool(valid) and f(rl) == pytest.approx(0.5, abs=1e-6)
-    assert f(recovery.score(rl)) == pytest.approx(0.9375, abs=1e-6)
+    assert f(recovery.score(rl, S)) == pytest.approx(0.9375, abs=1e-6)
     ctx, st = fold(recovery, recovery_case(progress_frozen=True))
     rl, valid = recovery.hard(st, ctx, NEVER)
-    assert bool(valid) and math.isnan(f(rl)) and f(recovery.score(rl)) == 0.0
+    assert bool(valid) and math.isnan(f(rl)) and f(recovery.score(rl, S)) == 0.0
 
 
 # ------------------------------------------------------------------------------------- progress
@@ -283,11 +287,11 @@ def test_progress_counts_the_end_zone_as_complete():
     tr["route_length"][:] = 42.0
     tr["progress"][:] = 30.0
     ctx, _ = fold(rule, tr)  # progress is stateless: any unit's fold carries the context
-    assert f(progress.hard(ctx)[0]) == pytest.approx(0.75)
+    assert f(progress.hard(ctx, S)[0]) == pytest.approx(0.75)
     tr["progress"][:] = 41.0
     ctx, _ = fold(rule, tr)
-    assert f(progress.hard(ctx)[0]) == 1.0
-    assert bool(progress.is_completed(ctx.progress_m, ctx.route_length_m))
+    assert f(progress.hard(ctx, S)[0]) == 1.0
+    assert bool(progress.is_completed(ctx.progress_m, ctx.route_length_m, S))
 
 
 # ---------------------------------------------------------------------------------------- gates
@@ -295,21 +299,23 @@ def test_collision_gate_and_failure_time():
     tr = quiet()
     tr["collision"][7] = True
     ctx, st = fold(collision, tr)
-    assert not bool(collision.hard(st, ctx)[0])
-    assert f(collision.failure_times(st, ctx)[0]) == at(7)
+    assert not bool(collision.hard(st, ctx, S)[0])
+    assert f(collision.failure_times(st, ctx, S)[0]) == at(7)
     ctx, st = fold(collision, quiet())
-    assert bool(collision.hard(st, ctx)[0]) and f(collision.failure_times(st, ctx)[0]) == NEVER
+    assert (
+        bool(collision.hard(st, ctx, S)[0]) and f(collision.failure_times(st, ctx, S)[0]) == NEVER
+    )
 
 
 def test_route_deviation_gate_at_30_m():
     tr = quiet()
     tr["dist_to_route"][12] = 29.9  # below 30 m: passes
     ctx, st = fold(route_deviation, tr)
-    assert bool(route_deviation.hard(st, ctx)[0])
+    assert bool(route_deviation.hard(st, ctx, S)[0])
     tr["dist_to_route"][12] = 30.0  # 30 m fails
     ctx, st = fold(route_deviation, tr)
-    assert not bool(route_deviation.hard(st, ctx)[0])
-    assert f(route_deviation.failure_times(st, ctx)[0]) == at(12)
+    assert not bool(route_deviation.hard(st, ctx, S)[0])
+    assert f(route_deviation.failure_times(st, ctx, S)[0]) == at(12)
 
 
 def test_lane_gate_debounce_over_the_whole_execution():
@@ -318,18 +324,18 @@ def test_lane_gate_debounce_over_the_whole_execution():
     tr["outside_lanes"][5:15] = True
     tr["outside_lanes"][30:39] = True
     ctx, st = fold(lane, tr)
-    assert bool(lane.hard(st, ctx)[0]) and f(lane.outside_s(st)) == pytest.approx(0.95)
+    assert bool(lane.hard(st, ctx, S)[0]) and f(lane.outside_s(st)) == pytest.approx(0.95)
     tr["outside_lanes"][40] = True
     ctx, st = fold(lane, tr)
-    assert not bool(lane.hard(st, ctx)[0])
-    assert f(lane.failure_times(st, ctx)[0]) == at(40)
+    assert not bool(lane.hard(st, ctx, S)[0])
+    assert f(lane.failure_times(st, ctx, S)[0]) == at(40)
 
 
 def test_rule_gate():
     tr = quiet()
     tr["red_light_violation"][3] = True
     ctx, st = fold(rule, tr)
-    assert not bool(rule.hard(st, ctx)[0]) and f(rule.failure_times(st, ctx)[0]) == at(3)
+    assert not bool(rule.hard(st, ctx, S)[0]) and f(rule.failure_times(st, ctx, S)[0]) == at(3)
 
 
 def test_block_gate_stall_timeout_and_fault():
@@ -338,21 +344,21 @@ def test_block_gate_stall_timeout_and_fault():
     tr = quiet(n=n)
     tr["ego_speed"][10:410] = 0.0
     ctx, st = fold(block, tr)
-    assert bool(block.stalled(st)) and f(block.max_still_s(st)) == pytest.approx(20.0)
-    t_stall, t_fault, t_timeout = block.failure_times(st, ctx)
+    assert bool(block.stalled(st, S)) and f(block.max_still_s(st)) == pytest.approx(20.0)
+    t_stall, t_fault, t_timeout = block.failure_times(st, ctx, S)
     assert f(t_stall) == at(409) and f(t_fault) == NEVER and f(t_timeout) == at(n - 1)
     tr["ego_speed"][409] = 5.0  # 399 ticks: no stall (the route is still unfinished: timeout)
     ctx, st = fold(block, tr)
-    assert not bool(block.stalled(st)) and not bool(block.hard(st, ctx)[0])
+    assert not bool(block.stalled(st, S)) and not bool(block.hard(st, ctx, S)[0])
     # standing at the route's end zone is no stall, and a completed route passes
     tr["ego_speed"][409] = 0.0
     tr["route_length"][:] = tr["progress"][-1] + 1.0
     tr["progress"][:] = tr["progress"][-1]
     ctx, st = fold(block, tr)
-    assert not bool(block.stalled(st)) and bool(block.hard(st, ctx)[0])
+    assert not bool(block.stalled(st, S)) and bool(block.hard(st, ctx, S)[0])
     tr["controller_fault"][7] = True  # a controller fault fails the gate at its tick
     ctx, st = fold(block, tr)
-    assert not bool(block.hard(st, ctx)[0]) and f(block.failure_times(st, ctx)[1]) == at(7)
+    assert not bool(block.hard(st, ctx, S)[0]) and f(block.failure_times(st, ctx, S)[1]) == at(7)
 
 
 def stop_case(first: int, last: int) -> dict:
@@ -384,7 +390,7 @@ def test_false_brake_gate(first, last, justified, passed):
     tr = stop_case(first, last)
     tr["justified_stop"][first : last + 1] = justified
     ctx, st = fold(false_brake, tr)
-    assert bool(false_brake.hard(st, ctx)[0]) == passed
+    assert bool(false_brake.hard(st, ctx, S)[0]) == passed
 
 
 # ----------------------------------------------------------------------- soft -> hard as T -> 0
@@ -412,30 +418,30 @@ def _hard_and_soft(name: str, temperature: float) -> tuple[float, float]:
     temp = jnp.float32(temperature)
     if name == "ttc":
         ctx, st = fold(ttc, ttc_case(), temperature)
-        return f(ttc.score(ttc.hard(st, ctx, NEVER)[0])), f(ttc.soft(st, ctx, NEVER, temp)[0])
+        return f(ttc.score(ttc.hard(st, ctx, NEVER)[0], S)), f(ttc.soft(st, ctx, NEVER, temp, S)[0])
     if name == "clearance":
         ctx, st = fold(clearance, clearance_case(), temperature)
         d_safe = jnp.float32(2.0)
         hard = clearance.score(clearance.hard(st, ctx, NEVER)[0], d_safe)
-        return f(hard), f(clearance.soft(st, ctx, NEVER, temp, d_safe)[0])
+        return f(hard), f(clearance.soft(st, ctx, NEVER, temp, S, d_safe)[0])
     if name == "anticipation":
         ctx, st = fold(anticipation, braking_case(14), temperature)
         t_react, valid = anticipation.hard(st, ctx, NEVER)
         hard = anticipation.score(ctx.t_warn_point, ctx.t_event, t_react, valid, False)
-        return f(hard), f(anticipation.soft(st, ctx, NEVER, temp)[0])
+        return f(hard), f(anticipation.soft(st, ctx, NEVER, temp, S)[0])
     if name == "recovery":
         ctx, st = fold(recovery, recovery_case(), temperature)
-        hard = recovery.score(recovery.hard(st, ctx, NEVER)[0])
-        return f(hard), f(recovery.soft(st, ctx, NEVER, temp)[0])
+        hard = recovery.score(recovery.hard(st, ctx, NEVER)[0], S)
+        return f(hard), f(recovery.soft(st, ctx, NEVER, temp, S)[0])
     if name == "progress":
         tr = quiet()
         tr["route_length"][:] = 402.0  # 0.6 of 400 m
         tr["progress"][:] = 240.0
         ctx, _ = fold(rule, tr, temperature)
-        return f(progress.hard(ctx)[0]), f(progress.soft(ctx, temp)[0])
+        return f(progress.hard(ctx, S)[0]), f(progress.soft(ctx, temp, S)[0])
     unit = globals()[name]
     ctx, st = fold(unit, _gate_case(unit), temperature)
-    return float(bool(unit.hard(st, ctx)[0])), f(unit.soft(st, ctx, temp)[0])
+    return float(bool(unit.hard(st, ctx, S)[0])), f(unit.soft(st, ctx, temp, S)[0])
 
 
 UNITS = ("ttc", "clearance", "anticipation", "recovery", "progress", "collision",

@@ -32,6 +32,7 @@ from lantern_jax.scoring.table import (
     write_route_table,
 )
 from lantern_jax.scoring.telemetry import fold_telemetry
+from lantern_jax.scoring.thresholds import DEFAULT_SCORING
 
 sys.path.insert(0, os.path.dirname(__file__))
 from reference_numpy_scoring import make_trajectory  # noqa: E402
@@ -123,7 +124,8 @@ def batch_metrics():
     def stack(trs):
         return TickSample(**{k: jnp.asarray(np.stack([t[k] for t in trs])) for k in trs[0]})
 
-    fold = jax.jit(jax.vmap(lambda s: finalize(fold_telemetry(s, 0.01))))
+    settings = DEFAULT_SCORING.replace(temperature=0.01)
+    fold = jax.jit(jax.vmap(lambda s: finalize(fold_telemetry(s, settings), settings)))
     return fold(stack(trs_a)), fold(stack(trs_b))
 
 

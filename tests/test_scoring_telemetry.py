@@ -16,6 +16,7 @@ from lantern_jax.scoring.cus import GATE_NAMES, pair_components, soft_pair_cus
 from lantern_jax.scoring.metrics import finalize
 from lantern_jax.scoring.sample import TickSample
 from lantern_jax.scoring.telemetry import fold_telemetry, init_telemetry, update_telemetry
+from lantern_jax.scoring.thresholds import DEFAULT_SCORING as S
 
 sys.path.insert(0, os.path.dirname(__file__))
 from reference_numpy_scoring import (  # noqa: E402
@@ -34,9 +35,9 @@ def _fold(samples, active, temperature):
 
     def body(tel, xs):
         sample, on = xs
-        return update_telemetry(tel, sample, temperature, on), None
+        return update_telemetry(tel, sample, S.replace(temperature=temperature), on), None
 
-    tel, _ = jax.lax.scan(body, init_telemetry(), (samples, active))
+    tel, _ = jax.lax.scan(body, init_telemetry(S), (samples, active))
     return tel
 
 
@@ -342,8 +343,8 @@ def test_soft_cus_gradient_is_finite(base):
         return TickSample(**d)
 
     def f(scale, temp):
-        ta = fold_telemetry(scaled(a, scale), temp)
-        tb = fold_telemetry(scaled(b, scale), temp)
+        ta = fold_telemetry(scaled(a, scale), S.replace(temperature=temp))
+        tb = fold_telemetry(scaled(b, scale), S.replace(temperature=temp))
         return soft_pair_cus(ta, tb, 2.0)
 
     grad = jax.jit(jax.grad(f))
@@ -354,9 +355,8 @@ def test_soft_cus_gradient_is_finite(base):
 
 def test_tick_counts_match_durations():
     # window lengths used by the accumulators (ticks * DT = seconds)
-    from lantern_jax.scoring import thresholds as th
-
-    assert th.REACT_WINDOW * DT == pytest.approx(0.5)
-    assert th.RECOVER_WINDOW * DT == pytest.approx(1.0)
-    assert th.BLOCK_STILL * DT == pytest.approx(20.0)
-    assert th.REACT_MIN_COUNT == 8
+    th = S
+    assert th.react_window * DT == pytest.approx(0.5)
+    assert th.recover_window * DT == pytest.approx(1.0)
+    assert th.block_still * DT == pytest.approx(20.0)
+    assert th.react_min_count == 8

@@ -15,6 +15,7 @@ from lantern_jax.observation import PRIVILEGED, SURROUND_RIG, WARNING
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.suite import build_suite_scenarios, load_suite
+from lantern_jax.sim.engine import Program
 from lantern_jax.sim.state import init_state
 from lantern_jax.sim.step import policy_waypoints, step
 from lantern_jax.sim.switch import SHARE_MIN_BYTES, policy_switch, switch_params
@@ -83,7 +84,7 @@ def test_each_branch_observes_only_what_its_member_reads(scenario):
     for i in range(3):
         params = switch_params(sw, i, members)
         state = init_state(scenario, sw.initial_carry(params))
-        out = jax.eval_shape(lambda s, p=params: step(sw, p, scenario, s, jnp.float32(0.05)), state)
+        out = jax.eval_shape(lambda s, p=params: step(sw, p, scenario, s), state)
         assert out[0].ego.xy.shape == (2,)
 
 
@@ -120,7 +121,7 @@ def test_a_stateful_member_keeps_its_own_carry(scenario):
     assert sw.num_branches == 2
     params = switch_params(sw, 1, (0.0, 0.0))
     state = init_state(scenario, sw.initial_carry(params))
-    run = jax.jit(lambda s: step(sw, params, scenario, s, jnp.float32(0.05))[0])
+    run = jax.jit(lambda s: step(sw, params, scenario, s)[0])
     for _ in range(3):
         state = run(state)
     assert state.policy_carry[0] == ()
@@ -143,12 +144,17 @@ def test_equal_large_arrays_enter_the_program_once():
     assert sp.member(0)["emb"] is sp.member(1)["emb"]
 
 
-def test_switches_are_cached_by_members():
-    assert policy_switch((PLAIN, PRIV)) is policy_switch((PLAIN, PRIV))
-    assert policy_switch((PRIV, PLAIN)) is not policy_switch((PLAIN, PRIV))
+def test_switches_of_the_same_programs_are_one_program():
+    """Two switches over members with the same programs are one static ``jit`` argument
+    (:class:`~lantern_jax.sim.engine.Program`): one compilation serves both."""
+    assert Program(policy_switch((PLAIN, PRIV))) == Program(policy_switch((PLAIN, PRIV)))
+    assert hash(Program(policy_switch((PLAIN, PRIV)))) == hash(
+        Program(policy_switch((PLAIN, PRIV)))
+    )
+    assert Program(policy_switch((PRIV, PLAIN))) != Program(policy_switch((PLAIN, PRIV)))
     # a policy of the same program under another name is the same member
     renamed = Policy("plain-again", zero, plain_act)
-    assert policy_switch((renamed, PRIV)) is policy_switch((PLAIN, PRIV))
+    assert Program(policy_switch((renamed, PRIV))) == Program(policy_switch((PLAIN, PRIV)))
     sw = policy_switch((PLAIN, PRIV))
     assert sw.any_privileged and sw.index_of(PRIV) == 1 and sw.index_of(renamed) == 0
 

@@ -17,6 +17,7 @@ from lantern_jax.constants import CAMERA_BACK_OFFSET, FRONT_CAMERA_FOV, OCC_BUIL
 from lantern_jax.scenarios.handmade import straight_scene
 from lantern_jax.scenarios.road import OccluderSpec
 from lantern_jax.scoring.measure import measure
+from lantern_jax.scoring.thresholds import DEFAULT_SCORING
 from lantern_jax.sensors import visibility as vis
 from lantern_jax.world import Occluders, ProtocolState
 
@@ -351,7 +352,7 @@ def test_ego_collides_with_an_occluder():
         world, world.ego0.replace(xy=jnp.asarray([18.0, 0.0], jnp.float32)), world.actors0,
         jnp.zeros(world.actors.num, bool), ProtocolState.initial(), jnp.float32(1.0),
         jnp.float32(18.0), jnp.float32(0.0), jnp.float32(17.9), jnp.float32(18.0),
-        jnp.int32(0), jnp.asarray(False), jnp.asarray(False),
+        jnp.int32(0), jnp.asarray(False), jnp.asarray(False), DEFAULT_SCORING,
     )  # fmt: skip
     # ego front at 18 + 2.45 = 20.45 > wall face 19.5, moving at 8 m/s -> collision
     assert bool(sample.collision)
@@ -359,7 +360,7 @@ def test_ego_collides_with_an_occluder():
         world, world.ego0.replace(xy=jnp.asarray([18.0, 0.0], jnp.float32), speed=0.0),
         world.actors0, jnp.zeros(world.actors.num, bool), ProtocolState.initial(),
         jnp.float32(1.0), jnp.float32(18.0), jnp.float32(0.0), jnp.float32(17.9),
-        jnp.float32(18.0), jnp.int32(0), jnp.asarray(False), jnp.asarray(False),
+        jnp.float32(18.0), jnp.int32(0), jnp.asarray(False), jnp.asarray(False), DEFAULT_SCORING,
     )  # fmt: skip
     assert not bool(at_rest.collision)  # contacts at standstill are ignored (leaderboard)
 

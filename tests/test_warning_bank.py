@@ -23,12 +23,12 @@ def suite():
 
 
 def test_canonical_ids_and_texts_are_fixed():
-    assert [e.text_id for e in w.TEXT_BANK[:6]] == list(range(6))
-    assert all(e.kind == "canonical" and e.family == e.text_id for e in w.TEXT_BANK[:6])
-    assert w.TEXT_BANK[0].text == (
+    assert [e.text_id for e in w.DEFAULT_BANK.entries[:6]] == list(range(6))
+    assert all(e.kind == "canonical" and e.family == e.text_id for e in w.DEFAULT_BANK.entries[:6])
+    assert w.DEFAULT_BANK[0].text == (
         "The pedestrian at position <FRONT_CAR_POS> is about to enter the ego lane."
     )
-    assert [e.text_id for e in w.TEXT_BANK] == list(range(len(w.TEXT_BANK)))
+    assert [e.text_id for e in w.DEFAULT_BANK] == list(range(len(w.DEFAULT_BANK)))
 
 
 def test_first_paraphrase_ids_are_kept():
@@ -89,11 +89,22 @@ def test_distance_conditioned_warning_renders_the_papers_positions():
         ((w.NO_FAMILY, "paraphrase", "A car.", "high"), "family"),
     ],
 )  # fmt: skip
-def test_add_text_refuses_bad_entries(args, match):
-    n = len(w.TEXT_BANK)
+def test_with_text_refuses_bad_entries(args, match):
+    n = len(w.DEFAULT_BANK)
     with pytest.raises(ValueError, match=match):
-        w.add_text(*args)
-    assert len(w.TEXT_BANK) == n
+        w.DEFAULT_BANK.with_text(*args)
+    assert len(w.DEFAULT_BANK) == n
+
+
+def test_with_text_returns_a_new_bank_and_leaves_the_default_alone():
+    n = len(w.DEFAULT_BANK)
+    bank = w.DEFAULT_BANK.with_text(
+        "PE", "paraphrase", "A car near <FRONT_CAR_POS> is stopped.", "low"
+    )
+    assert len(bank) == n + 1 and len(w.DEFAULT_BANK) == n
+    assert bank.get(n).text_id == n and bank.get(n).tier == "low"
+    assert n + 1 == len(w.token_table(bank)) and len(w.token_table()) == n
+    assert hash(bank) != hash(w.DEFAULT_BANK) and bank != w.DEFAULT_BANK
 
 
 # ---------------------------------------------------------------------------------------------

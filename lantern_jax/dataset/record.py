@@ -12,7 +12,7 @@ whether the execution was still running.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import functools
 from typing import Any
 
 import jax
@@ -27,8 +27,10 @@ from lantern_jax.observation import (
     SurroundView,
 )
 from lantern_jax.policies.base import Policy
+from lantern_jax.sim.engine import Program
 from lantern_jax.sim.observe import observe
 from lantern_jax.sim.rollout import start_state
+from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings
 from lantern_jax.sim.state import State
 from lantern_jax.sim.step import step
 from lantern_jax.world import Scenario
@@ -81,7 +83,11 @@ def _frame(scenario: Scenario, state: State) -> FrameRecord:
 
 
 def record(
-    scenario: Scenario, policy: Policy, policy_params: Any, num_frames: int
+    scenario: Scenario,
+    policy: Policy,
+    policy_params: Any,
+    num_frames: int,
+    settings: Settings = DEFAULT_SETTINGS,
 ) -> tuple[FrameRecord, State]:
     """Roll one execution, keeping one frame every :data:`FRAME_TICKS` ticks (the first at
     ``t = 0``), until it ends or ``num_frames`` frames are kept.
@@ -92,13 +98,12 @@ def record(
     Returns:
         (frames with a leading axis ``num_frames``, the final state).
     """
-    temperature = jnp.asarray(0.05, jnp.float32)
-    state0 = start_state(scenario, policy, policy_params)
+    state0 = start_state(scenario, policy, policy_params, settings)
     shapes = jax.eval_shape(_frame, scenario, state0)
     empty = jax.tree.map(lambda x: jnp.zeros((num_frames, *x.shape), x.dtype), shapes)
 
     def tick(s, _):
-        return step(policy, policy_params, scenario, s, temperature)[0], None
+        return step(policy, policy_params, scenario, s, settings)[0], None
 
     def body(carry):
         i, state, frames = carry
@@ -115,15 +120,21 @@ def record(
     return frames, final
 
 
-_RECORDERS: dict[tuple, Callable] = {}
+@functools.partial(jax.jit, static_argnames=("program", "num_frames"))
+def _record_batch(scenarios, policy_params, settings, *, program: Program, num_frames: int):
+    """:func:`record` of a batch (``vmap``); compiled once per program and frame count."""
+
+    def one(sc):
+        return record(sc, program.driver, policy_params, num_frames, settings)
+
+    return jax.vmap(one)(scenarios)
 
 
-def batched_recorder(policy: Policy, num_frames: int) -> Callable:
-    """``jit(vmap(record))``: ``(scenarios, policy_params) -> (frames, final states)``; one
-    compiled function per (policy program, frame count), reused by later calls."""
-    key = (policy.program, num_frames)
-    if key not in _RECORDERS:
-        _RECORDERS[key] = jax.jit(
-            jax.vmap(lambda sc, params: record(sc, policy, params, num_frames), in_axes=(0, None))
-        )
-    return _RECORDERS[key]
+def batched_recorder(policy: Policy, num_frames: int, settings: Settings = DEFAULT_SETTINGS):
+    """``(scenarios, policy_params) -> (frames, final states)`` of a batch, one compiled
+    program per (policy program, frame count) (a jitted function with those as static
+    arguments)."""
+    program = Program(policy)
+    return lambda scenarios, params: _record_batch(
+        scenarios, params, settings, program=program, num_frames=num_frames
+    )

@@ -50,22 +50,21 @@ def ego_light_state(lights: TrafficLights, ego_light: Array, t: Array) -> Array:
     return jnp.where(ego_light >= 0, states[idx], LIGHT_GREEN).astype(jnp.int32)
 
 
-LIGHT_HOLD_DIST = 30.0  # m, a red or yellow light whose stop line is this close ahead holds the ego
-LIGHT_HOLD_BEHIND = -1.0  # m, ... or up to 1 m past the line (the ego stopped on it)
-
-
-def light_holds_ego(light: Array, dist_to_stop_line: Array) -> Array:
+def light_holds_ego(
+    light: Array, dist_to_stop_line: Array, hold_dist: Array, hold_behind: Array
+) -> Array:
     """() bool: a non-green ego light with its stop line just ahead legitimately holds the ego.
 
     Used by the protocol (it pauses the anti-deadlock countdown) and by the scoring (it
-    justifies a Route B stop).
+    justifies a Route B stop); the distances are protocol settings
+    (:class:`lantern_jax.scenarios.protocol.ProtocolSettings`).
 
     Args:
         light: () int32, LIGHT_* state of the ego's light.
         dist_to_stop_line: () float32, m, route arc of the stop line minus the ego's arc.
+        hold_dist: () float32, m, the stop line is closer ahead than this ...
+        hold_behind: () float32, m, ... and no farther behind than this (negative).
     """
     return (
-        (light != LIGHT_GREEN)
-        & (dist_to_stop_line > LIGHT_HOLD_BEHIND)
-        & (dist_to_stop_line < LIGHT_HOLD_DIST)
+        (light != LIGHT_GREEN) & (dist_to_stop_line > hold_behind) & (dist_to_stop_line < hold_dist)
     )

@@ -42,12 +42,12 @@ from lantern_jax.policies.features import ACTION_SIZE, OBS_SIZE, action_to_waypo
 from lantern_jax.policies.features import observation_vector as flat
 from lantern_jax.scoring.components import progress
 from lantern_jax.sim.observe import observe
+from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings
 from lantern_jax.sim.state import State
 from lantern_jax.sim.step import transition
 
 Array = jax.Array
 
-TEMPERATURE = 0.05  # soft-accumulator temperature of the telemetry (unused by the reward)
 METRICS = ("progress", "gate_failure", "completed")
 SENSORS = (FRONT_CAMERA, WARNING)  # what the agent's observation vector is built from
 
@@ -68,12 +68,20 @@ class LanternEnv(Env):
     Args:
         bank: the scenes to draw from (default: :func:`~lantern_jax.envs.bank.build_bank` with
             its defaults, 16 pairs per family).
+        settings: scoring, protocol and text bank of the simulation (the reward reads the
+            scoring settings).
         **bank_kwargs: passed to :func:`~lantern_jax.envs.bank.build_bank` when ``bank`` is
             not given (``pairs_per_family``, ``seed``, ``families``).
     """
 
-    def __init__(self, bank: ScenarioBank | None = None, **bank_kwargs):
+    def __init__(
+        self,
+        bank: ScenarioBank | None = None,
+        settings: Settings = DEFAULT_SETTINGS,
+        **bank_kwargs,
+    ):
         self.bank = build_bank(**bank_kwargs) if bank is None else bank
+        self.settings = settings.validate()
 
     def start(self, index: Array) -> BraxState:
         """The first state of the execution of bank scene ``index`` (() int32)."""
@@ -82,7 +90,7 @@ class LanternEnv(Env):
         pipeline = EnvState(index=index, sim=sim, score=zero, failed=jnp.asarray(False))
         return BraxState(
             pipeline_state=pipeline,
-            obs=flat(observe(scenario, sim, SENSORS)),
+            obs=flat(observe(scenario, sim, SENSORS, self.settings.bank)),
             reward=zero,
             done=zero,
             metrics={k: zero for k in METRICS},
@@ -99,15 +107,17 @@ class LanternEnv(Env):
         ps: EnvState = state.pipeline_state
         scenario, _ = self.bank.take(ps.index)
         waypoints = action_to_waypoints(action, ps.sim.ego.speed)
-        sim, _ = transition(scenario, ps.sim, waypoints, jnp.float32(TEMPERATURE))
-        score, failed = running_score(sim.telemetry, sim.done, scenario.config.d_safe)
+        sim, _ = transition(scenario, ps.sim, waypoints, self.settings)
+        score, failed = running_score(
+            sim.telemetry, sim.done, scenario.config.d_safe, self.settings.scoring
+        )
         # Once over, an episode stays over (brax may step a done state before a reset).
         over = ps.failed | ps.sim.done
         score = jnp.where(over, ps.score, score)
         failed = ps.failed | failed
         done = sim.done | failed
-        p_old = progress.hard(ps.sim.telemetry.context)[0]
-        p_new = progress.hard(sim.telemetry.context)[0]
+        p_old = progress.hard(ps.sim.telemetry.context, self.settings.scoring)[0]
+        p_new = progress.hard(sim.telemetry.context, self.settings.scoring)[0]
         completed = done & ~failed & ~ps.sim.done
         metrics = {
             "progress": jnp.where(over, 0.0, p_new - p_old),
@@ -116,7 +126,7 @@ class LanternEnv(Env):
         }
         return state.replace(
             pipeline_state=EnvState(index=ps.index, sim=sim, score=score, failed=failed),
-            obs=flat(observe(scenario, sim, SENSORS)),
+            obs=flat(observe(scenario, sim, SENSORS, self.settings.bank)),
             reward=(score - ps.score).astype(jnp.float32),
             done=done.astype(jnp.float32),
             # other keys (e.g. a wrapper's ``reward``) are kept, as brax environments do

@@ -30,68 +30,69 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from lantern_jax.scoring import thresholds
 from lantern_jax.scoring.components import ROUTE_A_GATES, block, false_brake, progress
-from lantern_jax.scoring.cus import s_ant, s_clear, s_rec, s_ttc
-from lantern_jax.scoring.metrics import finalize
+from lantern_jax.scoring.cus import pair_components, quality_a
+from lantern_jax.scoring.metrics import ExecutionMetrics, finalize
 from lantern_jax.scoring.telemetry import Telemetry
+from lantern_jax.scoring.thresholds import DEFAULT_SCORING, ScoringSettings
 from lantern_jax.times import happened
 
 Array = jax.Array
 
 GATE_PENALTY = 1.0  # return of an episode that fails a gate (a CUS of 0 for its pair)
-W_PROGRESS = thresholds.W_PROGRESS_A  # progress weight of Route A's quality Q_A (0.40)
 
 
-def gate_failed(tel: Telemetry, ended: Array) -> Array:
+def gate_failed(tel: Telemetry, ended: Array, settings: ScoringSettings = DEFAULT_SCORING) -> Array:
     """() bool: a gate has failed so far (a timeout counts only once the execution has ended).
 
     Args:
         tel: telemetry after the latest tick.
         ended: () bool, the execution is over (route completed, timed out, deviated, blocked).
+        settings: the scoring settings the telemetry was folded with.
     """
     times = []
     for name, gate in ROUTE_A_GATES.items():
-        found = gate.failure_times(getattr(tel, name), tel.context)
+        found = gate.failure_times(getattr(tel, name), tel.context, settings)
         times += list(found[:2]) if gate is block else list(found)  # block: (stall, fault)
     failed = jnp.any(happened(jnp.stack(times)))
-    completed = progress.is_completed(tel.context.progress_m, tel.context.route_length_m)
-    braked = ~tel.context.is_route_a & ~false_brake.hard(tel.false_brake, tel.context)[0]
+    s = settings
+    completed = progress.is_completed(tel.context.progress_m, tel.context.route_length_m, s)
+    braked = ~tel.context.is_route_a & ~false_brake.hard(tel.false_brake, tel.context, s)[0]
     return failed | (ended & ~completed) | braked
 
 
-def route_score(tel: Telemetry, d_safe: Array) -> Array:
+def route_score(
+    tel: Telemetry, d_safe: Array, settings: ScoringSettings = DEFAULT_SCORING
+) -> Array:
     """() float32: the hard score of a finished route (``Q_A`` on Route A, ``P`` on Route B).
 
     Args:
         tel: final telemetry of the execution.
         d_safe: () float32, m, the family's clearance normaliser.
+        settings: the scoring settings the telemetry was folded with.
     """
-    m = finalize(tel)
-    nz = lambda x: jnp.where(jnp.isnan(x), 0.0, x)  # noqa: E731 (unavailable -> 0, as the CUS)
-    s_a = 0.5 * (nz(s_ttc(m.ttc_min_s)) + nz(s_clear(m.clearance_min_m, d_safe)))
-    t_a = 0.5 * (
-        nz(s_ant(m.t_ref_s, m.t_event_s, m.t_react_s, m.anticipation_available,
-                 m.coincident_onset))
-        + nz(s_rec(m.recovery_latency_s, m.recovery_available))
-    )  # fmt: skip
-    q_a = W_PROGRESS * m.progress + thresholds.W_SAFETY_A * s_a + thresholds.W_TEMPORAL_A * t_a
+    m: ExecutionMetrics = finalize(tel, settings)
+    comps = pair_components(m, m, d_safe, settings)  # Route A's own components
+    q_a = quality_a(comps["P_A"], comps["S_A"], comps["T_A"], settings)
     return jnp.where(m.is_route_a, q_a, m.progress).astype(jnp.float32)
 
 
-def running_score(tel: Telemetry, ended: Array, d_safe: Array) -> tuple[Array, Array]:
+def running_score(
+    tel: Telemetry, ended: Array, d_safe: Array, settings: ScoringSettings = DEFAULT_SCORING
+) -> tuple[Array, Array]:
     """The running route score ``R`` (see the module docstring) and whether a gate failed.
 
     Args:
         tel: telemetry after the latest tick.
         ended: () bool, the execution is over.
         d_safe: () float32, m.
+        settings: the scoring settings the telemetry was folded with.
 
     Returns:
         ``(R, failed)``: () float32, () bool.
     """
-    failed = gate_failed(tel, ended)
-    p = progress.hard(tel.context)[0]
-    w = jnp.where(tel.context.is_route_a, W_PROGRESS, 1.0)
-    value = jnp.where(ended, route_score(tel, d_safe), w * p)
+    failed = gate_failed(tel, ended, settings)
+    p = progress.hard(tel.context, settings)[0]
+    w = jnp.where(tel.context.is_route_a, settings.w_progress_a, 1.0)
+    value = jnp.where(ended, route_score(tel, d_safe, settings), w * p)
     return jnp.where(failed, -GATE_PENALTY, value).astype(jnp.float32), failed

@@ -26,8 +26,6 @@ stopping before the overlap point rather than by yielding gaps.
 
 from __future__ import annotations
 
-import math
-
 import jax
 import jax.numpy as jnp
 from flax import struct
@@ -47,13 +45,12 @@ from lantern_jax.polyline import project_uniform
 
 Array = jax.Array
 
-FORECAST_STEPS = 5  # 0 .. 2.0 s at 0.5 s
-FORECAST_DT = 0.5  # s
-
 
 @struct.dataclass
 class PlannerConfig:
-    """Continuous planner parameters (a pytree: sweepable and differentiable)."""
+    """The planner's parameters: a pytree inside the reference policies' parameters, so a
+    changed value is an argument of the compiled program (sweepable and differentiable);
+    ``forecast_steps`` is static (a shape)."""
 
     idm_a: Array  # () m/s^2, IDM maximum acceleration
     idm_b: Array  # () m/s^2, IDM comfortable deceleration
@@ -67,6 +64,16 @@ class PlannerConfig:
     ped_caution_dist: Array  # () m, pedestrians within this of the corridor edge ...
     ped_caution_speed: Array  # () m/s, ... cap the speed to this
     yield_setback: Array  # () m, distance before the turn entry at which a yield stop is held
+    forecast_dt: Array = 0.5  # s between the constant-velocity forecast steps
+    moving_speed: Array = 0.3  # m/s, an actor slower than this is not forecast
+    ped_caution_range: Array = 30.0  # m ahead within which pedestrians cap the speed
+    ped_s0: Array = 2.0  # m, standstill gap behind a forecast overlap
+    stop_s0: Array = 1.0  # m, standstill gap to a virtual stop (route end, warning stop)
+    turn_threshold: Array = 0.3  # rad, heading change that marks a turn entry ahead
+    cut_in_setback: Array = 4.9  # m, a warned cut-in is held this far behind its position
+    cut_in_s0: Array = 2.0  # m, standstill gap to a warned cut-in
+    match_radius: Array = 3.0  # m, a seen actor this close to a warned position gives its speed
+    forecast_steps: int = struct.field(pytree_node=False, default=5)  # 0 .. 2.0 s at 0.5 s
 
 
 def default_planner_config() -> PlannerConfig:
@@ -85,6 +92,15 @@ def default_planner_config() -> PlannerConfig:
         ped_caution_dist=f(2.5),
         ped_caution_speed=f(5.0),
         yield_setback=f(3.0),
+        forecast_dt=f(0.5),
+        moving_speed=f(0.3),
+        ped_caution_range=f(30.0),
+        ped_s0=f(2.0),
+        stop_s0=f(1.0),
+        turn_threshold=f(0.3),
+        cut_in_setback=f(2.0 * 2.45),  # two vehicle half lengths
+        cut_in_s0=f(2.0),
+        match_radius=f(3.0),
     )
 
 
@@ -138,13 +154,13 @@ def curvature_speed_limit(route: Array, lat_accel: Array, decel: Array) -> Array
     return jnp.min(jnp.sqrt(v_curve**2 + 2.0 * decel * arc))
 
 
-def turn_entry_arc(route: Array, threshold: float = 0.3) -> Array:
+def turn_entry_arc(route: Array, threshold: Array) -> Array:
     """() m, arc at which the route heading first deviates by > ``threshold`` rad (BIG: none)."""
     d = route[1:] - route[:-1]
     # angle(d, d[0]) > threshold, compared through its cosine (no arctangent per segment)
     dot = d[:, 0] * d[0, 0] + d[:, 1] * d[0, 1]
     norms = jnp.sqrt(jnp.sum(d * d, -1) * jnp.sum(d[0] * d[0]))
-    turned = dot < math.cos(threshold) * norms
+    turned = dot < jnp.cos(threshold) * norms
     arcs = jnp.arange(d.shape[0], dtype=jnp.float32) * ROUTE_STEP
     return jnp.min(jnp.where(turned, arcs, BIG))
 
@@ -179,14 +195,15 @@ def actor_constraints(
     hl, hw = obs.actor_extent[:, 0], obs.actor_extent[:, 1]
     # Footprint of the actor across / along the route (orientation aware).
     n_act = obs.actor_xy.shape[0]
-    taus = jnp.arange(FORECAST_STEPS, dtype=jnp.float32) * FORECAST_DT
+    steps = p.forecast_steps
+    taus = jnp.arange(steps, dtype=jnp.float32) * p.forecast_dt
     fut = obs.actor_xy[:, None, :] + obs.actor_vel[:, None, :] * taus[None, :, None]  # (A,F,2)
     arcs_all, dists_all = project_uniform(
         route, ROUTE_STEP, jnp.concatenate([obs.actor_xy, fut.reshape(-1, 2)], axis=0)
     )
     arc, dist = arcs_all[:n_act], dists_all[:n_act]
-    f_arc = arcs_all[n_act:].reshape(n_act, FORECAST_STEPS)
-    f_dist = dists_all[n_act:].reshape(n_act, FORECAST_STEPS)
+    f_arc = arcs_all[n_act:].reshape(n_act, steps)
+    f_dist = dists_all[n_act:].reshape(n_act, steps)
     tang = jax.vmap(lambda s: route_tangent(route, s))(arc)
     cos = jnp.abs(jnp.sum(obs.actor_dir * tang, -1))
     # |cross| rather than sqrt(1 - cos^2): finite gradient for aligned actors.
@@ -200,7 +217,7 @@ def actor_constraints(
     v_along = jnp.sum(obs.actor_vel * tang, -1)
     # An oncoming leader (moving against the route) is met where it will be at the end of the
     # forecast, treated as stopped there.
-    horizon = (FORECAST_STEPS - 1) * FORECAST_DT
+    horizon = (steps - 1) * p.forecast_dt
     oncoming = jnp.minimum(v_along, 0.0) * horizon
     lead_gap = jnp.where(seen & in_corr & ahead, arc - EGO_HALF_LENGTH - half_along + oncoming, BIG)
 
@@ -210,7 +227,7 @@ def actor_constraints(
     lon_hit = jnp.abs(f_arc - ego_arc[None, :]) < (
         1.3 * EGO_HALF_LENGTH + half_along[:, None] + p.forecast_margin
     )
-    moving = jnp.linalg.norm(obs.actor_vel, axis=-1) > 0.3
+    moving = jnp.linalg.norm(obs.actor_vel, axis=-1) > p.moving_speed
     # Same-direction leaders in the corridor are handled by IDM; everything else moving
     # (crossing, oncoming, merging) is checked for a forecast overlap.
     follower = in_corr & (v_along >= 0.0)
@@ -227,14 +244,14 @@ def actor_constraints(
         seen
         & (obs.actor_kind == KIND_PEDESTRIAN)
         & ahead
-        & (arc < 30.0)
+        & (arc < p.ped_caution_range)
         & (dist < EGO_HALF_WIDTH + hw + p.ped_caution_dist + p.corridor_margin)
     )
     caution = jnp.where(jnp.any(near), p.ped_caution_speed, BIG)
 
     gap = jnp.concatenate([lead_gap, conflict_gap])
     speed = jnp.concatenate([jnp.maximum(v_along, 0.0), jnp.zeros_like(v_along)])
-    s0 = jnp.concatenate([jnp.full_like(lead_gap, p.idm_s0), jnp.full_like(lead_gap, 2.0)])
+    s0 = jnp.concatenate([jnp.full_like(lead_gap, p.idm_s0), jnp.full_like(lead_gap, p.ped_s0)])
     return Constraints(gap=gap, speed=speed, s0=s0), caution
 
 
@@ -252,7 +269,7 @@ def light_constraint(p: PlannerConfig, obs: Observation) -> Constraints:
 def stop_constraint(p: PlannerConfig, arc: Array, active: Array) -> Constraints:
     """A virtual stopped obstacle whose rear is at ``arc`` m along the route (when ``active``)."""
     gap = jnp.where(active, jnp.maximum(arc - EGO_HALF_LENGTH, 0.0), BIG)
-    return Constraints(gap=gap[None], speed=jnp.zeros((1,)), s0=jnp.full((1,), 1.0))
+    return Constraints(gap=gap[None], speed=jnp.zeros((1,)), s0=jnp.full((1,), p.stop_s0))
 
 
 def merge(*cs: Constraints) -> Constraints:

@@ -75,7 +75,6 @@ KEYWORD_RULE: tuple[tuple[int, tuple[str, ...]], ...] = (
     (SEM_CUT_IN, ("cut into",)),
     (SEM_LANE_OBSTACLE, ("ego lane",)),
 )
-MATCH_RADIUS_M = 3.0  # m, a seen actor this close to the stated position gives its velocity
 
 
 @functools.cache
@@ -140,12 +139,12 @@ def warning_constraints(p: PlannerConfig, obs: Observation, seen: jax.Array) -> 
     rel = obs.actor_xy - pos[None, :]
     d = jnp.where(seen, jnp.sum(rel * rel, axis=-1), BIG)  # squared distance (no sqrt)
     j = jnp.argmin(d)
-    matched = d[j] < MATCH_RADIUS_M**2
+    matched = d[j] < p.match_radius**2
     v_match = jnp.where(matched, jnp.maximum(obs.actor_vel[j, 0], 0.0), 0.0)
-    cut_gap = jnp.where((sem == SEM_CUT_IN) & ahead, jnp.maximum(arc - 2.0 * 2.45, 0.0), BIG)
-    cut = Constraints(gap=cut_gap[None], speed=v_match[None], s0=jnp.full((1,), 2.0))
+    cut_gap = jnp.where((sem == SEM_CUT_IN) & ahead, jnp.maximum(arc - p.cut_in_setback, 0.0), BIG)
+    cut = Constraints(gap=cut_gap[None], speed=v_match[None], s0=jnp.full((1,), p.cut_in_s0))
 
-    entry = turn_entry_arc(obs.route)
+    entry = turn_entry_arc(obs.route, p.turn_threshold)
     yield_arc = jnp.where(entry < BIG * 0.5, jnp.maximum(entry - p.yield_setback, 0.0), BIG)
     yld = stop_constraint(p, yield_arc, (sem == SEM_YIELD_TURN) & (yield_arc < BIG * 0.5))
     return merge(obstacle, cut, yld)

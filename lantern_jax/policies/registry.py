@@ -13,7 +13,6 @@ policy, a shipped model, another checkpoint — is refused unless it is the very
 
 from __future__ import annotations
 
-import functools
 from collections.abc import Callable
 
 from lantern_jax.policies import expert, learned_ppo, reference
@@ -31,12 +30,11 @@ _REGISTRY: dict[str, Callable[[], Policy]] = {
 
 
 def _shipped(name: str) -> Callable[[], Policy]:
-    """The factory of a shipped learned model: loads its checkpoint once per process and
-    returns that same policy afterwards.  Its ``act`` is the key of every compiled program
-    (:func:`lantern_jax.evaluate.compiled_rollout`), so a fresh ``act`` per call would compile
-    the whole rollout again on every evaluation that names the model."""
+    """The factory of a shipped learned model: loads its checkpoint.  Every learned model runs
+    through one act function (:func:`~lantern_jax.policies.learned.checkpoint.learned_act`, the
+    architecture a static part of its parameters), so a model loaded again is the same program
+    and compiles nothing new."""
 
-    @functools.cache
     def factory() -> Policy:
         from lantern_jax.policies.learned.checkpoint import checkpoint_policy, shipped_path
 

@@ -27,12 +27,17 @@ with the late-onset ablation), and only in the warning condition of Route A.  A 
 override (``ExecutionConfig.override_*``, :func:`delivered_warning`) delivers a chosen text in a
 chosen window on any execution, Route B included; it changes what the policy reads, never these
 times.
+
+The protocol's own thresholds (what counts as stopped, as a queue, as a light holding the ego)
+are :class:`ProtocolSettings`, a frozen pytree passed as an argument (defaults: the values
+below).
 """
 
 from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+from flax import struct
 
 from lantern_jax.constants import (
     BIG,
@@ -47,12 +52,32 @@ from lantern_jax.world import ActorState, ExecutionConfig, ProtocolState
 
 Array = jax.Array
 
-STILL_SPEED = 0.1  # m/s, "stopped"
-STILL_TIME_FOR_CLEAR = 1.0  # s, ego response that lets the Obstacle Reveal object be removed
-QUEUE_DIST = 12.0  # m, a slow background vehicle this close ahead in the corridor is a queue
-QUEUE_BEHIND = -1.0  # m, ... or overlapping the ego front by up to 1 m
-QUEUE_LATERAL = EGO_HALF_WIDTH + 0.5  # m, corridor half width for a queue
-QUEUE_SPEED = 1.0  # m/s, a queueing vehicle is slower than this
+
+@struct.dataclass
+class ProtocolSettings:
+    """Thresholds of the temporal protocol (every field a traced float)."""
+
+    still_speed_mps: float = 0.1  # m/s, "stopped"
+    still_time_for_clear_s: float = 1.0  # s, ego response that lets the Obstacle Reveal object
+    #                                      be removed (``clear_on_ego_stop``)
+    queue_dist_m: float = 12.0  # m, a slow background vehicle this close ahead in the corridor
+    #                             is a queue ...
+    queue_behind_m: float = -1.0  # m, ... or overlapping the ego front by up to 1 m
+    queue_lateral_margin_m: float = 0.5  # m, corridor half width = ego half width + this
+    queue_speed_mps: float = 1.0  # m/s, a queueing vehicle is slower than this
+    light_hold_dist_m: float = 30.0  # m, a red or yellow light whose stop line is this close
+    #                                  ahead holds the ego ...
+    light_hold_behind_m: float = -1.0  # m, ... or up to 1 m past the line (stopped on it)
+
+    def light_holds(self, light: Array, dist_to_stop_line: Array) -> Array:
+        """() bool: :func:`~lantern_jax.dynamics.lights.light_holds_ego` with these distances."""
+        return light_holds_ego(
+            light, dist_to_stop_line, self.light_hold_dist_m, self.light_hold_behind_m
+        )
+
+
+#: The protocol's defaults.
+DEFAULT_PROTOCOL = ProtocolSettings()
 
 
 def ego_held(
@@ -63,6 +88,7 @@ def ego_held(
     present: Array,
     role: Array,
     speed: Array,
+    settings: ProtocolSettings = DEFAULT_PROTOCOL,
 ) -> Array:
     """() bool: a red/yellow light or a queue legitimately holds the ego (pauses the countdown).
 
@@ -75,16 +101,18 @@ def ego_held(
         present: (A,) bool, actors in the world.
         role: (A,) int32, ROLE_*; only ordinary (background) traffic forms a queue.
         speed: (A,) float32, m/s.
+        settings: the queue and light distances.
     """
+    s = settings
     queue = (
         present
-        & (lateral < QUEUE_LATERAL)
+        & (lateral < EGO_HALF_WIDTH + s.queue_lateral_margin_m)
         & (role == ROLE_BACKGROUND)
-        & (gap > QUEUE_BEHIND)
-        & (gap < QUEUE_DIST)
-        & (speed < QUEUE_SPEED)
+        & (gap > s.queue_behind_m)
+        & (gap < s.queue_dist_m)
+        & (speed < s.queue_speed_mps)
     )
-    return light_holds_ego(light, dist_to_stop_line) | jnp.any(queue)
+    return s.light_holds(light, dist_to_stop_line) | jnp.any(queue)
 
 
 def crossing_time(t_next: Array, prev: Array, cur: Array, threshold: Array, dt: float) -> Array:
@@ -165,6 +193,7 @@ def advance_hazard(
     hazard_visible: Array,
     hazard_s: Array,
     ego_speed: Array,
+    settings: ProtocolSettings = DEFAULT_PROTOCOL,
     dt: float = DT,
 ) -> ProtocolState:
     """Clearance and warning termination after the actors moved and visibility was computed.
@@ -176,17 +205,20 @@ def advance_hazard(
         hazard_visible: () bool, the hazard is visible to the front camera now.
         hazard_s: () m, the hazard's arc along its own path.
         ego_speed: () m/s.
+        settings: what counts as stopped, and for how long.
 
     Returns:
         The protocol state with ``t_clear``, ``t_warn_off`` and the ego-still timer updated.
     """
-    still = jnp.where(ego_speed < STILL_SPEED, proto.ego_still_time + dt, 0.0)
+    still = jnp.where(ego_speed < settings.still_speed_mps, proto.ego_still_time + dt, 0.0)
     after_event = happened(proto.t_event) & (t_next >= proto.t_event)
     pending = ~happened(proto.t_clear)
     geometric = hazard_s >= config.clear_s
     by_limit = (t_next - proto.t_event) >= config.clear_time_limit
     by_stop = (
-        config.clear_on_ego_stop & happened(proto.t_warn_off) & (still >= STILL_TIME_FOR_CLEAR)
+        config.clear_on_ego_stop
+        & happened(proto.t_warn_off)
+        & (still >= settings.still_time_for_clear_s)
     )
     clear_now = pending & after_event & (geometric | by_limit | by_stop)
     t_clear = jnp.where(clear_now, t_next, proto.t_clear)

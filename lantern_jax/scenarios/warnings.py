@@ -6,7 +6,8 @@ The templates are verbatim from the paper's warning-template table.  The token
 conflict) position ``(x, y)`` in metres in the *current ego frame*, ``x`` forward and ``y`` to
 the **right** (the paper's convention), formatted with one decimal.
 
-The text bank (:data:`TEXT_BANK`) is a list of :class:`WarningText` entries with fixed ids:
+The text bank (:class:`TextBank`, an immutable value; the built-in one is :data:`DEFAULT_BANK`)
+holds :class:`WarningText` entries with fixed ids:
 
 ==========  ==================================================================================
 ids         entries
@@ -39,9 +40,9 @@ those three.  It reads only the delivered text as tokens: :func:`warning_languag
 text's token ids up in :func:`text_tables` (built once, outside ``jit``) and writes the grounded
 position into the value channel at the text's two number tokens (:mod:`lantern_jax.language`,
 "Numbers").  No warning, or a text the bank does not hold, reads as all padding.  Strings are
-produced outside ``jit`` by :func:`render_warning`.  Texts added with :func:`add_text` after a
-rollout was compiled are unknown to that compiled rollout (it reads them as padding): add texts
-before compiling.
+produced outside ``jit`` by :func:`render_warning`.  A bank with more texts
+(:meth:`TextBank.with_text`) is a different value: a rollout given it in its settings
+(``Settings(bank=...)``) is compiled for it, and no program of another bank can answer for it.
 
 The bank's last built-in entry is the **empty text** (:data:`EMPTY_TEXT_ID`, kind ``"empty"``):
 a warning delivered with no words at all, used by the language-sensitivity diagnostic to check
@@ -50,6 +51,8 @@ that a policy's response comes from the words.  A policy cannot tell it from no 
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import hashlib
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -269,7 +272,7 @@ def _check_entry(kind: str, tier: str, text: str) -> None:
         raise ValueError(f"text: a high-ambiguity paraphrase states no position ({text!r})")
 
 
-def _initial_bank() -> list[WarningText]:
+def _initial_entries() -> tuple[WarningText, ...]:
     bank = [WarningText(i, i, "canonical", t) for i, t in enumerate(TEMPLATES)]
     for f, fam in enumerate(FAMILIES):
         bank.append(WarningText(len(bank), f, "paraphrase", PARAPHRASES[fam]["low"][0], "low"))
@@ -282,13 +285,85 @@ def _initial_bank() -> list[WarningText]:
     bank.append(WarningText(len(bank), NO_FAMILY, "empty", ""))
     for e in bank:
         _check_entry(e.kind, e.tier, e.text)
-    return bank
+    return tuple(bank)
 
 
-#: The text bank; canonical entries first so that ``text_id == family`` for them.
-TEXT_BANK: list[WarningText] = _initial_bank()
+@dataclass(frozen=True)
+class TextBank:
+    """The warning texts a simulation knows: an immutable value (hashable, so it can be a
+    static part of a compiled program's settings, :class:`lantern_jax.sim.settings.Settings`).
+
+    Attributes:
+        entries: the texts in id order (``entries[i].text_id == i``).
+    """
+
+    entries: tuple[WarningText, ...]
+
+    def __len__(self) -> int:
+        return len(self.entries)
+
+    def __iter__(self):
+        return iter(self.entries)
+
+    def __getitem__(self, text_id: int) -> WarningText:
+        return self.get(text_id)
+
+    def get(self, text_id: int) -> WarningText:
+        """The entry with ``text_id``.
+
+        Raises:
+            ValueError: for an id outside the bank.
+        """
+        i = int(text_id)
+        if not 0 <= i < len(self.entries):
+            raise ValueError(f"text_id: {i} outside 0..{len(self.entries) - 1}")
+        return self.entries[i]
+
+    def with_text(self, family: int | str, kind: str, text: str, tier: str = "") -> TextBank:
+        """A new bank with one more text (its id is the old bank's length).
+
+        Args:
+            family: family index or code (``NO_FAMILY`` allowed for non-actionable texts).
+            kind: ``"paraphrase"`` or ``"non_actionable"``.
+            text: the template (spacing rule: :func:`lantern_jax.language.check_template`).
+            tier: the ambiguity tier of a paraphrase.
+
+        Raises:
+            ValueError: for an unknown family, kind or tier, a canonical or empty text, a text
+                that breaks the spacing rule or its tier's position rule.
+        """
+        if kind not in TEXT_KINDS:
+            raise ValueError(f"kind: {kind!r} not one of {{{', '.join(TEXT_KINDS)}}}")
+        if kind in ("canonical", "empty"):
+            raise ValueError(
+                f"kind: the {kind} texts are fixed; add a paraphrase or a non-actionable text"
+            )
+        f = _family_index(family, allow_none=kind == "non_actionable")
+        _check_entry(kind, tier, text)
+        entry = WarningText(len(self.entries), f, kind, text, tier)
+        return TextBank((*self.entries, entry))
+
+
+    def with_replaced_text(self, text_id: int, text: str) -> TextBank:
+        """A new bank in which entry ``text_id`` reads ``text`` (same id, family, kind and
+        tier): a wording experiment on one warning, e.g. the exact warning of a family.
+
+        Raises:
+            ValueError: for an id outside the bank, the empty text, or a text that breaks the
+                bank's rules for the entry's kind and tier.
+        """
+        old = self.get(text_id)
+        if old.kind == "empty":
+            raise ValueError(f"text_id: {old.text_id} is the empty text; it has no words")
+        _check_entry(old.kind, old.tier, text)
+        entries = list(self.entries)
+        entries[old.text_id] = dataclasses.replace(old, text=text)
+        return TextBank(tuple(entries))
+
+#: The built-in bank; canonical entries first so that ``text_id == family`` for them.
+DEFAULT_BANK = TextBank(_initial_entries())
 #: Id of the empty text (no words; see the module docstring).
-EMPTY_TEXT_ID = next(e.text_id for e in TEXT_BANK if e.kind == "empty")
+EMPTY_TEXT_ID = next(e.text_id for e in DEFAULT_BANK if e.kind == "empty")
 
 
 def paraphrase_text_id(family: int) -> int:
@@ -296,53 +371,24 @@ def paraphrase_text_id(family: int) -> int:
     return len(TEMPLATES) + _family_index(family)
 
 
-def tier_text_ids(family: int | str, tier: str) -> tuple[int, ...]:
+def tier_text_ids(family: int | str, tier: str, bank: TextBank = DEFAULT_BANK) -> tuple[int, ...]:
     """Ids of a family's paraphrases of one ambiguity tier, in bank order."""
     f = _family_index(family)
     if tier not in TIERS:
         raise ValueError(f"tier: {tier!r} not one of {{{', '.join(TIERS)}}}")
     return tuple(
-        e.text_id for e in TEXT_BANK if e.kind == "paraphrase" and e.family == f and e.tier == tier
+        e.text_id for e in bank if e.kind == "paraphrase" and e.family == f and e.tier == tier
     )
 
 
-def non_actionable_text_ids() -> tuple[int, ...]:
+def non_actionable_text_ids(bank: TextBank = DEFAULT_BANK) -> tuple[int, ...]:
     """Ids of the non-actionable texts, in bank order (the paper's five first)."""
-    return tuple(e.text_id for e in TEXT_BANK if e.kind == "non_actionable")
+    return tuple(e.text_id for e in bank if e.kind == "non_actionable")
 
 
-def add_text(family: int | str, kind: str, text: str, tier: str = "") -> int:
-    """Append a text to :data:`TEXT_BANK` and return its new ``text_id``.
-
-    Args:
-        family: family index or code (``NO_FAMILY`` allowed for non-actionable texts).
-        kind: one of :data:`TEXT_KINDS` except ``"canonical"``.
-        text: the template (spacing rule: :func:`lantern_jax.language.check_template`).
-        tier: the ambiguity tier of a paraphrase.
-
-    Raises:
-        ValueError: for an unknown family, kind or tier, a canonical text, an empty text, a
-            text that breaks the spacing rule or its tier's position rule.
-    """
-    if kind not in TEXT_KINDS:
-        raise ValueError(f"kind: {kind!r} not one of {{{', '.join(TEXT_KINDS)}}}")
-    if kind in ("canonical", "empty"):
-        raise ValueError(
-            f"kind: the {kind} texts are fixed; add a paraphrase or a non-actionable text"
-        )
-    f = _family_index(family, allow_none=kind == "non_actionable")
-    _check_entry(kind, tier, text)
-    entry = WarningText(len(TEXT_BANK), f, kind, text, tier)
-    TEXT_BANK.append(entry)
-    return entry.text_id
-
-
-def get_text(text_id: int) -> WarningText:
+def get_text(text_id: int, bank: TextBank = DEFAULT_BANK) -> WarningText:
     """The bank entry with ``text_id``."""
-    i = int(text_id)
-    if not 0 <= i < len(TEXT_BANK):
-        raise ValueError(f"text_id: {i} outside 0..{len(TEXT_BANK) - 1}")
-    return TEXT_BANK[i]
+    return bank.get(text_id)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -378,7 +424,9 @@ def ambiguity_tiers(families: Sequence[str | int], keys: Sequence[str]) -> np.nd
     return _tier_order(families, keys) % len(TIERS)
 
 
-def held_out_text_ids(families: Sequence[str | int], keys: Sequence[str]) -> np.ndarray:
+def held_out_text_ids(
+    families: Sequence[str | int], keys: Sequence[str], bank: TextBank = DEFAULT_BANK
+) -> np.ndarray:
     """(n,) int32: the held-out paraphrase text of every pair, by its ambiguity tier.
 
     The tier comes from :func:`ambiguity_tiers`; within a tier the ``k``-th pair of the order
@@ -387,7 +435,7 @@ def held_out_text_ids(families: Sequence[str | int], keys: Sequence[str]) -> np.
     rank = _tier_order(families, keys)
     out = np.empty(len(rank), np.int32)
     for i, (f, r) in enumerate(zip(families, rank, strict=True)):
-        ids = tier_text_ids(f, TIERS[r % len(TIERS)])
+        ids = tier_text_ids(f, TIERS[r % len(TIERS)], bank)
         out[i] = ids[(r // len(TIERS)) % len(ids)]
     return out
 
@@ -428,20 +476,21 @@ def format_position(pos_ego_xy) -> str:
     return "(" + ", ".join(language.format_number(v) for v in p) + ")"
 
 
-def render_warning(text_id: int, pos_ego_xy=None) -> str:
+def render_warning(text_id: int, pos_ego_xy=None, bank: TextBank = DEFAULT_BANK) -> str:
     """The warning string with ``<FRONT_CAR_POS>`` grounded (what a language model reads).
 
     Args:
-        text_id: id in :data:`TEXT_BANK`.
+        text_id: id in ``bank``.
         pos_ego_xy: (2,) m, grounded position in the ego frame (x forward, y right), e.g. the
             output of :func:`ground_position`; ignored (may be None) for a text that states no
             position.
+        bank: the text bank.
 
     Example:
         ``render_warning(0, (14.2, 3.1))`` ->
         ``"The pedestrian at position (14.2, 3.1) is about to enter the ego lane."``
     """
-    entry = get_text(text_id)
+    entry = bank.get(text_id)
     if not entry.has_position:
         return entry.text
     return entry.text.replace(TOKEN, format_position(pos_ego_xy))
@@ -485,47 +534,48 @@ class TextTables:
         return self.x_slot >= 0
 
 
-_TABLES: dict[int, TextTables] = {}
-
-
-def text_tables() -> TextTables:
+def text_tables(bank: TextBank = DEFAULT_BANK) -> TextTables:
     """The per-text tables a rollout indexes by text id (:class:`TextTables`), built once per
-    bank size.
+    bank (outside ``jit``; the arrays are read-only).
 
     Raises:
         lantern_jax.language.LanguageAssetError: when the tokenizer file is missing.
         ValueError: naming a text longer than ``MAX_TOKENS`` tokens.
     """
-    n = len(TEXT_BANK)
-    if n not in _TABLES:
-        rows, xs, ys = [], [], []
-        for e in TEXT_BANK:
-            ids = language.tokenize(e.text)
-            if len(ids) > language.MAX_TOKENS:
-                raise ValueError(
-                    f"text {e.text_id}: {len(ids)} tokens exceed MAX_TOKENS "
-                    f"{language.MAX_TOKENS}: {e.text!r}"
-                )
-            slots = language.number_slots(ids)
-            rows.append(language.pad(ids))
-            xs.append(slots[0] if slots else -1)
-            ys.append(slots[1] if slots else -1)
-        tables = TextTables(
-            tokens=np.stack(rows), x_slot=np.asarray(xs, np.int32), y_slot=np.asarray(ys, np.int32)
-        )
-        for a in (tables.tokens, tables.x_slot, tables.y_slot):
-            a.setflags(write=False)
-        _TABLES.clear()
-        _TABLES[n] = tables
-    return _TABLES[n]
+    return _text_tables(bank)
 
 
-def token_table() -> np.ndarray:
+@functools.lru_cache(maxsize=8)
+def _text_tables(bank: TextBank) -> TextTables:
+    """:func:`text_tables`, cached by bank (one positional key, whatever the call spelling)."""
+    rows, xs, ys = [], [], []
+    for e in bank:
+        ids = language.tokenize(e.text)
+        if len(ids) > language.MAX_TOKENS:
+            raise ValueError(
+                f"text {e.text_id}: {len(ids)} tokens exceed MAX_TOKENS "
+                f"{language.MAX_TOKENS}: {e.text!r}"
+            )
+        slots = language.number_slots(ids)
+        rows.append(language.pad(ids))
+        xs.append(slots[0] if slots else -1)
+        ys.append(slots[1] if slots else -1)
+    tables = TextTables(
+        tokens=np.stack(rows), x_slot=np.asarray(xs, np.int32), y_slot=np.asarray(ys, np.int32)
+    )
+    for a in (tables.tokens, tables.x_slot, tables.y_slot):
+        a.setflags(write=False)
+    return tables
+
+
+def token_table(bank: TextBank = DEFAULT_BANK) -> np.ndarray:
     """(num_texts, MAX_TOKENS) int32, padded token ids of every text (see :func:`text_tables`)."""
-    return text_tables().tokens
+    return text_tables(bank).tokens
 
 
-def warning_language(text_id: Array, active: Array, position: Array) -> tuple[Array, Array]:
+def warning_language(
+    text_id: Array, active: Array, position: Array, bank: TextBank = DEFAULT_BANK
+) -> tuple[Array, Array]:
     """The delivered text as a policy reads it: token ids and the aligned value channel
     (jittable; one table lookup).
 
@@ -535,13 +585,14 @@ def warning_language(text_id: Array, active: Array, position: Array) -> tuple[Ar
         position: (2,) float32, m, the grounded position (ego frame, x forward, y right); it
             enters the value channel rounded as the text writes it, and only for a text that
             states a position.
+        bank: static; the text bank.
 
     Returns:
         tokens: (MAX_TOKENS,) int32, all ``PAD_ID`` when inactive or unknown.
         values: (MAX_TOKENS,) float32, the position's x and y at the text's two number tokens,
             zero elsewhere (all zero when inactive, unknown or stating no position).
     """
-    tables = text_tables()
+    tables = text_tables(bank)
     n = tables.tokens.shape[0]
     known = active & (text_id >= 0) & (text_id < n)
     i = jnp.clip(text_id, 0, n - 1)
@@ -585,7 +636,7 @@ def set_override(
 
     Args:
         scenario: one :class:`~lantern_jax.world.Scenario` or a batch (leading axis).
-        text_id: id in :data:`TEXT_BANK`.
+        text_id: id in the bank (:data:`DEFAULT_BANK` unless ``bank``).
         position: (2,) m: ego frame ``(forward, right)`` for ``frame="ego"`` (fixed relative to
             the ego, as in the paper's distance diagnostic), world ``(x, y)`` for
             ``frame="world"`` (a fixed point, grounded into the ego frame every tick).

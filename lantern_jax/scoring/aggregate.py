@@ -1,5 +1,6 @@
-"""Suite-level aggregation of route-level rows (paper "Pair score and aggregation" and the CUS
-decomposition table).
+"""Every table of an evaluation, built from route-level rows: the family table with its paired
+warning gains, the CUS decomposition and the premise table (paper "Pair score and aggregation";
+the printing and files are :mod:`lantern_jax.report`'s).
 
 Input: a route-level DataFrame (one row per (model, condition, pair); see
 :mod:`lantern_jax.scoring.table`).  Rows are grouped by ``(model, condition)``.
@@ -27,7 +28,7 @@ from collections.abc import Sequence
 import numpy as np
 import pandas as pd
 
-from lantern_jax.constants import FAMILIES
+from lantern_jax.constants import CONDITIONS, FAMILIES
 
 GROUP_COLUMNS = ("model", "condition")
 
@@ -168,3 +169,51 @@ def decomposition_pair_values(df: pd.DataFrame) -> pd.DataFrame:
     for name, col in FAILURE_COLUMNS.items():
         out[name] = 100.0 * (df[col].to_numpy(float) == 0)
     return out[[*keys, *DECOMPOSITION_COLUMNS]]
+
+
+def family_table(route_table: pd.DataFrame) -> pd.DataFrame:
+    """Per-family CUS rows for every (model, condition) plus each model's paired warning gain.
+
+    Columns: ``model, condition, PE, VC, OR, LWW, RWW, RTY, Overall``.
+    """
+    fam = family_scores(route_table).reset_index()
+    out = []
+    for model in dict.fromkeys(fam["model"]):
+        sub = fam[fam["model"] == model].set_index("condition")
+        for cond in CONDITIONS:
+            if cond in sub.index:
+                out.append({"model": model, "condition": cond, **sub.loc[cond].drop("model")})
+        if all(c in sub.index for c in CONDITIONS):
+            warned, plain = (sub.loc[c].drop("model") for c in CONDITIONS)
+            out.append({"model": model, "condition": "warning gain", **(warned - plain)})
+    cols = ["model", "condition", *FAMILIES, "Overall"]
+    return pd.DataFrame(out)[cols]
+
+
+#: The premise table's rows: (route-table column, label).
+PREMISE_ROWS = (
+    ("hazard_hidden_at_warning", "hidden at the warning point"),
+    ("hazard_hidden_before_warning", "hidden for the whole approach"),
+)
+
+
+def premise_table(route_table: pd.DataFrame) -> pd.DataFrame:
+    """The benchmark's premise, measured: per family, the share (%) of Route A executions
+    (every model and condition in ``route_table``) whose hazard the front camera could not see
+    at the warning point, and could not see at any tick of the approach up to it.
+
+    Columns: ``measure, PE, VC, OR, LWW, RWW, RTY, Overall`` (Overall pools all executions);
+    the last row, ``Route A executions``, counts them per family.
+    """
+    rows = []
+    for col, label in PREMISE_ROWS:
+        row = {"measure": label}
+        for f in FAMILIES:
+            v = route_table.loc[route_table["family"] == f, col]
+            row[f] = 100.0 * float(v.mean()) if len(v) else np.nan
+        row["Overall"] = 100.0 * float(route_table[col].mean()) if len(route_table) else np.nan
+        rows.append(row)
+    counts = {"measure": "Route A executions"}
+    counts.update({f: float((route_table["family"] == f).sum()) for f in FAMILIES})
+    counts["Overall"] = float(len(route_table))
+    return pd.DataFrame([*rows, counts])

@@ -43,6 +43,7 @@ from lantern_jax.scoring.components import (
 )
 from lantern_jax.scoring.metrics import ExecutionMetrics, first_failure_time
 from lantern_jax.scoring.telemetry import Telemetry
+from lantern_jax.scoring.thresholds import DEFAULT_SCORING, ScoringSettings
 
 Array = jax.Array
 
@@ -81,10 +82,41 @@ def _nz(x: Array) -> Array:
 
 
 # the components' elementwise hard scores (see their modules for the definitions)
-s_ttc = ttc.score
 s_clear = clearance.score
 s_ant = anticipation.score
-s_rec = recovery.score
+
+
+def s_ttc(ttc_min_s: Any, settings: ScoringSettings = DEFAULT_SCORING) -> Array:
+    """``S_TTC`` elementwise (:func:`lantern_jax.scoring.components.ttc.score`)."""
+    return ttc.score(ttc_min_s, settings)
+
+
+def s_rec(
+    recovery_latency_s: Any, available: Any = True, settings: ScoringSettings = DEFAULT_SCORING
+) -> Array:
+    """``S_rec`` elementwise (:func:`lantern_jax.scoring.components.recovery.score`)."""
+    return recovery.score(recovery_latency_s, settings, available)
+
+
+def quality_a(p_a: Any, s_a: Any, t_a: Any, settings: ScoringSettings = DEFAULT_SCORING) -> Array:
+    """Route A quality ``Q_A = w_P P_A + w_S S_A + w_T T_A`` (the paper's weights 0.40 / 0.35 /
+    0.25), elementwise; the one home of the formula (the soft score, the stress objective and
+    the RL reward use it too).
+
+    Args:
+        p_a: (...) progress in [0, 1].
+        s_a: (...) safety ``(S_TTC + S_clear) / 2``.
+        t_a: (...) temporal ``(S_ant + S_rec) / 2``.
+        settings: the weights.
+    """
+    return settings.w_progress_a * p_a + settings.w_safety_a * s_a + settings.w_temporal_a * t_a
+
+
+def cus_of(
+    q_a: Any, p_b: Any, gate_product: Any, settings: ScoringSettings = DEFAULT_SCORING
+) -> Array:
+    """``CUS = 100 * G * (w_A Q_A + w_B P_B)``, elementwise (the paper's 0.85 / 0.15)."""
+    return settings.cus_scale * gate_product * (settings.w_route_a * q_a + settings.w_route_b * p_b)
 
 
 def combine(
@@ -95,6 +127,7 @@ def combine(
     s_ant_: Any,
     s_rec_: Any,
     gate_product: Any,
+    settings: ScoringSettings = DEFAULT_SCORING,
 ) -> dict[str, Array]:
     """Weighted quality and CUS from normalised components (``NaN`` components count as 0).
 
@@ -103,17 +136,12 @@ def combine(
     """
     s_a = 0.5 * (_nz(_f(s_ttc_)) + _nz(_f(s_clear_)))
     t_a = 0.5 * (_nz(_f(s_ant_)) + _nz(_f(s_rec_)))
-    q_a = (
-        thresholds.W_PROGRESS_A * _nz(_f(p_a))
-        + thresholds.W_SAFETY_A * s_a
-        + thresholds.W_TEMPORAL_A * t_a
-    )
-    quality = thresholds.W_ROUTE_A * q_a + thresholds.W_ROUTE_B * _nz(_f(p_b))
+    q_a = quality_a(_nz(_f(p_a)), s_a, t_a, settings)
     return {
         "S_A": s_a,
         "T_A": t_a,
         "Q_A": q_a,
-        "CUS": thresholds.CUS_SCALE * _f(gate_product) * quality,
+        "CUS": cus_of(q_a, _nz(_f(p_b)), _f(gate_product), settings),
     }
 
 
@@ -137,6 +165,7 @@ def components_from_values(
     coincident: Any = None,
     anticipation_available: Any = True,
     recovery_available: Any = True,
+    settings: ScoringSettings = DEFAULT_SCORING,
 ) -> dict[str, Array]:
     """All components, gates and the CUS from plain values (units: s, m; gates: True = passed).
 
@@ -157,14 +186,14 @@ def components_from_values(
     comps = {
         "P_A": _f(P_A),
         "P_B": _f(P_B),
-        "S_ttc": s_ttc(ttc_min),
+        "S_ttc": ttc.score(ttc_min, settings),
         "S_clear": s_clear(d_min, d_safe),
         "S_ant": s_ant(t_ref, t_event, t_react, anticipation_available, coincident),
-        "S_rec": s_rec(RL, recovery_available),
+        "S_rec": recovery.score(RL, settings, recovery_available),
     }
     out = combine(
         comps["P_A"], comps["P_B"], comps["S_ttc"], comps["S_clear"], comps["S_ant"],
-        comps["S_rec"], product,
+        comps["S_rec"], product, settings,
     )  # fmt: skip
     return {**comps, **gates, "gate_product": product, **out}
 
@@ -175,7 +204,10 @@ def cus_from_values(*args: Any, **kwargs: Any) -> Array:
 
 
 def pair_components(
-    metrics_a: ExecutionMetrics, metrics_b: ExecutionMetrics, d_safe: Any
+    metrics_a: ExecutionMetrics,
+    metrics_b: ExecutionMetrics,
+    d_safe: Any,
+    settings: ScoringSettings = DEFAULT_SCORING,
 ) -> dict[str, Array]:
     """Hard components, gates and CUS of matched pairs (elementwise over any batch shape).
 
@@ -183,6 +215,7 @@ def pair_components(
         metrics_a: Route A execution outputs (from :func:`~lantern_jax.scoring.metrics.finalize`).
         metrics_b: Route B execution outputs; only ``progress`` and ``gate_false_brake`` are used.
         d_safe: clearance normaliser in m (see :func:`d_safe_for_family`).
+        settings: scoring thresholds and weights.
 
     Returns:
         dict: ``P_A, P_B, S_ttc, S_clear, S_ant, S_rec`` (float, ``NaN`` = unavailable), the six
@@ -201,6 +234,7 @@ def pair_components(
         coincident=a.coincident_onset,
         anticipation_available=a.anticipation_available,
         recovery_available=a.recovery_available,
+        settings=settings,
     )  # fmt: skip
 
 
@@ -213,7 +247,12 @@ def _or_zero(value_valid: tuple[Array, Array]) -> Array:
     return jnp.where(valid, value, 0.0)
 
 
-def soft_execution_terms(tel: Telemetry, d_safe: Any, temperature: Any = None) -> dict[str, Array]:
+def soft_execution_terms(
+    tel: Telemetry,
+    d_safe: Any,
+    temperature: Any = None,
+    settings: ScoringSettings = DEFAULT_SCORING,
+) -> dict[str, Array]:
     """Smooth components and gates of one execution.
 
     The log-sum-exp and first-crossing accumulators were built with the accumulator temperature
@@ -225,6 +264,7 @@ def soft_execution_terms(tel: Telemetry, d_safe: Any, temperature: Any = None) -
         tel: final telemetry of one execution.
         d_safe: () float32, m, clearance normaliser.
         temperature: () float32 for gates and clips.
+        settings: scoring thresholds (the accumulators' own, of :func:`update_telemetry`).
 
     Returns:
         dict of () float32: ``P, S_ttc, S_clear, S_ant, S_rec`` and the six soft gates
@@ -233,26 +273,31 @@ def soft_execution_terms(tel: Telemetry, d_safe: Any, temperature: Any = None) -
     """
     ctx = tel.context
     t = ctx.temperature if temperature is None else jnp.asarray(temperature, jnp.float32)
-    t_fail = first_failure_time(tel)
+    s = settings
+    t_fail = first_failure_time(tel, s)
     terms = {
-        "P": progress.soft(ctx, t)[0],
-        "S_ttc": _or_zero(ttc.soft(tel.ttc, ctx, t_fail, t)),
-        "S_clear": _or_zero(clearance.soft(tel.clearance, ctx, t_fail, t, _f(d_safe))),
-        "S_ant": _or_zero(anticipation.soft(tel.anticipation, ctx, t_fail, t)),
-        "S_rec": _or_zero(recovery.soft(tel.recovery, ctx, t_fail, t)),
+        "P": progress.soft(ctx, t, s)[0],
+        "S_ttc": _or_zero(ttc.soft(tel.ttc, ctx, t_fail, t, s)),
+        "S_clear": _or_zero(clearance.soft(tel.clearance, ctx, t_fail, t, s, _f(d_safe))),
+        "S_ant": _or_zero(anticipation.soft(tel.anticipation, ctx, t_fail, t, s)),
+        "S_rec": _or_zero(recovery.soft(tel.recovery, ctx, t_fail, t, s)),
     }
     for name, gate in ROUTE_A_GATES.items():
-        terms["gate_" + name] = gate.soft(getattr(tel, name), ctx, t)[0]
-    terms["gate_false_brake"] = false_brake.soft(tel.false_brake, ctx, t)[0]
+        terms["gate_" + name] = gate.soft(getattr(tel, name), ctx, t, s)[0]
+    terms["gate_false_brake"] = false_brake.soft(tel.false_brake, ctx, t, s)[0]
     return terms
 
 
 def soft_pair_components(
-    tel_a: Telemetry, tel_b: Telemetry, d_safe: Any, temperature: Any = None
+    tel_a: Telemetry,
+    tel_b: Telemetry,
+    d_safe: Any,
+    temperature: Any = None,
+    settings: ScoringSettings = DEFAULT_SCORING,
 ) -> dict[str, Array]:
     """Soft counterpart of :func:`pair_components` (same keys; all values in [0, 1] / 0..100)."""
-    a = soft_execution_terms(tel_a, d_safe, temperature)
-    b = soft_execution_terms(tel_b, d_safe, temperature)
+    a = soft_execution_terms(tel_a, d_safe, temperature, settings)
+    b = soft_execution_terms(tel_b, d_safe, temperature, settings)
     gates = {name: a[name] for name in GATE_NAMES[:-1]}
     gates["gate_false_brake"] = b["gate_false_brake"]
     product = jnp.ones((), jnp.float32)
@@ -268,13 +313,17 @@ def soft_pair_components(
     }
     out = combine(
         comps["P_A"], comps["P_B"], comps["S_ttc"], comps["S_clear"], comps["S_ant"],
-        comps["S_rec"], product,
+        comps["S_rec"], product, settings,
     )  # fmt: skip
     return {**comps, **gates, "gate_product": product, **out}
 
 
 def soft_pair_cus(
-    tel_a: Telemetry, tel_b: Telemetry, d_safe: Any, temperature: Any = None
+    tel_a: Telemetry,
+    tel_b: Telemetry,
+    d_safe: Any,
+    temperature: Any = None,
+    settings: ScoringSettings = DEFAULT_SCORING,
 ) -> Array:
     """Differentiable CUS (0..100) of one pair; converges to the hard CUS as temperature -> 0.
 
@@ -283,4 +332,4 @@ def soft_pair_cus(
         d_safe: () float32, m.
         temperature: () float32 for gates and clips (default: the accumulators' temperature).
     """
-    return soft_pair_components(tel_a, tel_b, d_safe, temperature)["CUS"]
+    return soft_pair_components(tel_a, tel_b, d_safe, temperature, settings)["CUS"]

@@ -30,9 +30,9 @@ import jax.numpy as jnp
 
 from lantern_jax import geometry, polyline
 from lantern_jax.constants import EGO_HALF_LENGTH, EGO_HALF_WIDTH, LIGHT_RED
-from lantern_jax.scoring import thresholds
 from lantern_jax.scoring.components.false_brake import matched_window
 from lantern_jax.scoring.sample import TickSample
+from lantern_jax.scoring.thresholds import ScoringSettings
 from lantern_jax.world import ActorState, EgoState, Lanes, ProtocolState, Scenario
 
 Array = jax.Array
@@ -40,26 +40,31 @@ Array = jax.Array
 EGO_EXTENT = (EGO_HALF_LENGTH, EGO_HALF_WIDTH)  # m, half length and half width of the ego box
 
 
-def outside_lanes(lanes: Lanes, ego: EgoState) -> Array:
+def outside_lanes(lanes: Lanes, ego: EgoState, settings: ScoringSettings) -> Array:
     """() bool: the ego centre is in no lane (half width + 0.5 m), or drives its lane the wrong way.
 
     Wrong way = heading more than 120 deg from the lane's direction (the leaderboard's junction
-    threshold, used everywhere here).
+    threshold, used everywhere here; ``settings.wrong_way_rad``).
     """
     heading = jnp.stack([jnp.cos(ego.yaw), jnp.sin(ego.yaw)])
 
     def one(center, pv, width):
         dist, direction = polyline.nearest_segment(center, pv, ego.xy)
         norm = jnp.sqrt(jnp.maximum(jnp.sum(direction * direction), 1e-12))
-        wrong = jnp.sum(direction * heading) < jnp.cos(thresholds.WRONG_WAY_RAD) * norm
-        return (dist <= 0.5 * width + thresholds.LANE_MARGIN_M) & ~wrong
+        wrong = jnp.sum(direction * heading) < jnp.cos(settings.wrong_way_rad) * norm
+        return (dist <= 0.5 * width + settings.lane_margin_m) & ~wrong
 
     inside = jax.vmap(one)(lanes.center, lanes.point_valid, lanes.width)
     return ~jnp.any(inside & lanes.valid)
 
 
 def justified_stop(
-    light_holds: Array, gap: Array, lateral: Array, present: Array, dist_to_end: Array
+    light_holds: Array,
+    gap: Array,
+    lateral: Array,
+    present: Array,
+    dist_to_end: Array,
+    settings: ScoringSettings,
 ) -> Array:
     """() bool: standing still now would be justified (light, lead actor, route end).
 
@@ -69,12 +74,13 @@ def justified_stop(
         lateral: (A,) float32, m, each actor's distance from the route minus its half size.
         present: (A,) bool, actors in the world.
         dist_to_end: () float32, m, route length minus the ego's route arc.
+        settings: the distances that justify a stop (``justify_*``).
     """
-    in_corr = present & (lateral < EGO_HALF_WIDTH + thresholds.JUSTIFY_LATERAL_MARGIN_M)
+    in_corr = present & (lateral < EGO_HALF_WIDTH + settings.justify_lateral_margin_m)
     lead = jnp.any(
-        in_corr & (gap > thresholds.JUSTIFY_LEAD_BEHIND_M) & (gap < thresholds.JUSTIFY_LEAD_DIST_M)
+        in_corr & (gap > settings.justify_lead_behind_m) & (gap < settings.justify_lead_dist_m)
     )
-    return light_holds | lead | (dist_to_end < thresholds.JUSTIFY_ROUTE_END_M)
+    return light_holds | lead | (dist_to_end < settings.justify_route_end_m)
 
 
 def measure(
@@ -91,6 +97,7 @@ def measure(
     light: Array,
     justified: Array,
     fault: Array,
+    settings: ScoringSettings,
 ) -> TickSample:
     """The tick's :class:`TickSample` (one execution, after the world was stepped).
 
@@ -106,6 +113,7 @@ def measure(
         light: () int32, LIGHT_* state of the ego's light at ``t``.
         justified: () bool, from :func:`justified_stop`.
         fault: () bool, controller fault this tick.
+        settings: scoring thresholds.
     """
     cfg = scenario.config
     h = cfg.hazard_index
@@ -115,7 +123,7 @@ def measure(
     occ = scenario.occluders
     hit_occ = geometry.overlap_with_boxes(ego.xy, ego.yaw, ego_ext, occ.center, occ.yaw, occ.extent)
     contact = jnp.any(overlap & present) | jnp.any(hit_occ & occ.valid)
-    collision = contact & (ego.speed >= thresholds.COLLISION_MIN_SPEED_MPS)
+    collision = contact & (ego.speed >= settings.collision_min_speed_mps)
     # only the hazard's box distance is scored (TTC, clearance): one box pair, not A
     hazard_dist = geometry.box_distance(
         ego.xy, ego.yaw, ego_ext, actors.xy[h], actors.yaw[h], ext[h]
@@ -123,7 +131,7 @@ def measure(
     ego_vel = ego.speed * jnp.stack([jnp.cos(ego.yaw), jnp.sin(ego.yaw)])
     hz_vel = actors.speed[h] * jnp.stack([jnp.cos(actors.yaw[h]), jnp.sin(actors.yaw[h])])
     crossed_stop = (arc_before < cfg.ego_stop_s) & (arc_now >= cfg.ego_stop_s)
-    fb_lo, fb_hi = matched_window(cfg.s_warn, cfg.s_event, cfg.s_conflict)
+    fb_lo, fb_hi = matched_window(cfg.s_warn, cfg.s_event, cfg.s_conflict, settings)
     return TickSample(
         t=t,
         ego_speed=ego.speed,
@@ -131,7 +139,7 @@ def measure(
         progress=progress,
         route_length=scenario.route.length,
         dist_to_route=dist_to_route,
-        outside_lanes=outside_lanes(scenario.lanes, ego),
+        outside_lanes=outside_lanes(scenario.lanes, ego, settings),
         red_light_violation=crossed_stop & (light == LIGHT_RED),
         collision=collision,
         hazard_present=present[h] & cfg.is_route_a,
@@ -139,7 +147,7 @@ def measure(
         hazard_rel_vel=hz_vel - ego_vel,
         hazard_box_dist=hazard_dist,
         justified_stop=justified,
-        slow_unjustified=(ego.speed < thresholds.SLOW_SPEED_FRACTION * cfg.v_ref) & ~justified,
+        slow_unjustified=(ego.speed < settings.slow_speed_fraction * cfg.v_ref) & ~justified,
         fb_window=(progress >= fb_lo) & (progress <= fb_hi),
         controller_fault=fault,
         t_warn_point=protocol.t_warn_point,
@@ -152,7 +160,12 @@ def measure(
 
 
 def execution_ended(
-    scenario: Scenario, t: Array, progress: Array, dist_to_route: Array, still_time: Array
+    scenario: Scenario,
+    t: Array,
+    progress: Array,
+    dist_to_route: Array,
+    still_time: Array,
+    settings: ScoringSettings,
 ) -> Array:
     """() bool: the execution is over — route completed, timed out, deviated 30 m or blocked 20 s.
 
@@ -162,10 +175,11 @@ def execution_ended(
         progress: () float32, m, furthest route arc reached.
         dist_to_route: () float32, m.
         still_time: () float32, s, continuous time the ego has been still.
+        settings: the route's end zone, the deviation and standstill limits.
     """
     return (
-        (progress >= thresholds.completion_length(scenario.route.length))
+        (progress >= settings.completion_length(scenario.route.length))
         | (t >= scenario.config.timeout_s)
-        | (dist_to_route >= thresholds.ROUTE_DEVIATION_M)
-        | (still_time >= thresholds.BLOCK_STILL_S)
+        | (dist_to_route >= settings.route_deviation_m)
+        | (still_time >= settings.block_still_s)
     )

@@ -52,6 +52,7 @@ from lantern_jax.scoring.components import (
     ttc,
 )
 from lantern_jax.scoring.telemetry import Telemetry
+from lantern_jax.scoring.thresholds import DEFAULT_SCORING, ScoringSettings
 from lantern_jax.times import happened, time_or_nan
 
 Array = jax.Array
@@ -107,11 +108,11 @@ class ExecutionMetrics:
     #                            justifying it (efficiency diagnostic, not part of the CUS)
 
 
-def first_failure_time(tel: Telemetry) -> Array:
+def first_failure_time(tel: Telemetry, settings: ScoringSettings = DEFAULT_SCORING) -> Array:
     """() float32, s: time stamp of the first Route A gate failure (``NEVER`` if none)."""
     times = []
     for name, gate in ROUTE_A_GATES.items():
-        times += gate.failure_times(getattr(tel, name), tel.context)
+        times += gate.failure_times(getattr(tel, name), tel.context, settings)
     return jnp.min(jnp.stack(times), axis=0)
 
 
@@ -120,9 +121,9 @@ def release_time(tel: Telemetry) -> Array:
     return recovery.release_time(tel.context.t_warn_off, tel.context.t_clear)
 
 
-def availability(tel: Telemetry) -> dict[str, Array]:
+def availability(tel: Telemetry, settings: ScoringSettings = DEFAULT_SCORING) -> dict[str, Array]:
     """Valid-hazard-telemetry masks (see the module docstring) as () bool arrays."""
-    t_fail = first_failure_time(tel)
+    t_fail = first_failure_time(tel, settings)
     return {
         name: unit.valid(getattr(tel, name), tel.context, t_fail)
         for name, unit in HAZARD_COMPONENTS.items()
@@ -135,16 +136,22 @@ def _or_nan(value_valid: tuple[Array, Array]) -> Array:
     return jnp.where(valid, value, jnp.nan)
 
 
-def finalize(tel: Telemetry) -> ExecutionMetrics:
-    """Per-execution hard outputs from the final accumulators (jittable)."""
+def finalize(tel: Telemetry, settings: ScoringSettings = DEFAULT_SCORING) -> ExecutionMetrics:
+    """Per-execution hard outputs from the final accumulators (jittable).
+
+    Args:
+        tel: final accumulators of one execution.
+        settings: the scoring settings the accumulators were folded with.
+    """
     ctx = tel.context
-    t_fail = first_failure_time(tel)
-    avail = availability(tel)
-    completed = progress.is_completed(ctx.progress_m, ctx.route_length_m)
+    t_fail = first_failure_time(tel, settings)
+    avail = availability(tel, settings)
+    completed = progress.is_completed(ctx.progress_m, ctx.route_length_m, settings)
+    s = settings
     return ExecutionMetrics(
         is_route_a=ctx.is_route_a,
         coincident_onset=ctx.coincident_onset,
-        progress=progress.hard(ctx)[0],
+        progress=progress.hard(ctx, s)[0],
         progress_m=ctx.progress_m,
         route_length_m=ctx.route_length_m,
         completed=completed,
@@ -165,15 +172,15 @@ def finalize(tel: Telemetry) -> ExecutionMetrics:
         clearance_available=avail["clearance"],
         anticipation_available=avail["anticipation"],
         recovery_available=avail["recovery"],
-        gate_collision=collision.hard(tel.collision, ctx)[0],
-        gate_route_deviation=route_deviation.hard(tel.route_deviation, ctx)[0],
-        gate_lane=lane.hard(tel.lane, ctx)[0],
-        gate_rule=rule.hard(tel.rule, ctx)[0],
-        gate_block=block.hard(tel.block, ctx)[0],
-        gate_false_brake=false_brake.hard(tel.false_brake, ctx)[0],
+        gate_collision=collision.hard(tel.collision, ctx, s)[0],
+        gate_route_deviation=route_deviation.hard(tel.route_deviation, ctx, s)[0],
+        gate_lane=lane.hard(tel.lane, ctx, s)[0],
+        gate_rule=rule.hard(tel.rule, ctx, s)[0],
+        gate_block=block.hard(tel.block, ctx, s)[0],
+        gate_false_brake=false_brake.hard(tel.false_brake, ctx, s)[0],
         controller_fault=tel.block.fault,
         t_fault_s=time_or_nan(tel.block.t_fault),
-        stalled=block.stalled(tel.block),
+        stalled=block.stalled(tel.block, s),
         timed_out=~completed,
         t_first_failure_s=time_or_nan(t_fail),
         max_route_dist_m=tel.route_deviation.max_dist,

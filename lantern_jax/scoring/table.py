@@ -22,6 +22,7 @@ from lantern_jax.constants import FAMILIES
 from lantern_jax.files import atomic_write
 from lantern_jax.scoring.cus import GATE_NAMES, d_safe_for_family, pair_components
 from lantern_jax.scoring.metrics import ExecutionMetrics
+from lantern_jax.scoring.thresholds import DEFAULT_SCORING, ScoringSettings
 
 KEY_COLUMNS = ("model", "condition", "pair_id")
 WARNING_CONDITION = "warning"
@@ -80,6 +81,7 @@ def build_route_table(
     warning_ticks: Any = None,
     hidden_at_warning: Any = None,
     hidden_before_warning: Any = None,
+    settings: ScoringSettings = DEFAULT_SCORING,
 ) -> pd.DataFrame:
     """Route-level DataFrame from batched per-execution metrics.
 
@@ -96,6 +98,7 @@ def build_route_table(
         hidden_at_warning, hidden_before_warning: (n,) bool, the Route A hazard was hidden from
             the front camera at the warning point / for the whole approach up to it (see the
             schema); default False (0) for every row.
+        settings: the scoring settings of the components and the CUS.
 
     Returns:
         DataFrame with the schema's columns in order (see :func:`validate_route_table`).
@@ -115,7 +118,9 @@ def build_route_table(
     if d_safe is None:
         d_safe = np.asarray(d_safe_for_family(np.asarray([FAMILIES.index(f) for f in fam])))
     d_safe = np.broadcast_to(np.asarray(d_safe, np.float64), (n,))
-    comps = {k: np.asarray(v, np.float64) for k, v in pair_components(a, b, d_safe).items()}
+    comps = {
+        k: np.asarray(v, np.float64) for k, v in pair_components(a, b, d_safe, settings).items()
+    }
     t_ref = np.asarray(a.t_ref_s, np.float64)
     if t_warn_on is None:
         warned = np.asarray([c == WARNING_CONDITION for c in conds])

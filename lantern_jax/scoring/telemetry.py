@@ -12,7 +12,8 @@ is 10 ticks (0.5 s), the recovery window 20 ticks (1 s), the lane debounce 20 ti
 total), the Route B false brake 20 consecutive ticks (1 s), blocking 400 consecutive ticks (20 s).
 
 The soft accumulators (log-sum-exp soft minima, soft first crossings) are built with the
-``temperature`` given to :func:`update_telemetry`, recorded in ``Telemetry.context.temperature``.
+temperature of the :class:`~lantern_jax.scoring.thresholds.ScoringSettings` given to
+:func:`update_telemetry`, recorded in ``Telemetry.context.temperature``.
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ from lantern_jax.scoring.components import (
     ttc,
 )
 from lantern_jax.scoring.sample import TickSample
+from lantern_jax.scoring.thresholds import DEFAULT_SCORING, ScoringSettings
 
 Array = jax.Array
 
@@ -58,67 +60,60 @@ class Telemetry:
     efficiency: efficiency.EfficiencyState  # completion time, unjustified slow time (not CUS)
 
 
-def init_telemetry() -> Telemetry:
-    """Accumulators before the first tick."""
-    return Telemetry(
-        context=context.init(),
-        ttc=ttc.init(),
-        clearance=clearance.init(),
-        anticipation=anticipation.init(),
-        recovery=recovery.init(),
-        collision=collision.init(),
-        route_deviation=route_deviation.init(),
-        lane=lane.init(),
-        rule=rule.init(),
-        block=block.init(),
-        false_brake=false_brake.init(),
-        efficiency=efficiency.init(),
-    )
+def init_telemetry(settings: ScoringSettings = DEFAULT_SCORING) -> Telemetry:
+    """Accumulators before the first tick (ring lengths from ``settings``)."""
+    return Telemetry(context=context.init(settings),
+                     **{name: unit.init(settings) for name, unit in _UNITS.items()})  # fmt: skip
 
 
-def _step(tel: Telemetry, s: TickSample, temp: Array) -> Telemetry:
+#: Every component's module by Telemetry field (``context`` apart: it runs first).
+_UNITS = {
+    "ttc": ttc, "clearance": clearance, "anticipation": anticipation, "recovery": recovery,
+    "collision": collision, "route_deviation": route_deviation, "lane": lane, "rule": rule,
+    "block": block, "false_brake": false_brake, "efficiency": efficiency,
+}  # fmt: skip
+
+
+def _step(tel: Telemetry, s: TickSample, settings: ScoringSettings) -> Telemetry:
     """Every component's ``update`` with the shared context of this tick."""
-    ctx, tick = context.update(tel.context, s, temp)
+    ctx, tick = context.update(tel.context, s, settings)
     return Telemetry(
         context=ctx,
-        ttc=ttc.update(tel.ttc, s, tick, temp),
-        clearance=clearance.update(tel.clearance, s, tick, temp),
-        anticipation=anticipation.update(tel.anticipation, s, tick, temp),
-        recovery=recovery.update(tel.recovery, s, tick, temp),
-        collision=collision.update(tel.collision, s, tick, temp),
-        route_deviation=route_deviation.update(tel.route_deviation, s, tick, temp),
-        lane=lane.update(tel.lane, s, tick, temp),
-        rule=rule.update(tel.rule, s, tick, temp),
-        block=block.update(tel.block, s, tick, temp),
-        false_brake=false_brake.update(tel.false_brake, s, tick, temp),
-        efficiency=efficiency.update(tel.efficiency, s, tick, temp),
+        **{
+            name: unit.update(getattr(tel, name), s, tick, settings)
+            for name, unit in _UNITS.items()
+        },
     )
 
 
 def update_telemetry(
-    tel: Telemetry, sample: TickSample, temperature: Array | float = 0.05, active: Array = True
+    tel: Telemetry,
+    sample: TickSample,
+    settings: ScoringSettings = DEFAULT_SCORING,
+    active: Array = True,
 ) -> Telemetry:
     """Fold one 20 Hz tick into the accumulators (jittable; one execution, ``vmap`` outside).
 
     Args:
         tel: accumulators before the tick.
         sample: the tick's measurement (see :class:`~lantern_jax.scoring.sample.TickSample`).
-        temperature: () float32, temperature of the soft accumulators (in the unit of each
-            relaxed quantity: s, m, m/s, m/s^2, samples); must be > 0.
+        settings: thresholds and the temperature of the soft accumulators (in the unit of each
+            relaxed quantity: s, m, m/s, m/s^2, samples; > 0).
         active: () bool, ``False`` leaves ``tel`` unchanged (ticks after an execution has ended
             -- route completed, timed out -- in a fixed-length batched scan).
 
     Returns:
         The updated :class:`Telemetry`.
     """
-    temp = jnp.asarray(temperature, jnp.float32)
-    new = _step(tel, sample, temp)
+    new = _step(tel, sample, settings)
     on = jnp.asarray(active, bool)
     return jax.tree.map(lambda n, o: jnp.where(on, n, o), new, tel)
 
 
 def fold_telemetry(
-    samples: TickSample, temperature: Array | float = 0.05, active: Array | None = None
+    samples: TickSample,
+    settings: ScoringSettings = DEFAULT_SCORING,
+    active: Array | None = None,
 ) -> Telemetry:
     """Fold a whole stacked sequence of ticks (leading axis = time) with ``lax.scan``.
 
@@ -127,7 +122,7 @@ def fold_telemetry(
 
     Args:
         samples: :class:`~lantern_jax.scoring.sample.TickSample` with a leading (N,) time axis.
-        temperature: () float32, temperature of the soft accumulators.
+        settings: thresholds and the soft accumulators' temperature.
         active: (N,) bool, ticks to fold (default: all).
 
     Returns:
@@ -138,7 +133,7 @@ def fold_telemetry(
 
     def body(tel, xs):
         s, a = xs
-        return update_telemetry(tel, s, temperature, a), None
+        return update_telemetry(tel, s, settings, a), None
 
-    tel, _ = jax.lax.scan(body, init_telemetry(), (samples, act))
+    tel, _ = jax.lax.scan(body, init_telemetry(settings), (samples, act))
     return tel

@@ -76,7 +76,9 @@ def grounded_position(scenario: Scenario, state: State) -> Array:
     return geometry.world_to_ego(h, state.ego.xy, state.ego.yaw)
 
 
-def delivered_warning(scenario: Scenario, state: State) -> tuple[Array, Array, Array]:
+def delivered_warning(
+    scenario: Scenario, state: State, bank: warnings.TextBank = warnings.DEFAULT_BANK
+) -> tuple[Array, Array, Array]:
     """What is delivered now: the protocol's warning or the override (ground truth, not a
     policy input).
 
@@ -98,8 +100,9 @@ def delivered_warning(scenario: Scenario, state: State) -> tuple[Array, Array, A
         geometry.world_to_ego(fixed, ego.xy, ego.yaw),
     )
     pos = jnp.where(overridden, override_pos, grounded_position(scenario, state))
-    n = warnings.text_tables().has_position.shape[0]
-    states_position = jnp.asarray(warnings.text_tables().has_position)[jnp.clip(text_id, 0, n - 1)]
+    has_position = warnings.text_tables(bank).has_position
+    n = has_position.shape[0]
+    states_position = jnp.asarray(has_position)[jnp.clip(text_id, 0, n - 1)]
     stated = active & (text_id >= 0) & (text_id < n) & states_position
     return active, text_id, jnp.where(stated, pos, 0.0)
 
@@ -153,11 +156,13 @@ def mask_actors(fields: dict[str, Array], seen: Array) -> dict[str, Array]:
     }
 
 
-def warning_fields(scenario: Scenario, state: State) -> dict[str, Array]:
+def warning_fields(
+    scenario: Scenario, state: State, bank: warnings.TextBank = warnings.DEFAULT_BANK
+) -> dict[str, Array]:
     """The warning as a policy with the ``"warning"`` sensor reads it: the delivered text's
     token ids and value channel (:func:`~lantern_jax.scenarios.warnings.warning_language`)."""
-    active, text_id, pos = delivered_warning(scenario, state)
-    tokens, values = warnings.warning_language(text_id, active, pos)
+    active, text_id, pos = delivered_warning(scenario, state, bank)
+    tokens, values = warnings.warning_language(text_id, active, pos, bank)
     return dict(warning_tokens=tokens, warning_values=values)
 
 
@@ -214,7 +219,10 @@ def surround_view(scenario: Scenario, state: State) -> SurroundView:
 
 
 def observe(
-    scenario: Scenario, state: State, sensors: tuple[str, ...] = DEFAULT_SENSORS
+    scenario: Scenario,
+    state: State,
+    sensors: tuple[str, ...] = DEFAULT_SENSORS,
+    bank: warnings.TextBank = warnings.DEFAULT_BANK,
 ) -> Observation:
     """Build the observation of the current tick from the declared sensors only.
 
@@ -223,6 +231,7 @@ def observe(
         state: the simulator state at time ``state.t`` (its percept is that of the same tick).
         sensors: static; the policy's sensor names
             (:func:`~lantern_jax.observation.normalize_sensors`; ``Policy.sensors``).
+        bank: static; the warning texts (``Settings.bank``).
     """
     r, cfg, percept = scenario.route, scenario.config, state.percept
     route, targets = route_ahead(scenario, state)
@@ -247,7 +256,7 @@ def observe(
         range_class=percept.range_class,
         light_state=ego_light_state(scenario.lights, cfg.ego_light, state.t),
         dist_to_stop=dist_to_stop,
-        **(warning_fields(scenario, state) if WARNING in sensors else no_warning_fields()),
+        **(warning_fields(scenario, state, bank) if WARNING in sensors else no_warning_fields()),
         privileged=forecast_view(scenario, state, truth) if PRIVILEGED in sensors else None,
         surround=surround,
     )

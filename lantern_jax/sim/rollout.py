@@ -30,6 +30,7 @@ import jax.numpy as jnp
 from lantern_jax.constants import DT
 from lantern_jax.sim.distributed import batch_mesh
 from lantern_jax.sim.record import TickRecord
+from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings
 from lantern_jax.sim.state import State, init_state
 from lantern_jax.sim.step import Driver, step
 from lantern_jax.world import Scenario
@@ -37,9 +38,11 @@ from lantern_jax.world import Scenario
 Array = jax.Array
 
 
-def start_state(scenario: Scenario, policy: Driver, policy_params: Any) -> State:
+def start_state(
+    scenario: Scenario, policy: Driver, policy_params: Any, settings: Settings = DEFAULT_SETTINGS
+) -> State:
     """The state of one execution at ``t = 0`` with the policy's initial carry."""
-    return init_state(scenario, policy.initial_carry(policy_params))
+    return init_state(scenario, policy.initial_carry(policy_params), settings.scoring)
 
 
 def with_carry(states: State, policy: Driver, policy_params: Any) -> State:
@@ -63,7 +66,7 @@ def rollout(
     policy_params: Any,
     num_ticks: int,
     record: bool = False,
-    temperature: float | Array = 0.05,
+    settings: Settings = DEFAULT_SETTINGS,
     remat: bool = False,
 ) -> tuple[State, TickRecord | None]:
     """Roll one execution forward for ``num_ticks`` ticks (frozen once it has ended).
@@ -75,7 +78,8 @@ def rollout(
         policy_params: policy parameters.
         num_ticks: static horizon.
         record: also return the per-tick :class:`TickRecord` (leading axis ``num_ticks``).
-        temperature: soft-score temperature for the smooth telemetry accumulators.
+        settings: scoring, protocol and text bank (:class:`~lantern_jax.sim.settings.Settings`;
+            the soft-score temperature is ``settings.scoring.temperature``).
         remat: recompute each tick's internals in the backward pass instead of storing them
             (``jax.checkpoint``): reverse-mode memory then grows with the carried state only,
             for a second forward pass of compute.
@@ -83,28 +87,27 @@ def rollout(
     Returns:
         (final state, records or None).
     """
-    temperature = jnp.asarray(temperature, jnp.float32)
 
     def body(state, _):
-        new, rec = step(policy, policy_params, scenario, state, temperature)
+        new, rec = step(policy, policy_params, scenario, state, settings)
         return new, (rec if record else None)
 
     if remat:
         body = jax.checkpoint(body)
 
-    start = start_state(scenario, policy, policy_params)
+    start = start_state(scenario, policy, policy_params, settings)
     return jax.lax.scan(body, start, None, length=num_ticks)
 
 
 def chunk_runner(
-    policy: Driver, policy_params: Any, chunk: int, temperature: Array
+    policy: Driver, policy_params: Any, chunk: int, settings: Settings
 ) -> Callable[[Scenario, State], State]:
     """``run_chunk(scenario, state)``: ``chunk`` scanned ticks of ONE execution (the scan
     carries the state; the scenario is closed over, so its tick-invariant work is hoisted)."""
 
     def run_chunk(scenario: Scenario, state: State) -> State:
         def body(s, _):
-            return step(policy, policy_params, scenario, s, temperature)[0], None
+            return step(policy, policy_params, scenario, s, settings)[0], None
 
         return jax.lax.scan(body, state, None, length=chunk)[0]
 
@@ -139,7 +142,7 @@ def rollout_batch(
     policy_params: Any,
     max_ticks: int | Array,
     chunk: int = 40,
-    temperature: float | Array = 0.05,
+    settings: Settings = DEFAULT_SETTINGS,
     start: State | None = None,
 ) -> State:
     """Roll a batch of executions (leading axis on every leaf) until all have ended.
@@ -151,16 +154,15 @@ def rollout_batch(
         max_ticks: upper bound of the horizon (rounded up to whole chunks): a Python int, or a
             traced int32 scalar, so that one compiled program serves every horizon.
         chunk: ticks per scanned chunk between checks of the batch's ``done`` mask.
-        temperature: soft-score temperature.
+        settings: scoring, protocol and text bank.
         start: continue these batched states (from an earlier call) instead of starting at
             the scenarios' initial state.
 
     Returns:
         The batched final states.
     """
-    temperature = jnp.asarray(temperature, jnp.float32)
     n_chunks = -(-max_ticks // chunk)
-    batched_chunk = jax.vmap(chunk_runner(policy, policy_params, chunk, temperature))
+    batched_chunk = jax.vmap(chunk_runner(policy, policy_params, chunk, settings))
 
     def cond(loop):
         i, states = loop
@@ -171,7 +173,8 @@ def rollout_batch(
         return i + 1, batched_chunk(scenarios, states)
 
     if start is None:
-        start = with_carry(jax.vmap(init_state)(scenarios), policy, policy_params)
+        starts = jax.vmap(lambda sc: init_state(sc, (), settings.scoring))(scenarios)
+        start = with_carry(starts, policy, policy_params)
     states = start
     return jax.lax.while_loop(cond, body, (jnp.asarray(0, jnp.int32), states))[1]
 
@@ -182,7 +185,7 @@ def rollout_batch_parallel(
     policy_params: Any,
     max_ticks: int | Array,
     chunk: int = 40,
-    temperature: float | Array = 0.05,
+    settings: Settings = DEFAULT_SETTINGS,
     start: State | None = None,
 ) -> State:
     """:func:`rollout_batch` split over all local devices (e.g. the CPU cores exposed with
@@ -194,7 +197,7 @@ def rollout_batch_parallel(
     """
     n_dev = jax.device_count()
     if n_dev == 1:
-        return rollout_batch(scenarios, policy, policy_params, max_ticks, chunk, temperature, start)
+        return rollout_batch(scenarios, policy, policy_params, max_ticks, chunk, settings, start)
     n = jax.tree.leaves(scenarios)[0].shape[0]
     pad = (-n) % n_dev
 
@@ -204,10 +207,8 @@ def rollout_batch_parallel(
     if pad:
         scenarios = pad_tree(scenarios)
         start = None if start is None else pad_tree(start)
-    if start is None:
-        start = with_carry(jax.vmap(init_state)(scenarios), policy, policy_params)
     final = on_every_device(
-        lambda sc, s: rollout_batch(sc, policy, policy_params, max_ticks, chunk, temperature, s),
+        lambda sc, s: rollout_batch(sc, policy, policy_params, max_ticks, chunk, settings, s),
         scenarios,
         start,
     )
@@ -279,7 +280,7 @@ def rollout_scheduled(
     max_ticks: int | Array,
     slots: int,
     chunk: int = 40,
-    temperature: float | Array = 0.05,
+    settings: Settings = DEFAULT_SETTINGS,
 ) -> State:
     """Roll ``n`` executions through ``slots`` slots until every one has ended
     (:func:`scheduled_map` with ``chunk`` scanned ticks per loop step).
@@ -300,18 +301,17 @@ def rollout_scheduled(
             scalar.
         slots: static, executions stepped together (1 <= slots <= n).
         chunk: static, ticks per loop step.
-        temperature: soft-score temperature.
+        settings: scoring, protocol and text bank.
 
     Returns:
         (n, ...) the final states, in the order of ``scenarios``.
     """
-    temperature = jnp.asarray(temperature, jnp.float32)
     max_ticks = jnp.asarray(max_ticks, jnp.int32)
 
     def ended(states: State) -> Array:
         return states.done | (states.tick >= max_ticks)
 
-    run_chunk = chunk_runner(policy, policy_params, chunk, temperature)
+    run_chunk = chunk_runner(policy, policy_params, chunk, settings)
     return scheduled_map(run_chunk, ended, scenarios, starts, slots)
 
 
@@ -323,7 +323,7 @@ def rollout_scheduled_parallel(
     max_ticks: int | Array,
     slots: int,
     chunk: int = 40,
-    temperature: float | Array = 0.05,
+    settings: Settings = DEFAULT_SETTINGS,
 ) -> State:
     """:func:`rollout_scheduled` on every device of :func:`batch_mesh`, each with its own
     scheduler over its own block of the batch (no communication; each stops on its own).
@@ -335,11 +335,11 @@ def rollout_scheduled_parallel(
     """
     if jax.device_count() == 1:
         return rollout_scheduled(
-            scenarios, starts, policy, policy_params, max_ticks, slots, chunk, temperature
+            scenarios, starts, policy, policy_params, max_ticks, slots, chunk, settings
         )
     return on_every_device(
         lambda sc, st: rollout_scheduled(
-            sc, st, policy, policy_params, max_ticks, slots, chunk, temperature
+            sc, st, policy, policy_params, max_ticks, slots, chunk, settings
         ),
         scenarios,
         starts,

@@ -14,6 +14,7 @@ import jax.numpy as jnp
 from flax import struct
 
 from lantern_jax.scoring.telemetry import Telemetry, init_telemetry
+from lantern_jax.scoring.thresholds import DEFAULT_SCORING, ScoringSettings
 from lantern_jax.sim.sense import Percept, locate_on_route, sense
 from lantern_jax.world import ActorState, EgoState, ProtocolState, Scenario, present
 
@@ -38,10 +39,12 @@ class State:
     policy_carry: Any = ()
 
 
-def init_state(scenario: Scenario, policy_carry: Any = ()) -> State:
+def init_state(
+    scenario: Scenario, policy_carry: Any = (), scoring: ScoringSettings = DEFAULT_SCORING
+) -> State:
     """The state at ``t = 0``: the scenario's initial ego and actors, sensed (a hazard seen
-    already counts as seen before the warning point); empty telemetry; the policy's initial
-    carry ``policy_carry``."""
+    already counts as seen before the warning point); empty telemetry (its ring lengths from
+    ``scoring``); the policy's initial carry ``policy_carry``."""
     zero = jnp.asarray(0.0, jnp.float32)
     arc, dist, progress = locate_on_route(scenario.route, scenario.ego0.xy, zero)
     percept = sense(scenario, scenario.ego0, scenario.actors0, arc, dist, progress)
@@ -54,7 +57,7 @@ def init_state(scenario: Scenario, policy_carry: Any = ()) -> State:
         actors=scenario.actors0,
         protocol=ProtocolState.initial().replace(hazard_seen_before_warn=seen),
         percept=percept,
-        telemetry=init_telemetry(),
+        telemetry=init_telemetry(scoring),
         done=jnp.asarray(False),
         fault=jnp.asarray(False),
         policy_carry=policy_carry,

@@ -36,7 +36,7 @@ import jax.numpy as jnp
 from lantern_jax.constants import DT
 from lantern_jax.dynamics.actors import step_actors
 from lantern_jax.dynamics.controller import follow_plan
-from lantern_jax.dynamics.lights import ego_light_state, light_holds_ego, light_states
+from lantern_jax.dynamics.lights import ego_light_state, light_states
 from lantern_jax.observation import corridor_gaps
 from lantern_jax.policies.base import Policy
 from lantern_jax.scenarios import protocol
@@ -45,6 +45,7 @@ from lantern_jax.scoring.telemetry import update_telemetry
 from lantern_jax.sim.observe import actors_in_ego_frame, delivered_warning, observe, route_ahead
 from lantern_jax.sim.record import TickRecord, tick_record
 from lantern_jax.sim.sense import locate_on_route, sense
+from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings
 from lantern_jax.sim.state import State, freeze
 from lantern_jax.sim.switch import PolicySwitch
 from lantern_jax.world import Scenario, present
@@ -54,7 +55,11 @@ Driver = Policy | PolicySwitch
 
 
 def policy_waypoints(
-    policy: Driver, policy_params: Any, scenario: Scenario, state: State
+    policy: Driver,
+    policy_params: Any,
+    scenario: Scenario,
+    state: State,
+    settings: Settings = DEFAULT_SETTINGS,
 ) -> tuple[Array, Any]:
     """The policy's part of a tick: its observation of ``state`` and its answer.
 
@@ -65,15 +70,18 @@ def policy_waypoints(
         policy_params: the policy's parameters.
         scenario: the execution's static scenario.
         state: the state at the start of the tick (``state.policy_carry`` is the policy's).
+        settings: the simulation's settings (the warning texts the observation reads).
 
     Returns:
         ((10, 2) float32 waypoints, ego frame; the policy's new carry).
     """
     if isinstance(policy, PolicySwitch):
-        waypoints, carry = policy.choose(policy_params, state.policy_carry, scenario, state)
+        waypoints, carry = policy.choose(
+            policy_params, state.policy_carry, scenario, state, settings.bank
+        )
         privileged = policy.any_privileged
     else:
-        obs = observe(scenario, state, policy.sensors)
+        obs = observe(scenario, state, policy.sensors, settings.bank)
         waypoints, carry = policy.step(policy_params, state.policy_carry, obs)
         privileged = policy.privileged
     waypoints = jnp.asarray(waypoints, jnp.float32)
@@ -84,8 +92,103 @@ def policy_waypoints(
     return waypoints, carry
 
 
+def _stage_ego(sc: Scenario, st: State, x: dict, settings: Settings) -> dict:
+    """Controller and bicycle under the waypoints; the route place and light at the new time."""
+    ego, fault, plan = follow_plan(st.ego, x["waypoints"], sc.config.friction)
+    t = st.t + DT
+    arc, dist, progress = locate_on_route(sc.route, ego.xy, st.percept.progress)
+    light = ego_light_state(sc.lights, sc.config.ego_light, t)
+    return dict(ego=ego, fault=fault, plan=plan, t=t, arc=arc, dist=dist, progress=progress,
+                light=light)  # fmt: skip
+
+
+def _stage_markers(sc: Scenario, st: State, x: dict, settings: Settings) -> dict:
+    """Warning point, anti-deadlock countdown and event onset (the actors as at the start)."""
+    cfg = sc.config
+    route, _ = route_ahead(sc, st)
+    truth = actors_in_ego_frame(sc, st)
+    gap, lateral = corridor_gaps(
+        route, truth["actor_xy"], truth["actor_dir"], truth["actor_extent"]
+    )
+    light_holds = settings.protocol.light_holds(x["light"], cfg.ego_stop_s - x["arc"])
+    held = protocol.ego_held(
+        x["light"], cfg.ego_stop_s - x["arc"], gap, lateral, truth["present"], sc.actors.role,
+        st.actors.speed, settings.protocol,
+    )  # fmt: skip
+    proto = protocol.advance_markers(
+        st.protocol, cfg, x["t"], st.percept.progress, x["progress"], held
+    )
+    return dict(gap=gap, lateral=lateral, present_before=truth["present"],
+                light_holds=light_holds, proto=proto)  # fmt: skip
+
+
+def _stage_actors(sc: Scenario, st: State, x: dict, settings: Settings) -> dict:
+    """Scripted actors, IDM traffic and lights."""
+    ego = x["ego"]
+    actors = step_actors(
+        st.actors, sc.actors, x["t"], x["proto"].t_event, light_states(sc.lights, x["t"]),
+        ego.xy, ego.yaw, ego.speed,
+    )  # fmt: skip
+    return dict(actors=actors)
+
+
+def _stage_sense(sc: Scenario, st: State, x: dict, settings: Settings) -> dict:
+    """Front camera and route place of the new tick."""
+    return dict(percept=sense(sc, x["ego"], x["actors"], x["arc"], x["dist"], x["progress"]))
+
+
+def _stage_hazard(sc: Scenario, st: State, x: dict, settings: Settings) -> dict:
+    """Warning termination, clearance, onset bookkeeping, removal of a cleared hazard."""
+    cfg, h, actors = sc.config, sc.config.hazard_index, x["actors"]
+    visible = x["percept"].visible[h] & present(sc.actors, actors)[h]
+    proto = protocol.advance_hazard(
+        x["proto"], cfg, x["t"], visible, actors.s[h], x["ego"].speed, settings.protocol
+    )
+    proto = protocol.record_onset(proto, st.protocol, cfg, visible, x["warned"][0])
+    return dict(proto=proto, actors=protocol.despawn_cleared(actors, proto, cfg))
+
+
+def _stage_measure(sc: Scenario, st: State, x: dict, settings: Settings) -> dict:
+    """The tick's measurement folded into the telemetry, and whether the execution ended."""
+    s = settings.scoring
+    justified = justified_stop(
+        x["light_holds"], x["gap"], x["lateral"], x["present_before"],
+        sc.route.length - x["arc"], s,
+    )  # fmt: skip
+    sample = measure(
+        sc, x["ego"], x["actors"], present(sc.actors, x["actors"]), x["proto"], x["t"],
+        x["progress"], x["dist"], st.percept.route_arc, x["arc"], x["light"], justified,
+        x["fault"], s,
+    )  # fmt: skip
+    ended = execution_ended(sc, x["t"], x["progress"], x["dist"], x["proto"].ego_still_time, s)
+    return dict(telemetry=update_telemetry(st.telemetry, sample, s), done=ended)
+
+
+#: The world's stages of a tick, in order: ``(label, stage(scenario, state, x, settings) ->
+#: outputs)``, each reading what the earlier ones put into ``x`` (``benchmarks/profile_tick.py``
+#: times them one by one).
+TRANSITION_STAGES = (
+    ("controller + bicycle + route place", _stage_ego),
+    ("protocol before the actors", _stage_markers),
+    ("actors (IDM, scripts, lights)", _stage_actors),
+    ("sensing (visibility, range image)", _stage_sense),
+    ("protocol after sensing", _stage_hazard),
+    ("measurement + telemetry + end test", _stage_measure),
+)
+
+
+def transition_outputs(
+    scenario: Scenario, state: State, waypoints: Array, settings: Settings = DEFAULT_SETTINGS
+) -> dict:
+    """Every intermediate of the world's part of a tick (:data:`TRANSITION_STAGES` in order)."""
+    x = dict(waypoints=waypoints, warned=delivered_warning(scenario, state, settings.bank))
+    for _, stage in TRANSITION_STAGES:
+        x.update(stage(scenario, state, x, settings))
+    return x
+
+
 def transition(
-    scenario: Scenario, state: State, waypoints: Array, temperature: Array
+    scenario: Scenario, state: State, waypoints: Array, settings: Settings = DEFAULT_SETTINGS
 ) -> tuple[State, TickRecord]:
     """The world's part of a tick: advance one execution under ``waypoints`` (see the module
     docstring for the stages).  The policy's carry is left as it was.
@@ -94,63 +197,26 @@ def transition(
         scenario: the execution's static scenario (closed over by the caller's scan).
         state: the state at the start of the tick.
         waypoints: (10, 2) float32, m, ego frame (x forward, y right), 0.25 s apart.
-        temperature: () float32, soft-score temperature of the telemetry's smooth accumulators.
+        settings: scoring, protocol and text bank (:class:`~lantern_jax.sim.settings.Settings`).
 
     Returns:
         (the state at the end of the tick — ``state`` itself when it had already ended,
         the tick's record for plots).
     """
-    cfg, script, h = scenario.config, scenario.actors, scenario.config.hazard_index
-    warned, text_id, warned_pos = delivered_warning(scenario, state)
-    route, _ = route_ahead(scenario, state)
-    truth = actors_in_ego_frame(scenario, state)
-    ego, fault, plan = follow_plan(state.ego, waypoints, cfg.friction)
-    t = state.t + DT
-
-    arc, dist, progress = locate_on_route(scenario.route, ego.xy, state.percept.progress)
-    light = ego_light_state(scenario.lights, cfg.ego_light, t)
-    gap, lateral = corridor_gaps(
-        route, truth["actor_xy"], truth["actor_dir"], truth["actor_extent"]
-    )
-    present_before = truth["present"]
-    held = protocol.ego_held(
-        light, cfg.ego_stop_s - arc, gap, lateral, present_before, script.role, state.actors.speed
-    )
-    proto = protocol.advance_markers(state.protocol, cfg, t, state.percept.progress, progress, held)
-
-    actors = step_actors(
-        state.actors, script, t, proto.t_event, light_states(scenario.lights, t),
-        ego.xy, ego.yaw, ego.speed,
-    )  # fmt: skip
-    percept = sense(scenario, ego, actors, arc, dist, progress)
-
-    hazard_visible = percept.visible[h] & present(script, actors)[h]
-    proto = protocol.advance_hazard(proto, cfg, t, hazard_visible, actors.s[h], ego.speed)
-    proto = protocol.record_onset(proto, state.protocol, cfg, hazard_visible, warned)
-    actors = protocol.despawn_cleared(actors, proto, cfg)
-
-    justified = justified_stop(
-        light_holds_ego(light, cfg.ego_stop_s - arc), gap, lateral, present_before,
-        scenario.route.length - arc,
-    )  # fmt: skip
-    sample = measure(
-        scenario, ego, actors, present(script, actors), proto, t, progress, dist,
-        state.percept.route_arc, arc, light, justified, fault,
-    )  # fmt: skip
+    x = transition_outputs(scenario, state, waypoints, settings)
     new = state.replace(
-        t=t,
+        t=x["t"],
         tick=state.tick + 1,
-        ego=ego,
-        actors=actors,
-        protocol=proto,
-        percept=percept,
-        telemetry=update_telemetry(state.telemetry, sample, temperature),
-        done=execution_ended(scenario, t, progress, dist, proto.ego_still_time),
-        fault=state.fault | fault,
+        ego=x["ego"],
+        actors=x["actors"],
+        protocol=x["proto"],
+        percept=x["percept"],
+        telemetry=x["telemetry"],
+        done=x["done"],
+        fault=state.fault | x["fault"],
     )
     new = freeze(state, new)
-    live = ~state.done
-    rec = tick_record(scenario, new, (warned, text_id, warned_pos), plan, light, live=live)
+    rec = tick_record(scenario, new, x["warned"], x["plan"], x["light"], live=~state.done)
     return new, rec
 
 
@@ -159,7 +225,7 @@ def step(
     policy_params: Any,
     scenario: Scenario,
     state: State,
-    temperature: Array,
+    settings: Settings = DEFAULT_SETTINGS,
 ) -> tuple[State, TickRecord]:
     """Advance one execution by one tick: :func:`policy_waypoints`, then :func:`transition`.
 
@@ -169,13 +235,13 @@ def step(
         policy_params: the policy's parameters.
         scenario: the execution's static scenario (closed over by the caller's scan).
         state: the state at the start of the tick.
-        temperature: () float32, soft-score temperature of the telemetry's smooth accumulators.
+        settings: scoring, protocol and text bank (:class:`~lantern_jax.sim.settings.Settings`).
 
     Returns:
         (the state at the end of the tick — ``state`` itself when it had already ended,
         the tick's record for plots).
     """
-    waypoints, carry = policy_waypoints(policy, policy_params, scenario, state)
-    new, rec = transition(scenario, state, waypoints, temperature)
+    waypoints, carry = policy_waypoints(policy, policy_params, scenario, state, settings)
+    new, rec = transition(scenario, state, waypoints, settings)
     kept = jax.tree.map(lambda n, o: jnp.where(state.done, o, n), carry, state.policy_carry)
     return new.replace(policy_carry=kept), rec

@@ -20,11 +20,11 @@ member has a branch of its own; the switch's carry holds every branch's carry.  
 the index is not batched (every execution of a call runs the same member), so the switch stays
 a real branch and the other members cost nothing at run time.
 
-A switch is cached by its members, so every evaluation with the same members reuses one
-compiled program.  Results equal those of the member's own program to float32 rounding: XLA
-fuses the branch's operations apart from the rest of the tick, so the last bits of a few values
-can differ (the evaluation's reproducibility promise,
-:data:`lantern_jax.scoring.table.REPRODUCIBLE_ATOL`, covers that).
+Switches of the same members are one program (compiled programs are keyed by the members'
+programs), so every evaluation with the same members reuses one compilation. Results equal those
+of the member's own program to float32 rounding: XLA fuses the branch's operations apart from
+the rest of the tick, so the last bits of a few values can differ (the evaluation's
+reproducibility promise, :data:`lantern_jax.scoring.table.REPRODUCIBLE_ATOL`, covers that).
 """
 
 from __future__ import annotations
@@ -40,6 +40,7 @@ from flax import struct
 from lantern_jax.language import PAD_ID
 from lantern_jax.observation import WARNING
 from lantern_jax.policies.base import Policy
+from lantern_jax.scenarios.warnings import DEFAULT_BANK, TextBank
 from lantern_jax.sim.observe import (
     actors_in_ego_frame,
     forecast_view,
@@ -128,7 +129,12 @@ class PolicySwitch:
         )
 
     def choose(
-        self, params: SwitchParams, carry: tuple, scenario: Scenario, state: State
+        self,
+        params: SwitchParams,
+        carry: tuple,
+        scenario: Scenario,
+        state: State,
+        bank: TextBank = DEFAULT_BANK,
     ) -> tuple[Array, tuple]:
         """Waypoints and new carry of the member ``params.index`` for one execution.
 
@@ -137,12 +143,13 @@ class PolicySwitch:
             carry: the switch's carry (:meth:`initial_carry`).
             scenario, state: the execution now; the cameras' observation is built once, and a
                 branch adds from them what only its members read.
+            bank: static; the warning texts.
 
         Returns:
             ((10, 2) float32 waypoints, the new carry).
         """
         sensors = (WARNING,) if self.any_warning else ()
-        obs = observe(scenario, state, sensors)
+        obs = observe(scenario, state, sensors, bank)
         warned = jnp.asarray([m.reads_warning for m in self.members])[params.index]
         obs = obs.replace(
             warning_tokens=jnp.where(warned, obs.warning_tokens, PAD_ID),
@@ -209,18 +216,11 @@ def _select(params: SwitchParams, mine: list[int], index: Array) -> Any:
     return jax.tree.unflatten(treedef, leaves)
 
 
-_SWITCHES: dict[tuple, PolicySwitch] = {}  # by the members' programs
-
-
 def policy_switch(members) -> PolicySwitch:
-    """The :class:`PolicySwitch` of ``members`` (policies of distinct programs), cached: the
-    same programs in the same order give the same object, hence one compiled program per
-    process."""
-    members = tuple(members)
-    key = tuple(m.program for m in members)
-    if key not in _SWITCHES:
-        _SWITCHES[key] = PolicySwitch(members)
-    return _SWITCHES[key]
+    """The :class:`PolicySwitch` of ``members`` (policies of distinct programs).  Two switches
+    of the same programs in the same order are the same program
+    (:class:`lantern_jax.sim.engine.Program`), so they share one compilation."""
+    return PolicySwitch(tuple(members))
 
 
 #: bytes: leaves at least this large are compared by content when the pool is built (smaller

@@ -33,10 +33,11 @@ import jax.numpy as jnp
 from flax import struct
 
 from lantern_jax.policies.base import Policy
-from lantern_jax.scoring import thresholds
-from lantern_jax.scoring.cus import soft_execution_terms
+from lantern_jax.scoring.cus import cus_of, quality_a, soft_execution_terms
 from lantern_jax.scoring.smooth import softmin_decode
+from lantern_jax.sim.engine import remember
 from lantern_jax.sim.rollout import rollout
+from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings
 from lantern_jax.stress.space import SearchSpace
 from lantern_jax.world import Scenario
 
@@ -64,11 +65,14 @@ class Problem:
     horizon: int  # ticks of the soft rollouts
     temperature: float  # soft-score temperature (m, s, m/s in the relaxed quantities)
     objective: str  # one of OBJECTIVES
+    settings: Settings = DEFAULT_SETTINGS  # scoring and protocol (its temperature replaced)
 
     def data(self) -> tuple:
-        """The problem's arrays: ``(scenario_a, scenario_b, policy_params, lo, hi)``."""
+        """The problem's arrays: ``(scenario_a, scenario_b, policy_params, lo, hi, settings)``
+        (the settings with the surrogate's temperature)."""
         return (self.scenario_a, self.scenario_b, self.policy_params,
-                jnp.asarray(self.space.lo), jnp.asarray(self.space.hi))  # fmt: skip
+                jnp.asarray(self.space.lo), jnp.asarray(self.space.hi),
+                self.settings.with_temperature(self.temperature))  # fmt: skip
 
     def static(self) -> tuple:
         """What a compilation depends on besides the arrays."""
@@ -95,25 +99,23 @@ def soft_objective(problem: Problem, z: Array, data: tuple | None = None) -> Arr
     if problem.objective not in OBJECTIVES:
         raise ValueError(f"objective {problem.objective!r} not one of {', '.join(OBJECTIVES)}")
     data = problem.data() if data is None else data
-    sc_a, sc_b, policy_params, _, _ = data
+    sc_a, sc_b, policy_params, _, _, settings = data
     sc_a, _ = problem.space.apply(sc_a, sc_b, candidate_values(data, z))
     final, _ = rollout(
-        sc_a, problem.policy, policy_params, problem.horizon,
-        temperature=problem.temperature, remat=True,
-    )  # fmt: skip
-    tel, temp = final.telemetry, problem.temperature
+        sc_a, problem.policy, policy_params, problem.horizon, settings=settings, remat=True
+    )
+    tel, temp, s = final.telemetry, problem.temperature, settings.scoring
     if problem.objective == "clearance":
         return softmin_decode(tel.clearance.lse, temp, cap=CLEARANCE_CAP_M)
     if problem.objective == "margin":
         return jnp.minimum(tel.collision.margin, CLEARANCE_CAP_M)
-    t = soft_execution_terms(tel, sc_a.config.d_safe, temp)
+    t = soft_execution_terms(tel, sc_a.config.d_safe, temp, s)
     gates = (t["gate_collision"] * t["gate_route_deviation"] * t["gate_lane"] * t["gate_rule"]
              * t["gate_block"])  # fmt: skip
     safety = 0.5 * (t["S_ttc"] + t["S_clear"])
     temporal = 0.5 * (t["S_ant"] + t["S_rec"])
-    quality = (thresholds.W_PROGRESS_A * t["P"] + thresholds.W_SAFETY_A * safety
-               + thresholds.W_TEMPORAL_A * temporal)  # fmt: skip
-    return thresholds.CUS_SCALE * gates * (thresholds.W_ROUTE_A * quality + thresholds.W_ROUTE_B)
+    # Route B is taken as fully completed: the knobs move Route A's hazard only
+    return cus_of(quality_a(t["P"], safety, temporal, s), 1.0, gates, s)
 
 
 @struct.dataclass
@@ -160,18 +162,9 @@ def estimate(
     return smoothed_estimate(lambda x: soft_objective(problem, x, data), z, eps, sigma)
 
 
-_COMPILED: dict[tuple, Callable] = {}
-
-
-def _cached(key: tuple, build: Callable[[], Callable]) -> Callable:
-    if key not in _COMPILED:
-        _COMPILED[key] = build()
-    return _COMPILED[key]
-
-
 def batched_estimator(problem: Problem, sigma: float) -> Callable:
     """``(z (R, K), eps (R, M, K)) -> Estimate`` over restarts, compiled once per static part."""
-    fn = _cached(
+    fn = remember(
         ("estimate", problem.static(), float(sigma)),
         lambda: jax.jit(
             jax.vmap(lambda data, z, e: estimate(problem, z, e, sigma, data), in_axes=(None, 0, 0))
@@ -183,7 +176,7 @@ def batched_estimator(problem: Problem, sigma: float) -> Callable:
 
 def batched_objective(problem: Problem) -> Callable:
     """``z (N, K) -> (N,)`` surrogate values, compiled once per static part."""
-    fn = _cached(
+    fn = remember(
         ("objective", problem.static()),
         lambda: jax.jit(
             jax.vmap(lambda data, z: soft_objective(problem, z, data), in_axes=(None, 0))

@@ -10,6 +10,7 @@ verifier, so their failure counts are comparable.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from typing import Any
 
 import jax
@@ -19,7 +20,9 @@ import numpy as np
 from lantern_jax.policies.base import Policy
 from lantern_jax.scoring.cus import pair_components
 from lantern_jax.scoring.metrics import finalize
+from lantern_jax.sim.engine import Program, remember
 from lantern_jax.sim.rollout import rollout_batch
+from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings
 from lantern_jax.sim.switch import policy_switch, switch_params
 from lantern_jax.stress.objective import Problem
 
@@ -50,31 +53,28 @@ MAX_VERIFY_TICKS = 1800  # ticks (90 s) >= the longest route timeout (20 s + 164
 #                          each execution still ends at its own timeout, and the batch exits early
 
 
-_COMPILED: dict[tuple, Any] = {}
+@functools.partial(jax.jit, static_argnames=("program",))
+def _metrics(scs, params, settings, *, program: Program) -> Any:
+    """Hard metrics of a batch rolled to its end; one compilation per policy program."""
+    final = rollout_batch(scs, program.driver, params, MAX_VERIFY_TICKS, settings=settings)
+    return finalize(final.telemetry, settings.scoring)
 
 
-def _hard_metrics(policy: Any) -> Any:
-    """``jit((scenarios, policy_params) -> ExecutionMetrics)``, one compilation per policy
-    program (a :class:`~lantern_jax.policies.base.Policy` or a policy switch)."""
-    key = ("metrics", getattr(policy, "program", policy))
-    if key not in _COMPILED:
-        _COMPILED[key] = jax.jit(
-            lambda scs, params: finalize(
-                rollout_batch(scs, policy, params, MAX_VERIFY_TICKS).telemetry
-            )
-        )
-    return _COMPILED[key]
+def _hard_metrics(policy: Any, settings: Settings = DEFAULT_SETTINGS) -> Any:
+    """``(scenarios, policy_params) -> ExecutionMetrics`` for a policy or a policy switch."""
+    program = Program(policy)
+    return lambda scs, params: _metrics(scs, params, settings, program=program)
 
 
 def _pair_builder(problem: Problem) -> Any:
     """``jit((scenario_a, scenario_b, values (N, K)) -> batched pairs)`` per knob set."""
     space = problem.space
-    key = ("pairs", space.names)
-    if key not in _COMPILED:
-        _COMPILED[key] = jax.jit(
+    return remember(
+        ("pairs", space.names),
+        lambda: jax.jit(
             jax.vmap(lambda sa, sb, v: space.apply(sa, sb, v), in_axes=(None, None, 0))
-        )
-    return _COMPILED[key]
+        ),
+    )
 
 
 class Verifier:
@@ -93,14 +93,14 @@ class Verifier:
         self.expert_params = expert.init(jax.random.PRNGKey(0))
         self._pairs = _pair_builder(problem)
         if problem.policy.program == expert.program:
-            self._metrics = _hard_metrics(expert)
+            self._metrics = _hard_metrics(expert, problem.settings)
             self._policy_params, self._expert_params = problem.policy_params, self.expert_params
         else:
             # The policy and the expert as members of one program: the simulator compiles
             # once for both (lantern_jax.sim.switch).
             switch = policy_switch((problem.policy, expert))
             members = (problem.policy_params, self.expert_params)
-            self._metrics = _hard_metrics(switch)
+            self._metrics = _hard_metrics(switch, problem.settings)
             self._policy_params = switch_params(switch, 0, members)
             self._expert_params = switch_params(switch, 1, members)
         self._nominal_b = None
@@ -122,7 +122,8 @@ class Verifier:
         scs_a, scs_b = self._pairs(p.scenario_a, p.scenario_b, values)
         m_a = self._metrics(scs_a, self._policy_params)
         m_b = self._route_b(scs_b, n)
-        comps = jax.tree.map(np.asarray, pair_components(m_a, m_b, p.scenario_a.config.d_safe))
+        comps = pair_components(m_a, m_b, p.scenario_a.config.d_safe, p.settings.scoring)
+        comps = jax.tree.map(np.asarray, comps)
         expert = jax.tree.map(np.asarray, self._metrics(scs_a, self._expert_params))
         expert_ok = np.all([getattr(expert, g) for g in ROUTE_A_GATES], axis=0)
         passed = np.asarray(comps["gate_product"]) > 0.5

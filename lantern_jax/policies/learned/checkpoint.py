@@ -53,11 +53,18 @@ class CheckpointError(ValueError):
 
 @struct.dataclass
 class LearnedParams:
-    """Parameters of a learned policy: trained weights plus the frozen text inputs."""
+    """Parameters of a learned policy: trained weights plus the frozen text inputs.
+
+    The architecture (graph and configuration) is a static part of the tree, so every model
+    runs through the one act function :func:`learned_act`: models of one architecture and
+    sensors are one compiled program (their weights are arguments).
+    """
 
     model: Any  # nnx.State of the model's parameters
     embedding: Array  # (V, D) float32, frozen token-embedding table
     nav_tokens: Array  # (3, L) int32, token ids of the navigation instructions
+    graphdef: Any = struct.field(pytree_node=False, default=None)  # nnx graph of the model
+    config: ModelConfig = struct.field(pytree_node=False, default=None)
 
 
 def new_model(config: ModelConfig, seed: int = 0) -> DrivingModel:
@@ -65,12 +72,19 @@ def new_model(config: ModelConfig, seed: int = 0) -> DrivingModel:
     return DrivingModel(config, nnx.Rngs(seed))
 
 
+def learned_act(params: LearnedParams, obs: Observation) -> Array:
+    """The act function of every learned model: ``(10, 2)`` waypoints of the model in
+    ``params`` (its graph, configuration and weights) for one observation."""
+    model = nnx.merge(params.graphdef, params.model)
+    return model(features(obs, params.config.rig, params.embedding, params.nav_tokens))
+
+
 def make_act(config: ModelConfig, graphdef: Any):
-    """The pure ``act(params, obs) -> (10, 2)`` of a model architecture."""
+    """The pure ``act(params, obs) -> (10, 2)`` of a model architecture, for parameters whose
+    weights are ``params.model`` (a plain :class:`LearnedParams` of that architecture)."""
 
     def act(params: LearnedParams, obs: Observation) -> Array:
-        model = nnx.merge(graphdef, params.model)
-        return model(features(obs, config.rig, params.embedding, params.nav_tokens))
+        return learned_act(params.replace(graphdef=graphdef, config=config), obs)
 
     return act
 
@@ -92,17 +106,17 @@ def learned_params(model: DrivingModel, embedding: Array | None = None) -> Learn
         from lantern_jax.language import load_embedding
 
         embedding = load_embedding()
-    _, state = nnx.split(model)
+    graphdef, state = nnx.split(model)
     return LearnedParams(state, jnp.asarray(embedding, jnp.float32),
-                         jnp.asarray(nav_token_table()))  # fmt: skip
+                         jnp.asarray(nav_token_table()), graphdef, model.config)  # fmt: skip
 
 
 def model_policy(name: str, model: DrivingModel, description: str = "",
                  embedding: Array | None = None) -> Policy:  # fmt: skip
-    """A trained model as a :class:`~lantern_jax.policies.base.Policy`."""
-    graphdef, _ = nnx.split(model)
+    """A trained model as a :class:`~lantern_jax.policies.base.Policy` (act:
+    :func:`learned_act`)."""
     params = learned_params(model, embedding)
-    return Policy(name, lambda key: params, make_act(model.config, graphdef), description,
+    return Policy(name, lambda key: params, learned_act, description,
                   sensors=model_sensors(model.config))  # fmt: skip
 
 

@@ -39,14 +39,13 @@ from flax import struct
 
 from lantern_jax.scoring import thresholds
 from lantern_jax.scoring.components.accumulate import count, first_time, push
-from lantern_jax.scoring.components.context import RING, Context, Tick, opened_by
+from lantern_jax.scoring.components.context import Context, Tick, opened_by, ring_length
 from lantern_jax.scoring.sample import TickSample
 from lantern_jax.scoring.smooth import smooth_clip01
+from lantern_jax.scoring.thresholds import ScoringSettings
 from lantern_jax.times import NEVER, happened, time_or_nan
 
 Array = jax.Array
-
-W = thresholds.REACT_WINDOW  # ticks per response window
 
 
 @struct.dataclass
@@ -54,7 +53,8 @@ class AnticipationState:
     """Accumulators of the response criteria (scalars unless a shape is given)."""
 
     n_post_ref: Array  # () int32, ticks with t >= t_ref
-    flags: Array  # (W,) bool, response flags of the last ticks (False before t_ref)
+    flags: Array  # (W,) bool, response flags of the last ticks (False before t_ref); W the
+    #               reaction window in ticks (ScoringSettings.react_window)
     t_react: Array  # () float32, s, start of the first sustained-response window (NEVER)
     event_checked: Array  # () bool, the window ending at the event tick was examined
     response_at_event: Array  # () bool, that window met the criterion
@@ -66,9 +66,10 @@ class AnticipationState:
     soft_response_at_event: Array  # () float32, soft response_at_event, in [0, 1]
 
 
-def init() -> AnticipationState:
+def init(settings: ScoringSettings) -> AnticipationState:
     """No tick yet."""
     f = lambda v: jnp.asarray(v, jnp.float32)  # noqa: E731
+    W = settings.react_window  # noqa: N806
     return AnticipationState(
         n_post_ref=jnp.asarray(0, jnp.int32), flags=jnp.zeros(W, bool), t_react=f(NEVER),
         event_checked=jnp.asarray(False), response_at_event=jnp.asarray(False),
@@ -77,53 +78,54 @@ def init() -> AnticipationState:
     )  # fmt: skip
 
 
-def _soft_flag(accel: Array, speed: Array, v_ref: Array, temp: Array) -> Array:
+def _soft_flag(accel: Array, speed: Array, v_ref: Array, settings: ScoringSettings) -> Array:
     """Soft response flag ``accel <= -0.5 m/s^2 or speed <= v_ref - 1 m/s``.
 
     Args:
         accel: (...) float32, m/s^2.
         speed: (...) float32, m/s.
         v_ref: () float32, m/s, reference speed.
-        temp: () float32, temperature.
+        settings: thresholds and temperature.
 
     Returns:
         (...) float32 in [0, 1].
     """
-    return 1.0 - (1.0 - jax.nn.sigmoid((thresholds.REACT_ACCEL_MPS2 - accel) / temp)) * (
-        1.0 - jax.nn.sigmoid((v_ref - thresholds.REACT_SPEED_DROP_MPS - speed) / temp)
+    temp = settings.temperature
+    return 1.0 - (1.0 - jax.nn.sigmoid((settings.react_accel_mps2 - accel) / temp)) * (
+        1.0 - jax.nn.sigmoid((v_ref - settings.react_speed_drop_mps - speed) / temp)
     )
 
 
-def _window_pass(full: Array, soft_flags: Array, temp: Array) -> Array:
-    """Soft ``at least REACT_MIN_COUNT flags set`` of one window.
+def _window_pass(full: Array, soft_flags: Array, settings: ScoringSettings) -> Array:
+    """Soft ``at least react_min_count flags set`` of one window.
 
     Args:
         full: () bool, the window is complete.
         soft_flags: (W,) float32, soft flags of the window.
-        temp: () float32, temperature (in flags).
+        settings: thresholds and temperature (in flags).
 
     Returns:
         () float32 in [0, 1]; 0 for an incomplete window.
     """
-    margin = jnp.sum(soft_flags) - (thresholds.REACT_MIN_COUNT - thresholds.COUNT_HALF)
-    return jnp.where(full, jax.nn.sigmoid(margin / temp), 0.0)
+    margin = jnp.sum(soft_flags) - (settings.react_min_count - thresholds.COUNT_HALF)
+    return jnp.where(full, jax.nn.sigmoid(margin / settings.temperature), 0.0)
 
 
-def _sustained(state: AnticipationState, tick: Tick, temp: Array) -> dict[str, Array]:
+def _sustained(state: AnticipationState, tick: Tick, settings: ScoringSettings) -> dict[str, Array]:
     """First sustained response at/after ``t_ref`` (hard and soft first crossing)."""
+    W = settings.react_window  # noqa: N806
     accel, speed, post_ref = tick.accel, tick.speed, tick.post_ref
     flag = post_ref & (
-        (accel <= thresholds.REACT_ACCEL_MPS2)
-        | (speed <= tick.v_pre - thresholds.REACT_SPEED_DROP_MPS)
+        (accel <= settings.react_accel_mps2) | (speed <= tick.v_pre - settings.react_speed_drop_mps)
     )
     flags = push(state.flags, flag)
     n_post_ref = count(state.n_post_ref, post_ref)
     full = n_post_ref >= W
-    window_start = tick.time_ring[RING - W]
-    ok = full & (jnp.sum(flags) >= thresholds.REACT_MIN_COUNT)
-    soft_flag = jnp.where(post_ref, _soft_flag(accel, speed, tick.v_pre, temp), 0.0)
+    window_start = tick.time_ring[ring_length(settings) - W]
+    ok = full & (jnp.sum(flags) >= settings.react_min_count)
+    soft_flag = jnp.where(post_ref, _soft_flag(accel, speed, tick.v_pre, settings), 0.0)
     soft_flags = push(state.soft_flags, soft_flag)
-    sigma = _window_pass(full, soft_flags, temp)
+    sigma = _window_pass(full, soft_flags, settings)
     p_k = state.surv * sigma
     return dict(
         n_post_ref=n_post_ref,
@@ -136,28 +138,30 @@ def _sustained(state: AnticipationState, tick: Tick, temp: Array) -> dict[str, A
     )
 
 
-def _at_event(state: AnticipationState, tick: Tick, temp: Array) -> dict[str, Array]:
+def _at_event(state: AnticipationState, tick: Tick, settings: ScoringSettings) -> dict[str, Array]:
     """Response already present in the window ending at the first tick with ``t >= t_event``."""
+    W = settings.react_window  # noqa: N806
     now = tick.post_event & ~state.event_checked
     full = tick.n_ticks >= W
     v_start = tick.speed_ring[0]
-    flags = (tick.accel_ring <= thresholds.REACT_ACCEL_MPS2) | (
-        tick.speed_ring <= v_start - thresholds.REACT_SPEED_DROP_MPS
+    flags = (tick.accel_ring <= settings.react_accel_mps2) | (
+        tick.speed_ring <= v_start - settings.react_speed_drop_mps
     )
-    present = full & (jnp.sum(flags) >= thresholds.REACT_MIN_COUNT)
+    present = full & (jnp.sum(flags) >= settings.react_min_count)
     soft_present = _window_pass(
-        full, _soft_flag(tick.accel_ring, tick.speed_ring, v_start, temp), temp
+        full, _soft_flag(tick.accel_ring, tick.speed_ring, v_start, settings), settings
     )
+    start = tick.time_ring[ring_length(settings) - W]
     return dict(
         event_checked=state.event_checked | tick.post_event,
         response_at_event=jnp.where(now, present, state.response_at_event),
-        t_response_start=jnp.where(now & present, tick.time_ring[RING - W], state.t_response_start),
+        t_response_start=jnp.where(now & present, start, state.t_response_start),
         soft_response_at_event=jnp.where(now, soft_present, state.soft_response_at_event),
     )
 
 
 def update(
-    state: AnticipationState, sample: TickSample, tick: Tick, temperature: Array
+    state: AnticipationState, sample: TickSample, tick: Tick, settings: ScoringSettings
 ) -> AnticipationState:
     """Fold one tick.
 
@@ -165,13 +169,13 @@ def update(
         state: accumulators before the tick.
         sample: the tick's measurement (unused: speed and acceleration come with ``tick``).
         tick: shared per-tick context.
-        temperature: () float32, m/s^2 and m/s (soft flags), flags (window tests).
+        settings: thresholds; temperature in m/s^2 and m/s (soft flags), flags (window tests).
 
     Returns:
         The accumulators after the tick.
     """
     return AnticipationState(
-        **_sustained(state, tick, temperature), **_at_event(state, tick, temperature)
+        **_sustained(state, tick, settings), **_at_event(state, tick, settings)
     )
 
 
@@ -237,8 +241,9 @@ def score(
 
 
 def soft(
-    state: AnticipationState, ctx: Context, t_fail: Array, temperature: Array
-) -> tuple[Array, Array]:
+    state: AnticipationState, ctx: Context, t_fail: Array, temperature: Array,
+    settings: ScoringSettings,
+) -> tuple[Array, Array]:  # fmt: skip
     """Smooth ``S_ant``: ``P(response) * clip((t_event - E[t_react | response]) /
     (t_event - t_ref))`` with a smooth clip; with coincident onset the soft
     ``response_at_event``.

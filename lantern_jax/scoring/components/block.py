@@ -26,6 +26,7 @@ from lantern_jax.scoring.components.context import Context, Tick
 from lantern_jax.scoring.components.progress import is_completed
 from lantern_jax.scoring.sample import TickSample
 from lantern_jax.scoring.smooth import soft_gate
+from lantern_jax.scoring.thresholds import ScoringSettings
 from lantern_jax.times import NEVER, happened
 
 Array = jax.Array
@@ -42,29 +43,32 @@ class BlockState:
     t_fault: Array  # () float32, s, first controller fault (NEVER)
 
 
-def init() -> BlockState:
-    """Moving, no fault."""
+def init(settings: ScoringSettings) -> BlockState:
+    """Moving, no fault. (no shape depends on ``settings``)"""
+    del settings
     i0, never = jnp.asarray(0, jnp.int32), jnp.asarray(NEVER, jnp.float32)
     return BlockState(
         still_run=i0, max_still_run=i0, t_stall=never, fault=jnp.asarray(False), t_fault=never
     )
 
 
-def update(state: BlockState, sample: TickSample, tick: Tick, temperature: Array) -> BlockState:
+def update(
+    state: BlockState, sample: TickSample, tick: Tick, settings: ScoringSettings
+) -> BlockState:
     """Fold one tick.
 
     Args:
         state: record before the tick.
         sample: the tick's measurement (``controller_fault``).
         tick: shared per-tick context.
-        temperature: unused (the soft gate is decoded from the final record).
+        settings: thresholds; temperature: unused (the soft gate is decoded from the final record).
 
     Returns:
         The record after the tick.
     """
-    unfinished = ~is_completed(tick.progress, tick.route_length)
-    still_run = run(state.still_run, (tick.speed < thresholds.STILL_SPEED_MPS) & unfinished)
-    stall_now = still_run >= thresholds.BLOCK_STILL
+    unfinished = ~is_completed(tick.progress, tick.route_length, settings)
+    still_run = run(state.still_run, (tick.speed < settings.still_speed_mps) & unfinished)
+    stall_now = still_run >= settings.block_still
     fault = jnp.asarray(sample.controller_fault, bool)
     return BlockState(
         still_run=still_run,
@@ -75,9 +79,9 @@ def update(state: BlockState, sample: TickSample, tick: Tick, temperature: Array
     )
 
 
-def stalled(state: BlockState) -> Array:
+def stalled(state: BlockState, settings: ScoringSettings) -> Array:
     """() bool: a standstill of >= 20 s with the route unfinished."""
-    return state.max_still_run >= thresholds.BLOCK_STILL
+    return state.max_still_run >= settings.block_still
 
 
 def max_still_s(state: BlockState) -> Array:
@@ -85,7 +89,7 @@ def max_still_s(state: BlockState) -> Array:
     return state.max_still_run.astype(jnp.float32) * DT
 
 
-def failure_times(state: BlockState, ctx: Context) -> tuple[Array, ...]:
+def failure_times(state: BlockState, ctx: Context, settings: ScoringSettings) -> tuple[Array, ...]:
     """Failure time(s) for the first Route A gate failure.
 
     Args:
@@ -96,11 +100,11 @@ def failure_times(state: BlockState, ctx: Context) -> tuple[Array, ...]:
         ``(t_stall, t_fault, t_timeout)``: () float32, s each (``NEVER`` = that cause
         did not fail); the timeout fails at the last folded tick.
     """
-    completed = is_completed(ctx.progress_m, ctx.route_length_m)
+    completed = is_completed(ctx.progress_m, ctx.route_length_m, settings)
     return state.t_stall, state.t_fault, jnp.where(completed, NEVER, ctx.t_last)
 
 
-def hard(state: BlockState, ctx: Context) -> tuple[Array, Array]:
+def hard(state: BlockState, ctx: Context, settings: ScoringSettings) -> tuple[Array, Array]:
     """Hard gate.
 
     Args:
@@ -111,11 +115,13 @@ def hard(state: BlockState, ctx: Context) -> tuple[Array, Array]:
         ``(passed, valid)``: () bool, no 20 s standstill, route completed, no controller
         fault; () bool (always True).
     """
-    completed = is_completed(ctx.progress_m, ctx.route_length_m)
-    return ~stalled(state) & completed & ~state.fault, jnp.asarray(True)
+    completed = is_completed(ctx.progress_m, ctx.route_length_m, settings)
+    return ~stalled(state, settings) & completed & ~state.fault, jnp.asarray(True)
 
 
-def soft(state: BlockState, ctx: Context, temperature: Array) -> tuple[Array, Array]:
+def soft(
+    state: BlockState, ctx: Context, temperature: Array, settings: ScoringSettings
+) -> tuple[Array, Array]:
     """Smooth gate.
 
     Args:
@@ -127,8 +133,8 @@ def soft(state: BlockState, ctx: Context, temperature: Array) -> tuple[Array, Ar
         ``(passed, valid)``: () float32 in [0, 1]; () bool (always True).
     """
     max_still = state.max_still_run.astype(jnp.float32)
-    still_margin = (thresholds.BLOCK_STILL - thresholds.COUNT_HALF - max_still) * DT
-    completion_margin = ctx.progress_m - (ctx.route_length_m - thresholds.COMPLETION_TOL_M)
+    still_margin = (settings.block_still - thresholds.COUNT_HALF - max_still) * DT
+    completion_margin = ctx.progress_m - (ctx.route_length_m - settings.completion_tol_m)
     no_fault = 1.0 - state.fault.astype(jnp.float32)
     value = soft_gate(still_margin, temperature) * soft_gate(completion_margin, temperature)
     return value * no_fault, jnp.asarray(True)

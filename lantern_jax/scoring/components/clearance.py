@@ -23,6 +23,7 @@ from lantern_jax.constants import BIG
 from lantern_jax.scoring.components.context import Context, Tick, opened_by
 from lantern_jax.scoring.sample import TickSample
 from lantern_jax.scoring.smooth import LSE_EMPTY, lse_add, smooth_clip01, softmin_decode
+from lantern_jax.scoring.thresholds import ScoringSettings
 
 Array = jax.Array
 
@@ -36,8 +37,9 @@ class ClearanceState:
     lse: Array  # () float32, soft-min accumulator log sum exp(-d / T)
 
 
-def init() -> ClearanceState:
-    """No sample yet."""
+def init(settings: ScoringSettings) -> ClearanceState:
+    """No sample yet. (no shape depends on ``settings``)"""
+    del settings
     return ClearanceState(
         min_m=jnp.asarray(BIG, jnp.float32),
         any_sample=jnp.asarray(False),
@@ -46,7 +48,7 @@ def init() -> ClearanceState:
 
 
 def update(
-    state: ClearanceState, sample: TickSample, tick: Tick, temperature: Array
+    state: ClearanceState, sample: TickSample, tick: Tick, settings: ScoringSettings
 ) -> ClearanceState:
     """Fold one tick.
 
@@ -54,11 +56,12 @@ def update(
         state: accumulators before the tick.
         sample: the tick's measurement (unused: the distances come with ``tick``).
         tick: shared per-tick context.
-        temperature: () float32, m, of the soft minimum.
+        settings: thresholds; temperature: () float32, m, of the soft minimum.
 
     Returns:
         The accumulators after the tick.
     """
+    temperature = settings.temperature
     in_window = tick.post_event & tick.before_clear
     sampled = in_window & (tick.present | tick.collision)
     d = jnp.where(tick.collision, 0.0, tick.hazard_dist)
@@ -110,8 +113,9 @@ def score(clearance_min_m: Any, d_safe: Any) -> Array:
 
 
 def soft(
-    state: ClearanceState, ctx: Context, t_fail: Array, temperature: Array, d_safe: Array
-) -> tuple[Array, Array]:
+    state: ClearanceState, ctx: Context, t_fail: Array, temperature: Array,
+    settings: ScoringSettings, d_safe: Array,
+) -> tuple[Array, Array]:  # fmt: skip
     """Smooth ``S_clear``: the soft minimum, decoded with the accumulator temperature
     ``ctx.temperature`` and capped at ``d_safe``, through a smooth clip.
 

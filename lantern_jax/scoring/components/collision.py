@@ -14,11 +14,11 @@ import jax.numpy as jnp
 from flax import struct
 
 from lantern_jax.constants import BIG
-from lantern_jax.scoring import thresholds
 from lantern_jax.scoring.components.accumulate import first_time
 from lantern_jax.scoring.components.context import Context, Tick
 from lantern_jax.scoring.sample import TickSample
 from lantern_jax.scoring.smooth import soft_gate
+from lantern_jax.scoring.thresholds import ScoringSettings
 from lantern_jax.times import NEVER
 
 Array = jax.Array
@@ -34,8 +34,9 @@ class CollisionState:
     #                max(box dist, 0.1 - speed); BIG before any hazard tick
 
 
-def init() -> CollisionState:
-    """No collision yet."""
+def init(settings: ScoringSettings) -> CollisionState:
+    """No collision yet. (no shape depends on ``settings``)"""
+    del settings
     return CollisionState(
         collided=jnp.asarray(False),
         t_collision=jnp.asarray(NEVER, jnp.float32),
@@ -44,7 +45,7 @@ def init() -> CollisionState:
 
 
 def update(
-    state: CollisionState, sample: TickSample, tick: Tick, temperature: Array
+    state: CollisionState, sample: TickSample, tick: Tick, settings: ScoringSettings
 ) -> CollisionState:
     """Fold one tick.
 
@@ -53,12 +54,12 @@ def update(
         sample: the tick's measurement (unused: collision, hazard distance and speed come
             with ``tick``).
         tick: shared per-tick context.
-        temperature: unused (the soft gate is decoded from the final record).
+        settings: thresholds; temperature: unused (the soft gate is decoded from the final record).
 
     Returns:
         The record after the tick.
     """
-    slow_touch = thresholds.COLLISION_MIN_SPEED_MPS - tick.speed
+    slow_touch = settings.collision_min_speed_mps - tick.speed
     margin = jnp.where(tick.present, jnp.maximum(tick.hazard_dist, slow_touch), BIG)
     return CollisionState(
         collided=state.collided | tick.collision,
@@ -67,7 +68,9 @@ def update(
     )
 
 
-def failure_times(state: CollisionState, ctx: Context) -> tuple[Array, ...]:
+def failure_times(
+    state: CollisionState, ctx: Context, settings: ScoringSettings
+) -> tuple[Array, ...]:
     """Failure time(s) for the first Route A gate failure.
 
     Args:
@@ -80,7 +83,7 @@ def failure_times(state: CollisionState, ctx: Context) -> tuple[Array, ...]:
     return (state.t_collision,)
 
 
-def hard(state: CollisionState, ctx: Context) -> tuple[Array, Array]:
+def hard(state: CollisionState, ctx: Context, settings: ScoringSettings) -> tuple[Array, Array]:
     """Hard gate.
 
     Args:
@@ -93,7 +96,9 @@ def hard(state: CollisionState, ctx: Context) -> tuple[Array, Array]:
     return ~state.collided, jnp.asarray(True)
 
 
-def soft(state: CollisionState, ctx: Context, temperature: Array) -> tuple[Array, Array]:
+def soft(
+    state: CollisionState, ctx: Context, temperature: Array, settings: ScoringSettings
+) -> tuple[Array, Array]:
     """Smooth gate.
 
     Args:

@@ -25,16 +25,17 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from lantern_jax.scoring import thresholds
 from lantern_jax.scoring.components.accumulate import count, push
 from lantern_jax.scoring.sample import TickSample
+from lantern_jax.scoring.thresholds import ScoringSettings
 from lantern_jax.times import NEVER, happened
 
 Array = jax.Array
 
-RING = max(
-    thresholds.REACT_WINDOW, thresholds.RECOVER_WINDOW
-)  # ticks, length of the time / progress rings
+
+def ring_length(settings: ScoringSettings) -> int:
+    """Ticks of the time and progress rings: the longer of the reaction and recovery windows."""
+    return max(settings.react_window, settings.recover_window)
 
 
 @struct.dataclass
@@ -52,10 +53,10 @@ class Context:
     t_clear: Array  # () float32, s, hazard clearance (NEVER)
     progress_m: Array  # () float32, m, furthest route arc reached (latest sample)
     route_length_m: Array  # () float32, m
-    time_ring: Array  # (RING,) float32, s, time stamps of the last ticks, oldest first
-    progress_ring: Array  # (RING,) float32, m, progress of the last ticks
-    speed_ring: Array  # (REACT_WINDOW,) float32, m/s, ego speed of the last ticks
-    accel_ring: Array  # (REACT_WINDOW,) float32, m/s^2, ego acceleration of the last ticks
+    time_ring: Array  # (ring_length,) float32, s, time stamps of the last ticks, oldest first
+    progress_ring: Array  # (ring_length,) float32, m, progress of the last ticks
+    speed_ring: Array  # (react_window,) float32, m/s, ego speed of the last ticks
+    accel_ring: Array  # (react_window,) float32, m/s^2, ego acceleration of the last ticks
     v_pre: Array  # () float32, m/s, ego speed on the last tick before t_ref (running value
     #               until the first tick at/after t_ref, frozen from then on)
     v_pre_set: Array  # () bool, v_pre has been frozen (a tick at/after t_ref was folded)
@@ -81,24 +82,25 @@ class Tick:
     post_event: Array  # () bool, t_event happened and t >= t_event
     before_clear: Array  # () bool, t <= t_clear
     n_ticks: Array  # () int32, ticks folded including this one
-    time_ring: Array  # (RING,) float32, s, ring including this tick (last entry)
-    progress_ring: Array  # (RING,) float32, m
-    speed_ring: Array  # (REACT_WINDOW,) float32, m/s
-    accel_ring: Array  # (REACT_WINDOW,) float32, m/s^2
+    time_ring: Array  # (ring_length,) float32, s, ring including this tick (last entry)
+    progress_ring: Array  # (ring_length,) float32, m
+    speed_ring: Array  # (react_window,) float32, m/s
+    accel_ring: Array  # (react_window,) float32, m/s^2
     v_pre: Array  # () float32, m/s, pre-warning speed after this tick (final once post_ref)
 
 
-def init() -> Context:
-    """Context before the first tick."""
+def init(settings: ScoringSettings) -> Context:
+    """Context before the first tick (ring lengths from ``settings``)."""
     f = lambda v: jnp.asarray(v, jnp.float32)  # noqa: E731
+    ring, window = ring_length(settings), settings.react_window
     return Context(
         n_ticks=jnp.asarray(0, jnp.int32), t_last=f(0.0), temperature=f(1.0),
         is_route_a=jnp.asarray(True), coincident_onset=jnp.asarray(False),
         t_warn_point=f(NEVER), t_event=f(NEVER), t_warn_off=f(NEVER), t_clear=f(NEVER),
         progress_m=f(0.0), route_length_m=f(0.0),
-        time_ring=jnp.zeros(RING, jnp.float32), progress_ring=jnp.zeros(RING, jnp.float32),
-        speed_ring=jnp.zeros(thresholds.REACT_WINDOW, jnp.float32),
-        accel_ring=jnp.zeros(thresholds.REACT_WINDOW, jnp.float32),
+        time_ring=jnp.zeros(ring, jnp.float32), progress_ring=jnp.zeros(ring, jnp.float32),
+        speed_ring=jnp.zeros(window, jnp.float32),
+        accel_ring=jnp.zeros(window, jnp.float32),
         v_pre=f(0.0), v_pre_set=jnp.asarray(False),
     )  # fmt: skip
 
@@ -138,13 +140,14 @@ def _tick(ctx: Context, s: TickSample) -> Tick:
     )
 
 
-def update(ctx: Context, s: TickSample, temperature: Array) -> tuple[Context, Tick]:
+def update(ctx: Context, s: TickSample, settings: ScoringSettings) -> tuple[Context, Tick]:
     """Fold one tick into the shared context.
 
     Args:
         ctx: context before the tick.
         s: the tick's measurement.
-        temperature: () float32, temperature of the soft accumulators (recorded for decoding).
+        settings: scoring settings; their temperature (of the soft accumulators) is recorded
+            for decoding.
 
     Returns:
         ``(context after the tick, per-tick view for the components)``.
@@ -154,7 +157,7 @@ def update(ctx: Context, s: TickSample, temperature: Array) -> tuple[Context, Ti
     new = Context(
         n_ticks=tick.n_ticks,
         t_last=tick.t,
-        temperature=jnp.asarray(temperature, f32),
+        temperature=jnp.asarray(settings.temperature, f32),
         is_route_a=jnp.asarray(s.is_route_a, bool),
         coincident_onset=ctx.coincident_onset | jnp.asarray(s.coincident_onset, bool),
         t_warn_point=jnp.asarray(s.t_warn_point, f32),

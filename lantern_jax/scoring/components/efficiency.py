@@ -24,10 +24,10 @@ import jax.numpy as jnp
 from flax import struct
 
 from lantern_jax.constants import DT
-from lantern_jax.scoring import thresholds
 from lantern_jax.scoring.components.accumulate import count, first_time
 from lantern_jax.scoring.components.context import Tick
 from lantern_jax.scoring.sample import TickSample
+from lantern_jax.scoring.thresholds import ScoringSettings
 from lantern_jax.times import NEVER, happened
 
 Array = jax.Array
@@ -41,15 +41,16 @@ class EfficiencyState:
     t_complete: Array  # () float32, s, first tick in the route's end zone (NEVER)
 
 
-def init() -> EfficiencyState:
-    """Nothing recorded yet."""
+def init(settings: ScoringSettings) -> EfficiencyState:
+    """Nothing recorded yet. (no shape depends on ``settings``)"""
+    del settings
     return EfficiencyState(
         slow_ticks=jnp.asarray(0, jnp.int32), t_complete=jnp.asarray(NEVER, jnp.float32)
     )
 
 
 def update(
-    state: EfficiencyState, sample: TickSample, tick: Tick, temperature: Array
+    state: EfficiencyState, sample: TickSample, tick: Tick, settings: ScoringSettings
 ) -> EfficiencyState:
     """Fold one tick.
 
@@ -57,13 +58,12 @@ def update(
         state: record before the tick.
         sample: the tick's measurement (``slow_unjustified``).
         tick: shared per-tick context (time, progress, route length).
-        temperature: unused (no soft form).
+        settings: thresholds; temperature: unused (no soft form).
 
     Returns:
         The record after the tick.
     """
-    del temperature
-    done = tick.progress >= thresholds.completion_length(tick.route_length)
+    done = tick.progress >= settings.completion_length(tick.route_length)
     return EfficiencyState(
         slow_ticks=count(state.slow_ticks, jnp.asarray(sample.slow_unjustified, bool)),
         t_complete=first_time(happened(state.t_complete), done, tick.t, state.t_complete),

@@ -28,25 +28,29 @@ from lantern_jax.scoring.components.accumulate import first_time, run
 from lantern_jax.scoring.components.context import Context, Tick
 from lantern_jax.scoring.sample import TickSample
 from lantern_jax.scoring.smooth import soft_gate
+from lantern_jax.scoring.thresholds import ScoringSettings
 from lantern_jax.times import NEVER, happened
 
 Array = jax.Array
 
 
-def matched_window(s_warn: Array, s_event: Array, s_conflict: Array) -> tuple[Array, Array]:
+def matched_window(
+    s_warn: Array, s_event: Array, s_conflict: Array, settings: ScoringSettings
+) -> tuple[Array, Array]:
     """The matched stretch of route ``[lo, hi]`` (m of route arc).
 
     Args:
         s_warn: () float32, m, warning point.
         s_event: () float32, m, geometric event point.
         s_conflict: () float32, m, conflict point.
+        settings: the coincident-onset lead (``false_brake_coincident_lead_m``).
 
     Returns:
         ``(lo, hi)``: ``(s_warn, s_event)``, or ``(s_warn - 10 m, s_conflict)`` when the event
         point does not lie beyond the warning point (coincident onset).
     """
     coincident = s_event <= s_warn
-    lo = jnp.where(coincident, s_warn - thresholds.FALSE_BRAKE_COINCIDENT_LEAD_M, s_warn)
+    lo = jnp.where(coincident, s_warn - settings.false_brake_coincident_lead_m, s_warn)
     hi = jnp.where(coincident, s_conflict, s_event)
     return lo, hi
 
@@ -61,8 +65,9 @@ class FalseBrakeState:
     t_fail: Array  # () float32, s, tick at which such a stop reached 1 s (NEVER)
 
 
-def init() -> FalseBrakeState:
-    """No stop yet."""
+def init(settings: ScoringSettings) -> FalseBrakeState:
+    """No stop yet. (no shape depends on ``settings``)"""
+    del settings
     i0 = jnp.asarray(0, jnp.int32)
     return FalseBrakeState(
         run=i0, touched=jnp.asarray(False), max_run=i0, t_fail=jnp.asarray(NEVER, jnp.float32)
@@ -70,7 +75,7 @@ def init() -> FalseBrakeState:
 
 
 def update(
-    state: FalseBrakeState, sample: TickSample, tick: Tick, temperature: Array
+    state: FalseBrakeState, sample: TickSample, tick: Tick, settings: ScoringSettings
 ) -> FalseBrakeState:
     """Fold one tick.
 
@@ -78,18 +83,18 @@ def update(
         state: record before the tick.
         sample: the tick's measurement (``justified_stop``, ``fb_window``).
         tick: shared per-tick context.
-        temperature: unused (the soft gate is decoded from the final record).
+        settings: thresholds; temperature: unused (the soft gate is decoded from the final record).
 
     Returns:
         The record after the tick.
     """
-    stopped = tick.speed <= thresholds.FALSE_BRAKE_SPEED_MPS
+    stopped = tick.speed <= settings.false_brake_speed_mps
     stop = stopped & ~jnp.asarray(sample.justified_stop, bool)
     n_run = run(state.run, stop)
     in_window = jnp.asarray(sample.fb_window, bool)
     touched = stop & (in_window | ((state.run > 0) & state.touched))
     counted = jnp.where(touched, n_run, 0)
-    failed = counted >= thresholds.FALSE_BRAKE
+    failed = counted >= settings.false_brake
     return FalseBrakeState(
         run=n_run,
         touched=touched,
@@ -103,7 +108,7 @@ def max_stop_s(state: FalseBrakeState) -> Array:
     return state.max_run.astype(jnp.float32) * DT
 
 
-def hard(state: FalseBrakeState, ctx: Context) -> tuple[Array, Array]:
+def hard(state: FalseBrakeState, ctx: Context, settings: ScoringSettings) -> tuple[Array, Array]:
     """Hard gate.
 
     Args:
@@ -114,10 +119,12 @@ def hard(state: FalseBrakeState, ctx: Context) -> tuple[Array, Array]:
         ``(passed, valid)``: () bool, no unjustified stop of 1 s touching the matched stretch;
         () bool (always True).
     """
-    return state.max_run < thresholds.FALSE_BRAKE, jnp.asarray(True)
+    return state.max_run < settings.false_brake, jnp.asarray(True)
 
 
-def soft(state: FalseBrakeState, ctx: Context, temperature: Array) -> tuple[Array, Array]:
+def soft(
+    state: FalseBrakeState, ctx: Context, temperature: Array, settings: ScoringSettings
+) -> tuple[Array, Array]:
     """Smooth gate.
 
     Args:
@@ -128,7 +135,5 @@ def soft(state: FalseBrakeState, ctx: Context, temperature: Array) -> tuple[Arra
     Returns:
         ``(passed, valid)``: () float32 in [0, 1]; () bool (always True).
     """
-    margin = (
-        thresholds.FALSE_BRAKE - thresholds.COUNT_HALF - state.max_run.astype(jnp.float32)
-    ) * DT
+    margin = (settings.false_brake - thresholds.COUNT_HALF - state.max_run.astype(jnp.float32)) * DT
     return soft_gate(margin, temperature), jnp.asarray(True)

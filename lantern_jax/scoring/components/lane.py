@@ -18,6 +18,7 @@ from lantern_jax.scoring.components.accumulate import count, first_time
 from lantern_jax.scoring.components.context import Context, Tick
 from lantern_jax.scoring.sample import TickSample
 from lantern_jax.scoring.smooth import soft_gate
+from lantern_jax.scoring.thresholds import ScoringSettings
 from lantern_jax.times import NEVER, happened
 
 Array = jax.Array
@@ -31,25 +32,28 @@ class LaneState:
     t_fail: Array  # () float32, s, tick at which the total reached 1 s (NEVER)
 
 
-def init() -> LaneState:
-    """Inside the lanes."""
+def init(settings: ScoringSettings) -> LaneState:
+    """Inside the lanes. (no shape depends on ``settings``)"""
+    del settings
     return LaneState(n_outside=jnp.asarray(0, jnp.int32), t_fail=jnp.asarray(NEVER, jnp.float32))
 
 
-def update(state: LaneState, sample: TickSample, tick: Tick, temperature: Array) -> LaneState:
+def update(
+    state: LaneState, sample: TickSample, tick: Tick, settings: ScoringSettings
+) -> LaneState:
     """Fold one tick.
 
     Args:
         state: record before the tick.
         sample: the tick's measurement (``outside_lanes``).
         tick: shared per-tick context.
-        temperature: unused (the soft gate is decoded from the final record).
+        settings: thresholds; temperature: unused (the soft gate is decoded from the final record).
 
     Returns:
         The record after the tick.
     """
     n_outside = count(state.n_outside, jnp.asarray(sample.outside_lanes, bool))
-    failed = n_outside >= thresholds.LANE_DEBOUNCE
+    failed = n_outside >= settings.lane_debounce
     return LaneState(
         n_outside=n_outside,
         t_fail=first_time(happened(state.t_fail), failed, tick.t, state.t_fail),
@@ -61,7 +65,7 @@ def outside_s(state: LaneState) -> Array:
     return state.n_outside.astype(jnp.float32) * DT
 
 
-def failure_times(state: LaneState, ctx: Context) -> tuple[Array, ...]:
+def failure_times(state: LaneState, ctx: Context, settings: ScoringSettings) -> tuple[Array, ...]:
     """Failure time(s) for the first Route A gate failure.
 
     Args:
@@ -74,7 +78,7 @@ def failure_times(state: LaneState, ctx: Context) -> tuple[Array, ...]:
     return (state.t_fail,)
 
 
-def hard(state: LaneState, ctx: Context) -> tuple[Array, Array]:
+def hard(state: LaneState, ctx: Context, settings: ScoringSettings) -> tuple[Array, Array]:
     """Hard gate.
 
     Args:
@@ -84,10 +88,12 @@ def hard(state: LaneState, ctx: Context) -> tuple[Array, Array]:
     Returns:
         ``(passed, valid)``: () bool, < 1 s in total outside the lanes; () bool (always True).
     """
-    return state.n_outside < thresholds.LANE_DEBOUNCE, jnp.asarray(True)
+    return state.n_outside < settings.lane_debounce, jnp.asarray(True)
 
 
-def soft(state: LaneState, ctx: Context, temperature: Array) -> tuple[Array, Array]:
+def soft(
+    state: LaneState, ctx: Context, temperature: Array, settings: ScoringSettings
+) -> tuple[Array, Array]:
     """Smooth gate.
 
     Args:
@@ -99,6 +105,6 @@ def soft(state: LaneState, ctx: Context, temperature: Array) -> tuple[Array, Arr
         ``(passed, valid)``: () float32 in [0, 1]; () bool (always True).
     """
     margin = (
-        thresholds.LANE_DEBOUNCE - thresholds.COUNT_HALF - state.n_outside.astype(jnp.float32)
+        settings.lane_debounce - thresholds.COUNT_HALF - state.n_outside.astype(jnp.float32)
     ) * DT
     return soft_gate(margin, temperature), jnp.asarray(True)

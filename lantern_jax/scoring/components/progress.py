@@ -14,27 +14,28 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from lantern_jax.scoring import thresholds
 from lantern_jax.scoring.components.context import Context
 from lantern_jax.scoring.smooth import smooth_clip01
+from lantern_jax.scoring.thresholds import ScoringSettings
 
 Array = jax.Array
 
 
-def is_completed(progress_m: Array, route_length_m: Array) -> Array:
+def is_completed(progress_m: Array, route_length_m: Array, settings: ScoringSettings) -> Array:
     """Whether the ego reached the route's end zone.
 
     Args:
         progress_m: (...) float32, m, furthest route arc reached.
         route_length_m: (...) float32, m.
+        settings: the end zone (``completion_tol_m``).
 
     Returns:
         (...) bool: ``progress_m >= route_length_m - 2 m``.
     """
-    return progress_m >= route_length_m - thresholds.COMPLETION_TOL_M
+    return progress_m >= route_length_m - settings.completion_tol_m
 
 
-def hard(ctx: Context) -> tuple[Array, Array]:
+def hard(ctx: Context, settings: ScoringSettings) -> tuple[Array, Array]:
     """Hard route completion.
 
     Args:
@@ -43,12 +44,12 @@ def hard(ctx: Context) -> tuple[Array, Array]:
     Returns:
         ``(p, valid)``: () float32 in [0, 1]; () bool (always True).
     """
-    span = thresholds.completion_length(ctx.route_length_m)
+    span = settings.completion_length(ctx.route_length_m)
     frac = jnp.where(span > 0, ctx.progress_m / jnp.where(span > 0, span, 1.0), 0.0)
     return jnp.clip(frac, 0.0, 1.0), jnp.asarray(True)
 
 
-def soft(ctx: Context, temperature: Array) -> tuple[Array, Array]:
+def soft(ctx: Context, temperature: Array, settings: ScoringSettings) -> tuple[Array, Array]:
     """Smooth route completion: the ratio through a smooth clip.
 
     Args:
@@ -58,7 +59,7 @@ def soft(ctx: Context, temperature: Array) -> tuple[Array, Array]:
     Returns:
         ``(p, valid)``: () float32 in [0, 1]; () bool (always True).
     """
-    span = thresholds.completion_length(ctx.route_length_m)
+    span = settings.completion_length(ctx.route_length_m)
     safe_len = jnp.where(span > 0, span, 1.0)
     p = jnp.where(span > 0, smooth_clip01(ctx.progress_m / safe_len, temperature), 0.0)
     return p, jnp.asarray(True)

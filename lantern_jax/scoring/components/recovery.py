@@ -26,9 +26,10 @@ from flax import struct
 
 from lantern_jax.scoring import thresholds
 from lantern_jax.scoring.components.accumulate import first_time, push, run
-from lantern_jax.scoring.components.context import RING, Context, Tick, opened_by
+from lantern_jax.scoring.components.context import Context, Tick, opened_by, ring_length
 from lantern_jax.scoring.sample import TickSample
 from lantern_jax.scoring.smooth import smooth_clip01
+from lantern_jax.scoring.thresholds import ScoringSettings
 from lantern_jax.times import NEVER, happened, time_or_nan
 
 Array = jax.Array
@@ -40,17 +41,18 @@ class RecoveryState:
 
     run: Array  # () int32, consecutive ticks after release with speed above the threshold
     t_recover: Array  # () float32, s, start of the first recovery window (NEVER)
-    log_ok: Array  # (RING,) float32, log sigmoid((v - v_thr) / T) of the last ticks
+    log_ok: Array  # (ring_length,) float32, log sigmoid((v - v_thr) / T) of the last ticks
     surv: Array  # () float32, soft probability that no window has passed yet
     p: Array  # () float32, soft probability that some window passed, sum_k p_k
     pt: Array  # () float32, s, sum_k p_k t_k
 
 
-def init() -> RecoveryState:
+def init(settings: ScoringSettings) -> RecoveryState:
     """No tick yet."""
     f = lambda v: jnp.asarray(v, jnp.float32)  # noqa: E731
+    ring = ring_length(settings)
     return RecoveryState(
-        run=jnp.asarray(0, jnp.int32), t_recover=f(NEVER), log_ok=jnp.zeros(RING, jnp.float32),
+        run=jnp.asarray(0, jnp.int32), t_recover=f(NEVER), log_ok=jnp.zeros(ring, jnp.float32),
         surv=f(1.0), p=f(0.0), pt=f(0.0),
     )  # fmt: skip
 
@@ -70,7 +72,7 @@ def release_time(t_warn_off: Array, t_clear: Array) -> Array:
 
 
 def update(
-    state: RecoveryState, sample: TickSample, tick: Tick, temperature: Array
+    state: RecoveryState, sample: TickSample, tick: Tick, settings: ScoringSettings
 ) -> RecoveryState:
     """Fold one tick.
 
@@ -78,24 +80,23 @@ def update(
         state: accumulators before the tick.
         sample: the tick's measurement (unused: speed and progress come with ``tick``).
         tick: shared per-tick context.
-        temperature: () float32, m/s (speed test) and m (progress test).
+        settings: thresholds; temperature: () float32, m/s (speed test) and m (progress test).
 
     Returns:
         The accumulators after the tick.
     """
+    temperature = settings.temperature
     t_release = release_time(tick.t_warn_off, tick.t_clear)
     post_rel = happened(t_release) & (tick.t >= t_release)
-    v_thr = jnp.maximum(
-        thresholds.RECOVER_MIN_SPEED_MPS, thresholds.RECOVER_PRE_FRACTION * tick.v_pre
-    )
+    v_thr = jnp.maximum(settings.recover_min_speed_mps, settings.recover_pre_fraction * tick.v_pre)
     n_run = run(state.run, post_rel & (tick.speed > v_thr))
     window_start = tick.time_ring[0]
     gain = tick.progress - tick.progress_ring[0]
-    ok = (n_run >= thresholds.RECOVER_WINDOW) & (gain >= thresholds.RECOVER_MIN_PROGRESS_M)
+    ok = (n_run >= settings.recover_window) & (gain >= settings.recover_min_progress_m)
 
     log_ok = push(state.log_ok, jax.nn.log_sigmoid((tick.speed - v_thr) / temperature))
-    complete = post_rel & (tick.n_ticks >= thresholds.RECOVER_WINDOW) & (window_start >= t_release)
-    gain_ok = jax.nn.sigmoid((gain - thresholds.RECOVER_MIN_PROGRESS_M) / temperature)
+    complete = post_rel & (tick.n_ticks >= settings.recover_window) & (window_start >= t_release)
+    gain_ok = jax.nn.sigmoid((gain - settings.recover_min_progress_m) / temperature)
     sigma = jnp.where(complete, jnp.exp(jnp.sum(log_ok)) * gain_ok, 0.0)
     p_k = state.surv * sigma
     return RecoveryState(
@@ -148,26 +149,26 @@ def hard(state: RecoveryState, ctx: Context, t_fail: Array) -> tuple[Array, Arra
     return jnp.where(happened(state.t_recover), latency, jnp.nan), valid(state, ctx, t_fail)
 
 
-def score(recovery_latency_s: Any, available: Any = True) -> Array:
+def score(recovery_latency_s: Any, settings: ScoringSettings, available: Any = True) -> Array:
     """``S_rec = clip(1 - RL / 8 s)``, elementwise.
 
     Args:
         recovery_latency_s: (...) float32, s; ``NaN`` or ``inf`` = no recovery (scores 0).
+        settings: the cap (``recover_cap_s``).
         available: (...) bool, ``False`` -> ``NaN``.
 
     Returns:
         (...) float32 in [0, 1]; ``NaN`` where unavailable.
     """
     rl = jnp.asarray(recovery_latency_s, jnp.float32)
-    value = jnp.where(
-        jnp.isfinite(rl), jnp.clip(1.0 - rl / thresholds.RECOVER_CAP_S, 0.0, 1.0), 0.0
-    )
+    value = jnp.where(jnp.isfinite(rl), jnp.clip(1.0 - rl / settings.recover_cap_s, 0.0, 1.0), 0.0)
     return jnp.where(jnp.asarray(available, bool), value, jnp.nan)
 
 
 def soft(
-    state: RecoveryState, ctx: Context, t_fail: Array, temperature: Array
-) -> tuple[Array, Array]:
+    state: RecoveryState, ctx: Context, t_fail: Array, temperature: Array,
+    settings: ScoringSettings,
+) -> tuple[Array, Array]:  # fmt: skip
     """Smooth ``S_rec``: ``P(recovered) * clip(1 - (E[t_recover | recovered] - t_release) /
     8 s)`` with a smooth clip.
 
@@ -184,5 +185,5 @@ def soft(
     has = state.p > thresholds.PROB_EPS
     e_rec = state.pt / jnp.where(has, state.p, 1.0)
     t_rel = jnp.where(ok, release_time(ctx.t_warn_off, ctx.t_clear), 0.0)
-    clipped = smooth_clip01(1.0 - (e_rec - t_rel) / thresholds.RECOVER_CAP_S, temperature)
+    clipped = smooth_clip01(1.0 - (e_rec - t_rel) / settings.recover_cap_s, temperature)
     return jnp.where(has, state.p * clipped, 0.0), ok

@@ -11,11 +11,11 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from lantern_jax.scoring import thresholds
 from lantern_jax.scoring.components.accumulate import first_time
 from lantern_jax.scoring.components.context import Context, Tick
 from lantern_jax.scoring.sample import TickSample
 from lantern_jax.scoring.smooth import soft_gate
+from lantern_jax.scoring.thresholds import ScoringSettings
 from lantern_jax.times import NEVER, happened
 
 Array = jax.Array
@@ -29,15 +29,16 @@ class RouteDeviationState:
     t_deviation: Array  # () float32, s, first tick with dist_to_route >= 30 m (NEVER)
 
 
-def init() -> RouteDeviationState:
-    """On the route."""
+def init(settings: ScoringSettings) -> RouteDeviationState:
+    """On the route. (no shape depends on ``settings``)"""
+    del settings
     return RouteDeviationState(
         max_dist=jnp.asarray(0.0, jnp.float32), t_deviation=jnp.asarray(NEVER, jnp.float32)
     )
 
 
 def update(
-    state: RouteDeviationState, sample: TickSample, tick: Tick, temperature: Array
+    state: RouteDeviationState, sample: TickSample, tick: Tick, settings: ScoringSettings
 ) -> RouteDeviationState:
     """Fold one tick.
 
@@ -45,20 +46,22 @@ def update(
         state: record before the tick.
         sample: the tick's measurement (``dist_to_route``).
         tick: shared per-tick context.
-        temperature: unused (the soft gate is decoded from the final record).
+        settings: thresholds; temperature: unused (the soft gate is decoded from the final record).
 
     Returns:
         The record after the tick.
     """
     dist = jnp.asarray(sample.dist_to_route, jnp.float32)
-    deviated = dist >= thresholds.ROUTE_DEVIATION_M
+    deviated = dist >= settings.route_deviation_m
     return RouteDeviationState(
         max_dist=jnp.maximum(state.max_dist, dist),
         t_deviation=first_time(happened(state.t_deviation), deviated, tick.t, state.t_deviation),
     )
 
 
-def failure_times(state: RouteDeviationState, ctx: Context) -> tuple[Array, ...]:
+def failure_times(
+    state: RouteDeviationState, ctx: Context, settings: ScoringSettings
+) -> tuple[Array, ...]:
     """Failure time(s) for the first Route A gate failure.
 
     Args:
@@ -71,7 +74,9 @@ def failure_times(state: RouteDeviationState, ctx: Context) -> tuple[Array, ...]
     return (state.t_deviation,)
 
 
-def hard(state: RouteDeviationState, ctx: Context) -> tuple[Array, Array]:
+def hard(
+    state: RouteDeviationState, ctx: Context, settings: ScoringSettings
+) -> tuple[Array, Array]:
     """Hard gate.
 
     Args:
@@ -84,7 +89,9 @@ def hard(state: RouteDeviationState, ctx: Context) -> tuple[Array, Array]:
     return ~happened(state.t_deviation), jnp.asarray(True)
 
 
-def soft(state: RouteDeviationState, ctx: Context, temperature: Array) -> tuple[Array, Array]:
+def soft(
+    state: RouteDeviationState, ctx: Context, temperature: Array, settings: ScoringSettings
+) -> tuple[Array, Array]:
     """Smooth gate.
 
     Args:
@@ -95,4 +102,4 @@ def soft(state: RouteDeviationState, ctx: Context, temperature: Array) -> tuple[
     Returns:
         ``(passed, valid)``: () float32 in [0, 1]; () bool (always True).
     """
-    return soft_gate(thresholds.ROUTE_DEVIATION_M - state.max_dist, temperature), jnp.asarray(True)
+    return soft_gate(settings.route_deviation_m - state.max_dist, temperature), jnp.asarray(True)

@@ -14,6 +14,7 @@ from flax import struct
 from lantern_jax.scoring.components.accumulate import first_time
 from lantern_jax.scoring.components.context import Context, Tick
 from lantern_jax.scoring.sample import TickSample
+from lantern_jax.scoring.thresholds import ScoringSettings
 from lantern_jax.times import NEVER
 
 Array = jax.Array
@@ -27,19 +28,22 @@ class RuleState:
     t_violation: Array  # () float32, s, first red-light violation (NEVER)
 
 
-def init() -> RuleState:
-    """No violation yet."""
+def init(settings: ScoringSettings) -> RuleState:
+    """No violation yet. (no shape depends on ``settings``)"""
+    del settings
     return RuleState(red_light=jnp.asarray(False), t_violation=jnp.asarray(NEVER, jnp.float32))
 
 
-def update(state: RuleState, sample: TickSample, tick: Tick, temperature: Array) -> RuleState:
+def update(
+    state: RuleState, sample: TickSample, tick: Tick, settings: ScoringSettings
+) -> RuleState:
     """Fold one tick.
 
     Args:
         state: record before the tick.
         sample: the tick's measurement (``red_light_violation``).
         tick: shared per-tick context.
-        temperature: unused (the soft gate is decoded from the final record).
+        settings: thresholds; temperature: unused (the soft gate is decoded from the final record).
 
     Returns:
         The record after the tick.
@@ -51,7 +55,7 @@ def update(state: RuleState, sample: TickSample, tick: Tick, temperature: Array)
     )
 
 
-def failure_times(state: RuleState, ctx: Context) -> tuple[Array, ...]:
+def failure_times(state: RuleState, ctx: Context, settings: ScoringSettings) -> tuple[Array, ...]:
     """Failure time(s) for the first Route A gate failure.
 
     Args:
@@ -64,7 +68,7 @@ def failure_times(state: RuleState, ctx: Context) -> tuple[Array, ...]:
     return (state.t_violation,)
 
 
-def hard(state: RuleState, ctx: Context) -> tuple[Array, Array]:
+def hard(state: RuleState, ctx: Context, settings: ScoringSettings) -> tuple[Array, Array]:
     """Hard gate.
 
     Args:
@@ -77,7 +81,9 @@ def hard(state: RuleState, ctx: Context) -> tuple[Array, Array]:
     return ~state.red_light, jnp.asarray(True)
 
 
-def soft(state: RuleState, ctx: Context, temperature: Array) -> tuple[Array, Array]:
+def soft(
+    state: RuleState, ctx: Context, temperature: Array, settings: ScoringSettings
+) -> tuple[Array, Array]:
     """The gate as a float (not relaxed).
 
     Args:

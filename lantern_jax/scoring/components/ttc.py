@@ -26,6 +26,7 @@ from lantern_jax.scoring import thresholds
 from lantern_jax.scoring.components.context import Context, Tick, opened_by
 from lantern_jax.scoring.sample import TickSample
 from lantern_jax.scoring.smooth import LSE_EMPTY, lse_add, smooth_clip01, softmin_decode
+from lantern_jax.scoring.thresholds import ScoringSettings
 
 Array = jax.Array
 
@@ -39,8 +40,9 @@ class TTCState:
     lse: Array  # () float32, soft-min accumulator log sum w exp(-TTC / T)
 
 
-def init() -> TTCState:
-    """No sample yet."""
+def init(settings: ScoringSettings) -> TTCState:
+    """No sample yet. (no shape depends on ``settings``)"""
+    del settings
     return TTCState(
         min_s=jnp.asarray(BIG, jnp.float32),
         any_sample=jnp.asarray(False),
@@ -61,31 +63,32 @@ def closing_speed(rel: Array, rel_vel: Array) -> Array:
     return jnp.where(r_ok, -jnp.sum(rel * rel_vel) / r_norm, 0.0)
 
 
-def update(state: TTCState, sample: TickSample, tick: Tick, temperature: Array) -> TTCState:
+def update(state: TTCState, sample: TickSample, tick: Tick, settings: ScoringSettings) -> TTCState:
     """Fold one tick.
 
     Args:
         state: accumulators before the tick.
         sample: the tick's measurement (``hazard_rel``, ``hazard_rel_vel``).
         tick: shared per-tick context.
-        temperature: () float32, s (soft minimum) and m/s (sample weights).
+        settings: thresholds; temperature in s (soft minimum) and m/s (sample weights).
 
     Returns:
         The accumulators after the tick.
     """
     f32 = jnp.float32
+    temperature = settings.temperature
     v_close = closing_speed(
         jnp.asarray(sample.hazard_rel, f32), jnp.asarray(sample.hazard_rel_vel, f32)
     )
     d_box = tick.hazard_dist
     overlap = d_box <= 0.0
-    closing = v_close > thresholds.CLOSING_MIN_MPS
+    closing = v_close > settings.closing_min_mps
     in_window = tick.post_ref & tick.before_clear & tick.present
     ttc = jnp.where(overlap, 0.0, d_box / jnp.where(closing, v_close, 1.0))
     sampled = in_window & (overlap | closing)
-    ttc_soft = jnp.where(overlap, 0.0, d_box / jnp.maximum(v_close, thresholds.CLOSING_MIN_MPS))
+    ttc_soft = jnp.where(overlap, 0.0, d_box / jnp.maximum(v_close, settings.closing_min_mps))
     log_w = jnp.where(
-        overlap, 0.0, jax.nn.log_sigmoid((v_close - thresholds.CLOSING_MIN_MPS) / temperature)
+        overlap, 0.0, jax.nn.log_sigmoid((v_close - settings.closing_min_mps) / temperature)
     )
     return TTCState(
         min_s=jnp.where(sampled, jnp.minimum(state.min_s, ttc), state.min_s),
@@ -119,20 +122,23 @@ def hard(state: TTCState, ctx: Context, t_fail: Array) -> tuple[Array, Array]:
     return jnp.where(state.any_sample, state.min_s, jnp.inf), valid(state, ctx, t_fail)
 
 
-def score(ttc_min_s: Any) -> Array:
+def score(ttc_min_s: Any, settings: ScoringSettings) -> Array:
     """``S_TTC = clip(TTC_min / 3 s)``, elementwise.
 
     Args:
         ttc_min_s: (...) float32, s; ``inf`` = no closing trend (scores 1), ``NaN`` = unavailable.
+        settings: the normalisation (``ttc_norm_s``).
 
     Returns:
         (...) float32 in [0, 1]; ``NaN`` where unavailable.
     """
     x = jnp.asarray(ttc_min_s, jnp.float32)
-    return jnp.where(jnp.isnan(x), jnp.nan, jnp.clip(x / thresholds.TTC_NORM_S, 0.0, 1.0))
+    return jnp.where(jnp.isnan(x), jnp.nan, jnp.clip(x / settings.ttc_norm_s, 0.0, 1.0))
 
 
-def soft(state: TTCState, ctx: Context, t_fail: Array, temperature: Array) -> tuple[Array, Array]:
+def soft(
+    state: TTCState, ctx: Context, t_fail: Array, temperature: Array, settings: ScoringSettings
+) -> tuple[Array, Array]:
     """Smooth ``S_TTC``: the soft minimum, decoded with the accumulator temperature
     ``ctx.temperature`` and capped at 3 s, through a smooth clip.
 
@@ -141,9 +147,10 @@ def soft(state: TTCState, ctx: Context, t_fail: Array, temperature: Array) -> tu
         ctx: final shared context.
         t_fail: () float32, s, first Route A gate failure (``NEVER`` if none).
         temperature: () float32, temperature of the smooth clip.
+        settings: the normalisation (``ttc_norm_s``).
 
     Returns:
         ``(s_ttc, valid)``: () float32 in [0, 1]; () bool (the hard availability).
     """
-    ttc = softmin_decode(state.lse, ctx.temperature, cap=thresholds.TTC_NORM_S)
-    return smooth_clip01(ttc / thresholds.TTC_NORM_S, temperature), valid(state, ctx, t_fail)
+    ttc = softmin_decode(state.lse, ctx.temperature, cap=settings.ttc_norm_s)
+    return smooth_clip01(ttc / settings.ttc_norm_s, temperature), valid(state, ctx, t_fail)
