@@ -1,0 +1,137 @@
+"""Settings are arguments (:mod:`lantern_jax.sim.settings`): a setting changed from Python in a
+running process gives the next evaluation's answer for the new value, the same answer as a
+fresh process with that change, also when a second process serves the program from the
+persistent cache; a traced setting runs the program already compiled.
+
+The changes (:data:`settings_probe.CHANGES`): scoring thresholds, weights, a tick window, the
+soft temperature, protocol thresholds, planner constants of ``coop`` and a text of the warning
+bank, each probed on three pairs (route table and soft CUS, :func:`settings_probe.probe`).
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+import settings_probe as sp
+
+from lantern_jax.policies.registry import get_policy
+from lantern_jax.scenarios.suite import load_suite
+from lantern_jax.scoring.cus import pair_components
+from lantern_jax.scoring.metrics import finalize
+from lantern_jax.scoring.thresholds import DEFAULT_SCORING, ScoringSettings
+from lantern_jax.sim import engine
+from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings
+
+PROBE = Path(__file__).with_name("settings_probe.py")
+#: Changes of a static setting (a tick window, the bank): another program, compiled again.
+STATIC = [n for n in sp.CHANGES if "(static)" in n]
+TRACED = [n for n in sp.CHANGES if n not in STATIC]
+
+
+@pytest.fixture(scope="module")
+def default_answer() -> bytes:
+    return sp.probe(None)
+
+
+def test_there_are_at_least_ten_settings_of_every_kind():
+    kinds = {n.split(".")[0] for n in sp.CHANGES}
+    assert len(sp.CHANGES) >= 10 and kinds == {"scoring", "protocol", "planner", "bank"}
+    assert "scoring.temperature" in sp.CHANGES
+
+
+@pytest.mark.parametrize("name", TRACED)
+def test_a_traced_setting_changed_in_process_is_answered_without_compiling(name, default_answer):
+    """The changed value's answer differs from the default's, runs the programs already
+    compiled (none added to the evaluator's cache), and the default comes back unchanged."""
+    before = set(engine._EXECUTABLES)
+    changed = sp.probe(name)
+    assert changed != default_answer, name
+    assert set(engine._EXECUTABLES) == before, "a traced setting compiled a new program"
+    assert sp.probe(None) == default_answer
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", STATIC)
+def test_a_static_setting_changed_in_process_compiles_its_own_program(name, default_answer):
+    before = set(engine._EXECUTABLES)
+    assert sp.probe(name) != default_answer, name
+    assert set(engine._EXECUTABLES) - before, "a static setting must be another program"
+    assert sp.probe(None) == default_answer
+
+
+def _run_probe(names: list[str], cache: Path) -> dict[str, str]:
+    """``settings_probe.py NAMES`` in a new process with its own persistent cache folder."""
+    env = dict(os.environ, JAX_COMPILATION_CACHE_DIR=str(cache), LANTERN_JAX_CACHE_DIR=str(cache))
+    res = subprocess.run(
+        [sys.executable, str(PROBE), *names], env=env, capture_output=True, text=True,
+        timeout=1200, cwd=PROBE.parent,
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr[-3000:]
+    out = dict(line.rsplit(" ", 1) for line in res.stdout.splitlines() if line.strip())
+    assert list(out) == names
+    return out
+
+
+@pytest.mark.slow
+def test_in_process_changes_equal_fresh_processes_and_the_persistent_cache(tmp_path):
+    """For each change: the answer in this process (after the default's, so every cache of the
+    evaluator is warm with the old value) equals that of a fresh process making only that
+    change; a second process, served by the persistent cache the first ones filled, gives the
+    same answers for all of them."""
+    cache = tmp_path / "cache"
+    in_process = {n: sp.digest(sp.probe(n)) for n in sp.CHANGES}
+    default = sp.digest(sp.probe(None))
+    assert default not in in_process.values()
+    for name in sp.CHANGES:
+        assert _run_probe([name], cache)[name] == in_process[name], name
+    assert any((cache / "lantern-programs").glob("*.program"))  # the store was filled
+    assert _run_probe(list(sp.CHANGES), cache) == in_process
+
+
+def test_settings_batch_with_vmap():
+    """Traced settings are pytree leaves: one pair's final telemetry scored under four TTC
+    normalisers and recovery caps in one ``vmap`` equals four separate calls."""
+    execs = engine.build_executions(load_suite().select(["rty_0001"]))
+    coop = get_policy("coop")
+    final, _ = engine.run_executions(
+        coop, execs.scenarios, coop.init(jax.random.PRNGKey(0)), execs.max_ticks
+    )
+    tel_a, tel_b = (jax.tree.map(lambda x, i=i: x[i], final.telemetry) for i in (0, 2))
+    d_safe = execs.scenarios.config.d_safe[0]
+
+    def cus(s: ScoringSettings):
+        return pair_components(finalize(tel_a, s), finalize(tel_b, s), d_safe, s)["CUS"]
+
+    norms = [1.0, 2.0, 3.0, 6.0]
+    caps = [2.0, 4.0, 8.0, 16.0]
+    batch = jax.tree.map(lambda x: jnp.broadcast_to(jnp.asarray(x), (4,)), DEFAULT_SCORING)
+    batch = batch.replace(ttc_norm_s=jnp.asarray(norms), recover_cap_s=jnp.asarray(caps))
+    together = np.asarray(jax.vmap(cus)(batch))
+    apart = [
+        float(cus(DEFAULT_SCORING.replace(ttc_norm_s=n, recover_cap_s=c)))
+        for n, c in zip(norms, caps, strict=True)
+    ]
+    np.testing.assert_allclose(together, apart, rtol=1e-6)
+    assert len(set(np.round(apart, 4))) > 1  # the settings matter on this pair
+
+
+@pytest.mark.parametrize(
+    "settings, match",
+    [
+        (Settings(scoring=ScoringSettings(ttc_norm_s=0.0)), r"ScoringSettings.ttc_norm_s"),
+        (Settings(scoring=ScoringSettings(react_window_s=0.01)), r"react_window_s.*one tick"),
+        (Settings(scoring=ScoringSettings(react_fraction=1.5)), r"react_fraction"),
+        (DEFAULT_SETTINGS.replace(bank=("text",)), r"Settings.bank: expected a TextBank"),
+        (DEFAULT_SETTINGS.replace(scoring=0.05), r"Settings.scoring: expected ScoringSettings"),
+    ],
+)
+def test_bad_settings_are_refused_naming_the_field(settings, match):
+    with pytest.raises(ValueError, match=match):
+        settings.validate()
