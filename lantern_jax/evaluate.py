@@ -28,8 +28,8 @@ import jax.numpy as jnp
 import numpy as np
 import pandas as pd
 
-from lantern_jax import program_store
-from lantern_jax.constants import DT, FAMILIES
+from lantern_jax import family_codes, program_store
+from lantern_jax.constants import DT
 from lantern_jax.policies.base import Policy, check_policy_output
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.suite import SUITE_ID, Suite, build_suite_batches, load_suite
@@ -467,7 +467,8 @@ def run_policy(
 def family_table(route_table: pd.DataFrame) -> pd.DataFrame:
     """Per-family CUS rows for every (model, condition) plus each model's paired warning gain.
 
-    Columns: ``model, condition, PE, VC, OR, LWW, RWW, RTY, Overall``.
+    Columns: ``model, condition, PE, VC, OR, LWW, RWW, RTY``, the registered families the
+    rows hold (:func:`lantern_jax.family_codes.table_codes`), ``Overall``.
     """
     fam = family_scores(route_table).reset_index()
     out = []
@@ -479,7 +480,7 @@ def family_table(route_table: pd.DataFrame) -> pd.DataFrame:
         if all(c in sub.index for c in CONDITIONS):
             gain = sub.loc["warning"].drop("model") - sub.loc["no-warning"].drop("model")
             out.append({"model": model, "condition": "warning gain", **gain})
-    cols = ["model", "condition", *FAMILIES, "Overall"]
+    cols = ["model", "condition", *family_codes.table_codes(route_table["family"]), "Overall"]
     return pd.DataFrame(out)[cols]
 
 
@@ -494,19 +495,21 @@ def premise_table(route_table: pd.DataFrame) -> pd.DataFrame:
     (every model and condition in ``route_table``) whose hazard the front camera could not see
     at the warning point, and could not see at any tick of the approach up to it.
 
-    Columns: ``measure, PE, VC, OR, LWW, RWW, RTY, Overall`` (Overall pools all executions);
-    the last row, ``Route A executions``, counts them per family.
+    Columns: ``measure, PE, VC, OR, LWW, RWW, RTY``, the registered families the rows hold,
+    ``Overall`` (Overall pools all executions); the last row, ``Route A executions``, counts
+    them per family.
     """
+    families = family_codes.table_codes(route_table["family"])
     rows = []
     for col, label in PREMISE_ROWS:
         row = {"measure": label}
-        for f in FAMILIES:
+        for f in families:
             v = route_table.loc[route_table["family"] == f, col]
             row[f] = 100.0 * float(v.mean()) if len(v) else np.nan
         row["Overall"] = 100.0 * float(route_table[col].mean()) if len(route_table) else np.nan
         rows.append(row)
     counts = {"measure": "Route A executions"}
-    counts.update({f: float((route_table["family"] == f).sum()) for f in FAMILIES})
+    counts.update({f: float((route_table["family"] == f).sum()) for f in families})
     counts["Overall"] = float(len(route_table))
     return pd.DataFrame([*rows, counts])
 

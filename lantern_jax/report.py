@@ -38,6 +38,7 @@ import numpy as np
 import pandas as pd
 from tabulate import tabulate
 
+from lantern_jax import family_codes
 from lantern_jax.constants import FAMILIES
 from lantern_jax.files import StagedFolder, atomic_write, check_target_folder
 from lantern_jax.scoring.aggregate import DECOMPOSITION_COLUMNS
@@ -72,6 +73,15 @@ OUTPUT_FILES = (
 )
 
 FAMILY_COLUMNS = (*FAMILIES, "Overall")
+
+
+def family_columns(df: pd.DataFrame) -> tuple[str, ...]:
+    """The family columns of a family or premise table: the six, then the registered families
+    among its columns (:func:`lantern_jax.family_codes.table_codes`), then ``Overall``
+    (:data:`FAMILY_COLUMNS` for a table of the six)."""
+    return (*family_codes.table_codes(df.columns), "Overall")
+
+
 GAIN_CONDITION = "warning gain"
 CONDITION_ORDER = ("warning", "no-warning", GAIN_CONDITION)
 CSV_FLOAT_FORMAT = "%.6f"
@@ -120,7 +130,8 @@ def ordered_tables(result: EvalResult) -> tuple[pd.DataFrame, pd.DataFrame]:
     """The family table and the decomposition of ``result`` with models in evaluation order and
     conditions as in :func:`order_rows` (the order of the printed and written tables)."""
     models = list(dict.fromkeys(result.route_table["model"]))
-    fam = order_rows(result.family_table, models)[["model", "condition", *FAMILY_COLUMNS]]
+    cols = family_columns(result.family_table)
+    fam = order_rows(result.family_table, models)[["model", "condition", *cols]]
     dec = order_rows(result.decomposition, models)[["model", "condition", *DECOMPOSITION_COLUMNS]]
     return fam, dec
 
@@ -142,7 +153,8 @@ def format_family_table(df: pd.DataFrame, tablefmt: str = "simple") -> str:
         ``-`` marks a family without pairs.
     """
     df = _with_keys(df)
-    missing = [c for c in FAMILY_COLUMNS if c not in df.columns]
+    columns = family_columns(df)
+    missing = [c for c in columns if c not in df.columns]
     if missing:
         raise ValueError(f"family table: missing column(s) {missing}")
     rows = []
@@ -150,15 +162,14 @@ def format_family_table(df: pd.DataFrame, tablefmt: str = "simple") -> str:
         rec = dict(zip(df.columns, r, strict=True))
         signed = rec["condition"] == GAIN_CONDITION
         rows.append(
-            [_label(rec["model"], rec["condition"])]
-            + [_fmt(rec[c], signed) for c in FAMILY_COLUMNS]
+            [_label(rec["model"], rec["condition"])] + [_fmt(rec[c], signed) for c in columns]
         )
     return tabulate(
         rows,
-        headers=["Model (condition)", *FAMILY_COLUMNS],
+        headers=["Model (condition)", *columns],
         tablefmt=tablefmt,
         disable_numparse=True,
-        colalign=("left", *["right"] * len(FAMILY_COLUMNS)),
+        colalign=("left", *["right"] * len(columns)),
     )
 
 
@@ -197,20 +208,21 @@ def format_decomposition(df: pd.DataFrame, tablefmt: str = "simple") -> str:
 def format_premise_table(df: pd.DataFrame, tablefmt: str = "simple") -> str:
     """The premise table (:func:`lantern_jax.evaluate.premise_table`) as text: one row per
     measure (% with one decimal), then the execution counts."""
+    columns = family_columns(df)
     rows = []
     for rec in df.to_dict("records"):
         is_count = rec["measure"] == "Route A executions"
         rows.append([rec["measure"]] + [
             "-" if not math.isfinite(rec[c]) else (f"{rec[c]:.0f}" if is_count else
                                                    f"{rec[c]:.1f}")
-            for c in FAMILY_COLUMNS
+            for c in columns
         ])  # fmt: skip
     return tabulate(
         rows,
-        headers=["", *FAMILY_COLUMNS],
+        headers=["", *columns],
         tablefmt=tablefmt,
         disable_numparse=True,
-        colalign=("left", *["right"] * len(FAMILY_COLUMNS)),
+        colalign=("left", *["right"] * len(columns)),
     )
 
 

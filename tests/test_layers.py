@@ -17,7 +17,8 @@ PACKAGE = Path(lantern_jax.__file__).parent
 
 #: Layers from the bottom up; each entry is a top-level module or sub-package of lantern_jax.
 LAYERS: tuple[tuple[str, ...], ...] = (
-    ("constants", "times", "timing"),  # values, the time sentinel, wall-clock breakdowns
+    # values, the time sentinel, wall-clock breakdowns, the known family codes
+    ("constants", "times", "timing", "family_codes"),
     ("geometry", "polyline", "split_map"),  # pure JAX maths and loop rewrites
     # scenario and observation types; I/O (files, compiled programs on disk); tokens
     ("world", "observation", "files", "program_store", "language"),
@@ -35,8 +36,9 @@ LAYERS: tuple[tuple[str, ...], ...] = (
         "envs",
         "stream",
         "training",
+        "transfer",
     ),  # evaluation, suites, stress testing, data, language diagnostics, ablations,
-    #               brax env, chunks, training
+    #               brax env, chunks, training, transfer to unseen hazards
     ("report", "viz"),  # tables, files, plots
     ("cli", "commands", "__main__"),  # the command line
 )

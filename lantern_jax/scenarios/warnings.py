@@ -16,6 +16,8 @@ ids         entries
 12-59       per family (8 each, family order): low 2-3, medium 1-3, high 1-3
 60-64       the five non-actionable warnings of the paper's appendix, verbatim (no family)
 65          the empty text (:data:`EMPTY_TEXT_ID`; no words)
+66-         texts added later: every registered family's exact warning (kind ``"canonical"``)
+            and paraphrases (:func:`add_family_texts`), texts added with :func:`add_text`
 ==========  ==================================================================================
 
 Ambiguity tiers of the paraphrases (paper appendix "Additional Ablation Analysis"):
@@ -58,7 +60,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from lantern_jax import language
+from lantern_jax import family_codes, language
 from lantern_jax.constants import (
     FAMILIES,
     OVERRIDE_ANCHOR_START,
@@ -224,7 +226,7 @@ class WarningText:
     """One entry of the text bank."""
 
     text_id: int
-    family: int  # index into constants.FAMILIES, NO_FAMILY for non-actionable texts
+    family: int  # family index (family_codes.codes()), NO_FAMILY for non-actionable texts
     kind: str  # one of TEXT_KINDS
     text: str  # may contain TOKEN (then it states a position)
     tier: str = ""  # one of TIERS for paraphrases, "" otherwise
@@ -237,14 +239,11 @@ class WarningText:
 
 def _family_index(family: int | str, allow_none: bool = False) -> int:
     if isinstance(family, str):
-        if family not in FAMILIES:
-            raise ValueError(f"family: {family!r} not one of {{{', '.join(FAMILIES)}}}")
-        return FAMILIES.index(family)
+        return family_codes.index(family)
     f = int(family)
     if allow_none and f == NO_FAMILY:
         return f
-    if not 0 <= f < len(FAMILIES):
-        raise ValueError(f"family: {f} outside 0..{len(FAMILIES) - 1}")
+    family_codes.code(f)  # raises for an unknown index
     return f
 
 
@@ -291,9 +290,76 @@ TEXT_BANK: list[WarningText] = _initial_bank()
 EMPTY_TEXT_ID = next(e.text_id for e in TEXT_BANK if e.kind == "empty")
 
 
-def paraphrase_text_id(family: int) -> int:
-    """Text id of a family's first low-ambiguity paraphrase (ids 6-11, as before the tiers)."""
-    return len(TEMPLATES) + _family_index(family)
+def paraphrase_text_id(family: int | str) -> int:
+    """Text id of a family's first low-ambiguity paraphrase (ids 6-11 for the six built-in
+    families, as before the tiers; a registered family's first paraphrase)."""
+    f = _family_index(family)
+    if f < len(FAMILIES):
+        return len(TEMPLATES) + f
+    return _family_paraphrases(f)[0]
+
+
+def canonical_text_id(family: int | str) -> int:
+    """Text id of a family's exact warning: the family index for the six built-in families, the
+    entry :func:`add_family_texts` added for a registered one.
+
+    Raises:
+        ValueError: for an unknown family or a registered family without texts.
+    """
+    f = _family_index(family)
+    if f < len(FAMILIES):
+        return f
+    for e in TEXT_BANK:
+        if e.kind == "canonical" and e.family == f:
+            return e.text_id
+    raise ValueError(f"family: {family_codes.code(f)!r} has no warning text in the bank")
+
+
+def _family_paraphrases(f: int) -> tuple[int, ...]:
+    """Ids of a family's paraphrases, in bank order (raises when it has none)."""
+    ids = tuple(e.text_id for e in TEXT_BANK if e.kind == "paraphrase" and e.family == f)
+    if not ids:
+        raise ValueError(f"family: {family_codes.code(f)!r} has no paraphrase in the bank")
+    return ids
+
+
+def add_family_texts(family: int | str, warning: str, paraphrases: dict[str, Sequence[str]]
+                     ) -> tuple[int, tuple[int, ...]]:  # fmt: skip
+    """Add a registered family's exact warning and paraphrases to the bank (once).
+
+    Args:
+        family: a registered family's code or index (not one of the six built-in families,
+            whose texts are fixed).
+        warning: the exact warning (kind ``"canonical"``), in the templates' style, with
+            ``<FRONT_CAR_POS>`` where the grounded position goes.
+        paraphrases: ambiguity tier -> held-out paraphrases (the bank's tier rules apply: low
+            and medium state the position, high does not).
+
+    Returns:
+        ``(warning id, paraphrase ids)``.  Adding the same texts for the same family again adds
+        nothing and returns the ids they already have.
+
+    Raises:
+        ValueError: for a built-in family, a family that already has other texts, or a text
+            that breaks the bank's rules.
+    """
+    f = _family_index(family)
+    if f < len(FAMILIES):
+        raise ValueError(f"family: {family_codes.code(f)!r} is built in; its texts are fixed")
+    entries = [("canonical", "", warning)]
+    for tier, texts in paraphrases.items():
+        entries += [("paraphrase", tier, t) for t in texts]
+    for kind, tier, text in entries:
+        _check_entry(kind, tier, text)
+    have = [(e.kind, e.tier, e.text) for e in TEXT_BANK if e.family == f]
+    if have:
+        if have != entries:
+            raise ValueError(f"family: {family_codes.code(f)!r} already has other texts")
+    else:
+        for kind, tier, text in entries:
+            TEXT_BANK.append(WarningText(len(TEXT_BANK), f, kind, text, tier))
+    ids = [e.text_id for e in TEXT_BANK if e.family == f]
+    return ids[0], tuple(ids[1:])
 
 
 def tier_text_ids(family: int | str, tier: str) -> tuple[int, ...]:
@@ -387,7 +453,8 @@ def held_out_text_ids(families: Sequence[str | int], keys: Sequence[str]) -> np.
     rank = _tier_order(families, keys)
     out = np.empty(len(rank), np.int32)
     for i, (f, r) in enumerate(zip(families, rank, strict=True)):
-        ids = tier_text_ids(f, TIERS[r % len(TIERS)])
+        # a registered family may lack a tier: it then reads any of its paraphrases
+        ids = tier_text_ids(f, TIERS[r % len(TIERS)]) or _family_paraphrases(_family_index(f))
         out[i] = ids[(r // len(TIERS)) % len(ids)]
     return out
 

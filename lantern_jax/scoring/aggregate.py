@@ -5,7 +5,8 @@ Input: a route-level DataFrame (one row per (model, condition, pair); see
 :mod:`lantern_jax.scoring.table`).  Rows are grouped by ``(model, condition)``.
 
 * Family score: mean CUS over the pairs of the family.
-* Overall: equal-weight macro-average of the family scores, in ``constants.FAMILIES`` order; a
+* Overall: equal-weight macro-average of the family scores, in ``constants.FAMILIES`` order
+  (then any registered family the rows hold, :func:`lantern_jax.family_codes.table_codes`); a
   family with no rows in a group is ``NaN`` and is left out of that group's macro-average.
 * Decomposition: pooled over all pairs of the group.  ``A-Prog.``, ``TTC``, ``Clear.``, ``Ant.``,
   ``Rec.``, ``B-Prog.`` are means x 100 of ``A_progress``, ``S_ttc``, ``S_clear``, ``S_ant``,
@@ -22,7 +23,7 @@ from collections.abc import Sequence
 import numpy as np
 import pandas as pd
 
-from lantern_jax.constants import FAMILIES
+from lantern_jax import family_codes
 
 GROUP_COLUMNS = ("model", "condition")
 
@@ -55,21 +56,24 @@ def family_scores(df: pd.DataFrame, by: Sequence[str] = GROUP_COLUMNS) -> pd.Dat
     """Per-family mean CUS and the macro-averaged Overall score.
 
     Args:
-        df: route-level rows with ``family`` (code in ``constants.FAMILIES``) and ``CUS``.
+        df: route-level rows with ``family`` (a known code, :mod:`lantern_jax.family_codes`)
+            and ``CUS``.
         by: grouping columns.
 
     Returns:
-        DataFrame indexed by ``by`` with columns ``PE, VC, OR, LWW, RWW, RTY, Overall`` (CUS
-        points, 0..100).
+        DataFrame indexed by ``by`` with columns ``PE, VC, OR, LWW, RWW, RTY``, the registered
+        families the rows hold, and ``Overall`` (CUS points, 0..100).
     """
     by = list(by)
     _check(df, [*by, "family", "CUS"])
-    unknown = sorted(set(df["family"]) - set(FAMILIES))
+    known = family_codes.codes()
+    unknown = sorted(set(df["family"]) - set(known))
     if unknown:
-        raise ValueError(f"route table: unknown family code(s) {unknown}; known: {FAMILIES}")
+        raise ValueError(f"route table: unknown family code(s) {unknown}; known: {known}")
+    cols = family_codes.table_codes(df["family"])
     means = df.groupby([*by, "family"], sort=False)["CUS"].mean().unstack("family")
-    means = means.reindex(columns=list(FAMILIES)).astype(float)
-    means["Overall"] = means[list(FAMILIES)].mean(axis=1, skipna=True)
+    means = means.reindex(columns=cols).astype(float)
+    means["Overall"] = means[cols].mean(axis=1, skipna=True)
     means.columns.name = None
     return means.sort_index()
 
