@@ -88,6 +88,10 @@ NONACTIONABLE_MAX_DV_MPS = 2.0  # m/s, max additional speed reduction vs no warn
 NONACTIONABLE_MAX_STOP_S = 1.0  # s, no standstill (speed < STILL_SPEED_MPS) of this length
 NONACTIONABLE_MAX_RC_DROP = 5.0  # percentage points, route completion may drop at most this
 
+# --- response to unseen hazards (paper appendix "Protocol Extension to Unseen Hazards") ---------
+RESPONSE_BRAKE = 0.5  # brake signal (commanded deceleration / brake limit) of a braking step
+RESPONSE_STEPS = 3  # consecutive 20-Hz control steps at or above it: a sustained response
+
 # --- per-tick measurement (scoring/measure.py) -------------------------------------------------
 LANE_MARGIN_M = 0.5  # m, outside every lane: centre farther than half a lane width + this
 WRONG_WAY_RAD = 2.0 * math.pi / 3.0  # rad, heading difference that counts as driving a lane
