@@ -17,6 +17,8 @@
     lantern-jax diagnostics language --policy coop        # does the policy read the words?
     lantern-jax ablations --list         # the protocol ablations
     lantern-jax ablations --policy coop  # the paper's ablation table for one policy
+    lantern-jax unseen --policy coop     # the paper's unseen-hazard tables
+    lantern-jax --families my_families.py evaluate --suite my_suite.json   # user families
 
 Options may also come from an experiment file (``--config``, TOML, one ``[evaluate]`` table; see
 :func:`load_config`); an option given on the command line always wins over the file.  Options
@@ -43,8 +45,10 @@ from collections.abc import Sequence
 
 from lantern_jax.commands import CommandError
 from lantern_jax.commands import dataset as dataset_command
+from lantern_jax.commands import families as families_option
 from lantern_jax.commands import stress as stress_command
 from lantern_jax.commands import train as train_command
+from lantern_jax.commands import unseen as unseen_command
 from lantern_jax.constants import FAMILIES, SUITE_ID
 
 REFERENCE_POLICIES = ("expert", "ego", "coop")
@@ -536,8 +540,9 @@ def _evaluate_breakdown(bd, result, seconds: float) -> None:
 def _print_suite(suite) -> None:
     from tabulate import tabulate
 
-    from lantern_jax.constants import FAMILIES
+    from lantern_jax import family_codes
 
+    families = family_codes.table_codes(p.family for p in suite.pairs)  # the six, then others
     rows = [
         [
             p.pair_id,
@@ -557,7 +562,7 @@ def _print_suite(suite) -> None:
         )
     )
     print()
-    counts = {f: sum(p.family == f for p in suite.pairs) for f in FAMILIES}
+    counts = {f: sum(p.family == f for p in suite.pairs) for f in families}
     per_family = ", ".join(f"{f} {n}" for f, n in counts.items())
     print(f"suite {suite.suite_id}: {len(suite)} pairs ({per_family})")
     print(f"suite sha256: {suite.suite_sha256}")
@@ -569,7 +574,7 @@ def _print_suite(suite) -> None:
         who = rep.get("validator", "expert-v1")
         print(f"generation report: expert pass rate before filtering (candidates run; "
               f"validator {who})")  # fmt: skip
-        for f in FAMILIES:
+        for f in families:
             if f in rate:
                 print(f"  {f:<4} {100.0 * float(rate[f]):5.1f} %  ({tried.get(f, '?')})")
         for key, label in (("static_rejected", "static rejects"),
@@ -577,7 +582,7 @@ def _print_suite(suite) -> None:
                            ("near_duplicate_rejected", "near-duplicate rejects")):  # fmt: skip
             counts = rep.get(key)
             if counts:
-                print(f"  {label}: " + ", ".join(f"{f} {counts.get(f, 0)}" for f in FAMILIES))
+                print(f"  {label}: " + ", ".join(f"{f} {counts.get(f, 0)}" for f in families))
     else:
         print("generation report: none in the manifest")
 
@@ -859,6 +864,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="LANTERN cooperative-warning driving benchmark (JAX, batched).",
         allow_abbrev=False,
     )
+    families_option.add_option(parser)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
 
     ev = sub.add_parser(
@@ -988,6 +994,7 @@ def build_parser() -> argparse.ArgumentParser:
     stress_command.add_parser(sub)
     dataset_command.add_parser(sub)
     train_command.add_parser(sub)
+    unseen_command.add_parser(sub)
     _add_language_commands(sub)
     return parser
 
@@ -1163,6 +1170,7 @@ def main(argv: Sequence[str] | None = None, exit_on_interrupt: bool | None = Non
         except SystemExit as e:  # --help, or an argparse usage error (already printed)
             return e.code if isinstance(e.code, int) else (0 if e.code is None else 2)
         try:
+            families_option.load(args.families)
             if hasattr(args, "no_compile_cache"):
                 configure_compile_cache(not args.no_compile_cache)
             if getattr(args, "coordinator", None) or getattr(args, "num_processes", None):
