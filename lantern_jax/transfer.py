@@ -2,7 +2,7 @@
 Unseen Hazards") for any registered policy.
 
 Every pair of a suite of unseen-hazard families (default: the shipped ``lantern-unseen`` suite
-of :mod:`lantern_jax.scenarios.unseen`, five pairs per family) runs Route A under three
+of :mod:`lantern_jax.scenarios.unseen`, ten pairs per family) runs Route A under three
 conditions — **no warning**, the family's **exact (free-form) warning** and its **held-out
 paraphrase** — and Route B once, in one jitted, vmapped call with full per-tick records
 (:func:`lantern_jax.diagnostics.run_recorded`).  Route geometry, weather, background traffic,
@@ -49,7 +49,7 @@ from lantern_jax.times import time_or_nan
 from lantern_jax.world import Scenario
 
 #: The shipped suite of the three unseen families (generated with
-#: ``generate_suite(seed=UNSEEN_SEED, pairs_per_slot=1, families=UNSEEN_CODES)``).
+#: ``generate_suite(UNSEEN_SEED, pairs_per_slot=2, families=UNSEEN_CODES, suite_id=...)``).
 UNSEEN_SUITE_ID = "lantern-unseen"
 UNSEEN_SEED = 20260612
 CONDITIONS = ("no warning", "warning", "held-out paraphrase")
@@ -126,8 +126,10 @@ class TransferResult:
 
     Attributes:
         policy: the policy's name.
-        rows: one row per (pair, condition): ``pair_id, family, condition, lead_s,
-            response_s, t_event_s, t_on_s, dv_mps, rc, collision, blocked, CUS``.
+        rows: one row per (pair, condition): ``pair_id, family, weather, condition, lead_s,
+            response_s, t_event_s``, ``t_on_s`` (warning onset, or the warning point without a
+            warning), ``t_seen_s`` (direct observation: the warning's termination),
+            ``t_clear_s``, ``dv_mps, rc, collision, blocked, CUS`` (s, m/s, %, CUS points).
         summary: one row per (family, condition): ``family, condition, label, n, responded``
             and ``mean``, ``lo``, ``hi`` of ``lead_s, dv_mps, rc, collision, blocked, CUS``.
     """
@@ -181,6 +183,8 @@ def run_transfer(
     t_ref = np.asarray(time_or_nan(final.protocol.t_warn_point))
     t_on = np.asarray(time_or_nan(final.protocol.t_warn_on))
     t_event = np.asarray(time_or_nan(final.protocol.t_event))
+    t_seen = np.asarray(time_or_nan(final.protocol.t_warn_off))
+    t_clear = np.asarray(time_or_nan(final.protocol.t_clear))
     rows = []
     for i in range(len(execs)):
         j, cond = divmod(i, len(CONDITIONS))
@@ -195,7 +199,8 @@ def run_transfer(
         rows.append(dict(
             pair_id=pair.pair_id, family=pair.family, weather=pair.weather,
             condition=CONDITIONS[cond], lead_s=t_event[i] - t_resp, response_s=t_resp,
-            t_event_s=t_event[i], t_on_s=onset, dv_mps=dv,
+            t_event_s=t_event[i], t_on_s=onset, t_seen_s=t_seen[i], t_clear_s=t_clear[i],
+            dv_mps=dv,
         ))  # fmt: skip
     table = pd.DataFrame(rows)
     k = len(CONDITIONS)
