@@ -43,7 +43,7 @@ import threading
 import time
 from collections.abc import Sequence
 
-from lantern_jax.commands import CommandError
+from lantern_jax.commands import CommandError, write_and_list
 from lantern_jax.commands import dataset as dataset_command
 from lantern_jax.commands import families as families_option
 from lantern_jax.commands import stress as stress_command
@@ -718,23 +718,13 @@ def _print_and_write(args: argparse.Namespace, tables: dict, note: str) -> int:
     """Print every (title, table) and write them as CSV + Markdown into ``--out``."""
     from tabulate import tabulate
 
-    from lantern_jax.diagnostics import write_tables
-
     for title, df in tables.values():
         print(title)
         print(tabulate(df, headers="keys", showindex=False, floatfmt=".1f"))
         print()
     if note:
         print(note)
-    try:
-        paths = write_tables(tables, args.out)
-    except OSError as e:
-        print(f"lantern-jax: error: cannot write results to {args.out}: {e}", file=sys.stderr)
-        return 1
-    print(f"Wrote {len(paths)} files:")
-    for path in paths:
-        print(f"  {path}")
-    return 0
+    return write_and_list(tables, args.out)
 
 
 def cmd_wording(args: argparse.Namespace, argv: Sequence[str]) -> int:

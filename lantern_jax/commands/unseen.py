@@ -19,7 +19,7 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-from lantern_jax.commands import CommandError
+from lantern_jax.commands import CommandError, write_and_list
 
 DEFAULT_OUT = "results/unseen"
 
@@ -30,7 +30,6 @@ def cmd_unseen(args: argparse.Namespace, argv: Sequence[str]) -> int:
     from tabulate import tabulate
 
     from lantern_jax import transfer
-    from lantern_jax.diagnostics import write_tables
     from lantern_jax.policies.registry import get_policy, policy_names
     from lantern_jax.report import check_output_folder
     from lantern_jax.scenarios.suite import SuiteError, load_suite
@@ -65,15 +64,7 @@ def cmd_unseen(args: argparse.Namespace, argv: Sequence[str]) -> int:
     print("Lead: event-on time minus the first of three consecutive 20-Hz control steps with "
           "brake signal >= 0.5 (commanded deceleration / brake limit), searched from the warning "
           "point; Resp.: pairs with such a response.")  # fmt: skip
-    try:
-        paths = write_tables(tables, args.out)
-    except OSError as e:
-        print(f"lantern-jax: error: cannot write results to {args.out}: {e}", file=sys.stderr)
-        return 1
-    print(f"Wrote {len(paths)} files:")
-    for path in paths:
-        print(f"  {path}")
-    return 0
+    return write_and_list(tables, args.out)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:

@@ -86,6 +86,7 @@ from lantern_jax.scenarios.families_common import (
     finish_pair,
     uniform,
 )
+from lantern_jax.scenarios.families_straight import opposing_sections
 from lantern_jax.scenarios.knobs import KNOBS
 from lantern_jax.scenarios.premise import (
     PREMISE_AT_WARNING,
@@ -128,7 +129,8 @@ __all__ = [
     "FamilyRecord", "Scene", "Clearance", "register_family", "registered_families",
     # building blocks
     "ActorSpec", "OccluderSpec", "LaneSection", "RoadMap", "RouteSpec", "Centerline",
-    "StraightLayout", "straight_road", "ego_route", "lane_path", "junctions",
+    "StraightLayout", "straight_road", "ego_route", "lane_path", "opposing_sections",
+    "junctions",
     "arc_length", "heading_at", "point_at", "project", "segment",
     # samplers
     "draw", "choose", "uniform",

@@ -35,8 +35,9 @@ Shared choices (this package's, the paper gives one route per event and no param
   car stays parked);
 * **the cyclist is a vehicle-kind actor with a bicycle's extent** (1.8 m x 0.6 m): CARLA spawns
   cyclists as vehicle blueprints, and a new actor kind would widen the kind one-hot that the
-  shipped learned models read (their object-token width is ``10 + NUM_ACTOR_KINDS``; their
-  checkpoints would no longer load) and renumber the range image's occluder classes.  The
+  shipped learned models read (their object tokens are ``10 + NUM_ACTOR_KINDS`` = 13 features
+  wide, the input width of their checkpoints' first object layer) and renumber the range
+  image's occluder classes.  The
   reversing car and the ambulance are vehicles; the bus, the truck and the van are parked
   vehicles of the map (occluders).
 
@@ -107,19 +108,6 @@ def straight_scene(p: dict, parking_width: float = 0.0):
     road_map = fam.straight_road(layout, line, -ROAD_MARGIN, length + ROAD_MARGIN)
     route = fam.ego_route(line, length, f"fwd_{layout.ego_lane}")
     return road_map, route, line, layout
-
-
-def opposing_traffic(road_map, line, layout, s_lo: float, s_hi: float) -> list:
-    """Background-traffic start sections on the opposing lanes between road arcs ``s_lo`` and
-    ``s_hi`` (those lanes run from the high-``s`` end, so their arcs count backwards)."""
-    out = []
-    for k in range(layout.lanes_back):
-        lane = road_map.lane(f"back_{k}")
-        d = layout.back_d(k)
-        a_lo, _ = fam.project(lane.center, line.to_xy(s_hi, d))
-        a_hi, _ = fam.project(lane.center, line.to_xy(s_lo, d))
-        out.append(fam.LaneSection(lane, a_lo, a_hi))
-    return out
 
 
 def road_path(line, s, d) -> np.ndarray:
@@ -266,7 +254,7 @@ def build_cyc(p: dict) -> fam.Scene:
         markers=(sc - warning_lead(lead, p["v_ref"]), sc - lead, sc),
         clearance=fam.Clearance(path_arc=ride["length"], despawn=True),
         conflict_xy=road_path(line, [sc], [0.0])[0],
-        traffic=opposing_traffic(road_map, line, layout, -ROAD_MARGIN + 10.0, sc - 10.0),
+        traffic=fam.opposing_sections(road_map, line, layout, -ROAD_MARGIN + 10.0, sc - 10.0),
         d_safe=fam.D_SAFE_SMALL_M,
         details=dict(cyclist_xy=path[0].tolist(), ride_m=ride["length"], event_lead_m=lead),
     )
@@ -660,7 +648,7 @@ def build_rev(p: dict) -> fam.Scene:
         markers=(sc - warning_lead(REV_EVENT_LEAD, p["v_ref"]), sc - REV_EVENT_LEAD, sc),
         clearance=fam.Clearance(time_limit=REV_STOP_LIMIT_S, on_ego_stop=True, despawn=True),
         conflict_xy=road_path(line, [sc], [0.0])[0],
-        traffic=opposing_traffic(road_map, line, layout, -ROAD_MARGIN + 10.0, sc - 10.0),
+        traffic=fam.opposing_sections(road_map, line, layout, -ROAD_MARGIN + 10.0, sc - 10.0),
         d_safe=fam.D_SAFE_SMALL_M,
         details=dict(car_xy=path[0].tolist(), end_xy=path[-1].tolist(),
                      turn_deg=math.degrees(man["turn"])),
