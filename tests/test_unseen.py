@@ -402,3 +402,22 @@ def test_the_unseen_suite_regenerates_from_its_seed(suite):
     assert fresh["suite_sha256"] == suite.suite_sha256
     got = [(p["pair_id"], p["route_2m"]) for p in fresh["pairs"]]
     assert got == [(p.pair_id, p.route_2m) for p in suite.pairs]
+
+
+def test_the_dataset_plans_a_registered_family_on_its_own_stream():
+    from lantern_jax.dataset.generate import _plan_key
+    from lantern_jax.dataset.scenes import build_scenes, plan_scenes
+
+    specs = plan_scenes(2, seed=5, families=["JWK"])
+    assert [(s.family, s.weather) for s in specs] == [("JWK", "clear_day"), ("JWK", "cloudy_day")]
+    rng = np.random.default_rng([5, family_codes.stream("JWK")])
+    assert specs[0].params == family("JWK").sample(rng, "clear_day")
+    route_a, route_b = build_scenes(specs)
+    assert not bool(route_a[0].config.force_event)  # open loop, as the six
+    assert "families" not in _plan_key(1, 2, 3) and _plan_key(1, 2, 3, ["JWK"])["families"]
+
+
+def test_held_out_paraphrases_of_a_family_without_every_tier():
+    ids = w.held_out_text_ids(["CYC"] * 3, ["a", "b", "c"])
+    assert set(ids.tolist()) == {w.paraphrase_text_id("CYC")}  # only a low-tier text: every tier
+    assert w.canonical_text_id("PE") == 0 and w.paraphrase_text_id("PE") == 6
