@@ -4,6 +4,11 @@ of the unseen-hazard tables.
 A family defined in a test file (``tests/family_example.py``, registered with the public API
 only) is built, validated, written to a suite file and evaluated through the Python API and the
 command line.
+
+Registration is process-wide, and test files share worker processes: the families are
+registered by a module fixture, not on import, and forgotten when this module's tests are done
+(:func:`lantern_jax.scenarios.registry.snapshot` / ``restore``), so other test files see the six
+alone.
 """
 
 from __future__ import annotations
@@ -20,7 +25,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from lantern_jax import family_codes, transfer
+from lantern_jax import family_codes
 from lantern_jax.cli import main
 from lantern_jax.constants import (
     DT,
@@ -34,7 +39,7 @@ from lantern_jax.diagnostics import run_recorded
 from lantern_jax.evaluate import evaluate, family_table
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.planner import route_point
-from lantern_jax.scenarios import registry, unseen
+from lantern_jax.scenarios import registry
 from lantern_jax.scenarios import warnings as w
 from lantern_jax.scenarios.duplicates import near_duplicates, route_samples
 from lantern_jax.scenarios.families import build_pair, family, sample_params
@@ -50,10 +55,32 @@ from lantern_jax.scoring.response import (
 )
 
 TESTS = Path(__file__).parent
-sys.path.insert(0, str(TESTS))
-import family_example  # noqa: E402  (registers JWK)
-
 CODES = ("CYC", "EMV", "REV")
+#: Modules that register families on import, set by :func:`registered` (module scope).
+transfer = unseen = family_example = None
+REGISTERING_MODULES = ("family_example", "lantern_jax.transfer", "lantern_jax.scenarios.unseen",
+                       "lantern_jax_user_families_family_example")  # fmt: skip
+
+
+@pytest.fixture(scope="module", autouse=True)
+def registered():
+    """Register the unseen families and JWK for this module's tests, then forget them."""
+    global transfer, unseen, family_example
+    state = registry.snapshot()
+    sys.path.insert(0, str(TESTS))
+    try:
+        import family_example as fe
+
+        from lantern_jax import transfer as tr
+        from lantern_jax.scenarios import unseen as un
+
+        transfer, unseen, family_example = tr, un, fe
+        yield
+    finally:
+        sys.path.remove(str(TESTS))
+        for name in REGISTERING_MODULES:
+            sys.modules.pop(name, None)
+        registry.restore(state)
 
 
 @pytest.fixture(scope="module")
@@ -282,27 +309,46 @@ def test_registering_again_returns_the_same_family_and_a_clash_is_refused():
         registry.register_family(other)
 
 
+def _seed_as_a_field(r):
+    return dict(code="JWK2", ranges={**r.ranges, "seed": registry.IntRange(0, 1)})
+
+
 @pytest.mark.parametrize(
     "change, match",
     [
-        (dict(code="PE"), "built-in"),
-        (dict(code="jwk2"), "upper-case"),
-        (dict(code="JWK2", ranges={"route_length": registry.FloatRange(1, 2)}), "v_ref"),
-        (dict(code="JWK2", ranges={**family_example.RANGES, "seed": registry.IntRange(0, 1)}),
-         "common fields"),
-        (dict(code="JWK2", premise="sometimes"), "premise"),
-        (dict(code="JWK2", knobs={"hazard_warp": (0.0, 1.0)}), "knobs"),
-        (dict(code="JWK2", paraphrases={}), "paraphrase"),
-        (dict(code="JWK2", warning="A van at<FRONT_CAR_POS> is stopped."), "exactly one space"),
-        (dict(code="JWK2", paraphrases={"high": ("Near <FRONT_CAR_POS> a van.",)}),
+        (lambda r: dict(code="PE"), "built-in"),
+        (lambda r: dict(code="jwk2"), "upper-case"),
+        (lambda r: dict(code="JWK2", ranges={"route_length": registry.FloatRange(1, 2)}),
+         "v_ref"),
+        (_seed_as_a_field, "common fields"),
+        (lambda r: dict(code="JWK2", premise="sometimes"), "premise"),
+        (lambda r: dict(code="JWK2", knobs={"hazard_warp": (0.0, 1.0)}), "knobs"),
+        (lambda r: dict(code="JWK2", paraphrases={}), "paraphrase"),
+        (lambda r: dict(code="JWK2", warning="A van at<FRONT_CAR_POS> is stopped."),
+         "exactly one space"),
+        (lambda r: dict(code="JWK2", paraphrases={"high": ("Near <FRONT_CAR_POS> a van.",)}),
          "no position"),
     ],
 )  # fmt: skip
 def test_bad_records_are_refused_before_anything_is_registered(change, match):
     known, bank = family_codes.codes(), len(w.TEXT_BANK)
+    record = family_example.RECORD
     with pytest.raises(ValueError, match=match):
-        registry.register_family(dataclasses.replace(family_example.RECORD, **change))
+        registry.register_family(dataclasses.replace(record, **change(record)))
     assert family_codes.codes() == known and len(w.TEXT_BANK) == bank
+
+
+def test_snapshot_and_restore_forget_what_was_registered_since():
+    state = registry.snapshot()
+    bank = len(w.TEXT_BANK)
+    other = dataclasses.replace(family_example.RECORD, code="JWK3")
+    assert registry.register_family(other).index == len(family_codes.codes()) - 1
+    assert "JWK3" in family_codes.codes() and len(w.TEXT_BANK) == bank + 2
+    registry.restore(state)
+    assert "JWK3" not in family_codes.codes() and len(w.TEXT_BANK) == bank
+    with pytest.raises(ValueError, match="JWK3"):
+        family("JWK3")
+    assert family("JWK") is family_example.FAMILY  # what was there before stays
 
 
 def test_a_user_family_validates_its_parameters_by_its_own_ranges():

@@ -126,7 +126,8 @@ from lantern_jax.scoring.thresholds import D_SAFE_LARGE_M, D_SAFE_SMALL_M
 
 __all__ = [
     # the record, the scene a builder returns, registration
-    "FamilyRecord", "Scene", "Clearance", "register_family", "registered_families",
+    "FamilyRecord", "Scene", "Clearance", "register_family", "registered_families", "snapshot",
+    "restore",
     # building blocks
     "ActorSpec", "OccluderSpec", "LaneSection", "RoadMap", "RouteSpec", "Centerline",
     "StraightLayout", "straight_road", "ego_route", "lane_path", "opposing_sections",
@@ -355,6 +356,48 @@ def register_family(record: FamilyRecord) -> _families.Family:
     )
     _RECORDS[record.code] = record
     return _families.add_record(internal)
+
+
+@dataclass(frozen=True)
+class Registrations:
+    """What :func:`snapshot` saw: the registered codes, records, ranges, premise rules and the
+    text bank's length."""
+
+    codes: dict
+    records: dict
+    internal: dict
+    ranges: dict
+    rules: dict
+    texts: int
+
+
+def snapshot() -> Registrations:
+    """The registrations as they are now, for :func:`restore` (tests and notebooks that define
+    families for a while)."""
+    return Registrations(
+        dict(family_codes._REGISTERED), dict(_RECORDS), dict(_families.FAMILY_RECORDS),
+        dict(_spec._REGISTERED_RANGES), dict(_premise._REGISTERED_RULES), len(_warnings.TEXT_BANK),
+    )  # fmt: skip
+
+
+def restore(state: Registrations) -> None:
+    """Forget every family registered since ``state`` was taken (:func:`snapshot`), their texts
+    included.  Scenarios built or programs compiled in between keep what they were built with;
+    suites of the forgotten families no longer load.
+
+    Raises:
+        ValueError: when the text bank holds fewer texts than at the snapshot.
+    """
+    if len(_warnings.TEXT_BANK) < state.texts:
+        raise ValueError("restore: the text bank is shorter than at the snapshot")
+    for target, saved in (
+        (family_codes._REGISTERED, state.codes), (_RECORDS, state.records),
+        (_families.FAMILY_RECORDS, state.internal), (_spec._REGISTERED_RANGES, state.ranges),
+        (_premise._REGISTERED_RULES, state.rules),
+    ):  # fmt: skip
+        target.clear()
+        target.update(saved)
+    del _warnings.TEXT_BANK[state.texts :]
 
 
 # ------------------------------------------------------------------------------------------------
