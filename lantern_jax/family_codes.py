@@ -79,6 +79,10 @@ def register(code_: str, name_: str) -> int:
     Registering the same code with the same name again returns its index (a module imported
     twice registers nothing new).
 
+    Args:
+        code_: the family code (:data:`CODE_PATTERN`).
+        name_: its long name, for listings.
+
     Raises:
         ValueError: for a built-in code, a code that breaks :data:`CODE_PATTERN`, an empty name,
             or a code already registered under another name.
@@ -102,7 +106,11 @@ def stream(code_: str) -> int:
     """The number that seeds a family's random streams (suite candidates, dataset scenes): its
     index for the six built-in families (as ``lantern-v3`` and the dataset were generated), else
     the first four bytes of the SHA-256 of its code, so that a registered family's draws do not
-    depend on what else is registered."""
+    depend on what else is registered.
+
+    Args:
+        code_: a known family code.
+    """
     if code_ in FAMILIES:
         return FAMILIES.index(code_)
     index(code_)  # raises for an unknown code
@@ -111,6 +119,10 @@ def stream(code_: str) -> int:
 
 def table_codes(present: Iterable[str]) -> list[str]:
     """The family columns of a table: the six built-in codes, then the registered codes among
-    ``present`` (in index order)."""
+    ``present`` (in index order).
+
+    Args:
+        present: the family codes the table's rows (or columns) hold; unknown ones are ignored.
+    """
     seen = set(present)
     return list(FAMILIES) + [c for c in _REGISTERED if c in seen]

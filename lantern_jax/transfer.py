@@ -144,7 +144,11 @@ MEASURES = ("lead_s", "dv_mps", "rc", "collision", "blocked", "CUS")
 
 def summarize(rows: pd.DataFrame) -> pd.DataFrame:
     """Per (family, condition): the number of pairs, how many responded, and the mean with a
-    95 % bootstrap interval over pairs of every measure (:data:`MEASURES`)."""
+    95 % bootstrap interval over pairs of every measure (:data:`MEASURES`).
+
+    Args:
+        rows: :attr:`TransferResult.rows`.
+    """
     out = []
     for fam in dict.fromkeys(rows["family"]):
         for cond in CONDITIONS:
@@ -238,7 +242,12 @@ HEADERS = ("Event", "Condition", "n", "Lead (s)", "Resp.", "Δv (m/s)", "RC", "C
 
 def table_rows(summary: pd.DataFrame, families: tuple[str, ...]) -> pd.DataFrame:
     """The printed form of the summary rows of ``families`` (:data:`HEADERS`; mean and
-    ``[95 % interval]`` where there is more than one pair; ``–``: no pair responded)."""
+    ``[95 % interval]`` where there is more than one pair; ``–``: no pair responded).
+
+    Args:
+        summary: :attr:`TransferResult.summary`.
+        families: the family codes of the table, in row order.
+    """
     from lantern_jax.scenarios.families import family
 
     out = []
@@ -271,7 +280,14 @@ def paper_note(families: tuple[str, ...]) -> str:
 
 def table_groups(summary: pd.DataFrame) -> list[tuple[str, tuple[str, ...]]]:
     """The tables to print: the paper's two for the families they cover, then one for any
-    other family of the summary."""
+    other family of the summary.
+
+    Args:
+        summary: :attr:`TransferResult.summary`.
+
+    Returns:
+        ``[(title, family codes), ...]``.
+    """
     present = list(dict.fromkeys(summary["family"]))
     groups = []
     for title, fams in PAPER_TABLES:

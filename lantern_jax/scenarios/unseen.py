@@ -97,6 +97,10 @@ def straight_scene(p: dict, parking_width: float = 0.0):
     """The road, ego route, centre line and layout of a straight-road pair: ``lanes_fwd``
     forward lanes (the ego in the rightmost), ``lanes_back`` opposing, an optional parking lane.
 
+    Args:
+        p: a CYC or REV parameter dict.
+        parking_width: m, the parking lane right of the forward lanes (0: none).
+
     Returns:
         ``(road_map, route, line, layout)``.
     """
@@ -111,7 +115,13 @@ def straight_scene(p: dict, parking_width: float = 0.0):
 
 
 def road_path(line, s, d) -> np.ndarray:
-    """(n, 2) canonical-frame points of road coordinates ``(s, d)`` (arrays of equal length)."""
+    """(n, 2) canonical-frame points of road coordinates.
+
+    Args:
+        line: the ego lane's centre line.
+        s: (n,) m, arcs along it.
+        d: (n,) m, lateral offsets, + = left.
+    """
     return line.to_xy(np.asarray(s, np.float64), np.asarray(d, np.float64))
 
 
@@ -154,7 +164,12 @@ def cyclist_path(p: dict, kerb: float, far: float) -> dict:
     """The cyclist's ride in road coordinates: it waits beyond the kerb beside the bus front,
     heading along the road; on the event it rides on until its rear is 0.5 m past the bus
     front, turns left onto the crossing line (radius 3 m) and rides straight across to 2 m
-    beyond the road's far edge (``far``).
+    beyond the road's far edge.
+
+    Args:
+        p: a CYC parameter dict.
+        kerb: m, the right kerb's offset from the ego lane's centre (negative).
+        far: m, the road's far (left) edge's offset.
 
     Returns:
         ``s``, ``d`` (n,) m, the path; ``length`` m; ``to_ego_lane`` m, the path arc at which
@@ -322,7 +337,11 @@ EMV_RANGES = {
 
 
 def junction_of(p: dict):
-    """The EMV junction (no lights) with its corner buildings or walls and the waiting truck."""
+    """The EMV junction (no lights) with its corner buildings or walls and the waiting truck.
+
+    Args:
+        p: an EMV parameter dict (its junction and occluder fields).
+    """
     missing = None if p["missing_arm"] == "none" else p["missing_arm"]
     shape = fam.junctions.JunctionShape(
         int(p["num_arms"]), missing, int(p["lanes_per_direction"]), float(p["lane_width"]),
@@ -349,7 +368,12 @@ def junction_of(p: dict):
 
 def ambulance_path(road_map, p: dict) -> tuple[np.ndarray, float]:
     """The ambulance's path (its inbound lane up to the box edge, then straight on) from its
-    waiting place, and the arc of the box edge along it."""
+    waiting place, and the arc of the box edge along it.
+
+    Args:
+        road_map: the junction (:func:`junction_of`).
+        p: an EMV parameter dict (its ``amb_back``: where the ambulance waits).
+    """
     name, box_in = fam.junctions.inbound_lane(road_map, "W", AMB_LANE)
     lane = road_map.lane(name).center
     truck_front = box_in - fam.junctions.STOP_LINE_SETBACK - fam.junctions.TRUCK_STOP_GAP
@@ -363,6 +387,10 @@ def ambulance_path(road_map, p: dict) -> tuple[np.ndarray, float]:
 
 def crossing(route_xy: np.ndarray, path: np.ndarray) -> tuple[float, float]:
     """``(route arc, path arc)`` where the path first crosses the route (m).
+
+    Args:
+        route_xy: (n, 2) m, the ego route.
+        path: (k, 2) m, the ambulance's path.
 
     Raises:
         ValueError: when they do not cross.
@@ -379,7 +407,13 @@ def crossing(route_xy: np.ndarray, path: np.ndarray) -> tuple[float, float]:
 def emv_geometry(p: dict, approach: float | None = None) -> dict:
     """The junction, the ego route (for ``approach``, default the pair's) and the crossing: the
     route arc of the conflict point past the box entry (``c_off``), the ambulance's distance to
-    it (``d_amb``) and the event lead at which a non-reacting ego would meet it there."""
+    it (``d_amb``), the event lead at which a non-reacting ego would meet it there and the
+    warning lead.
+
+    Args:
+        p: an EMV parameter dict.
+        approach: m, the route's approach (default: ``p["approach"]``).
+    """
     road_map = junction_of(p)
     approach = float(p["approach"] if approach is None else approach)
     length = min(float(p["route_length"]), approach + _exit_room(road_map))
@@ -575,6 +609,10 @@ def reverse_manoeuvre(p: dict, kerb: float) -> dict:
     """The reversing car's path in road coordinates (rear first: straight back out of the bay
     until its rear is 1 m into the road, then a 5-m arc swinging the rear upstream until its
     centre is ``end_offset`` from the ego lane's centre) and its final pose.
+
+    Args:
+        p: a REV parameter dict.
+        kerb: m, the kerb's offset from the ego lane's centre (negative: right).
 
     Returns:
         ``s``, ``d`` (n,) m, the path; ``turn`` rad, the final turn from the bay's axis;

@@ -61,7 +61,12 @@ brake_signals = jax.jit(jax.vmap(brake_signal, in_axes=(0, 0, None)))
 
 def step_start_speeds(v0: float, speed_end: np.ndarray) -> np.ndarray:
     """(T,) m/s, the ego's speed at the start of every recorded tick: ``v0`` at the first, then
-    the previous tick's end speed."""
+    the previous tick's end speed.
+
+    Args:
+        v0: m/s, the speed at ``t = 0``.
+        speed_end: (T,) m/s, the speed at the end of every tick.
+    """
     speed_end = np.asarray(speed_end, np.float64)
     return np.concatenate([[float(v0)], speed_end[:-1]])
 
