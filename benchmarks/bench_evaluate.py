@@ -1,7 +1,7 @@
 """Whole-suite evaluation timing for one policy: compile, wall time after compile,
 scenario-ticks/s and peak memory.
 
-The timed call is exactly what ``evaluate`` runs (:func:`lantern_jax.evaluate.run_executions`):
+The timed call is exactly what ``evaluate`` runs (:func:`lantern_jax.evaluation.run_executions`):
 every pair of the suite under Route A with warning, Route A without warning and Route B
 (3 x 120 executions for ``lantern-v3``) in one jitted, vmapped rollout that stops when every
 execution has ended (large batches: a fixed number of slots, refilled with waiting executions

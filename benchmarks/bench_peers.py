@@ -2,7 +2,7 @@
 whole-suite evaluation against highway-env's ``highway-v0``.
 
 Ours: every execution of the built-in suite (``lantern-v3``: 3 x 120) for one policy, exactly as
-``evaluate`` runs it (:func:`lantern_jax.evaluate.run_executions`), after compile; a tick is one
+``evaluate`` runs it (:func:`lantern_jax.evaluation.run_executions`), after compile; a tick is one
 20 Hz step of the whole world of one execution (policy, IDM and scripted actors, ray-cast
 sensing, the temporal protocol and the score accumulators).  Only the ticks an execution really
 lived count (its final ``tick``), not the ticks a finished execution is held.

@@ -30,7 +30,7 @@ from pathlib import Path
 import pandas as pd
 
 from lantern_jax.dataset.store import load_frames
-from lantern_jax.evaluate import evaluate
+from lantern_jax.evaluation import evaluate
 from lantern_jax.policies.learned.checkpoint import checkpoint_policy, shipped_path
 from lantern_jax.training.config import load_config
 from lantern_jax.training.train import train

@@ -1,1 +1,93 @@
-"""lantern_jax: LANTERN cooperative-warning benchmark in JAX."""
+"""lantern_jax: the LANTERN cooperative-warning benchmark as a JAX-vectorized simulator.
+
+The names a user needs, importable from the package itself::
+
+    import lantern_jax as lj
+
+    result = lj.evaluate(["expert", "coop"], suite=lj.load_suite())
+    print(result.family_table)
+
+* :func:`evaluate` — every execution of a suite for one or several policies, scored by the
+  CUS, with intervals (:mod:`lantern_jax.evaluation`);
+* :func:`load_suite` — a suite of route pairs (the built-in ``lantern-v3`` by default);
+* :class:`Policy` and :func:`get_policy` — a policy of your own, or a registered one;
+* :func:`rollout` — one execution, tick by tick, for your own loops;
+* :class:`Settings`, :class:`ScoringSettings`, :class:`ProtocolSettings`, :class:`TextBank`,
+  :data:`DEFAULT_SETTINGS` and :func:`default_settings` — the values a simulation reads,
+  passed as arguments (:mod:`lantern_jax.sim.settings`);
+* :class:`FamilyRecord` and :func:`register_family` — a hazard family of your own
+  (``docs/families.md``).
+
+The names are loaded on first use, so ``import lantern_jax`` stays cheap and does not import
+JAX (the command line sets XLA's CPU device count before JAX starts).
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+#: public name -> module that defines it
+_EXPORTS = {
+    "evaluate": "lantern_jax.evaluation",
+    "EvalResult": "lantern_jax.evaluation",
+    "load_suite": "lantern_jax.scenarios.suite",
+    "Suite": "lantern_jax.scenarios.suite",
+    "Policy": "lantern_jax.policies.base",
+    "get_policy": "lantern_jax.policies.registry",
+    "policy_names": "lantern_jax.policies.registry",
+    "rollout": "lantern_jax.sim.rollout",
+    "Settings": "lantern_jax.sim.settings",
+    "DEFAULT_SETTINGS": "lantern_jax.sim.settings",
+    "default_settings": "lantern_jax.sim.settings",
+    "ScoringSettings": "lantern_jax.scoring.thresholds",
+    "ProtocolSettings": "lantern_jax.scenarios.protocol",
+    "TextBank": "lantern_jax.scenarios.warnings",
+    "FamilyRecord": "lantern_jax.scenarios.registry",
+    "register_family": "lantern_jax.scenarios.registry",
+}
+
+__all__ = [
+    "DEFAULT_SETTINGS",
+    "EvalResult",
+    "FamilyRecord",
+    "Policy",
+    "ProtocolSettings",
+    "ScoringSettings",
+    "Settings",
+    "Suite",
+    "TextBank",
+    "default_settings",
+    "evaluate",
+    "get_policy",
+    "load_suite",
+    "policy_names",
+    "register_family",
+    "rollout",
+]
+
+
+def __getattr__(name: str) -> Any:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'lantern_jax' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value  # later lookups skip this function
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *_EXPORTS])
+
+
+if TYPE_CHECKING:  # for type checkers and IDEs: the same names, imported eagerly
+    from lantern_jax.evaluation import EvalResult, evaluate
+    from lantern_jax.policies.base import Policy
+    from lantern_jax.policies.registry import get_policy, policy_names
+    from lantern_jax.scenarios.protocol import ProtocolSettings
+    from lantern_jax.scenarios.registry import FamilyRecord, register_family
+    from lantern_jax.scenarios.suite import Suite, load_suite
+    from lantern_jax.scenarios.warnings import TextBank
+    from lantern_jax.scoring.thresholds import ScoringSettings
+    from lantern_jax.sim.rollout import rollout
+    from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings, default_settings

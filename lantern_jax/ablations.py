@@ -31,7 +31,7 @@ import numpy as np
 import pandas as pd
 
 from lantern_jax.constants import CONDITIONS, DT, SUITE_ID
-from lantern_jax.evaluate import EvalResult, evaluate, package_versions
+from lantern_jax.evaluation import EvalResult, evaluate, package_versions
 from lantern_jax.policies.base import Policy
 from lantern_jax.scenarios.ablations import ABLATIONS, get_ablation
 from lantern_jax.scenarios.suite import Suite, load_suite

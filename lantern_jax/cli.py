@@ -19,6 +19,8 @@
     lantern-jax ablations --list         # the protocol ablations
     lantern-jax ablations --policy coop  # the paper's ablation table for one policy
     lantern-jax compare results --policy coop --policy expert   # paired difference, p-values
+    lantern-jax unseen --policy coop     # the paper's unseen-hazard tables
+    lantern-jax --families my_families.py evaluate --suite my_suite.json   # user families
 
 Options may also come from an experiment file (``--config``, TOML, one ``[evaluate]`` table; see
 :func:`load_config`); an option given on the command line always wins over the file.  Options
@@ -43,11 +45,13 @@ import threading
 import time
 from collections.abc import Sequence
 
-from lantern_jax.commands import CommandError
+from lantern_jax.commands import CommandError, write_and_list
 from lantern_jax.commands import compare as compare_command
 from lantern_jax.commands import dataset as dataset_command
+from lantern_jax.commands import families as families_option
 from lantern_jax.commands import stress as stress_command
 from lantern_jax.commands import train as train_command
+from lantern_jax.commands import unseen as unseen_command
 from lantern_jax.constants import FAMILIES, SUITE_ID
 
 REFERENCE_POLICIES = ("expert", "ego", "coop")
@@ -417,7 +421,7 @@ def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
     bd = Breakdown()
     bd.before_creation("start-up (Python, lantern_jax command line)")
     with bd.phase("imports (JAX, evaluator, tables)"):
-        from lantern_jax.evaluate import PolicyError, ablation_names, evaluate
+        from lantern_jax.evaluation import PolicyError, ablation_names, evaluate
         from lantern_jax.report import format_tables, write_outputs
     _apply_config(args)
     if args.policy is not None and not any(n.strip() for v in args.policy for n in v.split(",")):
@@ -508,7 +512,7 @@ def _run_record(argv: Sequence[str]) -> dict:
 
 
 def _evaluate_breakdown(bd, result, seconds: float) -> None:
-    """Add the phases of :func:`lantern_jax.evaluate.evaluate` (``seconds`` of wall time in
+    """Add the phases of :func:`lantern_jax.evaluation.evaluate` (``seconds`` of wall time in
     all) to a breakdown: world build, per policy trace + lower, XLA compile, rollout and
     scoring, then the tables; the remainder is the rest of the evaluation (checks, progress)."""
     start = len(bd.phases)
@@ -527,8 +531,9 @@ def _evaluate_breakdown(bd, result, seconds: float) -> None:
 def _print_suite(suite) -> None:
     from tabulate import tabulate
 
-    from lantern_jax.constants import FAMILIES
+    from lantern_jax import family_codes
 
+    families = family_codes.table_codes(p.family for p in suite.pairs)  # the six, then others
     rows = [
         [
             p.pair_id,
@@ -548,7 +553,7 @@ def _print_suite(suite) -> None:
         )
     )
     print()
-    counts = {f: sum(p.family == f for p in suite.pairs) for f in FAMILIES}
+    counts = {f: sum(p.family == f for p in suite.pairs) for f in families}
     per_family = ", ".join(f"{f} {n}" for f, n in counts.items())
     print(f"suite {suite.suite_id}: {len(suite)} pairs ({per_family})")
     print(f"suite sha256: {suite.suite_sha256}")
@@ -560,7 +565,7 @@ def _print_suite(suite) -> None:
         who = rep.get("validator", "expert-v1")
         print(f"generation report: expert pass rate before filtering (candidates run; "
               f"validator {who})")  # fmt: skip
-        for f in FAMILIES:
+        for f in families:
             if f in rate:
                 print(f"  {f:<4} {100.0 * float(rate[f]):5.1f} %  ({tried.get(f, '?')})")
         for key, label in (("static_rejected", "static rejects"),
@@ -568,7 +573,7 @@ def _print_suite(suite) -> None:
                            ("near_duplicate_rejected", "near-duplicate rejects")):  # fmt: skip
             counts = rep.get(key)
             if counts:
-                print(f"  {label}: " + ", ".join(f"{f} {counts.get(f, 0)}" for f in FAMILIES))
+                print(f"  {label}: " + ", ".join(f"{f} {counts.get(f, 0)}" for f in families))
     else:
         print("generation report: none in the manifest")
 
@@ -653,7 +658,7 @@ def cmd_ablations(args: argparse.Namespace, argv: Sequence[str]) -> int:
     _check_out(args.out)
     suite = _load_suite(args)
     from lantern_jax.ablations import run_ablations
-    from lantern_jax.evaluate import PolicyError
+    from lantern_jax.evaluation import PolicyError
     from lantern_jax.report import format_ablation_table, interval_note, write_ablation_outputs
     from lantern_jax.scenarios.ablations import ABLATIONS
 
@@ -706,8 +711,6 @@ def _print_and_write(args: argparse.Namespace, tables: dict, note: str) -> int:
     """Print every (title, table) and write them as CSV + Markdown into ``--out``."""
     from tabulate import tabulate
 
-    from lantern_jax.diagnostics import write_tables
-
     for title, df, *display in tables.values():
         print(title)
         print(tabulate(display[0] if display else df, headers="keys", showindex=False,
@@ -715,15 +718,7 @@ def _print_and_write(args: argparse.Namespace, tables: dict, note: str) -> int:
         print()
     if note:
         print(note)
-    try:
-        paths = write_tables(tables, args.out)
-    except OSError as e:
-        print(f"lantern-jax: error: cannot write results to {args.out}: {e}", file=sys.stderr)
-        return 1
-    print(f"Wrote {len(paths)} files:")
-    for path in paths:
-        print(f"  {path}")
-    return 0
+    return write_and_list(tables, args.out)
 
 
 def cmd_wording(args: argparse.Namespace, argv: Sequence[str]) -> int:
@@ -869,6 +864,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="LANTERN cooperative-warning driving benchmark (JAX, batched).",
         allow_abbrev=False,
     )
+    families_option.add_option(parser)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
 
     ev = sub.add_parser(
@@ -1020,6 +1016,7 @@ def build_parser() -> argparse.ArgumentParser:
     compare_command.add_parser(sub)
     dataset_command.add_parser(sub)
     train_command.add_parser(sub)
+    unseen_command.add_parser(sub)
     _add_language_commands(sub)
     return parser
 
@@ -1195,6 +1192,7 @@ def main(argv: Sequence[str] | None = None, exit_on_interrupt: bool | None = Non
         except SystemExit as e:  # --help, or an argparse usage error (already printed)
             return e.code if isinstance(e.code, int) else (0 if e.code is None else 2)
         try:
+            families_option.load(args.families)
             if hasattr(args, "no_compile_cache"):
                 configure_compile_cache(not args.no_compile_cache)
             if getattr(args, "coordinator", None) or getattr(args, "num_processes", None):

@@ -45,7 +45,7 @@ import numpy as np
 import pandas as pd
 
 from lantern_jax.constants import DT, FAMILIES, SUITE_ID
-from lantern_jax.evaluate import build_executions, run_policy
+from lantern_jax.evaluation import build_executions, run_policy
 from lantern_jax.files import StagedFolder
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.registry import get_policy
@@ -75,7 +75,7 @@ from lantern_jax.scoring.uncertainty import (
     resampling,
     sample_interval,
 )
-from lantern_jax.sim.engine import Program
+from lantern_jax.sim.engine import Program, check_texts
 from lantern_jax.sim.rollout import rollout
 from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings
 from lantern_jax.world import Scenario, tree_stack
@@ -276,6 +276,7 @@ def run_recorded(
         horizon covers the longest route timeout.
     """
     batch = tree_stack(scenarios)
+    check_texts(settings, batch)
     horizon = int(np.ceil(float(np.max(np.asarray(batch.config.timeout_s))) / DT))
     final, rec = _recorded(batch, params, settings, program=Program(policy), horizon=horizon)
     metrics = jax.vmap(lambda t: finalize(t, settings.scoring))(final.telemetry)

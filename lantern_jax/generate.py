@@ -19,7 +19,11 @@ are filled in rounds of ``ROUND_SIZE`` candidates per unfilled slot:
    each accepted when it passed both validations, its slot still needs pairs and it is not a
    near duplicate of a pair selected before it.
 
-Rounds stop when every slot holds ``pairs_per_slot`` pairs.  The batch of every expert call is
+Rounds stop when every slot holds ``pairs_per_slot`` pairs.  ``generate_suite(families=...)``
+generates a suite of other families, registered ones included
+(:mod:`lantern_jax.scenarios.registry`); a registered family's slots draw from generators
+seeded by a number derived from its code (:func:`lantern_jax.family_codes.stream`), so its
+pairs do not depend on what else is registered.  The batch of every expert call is
 padded to one size with executions that are never stepped, so one compilation serves all
 rounds and a round of a few candidates costs only their own ticks.  This is an
 evaluation-layer concern (it runs the simulator and a policy), so it lives above
@@ -40,15 +44,17 @@ from __future__ import annotations
 
 import collections
 import math
+from collections.abc import Sequence
 
 import jax
 import numpy as np
 
+from lantern_jax import family_codes
 from lantern_jax.constants import DT, FAMILIES, WEATHERS
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.duplicates import near_duplicate, route_samples
 from lantern_jax.scenarios.families import sample_params
-from lantern_jax.scenarios.spec import PARAM_RANGES
+from lantern_jax.scenarios.spec import PARAM_RANGES, param_ranges
 from lantern_jax.scenarios.suite import (
     SUITE_ID,
     PairSpec,
@@ -72,6 +78,15 @@ ROUTE_DECIMALS = 3  # the manifest's route samples are rounded to 1 mm
 MAX_TICKS = int(
     math.ceil((20.0 + max(r["route_length"].hi for r in PARAM_RANGES.values()) / 3.0) / DT)
 )
+
+
+def max_ticks(families: Sequence[str]) -> int:
+    """Ticks of the expert calls of a suite of ``families``: :data:`MAX_TICKS` for the six,
+    longer when a registered family's routes are longer."""
+    longest = max(param_ranges(f)["route_length"].hi for f in families)
+    return max(MAX_TICKS, int(math.ceil((20.0 + longest / 3.0) / DT)))
+
+
 GATES = ("gate_collision", "gate_route_deviation", "gate_lane", "gate_rule", "gate_block")
 
 VALIDATOR = "expert"  # policy that filters newly generated suites
@@ -93,18 +108,21 @@ def dynamic_check(
     scenarios_b: list[Scenario],
     batch_size: int | None = None,
     validator: str = VALIDATOR,
+    ticks: int = MAX_TICKS,
 ) -> tuple[np.ndarray, list[str]]:
     """Run the validator (a privileged expert) on Route A (warning) and Route B of many pairs
     in one batched call.
 
     The executions are stepped as an evaluation steps them
-    (:func:`lantern_jax.evaluate.run_executions`: refilled slots on every device), the batch
+    (:func:`lantern_jax.evaluation.run_executions`: refilled slots on every device), the batch
     padded with executions that are never stepped.
 
     Args:
         scenarios_a, scenarios_b: the pairs' Route A and Route B scenarios.
         batch_size: pad the batch of ``2 n`` executions to this many (never stepped) so that
             calls of different sizes share one compilation; None = no padding.
+        validator: the registered policy that validates.
+        ticks: horizon of the rollouts (:func:`max_ticks` of the suite's families).
 
     Returns:
         (accepted (n,) bool, reasons list[str] — "" for accepted pairs).
@@ -115,7 +133,7 @@ def dynamic_check(
         raise ValueError(f"dynamic_check: {len(execs)} executions exceed batch {batch_size}")
     pol, params = _validator(validator)
     final, _ = run_executions(
-        pol, tree_stack(execs), params, MAX_TICKS, compact=True, pad_to=batch_size
+        pol, tree_stack(execs), params, ticks, compact=True, pad_to=batch_size
     )
     m = jax.tree.map(np.asarray, finalize(final.telemetry))
     proto = jax.tree.map(np.asarray, final.protocol)
@@ -148,19 +166,22 @@ def _slot_rng(seed: int, w: int, f: int) -> np.random.Generator:
 class _Generation:
     """The state of one generation run: slot generators, selected pairs, statistics."""
 
-    def __init__(self, seed: int, pairs_per_slot: int, candidates_per_slot: int) -> None:
+    def __init__(self, seed: int, pairs_per_slot: int, candidates_per_slot: int,
+                 families: Sequence[str] = FAMILIES) -> None:  # fmt: skip
         self.seed, self.need, self.max_k = seed, pairs_per_slot, candidates_per_slot
-        self.rngs = {(w, f): _slot_rng(seed, w, f) for w in range(len(WEATHERS))
-                     for f in range(len(FAMILIES))}  # fmt: skip
+        self.families = tuple(families)
+        self.rngs = {(w, f): _slot_rng(seed, w, family_codes.stream(code))
+                     for w in range(len(WEATHERS))
+                     for f, code in enumerate(self.families)}  # fmt: skip
         self.drawn = collections.Counter()  # candidates drawn per slot
         self.filled = collections.Counter()  # pairs selected per slot
-        self.selected: dict[str, list[dict]] = {f: [] for f in FAMILIES}
+        self.selected: dict[str, list[dict]] = {f: [] for f in self.families}
         self.seen: set[str] = set()
-        zero = {f: 0 for f in FAMILIES}
+        zero = dict.fromkeys(self.families, 0)
         self.stats = dict(candidates=dict(zero), static_rejected=dict(zero),
                           premise_rejected=dict(zero), near_duplicate_rejected=dict(zero),
                           dynamic_tried=dict(zero), dynamic_passed=dict(zero))  # fmt: skip
-        self.reasons: dict[str, set[str]] = {f: set() for f in FAMILIES}
+        self.reasons: dict[str, set[str]] = {f: set() for f in self.families}
 
     def open_slots(self) -> list[tuple[int, int]]:
         return [s for s in self.rngs if self.filled[s] < self.need and self.drawn[s] < self.max_k]
@@ -172,13 +193,13 @@ class _Generation:
         """Draw and statically check the next ``ROUND_SIZE`` candidates of every open slot."""
         out = []
         for w, f in self.open_slots():
-            fam = FAMILIES[f]
+            fam = self.families[f]
             for _ in range(min(ROUND_SIZE, self.max_k - self.drawn[(w, f)])):
                 k = self.drawn[(w, f)]
                 self.drawn[(w, f)] += 1
                 self.stats["candidates"][fam] += 1
-                params = sample_params(fam, self.rngs[(w, f)], WEATHERS[w])
-                try:
+                try:  # a sampler may draw an infeasible dict: a static rejection
+                    params = sample_params(fam, self.rngs[(w, f)], WEATHERS[w])
                     a, b, meta = static_check(params, self.seen)
                 except ValueError as e:
                     key = "premise_rejected" if "premise" in str(e) else "static_rejected"
@@ -195,14 +216,14 @@ class _Generation:
     def select(self, cands: list[dict], ok: np.ndarray, reasons: list[str]) -> None:
         """Accept the round's candidates k by k, weathers in order (see the module docstring)."""
         for c, good, why in zip(cands, ok, reasons, strict=True):
-            fam = FAMILIES[c["f"]]
+            fam = self.families[c["f"]]
             self.stats["dynamic_tried"][fam] += 1
             self.stats["dynamic_passed"][fam] += int(good)
             c["ok"] = bool(good)
             if not good:
                 self.reasons[fam].add(why)
         for c in sorted(cands, key=lambda c: (c["k"], c["w"], c["f"])):
-            fam, slot = FAMILIES[c["f"]], (c["w"], c["f"])
+            fam, slot = self.families[c["f"]], (c["w"], c["f"])
             if not c["ok"] or self.filled[slot] >= self.need:
                 continue
             if self._is_duplicate(fam, c["route"]):
@@ -214,7 +235,7 @@ class _Generation:
 
 def _manifest_pairs(gen: _Generation) -> list[dict]:
     pairs = []
-    for fam in FAMILIES:
+    for fam in gen.families:
         chosen = sorted(gen.selected[fam], key=lambda c: (c["w"], c["k"]))
         for i, c in enumerate(chosen, start=1):
             route = np.round(c["route"], ROUTE_DECIMALS) + 0.0
@@ -230,6 +251,8 @@ def generate_suite(
     candidates_per_slot: int = CANDIDATES_PER_SLOT,
     progress: bool = True,
     validator: str = VALIDATOR,
+    families: Sequence[str] = FAMILIES,
+    suite_id: str | None = None,
 ) -> dict:
     """Generate, validate and select a suite; returns the manifest dict.
 
@@ -239,11 +262,21 @@ def generate_suite(
         candidates_per_slot: most candidates drawn per slot.
         progress: print one line per round.
         validator: registered policy of the dynamic validation (recorded in the report).
+        families: the families of the suite (default: the six; registered families may be
+            named, :mod:`lantern_jax.scenarios.registry`).
+        suite_id: the manifest's suite id (default: :func:`regenerated_suite_id`).
 
     Raises:
         RuntimeError: naming the slots that could not be filled.
+        ValueError: for an unknown family or one named twice.
     """
-    gen = _Generation(seed, pairs_per_slot, candidates_per_slot)
+    families = tuple(families)
+    for code in families:
+        param_ranges(code)  # raises for an unknown family
+    if len(set(families)) != len(families):
+        raise ValueError(f"families: named more than once in {families}")
+    gen = _Generation(seed, pairs_per_slot, candidates_per_slot, families)
+    ticks = max_ticks(families)
     batch = 2 * len(gen.rngs) * ROUND_SIZE
     rounds = 0
     while gen.open_slots():
@@ -251,14 +284,14 @@ def generate_suite(
         rounds += 1
         if cands:
             ok, reasons = dynamic_check(
-                [c["a"] for c in cands], [c["b"] for c in cands], batch, validator
+                [c["a"] for c in cands], [c["b"] for c in cands], batch, validator, ticks
             )
             gen.select(cands, ok, reasons)
         if progress:
             done = sum(min(v, pairs_per_slot) for v in gen.filled.values())
             print(f"[suite] round {rounds}: {len(cands)} candidates to {validator}, "
                   f"{done}/{pairs_per_slot * len(gen.rngs)} pairs selected")  # fmt: skip
-    missing = [(WEATHERS[w], FAMILIES[f]) for (w, f) in gen.rngs if gen.filled[(w, f)] < gen.need]
+    missing = [(WEATHERS[w], families[f]) for (w, f) in gen.rngs if gen.filled[(w, f)] < gen.need]
     if missing:
         raise RuntimeError(f"not enough valid candidates for slots {missing}; statistics per "
                            f"family: {gen.stats}")  # fmt: skip
@@ -271,7 +304,7 @@ def generate_suite(
         rounds=rounds,
         **st,
         expert_pass_rate={
-            f: st["dynamic_passed"][f] / max(st["dynamic_tried"][f], 1) for f in FAMILIES
+            f: st["dynamic_passed"][f] / max(st["dynamic_tried"][f], 1) for f in families
         },  # fmt: skip
         dynamic_reject_reasons={f: sorted(r)[:10] for f, r in gen.reasons.items()},
     )
@@ -279,7 +312,7 @@ def generate_suite(
              for p in pairs]  # fmt: skip
     digest = suite_hash(specs)
     return dict(
-        suite_id=regenerated_suite_id(seed, digest),
+        suite_id=suite_id or regenerated_suite_id(seed, digest),
         format_version=1,
         seed=seed,
         pairs=pairs,

@@ -43,7 +43,8 @@ a number reaches a policy: there is no separate position field.
 A text is tokenised piece by piece: the words between placeholders, stripped of the single space
 that separates them from a placeholder, each go through the tokenizer as they are, so the ids of
 every piece are exactly the tokenizer's output for that piece, and :func:`detokenize` gives the
-text back (:func:`check_template` states the spacing rule that makes this exact).
+text back (:func:`check_template` states the spacing rule that makes this exact: punctuation
+may follow a placeholder directly, a word after one space).
 
 The embedding is a plain array: :func:`pooled_embedding` (mean over a text's word tokens, then
 unit length, as WordLlama's own inference pools) runs on NumPy outside ``jit`` and on a
@@ -168,12 +169,20 @@ def load_embedding(root: str | None = None) -> np.ndarray:
     return table
 
 
+#: Punctuation that may follow a placeholder directly (``"... near <FRONT_CAR_POS>; the ..."``,
+#: as the paper's held-out cyclist paraphrase writes it); :func:`detokenize` glues a piece that
+#: starts with one of them to the position before it.
+GLUED_PUNCTUATION = ".,;:!?"
+
+
 def check_template(text: str, placeholder: str = PLACEHOLDER) -> None:
     """Refuse a text that would not survive tokenisation unchanged.
 
-    The rule: no leading or trailing whitespace, and every placeholder separated from its
-    neighbours by exactly one space (or the start/end of the text), e.g.
-    ``"The car at <FRONT_CAR_POS> is stopped."``, not ``"... at <FRONT_CAR_POS>."``.
+    The rule: no leading or trailing whitespace; every placeholder separated from the word
+    before it by exactly one space (or the start of the text), and followed by the end of the
+    text, by :data:`GLUED_PUNCTUATION` directly, or by exactly one space and then a word, e.g.
+    ``"The car at <FRONT_CAR_POS> is stopped."`` or ``"... near <FRONT_CAR_POS>; it ..."``, not
+    ``"... at<FRONT_CAR_POS> ..."`` or ``"... at <FRONT_CAR_POS> ."``.
 
     Raises:
         ValueError: naming the problem.
@@ -185,13 +194,17 @@ def check_template(text: str, placeholder: str = PLACEHOLDER) -> None:
     for m in re.finditer(re.escape(placeholder), text):
         a, b = m.start(), m.end()
         before_ok = a == 0 or (text[a - 1] == " " and (a == 1 or not text[a - 2].isspace()))
-        after_ok = b == len(text) or (
-            text[b] == " " and (b + 1 == len(text) or not text[b + 1].isspace())
+        spaced = (
+            b + 1 < len(text)
+            and text[b] == " "
+            and not text[b + 1].isspace()
+            and text[b + 1] not in GLUED_PUNCTUATION
         )
+        after_ok = b == len(text) or text[b] in GLUED_PUNCTUATION or spaced
         if not (before_ok and after_ok):
             raise ValueError(
                 f"text: {placeholder} must be separated from the words by exactly one space "
-                f"in {text!r}"
+                f"(punctuation may follow it directly) in {text!r}"
             )
 
 
@@ -308,7 +321,11 @@ def detokenize(
         i += 1
     if run:
         pieces.append(tok.decode(run, skip_special_tokens=False))
-    return " ".join(pieces)
+    text = pieces[0] if pieces else ""
+    for piece in pieces[1:]:  # punctuation right after a position is glued to it
+        glued = piece[:1] in GLUED_PUNCTUATION and text.endswith((")", placeholder))
+        text += piece if glued else " " + piece
+    return text
 
 
 def word_mask(tokens: Array) -> Array:

@@ -1,4 +1,4 @@
-"""Tables and files of an evaluation (DESIGN §9).
+"""Tables and files of an evaluation.
 
 * :func:`format_family_table` / :func:`format_decomposition` render the per-family CUS table
   (with each model's paired warning gain) and the CUS decomposition for the terminal (or, with
@@ -39,6 +39,7 @@ import numpy as np
 import pandas as pd
 from tabulate import tabulate
 
+from lantern_jax import family_codes
 from lantern_jax.files import StagedFolder, atomic_write, check_target_folder
 from lantern_jax.scoring import uncertainty
 from lantern_jax.scoring.aggregate import DECOMPOSITION_COLUMNS
@@ -47,7 +48,7 @@ from lantern_jax.scoring.uncertainty import CONFIDENCE, MIN_N, interval_columns
 
 if TYPE_CHECKING:
     from lantern_jax.ablations import AblationResult
-    from lantern_jax.evaluate import EvalResult
+    from lantern_jax.evaluation import EvalResult
 
 ROUTE_CSV = "route_level_results.csv"
 FAMILY_CSV = "family_cus.csv"
@@ -74,6 +75,15 @@ OUTPUT_FILES = (
 )
 
 FAMILY_COLUMNS = uncertainty.FAMILY_COLUMNS
+
+
+def family_columns(df: pd.DataFrame) -> tuple[str, ...]:
+    """The family columns of a family or premise table: the six, then the registered families
+    among its columns (:func:`lantern_jax.family_codes.table_codes`), then ``Overall``
+    (:data:`FAMILY_COLUMNS` for a table of the six)."""
+    return (*family_codes.table_codes(df.columns), "Overall")
+
+
 GAIN_CONDITION = uncertainty.GAIN
 FLAG = "*"  # marks a cell averaging fewer than uncertainty.MIN_N pairs
 CONDITION_ORDER = ("warning", "no-warning", GAIN_CONDITION)
@@ -123,7 +133,8 @@ def ordered_tables(result: EvalResult) -> tuple[pd.DataFrame, pd.DataFrame]:
     """The family table and the decomposition of ``result`` with models in evaluation order and
     conditions as in :func:`order_rows` (the order of the printed and written tables)."""
     models = list(dict.fromkeys(result.route_table["model"]))
-    fam = order_rows(result.family_table, models)[["model", "condition", *FAMILY_COLUMNS]]
+    cols = family_columns(result.family_table)
+    fam = order_rows(result.family_table, models)[["model", "condition", *cols]]
     dec = order_rows(result.decomposition, models)[["model", "condition", *DECOMPOSITION_COLUMNS]]
     return fam, dec
 
@@ -221,7 +232,8 @@ def format_family_table(
         ``-`` marks a family without pairs; :data:`FLAG` a cell of fewer than ``MIN_N`` pairs.
     """
     df = _with_keys(df)
-    missing = [c for c in FAMILY_COLUMNS if c not in df.columns]
+    columns = family_columns(df)
+    missing = [c for c in columns if c not in df.columns]
     if missing:
         raise ValueError(f"family table: missing column(s) {missing}")
     ivs = _interval_rows(intervals, ("model", "condition"))
@@ -233,16 +245,15 @@ def format_family_table(
         signed = rec["condition"] == GAIN_CONDITION
         rows.append(
             [_label(rec["model"], rec["condition"])]
-            + [_interval_cell(rec, iv, c, signed, "ci", False) for c in FAMILY_COLUMNS]
+            + [_interval_cell(rec, iv, c, signed, "ci", False) for c in columns]
         )
     return tabulate(
         rows,
-        headers=["Model (condition)", *(_counts_header(FAMILY_COLUMNS, used) if ivs else
-                                        FAMILY_COLUMNS)],
+        headers=["Model (condition)", *(_counts_header(columns, used) if ivs else columns)],
         tablefmt=tablefmt,
         disable_numparse=True,
-        colalign=("left", *["right"] * len(FAMILY_COLUMNS)),
-    )  # fmt: skip
+        colalign=("left", *["right"] * len(columns)),
+    )
 
 
 def format_decomposition(
@@ -306,32 +317,33 @@ def _pm_table(
 def format_premise_table(
     df: pd.DataFrame, tablefmt: str = "simple", intervals: pd.DataFrame | None = None
 ) -> str:
-    """The premise table (:func:`lantern_jax.evaluate.premise_table`) as text: one row per
+    """The premise table (:func:`lantern_jax.evaluation.premise_table`) as text: one row per
     measure (% with one decimal; with ``intervals``, ``EvalResult.intervals.premise``, also
     its interval), then the execution counts and, with intervals, the pairs resampled."""
     ivs = _interval_rows(intervals, ("measure",))
+    columns = family_columns(df)
     rows = []
     for rec in df.to_dict("records"):
         if rec["measure"] == "Route A executions":
             rows.append([rec["measure"]] + [
-                "-" if not math.isfinite(rec[c]) else f"{rec[c]:.0f}" for c in FAMILY_COLUMNS
+                "-" if not math.isfinite(rec[c]) else f"{rec[c]:.0f}" for c in columns
             ])  # fmt: skip
             continue
         iv = ivs.get((rec["measure"],)) if ivs else None
         rows.append([rec["measure"]] + [
             "-" if not math.isfinite(rec[c]) else _interval_cell(rec, iv, c, False, "ci", False)
-            for c in FAMILY_COLUMNS
+            for c in columns
         ])  # fmt: skip
     if ivs:
         first = next(iter(ivs.values()))
-        rows.append(["pairs (resampled)"] + [str(first[interval_columns(c)[2]])
-                                             for c in FAMILY_COLUMNS])  # fmt: skip
+        rows.append(["pairs (resampled)"] + [str(first.get(interval_columns(c)[2], "-"))
+                                             for c in columns])  # fmt: skip
     return tabulate(
         rows,
-        headers=["", *FAMILY_COLUMNS],
+        headers=["", *columns],
         tablefmt=tablefmt,
         disable_numparse=True,
-        colalign=("left", *["right"] * len(FAMILY_COLUMNS)),
+        colalign=("left", *["right"] * len(columns)),
     )
 
 
@@ -528,7 +540,7 @@ def _write_set(result: EvalResult, out: Path, extra_manifest: dict | None,
     keys = ("model", "condition")
     fam_iv, dec_iv = (iv.family, iv.decomposition) if iv is not None else (None, None)
     for name, df, ivs, cols in (
-        (FAMILY_CSV, fam, fam_iv, FAMILY_COLUMNS),
+        (FAMILY_CSV, fam, fam_iv, family_columns(fam)),
         (DECOMPOSITION_CSV, dec, dec_iv, DECOMPOSITION_COLUMNS),
     ):
         table = with_interval_columns(df, ivs, keys, cols)
@@ -590,7 +602,7 @@ def write_outputs(
     Leftovers of an interrupted earlier write are cleaned first.
 
     Args:
-        result: from :func:`lantern_jax.evaluate.evaluate`.
+        result: from :func:`lantern_jax.evaluation.evaluate`.
         out_dir: output folder (created if needed).
         extra_manifest: more entries for the reproducibility manifest (they must be the same
             for the same inputs).

@@ -2,7 +2,7 @@
 
 A workload is a *source* — a function from execution ids to a batch of scenarios — and a
 count.  :func:`stream_executions` builds one chunk at a time, runs it with the evaluator's
-rollout (:func:`lantern_jax.evaluate.run_executions`: refilled slots, all local devices, or the
+rollout (:func:`lantern_jax.evaluation.run_executions`: refilled slots, all local devices, or the
 global mesh under JAX's distributed runtime), keeps only the per-execution outputs of
 :func:`~lantern_jax.scoring.metrics.finalize` (about 40 numbers per execution) and drops the
 chunk's scenarios and states before the next one.  Every chunk has the same shape (the last

@@ -31,7 +31,8 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
-from lantern_jax.constants import FAMILIES, NUM_ACTOR_KINDS, NUM_OCCLUDER_KINDS, NUM_ROLES
+from lantern_jax import family_codes
+from lantern_jax.constants import NUM_ACTOR_KINDS, NUM_OCCLUDER_KINDS, NUM_ROLES
 from lantern_jax.times import NEVER
 
 Array = jax.Array
@@ -406,7 +407,7 @@ class ExecutionConfig:
     the condition (warning / no-warning) and the route variant (A / B) never branch in Python.
     """
 
-    family: Array  # () int32, index into constants.FAMILIES
+    family: Array  # () int32, family index (family_codes.codes(): the six, then registered)
     is_route_a: Array  # () bool, Route A (hazard) vs Route B (control)
     warning_enabled: Array  # () bool, warning condition (only meaningful on Route A)
     s_warn: Array  # () float32, m, route arc of the warning point
@@ -469,9 +470,9 @@ class ExecutionConfig:
                 f"ExecutionConfig.override_off_s: {float(self.override_off_s)} before "
                 f"override_on_s {float(self.override_on_s)}"
             )
-        fam = int(self.family)
-        if not 0 <= fam < len(FAMILIES):
-            raise ValueError(f"ExecutionConfig.family: {fam} outside 0..{len(FAMILIES) - 1}")
+        fam, known = int(self.family), len(family_codes.codes())
+        if not 0 <= fam < known:
+            raise ValueError(f"ExecutionConfig.family: {fam} outside 0..{known - 1}")
         if not float(self.s_warn) <= float(self.s_event) <= float(self.s_conflict):
             raise ValueError(
                 "ExecutionConfig.s_warn/s_event/s_conflict: need s_warn <= s_event <= "

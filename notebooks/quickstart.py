@@ -41,7 +41,7 @@ import numpy as np
 import pandas as pd
 from IPython.display import display
 
-from lantern_jax.evaluate import evaluate
+from lantern_jax.evaluation import evaluate
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.report import format_decomposition, format_family_table, ordered_tables
 from lantern_jax.scenarios.families import build_pair

@@ -37,7 +37,7 @@ from IPython.display import display
 
 from lantern_jax.dataset.generate import generate_dataset
 from lantern_jax.dataset.store import card_markdown
-from lantern_jax.evaluate import evaluate
+from lantern_jax.evaluation import evaluate
 from lantern_jax.policies.learned.checkpoint import checkpoint_policy
 from lantern_jax.report import format_family_table, order_rows
 from lantern_jax.scenarios.suite import load_suite

@@ -106,7 +106,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-import lantern_jax.evaluate as ev
+import lantern_jax.evaluation as ev
 from lantern_jax import cli, files
 from lantern_jax.policies import registry as policy_registry
 from lantern_jax.policies.base import Policy

@@ -22,7 +22,7 @@ import pytest
 
 from lantern_jax import cli
 from lantern_jax.constants import FAMILIES
-from lantern_jax.evaluate import ablation_names, params_hash
+from lantern_jax.evaluation import ablation_names, params_hash
 from lantern_jax.policies.registry import get_policy, policy_names
 from lantern_jax.report import OUTPUT_FILES
 from lantern_jax.scenarios.suite import load_suite, write_manifest

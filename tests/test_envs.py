@@ -39,7 +39,7 @@ def env():
 
 def test_importing_lantern_jax_does_not_import_brax():
     code = (
-        "import sys, lantern_jax, lantern_jax.evaluate, lantern_jax.cli, "
+        "import sys, lantern_jax, lantern_jax.evaluation, lantern_jax.cli, "
         "lantern_jax.policies.registry; assert 'brax' not in sys.modules, 'brax imported'"
     )
     subprocess.run([sys.executable, "-c", code], check=True)

@@ -20,7 +20,7 @@ import pandas as pd
 import pytest
 
 from lantern_jax.constants import FAMILIES, KIND_PEDESTRIAN
-from lantern_jax.evaluate import (
+from lantern_jax.evaluation import (
     CONDITIONS,
     ablation_names,
     build_executions,
@@ -503,7 +503,7 @@ def test_slot_scheduling_matches_one_group(shipped, monkeypatch):
 def test_trimmed_padding_changes_no_result(suite2, policy):
     """Cutting the unused actor and lane slots (the default batch) keeps every valid slot and
     every result: discrete outputs exactly, continuous ones to the reproducibility promise."""
-    from lantern_jax.evaluate import run_executions
+    from lantern_jax.evaluation import run_executions
     from lantern_jax.scoring.metrics import finalize
     from lantern_jax.scoring.table import REPRODUCIBLE_ATOL, REPRODUCIBLE_RTOL
 

@@ -187,7 +187,7 @@ def test_crawling_at_the_warning_point_passes_the_gate_but_not_the_efficiency_di
 @pytest.mark.slow
 def test_coop_false_brake_rate_on_the_suite():
     """On the whole shipped suite the cooperative reference keeps False Brake-B <= 5 %."""
-    from lantern_jax.evaluate import evaluate
+    from lantern_jax.evaluation import evaluate
 
     rt = evaluate(["coop"], progress=False).route_table
     warned = rt[rt["condition"] == "warning"]

@@ -106,7 +106,7 @@ def test_the_value_channel_writes_the_position_as_the_text_does():
 @pytest.mark.parametrize(
     "text",
     [
-        "The car at <FRONT_CAR_POS>.",  # punctuation glued to the placeholder
+        "The car at <FRONT_CAR_POS> .",  # punctuation after a space: it would come back glued
         "The car at<FRONT_CAR_POS> is stopped.",
         "The car at  <FRONT_CAR_POS> is stopped.",  # two spaces
         " The car is stopped.",  # leading space
@@ -116,6 +116,24 @@ def test_the_value_channel_writes_the_position_as_the_text_does():
 def test_texts_that_would_not_round_trip_are_refused(text):
     with pytest.raises(ValueError, match="text"):
         language.tokenize(text)
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        "The car at <FRONT_CAR_POS>.",
+        "Watch the rider near <FRONT_CAR_POS>; the rider will enter your path.",
+        "At <FRONT_CAR_POS>, a car waits.",
+    ],
+)
+def test_punctuation_glued_to_a_position_round_trips(text):
+    ids = language.tokenize(text)
+    assert language.detokenize(ids) == text
+    position = "(12.3, -0.5)"
+    values = np.zeros(len(ids), np.float32)
+    slots = language.number_slots(ids)
+    values[slots] = (12.3, -0.5)
+    assert language.detokenize(ids, values) == text.replace(language.PLACEHOLDER, position)
 
 
 def test_too_long_text_is_refused():

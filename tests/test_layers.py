@@ -1,6 +1,6 @@
 """Imports only run downward, and no module imports itself back through others.
 
-The package is layered (DESIGN.md section 3); a module may import from its own layer or any lower
+The package is layered (``docs/design.md``); a module may import from its own layer or any lower
 layer, never from a higher one, and the imports between modules form no cycle.  Every
 ``import`` statement counts, including those inside functions (a lazy import is still a
 dependency).
@@ -17,7 +17,8 @@ PACKAGE = Path(lantern_jax.__file__).parent
 
 #: Layers from the bottom up; each entry is a top-level module or sub-package of lantern_jax.
 LAYERS: tuple[tuple[str, ...], ...] = (
-    ("constants", "times", "timing"),  # values, the time sentinel, wall-clock breakdowns
+    # values, the time sentinel, wall-clock breakdowns, the known family codes
+    ("constants", "times", "timing", "family_codes"),
     ("geometry", "polyline", "split_map"),  # pure JAX maths and loop rewrites
     # scenario and observation types; I/O (files, compiled programs on disk); tokens
     ("world", "observation", "files", "program_store", "language"),
@@ -26,7 +27,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("policies",),  # reference planners and the registry
     ("sim",),  # one tick and the rollouts
     (
-        "evaluate",
+        "evaluation",
         "generate",
         "stress",
         "dataset",
@@ -35,8 +36,9 @@ LAYERS: tuple[tuple[str, ...], ...] = (
         "envs",
         "stream",
         "training",
+        "transfer",
     ),  # evaluation, suites, stress testing, data, language diagnostics, ablations,
-    #               brax env, chunks, training
+    #               brax env, chunks, training, transfer to unseen hazards
     ("report", "viz", "compare"),  # tables, files, plots, differences between evaluations
     ("cli", "commands", "__main__"),  # the command line
 )
@@ -61,7 +63,8 @@ def _imports(path: Path) -> set[str]:
             out.update(a.name for a in node.names if a.name.startswith("lantern_jax"))
         elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
             if node.module.startswith("lantern_jax"):
-                out.add(node.module)
+                if node.module != "lantern_jax":  # ``from lantern_jax import m``: only m
+                    out.add(node.module)
                 for a in node.names:
                     sub = f"{node.module}.{a.name}"
                     if _exists(sub):

@@ -19,7 +19,7 @@ import pytest
 from lantern_jax.scoring.table import compare_route_tables, read_route_table
 
 WORKER = (
-    "import sys, lantern_jax.evaluate as e; e.COMPACT_MIN_BATCH = 1; "
+    "import sys, lantern_jax.evaluation as e; e.COMPACT_MIN_BATCH = 1; "
     "e.compact_slots = lambda backend=None: 2; "
     "from lantern_jax.cli import main; sys.exit(main(sys.argv[1:]))"
 )

@@ -20,7 +20,7 @@ import pytest
 
 from lantern_jax.constants import KIND_PEDESTRIAN, NUM_WAYPOINTS, WAYPOINT_DT
 from lantern_jax.diagnostics import language_table, run_recorded
-from lantern_jax.evaluate import build_executions, run_executions
+from lantern_jax.evaluation import build_executions, run_executions
 from lantern_jax.language import PAD_ID
 from lantern_jax.observation import (
     PRIVILEGED,

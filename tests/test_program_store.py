@@ -25,7 +25,7 @@ import numpy as np
 import pytest
 
 from lantern_jax import program_store
-from lantern_jax.evaluate import evaluate
+from lantern_jax.evaluation import evaluate
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.expert import expert_act
 from lantern_jax.policies.reference import reference_act

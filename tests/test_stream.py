@@ -8,7 +8,7 @@ import jax
 import numpy as np
 import pytest
 
-from lantern_jax.evaluate import run_executions
+from lantern_jax.evaluation import run_executions
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.knobs import get_knobs
 from lantern_jax.scenarios.suite import load_suite

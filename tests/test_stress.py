@@ -218,7 +218,7 @@ def test_verification_rejects_a_soft_failure_whose_hard_rollout_passes(suite):
 def test_a_small_stress_test_end_to_end(suite, tmp_path):
     """Every method runs on a tiny budget; ego's failures on the hidden pedestrian are found; the
     found scenarios, written as a suite file, re-evaluate to the hard CUS the search reported."""
-    from lantern_jax.evaluate import evaluate
+    from lantern_jax.evaluation import evaluate
     from lantern_jax.scoring.table import REPRODUCIBLE_ATOL
 
     pair = next(p for p in suite.pairs if p.family == "PE")

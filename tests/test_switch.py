@@ -9,7 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from lantern_jax.evaluate import shared_program
+from lantern_jax.evaluation import shared_program
 from lantern_jax.language import PAD_ID
 from lantern_jax.observation import PRIVILEGED, SURROUND_RIG, WARNING
 from lantern_jax.policies.base import Policy

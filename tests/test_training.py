@@ -107,7 +107,7 @@ def test_train_command_names_a_bad_config(tmp_path, capsys):
 def test_surround_recipe_trains_on_the_rig_and_drives(dataset, tmp_path):
     """The surround recipe reads the dataset's six-camera columns (every frame, no language)
     and its checkpoint runs in the closed loop with the simulator's 360-degree view."""
-    from lantern_jax.evaluate import evaluate
+    from lantern_jax.evaluation import evaluate
 
     cfg = tiny(dataset, tmp_path / "sur", name="learned-tiny-surround", recipe="surround")
     train(cfg, progress=False)

@@ -84,7 +84,7 @@ def test_distance_conditioned_warning_renders_the_papers_positions():
         (("PE", "non_actionable", "A car.", "low"), "only paraphrases have a tier"),
         (("PE", "paraphrase", "Cars at <FRONT_CAR_POS> and <FRONT_CAR_POS> now.", "low"),
          "2 positions"),
-        (("PE", "paraphrase", "A car at <FRONT_CAR_POS>.", "low"), "exactly one space"),
+        (("PE", "paraphrase", "A car at <FRONT_CAR_POS> .", "low"), "exactly one space"),
         (("XX", "paraphrase", "A car.", "high"), "family"),
         ((w.NO_FAMILY, "paraphrase", "A car.", "high"), "family"),
     ],

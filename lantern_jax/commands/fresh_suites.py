@@ -81,7 +81,7 @@ def run_fresh_suites(
         policies: the policies to evaluate.
         base: the loaded ``--suite`` (already cut to ``--pairs-per-family``).
         stage: ``stage(message)`` prints a stage line.
-        evaluate_kwargs: further arguments of :func:`lantern_jax.evaluate.evaluate`.
+        evaluate_kwargs: further arguments of :func:`lantern_jax.evaluation.evaluate`.
 
     Returns:
         The exit code.
@@ -91,7 +91,7 @@ def run_fresh_suites(
             seed that is the base suite's own.
     """
     from lantern_jax.compare import across_suites, format_across_suites
-    from lantern_jax.evaluate import evaluate
+    from lantern_jax.evaluation import evaluate
     from lantern_jax.files import StagedFolder, atomic_write
     from lantern_jax.report import format_tables, ordered_tables, write_outputs
     from lantern_jax.scoring.aggregate import DECOMPOSITION_COLUMNS

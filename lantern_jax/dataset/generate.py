@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -22,6 +23,7 @@ import jax
 import numpy as np
 import pandas as pd
 
+from lantern_jax import family_codes
 from lantern_jax.constants import DT, FAMILIES, WEATHERS
 from lantern_jax.dataset import frames as fr
 from lantern_jax.dataset.record import FRAME_TICKS, RIG_FIELDS, batched_recorder
@@ -44,7 +46,7 @@ from lantern_jax.dataset.store import (
     write_card,
     write_shard,
 )
-from lantern_jax.evaluate import package_versions
+from lantern_jax.evaluation import package_versions
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.suite import load_suite
 from lantern_jax.scoring.metrics import finalize
@@ -54,9 +56,13 @@ CHUNK_PAIRS = 96  # pairs per chunk: 192 recorded sequences per batched call
 MAX_SECONDS = 80.0  # s, recording cap (>= the longest route timeout, 20 s + 164 m / 3 m/s)
 
 
-def _plan_key(seed: int, pairs_per_family: int, chunk_pairs: int) -> dict:
-    return dict(seed=seed, pairs_per_family=pairs_per_family, chunk_pairs=chunk_pairs,
-                format_version=FORMAT_VERSION)  # fmt: skip
+def _plan_key(seed: int, pairs_per_family: int, chunk_pairs: int,
+              families: Sequence[str] = FAMILIES) -> dict:  # fmt: skip
+    key = dict(seed=seed, pairs_per_family=pairs_per_family, chunk_pairs=chunk_pairs,
+               format_version=FORMAT_VERSION)  # fmt: skip
+    if tuple(families) != FAMILIES:  # the six's key is what it was before other families
+        key["families"] = list(families)
+    return key
 
 
 def _new_card(key: dict, n_chunks: int) -> dict:
@@ -150,8 +156,9 @@ def _update_card(card: dict, k: int, names: tuple, rows: list, rejects: dict, n_
         c["sequences"] += 1
         c["frames"] += r["frames"]
         card["weathers"][r["weather"]] = card["weathers"].get(r["weather"], 0) + 1
-    order = {f: i for i, f in enumerate(FAMILIES)}
-    card["counts"] = sorted(counts.values(), key=lambda c: (order[c["family"]], c["route"]))
+    card["counts"] = sorted(
+        counts.values(), key=lambda c: (family_codes.index(c["family"]), c["route"])
+    )
     if shapes:
         card["frame_columns"] = shapes
 
@@ -162,8 +169,12 @@ def generate_dataset(
     seed: int = DATASET_SEED,
     chunk_pairs: int = CHUNK_PAIRS,
     progress: bool = True,
+    families: Sequence[str] = FAMILIES,
 ) -> dict:
     """Generate (or resume) a dataset in ``out``; returns the final card.
+
+    ``families`` are the scene families to record (default: the six of the training data; a
+    registered family, :mod:`lantern_jax.scenarios.registry`, is recorded like them).
 
     Raises:
         DatasetError: when ``out`` holds a dataset of another plan.
@@ -174,7 +185,7 @@ def generate_dataset(
                          f"{pairs_per_family}, {chunk_pairs}")  # fmt: skip
     folder = Path(out)
     folder.mkdir(parents=True, exist_ok=True)
-    key = _plan_key(seed, pairs_per_family, chunk_pairs)
+    key = _plan_key(seed, pairs_per_family, chunk_pairs, families)
     card = read_card(folder)
     if card is not None and any(card.get(k) != v for k, v in key.items()):
         raise DatasetError(f"{folder / 'dataset_card.json'}: written for another plan "
@@ -188,8 +199,9 @@ def generate_dataset(
         near_duplicates: dict[str, int] = {}
         t_plan = time.perf_counter()
         specs = plan_scenes(
-            pairs_per_family, seed, suite, rejected=near_duplicates, progress=progress
-        )
+            pairs_per_family, seed, suite, rejected=near_duplicates, progress=progress,
+            families=families,
+        )  # fmt: skip
         info = dict(suite_near_duplicates_skipped=near_duplicates,
                     plan_seconds=round(time.perf_counter() - t_plan, 1))  # fmt: skip
         write_plan(folder, key, suite.suite_sha256, specs, info)

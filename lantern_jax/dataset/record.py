@@ -27,10 +27,11 @@ from lantern_jax.observation import (
     SurroundView,
 )
 from lantern_jax.policies.base import Policy
-from lantern_jax.sim.engine import Program
+from lantern_jax.scenarios.warnings import TextBank
+from lantern_jax.sim.engine import Program, check_texts
 from lantern_jax.sim.observe import observe
 from lantern_jax.sim.rollout import start_state
-from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings
+from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings, default_settings
 from lantern_jax.sim.state import State
 from lantern_jax.sim.step import step
 from lantern_jax.world import Scenario
@@ -70,14 +71,14 @@ class FrameRecord:
     rig: RigFrame  # what the six-camera rig changes in it
 
 
-def _frame(scenario: Scenario, state: State) -> FrameRecord:
-    rig_obs = observe(scenario, state, RIG_SENSORS)
+def _frame(scenario: Scenario, state: State, bank: TextBank) -> FrameRecord:
+    rig_obs = observe(scenario, state, RIG_SENSORS, bank)
     return FrameRecord(
         t=state.t,
         live=~state.done,
         ego_xy=state.ego.xy,
         ego_yaw=state.ego.yaw,
-        obs=observe(scenario, state, FRONT_SENSORS),
+        obs=observe(scenario, state, FRONT_SENSORS, bank),
         rig=RigFrame(surround=rig_obs.surround, **{k: getattr(rig_obs, k) for k in RIG_FIELDS}),
     )
 
@@ -99,7 +100,7 @@ def record(
         (frames with a leading axis ``num_frames``, the final state).
     """
     state0 = start_state(scenario, policy, policy_params, settings)
-    shapes = jax.eval_shape(_frame, scenario, state0)
+    shapes = jax.eval_shape(lambda sc, st: _frame(sc, st, settings.bank), scenario, state0)
     empty = jax.tree.map(lambda x: jnp.zeros((num_frames, *x.shape), x.dtype), shapes)
 
     def tick(s, _):
@@ -107,7 +108,7 @@ def record(
 
     def body(carry):
         i, state, frames = carry
-        kept = _frame(scenario, state)
+        kept = _frame(scenario, state, settings.bank)
         frames = jax.tree.map(lambda buf, x: buf.at[i].set(x), frames, kept)
         state, _ = jax.lax.scan(tick, state, None, length=FRAME_TICKS)
         return i + 1, state, frames
@@ -130,11 +131,17 @@ def _record_batch(scenarios, policy_params, settings, *, program: Program, num_f
     return jax.vmap(one)(scenarios)
 
 
-def batched_recorder(policy: Policy, num_frames: int, settings: Settings = DEFAULT_SETTINGS):
+def batched_recorder(policy: Policy, num_frames: int, settings: Settings | None = None):
     """``(scenarios, policy_params) -> (frames, final states)`` of a batch, one compiled
     program per (policy program, frame count) (a jitted function with those as static
-    arguments)."""
+    arguments).  ``settings`` default: :func:`~lantern_jax.sim.settings.default_settings`
+    (the bank then holds every registered family's texts); a batch reading a text beyond the
+    bank is refused (ValueError)."""
     program = Program(policy)
-    return lambda scenarios, params: _record_batch(
-        scenarios, params, settings, program=program, num_frames=num_frames
-    )
+    settings = default_settings() if settings is None else settings
+
+    def run(scenarios, params):
+        check_texts(settings, scenarios)
+        return _record_batch(scenarios, params, settings, program=program, num_frames=num_frames)
+
+    return run

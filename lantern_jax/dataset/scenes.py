@@ -23,11 +23,13 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from collections.abc import Sequence
 from pathlib import Path
 
 import jax.numpy as jnp
 import numpy as np
 
+from lantern_jax import family_codes
 from lantern_jax.constants import FAMILIES, WEATHERS
 from lantern_jax.dataset.store import DatasetError
 from lantern_jax.files import atomic_write
@@ -63,7 +65,7 @@ class SceneSpec:
 def _suite_routes(suite: Suite | None) -> dict[str, list[np.ndarray]]:
     """Every suite pair's route samples (2 m, world frame) per family: the manifest's
     ``route_2m`` where it records one, else built from the pair's parameters."""
-    routes: dict[str, list[np.ndarray]] = {f: [] for f in FAMILIES}
+    routes: dict[str, list[np.ndarray]] = {f: [] for f in family_codes.codes()}
     for p in suite.pairs if suite is not None else ():
         if p.route_2m is not None:
             routes[p.family].append(np.asarray(p.route_2m, np.float64))
@@ -91,6 +93,7 @@ def plan_scenes(
     suite: Suite | None = None,
     rejected: dict | None = None,
     progress: bool = False,
+    families: Sequence[str] = FAMILIES,
 ) -> list[SceneSpec]:
     """The dataset's candidate pairs, in a deterministic order (family-major, weathers cycled).
 
@@ -108,8 +111,11 @@ def plan_scenes(
             per family (``{family: count}``).
         progress: show a progress bar (the default plan samples and builds about 9,900
             candidates for its 2,280 pairs: about three minutes on two CPU cores).
+        families: the families to plan (default: the six; a registered family is planned like
+            them, :mod:`lantern_jax.scenarios.registry`).
 
-    Each family draws from its own stream (``seed``, family index) and stops after
+    Each family draws from its own stream (``seed``, :func:`lantern_jax.family_codes.stream`:
+    the family index for the six) and stops after
     ``pairs_per_family`` survivors, so the plan of a smaller ``pairs_per_family`` is, family by
     family, the first scenes of a larger one.
     """
@@ -120,9 +126,9 @@ def plan_scenes(
     if progress:
         from tqdm.auto import tqdm
 
-        bar = tqdm(total=pairs_per_family * len(FAMILIES), desc="scenes", unit="pair")
-    for fi, fam in enumerate(FAMILIES):
-        rng = np.random.default_rng([seed, fi])
+        bar = tqdm(total=pairs_per_family * len(families), desc="scenes", unit="pair")
+    for fam in families:
+        rng = np.random.default_rng([seed, family_codes.stream(fam)])
         k = n_dup = 0
         while k < pairs_per_family:
             weather = WEATHERS[k % len(WEATHERS)]

@@ -11,7 +11,9 @@ A frozen suite stores only the parameter dicts (and their
 
 Every family is one :class:`Family` record in :data:`FAMILY_RECORDS` — its sampler, cross-field
 feasibility check, builder, documented parameter ranges, canonical warning text and what that
-warning asks the ego to do — so a new family is one record and one builder.
+warning asks the ego to do — so a new family is one record and one builder.  Families written
+outside the package are registered through :mod:`lantern_jax.scenarios.registry` (the public
+way; ``docs/families.md``), which adds their record here after the six.
 
 Shared conventions of every family:
 
@@ -45,12 +47,13 @@ from typing import Any
 
 import numpy as np
 
+from lantern_jax import family_codes
 from lantern_jax.constants import FAMILIES, FAMILY_NAMES, WEATHERS
 from lantern_jax.scenarios import families_junction as junction
 from lantern_jax.scenarios import families_straight as straight
 from lantern_jax.scenarios.knobs import apply_knobs
-from lantern_jax.scenarios.spec import PARAM_RANGES, content_hash, range_errors
-from lantern_jax.scenarios.warnings import TEMPLATES
+from lantern_jax.scenarios.spec import content_hash, param_ranges, range_errors
+from lantern_jax.scenarios.warnings import canonical_text_id, get_text
 from lantern_jax.world import Scenario
 
 # What a family's warning asks the ego to do (read by warning-aware policies).
@@ -77,18 +80,20 @@ class Family:
 
     @property
     def index(self) -> int:
-        """Index in ``constants.FAMILIES`` (the paper's order)."""
-        return FAMILIES.index(self.code)
+        """Family index: in ``constants.FAMILIES`` (the paper's order) for the six, then the
+        registered families in registration order (:mod:`lantern_jax.family_codes`)."""
+        return family_codes.index(self.code)
 
     @property
     def ranges(self) -> dict[str, Any]:
-        """The documented parameter ranges (:data:`~lantern_jax.scenarios.spec.PARAM_RANGES`)."""
-        return PARAM_RANGES[self.code]
+        """The documented parameter ranges (:func:`~lantern_jax.scenarios.spec.param_ranges`)."""
+        return param_ranges(self.code)
 
     @property
     def template(self) -> str:
-        """The canonical warning template (paper, warning-template table)."""
-        return TEMPLATES[self.index]
+        """The canonical warning template (paper, warning-template table; a registered
+        family's exact warning)."""
+        return get_text(canonical_text_id(self.index)).text
 
 
 def _junction_sampler(code: str) -> Sampler:
@@ -183,12 +188,26 @@ def family(code_or_index: int | str) -> Family:
     """
     if isinstance(code_or_index, str):
         if code_or_index not in FAMILY_RECORDS:
-            raise ValueError(f"family: {code_or_index!r} not one of {{{', '.join(FAMILIES)}}}")
+            known = ", ".join(FAMILY_RECORDS)
+            raise ValueError(f"family: {code_or_index!r} not one of {{{known}}}")
         return FAMILY_RECORDS[code_or_index]
-    i = int(code_or_index)
-    if not 0 <= i < len(FAMILIES):
-        raise ValueError(f"family: {i} outside 0..{len(FAMILIES) - 1}")
-    return FAMILY_RECORDS[FAMILIES[i]]
+    return FAMILY_RECORDS[family_codes.code(code_or_index)]
+
+
+def add_record(record: Family) -> Family:
+    """Add a registered family's record after the six (used by
+    :func:`lantern_jax.scenarios.registry.register_family`, which registers its code first).
+
+    Raises:
+        ValueError: for a code that is not registered, or already holds another record.
+    """
+    if record.code not in family_codes.registered():
+        raise ValueError(f"family: {record.code!r} is not a registered family code")
+    have = FAMILY_RECORDS.get(record.code)
+    if have is not None and have != record:
+        raise ValueError(f"family: {record.code!r} already has another record")
+    FAMILY_RECORDS[record.code] = record
+    return record
 
 
 def family_name(code_or_index: int | str) -> str:
@@ -206,8 +225,8 @@ def sample_params(family_: int | str, rng: np.random.Generator, weather: str = "
 
     Returns:
         flat dict (``family``, ``seed``, ``bg_seed``, ``weather``, ``rotation_deg``, ``v_ref``,
-        ``route_length`` and the family's fields of ``spec.PARAM_RANGES``), floats rounded to
-        1e-3.
+        ``route_length`` and the family's fields of :func:`~lantern_jax.scenarios.spec.
+        param_ranges`), floats rounded to 1e-3.
     """
     rec = family(family_)
     if weather not in WEATHERS:
@@ -234,7 +253,7 @@ def knob_errors(params: dict) -> list[str]:
     if not isinstance(knobs, dict) or not knobs:
         return [f"{fam}.{KNOBS_FIELD}: expected a non-empty JSON object, got {knobs!r}"]
     errors = []
-    space = KNOB_RANGES.get(fam, {})
+    space = FAMILY_RECORDS[fam].knobs if fam in FAMILY_RECORDS else {}
     for name, value in knobs.items():
         where = f"{fam}.{KNOBS_FIELD}.{name}"
         if name not in space:

@@ -27,18 +27,19 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from lantern_jax import family_codes
 from lantern_jax.constants import (
     BIG,
     EGO_HALF_LENGTH,
     EGO_HALF_WIDTH,
-    FAMILIES,
     KIND_VEHICLE,
     MOTION_IDM,
     ROLE_BACKGROUND,
 )
 from lantern_jax.scenarios import road
 from lantern_jax.scenarios.assemble import ActorSpec, assemble_scenario, initial_pose
-from lantern_jax.scenarios.spec import PARAM_RANGES, SEED_MAX, WEATHER_PROFILES, content_hash
+from lantern_jax.scenarios.spec import SEED_MAX, WEATHER_PROFILES, content_hash, param_ranges
+from lantern_jax.scenarios.warnings import canonical_text_id
 from lantern_jax.world import Scenario
 
 HAZARD_SLOT = 0
@@ -218,16 +219,19 @@ def pair_params(
     and Route B.
 
     Route B differs only in ``is_route_a`` and ``warning_enabled`` (False): the markers are kept
-    so that Route B's matched warning-to-event interval is defined.
+    so that Route B's matched warning-to-event interval is defined.  The warning text is the
+    family's exact warning (:func:`~lantern_jax.scenarios.warnings.canonical_text_id`: the
+    family index for the six built-in families).
     """
     s_warn, s_event, s_conflict = markers
+    text_id = canonical_text_id(family)
     a = dict(
         family=family, is_route_a=True, warning_enabled=True,
         s_warn=s_warn, s_event=s_event, s_conflict=s_conflict, hazard_index=hazard_index,
         clear_s=clear_s, clear_time_limit=clear_time_limit, clear_on_ego_stop=clear_on_ego_stop,
         despawn_on_clear=despawn_on_clear, force_event=force_event, force_delay=2.0,
         ego_light=ego_light, ego_stop_s=ego_stop_s, d_safe=d_safe, v_ref=v_ref,
-        friction=friction, sensing_range=sensing_range, template_id=family, text_id=family,
+        friction=friction, sensing_range=sensing_range, template_id=family, text_id=text_id,
         timeout_s=20.0 + route_length / 3.0, late_onset=False, warn_hold_extra=0.0,
         pos_noise_m=0.0, noise_seed=np.uint32(int(seed) & 0xFFFFFFFF),
     )  # fmt: skip
@@ -250,7 +254,7 @@ def _pair_meta(
     s_warn, s_event, s_conflict = markers
     signalized = bool(road_map.lights)
     return dict(
-        family=FAMILIES[family],
+        family=family_codes.code(family),
         family_index=family,
         content_hash=content_hash(p),
         params=dict(p),
@@ -268,7 +272,7 @@ def _pair_meta(
         ego_stop_s=route.stop_s if signalized else BIG,
         lanes=road_map.names,
         route_lanes=list(route.lanes),
-        text_id=family,
+        text_id=canonical_text_id(family),
         canonical=extra,
     )
 
@@ -294,9 +298,9 @@ def draw(
     nd: int = 3,
 ) -> float:
     """Sample field ``key`` of a family uniformly within its documented range
-    (:data:`~lantern_jax.scenarios.spec.PARAM_RANGES`), optionally narrowed to
+    (:func:`~lantern_jax.scenarios.spec.param_ranges`), optionally narrowed to
     ``[at_least, at_most]`` by the family's cross-field rules; rounded to ``nd`` decimals."""
-    rng_def = PARAM_RANGES[family][key]
+    rng_def = param_ranges(family)[key]
     lo = rng_def.lo if at_least is None else max(rng_def.lo, at_least)
     hi = rng_def.hi if at_most is None else min(rng_def.hi, at_most)
     return uniform(rng, lo, hi, nd)
@@ -323,7 +327,7 @@ def check_occluders(family: str, p: dict, scene: tuple) -> None:
 
 def choose(rng: np.random.Generator, family: str, key: str, options: tuple | None = None):
     """Pick one of the documented options of field ``key`` (or of ``options``, a subset)."""
-    return rng.choice(list(PARAM_RANGES[family][key].options if options is None else options))
+    return rng.choice(list(param_ranges(family)[key].options if options is None else options))
 
 
 def common_fields(rng: np.random.Generator, family: str, weather: str) -> dict:

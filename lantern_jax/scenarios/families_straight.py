@@ -121,7 +121,7 @@ def _road(p: dict, layout: StraightLayout):
     return road_map, route, line
 
 
-def _opposing_sections(road_map: road.RoadMap, line: Centerline, layout: StraightLayout,
+def opposing_sections(road_map: road.RoadMap, line: Centerline, layout: StraightLayout,
                        s_lo: float, s_hi: float) -> list[LaneSection]:  # fmt: skip
     """Sections of the backward lanes between road arcs ``s_lo`` and ``s_hi`` (they run from the
     high-``s`` end, so lane arcs count backwards)."""
@@ -235,7 +235,7 @@ def build_pe(p: dict):
         despawn_at_end=True,
     )
     markers = (sc - PE_WARN_LEAD, sc - PE_EVENT_LEAD, sc)
-    sections = _opposing_sections(road_map, line, _pe_layout(p), -ROAD_MARGIN + 10.0, sc - 10.0)
+    sections = opposing_sections(road_map, line, _pe_layout(p), -ROAD_MARGIN + 10.0, sc - 10.0)
     rules = dict(
         clear_s=PED_CROSSING, clear_time_limit=BIG, clear_on_ego_stop=False,
         despawn_on_clear=True, force_event=True, d_safe=D_SAFE_SMALL_M,
@@ -327,7 +327,7 @@ def build_vc(p: dict):
                          motion=MOTION_IDM, handover_after=INF_TIME)  # fmt: skip
     sc = vc_conflict_s(p["v_ref"], p["cut_frac"], p["gap_event"])
     markers = (sc - float(p["warn_lead"]), sc - VC_EVENT_LEAD, sc)
-    sections = _opposing_sections(
+    sections = opposing_sections(
         road_map, line, layout, -ROAD_MARGIN + 10.0, p["route_length"] + 50.0
     )
     rules = dict(
@@ -512,7 +512,7 @@ def build_or(p: dict):
     obj = _static_on_road(line, s_obj, 0.0, obj_ext, KIND_STATIC, ROLE_HAZARD)
     c = or_conflict_s(p)
     markers = (c - OR_WARN_LEAD, c - OR_EVENT_LEAD, c)
-    sections = _opposing_sections(
+    sections = opposing_sections(
         road_map, line, layout, -ROAD_MARGIN + 10.0, p["route_length"] + 50.0
     )
     exclusion = [(line.to_xy(g0, 0.0), OR_VAN_ZONE)]

@@ -22,6 +22,9 @@ the rule also asks the hazard to be hidden from every route point before the war
 (every ``APPROACH_STEP_M``): the paper's premise is that the warning arrives before the camera
 has seen the hazard at all.  For Obstacle Reveal that part depends on how closely the policy
 follows the van, so it is measured in the rollout (``hazard_hidden_before_warning``) instead.
+
+A family registered from user code names its rule in its record (:data:`PREMISE_RULES`:
+``"whole_approach"`` as PE, ``"at_warning_point"`` as OR, or ``"none"`` as VC and RTY).
 """
 
 from __future__ import annotations
@@ -31,7 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from lantern_jax import polyline
-from lantern_jax.constants import FRONT_CAMERA_FOV, MOTION_IDM
+from lantern_jax.constants import FAMILIES, FRONT_CAMERA_FOV, MOTION_IDM
 from lantern_jax.dynamics.actors import scripted_states, start_state
 from lantern_jax.sensors.visibility import camera_pose, visible_actors
 from lantern_jax.times import NEVER
@@ -40,6 +43,38 @@ from lantern_jax.world import Scenario
 PREMISE_FAMILIES = ("PE", "OR", "LWW", "RWW")
 STATIC_APPROACH_FAMILIES = ("PE", "LWW", "RWW")  # nothing moves before the event
 APPROACH_STEP_M = 2.0  # m between checked ego positions on the approach
+
+#: The premise rules a family can have: none (the hazard may be visible), hidden at the warning
+#: point (at every premise time), or hidden at the warning point and from every route point
+#: before it (for scenes where nothing that could hide the hazard moves before the event).
+PREMISE_NONE = "none"
+PREMISE_AT_WARNING = "at_warning_point"
+PREMISE_WHOLE_APPROACH = "whole_approach"
+PREMISE_RULES = (PREMISE_NONE, PREMISE_AT_WARNING, PREMISE_WHOLE_APPROACH)
+_REGISTERED_RULES: dict[str, str] = {}  # registered family code -> one of PREMISE_RULES
+
+
+def register_rule(code: str, rule: str) -> None:
+    """Set the premise rule of a registered family (called by
+    :func:`lantern_jax.scenarios.registry.register_family`).
+
+    Raises:
+        ValueError: for a built-in family or a rule outside :data:`PREMISE_RULES`.
+    """
+    if code in FAMILIES:
+        raise ValueError(f"premise: {code!r} is a built-in family; its rule is fixed")
+    if rule not in PREMISE_RULES:
+        raise ValueError(f"premise: {rule!r} not one of {{{', '.join(PREMISE_RULES)}}}")
+    _REGISTERED_RULES[code] = rule
+
+
+def premise_rule(code: str) -> str:
+    """The premise rule of a family (one of :data:`PREMISE_RULES`)."""
+    if code in STATIC_APPROACH_FAMILIES:
+        return PREMISE_WHOLE_APPROACH
+    if code in PREMISE_FAMILIES:
+        return PREMISE_AT_WARNING
+    return _REGISTERED_RULES.get(code, PREMISE_NONE)
 
 
 def _visible_at(scenario: Scenario, arc: jax.Array, t: jax.Array) -> jax.Array:
@@ -97,14 +132,15 @@ def premise_error(scenario: Scenario, meta: dict) -> str | None:
     """The premise rule: None when it holds (or does not apply to the family), else a message
     naming the family and the first time at which the hazard is visible."""
     fam = meta["family"]
-    if fam not in PREMISE_FAMILIES:
+    rule = premise_rule(fam)
+    if rule == PREMISE_NONE:
         return None
     seen = hazard_visible_at_warning(scenario, meta)
     if seen.any():
         t = float(np.asarray(meta["canonical"].get("premise_times", [0.0]))[np.argmax(seen)])
         return (f"{fam}: premise violated: the hazard is visible to the front camera at the "
                 f"warning point (actors at t = {t:.2f} s before the event)")  # fmt: skip
-    if fam in STATIC_APPROACH_FAMILIES:
+    if rule == PREMISE_WHOLE_APPROACH:
         arcs = np.arange(0.0, float(scenario.config.s_warn), APPROACH_STEP_M)
         seen = hazard_visibility(scenario, arcs, np.zeros_like(arcs))
         if seen.any():

@@ -370,6 +370,32 @@ def turn_route(
     return RouteSpec(xy, (lin, conn, lout), approach, approach + c_len, stop_s)
 
 
+def through_route(
+    road: RoadMap, from_arm: str, k: int, approach: float, length: float
+) -> RouteSpec:  # fmt: skip
+    """Ego route straight through a junction along the through lane from ``from_arm`` to the
+    opposite arm, lane ``k``: ``approach`` m before the box, then on until the route is
+    ``length`` m long.
+
+    Raises:
+        ValueError: when the opposite arm is missing or the lane is too short.
+    """
+    to_arm = OPPOSITE[from_arm]
+    if to_arm not in road.arms or from_arm not in road.arms:
+        raise ValueError(f"through_route: no straight movement {from_arm}->{to_arm}")
+    name, s_in = inbound_lane(road, from_arm, k)
+    lane = road.lane(name)
+    if approach <= 0 or approach > s_in or s_in - approach + length > lane.length:
+        raise ValueError(
+            f"through_route: approach {approach} and length {length} do not fit lane {name} "
+            f"({lane.length:.1f} m, box entry at {s_in:.1f} m)"
+        )
+    xy = densify(segment(lane.center, s_in - approach, s_in - approach + length), ROUTE_SPACING)
+    stop_s = approach - (s_in - lane.stop_s) if lane.stop_s < BIG else BIG
+    box_out = approach + lane.box_out_s - s_in
+    return RouteSpec(xy, (name,), approach, box_out, stop_s)
+
+
 # ------------------------------------------------------------------------------------------------
 # occluders
 # ------------------------------------------------------------------------------------------------

@@ -8,7 +8,7 @@ checks a dict against them, naming each bad field, e.g. ``"PE.route_length: 150.
 feasibility rules).
 
 Ranges follow the paper's "Detailed Scenario Specifications" table; route lengths are the
-closed-loop ranges of its data-collection appendix as rounded in DESIGN.md section 5 (PE 68-135 m,
+closed-loop ranges of its data-collection appendix rounded to the nearest metre (PE 68-135 m,
 VC 58-164, OR 66-133, LWW 56-80, RWW 52-87, RTY 50-75).  Every pair also samples its own
 geometry within documented ranges (lane count and width, road curvature, junction size through
 the kerb radius, skewed arms, occluder type, size and set-back, hazard offsets), so that no two
@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from lantern_jax import family_codes
 from lantern_jax.constants import FAMILIES, WEATHERS
 
 
@@ -138,7 +139,8 @@ MIN_RECOVERY_M = 29.0  # m of route after the conflict point, every family (pape
 MAX_CURVATURE = 1.0 / 70.0  # 1/m, gentle: < 1.5 m/s^2 lateral acceleration at 10 m/s
 MAX_BEND = 1.0 / 30.0  # 1/m, junction arms (v_ref <= 8 m/s: < 2.2 m/s^2)
 
-_COMMON = {
+#: Fields every family's parameter dict has (seeds, weather, scene rotation).
+COMMON_RANGES = {
     "seed": IntRange(0, SEED_MAX),  # pair seed: position-noise seed of the ablation
     "bg_seed": IntRange(0, SEED_MAX),  # background-traffic seed (shared by Route A and B)
     "weather": Choice(WEATHERS),
@@ -178,7 +180,7 @@ _JUNCTION = {
 #: this package's, documented in the family builders).
 PARAM_RANGES: dict[str, dict[str, Any]] = {
     "PE": {
-        **_COMMON,
+        **COMMON_RANGES,
         **_STRAIGHT,
         "v_ref": FloatRange(8.0, 10.0),
         "route_length": FloatRange(68.0, 135.0),
@@ -192,7 +194,7 @@ PARAM_RANGES: dict[str, dict[str, Any]] = {
         "parked_count": Choice((0, 1, 2)),  # further parked vehicles beyond the crossing
     },
     "VC": {
-        **_COMMON,
+        **COMMON_RANGES,
         **_STRAIGHT,
         "v_ref": FloatRange(9.0, 11.0),
         "route_length": FloatRange(58.0, 164.0),
@@ -202,7 +204,7 @@ PARAM_RANGES: dict[str, dict[str, Any]] = {
         "lanes_fwd": Choice((2, 3)),  # the cut-in comes from the rightmost lane
     },
     "OR": {
-        **_COMMON,
+        **COMMON_RANGES,
         # straight approach, then a street corner (see families_straight.or_centerline)
         **{k: v for k, v in _STRAIGHT.items() if k not in ("curvature_1", "curve_split")},
         "v_ref": FloatRange(8.0, 10.0),
@@ -219,7 +221,7 @@ PARAM_RANGES: dict[str, dict[str, Any]] = {
         "turn_radius": FloatRange(15.0, 40.0),  # m, of the ego lane's centre line
     },
     "LWW": {
-        **_COMMON,
+        **COMMON_RANGES,
         **_JUNCTION,
         # single-lane, tight junctions only: with two lanes per direction or a wide kerb radius
         # the left turn is so long that a wrong-way car 25 m along the reversed route from a
@@ -234,7 +236,7 @@ PARAM_RANGES: dict[str, dict[str, Any]] = {
         "truck_length": FloatRange(6.0, 9.0),  # m, truck waiting at the W arm's stop line
     },
     "RWW": {
-        **_COMMON,
+        **COMMON_RANGES,
         **_JUNCTION,
         "v_ref": FloatRange(6.0, 8.0),
         "route_length": FloatRange(52.0, 87.0),
@@ -242,7 +244,7 @@ PARAM_RANGES: dict[str, dict[str, Any]] = {
         "conflict_offset": FloatRange(6.0, 10.0),  # m, conflict point past the box entry
     },
     "RTY": {
-        **_COMMON,
+        **COMMON_RANGES,
         **_JUNCTION,
         "v_ref": FloatRange(6.0, 8.0),
         "route_length": FloatRange(50.0, 75.0),
@@ -255,11 +257,41 @@ PARAM_RANGES: dict[str, dict[str, Any]] = {
 assert tuple(PARAM_RANGES) == FAMILIES
 
 
+#: Parameter ranges of the families registered from user code (code -> the table its record
+#: holds, :func:`register_ranges`); the six built-in families' ranges are :data:`PARAM_RANGES`.
+_REGISTERED_RANGES: dict[str, dict[str, Any]] = {}
+
+
+def register_ranges(code: str, table: dict[str, Any]) -> None:
+    """Make a registered family's parameter ranges known to :func:`range_errors` (called by
+    :func:`lantern_jax.scenarios.registry.register_family`; the record keeps the table).
+
+    Raises:
+        ValueError: for a code that is not a registered family code.
+    """
+    if code not in family_codes.registered():
+        raise ValueError(f"family: {code!r} is not a registered family code")
+    _REGISTERED_RANGES[code] = table
+
+
+def param_ranges(code: str) -> dict[str, Any]:
+    """The parameter ranges of a family (built-in or registered).
+
+    Raises:
+        ValueError: naming the known families.
+    """
+    if code in PARAM_RANGES:
+        return PARAM_RANGES[code]
+    if code in _REGISTERED_RANGES:
+        return _REGISTERED_RANGES[code]
+    raise ValueError(f"family: {code!r} not one of {{{', '.join(family_codes.codes())}}}")
+
+
 def family_of(params: dict) -> str:
     """The family abbreviation of a parameter dict, validated."""
     fam = params.get("family") if isinstance(params, dict) else None
-    if not isinstance(fam, str) or fam not in PARAM_RANGES:
-        raise ValueError(f"family: {fam!r} not one of {{{', '.join(FAMILIES)}}}")
+    if not isinstance(fam, str) or (fam not in PARAM_RANGES and fam not in _REGISTERED_RANGES):
+        raise ValueError(f"family: {fam!r} not one of {{{', '.join(family_codes.codes())}}}")
     return fam
 
 
@@ -283,7 +315,7 @@ def range_errors(params: Any) -> list[str]:
         fam = family_of(params)
     except ValueError as e:
         return [str(e)]
-    table = PARAM_RANGES[fam]
+    table = param_ranges(fam)
     errors = [
         f"{fam}.{key}: unknown parameter (known: {', '.join(table)})"
         for key in params

@@ -33,7 +33,8 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from lantern_jax.constants import FAMILIES, SUITE_ID, WEATHERS
+from lantern_jax import family_codes
+from lantern_jax.constants import SUITE_ID, WEATHERS
 from lantern_jax.files import atomic_write
 from lantern_jax.scenarios.assemble import host_arrays
 from lantern_jax.scenarios.families import build_pair, param_errors, validate_params
@@ -78,11 +79,11 @@ class Suite:
         """
         if isinstance(n_per_family, bool) or not isinstance(n_per_family, int) or n_per_family < 1:
             raise ValueError(f"pairs per family must be an integer >= 1, got {n_per_family!r}")
-        keep, count = [], {f: 0 for f in FAMILIES}
+        keep, count = [], dict.fromkeys(family_codes.codes(), 0)
         for p in self.pairs:
-            if count[p.family] < n_per_family:
+            if count.get(p.family, 0) < n_per_family:
                 keep.append(p)
-                count[p.family] += 1
+                count[p.family] = count.get(p.family, 0) + 1
         return dataclasses.replace(
             self, pairs=tuple(keep), suite_sha256=suite_hash(keep), suite_id=self.suite_id + "-sub"
         )
@@ -333,8 +334,9 @@ def _pair_errors(d: object, i: int) -> tuple[str, list[str], PairSpec | None]:
         err("pair_id", f"expected a non-empty string of letters, digits, '_', '-' or '.', "
                        f"got {_type_name(pid)} {pid!r}")  # fmt: skip
     fam, weather, params, sha = (d.get(k) for k in ("family", "weather", "params", "sha256"))
-    if "family" in d and (not isinstance(fam, str) or fam not in FAMILIES):
-        err("family", f"{fam!r} not one of {{{', '.join(FAMILIES)}}}")
+    known = ", ".join(family_codes.codes())
+    if "family" in d and not family_codes.is_known(fam):
+        err("family", f"{fam!r} not one of {{{known}}}")
     if "weather" in d and (not isinstance(weather, str) or weather not in WEATHERS):
         err("weather", f"{weather!r} not one of {{{', '.join(WEATHERS)}}}")
     if "sha256" in d and not _is_sha256(sha):
@@ -346,9 +348,9 @@ def _pair_errors(d: object, i: int) -> tuple[str, list[str], PairSpec | None]:
             for key in getattr(params, "duplicates", ()):
                 err(f"params.{key}", "given more than once")
             pfam, pweather = params.get("family"), params.get("weather")
-            if not isinstance(pfam, str) or pfam not in FAMILIES:
-                err("params.family", f"{pfam!r} not one of {{{', '.join(FAMILIES)}}}")
-            elif isinstance(fam, str) and fam in FAMILIES and fam != pfam:
+            if not family_codes.is_known(pfam):
+                err("params.family", f"{pfam!r} not one of {{{known}}}")
+            elif family_codes.is_known(fam) and fam != pfam:
                 # the parameters are checked against their own family only once the label
                 # agrees; otherwise every field would be reported against the wrong table
                 err("family", f"label {fam!r} disagrees with params.family {pfam!r}")

@@ -17,6 +17,8 @@ ids         entries
 12-59       per family (8 each, family order): low 2-3, medium 1-3, high 1-3
 60-64       the five non-actionable warnings of the paper's appendix, verbatim (no family)
 65          the empty text (:data:`EMPTY_TEXT_ID`; no words)
+66-         texts added later: every registered family's exact warning (kind ``"canonical"``)
+            and paraphrases (:func:`add_family_texts`), texts added with :func:`add_text`
 ==========  ==================================================================================
 
 Ambiguity tiers of the paraphrases (paper appendix "Additional Ablation Analysis"):
@@ -61,7 +63,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from lantern_jax import language
+from lantern_jax import family_codes, language
 from lantern_jax.constants import (
     FAMILIES,
     OVERRIDE_ANCHOR_START,
@@ -227,7 +229,7 @@ class WarningText:
     """One entry of the text bank."""
 
     text_id: int
-    family: int  # index into constants.FAMILIES, NO_FAMILY for non-actionable texts
+    family: int  # family index (family_codes.codes()), NO_FAMILY for non-actionable texts
     kind: str  # one of TEXT_KINDS
     text: str  # may contain TOKEN (then it states a position)
     tier: str = ""  # one of TIERS for paraphrases, "" otherwise
@@ -240,14 +242,11 @@ class WarningText:
 
 def _family_index(family: int | str, allow_none: bool = False) -> int:
     if isinstance(family, str):
-        if family not in FAMILIES:
-            raise ValueError(f"family: {family!r} not one of {{{', '.join(FAMILIES)}}}")
-        return FAMILIES.index(family)
+        return family_codes.index(family)
     f = int(family)
     if allow_none and f == NO_FAMILY:
         return f
-    if not 0 <= f < len(FAMILIES):
-        raise ValueError(f"family: {f} outside 0..{len(FAMILIES) - 1}")
+    family_codes.code(f)  # raises for an unknown index
     return f
 
 
@@ -343,7 +342,6 @@ class TextBank:
         entry = WarningText(len(self.entries), f, kind, text, tier)
         return TextBank((*self.entries, entry))
 
-
     def with_replaced_text(self, text_id: int, text: str) -> TextBank:
         """A new bank in which entry ``text_id`` reads ``text`` (same id, family, kind and
         tier): a wording experiment on one warning, e.g. the exact warning of a family.
@@ -360,35 +358,132 @@ class TextBank:
         entries[old.text_id] = dataclasses.replace(old, text=text)
         return TextBank(tuple(entries))
 
+
 #: The built-in bank; canonical entries first so that ``text_id == family`` for them.
 DEFAULT_BANK = TextBank(_initial_entries())
 #: Id of the empty text (no words; see the module docstring).
 EMPTY_TEXT_ID = next(e.text_id for e in DEFAULT_BANK if e.kind == "empty")
 
 
-def paraphrase_text_id(family: int) -> int:
-    """Text id of a family's first low-ambiguity paraphrase (ids 6-11, as before the tiers)."""
-    return len(TEMPLATES) + _family_index(family)
+#: Registered families' texts (:func:`add_family_texts`), by family index in registration order:
+#: ``(kind, tier, text)`` entries, the exact warning first.
+_FAMILY_TEXTS: dict[int, tuple[tuple[str, str, str], ...]] = {}
 
 
-def tier_text_ids(family: int | str, tier: str, bank: TextBank = DEFAULT_BANK) -> tuple[int, ...]:
+def registered_bank() -> TextBank:
+    """The built-in bank followed by the texts of every registered family (in registration
+    order): the bank of :func:`lantern_jax.sim.settings.default_settings`, and the one every
+    function of this module reads when given no bank.  Equal to :data:`DEFAULT_BANK` when no
+    family is registered."""
+    return _registered_bank(tuple(_FAMILY_TEXTS.items()))
+
+
+@functools.lru_cache(maxsize=8)
+def _registered_bank(family_texts: tuple) -> TextBank:
+    entries = list(DEFAULT_BANK.entries)
+    for f, texts in family_texts:
+        start = len(entries)
+        entries += [
+            WarningText(start + i, f, kind, text, tier)
+            for i, (kind, tier, text) in enumerate(texts)
+        ]
+    return TextBank(tuple(entries))
+
+
+def _bank(bank: TextBank | None) -> TextBank:
+    return registered_bank() if bank is None else bank
+
+
+def paraphrase_text_id(family: int | str, bank: TextBank | None = None) -> int:
+    """Text id of a family's first low-ambiguity paraphrase (ids 6-11 for the six built-in
+    families, as before the tiers; a registered family's first paraphrase)."""
+    f = _family_index(family)
+    if f < len(FAMILIES):
+        return len(TEMPLATES) + f
+    return _family_paraphrases(f, bank)[0]
+
+
+def canonical_text_id(family: int | str, bank: TextBank | None = None) -> int:
+    """Text id of a family's exact warning: the family index for the six built-in families, the
+    entry :func:`add_family_texts` added for a registered one.
+
+    Raises:
+        ValueError: for an unknown family or a registered family without texts in the bank.
+    """
+    f = _family_index(family)
+    if f < len(FAMILIES):
+        return f
+    for e in _bank(bank):
+        if e.kind == "canonical" and e.family == f:
+            return e.text_id
+    raise ValueError(f"family: {family_codes.code(f)!r} has no warning text in the bank")
+
+
+def _family_paraphrases(f: int, bank: TextBank | None = None) -> tuple[int, ...]:
+    """Ids of a family's paraphrases, in bank order (raises when it has none)."""
+    ids = tuple(e.text_id for e in _bank(bank) if e.kind == "paraphrase" and e.family == f)
+    if not ids:
+        raise ValueError(f"family: {family_codes.code(f)!r} has no paraphrase in the bank")
+    return ids
+
+
+def add_family_texts(family: int | str, warning: str, paraphrases: dict[str, Sequence[str]]
+                     ) -> tuple[int, tuple[int, ...]]:  # fmt: skip
+    """Register a registered family's exact warning and paraphrases (once): they follow the
+    built-in texts in :func:`registered_bank`.
+
+    Args:
+        family: a registered family's code or index (not one of the six built-in families,
+            whose texts are fixed).
+        warning: the exact warning (kind ``"canonical"``), in the templates' style, with
+            ``<FRONT_CAR_POS>`` where the grounded position goes.
+        paraphrases: ambiguity tier -> held-out paraphrases (the bank's tier rules apply: low
+            and medium state the position, high does not).
+
+    Returns:
+        ``(warning id, paraphrase ids)`` in :func:`registered_bank`.  Adding the same texts for
+        the same family again adds nothing and returns the ids they already have.
+
+    Raises:
+        ValueError: for a built-in family, a family that already has other texts, or a text
+            that breaks the bank's rules.
+    """
+    f = _family_index(family)
+    if f < len(FAMILIES):
+        raise ValueError(f"family: {family_codes.code(f)!r} is built in; its texts are fixed")
+    entries = [("canonical", "", warning)]
+    for tier, texts in paraphrases.items():
+        entries += [("paraphrase", tier, t) for t in texts]
+    for kind, tier, text in entries:
+        _check_entry(kind, tier, text)
+    have = _FAMILY_TEXTS.get(f)
+    if have is not None and list(have) != entries:
+        raise ValueError(f"family: {family_codes.code(f)!r} already has other texts")
+    _FAMILY_TEXTS[f] = tuple(entries)
+    ids = [e.text_id for e in registered_bank() if e.family == f]
+    return ids[0], tuple(ids[1:])
+
+
+def tier_text_ids(family: int | str, tier: str, bank: TextBank | None = None) -> tuple[int, ...]:
     """Ids of a family's paraphrases of one ambiguity tier, in bank order."""
     f = _family_index(family)
     if tier not in TIERS:
         raise ValueError(f"tier: {tier!r} not one of {{{', '.join(TIERS)}}}")
     return tuple(
-        e.text_id for e in bank if e.kind == "paraphrase" and e.family == f and e.tier == tier
+        e.text_id
+        for e in _bank(bank)
+        if e.kind == "paraphrase" and e.family == f and e.tier == tier
     )
 
 
-def non_actionable_text_ids(bank: TextBank = DEFAULT_BANK) -> tuple[int, ...]:
+def non_actionable_text_ids(bank: TextBank | None = None) -> tuple[int, ...]:
     """Ids of the non-actionable texts, in bank order (the paper's five first)."""
-    return tuple(e.text_id for e in bank if e.kind == "non_actionable")
+    return tuple(e.text_id for e in _bank(bank) if e.kind == "non_actionable")
 
 
-def get_text(text_id: int, bank: TextBank = DEFAULT_BANK) -> WarningText:
-    """The bank entry with ``text_id``."""
-    return bank.get(text_id)
+def get_text(text_id: int, bank: TextBank | None = None) -> WarningText:
+    """The bank entry with ``text_id`` (default bank: :func:`registered_bank`)."""
+    return _bank(bank).get(text_id)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -425,7 +520,7 @@ def ambiguity_tiers(families: Sequence[str | int], keys: Sequence[str]) -> np.nd
 
 
 def held_out_text_ids(
-    families: Sequence[str | int], keys: Sequence[str], bank: TextBank = DEFAULT_BANK
+    families: Sequence[str | int], keys: Sequence[str], bank: TextBank | None = None
 ) -> np.ndarray:
     """(n,) int32: the held-out paraphrase text of every pair, by its ambiguity tier.
 
@@ -435,7 +530,10 @@ def held_out_text_ids(
     rank = _tier_order(families, keys)
     out = np.empty(len(rank), np.int32)
     for i, (f, r) in enumerate(zip(families, rank, strict=True)):
-        ids = tier_text_ids(f, TIERS[r % len(TIERS)], bank)
+        # a registered family may lack a tier: it then reads any of its paraphrases
+        ids = tier_text_ids(f, TIERS[r % len(TIERS)], bank) or _family_paraphrases(
+            _family_index(f), bank
+        )
         out[i] = ids[(r // len(TIERS)) % len(ids)]
     return out
 
@@ -476,7 +574,7 @@ def format_position(pos_ego_xy) -> str:
     return "(" + ", ".join(language.format_number(v) for v in p) + ")"
 
 
-def render_warning(text_id: int, pos_ego_xy=None, bank: TextBank = DEFAULT_BANK) -> str:
+def render_warning(text_id: int, pos_ego_xy=None, bank: TextBank | None = None) -> str:
     """The warning string with ``<FRONT_CAR_POS>`` grounded (what a language model reads).
 
     Args:
@@ -490,7 +588,7 @@ def render_warning(text_id: int, pos_ego_xy=None, bank: TextBank = DEFAULT_BANK)
         ``render_warning(0, (14.2, 3.1))`` ->
         ``"The pedestrian at position (14.2, 3.1) is about to enter the ego lane."``
     """
-    entry = bank.get(text_id)
+    entry = _bank(bank).get(text_id)
     if not entry.has_position:
         return entry.text
     return entry.text.replace(TOKEN, format_position(pos_ego_xy))
@@ -534,7 +632,7 @@ class TextTables:
         return self.x_slot >= 0
 
 
-def text_tables(bank: TextBank = DEFAULT_BANK) -> TextTables:
+def text_tables(bank: TextBank | None = None) -> TextTables:
     """The per-text tables a rollout indexes by text id (:class:`TextTables`), built once per
     bank (outside ``jit``; the arrays are read-only).
 
@@ -542,7 +640,7 @@ def text_tables(bank: TextBank = DEFAULT_BANK) -> TextTables:
         lantern_jax.language.LanguageAssetError: when the tokenizer file is missing.
         ValueError: naming a text longer than ``MAX_TOKENS`` tokens.
     """
-    return _text_tables(bank)
+    return _text_tables(_bank(bank))
 
 
 @functools.lru_cache(maxsize=8)
@@ -568,13 +666,13 @@ def _text_tables(bank: TextBank) -> TextTables:
     return tables
 
 
-def token_table(bank: TextBank = DEFAULT_BANK) -> np.ndarray:
+def token_table(bank: TextBank | None = None) -> np.ndarray:
     """(num_texts, MAX_TOKENS) int32, padded token ids of every text (see :func:`text_tables`)."""
     return text_tables(bank).tokens
 
 
 def warning_language(
-    text_id: Array, active: Array, position: Array, bank: TextBank = DEFAULT_BANK
+    text_id: Array, active: Array, position: Array, bank: TextBank | None = None
 ) -> tuple[Array, Array]:
     """The delivered text as a policy reads it: token ids and the aligned value channel
     (jittable; one table lookup).
@@ -585,7 +683,8 @@ def warning_language(
         position: (2,) float32, m, the grounded position (ego frame, x forward, y right); it
             enters the value channel rounded as the text writes it, and only for a text that
             states a position.
-        bank: static; the text bank.
+        bank: static; the text bank (default: :func:`registered_bank` when traced; the
+            simulator always passes its settings' bank).
 
     Returns:
         tokens: (MAX_TOKENS,) int32, all ``PAD_ID`` when inactive or unknown.

@@ -6,7 +6,8 @@ Input: a route-level DataFrame (one row per (model, condition, pair); see
 :mod:`lantern_jax.scoring.table`).  Rows are grouped by ``(model, condition)``.
 
 * Family score: mean CUS over the pairs of the family.
-* Overall: equal-weight macro-average of the family scores, in ``constants.FAMILIES`` order; a
+* Overall: equal-weight macro-average of the family scores, in ``constants.FAMILIES`` order
+  (then any registered family the rows hold, :func:`lantern_jax.family_codes.table_codes`); a
   family with no rows in a group is ``NaN`` and is left out of that group's macro-average.
 * Decomposition: pooled over all pairs of the group.  ``A-Prog.``, ``TTC``, ``Clear.``, ``Ant.``,
   ``Rec.``, ``B-Prog.`` are means x 100 of ``A_progress``, ``S_ttc``, ``S_clear``, ``S_ant``,
@@ -28,7 +29,8 @@ from collections.abc import Sequence
 import numpy as np
 import pandas as pd
 
-from lantern_jax.constants import CONDITIONS, FAMILIES
+from lantern_jax import family_codes
+from lantern_jax.constants import CONDITIONS
 
 GROUP_COLUMNS = ("model", "condition")
 
@@ -99,21 +101,24 @@ def family_scores(df: pd.DataFrame, by: Sequence[str] = GROUP_COLUMNS) -> pd.Dat
     """Per-family mean CUS and the macro-averaged Overall score.
 
     Args:
-        df: route-level rows with ``family`` (code in ``constants.FAMILIES``) and ``CUS``.
+        df: route-level rows with ``family`` (a known code, :mod:`lantern_jax.family_codes`)
+            and ``CUS``.
         by: grouping columns.
 
     Returns:
-        DataFrame indexed by ``by`` with columns ``PE, VC, OR, LWW, RWW, RTY, Overall`` (CUS
-        points, 0..100).
+        DataFrame indexed by ``by`` with columns ``PE, VC, OR, LWW, RWW, RTY``, the registered
+        families the rows hold, and ``Overall`` (CUS points, 0..100).
     """
     by = list(by)
     _check(df, [*by, "family", "CUS"])
-    unknown = sorted(set(df["family"]) - set(FAMILIES))
+    known = family_codes.codes()
+    unknown = sorted(set(df["family"]) - set(known))
     if unknown:
-        raise ValueError(f"route table: unknown family code(s) {unknown}; known: {FAMILIES}")
+        raise ValueError(f"route table: unknown family code(s) {unknown}; known: {known}")
+    cols = family_codes.table_codes(df["family"])
     means = df.groupby([*by, "family"], sort=False)["CUS"].mean().unstack("family")
-    means = means.reindex(columns=list(FAMILIES)).astype(float)
-    means["Overall"] = means[list(FAMILIES)].mean(axis=1, skipna=True)
+    means = means.reindex(columns=cols).astype(float)
+    means["Overall"] = means[cols].mean(axis=1, skipna=True)
     means.columns.name = None
     return means.sort_index()
 
@@ -174,7 +179,8 @@ def decomposition_pair_values(df: pd.DataFrame) -> pd.DataFrame:
 def family_table(route_table: pd.DataFrame) -> pd.DataFrame:
     """Per-family CUS rows for every (model, condition) plus each model's paired warning gain.
 
-    Columns: ``model, condition, PE, VC, OR, LWW, RWW, RTY, Overall``.
+    Columns: ``model, condition, PE, VC, OR, LWW, RWW, RTY``, the registered families the
+    rows hold (:func:`lantern_jax.family_codes.table_codes`), ``Overall``.
     """
     fam = family_scores(route_table).reset_index()
     out = []
@@ -186,7 +192,7 @@ def family_table(route_table: pd.DataFrame) -> pd.DataFrame:
         if all(c in sub.index for c in CONDITIONS):
             warned, plain = (sub.loc[c].drop("model") for c in CONDITIONS)
             out.append({"model": model, "condition": "warning gain", **(warned - plain)})
-    cols = ["model", "condition", *FAMILIES, "Overall"]
+    cols = ["model", "condition", *family_codes.table_codes(route_table["family"]), "Overall"]
     return pd.DataFrame(out)[cols]
 
 
@@ -202,18 +208,20 @@ def premise_table(route_table: pd.DataFrame) -> pd.DataFrame:
     (every model and condition in ``route_table``) whose hazard the front camera could not see
     at the warning point, and could not see at any tick of the approach up to it.
 
-    Columns: ``measure, PE, VC, OR, LWW, RWW, RTY, Overall`` (Overall pools all executions);
-    the last row, ``Route A executions``, counts them per family.
+    Columns: ``measure, PE, VC, OR, LWW, RWW, RTY``, the registered families the rows hold,
+    ``Overall`` (Overall pools all executions); the last row, ``Route A executions``, counts
+    them per family.
     """
+    families = family_codes.table_codes(route_table["family"])
     rows = []
     for col, label in PREMISE_ROWS:
         row = {"measure": label}
-        for f in FAMILIES:
+        for f in families:
             v = route_table.loc[route_table["family"] == f, col]
             row[f] = 100.0 * float(v.mean()) if len(v) else np.nan
         row["Overall"] = 100.0 * float(route_table[col].mean()) if len(route_table) else np.nan
         rows.append(row)
     counts = {"measure": "Route A executions"}
-    counts.update({f: float((route_table["family"] == f).sum()) for f in FAMILIES})
+    counts.update({f: float((route_table["family"] == f).sum()) for f in families})
     counts["Overall"] = float(len(route_table))
     return pd.DataFrame([*rows, counts])

@@ -18,6 +18,7 @@ import jax
 import numpy as np
 import pandas as pd
 
+from lantern_jax import family_codes
 from lantern_jax.constants import FAMILIES
 from lantern_jax.files import atomic_write
 from lantern_jax.scoring.cus import GATE_NAMES, d_safe_for_family, pair_components
@@ -59,11 +60,12 @@ def _family_codes(families: Any, n: int) -> list[str]:
     codes = []
     for f in _per_row("families", families, n):
         if isinstance(f, str):
-            if f not in FAMILIES:
-                raise ValueError(f"build_route_table: unknown family {f!r}; known: {FAMILIES}")
+            if not family_codes.is_known(f):
+                known = family_codes.codes()
+                raise ValueError(f"build_route_table: unknown family {f!r}; known: {known}")
             codes.append(f)
         else:
-            codes.append(FAMILIES[int(f)])
+            codes.append(family_codes.code(f))
     return codes
 
 
@@ -92,7 +94,8 @@ def build_route_table(
         pair_ids, families (codes or indices), weathers: one entry per row.
         t_warn_on: (n,) s, start of warning delivery (``NaN`` = none).  Default: ``t_ref_s`` for
             rows whose condition is ``"warning"``, ``NaN`` otherwise.
-        d_safe: (n,) m, clearance normalisers; default from the family (2 m PE/OR, else 3 m).
+        d_safe: (n,) m, clearance normalisers; default from the family (2 m PE/OR, else 3 m;
+            required for a registered family, whose record sets it per pair).
         warning_ticks: (n,) int, ticks at which a warning was delivered on Route A
             (default 0).
         hidden_at_warning, hidden_before_warning: (n,) bool, the Route A hazard was hidden from
@@ -116,6 +119,9 @@ def build_route_table(
     fam = _family_codes(families, n)
     conds = [str(c) for c in _per_row("condition", condition, n)]
     if d_safe is None:
+        other = sorted(set(fam) - set(FAMILIES))
+        if other:
+            raise ValueError(f"build_route_table: pass d_safe for registered families {other}")
         d_safe = np.asarray(d_safe_for_family(np.asarray([FAMILIES.index(f) for f in fam])))
     d_safe = np.broadcast_to(np.asarray(d_safe, np.float64), (n,))
     comps = {
@@ -215,9 +221,10 @@ def validate_route_table(df: pd.DataFrame, require_same_pairs: bool = True) -> p
         rows = df.loc[mask, list(KEY_COLUMNS)]
         return ["/".join(map(str, r)) for r in rows.itertuples(index=False)]
 
-    unknown = sorted(set(df["family"]) - set(FAMILIES))
+    known = family_codes.codes()
+    unknown = sorted(set(df["family"]) - set(known))
     if unknown:
-        raise ValueError(f"route table: unknown family code(s) {unknown}; known: {FAMILIES}")
+        raise ValueError(f"route table: unknown family code(s) {unknown}; known: {known}")
     for g in (*GATE_NAMES, "hazard_hidden_at_warning", "hazard_hidden_before_warning"):
         off = ~df[g].isin([0, 1])
         if off.any():

@@ -184,3 +184,8 @@ D_SAFE_BY_FAMILY = tuple(
 NONACTIONABLE_MAX_DV_MPS = 2.0  # m/s, max additional speed reduction vs no warning: below this
 NONACTIONABLE_MAX_STOP_S = 1.0  # s, no standstill (speed < still_speed_mps) of this length
 NONACTIONABLE_MAX_RC_DROP = 5.0  # percentage points, route completion may drop at most this
+
+# --- response to unseen hazards (paper appendix "Protocol Extension to Unseen Hazards") ---------
+# Host-side criteria of a table (never inside a compiled program).
+RESPONSE_BRAKE = 0.5  # brake signal (commanded deceleration / brake limit) of a braking step
+RESPONSE_STEPS = 3  # consecutive 20-Hz control steps at or above it: a sustained response

@@ -34,6 +34,7 @@ from collections.abc import Sequence
 import numpy as np
 import pandas as pd
 
+from lantern_jax import family_codes
 from lantern_jax.constants import FAMILIES
 from lantern_jax.scoring.aggregate import (
     DECOMPOSITION_COLUMNS,
@@ -88,6 +89,17 @@ class Resampling:
     def family_mask(self, family: str) -> np.ndarray:
         """(n,) bool, the pairs of ``family``."""
         return np.asarray(self.families) == family
+
+    @property
+    def table_families(self) -> list[str]:
+        """The family columns of the tables: the six, then the registered families drawn
+        (:func:`lantern_jax.family_codes.table_codes`)."""
+        return family_codes.table_codes(self.families)
+
+    @property
+    def table_columns(self) -> tuple[str, ...]:
+        """:attr:`table_families` then ``Overall``."""
+        return (*self.table_families, OVERALL)
 
 
 def resampling(
@@ -204,12 +216,14 @@ def by_family(res: Resampling, values: np.ndarray, weights: np.ndarray | None = 
 
     Returns:
         (R, F + 1, G) (R = B by default): the NaN-skipping mean of each family of
-        ``constants.FAMILIES`` (NaN for a family without values), then ``Overall``, the mean
-        over the families with a value (the tables' macro-average).
+        :attr:`Resampling.table_families` (NaN for a family without values), then
+        ``Overall``, the mean over the families with a value (the tables' macro-average).
     """
     values = np.asarray(values, np.float64)
     w = res.weights if weights is None else np.asarray(weights, np.float64)
-    fam = np.stack([_weighted_means(w * res.family_mask(f), values) for f in FAMILIES], axis=1)
+    fam = np.stack(
+        [_weighted_means(w * res.family_mask(f), values) for f in res.table_families], axis=1
+    )
     kept = np.where(np.isnan(fam), 0.0, fam)
     ok = ~np.isnan(fam)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -227,7 +241,7 @@ def counts(res: Resampling, values: np.ndarray, pairs: np.ndarray | None = None)
 
 def family_counts(res: Resampling, values: np.ndarray) -> np.ndarray:
     """(F + 1, G) int, the pairs behind each family cell and (their sum) the Overall cell."""
-    fam = np.stack([counts(res, values, res.family_mask(f)) for f in FAMILIES])
+    fam = np.stack([counts(res, values, res.family_mask(f)) for f in res.table_families])
     return np.concatenate([fam, fam.sum(axis=0, keepdims=True)])
 
 
@@ -354,7 +368,7 @@ def family_intervals(route_table: pd.DataFrame, res: Resampling) -> pd.DataFrame
         reps = np.concatenate([reps, np.stack(gain_reps, axis=2)], axis=2)
         n = np.concatenate([n, np.stack(gain_n, axis=1)], axis=1)
     lo, hi = interval(reps)
-    rows = _rows([*keys, *gain_keys], GROUP_COLUMNS, FAMILY_COLUMNS, lo, hi, n)
+    rows = _rows([*keys, *gain_keys], GROUP_COLUMNS, res.table_columns, lo, hi, n)
     return pd.DataFrame(rows)
 
 
@@ -421,11 +435,13 @@ def premise_intervals(
     for col, label in rows:
         per_pair = 100.0 * route_table.groupby("pair_id")[col].mean()
         v = per_pair.reindex(list(res.pair_ids)).to_numpy(np.float64)[:, None]
-        fam = np.stack([pooled(res, v, res.family_mask(f))[:, 0] for f in FAMILIES], axis=1)
+        fam = np.stack(
+            [pooled(res, v, res.family_mask(f))[:, 0] for f in res.table_families], axis=1
+        )
         reps = np.concatenate([fam, pooled(res, v)], axis=1)  # Overall pools every pair
         lo, hi = interval(reps)
         n = family_counts(res, v)[:, 0]
-        out += _rows([(label,)], ("measure",), FAMILY_COLUMNS, lo[:, None], hi[:, None],
+        out += _rows([(label,)], ("measure",), res.table_columns, lo[:, None], hi[:, None],
                      n[:, None])  # fmt: skip
     return pd.DataFrame(out)
 

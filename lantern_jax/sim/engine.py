@@ -291,11 +291,13 @@ def run_executions(
             sizes share one compiled program at little cost.
 
     Raises:
-        ValueError: when ``pad_to`` is smaller than the batch.
+        ValueError: when ``pad_to`` is smaller than the batch, or the settings' bank lacks a
+            text the executions read.
 
     Returns:
         (final states as NumPy arrays with leading axis ``n``, seconds spent compiling).
     """
+    check_texts(settings, scenarios)
     n = jax.tree.leaves(scenarios)[0].shape[0]
     total = n if pad_to is None else pad_to
     if total < n:
@@ -341,6 +343,14 @@ def run_executions(
     if timings is not None:
         timings["rollout"] = time.perf_counter() - t0 - t_compile
     return final, t_compile
+
+
+def check_texts(settings: Settings, scenarios: Scenario) -> None:
+    """:meth:`Settings.check_texts` for the warnings and overrides of batched scenarios."""
+    config = scenarios.config
+    settings.check_texts(np.concatenate([
+        np.asarray(config.text_id).reshape(-1), np.asarray(config.override_text_id).reshape(-1)
+    ]))  # fmt: skip
 
 
 def finalize_batch(telemetry: Any, settings: Settings = DEFAULT_SETTINGS) -> Any:

@@ -77,7 +77,7 @@ def grounded_position(scenario: Scenario, state: State) -> Array:
 
 
 def delivered_warning(
-    scenario: Scenario, state: State, bank: warnings.TextBank = warnings.DEFAULT_BANK
+    scenario: Scenario, state: State, bank: warnings.TextBank | None = None
 ) -> tuple[Array, Array, Array]:
     """What is delivered now: the protocol's warning or the override (ground truth, not a
     policy input).
@@ -157,7 +157,7 @@ def mask_actors(fields: dict[str, Array], seen: Array) -> dict[str, Array]:
 
 
 def warning_fields(
-    scenario: Scenario, state: State, bank: warnings.TextBank = warnings.DEFAULT_BANK
+    scenario: Scenario, state: State, bank: warnings.TextBank | None = None
 ) -> dict[str, Array]:
     """The warning as a policy with the ``"warning"`` sensor reads it: the delivered text's
     token ids and value channel (:func:`~lantern_jax.scenarios.warnings.warning_language`)."""
@@ -222,7 +222,7 @@ def observe(
     scenario: Scenario,
     state: State,
     sensors: tuple[str, ...] = DEFAULT_SENSORS,
-    bank: warnings.TextBank = warnings.DEFAULT_BANK,
+    bank: warnings.TextBank | None = None,
 ) -> Observation:
     """Build the observation of the current tick from the declared sensors only.
 

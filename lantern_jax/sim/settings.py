@@ -24,10 +24,11 @@ each: the dataclasses' field defaults.
 
 from __future__ import annotations
 
+import numpy as np
 from flax import struct
 
 from lantern_jax.scenarios.protocol import DEFAULT_PROTOCOL, ProtocolSettings
-from lantern_jax.scenarios.warnings import DEFAULT_BANK, TextBank
+from lantern_jax.scenarios.warnings import DEFAULT_BANK, TextBank, registered_bank
 from lantern_jax.scoring.thresholds import DEFAULT_SCORING, ScoringSettings
 
 
@@ -54,6 +55,27 @@ class Settings:
         self.scoring.validate()
         return self
 
+    def check_texts(self, text_ids) -> Settings:
+        """Check that the bank holds every text the executions may deliver (outside ``jit``; a
+        text id beyond the bank would be delivered as no text at all); returns self.
+
+        Args:
+            text_ids: the executions' text ids (``config.text_id`` and
+                ``config.override_text_id``; ``-1`` = none).
+
+        Raises:
+            ValueError: naming the ids beyond the bank.
+        """
+        ids = np.asarray(text_ids).reshape(-1)
+        beyond = sorted({int(i) for i in ids if i >= len(self.bank)})
+        if beyond:
+            raise ValueError(
+                f"Settings.bank: holds {len(self.bank)} texts; the executions read text id(s) "
+                f"{beyond} beyond it (texts of a registered family: start from "
+                "lantern_jax.sim.settings.default_settings())"
+            )
+        return self
+
     def with_temperature(self, temperature: float) -> Settings:
         """These settings with another soft-score temperature."""
         return self.replace(scoring=self.scoring.replace(temperature=temperature))
@@ -61,3 +83,11 @@ class Settings:
 
 #: The paper's settings.
 DEFAULT_SETTINGS = Settings()
+
+
+def default_settings() -> Settings:
+    """The paper's settings with every registered family's warning texts in the bank
+    (:func:`~lantern_jax.scenarios.warnings.registered_bank`; :data:`DEFAULT_SETTINGS` itself
+    when no family is registered)."""
+    bank = registered_bank()
+    return DEFAULT_SETTINGS if bank == DEFAULT_BANK else DEFAULT_SETTINGS.replace(bank=bank)

@@ -43,7 +43,7 @@ from lantern_jax.scoring.table import build_route_table
 from lantern_jax.scoring.uncertainty import SEED, TableIntervals, table_intervals
 from lantern_jax.sim.engine import Executions, build_executions, finalize_batch, run_executions
 from lantern_jax.sim.observe import observe
-from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings
+from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings, default_settings
 from lantern_jax.sim.state import init_state
 from lantern_jax.sim.switch import PolicySwitch, policy_switch, switch_params
 from lantern_jax.times import happened, time_or_nan
@@ -332,7 +332,7 @@ def evaluate(
     progress: bool = True,
     one_program: bool = True,
     bootstrap_seed: int = SEED,
-    settings: Settings = DEFAULT_SETTINGS,
+    settings: Settings | None = None,
 ) -> EvalResult:
     """Evaluate policies on a suite: one jitted, vmapped rollout call per policy, then score.
 
@@ -348,7 +348,8 @@ def evaluate(
         bootstrap_seed: seed of the pair-level bootstrap of the tables' intervals (recorded in
             the manifest).
         settings: scoring thresholds and weights, protocol thresholds, text bank
-            (:class:`~lantern_jax.sim.settings.Settings`; recorded in the manifest).
+            (:class:`~lantern_jax.sim.settings.Settings`; recorded in the manifest; default:
+            :func:`~lantern_jax.sim.settings.default_settings`, the paper's).
 
     Returns:
         :class:`EvalResult` with the route-level table, the family table (with paired warning
@@ -360,7 +361,7 @@ def evaluate(
         PolicyError: naming the policy whose ``act`` failed while traced or run.
     """
     pols = _policies_to_run(policies, suite)
-    settings.validate()
+    settings = (default_settings() if settings is None else settings).validate()
     if policy_params is None:
         policy_params = [None] * len(pols)
     if len(policy_params) != len(pols):
