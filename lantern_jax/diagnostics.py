@@ -77,7 +77,7 @@ from lantern_jax.scoring.uncertainty import (
 )
 from lantern_jax.sim.engine import Program, check_texts
 from lantern_jax.sim.rollout import rollout
-from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings
+from lantern_jax.sim.settings import Settings, default_settings
 from lantern_jax.world import Scenario, tree_stack
 
 EMPTY_ROAD_LENGTH_M = 150.0  # m, the non-actionable diagnostic's empty straight route
@@ -267,15 +267,17 @@ def _recorded(batch, params, settings, *, program: Program, horizon: int):
 
 
 def run_recorded(
-    policy: Policy, params: Any, scenarios: list[Scenario], settings: Settings = DEFAULT_SETTINGS
+    policy: Policy, params: Any, scenarios: list[Scenario], settings: Settings | None = None
 ) -> tuple[Any, Any, Any]:
-    """Roll out a few executions with full records (one jitted, vmapped call).
+    """Roll out a few executions with full records (one jitted, vmapped call) under
+    ``settings`` (default :func:`~lantern_jax.sim.settings.default_settings`).
 
     Returns:
         (final states, tick records, hard metrics), NumPy, leading axis = execution; the
         horizon covers the longest route timeout.
     """
     batch = tree_stack(scenarios)
+    settings = default_settings() if settings is None else settings
     check_texts(settings, batch)
     horizon = int(np.ceil(float(np.max(np.asarray(batch.config.timeout_s))) / DT))
     final, rec = _recorded(batch, params, settings, program=Program(policy), horizon=horizon)

@@ -49,6 +49,7 @@ from lantern_jax.scenarios.knobs import get_knobs, set_knobs
 from lantern_jax.scenarios.suite import load_suite
 from lantern_jax.scoring.cus import soft_pair_cus
 from lantern_jax.sim.rollout import horizon_ticks, rollout
+from lantern_jax.sim.settings import DEFAULT_SETTINGS
 from lantern_jax.viz import bev_plot, num_valid_ticks, timeline_plot
 
 SMALL = os.environ.get("LANTERN_NOTEBOOK_SMALL", "0") == "1"
@@ -185,12 +186,13 @@ display(timeline_plot(rec_w, rec_nw, proto_w, proto_nw, title=f"{pair.pair_id}: 
 # %%
 GRAD_TICKS = 400
 TEMPERATURE = 0.05
+SOFT_SETTINGS = DEFAULT_SETTINGS.with_temperature(TEMPERATURE)
 
 
 def soft_cus(crossing_speed):
     w_a = set_knobs(world_a, hazard_speed=crossing_speed)
-    final_a, _ = rollout(w_a, coop, coop_params, GRAD_TICKS, temperature=TEMPERATURE)
-    final_b, _ = rollout(world_b, coop, coop_params, GRAD_TICKS, temperature=TEMPERATURE)
+    final_a, _ = rollout(w_a, coop, coop_params, GRAD_TICKS, settings=SOFT_SETTINGS)
+    final_b, _ = rollout(world_b, coop, coop_params, GRAD_TICKS, settings=SOFT_SETTINGS)
     cus = soft_pair_cus(final_a.telemetry, final_b.telemetry, world_a.config.d_safe, TEMPERATURE)
     return cus, (final_a.done, final_b.done)
 

@@ -18,7 +18,7 @@ from lantern_jax.constants import FAMILIES, NUM_WAYPOINTS, WEATHERS
 from lantern_jax.dataset import frames as fr
 from lantern_jax.dataset import generate as generate_module
 from lantern_jax.dataset.generate import generate_dataset
-from lantern_jax.dataset.record import FRAME_TICKS, record
+from lantern_jax.dataset.record import FRAME_TICKS, FRONT_SENSORS, RIG_SENSORS, record
 from lantern_jax.dataset.scenes import PLAN_JSON, build_scenes, plan_scenes, read_plan
 from lantern_jax.dataset.store import (
     CARD_JSON,
@@ -29,6 +29,7 @@ from lantern_jax.dataset.store import (
     load_sequences,
     read_card,
 )
+from lantern_jax.language import PAD_ID
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.duplicates import near_duplicate, route_samples
 from lantern_jax.scenarios.families import build_pair, sample_params
@@ -87,7 +88,7 @@ def test_waypoints_are_the_experts_actual_future(made):
     scenario = build_scenes([spec])[0][0]
     expert = get_policy("expert")
     n_ticks = FRAME_TICKS * (int(mine["frame"].max()) + NUM_WAYPOINTS + 1)
-    _, rec = jax.jit(lambda sc: rollout(sc, expert.act, expert.init(None), n_ticks, record=True))(
+    _, rec = jax.jit(lambda sc: rollout(sc, expert, expert.init(None), n_ticks, record=True))(
         scenario
     )
     xy = np.concatenate([np.asarray(scenario.ego0.xy)[None], np.asarray(rec.ego_xy)])
@@ -139,19 +140,19 @@ def test_onset_only_rule_keeps_exactly_the_termination_crossing_frames(made):
     only_termination = frames["horizon_crossing"].to_numpy(bool) & ~crosses_onset
     assert only_termination.any(), "some frame should cross warning termination only"
     assert len(kept) > len(load_frames(folder, exclude_crossing="both"))
-    sub = load_frames(folder, exclude_crossing="onset", columns=["obs.warning_active"])
-    assert list(sub.columns) == ["obs.warning_active"] and len(sub) == len(kept)
+    sub = load_frames(folder, exclude_crossing="onset", columns=["obs.warning_tokens"])
+    assert list(sub.columns) == ["obs.warning_tokens"] and len(sub) == len(kept)
 
 
 def test_route_b_carries_no_warning_and_no_hazard(made):
-    folder, _ = made
+    folder, card = made
     frames = load_frames(folder, include_crossing=True)
+    shape = card["frame_columns"]["obs.warning_tokens"]
     b = frames[frames["route"] == "B"]
     assert len(b) > 0
-    assert not b["obs.warning_active"].astype(bool).any()
-    assert (b["obs.warning_text_id"] == -1).all()
+    assert np.all(column_array(b, "obs.warning_tokens", shape) == PAD_ID)  # no text delivered
     a = frames[frames["route"] == "A"]
-    assert a["obs.warning_active"].astype(bool).any()
+    assert np.any(column_array(a, "obs.warning_tokens", shape) != PAD_ID)
 
 
 def test_same_seed_gives_identical_shards_and_resume_finishes_the_same(made, tmp_path):
@@ -214,10 +215,10 @@ def test_closed_loop_observation_equals_the_dataset_frame(made):
     scenario = build_scenes([spec])[0][0]
     expert = get_policy("expert")
     params = expert.init(None)
-    recs, _ = jax.jit(lambda sc: record(sc, expert.act, params, 12))(scenario)
+    recs, _ = jax.jit(lambda sc: record(sc, expert, params, 12))(scenario)
     f = 8
-    final, _ = jax.jit(lambda sc: rollout(sc, expert.act, params, FRAME_TICKS * f))(scenario)
-    live = jax.jit(observe)(scenario, final)
+    final, _ = jax.jit(lambda sc: rollout(sc, expert, params, FRAME_TICKS * f))(scenario)
+    live = jax.jit(lambda sc, st: observe(sc, st, FRONT_SENSORS))(scenario, final)
     stored = jax.tree.map(lambda x: x[f], recs.obs)
     pairs = zip(jax.tree_util.tree_leaves_with_path(live),
                 jax.tree_util.tree_leaves_with_path(stored), strict=True)  # fmt: skip
@@ -225,10 +226,10 @@ def test_closed_loop_observation_equals_the_dataset_frame(made):
         np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-5, atol=1e-5,
                                    err_msg=jax.tree_util.keystr(path))  # fmt: skip
     # the six-camera rig: Observation.surround of a surround policy equals the stored view
-    rig = jax.jit(lambda sc, st: observe(sc, st, surround=True).surround)(scenario, final)
+    rig = jax.jit(lambda sc, st: observe(sc, st, RIG_SENSORS).surround)(scenario, final)
     for name in ("visible", "ranges", "hit_class"):
         np.testing.assert_allclose(np.asarray(getattr(rig, name)),
-                                   np.asarray(getattr(recs.surround, name))[f],
+                                   np.asarray(getattr(recs.rig.surround, name))[f],
                                    rtol=1e-5, atol=1e-5, err_msg=name)  # fmt: skip
     assert np.asarray(live.range_class).dtype == np.int32
 

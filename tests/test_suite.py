@@ -143,6 +143,7 @@ def _soft_pair_gradient(suite, key: str, num_ticks: int | None, temp: float = 0.
     from lantern_jax.scenarios.knobs import set_knobs
     from lantern_jax.scoring.cus import soft_pair_components
     from lantern_jax.sim.rollout import horizon_ticks, rollout
+    from lantern_jax.sim.settings import DEFAULT_SETTINGS
 
     p = next(q for q in suite.pairs if q.family == "PE")
     a, b, _ = build_pair(p.params)
@@ -150,9 +151,11 @@ def _soft_pair_gradient(suite, key: str, num_ticks: int | None, temp: float = 0.
     params = pol.init(jax.random.PRNGKey(0))
     n = horizon_ticks(float(a.config.timeout_s)) if num_ticks is None else num_ticks
 
+    settings = DEFAULT_SETTINGS.with_temperature(temp)
+
     def score(v_post):
-        fa, _ = rollout(set_knobs(a, hazard_speed=v_post), pol, params, n, temperature=temp)
-        fb, _ = rollout(b, pol, params, n, temperature=temp)
+        fa, _ = rollout(set_knobs(a, hazard_speed=v_post), pol, params, n, settings=settings)
+        fb, _ = rollout(b, pol, params, n, settings=settings)
         return soft_pair_components(fa.telemetry, fb.telemetry, a.config.d_safe, temp)[key]
 
     value, grad = jax.jit(jax.value_and_grad(score))(jnp.float32(3.0))

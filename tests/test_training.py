@@ -14,10 +14,13 @@ import pandas as pd
 import pytest
 
 from lantern_jax.cli import main
+from lantern_jax.constants import FAMILIES
 from lantern_jax.dataset.generate import generate_dataset
 from lantern_jax.dataset.store import load_frames, read_card
+from lantern_jax.language import PAD_ID
 from lantern_jax.policies.learned.checkpoint import checkpoint_policy, read_meta
 from lantern_jax.scenarios.suite import load_suite
+from lantern_jax.scenarios.warnings import text_tables
 from lantern_jax.training.config import TrainConfig
 from lantern_jax.training.data import examples_from_frames, recipe_examples, split_by_sequence
 from lantern_jax.training.train import train
@@ -43,17 +46,26 @@ def test_recipes_select_the_frames_they_promise(dataset):
     card = read_card(dataset)
     every = examples_from_frames(frames, card)
     base = recipe_examples(frames, card, tiny(dataset, "x"))
-    assert len(base) == int(np.sum(~every.obs["warning_active"]))
-    assert not base.obs["warning_active"].any()
+    warned = np.any(every.obs["warning_tokens"] != PAD_ID, axis=-1)  # a text was delivered
+    assert warned.any() and not warned.all()
+    assert len(base) == int(np.sum(~warned))
+    assert np.all(base.obs["warning_tokens"] == PAD_ID)
     coop = recipe_examples(frames, card, tiny(dataset, "x", recipe="coop", init_from="b"))
     assert len(coop) == len(every)
-    assert coop.obs["warning_active"].sum() == every.obs["warning_active"].sum()
+    assert np.any(coop.obs["warning_tokens"] != PAD_ID, axis=-1).sum() == warned.sum()
     far = recipe_examples(frames, card, tiny(dataset, "x", recipe="distance", init_from="b"))
     n_b = int(np.sum(frames["route"].to_numpy(str) == "B"))
     assert len(far) == len(every) + n_b
     added = far.take(np.arange(len(every), len(far)))
-    assert added.obs["warning_active"].all()
-    assert np.allclose(added.obs["warning_pos"][:, 0], 100.0)
+    assert np.any(added.obs["warning_tokens"] != PAD_ID, axis=-1).all()  # a text on every one
+    # ... its family's canonical sentence, the hazard told at 100 m ahead, 0.5 m to the side
+    tables = text_tables()
+    fam = np.asarray([FAMILIES.index(f) for f in frames["family"].to_numpy(str)[
+        frames["route"].to_numpy(str) == "B"]])  # fmt: skip
+    np.testing.assert_array_equal(added.obs["warning_tokens"], tables.tokens[fam])
+    rows = np.arange(len(added))
+    np.testing.assert_allclose(added.obs["warning_values"][rows, tables.x_slot[fam]], 100.0)
+    np.testing.assert_allclose(added.obs["warning_values"][rows, tables.y_slot[fam]], 0.5)
 
 
 def test_validation_split_holds_out_whole_sequences(dataset):
@@ -87,7 +99,7 @@ def test_coop_fine_tunes_the_base_and_runs_in_the_closed_loop(dataset, tmp_path,
     assert meta["train_config"]["init_from"] == str(base_path)
     assert meta["train_config"] == dataclasses.asdict(cfg)
     pol = checkpoint_policy(tmp_path / "coop" / "learned-tiny-coop.msgpack")
-    assert pol.name == "learned-tiny-coop" and pol.uses_warning
+    assert pol.name == "learned-tiny-coop" and pol.reads_warning
     rc = main(["evaluate", "--checkpoint", str(tmp_path / "coop" / "learned-tiny-coop.msgpack"),
                "--pairs-per-family", "1", "--out", str(tmp_path / "res"), "--quiet"])  # fmt: skip
     assert rc == 0
@@ -112,6 +124,6 @@ def test_surround_recipe_trains_on_the_rig_and_drives(dataset, tmp_path):
     cfg = tiny(dataset, tmp_path / "sur", name="learned-tiny-surround", recipe="surround")
     train(cfg, progress=False)
     pol = checkpoint_policy(tmp_path / "sur" / "learned-tiny-surround.msgpack")
-    assert pol.act.surround and not pol.uses_warning
+    assert pol.surround and not pol.reads_warning
     res = evaluate([pol], suite=load_suite().select(["pe_0001", "vc_0001"]), progress=False)
     assert np.isfinite(res.route_table["CUS"]).all() and len(res.route_table) == 4

@@ -34,7 +34,7 @@ from lantern_jax.scenarios.suite import Suite, build_suite_batches
 from lantern_jax.scoring.metrics import finalize
 from lantern_jax.sim.distributed import placement
 from lantern_jax.sim.rollout import rollout_scheduled_parallel, with_carry
-from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings
+from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings, default_settings
 from lantern_jax.sim.state import init_state
 from lantern_jax.sim.step import Driver
 from lantern_jax.sim.switch import PolicySwitch
@@ -258,7 +258,7 @@ def run_executions(
     scenarios: Scenario,
     policy_params: Any,
     max_ticks: int,
-    settings: Settings = DEFAULT_SETTINGS,
+    settings: Settings | None = None,
     compact: bool | None = None,
     timings: dict | None = None,
     pad_to: int | None = None,
@@ -282,7 +282,9 @@ def run_executions(
         scenarios: (n, ...) batched scenarios.
         policy_params: the policy's parameters.
         max_ticks: horizon, ticks.
-        settings: scoring, protocol and text bank (an argument of the compiled program).
+        settings: scoring, protocol and text bank (an argument of the compiled program; default
+            :func:`~lantern_jax.sim.settings.default_settings`, the paper's values with every
+            registered family's texts).
         compact: step through refilled slots (default: for batches of at least
             ``COMPACT_MIN_BATCH``).
         timings: receives ``"trace + lower"``, ``"XLA compile"`` and ``"rollout"`` seconds.
@@ -297,6 +299,7 @@ def run_executions(
     Returns:
         (final states as NumPy arrays with leading axis ``n``, seconds spent compiling).
     """
+    settings = default_settings() if settings is None else settings
     check_texts(settings, scenarios)
     n = jax.tree.leaves(scenarios)[0].shape[0]
     total = n if pad_to is None else pad_to
