@@ -8,9 +8,14 @@ sensing, the temporal protocol and the score accumulators).  Only the ticks an e
 lived count (its final ``tick``), not the ticks a finished execution is held.
 
 highway-env (an optional peer, never a project dependency; install it where you like, e.g.
-``python -m venv /tmp/peers && /tmp/peers/bin/pip install highway-env``): ``highway-v0`` with its
-default configuration (50 vehicles, IDM + MOBIL, 15 Hz simulation, one agent action per second),
+``python -m venv /tmp/peers && /tmp/peers/bin/pip install highway-env``): ``highway-v0`` with
+``--vehicles`` other vehicles (default 16, the actor capacity of one of our scenes; the peer's
+own default is 50) besides its ego, IDM + MOBIL, 15 Hz simulation, one agent action per second,
 no rendering, a constant IDLE action; a tick is one 15 Hz simulation step of one environment.
+
+Two ratios are printed: per scene-tick (one whole world advanced one tick) and per agent-step
+(one vehicle, pedestrian or ego advanced one tick: ours counts the ego and every actor slot a
+scene fills, whether or not the actor has appeared yet; the peer counts its ego and vehicles).
 It runs in ``--peer-python`` (default: this interpreter) as a subprocess, so it may live in its
 own environment.  Both per tick and per simulated second are printed (the two tick lengths
 differ).
@@ -49,7 +54,7 @@ import json, sys, time
 import gymnasium as gym
 import highway_env  # noqa: F401  (registers the environments)
 seconds = float(sys.argv[1])
-env = gym.make("highway-v0")
+env = gym.make("highway-v0", config={"vehicles_count": int(sys.argv[2])})
 cfg = env.unwrapped.config
 env.reset(seed=0)
 idle = 1  # DiscreteMetaAction: IDLE
@@ -71,10 +76,11 @@ print(json.dumps(dict(
 """
 
 
-def run_peer(python: str, seconds: float) -> dict | None:
-    """Measure highway-env in ``python``; None (with the reason printed) when it is missing."""
+def run_peer(python: str, seconds: float, vehicles: int) -> dict | None:
+    """Measure highway-env in ``python`` with ``vehicles`` other vehicles; None (with the reason
+    printed) when it is missing."""
     proc = subprocess.run(
-        [python, "-c", HIGHWAY_ENV_SNIPPET, str(seconds)],
+        [python, "-c", HIGHWAY_ENV_SNIPPET, str(seconds), str(vehicles)],
         capture_output=True,
         text=True,
         check=False,
@@ -93,6 +99,7 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--peer-python", default=sys.executable, help="interpreter with highway-env")
     ap.add_argument("--peer-seconds", type=float, default=20.0, help="how long to step the peer")
+    ap.add_argument("--vehicles", type=int, default=16, help="the peer's other vehicles")
     args = ap.parse_args()
 
     devices = f"{jax.device_count()} x {jax.default_backend()}"
@@ -104,6 +111,8 @@ def main() -> None:
     run = {}
     final, _ = run_executions(policy, execs.scenarios, params, execs.max_ticks, **run)
     lived = int(np.sum(np.asarray(final.tick)))
+    # agents per scene: the ego and every actor slot the scene fills (padding slots excluded)
+    agents = 1.0 + float(np.mean(np.sum(np.asarray(execs.scenarios.actors.valid), axis=-1)))
     walls = []
     for _ in range(args.repeats):
         t0 = time.perf_counter()
@@ -112,18 +121,22 @@ def main() -> None:
     wall = min(walls)
     ours = lived / wall
     print(f"lantern_jax {args.policy} on {args.suite}: {lived} scenario-ticks lived "
-          f"(3 x {execs.num_pairs} executions, {DT * 1e3:.0f} ms ticks) in {wall:.2f} s "
-          f"= {ours:,.0f} scenario-ticks/s, {ours * DT:,.0f} simulated s per s")  # fmt: skip
+          f"(3 x {execs.num_pairs} executions, {DT * 1e3:.0f} ms ticks, {agents:.1f} agents "
+          f"per scene on average) in {wall:.2f} s = {ours:,.0f} scenario-ticks/s, "
+          f"{ours * agents:,.0f} agent-steps/s, {ours * DT:,.0f} simulated s per s")  # fmt: skip
 
-    peer = run_peer(args.peer_python, args.peer_seconds)
+    peer = run_peer(args.peer_python, args.peer_seconds, args.vehicles)
     if peer is None:
         return
     theirs = peer["ticks"] / peer["wall_s"]
     sim_rate = theirs * peer["tick_s"]
-    print(f"highway-env {peer['version']} highway-v0 ({peer['vehicles']} vehicles): "
+    peer_agents = 1 + peer["vehicles"]
+    print(f"highway-env {peer['version']} highway-v0 ({peer['vehicles']} vehicles and the ego): "
           f"{peer['ticks']} ticks ({peer['tick_s'] * 1e3:.1f} ms) in {peer['wall_s']:.1f} s "
-          f"= {theirs:,.0f} scenario-ticks/s, {sim_rate:,.1f} simulated s per s")  # fmt: skip
-    print(f"ratio per scenario-tick: {ours / theirs:,.0f}x; per simulated second: "
+          f"= {theirs:,.0f} scenario-ticks/s, {theirs * peer_agents:,.0f} agent-steps/s, "
+          f"{sim_rate:,.1f} simulated s per s")  # fmt: skip
+    print(f"ratio per scene-tick: {ours / theirs:,.0f}x; per agent-step: "
+          f"{ours * agents / (theirs * peer_agents):,.0f}x; per simulated second: "
           f"{ours * DT / (theirs * peer['tick_s']):,.0f}x")  # fmt: skip
 
 
