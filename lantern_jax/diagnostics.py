@@ -50,6 +50,7 @@ from lantern_jax.files import StagedFolder
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.handmade import straight_scene
+from lantern_jax.scenarios.spec import route_timeout_s
 from lantern_jax.scenarios.suite import Suite, build_suite_scenarios, load_suite
 from lantern_jax.scenarios.warnings import (
     DISTANCE_POSITIONS,
@@ -345,9 +346,9 @@ def response_metrics(
 # ---------------------------------------------------------------------------------------------
 def empty_road(length: float = EMPTY_ROAD_LENGTH_M, speed: float = EMPTY_ROAD_SPEED_MPS):
     """The empty straight route of the non-actionable diagnostic (no actors, no protocol
-    warning; route timeout ``20 s + length / 3 m/s`` as in the suite)."""
+    warning; the suite's route timeout, :func:`~lantern_jax.scenarios.spec.route_timeout_s`)."""
     return straight_scene(
-        [], length=length, speed=speed, warning_enabled=False, timeout_s=20.0 + length / 3.0
+        [], length=length, speed=speed, warning_enabled=False, timeout_s=route_timeout_s(length)
     )
 
 

@@ -38,7 +38,13 @@ from lantern_jax.constants import (
 )
 from lantern_jax.scenarios import road
 from lantern_jax.scenarios.assemble import ActorSpec, assemble_scenario, initial_pose
-from lantern_jax.scenarios.spec import SEED_MAX, WEATHER_PROFILES, content_hash, param_ranges
+from lantern_jax.scenarios.spec import (
+    SEED_MAX,
+    WEATHER_PROFILES,
+    content_hash,
+    param_ranges,
+    route_timeout_s,
+)
 from lantern_jax.scenarios.warnings import canonical_text_id
 from lantern_jax.world import Scenario
 
@@ -232,7 +238,7 @@ def pair_params(
         despawn_on_clear=despawn_on_clear, force_event=force_event, force_delay=2.0,
         ego_light=ego_light, ego_stop_s=ego_stop_s, d_safe=d_safe, v_ref=v_ref,
         friction=friction, sensing_range=sensing_range, template_id=family, text_id=text_id,
-        timeout_s=20.0 + route_length / 3.0, late_onset=False, warn_hold_extra=0.0,
+        timeout_s=route_timeout_s(route_length), late_onset=False, warn_hold_extra=0.0,
         pos_noise_m=0.0, noise_seed=np.uint32(int(seed) & 0xFFFFFFFF),
     )  # fmt: skip
     return a, replace_dict(a, is_route_a=False, warning_enabled=False)
