@@ -50,7 +50,7 @@ import jax
 import numpy as np
 
 from lantern_jax import family_codes
-from lantern_jax.constants import DT, FAMILIES, WEATHERS
+from lantern_jax.constants import DT, FAMILIES, ROUTE_A_GATE_NAMES, WEATHERS
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.duplicates import near_duplicate, route_samples
 from lantern_jax.scenarios.families import sample_params
@@ -91,8 +91,6 @@ def max_ticks(families: Sequence[str]) -> int:
     longest = max(param_ranges(f)["route_length"].hi for f in families)
     return max(MAX_TICKS, _timeout_ticks(longest))
 
-
-GATES = ("gate_collision", "gate_route_deviation", "gate_lane", "gate_rule", "gate_block")
 
 VALIDATOR = "expert"  # policy that filters newly generated suites
 LEGACY_VALIDATOR = "expert-v1"  # the validator of manifests that do not name one
@@ -148,7 +146,7 @@ def dynamic_check(
         for j, tag in ((i, "A"), (n + i, "B")):
             if m.progress[j] < EXPERT_MIN_PROGRESS:
                 why.append(f"{tag}: route not completed")
-            why += [f"{tag}: {g} failed" for g in GATES if not bool(getattr(m, g)[j])]
+            why += [f"{tag}: {g} failed" for g in ROUTE_A_GATE_NAMES if not bool(getattr(m, g)[j])]
         if not bool(m.gate_false_brake[n + i]):
             why.append("B: false brake")
         for f in ("t_warn_point", "t_event", "t_warn_off", "t_clear"):

@@ -30,7 +30,7 @@ import numpy as np
 import pandas as pd
 
 from lantern_jax import family_codes
-from lantern_jax.constants import CONDITIONS
+from lantern_jax.constants import CONDITIONS, GATE_NAMES
 
 GROUP_COLUMNS = ("model", "condition")
 
@@ -42,14 +42,10 @@ COMPONENT_COLUMNS = {
     "Rec.": "S_rec",
     "B-Prog.": "B_progress",
 }
-FAILURE_COLUMNS = {
-    "Coll.-A": "gate_collision",
-    "RD-A": "gate_route_deviation",
-    "LC-A": "gate_lane",
-    "Rule-A": "gate_rule",
-    "Block-A": "gate_block",
-    "False Brake-B": "gate_false_brake",
-}
+#: Gate failure columns (% of pairs failing it) -> the gate, in :data:`GATE_NAMES` order.
+FAILURE_COLUMNS = dict(
+    zip(("Coll.-A", "RD-A", "LC-A", "Rule-A", "Block-A", "False Brake-B"), GATE_NAMES, strict=True)
+)
 #: The policy whose Route B time is every model's yardstick (``B-Time/Exp.``): the privileged
 #: expert, which sees every actor's forecast and slows only for what is there.
 EFFICIENCY_REFERENCE = "expert"

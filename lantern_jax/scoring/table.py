@@ -19,9 +19,9 @@ import numpy as np
 import pandas as pd
 
 from lantern_jax import family_codes
-from lantern_jax.constants import FAMILIES
+from lantern_jax.constants import FAMILIES, GATE_NAMES
 from lantern_jax.files import atomic_write
-from lantern_jax.scoring.cus import GATE_NAMES, d_safe_for_family, pair_components
+from lantern_jax.scoring.cus import d_safe_for_family, pair_components
 from lantern_jax.scoring.metrics import ExecutionMetrics
 from lantern_jax.scoring.thresholds import DEFAULT_SCORING, ScoringSettings
 
