@@ -90,6 +90,7 @@ PE, VC, OR, LWW, RWW, RTY = range(6)
 
 # --- the two conditions of every Route A execution (result tables' "condition" column) --------
 CONDITIONS = ("warning", "no-warning")
+WARNING_CONDITION, NO_WARNING_CONDITION = CONDITIONS
 
 # --- the gates of a pair (result tables' ``gate_*`` columns: 1 = passed) ------------------------
 #: Route A gates by telemetry field, in failure-time order (column ``"gate_" + field``).

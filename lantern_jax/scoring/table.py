@@ -19,14 +19,14 @@ import numpy as np
 import pandas as pd
 
 from lantern_jax import family_codes
-from lantern_jax.constants import FAMILIES, GATE_NAMES
+from lantern_jax.constants import FAMILIES, GATE_NAMES, WARNING_CONDITION
 from lantern_jax.files import atomic_write
 from lantern_jax.scoring.cus import d_safe_for_family, pair_components
 from lantern_jax.scoring.metrics import ExecutionMetrics
 from lantern_jax.scoring.thresholds import DEFAULT_SCORING, ScoringSettings
 
+#: The columns that identify a row (each combination exactly once).
 KEY_COLUMNS = ("model", "condition", "pair_id")
-WARNING_CONDITION = "warning"
 
 
 def load_schema() -> dict:
@@ -93,7 +93,7 @@ def build_route_table(
         model, condition: one string for all rows or one per row.
         pair_ids, families (codes or indices), weathers: one entry per row.
         t_warn_on: (n,) s, start of warning delivery (``NaN`` = none).  Default: ``t_ref_s`` for
-            rows whose condition is ``"warning"``, ``NaN`` otherwise.
+            rows of the warning condition (``constants.WARNING_CONDITION``), ``NaN`` otherwise.
         d_safe: (n,) m, clearance normalisers; default from the family (2 m PE/OR, else 3 m;
             required for a registered family, whose record sets it per pair).
         warning_ticks: (n,) int, ticks at which a warning was delivered on Route A
@@ -293,8 +293,6 @@ def read_route_table(path: str | os.PathLike) -> pd.DataFrame:
 REPRODUCIBLE_ATOL = 1e-4
 REPRODUCIBLE_RTOL = 1e-5
 
-ROW_KEYS = ("model", "condition", "pair_id")
-
 
 def compare_route_tables(
     before: pd.DataFrame, after: pd.DataFrame, atol: float = REPRODUCIBLE_ATOL
@@ -309,8 +307,8 @@ def compare_route_tables(
     """
     if list(before.columns) != list(after.columns):
         return False, [f"columns differ: {sorted(set(before.columns) ^ set(after.columns))}"]
-    b = before.set_index(list(ROW_KEYS)).sort_index()
-    a = after.set_index(list(ROW_KEYS)).sort_index()
+    b = before.set_index(list(KEY_COLUMNS)).sort_index()
+    a = after.set_index(list(KEY_COLUMNS)).sort_index()
     if not b.index.equals(a.index):
         return False, ["row keys (model, condition, pair_id) differ"]
     ok, lines, differing = True, [], 0
