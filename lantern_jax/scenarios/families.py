@@ -211,11 +211,6 @@ def add_record(record: Family) -> Family:
     return record
 
 
-def family_name(code_or_index: int | str) -> str:
-    """Family abbreviation from an index or an abbreviation."""
-    return family(code_or_index).code
-
-
 def sample_params(family_: int | str, rng: np.random.Generator, weather: str = "clear_day") -> dict:
     """Sample a valid parameter dict of one family.
 

@@ -75,15 +75,6 @@ def static_actor(xy, yaw: float, extent, kind: int, role: int) -> ActorSpec:
     return ActorSpec(path, tuple(extent), kind, role)
 
 
-def straight_path(p0, direction, length: float) -> np.ndarray:
-    """A straight path from ``p0`` along ``direction`` for ``length`` m (<= PATH_POINTS)."""
-    d = np.asarray(direction, np.float64)
-    d = d / np.linalg.norm(d)
-    p0 = np.asarray(p0, np.float64)
-    n = min(road.PATH_POINTS, max(2, int(math.ceil(length / 4.0)) + 1))
-    return p0 + np.linspace(0.0, length, n)[:, None] * d
-
-
 def fit_path(xy: np.ndarray) -> np.ndarray:
     """A polyline reduced to at most ``PATH_POINTS`` points (uniform resampling)."""
     return xy if len(xy) <= road.PATH_POINTS else road.resample(xy, road.PATH_POINTS)
