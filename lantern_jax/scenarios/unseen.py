@@ -2,7 +2,10 @@
 scenario families, written with the public family API only (:mod:`lantern_jax.scenarios.registry`;
 the worked example of ``docs/families.md``).
 
-Importing this module registers them:
+Importing this module registers them (CYC is defined here, EMV in
+:mod:`~lantern_jax.scenarios.unseen_emergency`, REV in
+:mod:`~lantern_jax.scenarios.unseen_reversing`, their shared road in
+:mod:`~lantern_jax.scenarios.unseen_common`):
 
 * ``CYC`` — **Occluded Cyclist Crossing**: a cyclist waits beyond the kerb beside the front of a
   bus parked in the parking lane on the ego's right and, on the event, rides out in front of
