@@ -17,14 +17,10 @@ import argparse
 import numpy as np
 import pandas as pd
 
-from lantern_jax.constants import FAMILIES
+from lantern_jax.constants import FAMILIES, GATE_NAMES
 from lantern_jax.scoring.table import read_route_table
 
 COMPONENTS = {"TTC": "S_ttc", "Clear.": "S_clear", "Ant.": "S_ant", "Rec.": "S_rec"}
-GATES = (
-    "gate_collision", "gate_route_deviation", "gate_lane", "gate_rule", "gate_block",
-    "gate_false_brake",
-)  # fmt: skip
 
 
 def family_components(df: pd.DataFrame) -> pd.DataFrame:
@@ -35,7 +31,7 @@ def family_components(df: pd.DataFrame) -> pd.DataFrame:
             sub = g if fam == "all" else g[g["family"] == fam]
             if sub.empty:
                 continue
-            gates = sub[list(GATES)].to_numpy(float)
+            gates = sub[list(GATE_NAMES)].to_numpy(float)
             row = {"model": model, "condition": cond, "family": fam, "n": len(sub)}
             cus = sub.groupby("family")["CUS"].mean()
             row["CUS"] = float(cus.mean())  # macro-average over families for "all"

@@ -40,7 +40,6 @@ from lantern_jax.cli import expose_cpu_cores  # noqa: E402
 expose_cpu_cores()
 
 import jax  # noqa: E402
-import numpy as np  # noqa: E402
 from profile_tick import mid_run_states  # noqa: E402  (this folder's tick profiler)
 
 from lantern_jax.sim.step import step  # noqa: E402
@@ -117,10 +116,8 @@ def main() -> None:
 
     pol, params, sc, st = mid_run_states(args.policy, args.batch, args.warmup_ticks)
     sc, st = jax.device_put((sc, st), jax.devices()[0])
-    temp = np.float32(0.05)
-
     def tick(s, x):
-        return step(pol, params, s, x, temp)[0]
+        return step(pol, params, s, x)[0]  # the default settings, as the evaluation's
 
     ticks = max(args.scan, 1)
     program = tick

@@ -37,12 +37,12 @@ from lantern_jax.scenarios.ablations import ABLATIONS, get_ablation
 from lantern_jax.scenarios.suite import Suite, load_suite
 from lantern_jax.scoring.aggregate import (
     GROUP_COLUMNS,
+    OVERALL,
     decomposition_pair_values,
     decomposition_table,
     family_scores,
 )
 from lantern_jax.scoring.uncertainty import (
-    OVERALL,
     SEED,
     family_intervals,
     interval_columns,
@@ -86,7 +86,7 @@ def ablation_rows(route_table: pd.DataFrame) -> pd.DataFrame:
         rows.append({
             "model": model,
             "condition": cond,
-            "CUS": float(fam.loc[(model, cond), "Overall"]),
+            "CUS": float(fam.loc[(model, cond), OVERALL]),
             "A-Prog.": float(d["A-Prog."]),
             "Event Exp.": 100.0 * float(np.mean(g["event_exposed"].to_numpy() == 1)),
             "Ant.": float(d["Ant."]),

@@ -90,6 +90,14 @@ PE, VC, OR, LWW, RWW, RTY = range(6)
 
 # --- the two conditions of every Route A execution (result tables' "condition" column) --------
 CONDITIONS = ("warning", "no-warning")
+WARNING_CONDITION, NO_WARNING_CONDITION = CONDITIONS
+
+# --- the gates of a pair (result tables' ``gate_*`` columns: 1 = passed) ------------------------
+#: Route A gates by telemetry field, in failure-time order (column ``"gate_" + field``).
+ROUTE_A_GATE_FIELDS = ("collision", "route_deviation", "lane", "rule", "block")
+ROUTE_A_GATE_NAMES = tuple(f"gate_{field}" for field in ROUTE_A_GATE_FIELDS)
+#: All six gates of a pair: Route A's, then Route B's false-brake gate.
+GATE_NAMES = (*ROUTE_A_GATE_NAMES, "gate_false_brake")
 
 # --- weather profiles of the frozen suite -----------------------------------------------------
 WEATHERS = ("clear_day", "cloudy_day", "wet_day", "light_rain", "dusk")

@@ -44,12 +44,19 @@ import jax
 import numpy as np
 import pandas as pd
 
-from lantern_jax.constants import DT, FAMILIES, SUITE_ID
+from lantern_jax.constants import (
+    DT,
+    FAMILIES,
+    NO_WARNING_CONDITION,
+    SUITE_ID,
+    WARNING_CONDITION,
+)
 from lantern_jax.evaluation import build_executions, run_policy
 from lantern_jax.files import StagedFolder
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.handmade import straight_scene
+from lantern_jax.scenarios.spec import route_timeout_s
 from lantern_jax.scenarios.suite import Suite, build_suite_scenarios, load_suite
 from lantern_jax.scenarios.warnings import (
     DISTANCE_POSITIONS,
@@ -60,6 +67,7 @@ from lantern_jax.scenarios.warnings import (
     paraphrase_tiers,
     set_override,
 )
+from lantern_jax.scoring.aggregate import OVERALL
 from lantern_jax.scoring.metrics import finalize
 from lantern_jax.scoring.thresholds import (
     DEFAULT_SCORING,
@@ -245,9 +253,9 @@ def wording_table(
             n = execs.num_pairs
             tiers = paraphrase_tiers(jax.tree.map(lambda x, n=n: x[:n], execs.scenarios.config))
     pair_ids = [p.pair_id for p in s.pairs]
-    canon, para = (r[r["condition"] == "warning"] for r in runs.values())
+    canon, para = (r[r["condition"] == WARNING_CONDITION] for r in runs.values())
     table = tier_rows(canon, para, tiers, pair_ids)
-    none_rows = runs["none"][runs["none"]["condition"] == "no-warning"]
+    none_rows = runs["none"][runs["none"]["condition"] == NO_WARNING_CONDITION]
     none = none_rows.set_index("pair_id")["CUS"]
     groups = [tiers == k for k in range(len(TIERS))] + [np.ones(len(pair_ids), bool)]
     table["Matched no-warning"] = [
@@ -347,9 +355,9 @@ def response_metrics(
 # ---------------------------------------------------------------------------------------------
 def empty_road(length: float = EMPTY_ROAD_LENGTH_M, speed: float = EMPTY_ROAD_SPEED_MPS):
     """The empty straight route of the non-actionable diagnostic (no actors, no protocol
-    warning; route timeout ``20 s + length / 3 m/s`` as in the suite)."""
+    warning; the suite's route timeout, :func:`~lantern_jax.scenarios.spec.route_timeout_s`)."""
     return straight_scene(
-        [], length=length, speed=speed, warning_enabled=False, timeout_s=20.0 + length / 3.0
+        [], length=length, speed=speed, warning_enabled=False, timeout_s=route_timeout_s(length)
     )
 
 
@@ -397,6 +405,10 @@ def nonactionable_table(
 # ---------------------------------------------------------------------------------------------
 # distance-conditioned warnings on Route B
 # ---------------------------------------------------------------------------------------------
+#: The distance diagnostic's three runs of every route: no warning, the near one, the far one.
+DISTANCE_CONDITIONS = (NO_WARNING_CONDITION, "near", "far")
+
+
 def plan_length(waypoints: np.ndarray) -> float:
     """m, length of the polyline from the ego (origin) through the (10, 2) waypoints."""
     pts = np.concatenate([np.zeros((1, 2)), np.asarray(waypoints, np.float64)])
@@ -453,7 +465,7 @@ def distance_table(
     pair_ids, scenarios = distance_scenarios(s, family, routes, window_s)
     _, rec, metrics = run_recorded(pol, params, scenarios)
     live = live_mask(rec)
-    conds = ("no-warning", "near", "far")
+    conds = DISTANCE_CONDITIONS
     n_win = int(round(window_s / DT))
     opened, closed = [], []
     for r, pid in enumerate(pair_ids):
@@ -477,13 +489,13 @@ def distance_table(
                     "RC (%)": 100.0 * float(metrics.progress[i]),
                 }
             )
-        row["Retention (%)"] = 100.0 * row["far"] / row["no-warning"]
+        row["Retention (%)"] = 100.0 * row["far"] / row[NO_WARNING_CONDITION]
         opened.append(row)
     return pd.DataFrame(opened), pd.DataFrame(closed)
 
 
 #: The distance diagnostic's open-loop columns summarised over routes.
-DISTANCE_COLUMNS = ("no-warning", "near", "far", "Retention (%)")
+DISTANCE_COLUMNS = (*DISTANCE_CONDITIONS, "Retention (%)")
 
 
 def distance_summary(open_loop: pd.DataFrame, seed: int = SEED) -> pd.DataFrame:
@@ -545,18 +557,18 @@ def language_table(
     def family_means(table: pd.DataFrame, condition: str) -> dict[str, float]:
         rows = table[table["condition"] == condition]
         out = {f: float(rows.loc[rows["family"] == f, "CUS"].mean()) for f in FAMILIES}
-        out["Overall"] = float(rows["CUS"].mean())
+        out[OVERALL] = float(rows["CUS"].mean())
         return out
 
     means = {
-        v: family_means(t, "no-warning" if v == "no warning" else "warning")
+        v: family_means(t, NO_WARNING_CONDITION if v == "no warning" else WARNING_CONDITION)
         for v, t in runs.items()
     }
     rows = [{"Variant": v, **means[v]} for v in LANGUAGE_VARIANTS]
     base, none = means["delivered text"], means["no warning"]
     for v in ("other family's text", "empty text"):
         share = {}
-        for col in (*FAMILIES, "Overall"):
+        for col in (*FAMILIES, OVERALL):
             gain = base[col] - none[col]
             share[col] = (
                 100.0 * (means[v][col] - none[col]) / gain if gain >= MIN_GAIN_FOR_SHARE else np.nan

@@ -50,11 +50,11 @@ import jax
 import numpy as np
 
 from lantern_jax import family_codes
-from lantern_jax.constants import DT, FAMILIES, WEATHERS
+from lantern_jax.constants import DT, FAMILIES, ROUTE_A_GATE_NAMES, WEATHERS
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.duplicates import near_duplicate, route_samples
 from lantern_jax.scenarios.families import sample_params
-from lantern_jax.scenarios.spec import PARAM_RANGES, param_ranges
+from lantern_jax.scenarios.spec import PARAM_RANGES, param_ranges, route_timeout_s
 from lantern_jax.scenarios.suite import (
     SUITE_ID,
     PairSpec,
@@ -74,20 +74,23 @@ CANDIDATES_PER_SLOT = 160  # at most, per slot (lantern-v3: OR needs up to ~100)
 ROUND_SIZE = 8  # candidates per unfilled slot and round
 EXPERT_MIN_PROGRESS = 0.99  # route completion the expert must reach on both routes
 ROUTE_DECIMALS = 3  # the manifest's route samples are rounded to 1 mm
-#: Ticks of every expert call: the longest route timeout of any family (20 s + length / 3 m/s).
-MAX_TICKS = int(
-    math.ceil((20.0 + max(r["route_length"].hi for r in PARAM_RANGES.values()) / 3.0) / DT)
-)
+
+
+def _timeout_ticks(route_length_m: float) -> int:
+    """Ticks that cover the route timeout of a route this long."""
+    return int(math.ceil(route_timeout_s(route_length_m) / DT))
+
+
+#: Ticks of every expert call: the longest route timeout of any family.
+MAX_TICKS = _timeout_ticks(max(r["route_length"].hi for r in PARAM_RANGES.values()))
 
 
 def max_ticks(families: Sequence[str]) -> int:
     """Ticks of the expert calls of a suite of ``families``: :data:`MAX_TICKS` for the six,
     longer when a registered family's routes are longer."""
     longest = max(param_ranges(f)["route_length"].hi for f in families)
-    return max(MAX_TICKS, int(math.ceil((20.0 + longest / 3.0) / DT)))
+    return max(MAX_TICKS, _timeout_ticks(longest))
 
-
-GATES = ("gate_collision", "gate_route_deviation", "gate_lane", "gate_rule", "gate_block")
 
 VALIDATOR = "expert"  # policy that filters newly generated suites
 LEGACY_VALIDATOR = "expert-v1"  # the validator of manifests that do not name one
@@ -143,7 +146,7 @@ def dynamic_check(
         for j, tag in ((i, "A"), (n + i, "B")):
             if m.progress[j] < EXPERT_MIN_PROGRESS:
                 why.append(f"{tag}: route not completed")
-            why += [f"{tag}: {g} failed" for g in GATES if not bool(getattr(m, g)[j])]
+            why += [f"{tag}: {g} failed" for g in ROUTE_A_GATE_NAMES if not bool(getattr(m, g)[j])]
         if not bool(m.gate_false_brake[n + i]):
             why.append("B: false brake")
         for f in ("t_warn_point", "t_event", "t_warn_off", "t_clear"):

@@ -120,30 +120,6 @@ def interpolate(points: Array, s: Array, valid: Array, s_query: Array) -> tuple[
     return xy, heading
 
 
-def interpolate_dir(points: Array, s: Array, valid: Array, s_query: Array) -> tuple[Array, Array]:
-    """Point and unit travel direction at arc ``s_query`` (:func:`interpolate` without trig).
-
-    Args:
-        points: (P, 2) float32, m.
-        s: (P,) float32, m, cumulative arc length.
-        valid: (P,) bool, prefix mask.
-        s_query: () float32, m, arc length (any real value; linear extension beyond the ends).
-
-    Returns:
-        xy: (2,) float32, m, the point at ``s_query``.
-        direction: (2,) float32, unit vector of travel there (``(1, 0)`` on a degenerate
-            polyline, matching heading 0 of :func:`interpolate`).
-    """
-    n = num_valid(valid)
-    last_seg = jnp.maximum(n - 2, 0)
-    passed = jnp.sum((valid[1:] & (s[1:] <= s_query)).astype(jnp.int32))
-    i = jnp.clip(passed, 0, last_seg)
-    p0, s0, u, ok = _segment(points, s, valid, i)
-    xy = p0 + (s_query - s0) * u
-    direction = jnp.where(ok, u, jnp.asarray([1.0, 0.0], u.dtype))
-    return xy, direction
-
-
 def nearest_segment(points: Array, valid: Array, query: Array) -> tuple[Array, Array]:
     """Distance to a padded polyline and the travel direction of its nearest segment.
 

@@ -32,6 +32,7 @@ import jax
 import numpy as np
 import pandas as pd
 
+from lantern_jax.constants import WARNING_CONDITION
 from lantern_jax.diagnostics import live_mask, run_recorded
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.registry import get_policy
@@ -53,7 +54,10 @@ from lantern_jax.world import Scenario
 #: ``generate_suite(UNSEEN_SEED, pairs_per_slot=2, families=UNSEEN_CODES, suite_id=...)``).
 UNSEEN_SUITE_ID = "lantern-unseen"
 UNSEEN_SEED = 20260612
-CONDITIONS = ("no warning", "warning", "held-out paraphrase")
+NO_WARNING, PARAPHRASE = "no warning", "held-out paraphrase"
+#: The three conditions of every pair; the family's own warning is the route table's warning
+#: condition (its rows get the warning-onset column).
+CONDITIONS = (NO_WARNING, WARNING_CONDITION, PARAPHRASE)
 #: How the paper names the warning condition of each event.
 WARNING_LABEL = {"CYC": "free-form warning"}
 DEFAULT_WARNING_LABEL = "exact warning"
@@ -67,12 +71,12 @@ PAPER_TABLES = (
 #: The paper's figures (Coop-SimLingo, one route per event): family -> condition ->
 #: (lead s, Δv m/s, RC %, collisions, blocking).
 PAPER = {
-    "CYC": {"no warning": (-0.60, 0.0, 100, 0, 0), "warning": (1.95, 9.5, 100, 0, 0),
-            "held-out paraphrase": (1.80, 9.3, 100, 0, 0)},
-    "EMV": {"no warning": (-0.55, 0.0, 55.1, 1, 0), "warning": (2.00, 8.9, 100, 0, 0),
-            "held-out paraphrase": (1.35, 3.5, 55.1, 1, 0)},
-    "REV": {"no warning": (-0.45, 1.8, 100, 0, 0), "warning": (1.95, 10.6, 100, 0, 0),
-            "held-out paraphrase": (-0.60, 0.0, 100, 0, 0)},
+    "CYC": {NO_WARNING: (-0.60, 0.0, 100, 0, 0), WARNING_CONDITION: (1.95, 9.5, 100, 0, 0),
+            PARAPHRASE: (1.80, 9.3, 100, 0, 0)},
+    "EMV": {NO_WARNING: (-0.55, 0.0, 55.1, 1, 0), WARNING_CONDITION: (2.00, 8.9, 100, 0, 0),
+            PARAPHRASE: (1.35, 3.5, 55.1, 1, 0)},
+    "REV": {NO_WARNING: (-0.45, 1.8, 100, 0, 0), WARNING_CONDITION: (1.95, 10.6, 100, 0, 0),
+            PARAPHRASE: (-0.60, 0.0, 100, 0, 0)},
 }  # fmt: skip
 
 
@@ -85,7 +89,7 @@ def unseen_suite() -> Suite:
 
 def condition_label(family: str, condition: str) -> str:
     """A condition as the paper's tables name it for ``family``."""
-    if condition != "warning":
+    if condition != WARNING_CONDITION:
         return condition
     return WARNING_LABEL.get(family, DEFAULT_WARNING_LABEL)
 

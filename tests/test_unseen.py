@@ -290,17 +290,23 @@ def test_bootstrap_interval():
 # ---------------------------------------------------------------------------------------------
 # the registry
 # ---------------------------------------------------------------------------------------------
-def test_the_unseen_module_uses_only_the_public_api():
-    tree = ast.parse(Path(unseen.__file__).read_text())
-    imported = {
-        n.module if isinstance(n, ast.ImportFrom) else a.name
-        for n in ast.walk(tree)
-        if isinstance(n, ast.Import | ast.ImportFrom)
-        for a in n.names
-    }
-    inside = {m for m in imported if m and m.startswith("lantern_jax")}
-    assert inside == {"lantern_jax.scenarios"}
-    assert "from lantern_jax.scenarios import registry as fam" in Path(unseen.__file__).read_text()
+def test_the_unseen_modules_use_only_the_public_api():
+    """The unseen families (``unseen.py`` and the ``unseen_*`` modules it builds on) import
+    nothing of the package but the registry and each other."""
+    paths = sorted(Path(unseen.__file__).parent.glob("unseen*.py"))
+    assert {p.stem for p in paths} >= {"unseen", "unseen_common"}
+    ours = {f"lantern_jax.scenarios.{p.stem}" for p in paths}
+    for path in paths:
+        tree = ast.parse(path.read_text())
+        imported = {
+            n.module if isinstance(n, ast.ImportFrom) else a.name
+            for n in ast.walk(tree)
+            if isinstance(n, ast.Import | ast.ImportFrom)
+            for a in n.names
+        }
+        inside = {m for m in imported if m and m.startswith("lantern_jax")}
+        assert inside <= {"lantern_jax.scenarios", *ours}, path.name
+        assert "from lantern_jax.scenarios import registry as fam" in path.read_text(), path.name
 
 
 def test_registering_again_returns_the_same_family_and_a_clash_is_refused():

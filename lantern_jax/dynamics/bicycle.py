@@ -58,18 +58,6 @@ def slip_angle(steer: Array) -> Array:
     return jnp.arctan(EGO_LR / EGO_WHEELBASE * jnp.tan(steer))
 
 
-def path_curvature(steer: Array) -> Array:
-    """Curvature of the path traced by the box centre at a constant wheel angle.
-
-    Args:
-        steer: (...) float32, rad.
-
-    Returns:
-        (...) float32, 1/m, signed (+ = turning left), ``sin(beta) / lr``.
-    """
-    return jnp.sin(slip_angle(steer)) / EGO_LR
-
-
 def turning_radius(steer: Array) -> Array:
     """Radius of the circle traced by the box centre, ``sqrt(lr^2 + (L / tan(steer))^2)``.
 

@@ -107,10 +107,6 @@ def default_planner_config() -> PlannerConfig:
 # ---------------------------------------------------------------------------------------------
 # route helpers (route = (N, 2) ego-frame points, ROUTE_STEP apart, arc 0 at the first point)
 # ---------------------------------------------------------------------------------------------
-def _route_arcs(route: Array) -> Array:
-    return jnp.arange(route.shape[0], dtype=jnp.float32) * ROUTE_STEP
-
-
 def project_on_route(route: Array, q: Array) -> tuple[Array, Array]:
     """Project one point onto the observed route (:func:`lantern_jax.polyline.project_uniform`)."""
     arc, dist = project_uniform(route, ROUTE_STEP, q[None, :])

@@ -26,8 +26,9 @@ Shared conventions of every family:
 * execution starts at ``t = 0`` with the ego at route arc 0, on its lane centre, heading along the
   route, already moving at ``v_ref`` (zero steer and acceleration);
 * ``force_event`` True except RTY, ``force_delay`` 2 s, ``d_safe`` 2 m for PE/OR and 3 m
-  otherwise, ``template_id = text_id = family index``, ``timeout_s = 20 + route_length / 3``,
-  ablation fields off, ``noise_seed`` from ``params["seed"]``.
+  otherwise, ``template_id = text_id = family index``, ``timeout_s`` from the route length
+  (:func:`~lantern_jax.scenarios.spec.route_timeout_s`), ablation fields off, ``noise_seed``
+  from ``params["seed"]``.
 
 A parameter dict may carry an optional ``knobs`` object (knob name -> value, inside the family's
 :data:`KNOB_RANGES`), applied to the built pair with
@@ -208,11 +209,6 @@ def add_record(record: Family) -> Family:
         raise ValueError(f"family: {record.code!r} already has another record")
     FAMILY_RECORDS[record.code] = record
     return record
-
-
-def family_name(code_or_index: int | str) -> str:
-    """Family abbreviation from an index or an abbreviation."""
-    return family(code_or_index).code
 
 
 def sample_params(family_: int | str, rng: np.random.Generator, weather: str = "clear_day") -> dict:

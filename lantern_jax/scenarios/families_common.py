@@ -38,7 +38,13 @@ from lantern_jax.constants import (
 )
 from lantern_jax.scenarios import road
 from lantern_jax.scenarios.assemble import ActorSpec, assemble_scenario, initial_pose
-from lantern_jax.scenarios.spec import SEED_MAX, WEATHER_PROFILES, content_hash, param_ranges
+from lantern_jax.scenarios.spec import (
+    SEED_MAX,
+    WEATHER_PROFILES,
+    content_hash,
+    param_ranges,
+    route_timeout_s,
+)
 from lantern_jax.scenarios.warnings import canonical_text_id
 from lantern_jax.world import Scenario
 
@@ -67,15 +73,6 @@ def static_actor(xy, yaw: float, extent, kind: int, role: int) -> ActorSpec:
     xy = np.asarray(xy, np.float64)
     path = np.stack([xy, xy + np.array([math.cos(yaw), math.sin(yaw)])])
     return ActorSpec(path, tuple(extent), kind, role)
-
-
-def straight_path(p0, direction, length: float) -> np.ndarray:
-    """A straight path from ``p0`` along ``direction`` for ``length`` m (<= PATH_POINTS)."""
-    d = np.asarray(direction, np.float64)
-    d = d / np.linalg.norm(d)
-    p0 = np.asarray(p0, np.float64)
-    n = min(road.PATH_POINTS, max(2, int(math.ceil(length / 4.0)) + 1))
-    return p0 + np.linspace(0.0, length, n)[:, None] * d
 
 
 def fit_path(xy: np.ndarray) -> np.ndarray:
@@ -232,7 +229,7 @@ def pair_params(
         despawn_on_clear=despawn_on_clear, force_event=force_event, force_delay=2.0,
         ego_light=ego_light, ego_stop_s=ego_stop_s, d_safe=d_safe, v_ref=v_ref,
         friction=friction, sensing_range=sensing_range, template_id=family, text_id=text_id,
-        timeout_s=20.0 + route_length / 3.0, late_onset=False, warn_hold_extra=0.0,
+        timeout_s=route_timeout_s(route_length), late_onset=False, warn_hold_extra=0.0,
         pos_noise_m=0.0, noise_seed=np.uint32(int(seed) & 0xFFFFFFFF),
     )  # fmt: skip
     return a, replace_dict(a, is_route_a=False, warning_enabled=False)

@@ -356,7 +356,8 @@ def or_centerline(p: dict) -> Centerline:
 
     A lead van hides an object only while ego, van and object are lined up, so the approach is
     straight; the routes differ by what follows the object (a street corner), which is what keeps
-    twenty of them apart under the near-duplicate rule (``benchmarks/or_route_diversity.py``).
+    twenty of them apart under the near-duplicate rule
+    (``docs/investigations/or_route_diversity.py``).
     """
     s_b = float(p["reveal_s"]) + float(p["object_ahead"]) + OR_STRAIGHT_AFTER
     radius = float(p["turn_radius"])

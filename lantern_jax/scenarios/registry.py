@@ -122,6 +122,7 @@ from lantern_jax.scenarios.spec import (
     FloatRange,
     IntRange,
 )
+from lantern_jax.scenarios.warning_texts import check_entry
 from lantern_jax.scoring.thresholds import D_SAFE_LARGE_M, D_SAFE_SMALL_M
 
 __all__ = [
@@ -339,8 +340,8 @@ def register_family(record: FamilyRecord) -> _families.Family:
     # check the texts before anything is registered (the bank's rules)
     for tier, texts in record.paraphrases.items():
         for text in texts:
-            _warnings._check_entry("paraphrase", tier, text)
-    _warnings._check_entry("canonical", "", record.warning)
+            check_entry("paraphrase", tier, text)
+    check_entry("canonical", "", record.warning)
     index = family_codes.register(record.code, record.name)
     _spec.register_ranges(record.code, {**COMMON_RANGES, **record.ranges})
     _warnings.add_family_texts(record.code, record.warning, dict(record.paraphrases))

@@ -139,6 +139,13 @@ MIN_RECOVERY_M = 29.0  # m of route after the conflict point, every family (pape
 MAX_CURVATURE = 1.0 / 70.0  # 1/m, gentle: < 1.5 m/s^2 lateral acceleration at 10 m/s
 MAX_BEND = 1.0 / 30.0  # 1/m, junction arms (v_ref <= 8 m/s: < 2.2 m/s^2)
 
+
+def route_timeout_s(route_length_m: float) -> float:
+    """Route timeout in s of a route ``route_length_m`` m long, ``20 s + length / (3 m/s)``,
+    for every family (an execution whose ego has not finished by then ends there)."""
+    return 20.0 + route_length_m / 3.0
+
+
 #: Fields every family's parameter dict has (seeds, weather, scene rotation).
 COMMON_RANGES = {
     "seed": IntRange(0, SEED_MAX),  # pair seed: position-noise seed of the ablation

@@ -1,8 +1,9 @@
 """Cooperative warning texts: the six canonical templates, a text bank by ambiguity, rendering,
 grounding and the token tables that a rollout reads.
 
-The templates are verbatim from the paper's warning-template table.  The token
-``<FRONT_CAR_POS>`` is never shown literally: at every step it is replaced by the hazard (or
+The texts themselves and the bank type are :mod:`lantern_jax.scenarios.warning_texts`
+(re-exported here); the templates are verbatim from the paper's warning-template table.  The
+token ``<FRONT_CAR_POS>`` is never shown literally: at every step it is replaced by the hazard (or
 conflict) position ``(x, y)`` in metres in the *current ego frame*, ``x`` forward and ``y`` to
 the **right** (the paper's convention), formatted with one decimal.
 
@@ -53,7 +54,6 @@ that a policy's response comes from the words.  A policy cannot tell it from no 
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import hashlib
 from collections.abc import Sequence
@@ -71,298 +71,31 @@ from lantern_jax.constants import (
     OVERRIDE_FRAME_EGO,
     OVERRIDE_FRAME_WORLD,
 )
+from lantern_jax.scenarios.warning_texts import (
+    DEFAULT_BANK,
+    TEMPLATES,
+    TIERS,
+    TOKEN,
+    TextBank,
+    WarningText,
+    check_entry,
+    family_index,
+)
+
+# the rest of the texts and the bank, read from this module too
+from lantern_jax.scenarios.warning_texts import EMPTY_TEXT_ID as EMPTY_TEXT_ID
+from lantern_jax.scenarios.warning_texts import NO_FAMILY as NO_FAMILY
+from lantern_jax.scenarios.warning_texts import NON_ACTIONABLE as NON_ACTIONABLE
+from lantern_jax.scenarios.warning_texts import PARAPHRASES as PARAPHRASES
+from lantern_jax.scenarios.warning_texts import TEXT_KINDS as TEXT_KINDS
 from lantern_jax.times import NEVER
 from lantern_jax.world import Scenario
 
 Array = jax.Array
 
-TOKEN = language.PLACEHOLDER  # "<FRONT_CAR_POS>"
-TEXT_KINDS = ("canonical", "paraphrase", "non_actionable", "empty")
-TIERS = ("low", "medium", "high")
-NO_FAMILY = -1  # family of a text that belongs to no scenario family (non-actionable)
-
-#: Canonical templates, index = family index (paper, warning-template table).
-TEMPLATES: tuple[str, ...] = (
-    "The pedestrian at position <FRONT_CAR_POS> is about to enter the ego lane.",
-    "The vehicle at position <FRONT_CAR_POS> will cut into the ego lane soon.",
-    "The static object at position <FRONT_CAR_POS> is blocking the ego lane.",
-    "A wrong-way vehicle at position <FRONT_CAR_POS> will cross the ego left-turn path. "
-    "Yield before turning left.",
-    "A wrong-way vehicle at position <FRONT_CAR_POS> will cross the ego right-turn path. "
-    "Yield before turning right.",
-    "The vehicle at position <FRONT_CAR_POS> will cross the ego right-turn path. "
-    "Yield before turning right.",
-)
-assert len(TEMPLATES) == len(FAMILIES)
-
-P = TOKEN
-#: Paraphrases per family and tier (three each).  The first low-tier text of each family keeps
-#: id ``6 + family``.
-PARAPHRASES: dict[str, dict[str, tuple[str, ...]]] = {
-    "PE": {
-        "low": (
-            f"Watch out: someone on foot near {P} is stepping into your lane.",
-            f"A pedestrian at {P} is about to step into the ego lane.",
-            f"Caution, a person walking at {P} will enter your lane in a moment.",
-        ),
-        "medium": (
-            f"Someone near {P} may end up on the road ahead.",
-            f"There is movement at the roadside near {P} that could reach your path.",
-            f"Keep an eye on the area around {P} as it may not stay clear.",
-        ),
-        "high": (
-            "Someone may cross in front of you.",
-            "Watch for people near the road ahead.",
-            "A road user may step out ahead.",
-        ),
-    },
-    "VC": {
-        "low": (
-            f"A car around {P} is about to merge in front of you.",
-            f"The vehicle at {P} is going to change into the ego lane shortly.",
-            f"Heads up: the car at {P} will move into your lane soon.",
-        ),
-        "medium": (
-            f"The car near {P} may not stay in its lane.",
-            f"Traffic beside you near {P} could come across.",
-            f"Watch the vehicle around {P} because its path may meet yours.",
-        ),
-        "high": (
-            "A nearby vehicle may change lanes.",
-            "Another car may move in front of you.",
-            "Watch for merging traffic.",
-        ),
-    },
-    "OR": {
-        "low": (
-            f"Something is stopped in your lane near {P} and the road ahead is blocked.",
-            f"A stationary object at {P} is obstructing the ego lane.",
-            f"The ego lane is blocked by a stopped object at {P} ahead.",
-        ),
-        "medium": (
-            f"The lane near {P} is not clear.",
-            f"There may be something on the road around {P} ahead.",
-            f"Expect an obstruction near {P} on your way.",
-        ),
-        "high": (
-            "The road ahead may be blocked.",
-            "There may be an obstacle ahead.",
-            "The way ahead may not be clear.",
-        ),
-    },
-    "LWW": {
-        "low": (
-            f"A car driving against traffic near {P} will pass through your left turn. "
-            "Wait before turning.",
-            f"A vehicle going the wrong way at {P} will cut across your left turn. "
-            "Yield before turning left.",
-            f"Wrong-way traffic at {P} is about to cross the ego left-turn path, so give way "
-            "before the turn.",
-        ),
-        "medium": (
-            f"A car near {P} is not following the usual direction. Take care in the left turn.",
-            f"Oncoming traffic near {P} may be in the wrong lane for your left turn.",
-            f"The left turn may not be clear, so check the vehicle near {P} first.",
-        ),
-        "high": (
-            "Take care when turning left.",
-            "Another vehicle may be in your way in the turn.",
-            "Be ready to wait before turning left.",
-        ),
-    },
-    "RWW": {
-        "low": (
-            f"A car driving against traffic near {P} will pass through your right turn. "
-            "Wait before turning.",
-            f"A vehicle going the wrong way at {P} will cut across your right turn. "
-            "Yield before turning right.",
-            f"Wrong-way traffic at {P} is about to cross the ego right-turn path, so give way "
-            "before the turn.",
-        ),
-        "medium": (
-            f"A car near {P} is not following the usual direction. Take care in the right turn.",
-            f"Oncoming traffic near {P} may be in the wrong lane for your right turn.",
-            f"The right turn may not be clear, so check the vehicle near {P} first.",
-        ),
-        "high": (
-            "Take care when turning right.",
-            "Another vehicle may be in your way in the turn.",
-            "Be ready to wait before turning right.",
-        ),
-    },
-    "RTY": {
-        "low": (
-            f"Cross traffic near {P} is heading through your right turn. Let it pass first.",
-            f"A vehicle at {P} is about to cross the ego right-turn path. Give way before "
-            "turning right.",
-            f"The car at {P} will pass through your right turn, so wait for it before turning.",
-        ),
-        "medium": (
-            f"Traffic near {P} may be coming through the junction.",
-            f"The junction near {P} may not be clear for your turn.",
-            f"Check the crossing traffic around {P} before the right turn.",
-        ),
-        "high": (
-            "Traffic may be crossing ahead.",
-            "Be careful at the junction.",
-            "Other vehicles may need to pass first.",
-        ),
-    },
-}
-del P
-
-#: The five non-actionable warnings of the paper's appendix, verbatim.
-NON_ACTIONABLE: tuple[str, ...] = (
-    "Caution: maintenance equipment is operating behind the roadside barrier.",
-    "Warning: a delivery van is parked in an off-road service area.",
-    "Caution: a pedestrian is waiting behind a roadside fence and remains clear of traffic.",
-    "Warning: a cyclist is traveling away on a physically separated path.",
-    "Caution: traffic is restricted on a parallel road outside the ego route.",
-)
 
 #: Ego-frame positions (x forward, y right; m) of the distance-conditioned diagnostic (paper).
 DISTANCE_POSITIONS: dict[str, tuple[float, float]] = {"near": (12.0, 0.5), "far": (100.0, 0.5)}
-
-
-@dataclass(frozen=True)
-class WarningText:
-    """One entry of the text bank."""
-
-    text_id: int
-    family: int  # family index (family_codes.codes()), NO_FAMILY for non-actionable texts
-    kind: str  # one of TEXT_KINDS
-    text: str  # may contain TOKEN (then it states a position)
-    tier: str = ""  # one of TIERS for paraphrases, "" otherwise
-
-    @property
-    def has_position(self) -> bool:
-        """The text states a position (contains ``<FRONT_CAR_POS>``)."""
-        return TOKEN in self.text
-
-
-def _family_index(family: int | str, allow_none: bool = False) -> int:
-    if isinstance(family, str):
-        return family_codes.index(family)
-    f = int(family)
-    if allow_none and f == NO_FAMILY:
-        return f
-    family_codes.code(f)  # raises for an unknown index
-    return f
-
-
-def _check_entry(kind: str, tier: str, text: str) -> None:
-    """Bank rules: spacing around the placeholder, at most one position, tiers consistent; only
-    the empty text is empty."""
-    if kind == "empty":
-        if text != "" or tier:
-            raise ValueError(f"text: the empty text has no words and no tier, got {text!r}")
-        return
-    language.check_template(text, TOKEN)
-    n = text.count(TOKEN)
-    if n > 1:
-        raise ValueError(f"text: states {n} positions; a warning grounds one ({text!r})")
-    if kind == "paraphrase" and tier not in TIERS:
-        raise ValueError(f"tier: {tier!r} not one of {{{', '.join(TIERS)}}}")
-    if kind != "paraphrase" and tier:
-        raise ValueError(f"tier: only paraphrases have a tier, got {tier!r} for kind {kind!r}")
-    if tier in ("low", "medium") and n != 1:
-        raise ValueError(f"text: a {tier}-ambiguity paraphrase must state the position ({text!r})")
-    if tier == "high" and n:
-        raise ValueError(f"text: a high-ambiguity paraphrase states no position ({text!r})")
-
-
-def _initial_entries() -> tuple[WarningText, ...]:
-    bank = [WarningText(i, i, "canonical", t) for i, t in enumerate(TEMPLATES)]
-    for f, fam in enumerate(FAMILIES):
-        bank.append(WarningText(len(bank), f, "paraphrase", PARAPHRASES[fam]["low"][0], "low"))
-    for f, fam in enumerate(FAMILIES):
-        for tier in TIERS:
-            for text in PARAPHRASES[fam][tier][1 if tier == "low" else 0 :]:
-                bank.append(WarningText(len(bank), f, "paraphrase", text, tier))
-    for text in NON_ACTIONABLE:
-        bank.append(WarningText(len(bank), NO_FAMILY, "non_actionable", text))
-    bank.append(WarningText(len(bank), NO_FAMILY, "empty", ""))
-    for e in bank:
-        _check_entry(e.kind, e.tier, e.text)
-    return tuple(bank)
-
-
-@dataclass(frozen=True)
-class TextBank:
-    """The warning texts a simulation knows: an immutable value (hashable, so it can be a
-    static part of a compiled program's settings, :class:`lantern_jax.sim.settings.Settings`).
-
-    Attributes:
-        entries: the texts in id order (``entries[i].text_id == i``).
-    """
-
-    entries: tuple[WarningText, ...]
-
-    def __len__(self) -> int:
-        return len(self.entries)
-
-    def __iter__(self):
-        return iter(self.entries)
-
-    def __getitem__(self, text_id: int) -> WarningText:
-        return self.get(text_id)
-
-    def get(self, text_id: int) -> WarningText:
-        """The entry with ``text_id``.
-
-        Raises:
-            ValueError: for an id outside the bank.
-        """
-        i = int(text_id)
-        if not 0 <= i < len(self.entries):
-            raise ValueError(f"text_id: {i} outside 0..{len(self.entries) - 1}")
-        return self.entries[i]
-
-    def with_text(self, family: int | str, kind: str, text: str, tier: str = "") -> TextBank:
-        """A new bank with one more text (its id is the old bank's length).
-
-        Args:
-            family: family index or code (``NO_FAMILY`` allowed for non-actionable texts).
-            kind: ``"paraphrase"`` or ``"non_actionable"``.
-            text: the template (spacing rule: :func:`lantern_jax.language.check_template`).
-            tier: the ambiguity tier of a paraphrase.
-
-        Raises:
-            ValueError: for an unknown family, kind or tier, a canonical or empty text, a text
-                that breaks the spacing rule or its tier's position rule.
-        """
-        if kind not in TEXT_KINDS:
-            raise ValueError(f"kind: {kind!r} not one of {{{', '.join(TEXT_KINDS)}}}")
-        if kind in ("canonical", "empty"):
-            raise ValueError(
-                f"kind: the {kind} texts are fixed; add a paraphrase or a non-actionable text"
-            )
-        f = _family_index(family, allow_none=kind == "non_actionable")
-        _check_entry(kind, tier, text)
-        entry = WarningText(len(self.entries), f, kind, text, tier)
-        return TextBank((*self.entries, entry))
-
-    def with_replaced_text(self, text_id: int, text: str) -> TextBank:
-        """A new bank in which entry ``text_id`` reads ``text`` (same id, family, kind and
-        tier): a wording experiment on one warning, e.g. the exact warning of a family.
-
-        Raises:
-            ValueError: for an id outside the bank, the empty text, or a text that breaks the
-                bank's rules for the entry's kind and tier.
-        """
-        old = self.get(text_id)
-        if old.kind == "empty":
-            raise ValueError(f"text_id: {old.text_id} is the empty text; it has no words")
-        _check_entry(old.kind, old.tier, text)
-        entries = list(self.entries)
-        entries[old.text_id] = dataclasses.replace(old, text=text)
-        return TextBank(tuple(entries))
-
-
-#: The built-in bank; canonical entries first so that ``text_id == family`` for them.
-DEFAULT_BANK = TextBank(_initial_entries())
-#: Id of the empty text (no words; see the module docstring).
-EMPTY_TEXT_ID = next(e.text_id for e in DEFAULT_BANK if e.kind == "empty")
 
 
 #: Registered families' texts (:func:`add_family_texts`), by family index in registration order:
@@ -397,7 +130,7 @@ def _bank(bank: TextBank | None) -> TextBank:
 def paraphrase_text_id(family: int | str, bank: TextBank | None = None) -> int:
     """Text id of a family's first low-ambiguity paraphrase (ids 6-11 for the six built-in
     families, as before the tiers; a registered family's first paraphrase)."""
-    f = _family_index(family)
+    f = family_index(family)
     if f < len(FAMILIES):
         return len(TEMPLATES) + f
     return _family_paraphrases(f, bank)[0]
@@ -410,7 +143,7 @@ def canonical_text_id(family: int | str, bank: TextBank | None = None) -> int:
     Raises:
         ValueError: for an unknown family or a registered family without texts in the bank.
     """
-    f = _family_index(family)
+    f = family_index(family)
     if f < len(FAMILIES):
         return f
     for e in _bank(bank):
@@ -448,14 +181,14 @@ def add_family_texts(family: int | str, warning: str, paraphrases: dict[str, Seq
         ValueError: for a built-in family, a family that already has other texts, or a text
             that breaks the bank's rules.
     """
-    f = _family_index(family)
+    f = family_index(family)
     if f < len(FAMILIES):
         raise ValueError(f"family: {family_codes.code(f)!r} is built in; its texts are fixed")
     entries = [("canonical", "", warning)]
     for tier, texts in paraphrases.items():
         entries += [("paraphrase", tier, t) for t in texts]
     for kind, tier, text in entries:
-        _check_entry(kind, tier, text)
+        check_entry(kind, tier, text)
     have = _FAMILY_TEXTS.get(f)
     if have is not None and list(have) != entries:
         raise ValueError(f"family: {family_codes.code(f)!r} already has other texts")
@@ -466,7 +199,7 @@ def add_family_texts(family: int | str, warning: str, paraphrases: dict[str, Seq
 
 def tier_text_ids(family: int | str, tier: str, bank: TextBank | None = None) -> tuple[int, ...]:
     """Ids of a family's paraphrases of one ambiguity tier, in bank order."""
-    f = _family_index(family)
+    f = family_index(family)
     if tier not in TIERS:
         raise ValueError(f"tier: {tier!r} not one of {{{', '.join(TIERS)}}}")
     return tuple(
@@ -493,7 +226,7 @@ def _tier_order(families: Sequence[str | int], keys: Sequence[str]) -> np.ndarra
     """Rank of every pair when ordered by (family, SHA-256 of its key)."""
     if len(families) != len(keys):
         raise ValueError(f"families/keys: {len(families)} families but {len(keys)} keys")
-    fam = [_family_index(f) for f in families]
+    fam = [family_index(f) for f in families]
     digest = [hashlib.sha256(str(k).encode()).hexdigest() for k in keys]
     order = sorted(range(len(fam)), key=lambda i: (fam[i], digest[i], i))
     rank = np.empty(len(fam), np.int64)
@@ -532,10 +265,17 @@ def held_out_text_ids(
     for i, (f, r) in enumerate(zip(families, rank, strict=True)):
         # a registered family may lack a tier: it then reads any of its paraphrases
         ids = tier_text_ids(f, TIERS[r % len(TIERS)], bank) or _family_paraphrases(
-            _family_index(f), bank
+            family_index(f), bank
         )
         out[i] = ids[(r // len(TIERS)) % len(ids)]
     return out
+
+
+def _pair_keys(config) -> tuple[list, list[str]]:
+    """(families, keys) of every execution of a batched config: the key is the pair's
+    generation seed (``noise_seed``)."""
+    families = np.asarray(config.family).reshape(-1).tolist()
+    return families, [str(int(k)) for k in np.asarray(config.noise_seed).reshape(-1)]
 
 
 def paraphrase_text_ids(config) -> np.ndarray:
@@ -549,17 +289,13 @@ def paraphrase_text_ids(config) -> np.ndarray:
         config: an :class:`~lantern_jax.world.ExecutionConfig` with a leading batch axis (the
             Route A executions of a suite, one per pair).
     """
-    families = np.asarray(config.family).reshape(-1)
-    keys = [str(int(k)) for k in np.asarray(config.noise_seed).reshape(-1)]
-    return held_out_text_ids(families.tolist(), keys)
+    return held_out_text_ids(*_pair_keys(config))
 
 
 def paraphrase_tiers(config) -> np.ndarray:
     """(n,) int: the ambiguity tier (index into :data:`TIERS`) that :func:`paraphrase_text_ids`
     uses for every execution of a batched config."""
-    families = np.asarray(config.family).reshape(-1)
-    keys = [str(int(k)) for k in np.asarray(config.noise_seed).reshape(-1)]
-    return ambiguity_tiers(families.tolist(), keys)
+    return ambiguity_tiers(*_pair_keys(config))
 
 
 # ---------------------------------------------------------------------------------------------

@@ -30,9 +30,13 @@ import numpy as np
 import pandas as pd
 
 from lantern_jax import family_codes
-from lantern_jax.constants import CONDITIONS
+from lantern_jax.constants import CONDITIONS, GATE_NAMES
 
 GROUP_COLUMNS = ("model", "condition")
+#: The family tables' column of the macro average over families.
+OVERALL = "Overall"
+#: The family table's condition of a model's paired difference, warning minus no-warning.
+GAIN = "warning gain"
 
 COMPONENT_COLUMNS = {
     "A-Prog.": "A_progress",
@@ -42,14 +46,10 @@ COMPONENT_COLUMNS = {
     "Rec.": "S_rec",
     "B-Prog.": "B_progress",
 }
-FAILURE_COLUMNS = {
-    "Coll.-A": "gate_collision",
-    "RD-A": "gate_route_deviation",
-    "LC-A": "gate_lane",
-    "Rule-A": "gate_rule",
-    "Block-A": "gate_block",
-    "False Brake-B": "gate_false_brake",
-}
+#: Gate failure columns (% of pairs failing it) -> the gate, in :data:`GATE_NAMES` order.
+FAILURE_COLUMNS = dict(
+    zip(("Coll.-A", "RD-A", "LC-A", "Rule-A", "Block-A", "False Brake-B"), GATE_NAMES, strict=True)
+)
 #: The policy whose Route B time is every model's yardstick (``B-Time/Exp.``): the privileged
 #: expert, which sees every actor's forecast and slows only for what is there.
 EFFICIENCY_REFERENCE = "expert"
@@ -118,7 +118,7 @@ def family_scores(df: pd.DataFrame, by: Sequence[str] = GROUP_COLUMNS) -> pd.Dat
     cols = family_codes.table_codes(df["family"])
     means = df.groupby([*by, "family"], sort=False)["CUS"].mean().unstack("family")
     means = means.reindex(columns=cols).astype(float)
-    means["Overall"] = means[cols].mean(axis=1, skipna=True)
+    means[OVERALL] = means[cols].mean(axis=1, skipna=True)
     means.columns.name = None
     return means.sort_index()
 
@@ -191,8 +191,8 @@ def family_table(route_table: pd.DataFrame) -> pd.DataFrame:
                 out.append({"model": model, "condition": cond, **sub.loc[cond].drop("model")})
         if all(c in sub.index for c in CONDITIONS):
             warned, plain = (sub.loc[c].drop("model") for c in CONDITIONS)
-            out.append({"model": model, "condition": "warning gain", **(warned - plain)})
-    cols = ["model", "condition", *family_codes.table_codes(route_table["family"]), "Overall"]
+            out.append({"model": model, "condition": GAIN, **(warned - plain)})
+    cols = ["model", "condition", *family_codes.table_codes(route_table["family"]), OVERALL]
     return pd.DataFrame(out)[cols]
 
 
@@ -219,9 +219,9 @@ def premise_table(route_table: pd.DataFrame) -> pd.DataFrame:
         for f in families:
             v = route_table.loc[route_table["family"] == f, col]
             row[f] = 100.0 * float(v.mean()) if len(v) else np.nan
-        row["Overall"] = 100.0 * float(route_table[col].mean()) if len(route_table) else np.nan
+        row[OVERALL] = 100.0 * float(route_table[col].mean()) if len(route_table) else np.nan
         rows.append(row)
     counts = {"measure": "Route A executions"}
     counts.update({f: float((route_table["family"] == f).sum()) for f in families})
-    counts["Overall"] = float(len(route_table))
+    counts[OVERALL] = float(len(route_table))
     return pd.DataFrame([*rows, counts])

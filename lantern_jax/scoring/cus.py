@@ -30,7 +30,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
-from lantern_jax.constants import FAMILIES
+from lantern_jax.constants import FAMILIES, GATE_NAMES, ROUTE_A_GATE_NAMES
 from lantern_jax.scoring import thresholds
 from lantern_jax.scoring.components import (
     ROUTE_A_GATES,
@@ -46,15 +46,6 @@ from lantern_jax.scoring.telemetry import Telemetry
 from lantern_jax.scoring.thresholds import DEFAULT_SCORING, ScoringSettings
 
 Array = jax.Array
-
-GATE_NAMES = (
-    "gate_collision",
-    "gate_route_deviation",
-    "gate_lane",
-    "gate_rule",
-    "gate_block",
-    "gate_false_brake",
-)
 
 
 def d_safe_for_family(family: Any) -> Array:
@@ -172,14 +163,9 @@ def components_from_values(
     ``ttc_min``: ``inf`` = no closing trend, ``NaN`` = unavailable.  ``d_min``: ``NaN`` =
     unavailable.  ``t_react`` / ``RL``: ``NaN`` or ``inf`` = no response / no recovery.
     """
-    gates = {
-        "gate_collision": jnp.asarray(gate_collision, bool),
-        "gate_route_deviation": jnp.asarray(gate_route_deviation, bool),
-        "gate_lane": jnp.asarray(gate_lane, bool),
-        "gate_rule": jnp.asarray(gate_rule, bool),
-        "gate_block": jnp.asarray(gate_block, bool),
-        "gate_false_brake": jnp.asarray(gate_false_brake, bool),
-    }
+    passed = (gate_collision, gate_route_deviation, gate_lane, gate_rule, gate_block,
+              gate_false_brake)  # fmt: skip
+    gates = {name: jnp.asarray(v, bool) for name, v in zip(GATE_NAMES, passed, strict=True)}
     product = jnp.ones((), jnp.float32)
     for name in GATE_NAMES:
         product = product * gates[name].astype(jnp.float32)
@@ -225,11 +211,7 @@ def pair_components(
     return components_from_values(
         a.progress, b.progress, a.ttc_min_s, a.clearance_min_m, d_safe,
         a.t_ref_s, a.t_event_s, a.t_react_s, a.recovery_latency_s,
-        gate_collision=a.gate_collision,
-        gate_route_deviation=a.gate_route_deviation,
-        gate_lane=a.gate_lane,
-        gate_rule=a.gate_rule,
-        gate_block=a.gate_block,
+        **{name: getattr(a, name) for name in ROUTE_A_GATE_NAMES},
         gate_false_brake=b.gate_false_brake,
         coincident=a.coincident_onset,
         anticipation_available=a.anticipation_available,
@@ -298,7 +280,7 @@ def soft_pair_components(
     """Soft counterpart of :func:`pair_components` (same keys; all values in [0, 1] / 0..100)."""
     a = soft_execution_terms(tel_a, d_safe, temperature, settings)
     b = soft_execution_terms(tel_b, d_safe, temperature, settings)
-    gates = {name: a[name] for name in GATE_NAMES[:-1]}
+    gates = {name: a[name] for name in ROUTE_A_GATE_NAMES}
     gates["gate_false_brake"] = b["gate_false_brake"]
     product = jnp.ones((), jnp.float32)
     for name in GATE_NAMES:

@@ -19,14 +19,14 @@ import numpy as np
 import pandas as pd
 
 from lantern_jax import family_codes
-from lantern_jax.constants import FAMILIES
+from lantern_jax.constants import FAMILIES, GATE_NAMES, WARNING_CONDITION
 from lantern_jax.files import atomic_write
-from lantern_jax.scoring.cus import GATE_NAMES, d_safe_for_family, pair_components
+from lantern_jax.scoring.cus import d_safe_for_family, pair_components
 from lantern_jax.scoring.metrics import ExecutionMetrics
 from lantern_jax.scoring.thresholds import DEFAULT_SCORING, ScoringSettings
 
+#: The columns that identify a row (each combination exactly once).
 KEY_COLUMNS = ("model", "condition", "pair_id")
-WARNING_CONDITION = "warning"
 
 
 def load_schema() -> dict:
@@ -69,6 +69,71 @@ def _family_codes(families: Any, n: int) -> list[str]:
     return codes
 
 
+def _batched(
+    metrics_a: ExecutionMetrics, metrics_b: ExecutionMetrics
+) -> tuple[ExecutionMetrics, ExecutionMetrics, int]:
+    """NumPy copies of the Route A and Route B metrics with one leading axis, and its length."""
+    a = jax.tree.map(np.asarray, metrics_a)
+    b = jax.tree.map(np.asarray, metrics_b)
+    n = int(np.shape(a.progress)[0]) if np.ndim(a.progress) else 1
+    if np.ndim(a.progress) == 0:
+        a = jax.tree.map(lambda x: x[None], a)
+        b = jax.tree.map(lambda x: x[None], b)
+    if np.shape(b.progress)[0] != n:
+        raise ValueError(
+            f"build_route_table: {n} Route A executions but {np.shape(b.progress)[0]} Route B"
+        )
+    return a, b, n
+
+
+def _family_d_safe(codes: list[str]) -> np.ndarray:
+    """(n,) m, the built-in families' clearance normalisers (a registered family has none)."""
+    other = sorted(set(codes) - set(FAMILIES))
+    if other:
+        raise ValueError(f"build_route_table: pass d_safe for registered families {other}")
+    return np.asarray(d_safe_for_family(np.asarray([FAMILIES.index(f) for f in codes])))
+
+
+def _measured_columns(a: ExecutionMetrics, b: ExecutionMetrics, comps: dict) -> dict:
+    """The columns measured by the rollouts and the scorer (NumPy metrics with leading axis n,
+    the pair components as float64)."""
+
+    def f64(x: Any) -> np.ndarray:
+        return np.asarray(x, np.float64)
+
+    def i64(x: Any) -> np.ndarray:
+        return np.asarray(x).astype(np.int64)
+
+    return {
+        "A_progress": f64(a.progress),
+        "B_progress": f64(b.progress),
+        "ttc_min_s": f64(a.ttc_min_s),
+        "clearance_min_m": f64(a.clearance_min_m),
+        "t_ref_s": f64(a.t_ref_s),
+        "t_event_s": f64(a.t_event_s),
+        "t_warn_off_s": f64(a.t_warn_off_s),
+        "t_clear_s": f64(a.t_clear_s),
+        "t_react_s": f64(a.t_react_s),
+        "recovery_latency_s": f64(a.recovery_latency_s),
+        "S_ttc": comps["S_ttc"],
+        "S_clear": comps["S_clear"],
+        "S_ant": comps["S_ant"],
+        "S_rec": comps["S_rec"],
+        **{g: comps[g].astype(np.int64) for g in GATE_NAMES},
+        "CUS": comps["CUS"],
+        "controller_fault": i64(a.controller_fault),
+        "t_fault_s": f64(a.t_fault_s),
+        "B_controller_fault": i64(b.controller_fault),
+        "B_t_fault_s": f64(b.t_fault_s),
+        "coincident_onset": i64(a.coincident_onset),
+        "t_first_failure_s": f64(a.t_first_failure_s),
+        "event_exposed": i64(a.event_exposed),
+        "B_false_brake_stop_s": f64(b.false_brake_max_stop_s),
+        "B_time_s": f64(b.t_complete_s),
+        "B_slow_s": f64(b.slow_unjustified_s),
+    }
+
+
 def build_route_table(
     metrics_a: ExecutionMetrics,
     metrics_b: ExecutionMetrics,
@@ -93,7 +158,7 @@ def build_route_table(
         model, condition: one string for all rows or one per row.
         pair_ids, families (codes or indices), weathers: one entry per row.
         t_warn_on: (n,) s, start of warning delivery (``NaN`` = none).  Default: ``t_ref_s`` for
-            rows whose condition is ``"warning"``, ``NaN`` otherwise.
+            rows of the warning condition (``constants.WARNING_CONDITION``), ``NaN`` otherwise.
         d_safe: (n,) m, clearance normalisers; default from the family (2 m PE/OR, else 3 m;
             required for a registered family, whose record sets it per pair).
         warning_ticks: (n,) int, ticks at which a warning was delivered on Route A
@@ -106,32 +171,18 @@ def build_route_table(
     Returns:
         DataFrame with the schema's columns in order (see :func:`validate_route_table`).
     """
-    a = jax.tree.map(np.asarray, metrics_a)
-    b = jax.tree.map(np.asarray, metrics_b)
-    n = int(np.shape(a.progress)[0]) if np.ndim(a.progress) else 1
-    if np.ndim(a.progress) == 0:
-        a = jax.tree.map(lambda x: x[None], a)
-        b = jax.tree.map(lambda x: x[None], b)
-    if np.shape(b.progress)[0] != n:
-        raise ValueError(
-            f"build_route_table: {n} Route A executions but {np.shape(b.progress)[0]} Route B"
-        )
+    a, b, n = _batched(metrics_a, metrics_b)
     fam = _family_codes(families, n)
     conds = [str(c) for c in _per_row("condition", condition, n)]
     if d_safe is None:
-        other = sorted(set(fam) - set(FAMILIES))
-        if other:
-            raise ValueError(f"build_route_table: pass d_safe for registered families {other}")
-        d_safe = np.asarray(d_safe_for_family(np.asarray([FAMILIES.index(f) for f in fam])))
+        d_safe = _family_d_safe(fam)
     d_safe = np.broadcast_to(np.asarray(d_safe, np.float64), (n,))
     comps = {
         k: np.asarray(v, np.float64) for k, v in pair_components(a, b, d_safe, settings).items()
     }
-    t_ref = np.asarray(a.t_ref_s, np.float64)
     if t_warn_on is None:
         warned = np.asarray([c == WARNING_CONDITION for c in conds])
-        t_warn_on = np.where(warned, t_ref, np.nan)
-    f64 = lambda x: np.asarray(x, np.float64)  # noqa: E731
+        t_warn_on = np.where(warned, np.asarray(a.t_ref_s, np.float64), np.nan)
     shown = np.broadcast_to(
         np.asarray(0 if warning_ticks is None else warning_ticks, np.int64), (n,)
     )
@@ -141,38 +192,13 @@ def build_route_table(
         "pair_id": [str(p) for p in _per_row("pair_ids", pair_ids, n)],
         "family": fam,
         "weather": [str(w) for w in _per_row("weathers", weathers, n)],
-        "A_progress": f64(a.progress),
-        "B_progress": f64(b.progress),
-        "ttc_min_s": f64(a.ttc_min_s),
-        "clearance_min_m": f64(a.clearance_min_m),
-        "t_ref_s": t_ref,
-        "t_warn_on_s": np.broadcast_to(f64(t_warn_on), (n,)),
-        "t_event_s": f64(a.t_event_s),
-        "t_warn_off_s": f64(a.t_warn_off_s),
-        "t_clear_s": f64(a.t_clear_s),
-        "t_react_s": f64(a.t_react_s),
-        "recovery_latency_s": f64(a.recovery_latency_s),
-        "S_ttc": comps["S_ttc"],
-        "S_clear": comps["S_clear"],
-        "S_ant": comps["S_ant"],
-        "S_rec": comps["S_rec"],
-        **{g: comps[g].astype(np.int64) for g in GATE_NAMES},
-        "CUS": comps["CUS"],
+        **_measured_columns(a, b, comps),
+        "t_warn_on_s": np.broadcast_to(np.asarray(t_warn_on, np.float64), (n,)),
         "d_safe_m": d_safe.copy(),
-        "controller_fault": np.asarray(a.controller_fault).astype(np.int64),
-        "t_fault_s": f64(a.t_fault_s),
-        "B_controller_fault": np.asarray(b.controller_fault).astype(np.int64),
-        "B_t_fault_s": f64(b.t_fault_s),
-        "coincident_onset": np.asarray(a.coincident_onset).astype(np.int64),
         "hazard_hidden_at_warning": _flags(hidden_at_warning, n),
         "hazard_hidden_before_warning": _flags(hidden_before_warning, n),
-        "t_first_failure_s": f64(a.t_first_failure_s),
         "warning_ticks": shown,
         "warning_delivered": (shown > 0).astype(np.int64),
-        "event_exposed": np.asarray(a.event_exposed).astype(np.int64),
-        "B_false_brake_stop_s": f64(b.false_brake_max_stop_s),
-        "B_time_s": f64(b.t_complete_s),
-        "B_slow_s": f64(b.slow_unjustified_s),
     }
     df = pd.DataFrame(data)
     for name, dtype in schema_columns():
@@ -293,8 +319,6 @@ def read_route_table(path: str | os.PathLike) -> pd.DataFrame:
 REPRODUCIBLE_ATOL = 1e-4
 REPRODUCIBLE_RTOL = 1e-5
 
-ROW_KEYS = ("model", "condition", "pair_id")
-
 
 def compare_route_tables(
     before: pd.DataFrame, after: pd.DataFrame, atol: float = REPRODUCIBLE_ATOL
@@ -309,8 +333,8 @@ def compare_route_tables(
     """
     if list(before.columns) != list(after.columns):
         return False, [f"columns differ: {sorted(set(before.columns) ^ set(after.columns))}"]
-    b = before.set_index(list(ROW_KEYS)).sort_index()
-    a = after.set_index(list(ROW_KEYS)).sort_index()
+    b = before.set_index(list(KEY_COLUMNS)).sort_index()
+    a = after.set_index(list(KEY_COLUMNS)).sort_index()
     if not b.index.equals(a.index):
         return False, ["row keys (model, condition, pair_id) differ"]
     ok, lines, differing = True, [], 0

@@ -36,9 +36,13 @@ import pandas as pd
 
 from lantern_jax import family_codes
 from lantern_jax.constants import FAMILIES
+from lantern_jax.constants import NO_WARNING_CONDITION as NO_WARNING
+from lantern_jax.constants import WARNING_CONDITION as WARNING
 from lantern_jax.scoring.aggregate import (
     DECOMPOSITION_COLUMNS,
+    GAIN,
     GROUP_COLUMNS,
+    OVERALL,
     decomposition_pair_values,
 )
 
@@ -48,10 +52,7 @@ SEED = 0  # seed of the resampling generator (recorded in every manifest)
 MIN_N = 10  # a cell averaging fewer pairs than this is flagged
 METHOD = "percentile bootstrap over route pairs, stratified by family"
 
-OVERALL = "Overall"
 FAMILY_COLUMNS = (*FAMILIES, OVERALL)
-GAIN = "warning gain"
-WARNING, NO_WARNING = "warning", "no-warning"
 
 
 def interval_columns(column: str) -> tuple[str, str, str]:

@@ -15,8 +15,8 @@ states are gathered (``process_allgather``) so that every process can score the 
   only its own shard: ``jax.make_array_from_callback``), parameters are replicated, and
   ``get`` gathers a result back into ordinary local arrays on every process.
 
-The batch must divide by the global device count; :func:`pad_batch` pads with copies of the
-first execution (cut off again after the run).
+The batch must divide by the global device count (``Placement.multiple``); the evaluation's
+layout pads it (:func:`lantern_jax.sim.engine.schedule_layout`).
 """
 
 from __future__ import annotations
@@ -38,19 +38,6 @@ def batch_mesh() -> jax.sharding.Mesh:
     return jax.make_mesh(
         (jax.device_count(),), (BATCH_AXIS,), axis_types=(jax.sharding.AxisType.Auto,)
     )
-
-
-def pad_batch(tree: Any, multiple: int) -> tuple[Any, int]:
-    """Pad the leading axis to a multiple of ``multiple`` with copies of element 0.
-
-    Returns:
-        (padded tree, original batch size).
-    """
-    n = jax.tree.leaves(tree)[0].shape[0]
-    pad = (-n) % multiple
-    if pad:
-        tree = jax.tree.map(lambda x: jnp.concatenate([x, jnp.repeat(x[:1], pad, axis=0)]), tree)
-    return tree, n
 
 
 @dataclasses.dataclass(frozen=True)

@@ -27,7 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 import pandas as pd
 
-from lantern_jax.constants import DT
+from lantern_jax.constants import CONDITIONS, DT, WARNING_CONDITION
 from lantern_jax.files import StagedFolder, atomic_write
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.registry import get_policy
@@ -54,17 +54,18 @@ class StressConfig:
     lr: float = 0.3  # Adam step size in the unconstrained space
     temperature: float = 0.1  # soft-score temperature of the surrogate
     objective: str = "clearance"
-    condition: str = "warning"  # warning | no-warning
+    condition: str = WARNING_CONDITION  # one of CONDITIONS
     seed: int = 0
     methods: tuple[str, ...] = search.METHODS
 
 
 def make_problem(pair: PairSpec, policy: Policy, space: SearchSpace, cfg: StressConfig) -> Problem:
     """The problem of one pair: Route A under the condition, the soft horizon, the surrogate."""
-    if cfg.condition not in ("warning", "no-warning"):
-        raise ValueError(f"condition: {cfg.condition!r} not one of warning, no-warning")
+    if cfg.condition not in CONDITIONS:
+        raise ValueError(f"condition: {cfg.condition!r} not one of {', '.join(CONDITIONS)}")
     a, b, _ = build_pair(pair.params)
-    a = a.replace(config=a.config.replace(warning_enabled=jnp.asarray(cfg.condition == "warning")))
+    warned = jnp.asarray(cfg.condition == WARNING_CONDITION)
+    a = a.replace(config=a.config.replace(warning_enabled=warned))
     reach = float(a.config.s_conflict) / float(a.config.v_ref) + INTERACTION_TAIL_S
     horizon = int(min(np.ceil(reach / DT), np.ceil(float(a.config.timeout_s) / DT)))
     params = policy.init(jax.random.PRNGKey(0))

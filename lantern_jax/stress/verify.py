@@ -17,6 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from lantern_jax.constants import ROUTE_A_GATE_NAMES
 from lantern_jax.policies.base import Policy
 from lantern_jax.scoring.cus import pair_components
 from lantern_jax.scoring.metrics import finalize
@@ -27,9 +28,6 @@ from lantern_jax.sim.switch import policy_switch, switch_params
 from lantern_jax.stress.objective import Problem
 
 FAIL_BELOW_CUS = 50.0  # CUS points: a pair below this counts as a failure (besides any gate)
-ROUTE_A_GATES = (
-    "gate_collision", "gate_route_deviation", "gate_lane", "gate_rule", "gate_block",
-)  # fmt: skip
 
 
 @dataclasses.dataclass
@@ -125,7 +123,7 @@ class Verifier:
         comps = pair_components(m_a, m_b, p.scenario_a.config.d_safe, p.settings.scoring)
         comps = jax.tree.map(np.asarray, comps)
         expert = jax.tree.map(np.asarray, self._metrics(scs_a, self._expert_params))
-        expert_ok = np.all([getattr(expert, g) for g in ROUTE_A_GATES], axis=0)
+        expert_ok = np.all([getattr(expert, g) for g in ROUTE_A_GATE_NAMES], axis=0)
         passed = np.asarray(comps["gate_product"]) > 0.5
         cus = np.asarray(comps["CUS"], np.float64)
         failed = (~passed | (cus < self.threshold)) & expert_ok

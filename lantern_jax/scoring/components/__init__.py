@@ -39,6 +39,7 @@ efficiency         route completion time and unjustified slow time: a diagnostic
 =================  ======================================================================
 """
 
+from lantern_jax.constants import ROUTE_A_GATE_FIELDS
 from lantern_jax.scoring.components import (
     anticipation,
     block,
@@ -58,14 +59,9 @@ from lantern_jax.scoring.components import (
 # hazard components by Telemetry field (and availability key)
 HAZARD_COMPONENTS = {"ttc": ttc, "clearance": clearance, "anticipation": anticipation,
                      "recovery": recovery}  # fmt: skip
-# Route A gates by Telemetry field (the pass flag is ``"gate_" + name``), in failure-time order
-ROUTE_A_GATES = {
-    "collision": collision,
-    "route_deviation": route_deviation,
-    "lane": lane,
-    "rule": rule,
-    "block": block,
-}
+# Route A gates by Telemetry field (the pass flag is ``"gate_" + name``), in failure-time order;
+# each gate's module is named after its field
+ROUTE_A_GATES = {name: globals()[name] for name in ROUTE_A_GATE_FIELDS}
 
 __all__ = [
     "HAZARD_COMPONENTS",

@@ -10,7 +10,7 @@ termination-crossing frames (``exclude_crossing = "onset"``) is what lets the fi
 use the warning::
 
     lantern-jax dataset --out data/lantern
-    python benchmarks/crossing_rule_seeds.py --dataset data/lantern --seeds 0 1 2
+    python docs/investigations/crossing_rule_seeds.py --dataset data/lantern --seeds 0 1 2
 
 Both variants start from the same base model (``--base``, default: the shipped
 ``learned-base``) and use ``configs/train_coop.toml`` otherwise; ``--config
@@ -35,7 +35,7 @@ from lantern_jax.policies.learned.checkpoint import checkpoint_policy, shipped_p
 from lantern_jax.training.config import load_config
 from lantern_jax.training.train import train
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]  # the repository
 RULES = ("both", "onset")
 
 

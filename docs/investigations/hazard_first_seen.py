@@ -8,9 +8,9 @@ distance and the hazard's bearing in the ego frame then (0 = straight ahead, + =
 how many of the approach ticks it was visible.  A large bearing at a long distance means the
 line of sight runs across a bend, past whatever was meant to hide the hazard::
 
-    python benchmarks/hazard_first_seen.py                      # OR, coop, warning condition
-    python benchmarks/hazard_first_seen.py --family PE --policy expert
-    python benchmarks/hazard_first_seen.py --family OR --csv first_seen_or.csv
+    python docs/investigations/hazard_first_seen.py          # OR, coop, warning condition
+    python docs/investigations/hazard_first_seen.py --family PE --policy expert
+    python docs/investigations/hazard_first_seen.py --family OR --csv first_seen_or.csv
 
 Visibility is the simulator's own (``TickRecord.visible``, the state at the end of each tick);
 the approach is every tick that ends before the ego reaches the warning point.

@@ -26,7 +26,7 @@ For each layout it draws candidates until ``--suite-size`` mutually distinct rou
 of ``--probe`` fresh candidates that are not near duplicates of any of them (what the dataset
 generator keeps)::
 
-    python benchmarks/or_route_diversity.py [--candidates 5000] [--probe 500] [--seed 0]
+    python docs/investigations/or_route_diversity.py [--candidates 5000] [--probe 500] [--seed 0]
 
 It builds no scenario and runs no policy.
 """

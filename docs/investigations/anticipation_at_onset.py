@@ -14,8 +14,8 @@ ego's closing speed on it (m/s; > 0 = the ego gains on it; the hazard's velocity
 its positions at the onset tick and the next, so a hazard that starts moving in the onset tick,
 as Right-Turn Yield's flow does, shows its speed after the start)::
 
-    python benchmarks/anticipation_at_onset.py                       # expert, every family
-    python benchmarks/anticipation_at_onset.py --policy coop --family VC RTY
+    python docs/investigations/anticipation_at_onset.py      # expert, every family
+    python docs/investigations/anticipation_at_onset.py --policy coop --family VC RTY
 
 The rollouts are the simulator's own (:func:`lantern_jax.diagnostics.run_recorded`); S_ant is
 the scorer's.
@@ -33,7 +33,7 @@ from lantern_jax.constants import DT, FAMILIES
 from lantern_jax.policies.registry import policy_names
 from lantern_jax.scenarios.suite import SUITE_ID
 from lantern_jax.scoring.components import anticipation
-from lantern_jax.scoring.thresholds import REACT_WINDOW
+from lantern_jax.scoring.thresholds import DEFAULT_SCORING
 
 
 def onset_table(family: str, policy: str, suite: str = SUITE_ID) -> pd.DataFrame:
@@ -52,6 +52,7 @@ def onset_table(family: str, policy: str, suite: str = SUITE_ID) -> pd.DataFrame
                            met.anticipation_available, met.coincident_onset)
     )  # fmt: skip
     hazard = np.asarray(batch.config.hazard_index)
+    window = DEFAULT_SCORING.react_window  # ticks, the scorer's response window
     rows = []
     for k, i in enumerate(idx):
         t = rec.t[k]
@@ -76,7 +77,7 @@ def onset_table(family: str, policy: str, suite: str = SUITE_ID) -> pd.DataFrame
             "S_ant": float(s_ant[k]),
             "react_after_onset_s": float(met.t_react_s[k]) - t_ref,
             "v_onset": float(rec.ego_speed[k][j]),
-            "a_pre_event": float(np.mean(rec.ego_accel[k][max(je - REACT_WINDOW + 1, 0):je + 1])),
+            "a_pre_event": float(np.mean(rec.ego_accel[k][max(je - window + 1, 0):je + 1])),
             "hazard_ahead_m": float(d @ fwd),
             "hazard_left_m": float(d @ left),
             "hazard_speed": float(np.hypot(*vel)),
