@@ -197,7 +197,10 @@ def _source(args: argparse.Namespace, key: str) -> str:
 
 
 def resolve_policies(names: Sequence[str] | None, source: str = "--policy") -> list[str]:
-    """Expand ``all`` and comma-separated lists; check every name against the registry.
+    """Expand ``all`` and comma-separated lists; register every policy named by its code
+    (``file.py:NAME`` or ``package.module:attr``, see
+    :func:`~lantern_jax.policies.registry.register_policy_source`); check every name against
+    the registry.
 
     Args:
         names: the values given (each a name or comma-separated names).
@@ -206,7 +209,8 @@ def resolve_policies(names: Sequence[str] | None, source: str = "--policy") -> l
     Raises:
         UsageError: naming the unknown policy and where it came from, listing the known ones.
     """
-    from lantern_jax.policies.registry import get_policy, policy_names
+    from lantern_jax.policies.external import is_policy_source
+    from lantern_jax.policies.registry import get_policy, policy_names, register_policy_source
 
     out: list[str] = []
     for item in names or ["all"]:
@@ -215,6 +219,11 @@ def resolve_policies(names: Sequence[str] | None, source: str = "--policy") -> l
                 continue
             expanded = list(REFERENCE_POLICIES) if name == "all" else [name]
             for n in expanded:
+                if is_policy_source(n):  # a user's code: file.py:NAME or package.module:attr
+                    try:
+                        n = register_policy_source(n)
+                    except (ValueError, TypeError) as e:
+                        raise UsageError(f"{source}: {e}") from None
                 try:
                     get_policy(n)
                 except KeyError:
@@ -879,8 +888,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--policy",
         action="append",
         metavar="NAME",
-        help="policy name, comma-separated names or 'all' (= expert, ego, coop; the default); "
-        "may be repeated",
+        help="policy name, comma-separated names or 'all' (= expert, ego, coop; the default), "
+        "or a policy in your own code as path/to/file.py:NAME or package.module:attr (a Policy "
+        "or a function returning one; the manifest records its file's SHA-256); may be repeated",
     )
     ev.add_argument(
         "--checkpoint",

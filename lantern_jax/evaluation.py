@@ -30,7 +30,7 @@ import pandas as pd
 
 from lantern_jax.constants import CONDITIONS, DT, SUITE_ID
 from lantern_jax.policies.base import Policy, check_policy_output
-from lantern_jax.policies.registry import get_policy
+from lantern_jax.policies.registry import get_policy, policy_source
 from lantern_jax.scenarios.ablations import ablation_names
 from lantern_jax.scenarios.suite import Suite, load_suite
 from lantern_jax.scoring.aggregate import (
@@ -313,6 +313,8 @@ def _manifest(s: Suite, ablation: str, execs: Executions, runs: list[PolicyRun],
                 params_sha256=r.params_sha256,
                 seconds_compile=round(r.seconds_compile, 3),
                 seconds_run=round(r.seconds_run, 3),
+                # a policy loaded from a user's code: its file and the SHA-256 of its source
+                **({"source": policy_source(r.policy)} if policy_source(r.policy) else {}),
             )
             for r in runs
         ],

@@ -3,6 +3,7 @@
     from lantern_jax.policies.registry import get_policy, register_policy
     register_policy("mine", lambda: Policy("mine", init, act, "my planner"))
     policy = get_policy("mine")
+    name = register_policy_source("my_policy.py:POLICY")   # a user's file, by its Policy.name
 
 A duplicate or unknown name is an error that lists the known names, and so is a name the
 command line could not select (:mod:`lantern_jax.policies.names`).  A saved model registers
@@ -124,6 +125,54 @@ def register_checkpoint(path: str, name: str | None = None) -> str:
     _REGISTRY[policy.name] = lambda: policy
     _CHECKPOINT_HASHES[policy.name] = digest
     return policy.name
+
+
+#: Where every policy registered from code by :func:`register_policy_source` came from.
+_SOURCES: dict[str, dict] = {}
+
+
+def register_policy_source(spec: str) -> str:
+    """Register the policy that ``spec`` names (``path/to/file.py:NAME`` or
+    ``package.module:attr``, :func:`~lantern_jax.policies.external.load_policy_source`) under
+    its own ``Policy.name``; returns that name.  Its source record (file, SHA-256) is kept for
+    the result's manifest (:func:`policy_source`).
+
+    Registering the same spec with the same file content again changes nothing.
+
+    Raises:
+        ValueError: for a spec that cannot be loaded, a policy name the command line cannot
+            select, or a name already registered for another policy (a built-in one, a shipped
+            model, a checkpoint, or other code).
+        TypeError: when the named object is neither a Policy nor a factory of one.
+    """
+    from lantern_jax.policies.external import load_policy_source
+
+    policy, source = load_policy_source(spec)
+    problem = name_problem(policy.name)
+    if problem:
+        raise ValueError(f"policy source {spec!r}: its Policy.name: {problem}")
+    if policy.name in _REGISTRY:
+        earlier = _SOURCES.get(policy.name)
+        if (
+            earlier is not None
+            and earlier["source_sha256"] == source["source_sha256"]
+            and earlier["source_path"] == source["source_path"]
+        ):
+            return policy.name
+        raise ValueError(
+            f"policy source {spec!r}: name {policy.name!r} is already registered for another "
+            "policy; the rows of a name must come from one policy: give its Policy another name"
+        )  # fmt: skip
+    _REGISTRY[policy.name] = lambda: policy
+    _SOURCES[policy.name] = source
+    return policy.name
+
+
+def policy_source(name: str) -> dict | None:
+    """The source record of a policy registered from code (:func:`register_policy_source`;
+    the keys of :func:`~lantern_jax.policies.external.load_policy_source`); None for any other
+    policy."""
+    return _SOURCES.get(name)
 
 
 def policy_names() -> list[str]:
