@@ -11,6 +11,7 @@ The names a user needs, importable from the package itself::
   CUS, with intervals (:mod:`lantern_jax.evaluation`);
 * :func:`load_suite` — a suite of route pairs (the built-in ``lantern-v3`` by default);
 * :class:`Policy` and :func:`get_policy` — a policy of your own, or a registered one;
+  :func:`register_policy_source` — a policy in a file or module (``file.py:NAME``);
 * :func:`rollout` — one execution, tick by tick, for your own loops;
 * :class:`Settings`, :class:`ScoringSettings`, :class:`ProtocolSettings`, :class:`TextBank`,
   :data:`DEFAULT_SETTINGS` and :func:`default_settings` — the values a simulation reads,
@@ -25,7 +26,14 @@ JAX (the command line sets XLA's CPU device count before JAX starts).
 from __future__ import annotations
 
 import importlib
+import importlib.metadata
 from typing import TYPE_CHECKING, Any
+
+try:
+    #: The installed package's version (``pyproject.toml``); ``lantern-jax --version``.
+    __version__ = importlib.metadata.version("lantern-jax")
+except importlib.metadata.PackageNotFoundError:  # a checkout on sys.path, not installed
+    __version__ = "0+unknown"
 
 #: public name -> module that defines it
 _EXPORTS = {
@@ -35,6 +43,7 @@ _EXPORTS = {
     "Suite": "lantern_jax.scenarios.suite",
     "Policy": "lantern_jax.policies.base",
     "get_policy": "lantern_jax.policies.registry",
+    "register_policy_source": "lantern_jax.policies.registry",
     "policy_names": "lantern_jax.policies.registry",
     "rollout": "lantern_jax.sim.rollout",
     "Settings": "lantern_jax.sim.settings",
@@ -63,6 +72,7 @@ __all__ = [
     "load_suite",
     "policy_names",
     "register_family",
+    "register_policy_source",
     "rollout",
 ]
 
@@ -83,7 +93,7 @@ def __dir__() -> list[str]:
 if TYPE_CHECKING:  # for type checkers and IDEs: the same names, imported eagerly
     from lantern_jax.evaluation import EvalResult, evaluate
     from lantern_jax.policies.base import Policy
-    from lantern_jax.policies.registry import get_policy, policy_names
+    from lantern_jax.policies.registry import get_policy, policy_names, register_policy_source
     from lantern_jax.scenarios.protocol import ProtocolSettings
     from lantern_jax.scenarios.registry import FamilyRecord, register_family
     from lantern_jax.scenarios.suite import Suite, load_suite
