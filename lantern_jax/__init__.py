@@ -9,6 +9,8 @@ The names a user needs, importable from the package itself::
 
 * :func:`evaluate` — every execution of a suite for one or several policies, scored by the
   CUS, with intervals (:mod:`lantern_jax.evaluation`);
+* :func:`write_outputs` — an evaluation's files, as ``lantern-jax evaluate --out`` writes them
+  (tables, route-level CSV and schema, reproducibility manifest, run record);
 * :func:`load_suite` — a suite of route pairs (the built-in ``lantern-v3`` by default);
 * :class:`Policy` and :func:`get_policy` — a policy of your own, or a registered one;
   :func:`register_policy_source` — a policy in a file or module (``file.py:NAME``);
@@ -46,6 +48,7 @@ _EXPORTS = {
     "register_policy_source": "lantern_jax.policies.registry",
     "policy_names": "lantern_jax.policies.registry",
     "rollout": "lantern_jax.sim.rollout",
+    "write_outputs": "lantern_jax.report",
     "Settings": "lantern_jax.sim.settings",
     "DEFAULT_SETTINGS": "lantern_jax.sim.settings",
     "default_settings": "lantern_jax.sim.settings",
@@ -74,6 +77,7 @@ __all__ = [
     "register_family",
     "register_policy_source",
     "rollout",
+    "write_outputs",
 ]
 
 
@@ -99,5 +103,6 @@ if TYPE_CHECKING:  # for type checkers and IDEs: the same names, imported eagerl
     from lantern_jax.scenarios.suite import Suite, load_suite
     from lantern_jax.scenarios.warnings import TextBank
     from lantern_jax.scoring.thresholds import ScoringSettings
+    from lantern_jax.report import write_outputs
     from lantern_jax.sim.rollout import rollout
     from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings, default_settings
