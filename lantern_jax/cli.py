@@ -297,46 +297,32 @@ def load_config(path: str) -> dict:
 
     Raises:
         UsageError: naming the file and the offending key for a key outside the table, an
-            unknown key, a wrong type, an empty selection or a pair count below 1.
+            unknown key, a wrong type, an empty selection or a pair count below 1
+            (:mod:`lantern_jax.config_file` reads the file).
     """
-    from lantern_jax.files import read_toml
+    from lantern_jax.config_file import ConfigFileError, check_keys, read_table, typed_value
 
     try:
-        raw = read_toml(path)
-    except OSError as e:
-        raise UsageError(f"cannot read config {path}: {e}") from None
-    except ValueError as e:
-        raise UsageError(f"config {path}: not valid TOML ({e})") from None
-    outside = [k for k in raw if k != CONFIG_TABLE]
-    if outside:
-        raise UsageError(
-            f"config {path}: key(s) {', '.join(map(repr, outside))} outside the "
-            f"[{CONFIG_TABLE}] table; every option goes under [{CONFIG_TABLE}]"
-        )
-    if CONFIG_TABLE not in raw:
-        raise UsageError(f"config {path}: no [{CONFIG_TABLE}] table")
-    cfg = raw[CONFIG_TABLE]
-    if not isinstance(cfg, dict):
-        raise UsageError(f"config {path}: {CONFIG_TABLE} must be a table ([{CONFIG_TABLE}])")
-    for key, value in cfg.items():
-        if key not in CONFIG_KEYS:
-            raise UsageError(
-                f"config {path}: unknown key {key!r} in [{CONFIG_TABLE}]; "
-                f"valid keys: {', '.join(CONFIG_KEYS)}"
-            )
-        types = CONFIG_KEYS[key]
-        if isinstance(value, bool) or not isinstance(value, types):
-            want = " or ".join(t.__name__ for t in types)
-            raise UsageError(f"config {path}: {key} must be {want}, got {value!r}")
-        if isinstance(value, list) and not all(isinstance(v, str) for v in value):
-            raise UsageError(f"config {path}: {key} must be a list of strings, got {value!r}")
-        items = value if isinstance(value, list) else [value] if isinstance(value, str) else []
-        names = [n.strip() for v in items for n in v.split(",")]
-        if isinstance(value, str | list) and not any(names):
-            raise UsageError(f"config {path}: {key} is empty (leave the key out for the default)")
-        if key == "pairs_per_family" and value < 1:
-            raise UsageError(f"config {path}: {key} must be >= 1 (got {value})")
+        cfg = read_table(path, CONFIG_TABLE)
+        for key, value in cfg.items():
+            check_keys(path, CONFIG_TABLE, [key], tuple(CONFIG_KEYS))
+            typed_value(value, CONFIG_KEYS[key], f"config {path}: {key}")
+            _check_value(path, key, value)
+    except ConfigFileError as e:
+        raise UsageError(str(e)) from None
     return cfg
+
+
+def _check_value(path: str, key: str, value) -> None:
+    """What an experiment file's value must be besides its type: a list of strings, not empty,
+    a pair count of at least 1."""
+    if isinstance(value, list) and not all(isinstance(v, str) for v in value):
+        raise UsageError(f"config {path}: {key} must be a list of strings, got {value!r}")
+    names = [value] if isinstance(value, str) else value if isinstance(value, list) else None
+    if names is not None and not any(n.strip() for v in names for n in v.split(",")):
+        raise UsageError(f"config {path}: {key} is empty (leave the key out for the default)")
+    if key == "pairs_per_family" and value < 1:
+        raise UsageError(f"config {path}: {key} must be >= 1 (got {value})")
 
 
 def _apply_config(args: argparse.Namespace) -> None:
