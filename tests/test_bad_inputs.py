@@ -6,7 +6,7 @@ came from (flag, config file and key, file and field), exit code 2, before anyth
 compiled; a fault is recorded where the result is, and a result set is complete or absent;
 nothing the project did not write is deleted or overwritten.
 
-Catalogue (188 bad inputs and faults, in 13 categories):
+Catalogue (190 bad inputs and faults, in 13 categories):
 
 * suite files (43: 40 in ``SUITE_CASES``, a duplicated JSON key, broken JSON, a generated
   suite's id): family and weather labels that disagree with the parameters; a 4e-7 change and
@@ -30,11 +30,11 @@ Catalogue (188 bad inputs and faults, in 13 categories):
   onto a folder (API: clear error, no temp file; CLI: exit 2 before generating); two runs of
   the same evaluation give a byte-identical manifest (wall times and the command go to
   ``run_record.json``); two processes writing one folder at once leave one whole set;
-* output folders (12): a file, under a file, unwritable, empty — exit 2 before the evaluation;
+* output folders (14): a file, under a file, unwritable, empty — exit 2 before the evaluation;
   a symbolic link is followed; a bind mount and an exchange failing with EBUSY are written in
   place, saying so; ``--out .`` keeps the working folder and the user's files; a 250-character
-  folder name; root writing into a user's folder keeps its owner, group and mode; ``dataset``
-  and ``train`` with ``--out`` a file;
+  folder name; root writing into a user's folder keeps its owner, group and mode; ``dataset``,
+  ``train``, ``stress`` and ``unseen`` with ``--out`` a file;
 * configs, flags and environment (35): keys beside ``[evaluate]``, keys without it, another
   table, an unknown key, a nested table, ``pairs = []``, ``policy = []``, ``policy = ""``, an
   empty file, ``pairs_per_family = 0`` and ``-2``, ``--pol``, ``--pairs-per``, ``--abl``,
@@ -108,6 +108,10 @@ import pytest
 
 import lantern_jax.evaluation as ev
 from lantern_jax import cli, files
+from lantern_jax.commands import UsageError
+from lantern_jax.commands.common import register_checkpoints
+from lantern_jax.commands.evaluate import load_config
+from lantern_jax.commands.suite import suite_to_manifest
 from lantern_jax.policies import registry as policy_registry
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.registry import get_policy
@@ -158,7 +162,7 @@ def no_evaluation(monkeypatch):
 # ---------------------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def base_manifest() -> dict:
-    return cli.suite_to_manifest(load_suite().select(PAIRS), "two-pairs")
+    return suite_to_manifest(load_suite().select(PAIRS), "two-pairs")
 
 
 def rehash(m: dict) -> dict:
@@ -793,9 +797,10 @@ def test_root_keeps_the_owner_and_mode_of_a_users_folder(sets, tmp_path):
     assert {(p.stat().st_uid, p.stat().st_gid) for p in out.iterdir()} == {(4321, 4322)}
 
 
-@pytest.mark.parametrize("command", ["dataset", "train"])
+@pytest.mark.parametrize("command", ["dataset", "train", "stress", "unseen"])
 def test_an_output_folder_that_is_a_file_is_refused(command, tmp_path):
-    """``lantern-jax dataset --out /etc/passwd`` (a file): one line, exit 2, the file intact."""
+    """``lantern-jax dataset --out /etc/passwd`` (a file): one line naming ``--out``, exit 2, the
+    file intact; the same for every command with ``--out``."""
     a_file = tmp_path / "passwd"
     a_file.write_text("root:x:0:0")
     config = tmp_path / "t.toml"
@@ -803,6 +808,8 @@ def test_an_output_folder_that_is_a_file_is_refused(command, tmp_path):
     argv = {
         "dataset": ["dataset", "--out", str(a_file)],
         "train": ["train", "--config", str(config), "--out", str(a_file)],
+        "stress": ["stress", "--family", "PE", "--out", str(a_file)],
+        "unseen": ["unseen", "--policy", "coop", "--out", str(a_file)],
     }[command]
     res = run_cli(argv)
     assert res.rc == 2 and a_file.read_text() == "root:x:0:0"
@@ -839,8 +846,8 @@ def test_bad_config(case, tmp_path, no_evaluation):
     _, text, expected = case
     path = tmp_path / "exp.toml"
     path.write_text(text)
-    with pytest.raises(cli.UsageError, match=rf"config {re.escape(str(path))}: {expected}"):
-        cli.load_config(str(path))
+    with pytest.raises(UsageError, match=rf"config {re.escape(str(path))}: {expected}"):
+        load_config(str(path))
     res = run_cli(["evaluate", "--config", str(path), "--out", str(tmp_path / "out")])
     assert res.rc == 2 and f"config {path}" in res.err
 
@@ -897,12 +904,12 @@ def test_a_config_with_a_byte_order_mark_is_read(tmp_path, monkeypatch):
 
     path = tmp_path / "exp.toml"
     path.write_bytes(b'\xef\xbb\xbf[evaluate]\npolicy = "coop"\npairs_per_family = 1\n')
-    assert cli.load_config(str(path)) == {"policy": "coop", "pairs_per_family": 1}
+    assert load_config(str(path)) == {"policy": "coop", "pairs_per_family": 1}
     path.write_bytes(b'\xef\xbb\xbf[train]\nname = "mine"\nrecipe = "base"\n')
     assert load_train_config(path).name == "mine"
     path.write_bytes(b"\xff\xfe[\x00e\x00")  # UTF-16: refused with the reason
-    with pytest.raises(cli.UsageError, match=r"not valid TOML \(not UTF-8 text"):
-        cli.load_config(str(path))
+    with pytest.raises(UsageError, match=r"not valid TOML \(not UTF-8 text"):
+        load_config(str(path))
 
 
 def test_explicit_flags_win_over_the_config(tmp_path, monkeypatch):
@@ -1101,7 +1108,7 @@ def test_a_checkpoint_registers_once_and_under_a_name_given(saved_models, regist
     assert registry.register_checkpoint(mine) == "mine" and get_policy("mine") is first  # same
     with pytest.raises(CheckpointError, match=r"name 'mine' is already registered \(another "):
         registry.register_checkpoint(str(saved_models / "other.msgpack"), "mine")
-    assert cli.register_checkpoints([f"mine2={saved_models / 'other.msgpack'}"]) == ["mine2"]
+    assert register_checkpoints([f"mine2={saved_models / 'other.msgpack'}"]) == ["mine2"]
     with pytest.raises(CheckpointError, match=r"other\.msgpack: name: 'x/y' is not a selectable"):
         registry.register_checkpoint(str(saved_models / "other.msgpack"), "x/y")
 
@@ -1751,6 +1758,7 @@ def test_a_swallowed_interrupt_still_ends_the_command_with_130(monkeypatch, tmp_
     import signal as signal_module
 
     from lantern_jax import cli
+    from lantern_jax.commands import policies, runtime
 
     def swallowed(args, argv):
         try:
@@ -1759,11 +1767,11 @@ def test_a_swallowed_interrupt_still_ends_the_command_with_130(monkeypatch, tmp_
             pass  # what a finalizer does with it
         return 0
 
-    monkeypatch.setattr(cli, "cmd_policies", swallowed)
+    monkeypatch.setattr(policies, "cmd_policies", swallowed)
     before = signal_module.getsignal(signal_module.SIGINT)
     assert cli.main(["policies"]) == 130
     assert "lantern-jax: interrupted" in capsys.readouterr().err
     assert signal_module.getsignal(signal_module.SIGINT) is before  # handler restored
-    cli._SIGINT_SEEN = True  # a stale flag from an earlier command is cleared on entry
-    monkeypatch.setattr(cli, "cmd_policies", lambda args, argv: 0)
+    runtime._SIGINT_SEEN = True  # a stale flag from an earlier command is cleared on entry
+    monkeypatch.setattr(policies, "cmd_policies", lambda args, argv: 0)
     assert cli.main(["policies"]) == 0

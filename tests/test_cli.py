@@ -21,6 +21,8 @@ import pandas as pd
 import pytest
 
 from lantern_jax import cli
+from lantern_jax.commands import runtime
+from lantern_jax.commands.suite import suite_to_manifest
 from lantern_jax.constants import FAMILIES
 from lantern_jax.evaluation import ablation_names, params_hash
 from lantern_jax.policies.registry import get_policy, policy_names
@@ -45,7 +47,7 @@ def run_cli(argv: list[str]) -> types.SimpleNamespace:
 def manifest_path(tmp_path_factory):
     suite = load_suite().select(PAIRS)
     path = tmp_path_factory.mktemp("suite") / "two-pairs.json"
-    write_manifest(cli.suite_to_manifest(suite, "two-pairs"), path)
+    write_manifest(suite_to_manifest(suite, "two-pairs"), path)
     return path
 
 
@@ -215,7 +217,7 @@ def test_fresh_suites_evaluate_every_suite_and_report_the_spread(
 
     def fake_generate(seed, progress=True, validator="expert"):
         calls.append((seed, validator))
-        return dict(cli.suite_to_manifest(base), seed=seed)
+        return dict(suite_to_manifest(base), seed=seed)
 
     monkeypatch.setattr(generate, "generate_suite", fake_generate)
     argv = ["evaluate", "--policy", "coop", "--suite", str(manifest_path), "--quiet",
@@ -373,7 +375,8 @@ def test_shipped_configs_parse_and_bad_configs_name_the_field(tmp_path):
     """Every file in configs/ is a valid experiment; a bad key or type is named in the error."""
     from pathlib import Path
 
-    from lantern_jax.cli import CONFIG_KEYS, UsageError, load_config
+    from lantern_jax.commands import UsageError
+    from lantern_jax.commands.evaluate import CONFIG_KEYS, load_config
 
     root = Path(__file__).resolve().parents[1] / "configs"
     # training configs (train_*.toml, a [train] table) are checked by tests/test_learned.py
@@ -461,18 +464,18 @@ def test_compile_cache_folder_environment_and_flag(tmp_path, monkeypatch):
     import jax
 
     before = (jax.config.jax_enable_compilation_cache, jax.config.jax_compilation_cache_dir)
-    monkeypatch.delenv(cli.CACHE_DIR_ENV, raising=False)
+    monkeypatch.delenv(runtime.CACHE_DIR_ENV, raising=False)
     monkeypatch.delenv("JAX_COMPILATION_CACHE_DIR", raising=False)
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
     try:
-        assert cli.compile_cache_dir() == str(tmp_path / "lantern-jax" / "jax")
+        assert runtime.compile_cache_dir() == str(tmp_path / "lantern-jax" / "jax")
         monkeypatch.setenv("JAX_COMPILATION_CACHE_DIR", str(tmp_path / "jax-own"))
-        assert cli.compile_cache_dir() == str(tmp_path / "jax-own")
-        monkeypatch.setenv(cli.CACHE_DIR_ENV, str(tmp_path / "moved"))  # ours wins
-        assert cli.configure_compile_cache(True) == str(tmp_path / "moved")
+        assert runtime.compile_cache_dir() == str(tmp_path / "jax-own")
+        monkeypatch.setenv(runtime.CACHE_DIR_ENV, str(tmp_path / "moved"))  # ours wins
+        assert runtime.configure_compile_cache(True) == str(tmp_path / "moved")
         assert jax.config.jax_enable_compilation_cache
         assert jax.config.jax_compilation_cache_dir == str(tmp_path / "moved")
-        assert cli.configure_compile_cache(False) is None
+        assert runtime.configure_compile_cache(False) is None
         assert not jax.config.jax_enable_compilation_cache
     finally:
         jax.config.update("jax_enable_compilation_cache", before[0])

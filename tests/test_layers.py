@@ -20,8 +20,9 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     # values, the time sentinel, wall-clock breakdowns, the known family codes, array checks
     ("constants", "times", "timing", "family_codes", "checks"),
     ("geometry", "polyline", "split_map"),  # pure JAX maths and loop rewrites
-    # scenario and observation types; I/O (files, compiled programs on disk); tokens
-    ("world", "observation", "files", "program_store", "language"),
+    # scenario and observation types; I/O (files, configuration files, compiled programs on
+    # disk); tokens
+    ("world", "observation", "files", "config_file", "program_store", "language"),
     ("dynamics", "sensors", "scoring"),  # how things move, what is seen, how it is measured
     ("scenarios",),  # roads, families, protocol, warnings, suites (NumPy builders + JAX protocol)
     ("policies",),  # reference planners and the registry

@@ -1,26 +1,14 @@
-"""Sub-commands of ``lantern-jax`` beyond the core ones in :mod:`lantern_jax.cli`: each module
-adds its parser with ``add_parser(sub)`` and raises :class:`CommandError` for a usage error (exit
-code 2)."""
+"""The commands of ``lantern-jax``, one module each.
+
+Every command module has ``add_parser(sub)``, which adds the command to the command line's
+sub-parsers with its ``cmd_*`` function as the one to run, and raises :class:`UsageError` for a
+bad argument (exit code 2).  What several commands share is in :mod:`.common` (options, suite
+selection, output folders, stage lines) and :mod:`.runtime` (Ctrl-C, standard output, the
+compilation cache, the distributed runtime); :mod:`lantern_jax.cli` assembles the parser and
+runs a command.
+"""
 
 
-class CommandError(Exception):
-    """A bad command-line argument of a sub-command (exit code 2)."""
-
-
-def write_and_list(tables: dict, out: str) -> int:
-    """Write ``name.csv`` and ``name.md`` for every ``name: (title, table)`` into ``out`` as one
-    set (:func:`lantern_jax.diagnostics.write_tables`) and list the files; returns the exit
-    code (1 when they cannot be written)."""
-    import sys
-
-    from lantern_jax.diagnostics import write_tables
-
-    try:
-        paths = write_tables(tables, out)
-    except OSError as e:
-        print(f"lantern-jax: error: cannot write results to {out}: {e}", file=sys.stderr)
-        return 1
-    print(f"Wrote {len(paths)} files:")
-    for path in paths:
-        print(f"  {path}")
-    return 0
+class UsageError(Exception):
+    """A user error that ends the command with exit code 2; the message names the bad option
+    (or file and key)."""

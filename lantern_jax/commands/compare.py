@@ -21,7 +21,8 @@ import shlex
 from collections.abc import Sequence
 from pathlib import Path
 
-from lantern_jax.commands import CommandError
+from lantern_jax.commands import UsageError
+from lantern_jax.commands.common import check_out, split_values
 
 COMPARISON_MD = "comparison.md"
 COMPARISON_CSV = "comparison.csv"
@@ -36,7 +37,7 @@ def _result_set(path: str) -> tuple[Path, dict]:
     """The route-level CSV of a result folder (or the CSV itself) and its manifest ({} if none).
 
     Raises:
-        CommandError: when there is no route-level CSV there.
+        UsageError: when there is no route-level CSV there.
     """
     p = Path(path)
     if p.is_file():
@@ -48,14 +49,14 @@ def _result_set(path: str) -> tuple[Path, dict]:
             m = p / manifest
             return p / csv, json.loads(m.read_text()) if m.is_file() else {}
     names = " or ".join(c for c, _ in RESULT_FILES)
-    raise CommandError(f"{path}: no result set there (expected a folder with {names})")
+    raise UsageError(f"{path}: no result set there (expected a folder with {names})")
 
 
 def _rows(df, model: str, where: str):
     rows = df[df["model"] == model]
     if rows.empty:
         there = ", ".join(sorted(set(df["model"])))
-        raise CommandError(f"--policy {model!r}: not in {where} (models there: {there})")
+        raise UsageError(f"--policy {model!r}: not in {where} (models there: {there})")
     return rows
 
 
@@ -63,11 +64,11 @@ def cmd_compare(args: argparse.Namespace, argv: Sequence[str]) -> int:
     """Compare two policies of one result set, or one policy in two; returns the exit code."""
     from lantern_jax.compare import compare_runs, format_comparison
     from lantern_jax.files import StagedFolder, atomic_write
-    from lantern_jax.report import check_output_folder, interval_note
+    from lantern_jax.report import interval_note
     from lantern_jax.scoring.table import read_route_table
     from lantern_jax.scoring.uncertainty import SEED, settings
 
-    policies = [n.strip() for item in args.policy or [] for n in item.split(",") if n.strip()]
+    policies = split_values(args.policy)
     sets = list(args.results)
     if len(sets) == 1 and len(policies) == 2:
         (path, manifest) = _result_set(sets[0])
@@ -78,7 +79,7 @@ def cmd_compare(args: argparse.Namespace, argv: Sequence[str]) -> int:
         (pa, ma), (pb, mb) = _result_set(sets[0]), _result_set(sets[1])
         ha, hb = ma.get("suite_sha256"), mb.get("suite_sha256")
         if ha and hb and ha != hb:
-            raise CommandError(
+            raise UsageError(
                 f"{sets[0]} and {sets[1]} were evaluated on different suites (suite hashes "
                 f"{ha[:12]} and {hb[:12]}); a paired comparison needs the same pairs"
             )
@@ -86,16 +87,16 @@ def cmd_compare(args: argparse.Namespace, argv: Sequence[str]) -> int:
         b = _rows(read_route_table(pb), policies[0], sets[1])
         labels = [f"{policies[0]} ({s})" for s in sets]
     else:
-        raise CommandError(
+        raise UsageError(
             "give one result set and two --policy names, or two result sets and one --policy "
             f"(got {len(sets)} result set(s) and {len(policies)} policy name(s))"
         )
     seed = SEED if args.bootstrap_seed is None else args.bootstrap_seed
+    check_out(args.out)
     try:
-        check_output_folder(args.out)
         table = compare_runs(a, b, seed=seed)
     except ValueError as e:
-        raise CommandError(str(e)) from None
+        raise UsageError(str(e)) from None
     title = f"Paired comparison of mean CUS: {labels[0]} - {labels[1]}"
     note = (
         f"{interval_note(settings(seed))}; p: two-sided paired bootstrap p-value of a zero "

@@ -18,7 +18,8 @@ from __future__ import annotations
 import argparse
 from collections.abc import Sequence
 
-from lantern_jax.commands import CommandError
+from lantern_jax.commands import UsageError
+from lantern_jax.commands.common import check_out
 
 
 def cmd_dataset(args: argparse.Namespace, argv: Sequence[str]) -> int:
@@ -28,16 +29,12 @@ def cmd_dataset(args: argparse.Namespace, argv: Sequence[str]) -> int:
     from lantern_jax.dataset.generate import generate_dataset
     from lantern_jax.dataset.scenes import PAIRS_PER_FAMILY
     from lantern_jax.dataset.store import DatasetError, card_markdown
-    from lantern_jax.files import OutputFolderError, check_target_folder
 
-    try:
-        check_target_folder(args.out, in_place=True)
-    except OutputFolderError as e:
-        raise CommandError(f"--out: {e}") from None
+    check_out(args.out, in_place=True)
     if args.sequences is not None:
         if args.sequences < 2 * len(FAMILIES):
-            raise CommandError(f"--sequences: at least {2 * len(FAMILIES)} (one Route A and one "
-                               f"Route B per family), got {args.sequences}")  # fmt: skip
+            raise UsageError(f"--sequences: at least {2 * len(FAMILIES)} (one Route A and one "
+                             f"Route B per family), got {args.sequences}")  # fmt: skip
         pairs = -(-args.sequences // (2 * len(FAMILIES)))
     else:
         pairs = PAIRS_PER_FAMILY
@@ -45,7 +42,7 @@ def cmd_dataset(args: argparse.Namespace, argv: Sequence[str]) -> int:
         card = generate_dataset(args.out, pairs_per_family=pairs, seed=args.seed,
                                 progress=not args.quiet)  # fmt: skip
     except DatasetError as e:
-        raise CommandError(str(e)) from None
+        raise UsageError(str(e)) from None
     print(card_markdown(card))
     plan = card.get("plan_seconds")
     planned = f"planning {plan:.0f} s (once, kept in plan.json), " if plan is not None else ""

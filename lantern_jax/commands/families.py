@@ -16,7 +16,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from lantern_jax.commands import CommandError
+from lantern_jax.commands import UsageError
 
 MODULE_PREFIX = "lantern_jax_user_families_"  # the module name of a file given by path
 
@@ -36,7 +36,7 @@ def load(specs: Sequence[str] | None) -> list[str]:
     """Import every file or module of ``specs``; return the module names.
 
     Raises:
-        CommandError: naming a file or module that cannot be imported, with the error it raised.
+        UsageError: naming a file or module that cannot be imported, with the error it raised.
     """
     names = []
     for spec in specs or ():
@@ -58,6 +58,6 @@ def load(specs: Sequence[str] | None) -> list[str]:
             else:
                 name = importlib.import_module(spec).__name__
         except Exception as e:
-            raise CommandError(f"--families {spec}: {type(e).__name__}: {e}") from None
+            raise UsageError(f"--families {spec}: {type(e).__name__}: {e}") from None
         names.append(name)
     return names

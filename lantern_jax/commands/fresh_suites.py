@@ -24,7 +24,7 @@ import shlex
 from collections.abc import Sequence
 from pathlib import Path
 
-from lantern_jax.commands import CommandError
+from lantern_jax.commands import UsageError
 
 ACROSS_MD = "across_suites.md"
 ACROSS_CSV = "across_suites.csv"
@@ -87,35 +87,15 @@ def run_fresh_suites(
         The exit code.
 
     Raises:
-        CommandError: for a missing ``--seed``, ``--pairs`` (fresh suites have other pairs), or a
+        UsageError: for a missing ``--seed``, ``--pairs`` (fresh suites have other pairs), or a
             seed that is the base suite's own.
     """
-    from lantern_jax.compare import across_suites, format_across_suites
     from lantern_jax.evaluation import evaluate
-    from lantern_jax.files import StagedFolder, atomic_write
-    from lantern_jax.report import format_tables, ordered_tables, write_outputs
-    from lantern_jax.scoring.aggregate import DECOMPOSITION_COLUMNS
+    from lantern_jax.report import format_tables, write_outputs
 
-    if args.seed is None:
-        raise CommandError("--fresh-suites needs --seed S (suite k is generated from S + k)")
-    if args.pairs is not None:
-        raise CommandError("--pairs cannot select pairs of fresh suites; use --pairs-per-family")
-    if args.fresh_suites < 1:
-        raise CommandError(f"--fresh-suites must be >= 1 (got {args.fresh_suites})")
-    seeds = fresh_seeds(args.seed, args.fresh_suites)
-    if base.seed in seeds:
-        raise CommandError(f"--seed: seed {base.seed} generated {base.suite_id} itself")
     out = Path(args.out)
     command = shlex.join(["lantern-jax", *argv])
-    suites = [(base, None, None)]
-    for seed in seeds:
-        stage(f"suite from seed {seed}: generating (or loading) {fresh_suite_id(seed)}")
-        suite, path, made = _fresh_suite(base, seed, out, progress=not args.quiet)
-        if args.pairs_per_family is not None:
-            suite = suite.subset(args.pairs_per_family)
-        stage(f"{suite.suite_id}: {len(suite)} pairs, hash {suite.suite_sha256[:12]} "
-              f"({'generated' if made else 'loaded'} {path})")  # fmt: skip
-        suites.append((suite, seed, path))
+    suites = [(base, None, None)] + _fresh_suites(args, base, out, stage)
     results, records = [], []
     for suite, seed, path in suites:
         stage(f"evaluating {', '.join(policies)} on {suite.suite_id} ({len(suite)} pairs)")
@@ -130,11 +110,48 @@ def run_fresh_suites(
             num_pairs=len(suite), fresh=seed is not None,
             manifest=None if path is None else str(path), results=str(folder),
         ))  # fmt: skip
-    fams = [ordered_tables(r)[0] for r in results]
-    decs = [ordered_tables(r)[1] for r in results]
-    fam_across = across_suites(fams)
-    dec_across = across_suites(decs, columns=DECOMPOSITION_COLUMNS)
-    ids = ", ".join(r["suite_id"] for r in records)
+    record = dict(command=command, suites=records, policies=policies,
+                  intervals=results[0].manifest.get("intervals"))  # fmt: skip
+    _across(results, record, out)
+    return 0
+
+
+def _fresh_suites(args: argparse.Namespace, base, out: Path, stage) -> list[tuple]:
+    """``(suite, seed, manifest path)`` of every fresh suite, generated or loaded (cut to
+    ``--pairs-per-family``), after checking the options."""
+    if args.seed is None:
+        raise UsageError("--fresh-suites needs --seed S (suite k is generated from S + k)")
+    if args.pairs is not None:
+        raise UsageError("--pairs cannot select pairs of fresh suites; use --pairs-per-family")
+    if args.fresh_suites < 1:
+        raise UsageError(f"--fresh-suites must be >= 1 (got {args.fresh_suites})")
+    seeds = fresh_seeds(args.seed, args.fresh_suites)
+    if base.seed in seeds:
+        raise UsageError(f"--seed: seed {base.seed} generated {base.suite_id} itself")
+    suites = []
+    for seed in seeds:
+        stage(f"suite from seed {seed}: generating (or loading) {fresh_suite_id(seed)}")
+        suite, path, made = _fresh_suite(base, seed, out, progress=not args.quiet)
+        if args.pairs_per_family is not None:
+            suite = suite.subset(args.pairs_per_family)
+        stage(f"{suite.suite_id}: {len(suite)} pairs, hash {suite.suite_sha256[:12]} "
+              f"({'generated' if made else 'loaded'} {path})")  # fmt: skip
+        suites.append((suite, seed, path))
+    return suites
+
+
+def _across(results: list, record: dict, out: Path) -> None:
+    """Print the family table and the decomposition across the suites and write them with the
+    record of the suites (:data:`ACROSS_MD`, ... as one set into ``out``)."""
+    from lantern_jax.compare import across_suites, format_across_suites
+    from lantern_jax.files import StagedFolder, atomic_write
+    from lantern_jax.report import ordered_tables
+    from lantern_jax.scoring.aggregate import DECOMPOSITION_COLUMNS
+
+    fam_across = across_suites([ordered_tables(r)[0] for r in results])
+    dec_across = across_suites([ordered_tables(r)[1] for r in results],
+                               columns=DECOMPOSITION_COLUMNS)  # fmt: skip
+    ids = ", ".join(r["suite_id"] for r in record["suites"])
     title = f"Per-family CUS across {len(results)} suites ({ids})"
     note = "Each cell: mean over the suites ± the sample standard deviation across them."
     table = format_across_suites(fam_across)
@@ -146,8 +163,6 @@ def run_fresh_suites(
         f"## CUS decomposition across the suites\n\n"
         f"{format_across_suites(dec_across, columns=DECOMPOSITION_COLUMNS, tablefmt='github')}\n"
     )
-    record = dict(command=command, suites=records, policies=policies,
-                  intervals=results[0].manifest.get("intervals"))  # fmt: skip
     files = (ACROSS_MD, ACROSS_CSV, ACROSS_DECOMPOSITION_CSV, ACROSS_JSON)
     with StagedFolder(out, files) as st:
         atomic_write(st.path / ACROSS_MD, md.encode())
@@ -157,4 +172,3 @@ def run_fresh_suites(
         atomic_write(st.path / ACROSS_JSON, (json.dumps(record, indent=2) + "\n").encode())
         st.commit()
     print(f"\nWrote {', '.join(str(out / f) for f in files)} and one result set per suite")
-    return 0

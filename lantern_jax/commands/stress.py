@@ -14,10 +14,11 @@ from __future__ import annotations
 
 import argparse
 import math
-import sys
 from collections.abc import Sequence
 
-from lantern_jax.commands import CommandError
+from lantern_jax.commands import UsageError
+from lantern_jax.commands.common import check_out, write_failed
+from lantern_jax.constants import CONDITIONS
 
 
 def _ranges(items: Sequence[str] | None) -> dict[str, tuple[float, float]]:
@@ -30,9 +31,9 @@ def _ranges(items: Sequence[str] | None) -> dict[str, tuple[float, float]]:
                 raise ValueError
             out[name.strip()] = (float(lo), float(hi))
         except ValueError:
-            raise CommandError(f"--range {item!r}: expected KNOB=LO:HI") from None
+            raise UsageError(f"--range {item!r}: expected KNOB=LO:HI") from None
         if not (math.isfinite(out[name.strip()][0]) and math.isfinite(out[name.strip()][1])):
-            raise CommandError(f"--range {item!r}: LO and HI must be finite numbers")
+            raise UsageError(f"--range {item!r}: LO and HI must be finite numbers")
     return out
 
 
@@ -53,7 +54,7 @@ def _check_numbers(args: argparse.Namespace, methods: tuple[str, ...]) -> None:
     )  # fmt: skip
     for flag, value, ok, want in checks:
         if not ok:
-            raise CommandError(f"{flag}: must be {want}, got {value:g}")
+            raise UsageError(f"{flag}: must be {want}, got {value:g}")
 
 
 def cmd_stress(args: argparse.Namespace, argv: Sequence[str]) -> int:
@@ -62,29 +63,29 @@ def cmd_stress(args: argparse.Namespace, argv: Sequence[str]) -> int:
     from tabulate import tabulate
 
     from lantern_jax.constants import FAMILIES
-    from lantern_jax.report import check_output_folder, interval_note
+    from lantern_jax.report import interval_note
     from lantern_jax.scenarios.suite import load_suite
     from lantern_jax.stress import report, search
     from lantern_jax.viz.stress import convergence_plot
 
     if args.family not in FAMILIES:
-        raise CommandError(f"--family {args.family!r}: not one of {', '.join(FAMILIES)}")
+        raise UsageError(f"--family {args.family!r}: not one of {', '.join(FAMILIES)}")
     methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())
     bad = [m for m in methods if m not in search.METHODS]
     if bad or not methods:
-        raise CommandError(f"--methods: {bad or 'none'}; valid: {', '.join(search.METHODS)}")
+        raise UsageError(f"--methods: {bad or 'none'}; valid: {', '.join(search.METHODS)}")
     _check_numbers(args, methods)
     ranges = _ranges(args.range)
+    check_out(args.out)
     try:
-        check_output_folder(args.out)
         suite = load_suite(args.suite) if args.suite else load_suite()
     except (OSError, ValueError) as e:
-        raise CommandError(str(e)) from None
+        raise UsageError(str(e)) from None
     pairs = [p for p in suite.pairs if p.family == args.family]
     if args.pair:
         pairs = [p for p in pairs if p.pair_id == args.pair]
         if not pairs:
-            raise CommandError(f"--pair {args.pair!r}: no {args.family} pair of that id")
+            raise UsageError(f"--pair {args.pair!r}: no {args.family} pair of that id")
     knobs = tuple(k.strip() for k in args.knobs.split(",") if k.strip()) if args.knobs else None
     cfg = report.StressConfig(
         budget_s=args.budget_s, restarts=args.restarts, samples=args.samples,
@@ -95,7 +96,7 @@ def cmd_stress(args: argparse.Namespace, argv: Sequence[str]) -> int:
         _, traces = report.stress_test(pairs[0], args.policy, cfg, suite, knobs, ranges,
                                        progress=not args.quiet)  # fmt: skip
     except (ValueError, KeyError) as e:
-        raise CommandError(str(e).strip("'\"")) from None
+        raise UsageError(str(e).strip("'\"")) from None
     from lantern_jax.stress.space import search_space
 
     space = search_space(args.family, knobs, ranges)
@@ -104,8 +105,7 @@ def cmd_stress(args: argparse.Namespace, argv: Sequence[str]) -> int:
     try:
         files = report.write_results(args.out, pairs[0], space, traces, fig)
     except OSError as e:
-        print(f"lantern-jax: error: cannot write results to {args.out}: {e}", file=sys.stderr)
-        return 1
+        return write_failed(args.out, e)
     table = report.comparison_table(traces)
     print(f"Stress test  ({title}; {args.budget_s:g} s per method, {args.restarts} restarts)")
     print(tabulate(table, headers="keys", showindex=False, floatfmt=".2f"))
@@ -138,7 +138,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     st.add_argument("--sigma", type=float, default=0.3, help="gradient smoothing scale")
     st.add_argument("--temperature", type=float, default=0.1, help="soft-score temperature")
     st.add_argument("--objective", default="clearance", choices=("clearance", "margin", "soft_cus"))
-    st.add_argument("--condition", default="warning", choices=("warning", "no-warning"))
+    st.add_argument("--condition", default=CONDITIONS[0], choices=CONDITIONS)
     st.add_argument("--methods", default="gradient,random,cmaes", metavar="M[,M...]")
     st.add_argument("--seed", type=int, default=0)
     st.add_argument("--quiet", action="store_true", help="no progress lines")

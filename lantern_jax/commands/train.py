@@ -15,34 +15,32 @@ from __future__ import annotations
 import argparse
 from collections.abc import Sequence
 
-from lantern_jax.commands import CommandError
+from lantern_jax.commands import UsageError
+from lantern_jax.commands.common import check_out
 
 
 def cmd_train(args: argparse.Namespace, argv: Sequence[str]) -> int:
     """Train one model as the config says; print the summary."""
     del argv
+    from lantern_jax.config_file import ConfigFileError
     from lantern_jax.dataset.store import DatasetError
-    from lantern_jax.files import OutputFolderError, check_target_folder
     from lantern_jax.policies.learned.checkpoint import CheckpointError
-    from lantern_jax.training.config import ConfigError, load_config
+    from lantern_jax.training.config import load_config
     from lantern_jax.training.train import train
 
     try:
         cfg = load_config(args.config, dataset=args.dataset, out=args.out, epochs=args.epochs,
                           seed=args.seed)  # fmt: skip
-    except ConfigError as e:
-        raise CommandError(str(e)) from None
-    try:
-        check_target_folder(cfg.out, in_place=True)
-    except OutputFolderError as e:
-        where = "--out" if args.out is not None else f"config {args.config}: train.out"
-        raise CommandError(f"{where}: {e}") from None
+    except ConfigFileError as e:
+        raise UsageError(str(e)) from None
+    where = "--out" if args.out is not None else f"config {args.config}: train.out"
+    check_out(cfg.out, where, in_place=True)
     try:
         summary = train(cfg, progress=not args.quiet)
     except DatasetError as e:  # names the dataset's file
-        raise CommandError(str(e)) from None
+        raise UsageError(str(e)) from None
     except CheckpointError as e:  # the model it fine-tunes
-        raise CommandError(f"config {args.config}: train.init_from: {e}") from None
+        raise UsageError(f"config {args.config}: train.init_from: {e}") from None
     for k, v in summary.items():
         print(f"{k:>16}: {v:.4g}" if isinstance(v, float) else f"{k:>16}: {v}")
     return 0

@@ -19,7 +19,8 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-from lantern_jax.commands import CommandError, write_and_list
+from lantern_jax.commands import UsageError
+from lantern_jax.commands.common import check_out, write_and_list
 
 DEFAULT_OUT = "results/unseen"
 
@@ -31,19 +32,18 @@ def cmd_unseen(args: argparse.Namespace, argv: Sequence[str]) -> int:
 
     from lantern_jax import transfer
     from lantern_jax.policies.registry import get_policy, policy_names
-    from lantern_jax.report import check_output_folder
     from lantern_jax.scenarios.suite import SuiteError, load_suite
 
     try:
         policy = get_policy(args.policy)
     except KeyError:
-        raise CommandError(f"--policy: unknown policy {args.policy!r}; known policies: "
-                           f"{', '.join(policy_names())}") from None  # fmt: skip
+        raise UsageError(f"--policy: unknown policy {args.policy!r}; known policies: "
+                         f"{', '.join(policy_names())}") from None  # fmt: skip
+    check_out(args.out)
     try:
-        check_output_folder(args.out)
         suite = transfer.unseen_suite() if args.suite is None else load_suite(args.suite)
     except (FileNotFoundError, SuiteError, ValueError) as e:
-        raise CommandError(str(e).strip("'\"")) from None
+        raise UsageError(str(e).strip("'\"")) from None
     if not args.quiet:
         print(f"[unseen] {policy.name} on {suite.suite_id} ({len(suite)} pairs): no warning, "
               "exact warning, held-out paraphrase", file=sys.stderr)  # fmt: skip

@@ -21,15 +21,17 @@ import math
 from pathlib import Path
 from typing import Any
 
+from lantern_jax.config_file import ConfigFileError, check_keys, read_table, typed_value
 from lantern_jax.dataset.store import EXCLUDE_CROSSING
-from lantern_jax.files import read_toml
 from lantern_jax.policies.names import name_problem
 
 RECIPES = ("base", "coop", "surround", "distance")
+#: The table of a training config.
+TABLE = "train"
 
-
-class ConfigError(ValueError):
-    """A training config that cannot be used; names the file and key."""
+#: A training config that cannot be used; names the file and key (the error of every
+#: configuration file, :class:`lantern_jax.config_file.ConfigFileError`).
+ConfigError = ConfigFileError
 
 
 @dataclasses.dataclass(frozen=True)
@@ -70,17 +72,8 @@ class TrainConfig:
 
 
 _FIELDS = {f.name: f for f in dataclasses.fields(TrainConfig)}
-
-
-def _check_type(key: str, value: Any) -> Any:
-    want = _FIELDS[key].type
-    if want == "float" and isinstance(value, int | float) and not isinstance(value, bool):
-        return float(value)
-    if want == "int" and isinstance(value, int) and not isinstance(value, bool):
-        return value
-    if want == "str" and isinstance(value, str):
-        return value
-    raise ConfigError(f"must be {want}, got {value!r}")
+#: The accepted types of a field by its annotation.
+_TYPES = {"float": (float,), "int": (int,), "str": (str,)}
 
 
 def load_config(path: str | Path, **overrides: Any) -> TrainConfig:
@@ -91,26 +84,13 @@ def load_config(path: str | Path, **overrides: Any) -> TrainConfig:
             unknown keys, wrong types, missing required keys or out-of-range values.
     """
     path = str(path)
-    try:
-        raw = read_toml(path)
-    except OSError as e:
-        raise ConfigError(f"cannot read config {path}: {e}") from None
-    except ValueError as e:
-        raise ConfigError(f"config {path}: not valid TOML ({e})") from None
-    outside = sorted(k for k in raw if k != "train")
-    if outside or not isinstance(raw.get("train"), dict):
-        raise ConfigError(f"config {path}: needs one [train] table; found {outside or 'none'}")
-    table = {**raw["train"], **{k: v for k, v in overrides.items() if v is not None}}
-    for key in table:
-        if key not in _FIELDS:
-            raise ConfigError(f"{_where(path, key, overrides)}: unknown key; valid: "
-                              f"{', '.join(_FIELDS)}")  # fmt: skip
-    values = {}
-    for key, value in table.items():
-        try:
-            values[key] = _check_type(key, value)
-        except ConfigError as e:
-            raise ConfigError(f"{_where(path, key, overrides)} {e}") from None
+    given = {k: v for k, v in overrides.items() if v is not None}
+    table = {**read_table(path, TABLE), **given}
+    check_keys(path, TABLE, table, tuple(_FIELDS))
+    values = {
+        key: typed_value(value, _TYPES[_FIELDS[key].type], _where(path, key, overrides))
+        for key, value in table.items()
+    }
     for key in ("name", "recipe"):
         if key not in values:
             raise ConfigError(f"config {path}: train.{key}: missing")
