@@ -278,12 +278,9 @@ def run_recorded(
     policy: Policy, params: Any, scenarios: list[Scenario], settings: Settings | None = None
 ) -> tuple[Any, Any, Any]:
     """Roll out a few executions with full records (one jitted, vmapped call) under
-    ``settings`` (default :func:`~lantern_jax.sim.settings.default_settings`).
-
-    Returns:
-        (final states, tick records, hard metrics), NumPy, leading axis = execution; the
-        horizon covers the longest route timeout.
-    """
+    ``settings`` (default :func:`~lantern_jax.sim.settings.default_settings`); returns (final
+    states, tick records, hard metrics), NumPy, leading axis = execution, over a horizon
+    covering the longest route timeout."""
     batch = tree_stack(scenarios)
     settings = default_settings() if settings is None else settings
     check_texts(settings, batch)
