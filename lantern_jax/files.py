@@ -76,8 +76,9 @@ class OutputFolderError(OSError):
     """A target folder that cannot receive a result set (a file, an unwritable place...)."""
 
 
-def _file_mode() -> int:
-    """0o666 minus the process umask (``mkstemp`` creates files 0o600)."""
+def file_mode() -> int:
+    """0o666 minus the process umask: the mode a plain ``open`` gives a new file (``mkstemp``
+    creates files 0o600, readable by their owner only)."""
     mask = os.umask(0)
     os.umask(mask)
     return 0o666 & ~mask
@@ -146,7 +147,7 @@ def atomic_write(path: str | os.PathLike, data: bytes | str) -> Path:
             fh.write(payload)
             fh.flush()
             os.fsync(fh.fileno())
-        os.chmod(tmp, _file_mode())
+        os.chmod(tmp, file_mode())
         os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(OSError):

@@ -36,7 +36,6 @@
 import os
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 import pandas as pd
 from IPython.display import display
@@ -48,9 +47,9 @@ from lantern_jax.scenarios.families import build_pair
 from lantern_jax.scenarios.knobs import get_knobs, set_knobs
 from lantern_jax.scenarios.suite import load_suite
 from lantern_jax.scoring.cus import soft_pair_cus
-from lantern_jax.sim.rollout import horizon_ticks, rollout
+from lantern_jax.sim.rollout import rollout
 from lantern_jax.sim.settings import DEFAULT_SETTINGS
-from lantern_jax.viz import bev_plot, num_valid_ticks, timeline_plot
+from lantern_jax.viz import bev_plot, num_valid_ticks, plot_pair, record_pair
 
 SMALL = os.environ.get("LANTERN_NOTEBOOK_SMALL", "0") == "1"
 print("jax", jax.__version__, "on", jax.default_backend(), "| SMALL =", SMALL)
@@ -122,31 +121,20 @@ result.route_table.head()
 # %% [markdown]
 # ## 3. One pair up close: Pedestrian Emergence
 #
-# A pedestrian hidden behind a parked truck steps into the ego lane. We roll out `coop` on
-# Route A with and without the warning, recording every tick. `rollout` is a plain function of
-# the scenario, so one jitted function serves both conditions: only `config.warning_enabled`
-# differs.
+# A pedestrian hidden behind a parked truck steps into the ego lane. `record_pair` rolls out
+# the pair's three executions under `coop` (Route A with and without the warning, Route B) in
+# one jitted call, recording every tick.
 
 # %%
 pair = next(p for p in small.pairs if p.family == "PE")
-world_a, world_b, _ = build_pair(pair.params)
-world_a_nowarn = world_a.replace(config=world_a.config.replace(warning_enabled=jnp.asarray(False)))
+recorded = record_pair("coop", pair.pair_id)
+warned = recorded.warning
 
-coop = get_policy("coop")
-coop_params = coop.init(jax.random.PRNGKey(0))
-num_ticks = horizon_ticks(float(world_a.config.timeout_s))  # the route's timeout
-run = jax.jit(lambda w: rollout(w, coop, coop_params, num_ticks, record=True))
-
-final_w, rec_w = jax.device_get(run(world_a))
-final_nw, rec_nw = jax.device_get(run(world_a_nowarn))
-proto_w, proto_nw = final_w.protocol, final_nw.protocol
-
-print(f"pair {pair.pair_id} ({pair.weather}), horizon {num_ticks} ticks")
-for name, final, rec in (("warning", final_w, rec_w), ("no warning", final_nw, rec_nw)):
+print(f"pair {pair.pair_id} ({pair.weather}), horizon {warned.record.t.shape[0]} ticks")
+for ex in (warned, recorded.no_warning):
     print(
-        f"{name:>10}: ends after {num_valid_ticks(rec)} ticks, "
-        f"event onset t = {float(final.protocol.t_event):.2f} s, "
-        f"collision: {bool(final.telemetry.collision.collided)}"
+        f"{ex.condition:>10}: ends after {num_valid_ticks(ex.record)} ticks, "
+        f"event onset t = {float(ex.final.protocol.t_event):.2f} s, collision: {ex.collided}"
     )
 
 # %% [markdown]
@@ -156,22 +144,24 @@ for name, final, rec in (("warning", final_w, rec_w), ("no warning", final_nw, r
 # down.
 
 # %%
-i_warn = int(np.argmax(rec_w.warning_active))
-display(bev_plot(world_a, rec_w, i_warn, title="PE, warning first active"))
+i_warn = int(np.argmax(warned.record.warning_active))
+display(bev_plot(warned.scenario, warned.record, i_warn, title="PE, warning first active"))
 
 # %% [markdown]
-# At the event onset the pedestrian starts to cross.
+# `plot_pair` shows one execution at its most telling tick (its first collision, else the
+# closest approach to the hazard) next to the speed and acceleration of both conditions: the
+# warning's delivery shaded, vertical lines at event onset, warning termination and clearance
+# (solid: warning run, dashed: no warning), collisions in red and each execution's first failed
+# gate. Without the warning, `coop` meets the pedestrian only when it steps out:
 
 # %%
-i_event = int(np.searchsorted(rec_w.t, float(proto_w.t_event)))
-display(bev_plot(world_a, rec_w, i_event, title="PE, event onset"))
+display(plot_pair(recorded, condition="no-warning"))
 
 # %% [markdown]
-# Speed and acceleration of both conditions; the warning's delivery is shaded, vertical lines
-# mark event onset, warning termination and clearance (solid: warning run, dashed: no warning).
+# With the warning it slows down early and lets the pedestrian cross:
 
 # %%
-display(timeline_plot(rec_w, rec_nw, proto_w, proto_nw, title=f"{pair.pair_id}: coop"))
+display(plot_pair(recorded, condition="warning"))
 
 # %% [markdown]
 # ## 4. Gradients through the simulator
@@ -184,6 +174,10 @@ display(timeline_plot(rec_w, rec_nw, proto_w, proto_nw, title=f"{pair.pair_id}: 
 # longer than the forward one.
 
 # %%
+world_a, world_b, _ = build_pair(pair.params)
+coop = get_policy("coop")
+coop_params = coop.init(jax.random.PRNGKey(0))
+
 GRAD_TICKS = 400
 TEMPERATURE = 0.05
 SOFT_SETTINGS = DEFAULT_SETTINGS.with_temperature(TEMPERATURE)

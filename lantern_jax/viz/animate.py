@@ -10,7 +10,8 @@ from typing import Any
 
 from matplotlib import animation
 
-from lantern_jax.viz.common import num_valid_ticks, to_numpy
+from lantern_jax.files import file_mode
+from lantern_jax.viz.common import collision_index, num_valid_ticks, to_numpy
 from lantern_jax.viz.plots import bev_figure, bev_plot
 
 
@@ -23,13 +24,15 @@ def save_animation(
     dpi: int = 80,
     show_rays: bool = True,
     title: str | None = None,
+    collision_time: float | None = None,
 ) -> Path:
     """Write an animation of the bird's-eye view (:func:`~lantern_jax.viz.plots.bev_plot`).
 
     One frame every ``stride`` record entries, from the first entry to the end of the execution
     (the tick that ended it is always the last frame).  A single figure is reused and redrawn
     per frame at a small ``dpi``.  The file is written to a temporary name in the same folder
-    and moved into place when complete.
+    and moved into place when complete, with the mode a plain ``open`` would give it (0o666
+    minus the umask, e.g. 0o644).
 
     Args:
         scenario: the :class:`~lantern_jax.world.Scenario` of the execution.
@@ -42,6 +45,8 @@ def save_animation(
         dpi: resolution of the frames.
         show_rays: draw the camera sight lines.
         title: title prefix of every frame (see ``bev_plot``).
+        collision_time: s, the execution's first collision: from its frame on a red X marks
+            where the ego collided (see ``bev_plot``); None: no collision.
 
     Returns:
         The path actually written.
@@ -53,6 +58,9 @@ def save_animation(
     frames = list(range(0, n, stride))
     if frames[-1] != n - 1:
         frames.append(n - 1)
+    i_coll = collision_index(rec, collision_time)
+    if i_coll is not None and i_coll not in frames:  # the collision always gets its frame
+        frames = sorted([*frames, i_coll])
 
     path = Path(path)
     if path.suffix.lower() == ".mp4":
@@ -73,8 +81,10 @@ def save_animation(
     try:
         with writer.saving(fig, tmp, dpi):
             for i in frames:
-                bev_plot(w, rec, i, ax=ax, title=title, show_rays=show_rays)
+                bev_plot(w, rec, i, ax=ax, title=title, show_rays=show_rays,
+                         collision_time=collision_time)  # fmt: skip
                 writer.grab_frame()
+        os.chmod(tmp, file_mode())
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):

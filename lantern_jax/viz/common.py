@@ -12,6 +12,10 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from lantern_jax import times
+from lantern_jax.constants import DT
+from lantern_jax.files import file_mode
+
+COLLISION_COLOR = "#e00000"  # collision markers (bird's-eye view and timeline)
 
 
 def to_numpy(tree: Any) -> Any:
@@ -45,8 +49,29 @@ def happened(t: Any) -> bool:
     return bool(np.isfinite(float(t)) and times.happened(float(t)))
 
 
+def collision_index(record: Any, collision_time: Any) -> int | None:
+    """Record entry of a collision: the first entry at or after ``collision_time``.
+
+    Args:
+        record: a ``TickRecord`` with a leading time axis (``t`` of shape ``(N,)``, s).
+        collision_time: s, the first collision (``telemetry.collision.t_collision``); None, NaN
+            or a time that never happened: no collision.
+
+    Returns:
+        The entry index (within the execution's valid entries), or None without a collision.
+    """
+    if collision_time is None or not happened(collision_time):
+        return None
+    t = np.asarray(record.t, float).reshape(-1)[: num_valid_ticks(record)]
+    i = int(np.searchsorted(t, float(collision_time) - 0.5 * DT))
+    return min(i, t.shape[0] - 1)
+
+
 def save_figure(fig: Figure, path: str | os.PathLike, dpi: int = 110) -> Path:
     """Write a figure as PNG atomically (temporary file in the same folder + ``os.replace``).
+
+    The file gets the mode a plain ``open`` would give it (0o666 minus the umask, e.g. 0o644),
+    so others can read it.
 
     Args:
         fig: the matplotlib figure.
@@ -62,6 +87,7 @@ def save_figure(fig: Figure, path: str | os.PathLike, dpi: int = 110) -> Path:
     try:
         with os.fdopen(fd, "wb") as fh:
             fig.savefig(fh, format="png", dpi=dpi, bbox_inches="tight")
+        os.chmod(tmp, file_mode())
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):

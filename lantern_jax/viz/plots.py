@@ -46,7 +46,9 @@ from lantern_jax.constants import (
 from lantern_jax.dynamics.lights import light_states
 from lantern_jax.scenarios.warnings import get_text, render_warning
 from lantern_jax.viz.common import (
+    COLLISION_COLOR,
     box_corners_np,
+    collision_index,
     ego_frame_to_world,
     lane_polygon,
     num_valid_ticks,
@@ -294,6 +296,12 @@ def _draw_warning(ax, fig: Figure, text: str, grounded_xy: np.ndarray | None) ->
     )
 
 
+def _draw_collision(ax, xy: np.ndarray) -> None:
+    """A red X where the ego collided (``gid="collision"``)."""
+    ax.plot(*xy, marker="X", ms=16, color=COLLISION_COLOR, mec="white", mew=1.2, ls="none",
+            zorder=9, gid="collision", label="collision")  # fmt: skip
+
+
 def _default_title(config: Any) -> str:
     fam = FAMILIES[int(config.family)] if 0 <= int(config.family) < len(FAMILIES) else "?"
     route = "A" if bool(config.is_route_a) else "B"
@@ -318,6 +326,7 @@ def bev_plot(
     ax: Any = None,
     title: str | None = None,
     show_rays: bool = True,
+    collision_time: float | None = None,
 ) -> Figure:
     """Bird's-eye view of one execution at one recorded tick.
 
@@ -333,7 +342,8 @@ def bev_plot(
     and the active warning text (wrapped to the axes width; ``gid="warning"``) with its grounded
     position.  The view is centred on the ego (70 m window).  Patches: one ``Polygon`` per
     present actor (``gid="actor:<slot>"``) and one for the ego (``gid="ego"``); the frustum is a
-    ``Wedge`` (``gid="frustum"``); lanes are collections.
+    ``Wedge`` (``gid="frustum"``); lanes are collections.  With ``collision_time``, from the
+    collision's tick on a red X (``gid="collision"``) marks where the ego was when it collided.
 
     Args:
         scenario: the :class:`~lantern_jax.world.Scenario` of the execution (static data:
@@ -346,6 +356,8 @@ def bev_plot(
             placed to the right of the axes.
         title: title prefix; defaults to the family, route and condition.
         show_rays: draw sight lines from the camera to every visible actor's centre.
+        collision_time: s, the execution's first collision (``telemetry.collision.t_collision``
+            of its final state); None, NaN or a time that never happened: no collision.
 
     Returns:
         The figure holding the axes.
@@ -391,6 +403,9 @@ def bev_plot(
         stated = get_text(text_id).has_position
         where = ego_frame_to_world(rec.warning_pos[i], prev_xy, prev_yaw)[0] if stated else None
         _draw_warning(ax, fig, text, where)
+    i_coll = collision_index(rec, collision_time)
+    if i_coll is not None and i >= i_coll:
+        _draw_collision(ax, rec.ego_xy[i_coll])
     _frame_view(ax, ego_xy)
     title = _default_title(sc.config) if title is None else title
     ax.set_title(f"{title}  |  t = {t:.2f} s, v = {float(rec.ego_speed[i]):.1f} m/s", fontsize=10)

@@ -9,7 +9,13 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
 from lantern_jax.constants import DT
-from lantern_jax.viz.common import happened, num_valid_ticks, to_numpy
+from lantern_jax.viz.common import (
+    COLLISION_COLOR,
+    collision_index,
+    happened,
+    num_valid_ticks,
+    to_numpy,
+)
 
 RUN_STYLES = (  # (key, label, colour, line style)
     ("warning", "warning", "#1d3557", "-"),
@@ -69,6 +75,8 @@ def timeline_plot(
     protocol_warning: Any,
     protocol_nowarning: Any,
     title: str | None = None,
+    collision_times: tuple[Any, Any] | None = None,
+    axes: tuple[Any, Any] | None = None,
 ) -> Figure:
     """Speed and longitudinal acceleration over time of the two conditions of one scenario.
 
@@ -77,22 +85,34 @@ def timeline_plot(
     of its execution.  The warning run's delivery interval is shaded (:func:`warning_interval`)
     and vertical lines mark event onset, warning termination and clearance of each run (solid:
     warning run, dashed: no-warning run; colour = transition).  The lines carry ``gid``
-    ``"<field>:<run>"``, e.g. ``"t_event:warning"``, and sit at the protocol's times.
+    ``"<field>:<run>"``, e.g. ``"t_event:warning"``, and sit at the protocol's times.  A run
+    that collided gets a red vertical line at the collision on both axes and a red X on its
+    speed curve (``gid="collision:<run>"``).
 
     Args:
         rec_warning: ``TickRecord`` (leading time axis) of the warning condition.
         rec_nowarning: ``TickRecord`` of the no-warning condition.
         protocol_warning: final ``ProtocolState`` (or mapping of its fields) of the warning run.
         protocol_nowarning: final ``ProtocolState`` of the no-warning run.
-        title: figure title.
+        title: figure title (the speed axes' title when drawing into ``axes``).
+        collision_times: s, ``(warning run, no-warning run)`` first collision of each run
+            (``telemetry.collision.t_collision``); None, NaN or a time that never happened: no
+            collision.
+        axes: ``(speed axes, acceleration axes)`` to draw into (sharing their x axis), e.g. next
+            to a bird's-eye view; a new figure is made when None.
 
     Returns:
         The figure (two axes: speed on top, acceleration below).
     """
     recs = {"warning": to_numpy(rec_warning), "nowarning": to_numpy(rec_nowarning)}
     protos = {"warning": protocol_warning, "nowarning": protocol_nowarning}
-    fig = Figure(figsize=(8.0, 5.6))
-    ax_v, ax_a = fig.subplots(2, 1, sharex=True)
+    colls = dict(zip(("warning", "nowarning"), collision_times or (None, None), strict=True))
+    if axes is None:
+        fig = Figure(figsize=(8.0, 5.6))
+        ax_v, ax_a = fig.subplots(2, 1, sharex=True)
+    else:
+        ax_v, ax_a = axes
+        fig = ax_v.figure
 
     interval = warning_interval(recs["warning"], protocol_warning)
     if interval is not None:
@@ -112,6 +132,13 @@ def timeline_plot(
             if happened(tm):
                 for ax in (ax_v, ax_a):
                     ax.axvline(tm, color=lcolor, ls=ls, lw=1.1, alpha=0.9, gid=f"{field}:{key}")
+        i_coll = collision_index(rec, colls[key])
+        if i_coll is not None:
+            tc = float(colls[key])
+            for ax in (ax_v, ax_a):
+                ax.axvline(tc, color=COLLISION_COLOR, ls=ls, lw=2.0, gid=f"collision:{key}")
+            ax_v.plot(tc, v[i_coll], marker="X", ms=12, color=COLLISION_COLOR, mec="white",
+                      mew=1.0, ls="none", zorder=6, gid=f"collision:{key}")  # fmt: skip
 
     ax_a.axhline(0.0, color="#999999", lw=0.6, zorder=0.5)
     ax_v.set_ylabel("speed (m/s)")
@@ -129,6 +156,10 @@ def timeline_plot(
             Line2D([], [], color=SHADE_COLOR, alpha=0.6, lw=8, label="warning delivered")
         )
     handles += [Line2D([], [], color=c, lw=1.1, label=lab) for _, lab, c in EVENT_LINES]
+    if any(collision_index(recs[k], colls[k]) is not None for k in recs):
+        handles.append(
+            Line2D([], [], color=COLLISION_COLOR, lw=2.0, marker="X", ms=8, label="collision")
+        )
     ax_v.legend(
         handles=handles,
         loc="upper left",
@@ -137,6 +168,10 @@ def timeline_plot(
         frameon=False,
         borderaxespad=0.0,
     )
+    if axes is not None:
+        if title:
+            ax_v.set_title(title, fontsize=10)
+        return fig
     if title:
         fig.suptitle(title, fontsize=11)
     fig.tight_layout()
