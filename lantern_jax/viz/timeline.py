@@ -69,6 +69,23 @@ def warning_interval(record: Any, protocol: Any) -> tuple[float, float] | None:
     return start, end
 
 
+def _legend(ax_v: Any, shaded: bool, collided: bool) -> None:
+    """The timeline's legend, right of the speed axes: the two runs, the warning's delivery
+    (when ``shaded``), the protocol's transitions and (when ``collided``) the collision."""
+    handles = [Line2D([], [], color=c, ls=ls, lw=1.6, label=lab) for _, lab, c, ls in RUN_STYLES]
+    if shaded:
+        handles.append(
+            Line2D([], [], color=SHADE_COLOR, alpha=0.6, lw=8, label="warning delivered")
+        )
+    handles += [Line2D([], [], color=c, lw=1.1, label=lab) for _, lab, c in EVENT_LINES]
+    if collided:
+        handles.append(
+            Line2D([], [], color=COLLISION_COLOR, lw=2.0, marker="X", ms=8, label="collision")
+        )
+    ax_v.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8,
+                frameon=False, borderaxespad=0.0)  # fmt: skip
+
+
 def timeline_plot(
     rec_warning: Any,
     rec_nowarning: Any,
@@ -150,24 +167,8 @@ def timeline_plot(
         ax.grid(alpha=0.3, lw=0.5)
         ax.tick_params(labelsize=8)
 
-    handles = [Line2D([], [], color=c, ls=ls, lw=1.6, label=lab) for _, lab, c, ls in RUN_STYLES]
-    if interval is not None:
-        handles.append(
-            Line2D([], [], color=SHADE_COLOR, alpha=0.6, lw=8, label="warning delivered")
-        )
-    handles += [Line2D([], [], color=c, lw=1.1, label=lab) for _, lab, c in EVENT_LINES]
-    if any(collision_index(recs[k], colls[k]) is not None for k in recs):
-        handles.append(
-            Line2D([], [], color=COLLISION_COLOR, lw=2.0, marker="X", ms=8, label="collision")
-        )
-    ax_v.legend(
-        handles=handles,
-        loc="upper left",
-        bbox_to_anchor=(1.01, 1.0),
-        fontsize=8,
-        frameon=False,
-        borderaxespad=0.0,
-    )
+    _legend(ax_v, interval is not None,
+            any(collision_index(recs[k], colls[k]) is not None for k in recs))  # fmt: skip
     if axes is not None:
         if title:
             ax_v.set_title(title, fontsize=10)
