@@ -51,6 +51,7 @@ from lantern_jax.commands import (
     diagnostics,
     evaluate,
     families,
+    plot,
     policies,
     runtime,
     stress,
@@ -76,7 +77,7 @@ __all__ = [
 #: The command modules, in the order ``lantern-jax --help`` lists them.
 COMMANDS = (
     evaluate, suite, policies, ablations, stress, compare, dataset, train, unseen, wording,
-    diagnostics,
+    diagnostics, plot,
 )  # fmt: skip
 
 #: Environment variable that sets the number of XLA CPU devices of the command line.

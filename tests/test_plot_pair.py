@@ -116,3 +116,18 @@ def test_result_gives_suite_settings_and_policy():
     assert got == settings
     with pytest.raises(ValueError, match="expert"):
         _from_result(result, "expert", None)
+
+
+def test_the_plot_command_writes_the_figure_and_names_a_bad_pair(tmp_path, capsys):
+    """``lantern-jax plot`` writes the chosen execution's figure, readable by others; an unknown
+    pair id ends with exit code 2 and a message naming it."""
+    from lantern_jax.cli import main
+
+    out = tmp_path / "plots"
+    assert main(["plot", "--pair", "pe_0001", "--condition", "no-warning", "--out", str(out),
+                 "--quiet"]) == 0  # fmt: skip
+    png = out / "pe_0001_coop_no-warning.png"
+    assert png.is_file() and png.stat().st_size > 10_000
+    assert str(png) in capsys.readouterr().out
+    assert main(["plot", "--pair", "zz_9999", "--out", str(out), "--quiet"]) == 2
+    assert "zz_9999" in capsys.readouterr().err
