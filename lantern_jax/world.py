@@ -187,23 +187,25 @@ class ActorTrack:
     """
 
     accel: Array  # (A, N) float32, m/s^2, commanded longitudinal acceleration per knot
-    lateral: Array  # (A, N) float32, rate of the lateral channel per knot: m/s^2 (lateral
-    #                 acceleration) for a holonomic actor, rad/s (heading-offset rate) otherwise
+    lateral: Array  # (A, N) float32, lateral target per knot: m/s (sideways speed) for a
+    #                 holonomic actor, rad (heading offset from the path) otherwise
     knot_s: Array  # (A,) float32, s, knot length h (> 0)
     v_max: Array  # (A,) float32, m/s, speed limit of the actor's kind
     a_max: Array  # (A,) float32, m/s^2, acceleration limit (IDM actors: of the total)
     b_max: Array  # (A,) float32, m/s^2, braking limit (> 0; IDM actors: of the total)
     lat_max: Array  # (A,) float32, bound of the lateral channel: m/s (lateral speed) for a
     #                 holonomic actor, rad (heading offset from the path) otherwise
+    lat_rate: Array  # (A,) float32, its rate limit: m/s^2 or rad/s
     holonomic: Array  # (A,) bool, the lateral channel is a lateral velocity (walkers) rather
     #                   than a heading offset (vehicles: lateral speed = speed x offset)
-    # the knot profile, derived from the fields above (lantern_jax.dynamics.adversary.
-    # track_profile) and stored so that a tick only interpolates it
-    dv: Array  # (A, N + 1) float32, m/s, speed minus the start speed at the knots
-    ds: Array  # (A, N + 1) float32, m, its integral: extra arc at the knots
-    q: Array  # (A, N + 1) float32, lateral channel at the knots (m/s or rad)
-    g: Array  # (A, N + 1) float32, lateral gain at the knots (1, or the speed in m/s)
-    dlat: Array  # (A, N + 1) float32, m, extra lateral offset at the knots
+    # the knot profile at the N action knots and the E return knots after them, derived from
+    # the fields above (lantern_jax.dynamics.adversary.track_profile) and stored so that a
+    # tick only interpolates it; P = N + E + 1 knot times
+    dv: Array  # (A, P) float32, m/s, speed minus the start speed at the knots
+    ds: Array  # (A, P) float32, m, its integral: extra arc at the knots
+    q: Array  # (A, P) float32, lateral channel at the knots (m/s or rad)
+    g: Array  # (A, P) float32, lateral gain at the knots (1, or the speed in m/s)
+    dlat: Array  # (A, P) float32, m, extra lateral offset at the knots
 
     @property
     def knots(self) -> int:
@@ -213,15 +215,18 @@ class ActorTrack:
     def validate(self, n: int) -> ActorTrack:
         a = check_shape("ActorTrack.accel", self.accel, (n, None))
         check_shape("ActorTrack.lateral", self.lateral, a.shape)
-        for f in ("accel", "lateral", "knot_s", "v_max", "a_max", "b_max", "lat_max"):
+        for f in ("accel", "lateral", "knot_s", "v_max", "a_max", "b_max", "lat_max", "lat_rate"):
             if f not in ("accel", "lateral"):
                 check_shape(f"ActorTrack.{f}", getattr(self, f), (n,))
             check_finite(f"ActorTrack.{f}", getattr(self, f))
         check_shape("ActorTrack.holonomic", self.holonomic, (n,))
+        profile = check_shape("ActorTrack.dv", self.dv, (n, None))
+        if profile.shape[1] < a.shape[1] + 1:
+            raise ValueError("ActorTrack.dv: the profile needs more knot times than actions")
         for f in ("dv", "ds", "q", "g", "dlat"):
-            check_shape(f"ActorTrack.{f}", getattr(self, f), (n, a.shape[1] + 1))
+            check_shape(f"ActorTrack.{f}", getattr(self, f), profile.shape)
             check_finite(f"ActorTrack.{f}", getattr(self, f))
-        for f in ("v_max", "a_max", "b_max", "lat_max"):
+        for f in ("v_max", "a_max", "b_max", "lat_max", "lat_rate"):
             check_nonneg(f"ActorTrack.{f}", getattr(self, f))
         if np.any(np.asarray(self.knot_s) <= 0):
             raise ValueError("ActorTrack.knot_s: must be > 0")

@@ -36,8 +36,7 @@ def _pair(suite, family):
 def _profile(u_acc, u_lat, kind, v0):
     lim = adv.limits_of_kind(kind)
     acc, lat = adv.scale_actions(jnp.asarray(u_acc), jnp.asarray(u_lat), lim)
-    prof = adv.track_profile(acc, lat, jnp.float32(H), jnp.float32(v0), jnp.float32(lim.v_max),
-                             jnp.float32(lim.lat_max), jnp.asarray(lim.holonomic))  # fmt: skip
+    prof = adv.track_profile(acc, lat, H, jnp.float32(v0), lim)
     return lim, {k: np.asarray(v, np.float64) for k, v in prof.items()}
 
 
@@ -74,7 +73,8 @@ def test_zero_actions_reproduce_the_scripted_motion_exactly(t, tau, v_post, lat_
 def test_kinematic_limits_hold_for_any_action(kind, v0, seed, extreme):
     """Whatever the actions, the realised speed stays in [0, max(v_max, v0)], its change per
     knot within the acceleration and braking limits, the lateral channel within its bound and
-    rate, and a vehicle's lateral speed within its heading bound times its speed."""
+    rate, a vehicle's lateral speed within its heading bound times its speed, and after the last
+    knot the actor is back to its scripted speed and heading."""
     rng = np.random.default_rng(seed)
     draw = (lambda: rng.choice([-1.0, 1.0], N)) if extreme else (lambda: rng.uniform(-1, 1, N))
     lim, p = _profile(draw(), draw(), kind, v0)
@@ -85,11 +85,16 @@ def test_kinematic_limits_hold_for_any_action(kind, v0, seed, extreme):
     assert np.all(dv <= lim.a_max + tol) and np.all(-dv <= lim.b_max + tol)
     assert np.all(np.abs(p["q"]) <= lim.lat_max + tol)
     assert np.all(np.abs(np.diff(p["q"])) / H <= lim.lat_rate + tol)
+    # after the last knot the actor returns to its script: scripted speed, zero lateral channel
+    assert abs(p["dv"][-1]) < tol and abs(p["q"][-1]) < tol
     # dense samples of the closed form between the knots
     prof = {k: jnp.asarray(x, jnp.float32) for k, x in p.items()}
-    us = jnp.linspace(0.0, N * H + 2.0, 301)
-    off = jax.vmap(lambda u: adv.scripted_offsets(prof["dv"], prof["ds"], prof["q"], prof["g"],
-                                                  prof["dlat"], jnp.float32(H), u))(us)  # fmt: skip
+    us = jnp.linspace(0.0, N * H + adv.RETURN_S + 2.0, 401)
+    off = jax.vmap(
+        lambda u: adv.scripted_offsets(
+            prof["dv"], prof["ds"], prof["q"], prof["g"], prof["dlat"], jnp.float32(H), u
+        )
+    )(us)
     speed = v0 + np.asarray(off[1], np.float64)
     w = np.asarray(off[3], np.float64)
     assert np.all(speed >= -tol) and np.all(speed <= max(lim.v_max, v0) + tol)
@@ -104,9 +109,11 @@ def test_closed_form_integrates_its_own_speeds():
     _, p = _profile(rng.uniform(-1, 1, N), rng.uniform(-1, 1, N), KIND_VEHICLE, 7.0)
     prof = {k: jnp.asarray(x, jnp.float32) for k, x in p.items()}
     us = np.linspace(0.0, N * H + 1.0, 4001)
-    off = jax.vmap(lambda u: adv.scripted_offsets(prof["dv"], prof["ds"], prof["q"], prof["g"],
-                                                  prof["dlat"], jnp.float32(H), u))(
-        jnp.asarray(us, jnp.float32))  # fmt: skip
+    off = jax.vmap(
+        lambda u: adv.scripted_offsets(
+            prof["dv"], prof["ds"], prof["q"], prof["g"], prof["dlat"], jnp.float32(H), u
+        )
+    )(jnp.asarray(us, jnp.float32))
     ds, dv, dlat, w = (np.asarray(x, np.float64) for x in off)
     trap = lambda y: np.concatenate([[0.0], np.cumsum(0.5 * (y[1:] + y[:-1]) * np.diff(us))])  # noqa: E731
     np.testing.assert_allclose(ds, trap(dv), atol=2e-3)
@@ -142,22 +149,36 @@ def _with_adversary(params, tracks, knot_s=H):
     [
         ([], r"PE.adversary: expected a JSON object"),
         (dict(knot_s=0.5, tracks=[]), r"PE.adversary.tracks: expected a non-empty JSON array"),
-        (dict(knot_s=5.0, tracks=[dict(slot=0, accel=[0.0], lateral=[0.0])]),
-         r"PE.adversary.knot_s: expected a number in \[0.1, 2\]"),
-        (dict(knot_s=0.5, tracks=[dict(slot=0, accel=[0.0, 1.5], lateral=[0.0, 0.0])]),
-         r"PE.adversary.tracks\[0\].accel\[1\]: 1.5 outside \[-1, 1\]"),
-        (dict(knot_s=0.5, tracks=[dict(slot=0, accel=[0.0], lateral=[0.0, 0.0])]),
-         r"PE.adversary.tracks: every channel needs the same number of knots"),
-        (dict(knot_s=0.5, tracks=[dict(slot=16, accel=[0.0], lateral=[0.0])]),
-         r"PE.adversary.tracks\[0\].slot: expected an integer in \[0, 15\]"),
-        (dict(knot_s=0.5, tracks=[dict(slot=0, accel=[0.0], lateral=[0.0], jerk=[1])]),
-         r"PE.adversary.tracks\[0\].jerk: unknown field"),
-        (dict(knot_s=0.5, tracks=[dict(slot=9, accel=[0.0], lateral=[0.0])]),
-         r"PE.adversary.tracks\[0\].slot: slot 9 holds no actor"),
-        (dict(knot_s=0.5, tracks=[dict(slot=0, accel=[0.0], lateral=[0.0])] * 2),
-         r"PE.adversary.tracks\[1\].slot: slot 0 has a track already"),
+        (
+            dict(knot_s=5.0, tracks=[dict(slot=0, accel=[0.0], lateral=[0.0])]),
+            r"PE.adversary.knot_s: expected a number in \[0.1, 2\]",
+        ),
+        (
+            dict(knot_s=0.5, tracks=[dict(slot=0, accel=[0.0, 1.5], lateral=[0.0, 0.0])]),
+            r"PE.adversary.tracks\[0\].accel\[1\]: 1.5 outside \[-1, 1\]",
+        ),
+        (
+            dict(knot_s=0.5, tracks=[dict(slot=0, accel=[0.0], lateral=[0.0, 0.0])]),
+            r"PE.adversary.tracks: every channel needs the same number of knots",
+        ),
+        (
+            dict(knot_s=0.5, tracks=[dict(slot=16, accel=[0.0], lateral=[0.0])]),
+            r"PE.adversary.tracks\[0\].slot: expected an integer in \[0, 15\]",
+        ),
+        (
+            dict(knot_s=0.5, tracks=[dict(slot=0, accel=[0.0], lateral=[0.0], jerk=[1])]),
+            r"PE.adversary.tracks\[0\].jerk: unknown field",
+        ),
+        (
+            dict(knot_s=0.5, tracks=[dict(slot=9, accel=[0.0], lateral=[0.0])]),
+            r"PE.adversary.tracks\[0\].slot: slot 9 holds no actor",
+        ),
+        (
+            dict(knot_s=0.5, tracks=[dict(slot=0, accel=[0.0], lateral=[0.0])] * 2),
+            r"PE.adversary.tracks\[1\].slot: slot 0 has a track already",
+        ),
     ],
-)  # fmt: skip
+)
 def test_bad_adversary_fields_are_named(suite, adversary, message):
     params = dict(_pair(suite, "PE").params, adversary=adversary)
     errors = param_errors(params)
@@ -214,29 +235,44 @@ def test_actor_groups_name_moving_actors(suite):
 
 def test_batches_mix_pairs_with_and_without_tracks(suite):
     """A batch of pairs with and without tracks (and with different knot counts) stacks: the
-    others get zero tracks, shorter tracks zero knots that hold their last state."""
+    others get zero tracks, shorter tracks zero actions and a profile that holds its last
+    state, which changes none of their motion."""
     from lantern_jax.scenarios.suite import build_suite_batches
 
     pe = _pair(suite, "PE")
     rng = np.random.default_rng(0)
-    long_ = _with_adversary(pe.params, [dict(slot=0, accel=rng.uniform(-1, 1, 8).tolist(),
-                                             lateral=rng.uniform(-1, 1, 8).tolist())])  # fmt: skip
+    long_ = _with_adversary(
+        pe.params,
+        [
+            dict(
+                slot=0, accel=rng.uniform(-1, 1, 8).tolist(), lateral=rng.uniform(-1, 1, 8).tolist()
+            )
+        ],
+    )
     short = _with_adversary(pe.params, [dict(slot=0, accel=[0.3, -0.2], lateral=[0.1, 0.0])])
-    pairs = (suite.pairs[0], *(type(pe)(f"x{i}", "PE", pe.weather, p, content_hash(p))
-                               for i, p in enumerate((long_, short))))  # fmt: skip
+    pairs = (
+        suite.pairs[0],
+        *(
+            type(pe)(f"x{i}", "PE", pe.weather, p, content_hash(p))
+            for i, p in enumerate((long_, short))
+        ),
+    )
     a, b = build_suite_batches(suite.__class__(suite.suite_id, pairs, "0" * 64, 0, {}))
     assert a.actors.track.accel.shape == (3, 16, 8)
+    assert a.actors.track.dv.shape == (3, 16, 8 + adv.return_knots(H) + 1)
     assert np.all(np.asarray(a.actors.track.accel[0]) == 0.0)
     # the short track's padded profile equals its own closed form beyond its last knot
     built, _, _ = build_pair(short)
     tr = built.actors.track
-    for u in (0.3, 1.0, 2.5, 3.9):
-        own = adv.scripted_offsets(tr.dv[0], tr.ds[0], tr.q[0], tr.g[0], tr.dlat[0],
-                                   tr.knot_s[0], jnp.float32(u))  # fmt: skip
+    for u in (0.3, 1.0, 2.5, 3.9, 9.0):
+        own = adv.scripted_offsets(
+            tr.dv[0], tr.ds[0], tr.q[0], tr.g[0], tr.dlat[0], tr.knot_s[0], jnp.float32(u)
+        )
         t2 = a.actors.track
-        padded = adv.scripted_offsets(*(jnp.asarray(getattr(t2, k)[2, 0]) for k in
-                                        ("dv", "ds", "q", "g", "dlat", "knot_s")),
-                                      jnp.float32(u))  # fmt: skip
+        padded = adv.scripted_offsets(
+            *(jnp.asarray(getattr(t2, k)[2, 0]) for k in ("dv", "ds", "q", "g", "dlat", "knot_s")),
+            jnp.float32(u),
+        )
         np.testing.assert_allclose(np.asarray(padded), np.asarray(own), atol=1e-5)
     assert b.actors.track.accel.shape == (3, 16, 8)
 
@@ -254,9 +290,16 @@ def _actor_states(scenario, ticks):
         t = (k + 1).astype(jnp.float32) * DT
         ego_xy = jnp.stack([t * 8.0, 0.0])
         t_event = jnp.where(t >= 1.0, 1.0, NEVER).astype(jnp.float32)
-        new = step_actors(actors, scenario.actors, t, t_event,
-                          light_states(scenario.lights, t), ego_xy, jnp.float32(0.0),
-                          jnp.float32(8.0))  # fmt: skip
+        new = step_actors(
+            actors,
+            scenario.actors,
+            t,
+            t_event,
+            light_states(scenario.lights, t),
+            ego_xy,
+            jnp.float32(0.0),
+            jnp.float32(8.0),
+        )
         return new, (new.s, new.speed, new.lat, new.xy)
 
     return jax.jit(lambda: jax.lax.scan(body, scenario.actors0, jnp.arange(ticks))[1])()
@@ -269,8 +312,9 @@ def test_idm_actors_follow_their_tracks_within_limits(suite):
     a0, _, _ = build_pair(pair.params)
     slot = spec.adversary_slots(a0, ["background"])[0]
     zero = _with_adversary(pair.params, [dict(slot=slot, accel=[0.0] * N, lateral=[0.0] * N)])
-    hard = _with_adversary(pair.params, [dict(slot=slot, accel=[-1.0] * 4 + [1.0] * 12,
-                                              lateral=[1.0] * N)])  # fmt: skip
+    hard = _with_adversary(
+        pair.params, [dict(slot=slot, accel=[-1.0] * 4 + [1.0] * 12, lateral=[1.0] * N)]
+    )
     base = [np.asarray(x) for x in _actor_states(a0, 200)]
     same = [np.asarray(x) for x in _actor_states(build_pair(zero)[0], 200)]
     for x, y in zip(base, same, strict=True):

@@ -65,8 +65,11 @@ def adversary_errors(params: dict) -> list[str]:
     where = f"{fam}.{ADVERSARY_FIELD}"
     if not isinstance(adv, dict):
         return [f"{where}: expected a JSON object, got {adv!r}"]
-    errors = [f"{where}.{k}: unknown field (known: knot_s, tracks)" for k in adv
-              if k not in ("knot_s", "tracks")]  # fmt: skip
+    errors = [
+        f"{where}.{k}: unknown field (known: knot_s, tracks)"
+        for k in adv
+        if k not in ("knot_s", "tracks")
+    ]
     h = adv.get("knot_s")
     lo, hi = KNOT_S_RANGE
     if not _number(h) or not lo <= float(h) <= hi:
@@ -80,14 +83,18 @@ def adversary_errors(params: dict) -> list[str]:
         if not isinstance(tr, dict):
             errors.append(f"{at}: expected a JSON object, got {tr!r}")
             continue
-        errors += [f"{at}.{k}: unknown field (known: {', '.join(TRACK_KEYS)})" for k in tr
-                   if k not in TRACK_KEYS]  # fmt: skip
+        errors += [
+            f"{at}.{k}: unknown field (known: {', '.join(TRACK_KEYS)})"
+            for k in tr
+            if k not in TRACK_KEYS
+        ]
         errors += [f"{at}.{k}: missing" for k in TRACK_KEYS if k not in tr]
         slot = tr.get("slot")
         if "slot" in tr:
             if isinstance(slot, bool) or not isinstance(slot, int) or not 0 <= slot < MAX_ACTORS:
-                errors.append(f"{at}.slot: expected an integer in [0, {MAX_ACTORS - 1}], "
-                              f"got {slot!r}")  # fmt: skip
+                errors.append(
+                    f"{at}.slot: expected an integer in [0, {MAX_ACTORS - 1}], got {slot!r}"
+                )
             elif slot in slots:
                 errors.append(f"{at}.slot: slot {slot} has a track already")
             else:
@@ -97,16 +104,19 @@ def adversary_errors(params: dict) -> list[str]:
             if ch not in tr:
                 continue
             if not isinstance(seq, list) or not 1 <= len(seq) <= MAX_KNOTS:
-                errors.append(f"{at}.{ch}: expected an array of 1 to {MAX_KNOTS} numbers, "
-                              f"got {type(seq).__name__}")  # fmt: skip
+                errors.append(
+                    f"{at}.{ch}: expected an array of 1 to {MAX_KNOTS} numbers, "
+                    f"got {type(seq).__name__}"
+                )
                 continue
             knots.add(len(seq))
             for k, v in enumerate(seq):
                 if not _number(v) or not -1.0 <= float(v) <= 1.0:
                     errors.append(f"{at}.{ch}[{k}]: {v!r} outside [-1, 1]")
     if len(knots) > 1:
-        errors.append(f"{where}.tracks: every channel needs the same number of knots, "
-                      f"got {sorted(knots)}")  # fmt: skip
+        errors.append(
+            f"{where}.tracks: every channel needs the same number of knots, got {sorted(knots)}"
+        )
     return errors
 
 
@@ -120,15 +130,21 @@ def slot_errors(scenario: Scenario, adversary: dict, family: str) -> list[str]:
         if not valid[s]:
             errors.append(f"{family}.{ADVERSARY_FIELD}.tracks[{i}].slot: slot {s} holds no actor")
         elif int(kind[s]) not in CLASS_OF_KIND:
-            errors.append(f"{family}.{ADVERSARY_FIELD}.tracks[{i}].slot: slot {s} holds a "
-                          "static object, which takes no track")  # fmt: skip
+            errors.append(
+                f"{family}.{ADVERSARY_FIELD}.tracks[{i}].slot: slot {s} holds a "
+                "static object, which takes no track"
+            )
     return errors
 
 
 def with_tracks(
-    scenario: Scenario, slots: Sequence[int], kinds: Sequence[int], u_accel: jax.Array,
-    u_lateral: jax.Array, knot_s: float,
-) -> Scenario:  # fmt: skip
+    scenario: Scenario,
+    slots: Sequence[int],
+    kinds: Sequence[int],
+    u_accel: jax.Array,
+    u_lateral: jax.Array,
+    knot_s: float,
+) -> Scenario:
     """``scenario`` with tracks on ``slots`` (differentiable in the actions; jittable).
 
     Args:
@@ -142,8 +158,9 @@ def with_tracks(
     u_accel, u_lateral = jnp.asarray(u_accel), jnp.asarray(u_lateral)
     track = zero_track(script.num, u_accel.shape[-1], knot_s)
     for i, (s, k) in enumerate(zip(slots, kinds, strict=True)):
-        track = set_track(track, int(s), int(k), script.v_post[int(s)], u_accel[i],
-                          u_lateral[i], knot_s)  # fmt: skip
+        track = set_track(
+            track, int(s), int(k), script.v_post[int(s)], u_accel[i], u_lateral[i], knot_s
+        )
     return scenario.replace(actors=script.replace(track=track))
 
 
@@ -218,10 +235,18 @@ def adversary_slots(scenario: Scenario, groups: Sequence[str], background: int =
             out.append(h)
             continue
         role = np.asarray(sc.role)
-        cands = [i for i in range(sc.num) if valid[i] and role[i] == ROLE_BACKGROUND
-                 and int(kind[i]) in CLASS_OF_KIND and i not in out]  # fmt: skip
-        dist = {i: route_distance(scenario, _path_points(scenario, i, BACKGROUND_LOOKAHEAD_S))
-                for i in cands}  # fmt: skip
+        cands = [
+            i
+            for i in range(sc.num)
+            if valid[i]
+            and role[i] == ROLE_BACKGROUND
+            and int(kind[i]) in CLASS_OF_KIND
+            and i not in out
+        ]
+        dist = {
+            i: route_distance(scenario, _path_points(scenario, i, BACKGROUND_LOOKAHEAD_S))
+            for i in cands
+        }
         near = sorted((i for i in cands if dist[i] <= NEAR_ROUTE_M), key=lambda i: dist[i])
         if not near:
             raise ValueError(
@@ -234,43 +259,51 @@ def adversary_slots(scenario: Scenario, groups: Sequence[str], background: int =
 
 def uniform_tracks(scenarios: list[Scenario]) -> list[Scenario]:
     """Scenarios of one batch with tracks of one shape: where any has a track, the others get
-    all-zero tracks and every track is padded with zero knots to the most knots (a zero knot
-    after the last holds the speed and the lateral channel, which is what the last knot does)."""
+    all-zero tracks, and every track is padded to the most knots (zero actions: the commanded
+    acceleration of an IDM actor is 0 after its last knot anyway) and its profile to the
+    longest one (holding its last state: the actor is back on its script by then)."""
     tracks = [s.actors.track for s in scenarios]
     if all(t is None for t in tracks):
         return scenarios
     n = max(int(t.accel.shape[-1]) for t in tracks if t is not None)
+    p = max(int(t.dv.shape[-1]) for t in tracks if t is not None)
     out = []
     for s, t in zip(scenarios, tracks, strict=True):
-        if t is None:
-            out.append(without_effect(s, n))
-            continue
-        pad = n - int(t.accel.shape[-1])
-        if pad:
-            t = _pad_track(t, pad)
-        out.append(s.replace(actors=s.actors.replace(track=t)))
+        t = zero_track(s.actors.num, n) if t is None else t
+        out.append(s.replace(actors=s.actors.replace(track=_pad_track(t, n, p))))
     return out
 
 
-def _pad_track(track: Any, pad: int) -> Any:
-    """A track with ``pad`` zero-action knots appended (its knot profile held)."""
-
-    def hold(x):
-        x = np.asarray(x)
-        return np.concatenate([x, np.repeat(x[:, -1:], pad, axis=1)], axis=1)
+def _pad_track(track: Any, knots: int, points: int) -> Any:
+    """A track with zero actions appended up to ``knots`` and its profile held up to
+    ``points`` knot times (the arc and lateral offsets continue at the last speeds)."""
+    pad_n = knots - int(track.accel.shape[-1])
+    pad_p = points - int(track.dv.shape[-1])
+    if pad_n == 0 and pad_p == 0:
+        return track
 
     def zeros(x):
         x = np.asarray(x)
-        return np.concatenate([x, np.zeros((x.shape[0], pad), x.dtype)], axis=1)
+        return np.concatenate([x, np.zeros((x.shape[0], pad_n), x.dtype)], axis=1)
 
-    ds, dv = np.asarray(track.ds), np.asarray(track.dv)
-    g, q = np.asarray(track.g), np.asarray(track.q)
-    steps = np.arange(1, pad + 1, dtype=np.float32)
+    def hold(x):
+        x = np.asarray(x)
+        return np.concatenate([x, np.repeat(x[:, -1:], pad_p, axis=1)], axis=1)
+
+    dv, g, q = np.asarray(track.dv), np.asarray(track.g), np.asarray(track.q)
+    steps = np.arange(1, pad_p + 1, dtype=np.float32)
     elapsed = np.asarray(track.knot_s, np.float32)[:, None] * steps
-    extra_s = ds[:, -1:] + dv[:, -1:] * elapsed
-    extra_lat = np.asarray(track.dlat)[:, -1:] + g[:, -1:] * q[:, -1:] * elapsed
+    ds = np.concatenate(
+        [np.asarray(track.ds), np.asarray(track.ds)[:, -1:] + dv[:, -1:] * elapsed], 1
+    )
+    dlat = np.asarray(track.dlat)
+    dlat = np.concatenate([dlat, dlat[:, -1:] + g[:, -1:] * q[:, -1:] * elapsed], 1)
     return track.replace(
-        accel=zeros(track.accel), lateral=zeros(track.lateral), dv=hold(dv), q=hold(q),
-        g=hold(g), ds=np.concatenate([ds, extra_s], 1),
-        dlat=np.concatenate([np.asarray(track.dlat), extra_lat], 1),
-    )  # fmt: skip
+        accel=zeros(track.accel),
+        lateral=zeros(track.lateral),
+        dv=hold(dv),
+        q=hold(q),
+        g=hold(g),
+        ds=ds,
+        dlat=dlat,
+    )

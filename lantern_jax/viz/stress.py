@@ -17,15 +17,15 @@ METHOD_STYLE = {
 
 
 def convergence_plot(traces: list[Any], title: str = "") -> Figure:
-    """Best (lowest) hard CUS found so far against evaluations and against wall-clock seconds.
+    """Best (lowest) hard CUS found so far against rollouts and against wall-clock seconds.
 
     Args:
         traces: :class:`lantern_jax.stress.search.Trace` objects, one per method.
         title: figure title.
 
     Returns:
-        A figure with two panels (evaluations, seconds); a horizontal line marks the failure
-        threshold of the verifier (CUS 50) and markers the first verified failures.
+        A figure with two panels (rollouts per restart, seconds); a horizontal line marks the
+        failure threshold of the verifier (CUS 50) and markers the first verified failures.
     """
     from lantern_jax.stress.verify import FAIL_BELOW_CUS
 
@@ -33,12 +33,13 @@ def convergence_plot(traces: list[Any], title: str = "") -> Figure:
     axes = fig.subplots(1, 2, sharey=True)
     for t in traces:
         style = METHOD_STYLE.get(t.method, {})
-        for ax, x in zip(axes, (t.evaluations, t.seconds), strict=True):
+        cost = t.rollouts or t.evaluations
+        for ax, x in zip(axes, (cost, t.seconds), strict=True):
             ax.step(x, t.best_cus, where="post", label=t.method, **style)
         for f in t.found[:1]:
-            axes[0].plot(f["evaluations"] * t.restarts, f["cus"], "o", color=style.get("color"))
+            axes[0].plot(f["rollouts"], f["cus"], "o", color=style.get("color"))
             axes[1].plot(f["seconds"], f["cus"], "o", color=style.get("color"))
-    for ax, label in zip(axes, ("evaluations (all restarts)", "seconds"), strict=True):
+    for ax, label in zip(axes, ("rollouts per restart (every kind)", "seconds"), strict=True):
         ax.axhline(FAIL_BELOW_CUS, color="black", lw=0.8, ls=":")
         ax.set_xlabel(label)
         ax.grid(alpha=0.3)
