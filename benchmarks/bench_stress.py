@@ -161,11 +161,15 @@ def main() -> None:
             cols = [
                 "method",
                 "failure_rate",
+                "failure_rate_lo",
+                "failure_rate_hi",
                 "median_rollouts",
                 "found_within_equal_s",
                 "median_s_at_equal_s",
                 "distinct_failures",
                 "policy_pass_share",
+                "rejected_expert",
+                "rejected_adversary",
                 "rollouts",
                 "search_s",
             ]

@@ -328,6 +328,8 @@ def comparison_table(
                 verified=t.verified,
                 policy_pass_share=1.0 - t.policy_failed / t.verified if t.verified else np.nan,
                 plausible_failure_share=t.plausible_failed / t.verified if t.verified else np.nan,
+                rejected_expert=t.rejected_expert,
+                rejected_adversary=t.rejected_adversary,
                 lowest_cus=t.lowest["cus"] if t.lowest else np.nan,
                 rollouts=t.rollouts_per_restart,
                 **{f"rollouts_{k}": v for k, v in t.counts.items()},

@@ -60,6 +60,8 @@ class Trace:
     verified: int = 0  # candidates verified, all restarts
     policy_failed: int = 0  # of which the policy failed (plausible or not)
     plausible_failed: int = 0  # of which were verified plausible failures
+    rejected_expert: int = 0  # policy failures the expert did not drive with margin
+    rejected_adversary: int = 0  # ... that it did, whose tracked actors broke rules 2-4
     compile_s: float = 0.0  # s spent compiling before the search (not on the clock)
     nan_gradients: int = 0  # gradient estimates with a non-finite entry (taken as 0 there)
 
@@ -98,6 +100,10 @@ class Trace:
         self.verified += len(values)
         policy_failed = verdict.failed if verdict.policy_failed is None else verdict.policy_failed
         self.policy_failed += int(np.sum(policy_failed))
+        self.rejected_expert += int(np.sum(policy_failed & ~verdict.expert_ok))
+        if verdict.plausible is not None:
+            shared = policy_failed & verdict.expert_ok & ~verdict.plausible
+            self.rejected_adversary += int(np.sum(shared))
         self.plausible_failed += int(np.sum(verdict.failed))
         evals = len(self.evaluations) and self.evaluations[-1]
         for i in np.argsort(verdict.cus, kind="stable"):
