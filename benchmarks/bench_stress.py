@@ -1,17 +1,32 @@
-"""Stress-testing comparison and gradient quality, per family and policy.
+"""Stress-testing comparison and gradient quality, per family and policy, on adversarial tracks.
 
-For every family and policy: the comparison table of gradient search, random search and
-CMA-ES at equal wall-clock budget (``lantern_jax.stress.report.comparison_table``), and the
-agreement between each gradient estimate and finite differences of the smoothed surrogate
-(cosine similarity over random directions) without smoothing (sigma 0) and with the default
-smoothing.  Prints both tables and writes them as CSV into ``--out``.
+For every family and policy: one pair (the family's first whose nominal scene the expert drives
+with margin, so that a plausible failure can exist at all), the adversary space of its hazard
+(16 knots of 0.5 s, 32 dimensions; in Obstacle Reveal the van that reveals the static hazard),
+and gradient search, random search and CMA-ES run interleaved in this process on the same
+budget of rollouts per restart (every kind counted).  Per cell it reports:
 
-    python benchmarks/bench_stress.py --budget-s 60 --policies ego,coop --out runs/bench_stress
+* the **rare-failure share**: the share of uniformly random draws the policy passes (random
+  search's own draws; a cell is *rare* when >= 90 %);
+* per method: share of restarts with a verified plausible failure, median rollouts to the first
+  (a restart without one counts as beyond the budget), the same at **equal wall-clock** (every
+  method cut at the shortest method's search time), distinct failures;
+* whether gradient search meets the goal: median rollouts to the first failure <= 1/2 of random
+  search's and <= CMA-ES's, and the same in seconds at equal wall-clock;
+* gradient quality: cosine between the pathwise gradient and central finite differences of the
+  soft objective along random directions, at random points of the space.
+
+Prints the tables, the machine's load, and writes ``comparison.csv``, ``cells.csv``,
+``gradient_quality.csv`` into ``--out``::
+
+    python benchmarks/bench_stress.py --budget-rollouts 64 \\
+        --policies coop,learned-distance-onset-only
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import platform
 import time
@@ -21,53 +36,170 @@ import numpy as np
 import pandas as pd
 
 from lantern_jax.constants import FAMILIES
+from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.suite import load_suite
-from lantern_jax.stress.report import (
-    StressConfig,
-    comparison_table,
-    gradient_quality,
-    stress_test,
-)
-from lantern_jax.stress.space import search_space
+from lantern_jax.stress import report
+from lantern_jax.stress.verify import Verifier
+
+RARE_PASS_SHARE = 0.9  # a cell is "rare" when the policy passes this share of random draws
+
+
+def pick_pair(suite, family: str, cfg: report.StressConfig, policy):
+    """The family's first pair whose nominal scene the expert drives with margin."""
+    for pair in (p for p in suite.pairs if p.family == family):
+        problem = report.make_problem(pair, policy, None, cfg)
+        nominal = Verifier(problem, batch=cfg.restarts)(
+            np.zeros((cfg.restarts, problem.space.dim), np.float32)
+        )
+        if nominal.expert_ok[0]:
+            return pair
+    return None
+
+
+def censored_median(x: np.ndarray, cap: float = math.inf) -> float:
+    """Median over restarts; not found (NaN) or beyond ``cap`` counts as infinite."""
+    x = np.where(np.isnan(x) | (x > cap), np.inf, x)
+    return float(np.median(x))
+
+
+def cell_rows(traces, problem) -> tuple[pd.DataFrame, dict]:
+    """The per-method rows of one cell and its verdict."""
+    table = report.comparison_table(traces, problem)
+    common_s = min(t.seconds[-1] for t in traces)
+    by = {t.method: t for t in traces}
+    table["equal_s"] = common_s
+    table["found_within_equal_s"] = [report.found_within(t, seconds=common_s) for t in traces]
+    table["median_s_at_equal_s"] = [censored_median(t.first_seconds, common_s) for t in traces]
+    table["median_rollouts"] = [censored_median(t.first_rollouts) for t in traces]
+    verdict = {}
+    if {"gradient", "random", "cmaes"} <= set(by):
+        g, r, c = (table.set_index("method").loc[m] for m in ("gradient", "random", "cmaes"))
+        verdict = dict(
+            rollouts_goal=bool(
+                np.isfinite(g["median_rollouts"])
+                and g["median_rollouts"] <= 0.5 * r["median_rollouts"]
+                and g["median_rollouts"] <= c["median_rollouts"]
+            ),
+            wallclock_goal=bool(
+                np.isfinite(g["median_s_at_equal_s"])
+                and g["median_s_at_equal_s"] <= 0.5 * r["median_s_at_equal_s"]
+                and g["median_s_at_equal_s"] <= c["median_s_at_equal_s"]
+            ),
+        )
+    return table, verdict
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--budget-s", type=float, default=60.0)
-    ap.add_argument("--policies", default="ego,coop")
+    ap.add_argument("--budget-rollouts", type=int, default=64)
+    ap.add_argument("--budget-s", type=float, default=900.0)
+    ap.add_argument("--policies", default="coop,learned-distance-onset-only")
     ap.add_argument("--families", default=",".join(FAMILIES))
+    ap.add_argument("--actors", default="hazard")
+    ap.add_argument("--knots", type=int, default=16)
     ap.add_argument("--restarts", type=int, default=8)
-    ap.add_argument("--samples", type=int, default=8)
+    ap.add_argument(
+        "--horizon-s",
+        type=float,
+        default=20.0,
+        help="one soft horizon for every family (one program per policy)",
+    )
     ap.add_argument("--quality-points", type=int, default=4)
     ap.add_argument("--out", default="runs/bench_stress")
     args = ap.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     suite = load_suite()
-    cfg = StressConfig(budget_s=args.budget_s, restarts=args.restarts, samples=args.samples)
-    comps, quality = [], []
-    print(f"machine: {platform.machine()} {os.cpu_count()} cores; budget {args.budget_s:g} s")
-    for policy in args.policies.split(","):
+    cfg = report.StressConfig(
+        space="adversary",
+        actors=tuple(args.actors.split(",")),
+        knots=args.knots,
+        restarts=args.restarts,
+        budget_s=args.budget_s,
+        budget_rollouts=args.budget_rollouts,
+        horizon_s=args.horizon_s,
+    )
+    load0 = os.getloadavg()
+    t_all = time.perf_counter()
+    print(
+        f"machine: {platform.machine()}, {os.cpu_count()} cores, load {load0[0]:.1f} (1 min) "
+        f"{load0[1]:.1f} (5 min); budget {args.budget_rollouts} rollouts per restart, "
+        f"{args.restarts} restarts, {args.knots} knots",
+        flush=True,
+    )
+    comps, cells, quality = [], [], []
+    for name in args.policies.split(","):
+        policy = get_policy(name)
         for fam in args.families.split(","):
-            pair = next(p for p in suite.pairs if p.family == fam)
             t0 = time.perf_counter()
-            problem, traces = stress_test(pair, policy, cfg, suite=suite, progress=False)
-            table = comparison_table(traces).assign(family=fam, policy=policy)
-            comps.append(table)
-            print(f"\n{fam} {policy} ({time.perf_counter() - t0:.0f} s incl. compile)")
-            print(table.drop(columns=["family", "policy"]).to_string(index=False))
-            space = search_space(fam)
-            points = np.random.default_rng(7).normal(0, 1, (args.quality_points, space.dim))
-            for sigma in (0.0, cfg.sigma):
-                q = gradient_quality(problem, points, sigma, args.samples)
-                quality.append(q.mean().to_frame().T.assign(family=fam, policy=policy,
-                                                            sigma=sigma))  # fmt: skip
-    comp = pd.concat(comps, ignore_index=True)
-    qual = pd.concat(quality, ignore_index=True)
-    comp.to_csv(out / "comparison.csv", index=False)
-    qual.to_csv(out / "gradient_quality.csv", index=False)
-    print("\nGradient quality (mean cosine with finite differences over random directions)")
-    print(qual.to_string(index=False, float_format=lambda x: f"{x:.2f}"))
+            pair = pick_pair(suite, fam, cfg.resolved(), policy)
+            if pair is None:
+                print(f"\n{fam} {name}: no pair whose nominal scene the expert drives with margin")
+                continue
+            problem, traces = report.stress_test(pair, policy, cfg, suite=suite, progress=True)
+            table, verdict = cell_rows(traces, problem)
+            random_row = table.set_index("method").loc["random"]
+            pass_share = float(random_row["policy_pass_share"])
+            cells.append(
+                dict(
+                    policy=name,
+                    family=fam,
+                    pair=pair.pair_id,
+                    dim=problem.space.dim,
+                    nominal_cus=problem.info["nominal_cus"],
+                    nominal_policy_failed=problem.info["nominal_policy_failed"],
+                    random_draws=int(random_row["verified"]),
+                    policy_pass_share=pass_share,
+                    plausible_failure_share=float(random_row["plausible_failure_share"]),
+                    rare=pass_share >= RARE_PASS_SHARE,
+                    compile_s=problem.info["compile_s"],
+                    load_1min=os.getloadavg()[0],
+                    **verdict,
+                )
+            )
+            comps.append(table.assign(policy=name, family=fam, pair=pair.pair_id))
+            cols = [
+                "method",
+                "failure_rate",
+                "failure_rate_lo",
+                "failure_rate_hi",
+                "median_rollouts",
+                "found_within_equal_s",
+                "median_s_at_equal_s",
+                "distinct_failures",
+                "policy_pass_share",
+                "rejected_expert",
+                "rejected_adversary",
+                "rollouts",
+                "search_s",
+            ]
+            print(
+                f"\n{fam} {name} {pair.pair_id} (pass share of random draws {pass_share:.3f}; "
+                f"{time.perf_counter() - t0:.0f} s incl. compile {problem.info['compile_s']:.0f}"
+                f" s) {verdict}"
+            )
+            print(table[cols].to_string(index=False, float_format=lambda x: f"{x:.2f}"))
+            points = np.random.default_rng(7).normal(
+                0.0, 0.5, (args.quality_points, problem.space.dim)
+            )
+            q = report.gradient_quality(problem, points, 0.0, 1, directions=8, batch=args.restarts)
+            quality.append(q.assign(family=fam, policy=name))
+            print(
+                f"gradient vs finite differences (cosine): {np.round(q['cos_first'], 3)}",
+                flush=True,
+            )
+            pd.concat(comps).to_csv(out / "comparison.csv", index=False)
+            pd.DataFrame(cells).to_csv(out / "cells.csv", index=False)
+            pd.concat(quality).to_csv(out / "gradient_quality.csv", index=False)
+    load1 = os.getloadavg()
+    print(
+        f"\ntotal {time.perf_counter() - t_all:.0f} s; load at the end {load1[0]:.1f} (1 min) "
+        f"{load1[1]:.1f} (5 min)"
+    )
+    print(pd.DataFrame(cells).to_string(index=False))
+    qual = pd.concat(quality).groupby(["policy", "family"])["cos_first"].agg(["mean", "min"])
+    print("\nGradient quality (cosine with central finite differences, 8 directions per point)")
+    print(qual.to_string(float_format=lambda x: f"{x:.3f}"))
 
 
 if __name__ == "__main__":

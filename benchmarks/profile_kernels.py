@@ -116,6 +116,7 @@ def main() -> None:
 
     pol, params, sc, st = mid_run_states(args.policy, args.batch, args.warmup_ticks)
     sc, st = jax.device_put((sc, st), jax.devices()[0])
+
     def tick(s, x):
         return step(pol, params, s, x)[0]  # the default settings, as the evaluation's
 

@@ -1,25 +1,30 @@
-"""Scenario stress testing: search spaces, gradient estimators, verification, bad inputs, and a
-whole (small) stress test whose found scenarios re-evaluate to the same hard CUS."""
+"""Scenario stress testing: search spaces, gradient estimators, plausibility, the failure
+catalogue, and a whole (small) stress test whose found scenarios re-evaluate to the same hard
+CUS."""
 
 from __future__ import annotations
 
-import json
+import types
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pandas as pd
 import pytest
 from conftest import constant_speed_waypoints
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from lantern_jax.constants import KIND_PEDESTRIAN, ROLE_HAZARD, TRIGGER_EVENT
+from lantern_jax.constants import KIND_PEDESTRIAN, ROLE_HAZARD, TRIGGER_CLOCK, TRIGGER_EVENT
 from lantern_jax.policies.base import Policy
+from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.families import KNOB_RANGES
 from lantern_jax.scenarios.handmade import ActorSpec, straight_scene
 from lantern_jax.scenarios.suite import load_suite
 from lantern_jax.stress import objective, report
-from lantern_jax.stress.space import search_space
+from lantern_jax.stress import plausibility as rules
+from lantern_jax.stress.plausibility import CAP_M
+from lantern_jax.stress.space import adversary_space, search_space
 
 
 @pytest.fixture(scope="module")
@@ -136,19 +141,31 @@ def test_adam_on_the_estimates_finds_a_known_minimum():
 # ---------------------------------------------------------------------------------------------
 # autodiff against finite differences on a smooth scene
 # ---------------------------------------------------------------------------------------------
-def _crossing_problem():
-    """A pedestrian crossing the ego's path on the event; the ego drives straight at 8 m/s
-    whatever happens (no planner decisions), so the clearance is a smooth function of the
-    pedestrian's crossing speed and trigger delay."""
+CRUISE = Policy("cruise", lambda key: None, lambda p, obs: constant_speed_waypoints(8.0))
+
+
+def _crossing(x=40.0, y0=-6.0, trigger=TRIGGER_EVENT, delay=0.0, speed=3.0, s_event=30.0,
+              **config):  # fmt: skip
+    """A straight road; a pedestrian crossing it at ``x`` (from ``y0`` to the far side) after
+    its trigger."""
     ped = ActorSpec(
-        path=np.array([[40.0, -6.0], [40.0, 16.0]]), extent=(0.3, 0.3), kind=KIND_PEDESTRIAN,
-        role=ROLE_HAZARD, v_post=3.0, trigger=TRIGGER_EVENT, despawn_at_end=True,
+        path=np.array([[x, y0], [x, 16.0]]), extent=(0.3, 0.3), kind=KIND_PEDESTRIAN,
+        role=ROLE_HAZARD, v_post=speed, trigger=trigger, trigger_delay=delay,
+        despawn_at_end=True,
     )  # fmt: skip
-    scene = straight_scene([ped], s_warn=20.0, s_event=30.0, s_conflict=40.0, clear_s=22.0,
-                           despawn_on_clear=True)  # fmt: skip
-    space = search_space("PE")
-    cruise = Policy("cruise", lambda key: None, lambda p, obs: constant_speed_waypoints(8.0))
-    return objective.Problem(space, scene, scene, cruise, None, 160, 0.1, "clearance")
+    config = {"clear_s": 22.0, "despawn_on_clear": True, **config}
+    return straight_scene([ped], s_warn=s_event - 1.0, s_event=s_event, s_conflict=x, **config)
+
+
+def _crossing_problem(expert=None, objective_name="margin", horizon=160):
+    """The crossing under the cruise policy (8 m/s whatever happens: no planner decisions, so
+    the margin is a smooth function of the pedestrian's track: it is across, metres away, when
+    the ego passes)."""
+    scene = _crossing(s_event=10.0)
+    space = adversary_space(scene, "PE", ("hazard",), knots=8, knot_s=0.5)
+    expert_params = None if expert is None else expert.init(jax.random.PRNGKey(0))
+    return objective.Problem(space, scene, scene, CRUISE, None, horizon, 0.1, objective_name,
+                             expert, expert_params)  # fmt: skip
 
 
 def test_cmaes_tells_its_own_samples_and_converges_on_a_bowl():
@@ -181,62 +198,149 @@ def test_cmaes_tells_its_own_samples_and_converges_on_a_bowl():
 
 @pytest.mark.slow
 def test_autodiff_agrees_with_finite_differences_on_a_smooth_scene():
+    """On the adversary space of a crossing walker met by a cruising ego, the pathwise gradient
+    of the soft collision margin equals central finite differences of it (the closed form of
+    the track and the watch are smooth there)."""
     problem = _crossing_problem()
-    z = problem.space.unconstrained(jnp.asarray([3.2, 0.4]))
-    grad = jax.jit(jax.grad(lambda x: objective.soft_objective(problem, x)))(z)
-    f = objective.batched_objective(problem)
-    h = 1e-2
-    plus = np.asarray(f(jnp.stack([z + h * jnp.eye(2)[i] for i in range(2)])))
-    minus = np.asarray(f(jnp.stack([z - h * jnp.eye(2)[i] for i in range(2)])))
-    fd = (plus - minus) / (2 * h)
-    assert np.all(np.abs(np.asarray(grad)) > 1e-3), "the clearance should depend on both knobs"
-    np.testing.assert_allclose(np.asarray(grad), fd, rtol=0.05, atol=1e-3)
+    rng = np.random.default_rng(0)
+    z = jnp.asarray(rng.normal(0.0, 0.3, problem.space.dim), jnp.float32)
+    quality = report.gradient_quality(problem, np.asarray(z)[None], 0.0, 1, directions=8,
+                                      step=1e-2, batch=1)  # fmt: skip
+    assert np.isfinite(quality["value"][0]) and 0.0 < quality["value"][0] < CAP_M
+    assert quality["cos_first"][0] > 0.99
+    grad = objective.batched_estimator(problem, 0.0)(z[None], np.zeros((1, 1, z.shape[0])))
+    assert np.all(np.isfinite(np.asarray(grad.first))) and float(jnp.linalg.norm(grad.first)) > 0
 
 
 # ---------------------------------------------------------------------------------------------
-# verification
+# plausibility
 # ---------------------------------------------------------------------------------------------
+def test_plausibility_rules_on_their_numbers():
+    """The rules as stated: the expert needs every gate, 0.5 m of clearance (or none measured)
+    and 0.5 m from every watched actor; a tracked actor may stop in the path for 2 s, never
+    leave the road, never exceed its speed limit (within 0.05 m/s)."""
+    ok = rules.expert_passes_with_margin(
+        np.array([True, True, True, False, True]),
+        np.array([0.6, np.nan, 0.4, 3.0, 2.0]),
+        np.array([0.5, 3.0, 3.0, 3.0, 0.49]),
+    )
+    np.testing.assert_array_equal(ok, [True, True, False, False, False])
+    plausible = rules.adversary_plausible(
+        np.array([2.0, 2.05, 0.0, 0.0]), np.array([0.0, 0.0, 0.05, 0.0]),
+        np.array([[4.5], [4.5], [4.5], [4.6]]), np.array([4.54]),
+    )  # fmt: skip
+    np.testing.assert_array_equal(plausible, [True, False, False, False])
+    # the black-box expression: margin + 2 per m of expert margin missing below 1 m + 2 per s
+    obj = rules.hard_objective(np.array([1.5, 1.5, 40.0]), np.array([0.25, 3.0, 3.0]),
+                               np.array([0.0, 1.5, 0.0]), np.array([0.0, 0.0, 0.0]))  # fmt: skip
+    np.testing.assert_allclose(obj, [1.5 + 2 * 0.75, 1.5 + 2 * 0.5, rules.CAP_M])
+    # a walker's speed limit: hypot(run, sidestep); a car's: hypot(v, v tan(heading bound))
+    assert rules.speed_limit(4.5, 1.0, True, 3.0) == pytest.approx(np.hypot(4.5, 1.0))
+    assert rules.speed_limit(16.7, 0.2, False, 20.0) == pytest.approx(np.hypot(20.0, 4.0))
+
+
 @pytest.mark.slow
-def test_verification_rejects_a_soft_failure_whose_hard_rollout_passes(suite):
-    """At a high temperature the soft Route A score of the nominal PE pair under coop lies far
-    below the failure threshold, but coop drives it cleanly: verification says no failure."""
-    from lantern_jax.policies.registry import get_policy
-    from lantern_jax.stress.verify import FAIL_BELOW_CUS, Verifier
+def test_only_plausible_failures_are_reported():
+    """Three crossings met by the cruising policy (8 m/s, never brakes), verified with the
+    privileged expert as the guard:
 
-    pair = next(p for p in suite.pairs if p.family == "PE")
-    cfg = report.StressConfig(temperature=1.0, objective="soft_cus")
-    problem = report.make_problem(pair, get_policy("coop"), search_space("PE"), cfg)
-    nominal = jnp.asarray([[3.0, 0.0]], jnp.float32)
-    soft = float(objective.soft_objective(problem, problem.space.unconstrained(nominal[0])))
-    assert soft < FAIL_BELOW_CUS
-    verdict = Verifier(problem, get_policy("expert"))(np.asarray(nominal))
-    assert bool(verdict.gates_passed[0]) and verdict.cus[0] > FAIL_BELOW_CUS
-    assert not bool(verdict.failed[0])
+    * a walker crossing at its scripted 3 m/s into the cruising ego: the policy collides, the
+      expert (which sees it) stops with metres to spare: a plausible failure, reported;
+    * the same walker braking to a stop in the middle of the lane and waiting there until the
+      ego arrives (3.6 s in its path): the policy collides, but the walker froze: not reported;
+    * a walker running into the side of the ego right beside it: the expert cannot avoid it
+      either (its failure is shared): not reported.
+    """
+    from lantern_jax.stress.verify import Verifier
+
+    expert = get_policy("expert")
+
+    def verdict(scene, actions):
+        space = adversary_space(scene, "PE", ("hazard",), knots=16, knot_s=0.5)
+        problem = objective.Problem(space, scene, scene, CRUISE, None, 200, 0.1, "plausible",
+                                    expert, expert.init(jax.random.PRNGKey(0)))  # fmt: skip
+        return Verifier(problem, batch=2)(np.asarray(actions, np.float32))
+
+    zero, freeze = np.zeros(32), np.zeros(32)
+    freeze[3:5] = -1.0  # brake at 3 m/s^2 from 1.5 s to 2.5 s after the trigger: stops mid-lane
+    crossing = verdict(_crossing(x=40.0, s_event=20.0), [zero, zero])
+    assert crossing.failed[0] and crossing.failed_gates[0] == ["gate_collision"]
+    assert crossing.expert_ok[0] and crossing.expert_dist_m[0] > 1.0 and crossing.plausible[0]
+    frozen = verdict(_crossing(x=50.0, s_event=5.0, despawn_on_clear=False,
+                               clear_time_limit=60.0), [zero, freeze])  # fmt: skip
+    assert not frozen.policy_failed[0]  # unperturbed, the walker is across before the ego comes
+    assert frozen.policy_failed[1] and frozen.expert_ok[1]
+    assert frozen.stop_s[1] > rules.STOP_IN_PATH_LIMIT_S and not frozen.plausible[1]
+    assert not frozen.failed[1]
+    beside = _crossing(x=4.0, y0=-2.5, trigger=TRIGGER_CLOCK, delay=0.1, speed=4.5, s_event=3.0)
+    side = verdict(beside, [zero, zero])
+    assert side.policy_failed[0] and not side.expert_ok[0] and not side.failed[0]
+
+
+# ---------------------------------------------------------------------------------------------
+# the failure catalogue
+# ---------------------------------------------------------------------------------------------
+def test_near_duplicates_of_a_manoeuvre_are_one_failure():
+    """The paper's rule on the adversary's positions at equal times: within 3 m at 70 % of the
+    samples both ways is the same manoeuvre; farther, or present in one only, is another."""
+    from lantern_jax.stress import catalogue
+
+    t = np.arange(20, dtype=np.float64)
+    base = np.stack([t, np.zeros_like(t)], -1)[:, None, :]  # (K, W=1, 2)
+    near = base + np.array([0.0, 2.5])  # 2.5 m apart everywhere
+    far = base.copy()
+    far[:8] += np.array([0.0, 4.0])  # 4 m apart at 8 of 20 samples: 60 % near
+    gone = base.copy()
+    gone[7:] = np.nan  # absent from 7 s on: only 35 % of base's samples are matched
+    assert catalogue.same_manoeuvre(base, near, [0])
+    assert not catalogue.same_manoeuvre(base, far, [0])
+    assert not catalogue.same_manoeuvre(base, gone, [0])
+    problem = types.SimpleNamespace(tracked_mask=np.array([True]))
+    failures = [dict(traj=x) for x in (base, near, far, gone, far + 0.1)]
+    assert catalogue.distinct(failures, problem) == [0, 2, 3]
 
 
 @pytest.mark.slow
-def test_a_small_stress_test_end_to_end(suite, tmp_path):
-    """Every method runs on a tiny budget; ego's failures on the hidden pedestrian are found; the
-    found scenarios, written as a suite file, re-evaluate to the hard CUS the search reported."""
+def test_found_failures_round_trip_through_their_suite_file(suite, tmp_path):
+    """A small adversary stress test of ``ego`` on the hidden pedestrian: every method finds
+    verified failures; the catalogue, written as a suite file, re-evaluates to the hard CUS the
+    search verified (within the evaluation's reproducibility promise) with the same gates."""
     from lantern_jax.evaluation import evaluate
     from lantern_jax.scoring.table import REPRODUCIBLE_ATOL
 
     pair = next(p for p in suite.pairs if p.family == "PE")
-    # a wall-clock budget: generous, so that a loaded machine still completes a few iterations
-    cfg = report.StressConfig(budget_s=10.0, restarts=2, samples=2, seed=0)
+    cfg = report.StressConfig(space="adversary", knots=8, budget_s=600.0, budget_rollouts=8,
+                              restarts=2, popsize=2, methods=("random", "cmaes"))  # fmt: skip
     problem, traces = report.stress_test(pair, "ego", cfg, suite=suite, progress=False)
-    table = report.comparison_table(traces)
-    assert list(table["method"]) == ["gradient", "random", "cmaes"]
-    assert (table["failure_rate"] > 0).all()  # ego never sees the hidden pedestrian in time
+    table = report.comparison_table(traces, problem)
+    assert list(table["method"]) == ["random", "cmaes"]
+    assert (table["failure_rate"] > 0).all()
     assert (table["failure_rate_lo"] <= table["failure_rate"]).all()
     assert (table["failure_rate"] <= table["failure_rate_hi"]).all()
-    files = report.write_results(tmp_path, pair, problem.space, traces)
-    manifest = json.loads(files["found_suite.json"].read_text())
-    assert manifest["pairs"], "nothing was found"
-    found = load_suite(files["found_suite.json"])
+    assert (table["rollouts"] >= 8).all() and (table["rollouts_soft_policy"] == 0).all()
+    files = report.write_results(tmp_path, pair, problem.space, traces, None, problem, "ego")
+    entries = pd.read_csv(files["catalogue.csv"])
+    assert len(entries) >= 1 and entries["description"].str.contains("pedestrian").all()
+    found = load_suite(files["catalogue_suite.json"])
+    assert all("adversary" in p.params for p in found.pairs)
     result = evaluate(["ego"], suite=found, progress=False)
     got = result.route_table[result.route_table["condition"] == "warning"].set_index("pair_id")
-    reported = {f"{pair.pair_id}_{t.method}_r{f['restart']:02d}": f["cus"]
-                for t in traces for f in t.found}  # fmt: skip
-    for pid, cus in reported.items():
-        assert abs(got.loc[pid, "CUS"] - cus) <= REPRODUCIBLE_ATOL, pid
+    for _, e in entries.iterrows():
+        assert abs(got.loc[e["pair_id"], "CUS"] - e["hard_cus"]) <= REPRODUCIBLE_ATOL, e["pair_id"]
+
+
+@pytest.mark.slow
+def test_verification_rejects_a_soft_failure_whose_hard_rollout_passes(suite):
+    """At a high temperature the soft Route A score of the nominal PE pair under coop lies far
+    below the failure threshold, but coop drives it cleanly: verification says no failure."""
+    from lantern_jax.stress.verify import FAIL_BELOW_CUS, Verifier
+
+    pair = next(p for p in suite.pairs if p.family == "PE")
+    cfg = report.StressConfig(temperature=1.0, objective="soft_cus", expert_weight=0.0)
+    problem = report.make_problem(pair, get_policy("coop"), search_space("PE"), cfg)
+    nominal = jnp.asarray([[3.0, 0.0]], jnp.float32)
+    soft = float(objective.soft_objective(problem, problem.space.unconstrained(nominal[0])))
+    assert soft < FAIL_BELOW_CUS
+    verdict = Verifier(problem)(np.asarray(nominal))
+    assert bool(verdict.gates_passed[0]) and verdict.cus[0] > FAIL_BELOW_CUS
+    assert not bool(verdict.failed[0])

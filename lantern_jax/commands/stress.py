@@ -1,13 +1,18 @@
-"""``lantern-jax stress``: search a family's scenario knobs for the hazards that break a policy.
+"""``lantern-jax stress``: search a scenario for the hazards that break a policy.
 
 ::
 
     lantern-jax stress --policy coop --family PE --budget-s 60 --out runs/stress_pe
+    lantern-jax stress --policy coop --family PE --space adversary --actors hazard,background \\
+        --knots 16 --budget-rollouts 128 --out runs/stress_pe_adv
 
-runs gradient search, random search and CMA-ES at equal wall-clock budget on one pair of the
-suite (default: the family's first pair), prints the comparison table and writes
-``comparison.csv``, ``found.csv``, ``found_suite.json`` (runnable with ``lantern-jax evaluate
---suite``) and ``convergence.png`` (see :mod:`lantern_jax.stress.report`).
+runs gradient search, random search and CMA-ES interleaved at equal budget (seconds per
+method and/or rollouts per restart) on one pair of the suite (default: the family's first pair),
+in the family's knobs (``--space knobs``), in adversarial tracks of its actors
+(``--space adversary``) or in both; prints a ``compiling`` line, the comparison table and the
+failure catalogue, and writes ``comparison.csv``, ``found.csv``, ``found_suite.json``, the
+catalogue (``catalogue.csv``, ``catalogue_suite.json`` — runnable with ``lantern-jax evaluate
+--suite`` — and ``catalogue.png``) and ``convergence.png`` (see :mod:`lantern_jax.stress.report`).
 """
 
 from __future__ import annotations
@@ -19,6 +24,10 @@ from collections.abc import Sequence
 from lantern_jax.commands import UsageError
 from lantern_jax.commands.common import check_out, write_failed
 from lantern_jax.constants import CONDITIONS
+
+#: Options only a knob space reads, and options only an adversary space reads (None = not given).
+KNOB_OPTIONS = ("knobs", "range")
+ADVERSARY_OPTIONS = ("actors", "knots", "knot_s", "background")
 
 
 def _ranges(items: Sequence[str] | None) -> dict[str, tuple[float, float]]:
@@ -39,22 +48,91 @@ def _ranges(items: Sequence[str] | None) -> dict[str, tuple[float, float]]:
 
 def _check_numbers(args: argparse.Namespace, methods: tuple[str, ...]) -> None:
     """Refuse search settings that cannot run, before anything is compiled."""
-    least_samples = 2 if "cmaes" in methods else 1  # CMA-ES needs a population of two
-    checks = (
-        ("--budget-s", args.budget_s, math.isfinite(args.budget_s) and args.budget_s > 0,
-         "a finite number of seconds > 0"),
+    popsize_from_samples = "cmaes" in methods and args.space == "knobs" and not args.popsize
+    least_samples = 2 if popsize_from_samples else 1  # CMA-ES needs a population of two
+    checks = [
+        (
+            "--budget-s",
+            args.budget_s,
+            math.isfinite(args.budget_s) and args.budget_s > 0,
+            "a finite number of seconds > 0",
+        ),
         ("--restarts", args.restarts, args.restarts >= 1, "a whole number >= 1"),
-        ("--samples", args.samples, args.samples >= least_samples,
-         f"a whole number >= {least_samples}" + (" (CMA-ES's population)" if
-                                                 least_samples == 2 else "")),
-        ("--sigma", args.sigma, math.isfinite(args.sigma) and args.sigma >= 0,
-         "a finite number >= 0"),
-        ("--temperature", args.temperature,
-         math.isfinite(args.temperature) and args.temperature > 0, "a finite number > 0"),
-    )  # fmt: skip
+        (
+            "--sigma",
+            args.sigma,
+            args.sigma is None or (math.isfinite(args.sigma) and args.sigma >= 0),
+            "a finite number >= 0",
+        ),
+        (
+            "--temperature",
+            args.temperature,
+            math.isfinite(args.temperature) and args.temperature > 0,
+            "a finite number > 0",
+        ),
+        (
+            "--popsize",
+            args.popsize,
+            args.popsize == 0 or args.popsize >= 2,
+            "0 (cma's default) or a whole number >= 2",
+        ),
+    ]
+    if args.expert_weight is not None:
+        checks.append(
+            (
+                "--expert-weight",
+                args.expert_weight,
+                math.isfinite(args.expert_weight) and args.expert_weight >= 0,
+                "a finite number >= 0",
+            )
+        )
+    if args.samples is not None:
+        checks.append(
+            (
+                "--samples",
+                args.samples,
+                args.samples >= least_samples,
+                f"a whole number >= {least_samples}"
+                + (" (CMA-ES's population)" if least_samples == 2 else ""),
+            )
+        )
+    if args.budget_rollouts is not None:
+        checks.append(
+            (
+                "--budget-rollouts",
+                args.budget_rollouts,
+                args.budget_rollouts >= 1,
+                "a whole number >= 1",
+            )
+        )
+    if args.lr is not None:
+        checks.append(
+            ("--lr", args.lr, math.isfinite(args.lr) and args.lr > 0, "a finite number > 0")
+        )
+    if args.horizon_s is not None:
+        checks.append(
+            (
+                "--horizon-s",
+                args.horizon_s,
+                math.isfinite(args.horizon_s) and args.horizon_s > 0,
+                "a finite number of seconds > 0",
+            )
+        )
     for flag, value, ok, want in checks:
         if not ok:
             raise UsageError(f"{flag}: must be {want}, got {value:g}")
+
+
+def _check_space_options(args: argparse.Namespace) -> None:
+    """Options the chosen space does not read are refused."""
+    unread = ADVERSARY_OPTIONS if args.space == "knobs" else ()
+    unread += KNOB_OPTIONS if args.space == "adversary" else ()
+    given = [f"--{k.replace('_', '-')}" for k in unread if getattr(args, k) is not None]
+    if given:
+        raise UsageError(
+            f"{', '.join(given)}: --space {args.space} does not read "
+            f"{'it' if len(given) == 1 else 'them'}"
+        )
 
 
 def cmd_stress(args: argparse.Namespace, argv: Sequence[str]) -> int:
@@ -66,7 +144,7 @@ def cmd_stress(args: argparse.Namespace, argv: Sequence[str]) -> int:
     from lantern_jax.report import interval_note
     from lantern_jax.scenarios.suite import load_suite
     from lantern_jax.stress import report, search
-    from lantern_jax.viz.stress import convergence_plot
+    from lantern_jax.viz.stress import catalogue_figure, convergence_plot
 
     if args.family not in FAMILIES:
         raise UsageError(f"--family {args.family!r}: not one of {', '.join(FAMILIES)}")
@@ -75,6 +153,7 @@ def cmd_stress(args: argparse.Namespace, argv: Sequence[str]) -> int:
     if bad or not methods:
         raise UsageError(f"--methods: {bad or 'none'}; valid: {', '.join(search.METHODS)}")
     _check_numbers(args, methods)
+    _check_space_options(args)
     ranges = _ranges(args.range)
     check_out(args.out)
     try:
@@ -87,29 +166,77 @@ def cmd_stress(args: argparse.Namespace, argv: Sequence[str]) -> int:
         if not pairs:
             raise UsageError(f"--pair {args.pair!r}: no {args.family} pair of that id")
     knobs = tuple(k.strip() for k in args.knobs.split(",") if k.strip()) if args.knobs else None
+    actors = tuple(a.strip() for a in (args.actors or "hazard").split(",") if a.strip())
+    given = {
+        k: getattr(args, k)
+        for k in ("budget_rollouts", "knots", "knot_s", "background", "expert_weight")
+        if getattr(args, k) is not None
+    }
     cfg = report.StressConfig(
-        budget_s=args.budget_s, restarts=args.restarts, samples=args.samples,
-        sigma=args.sigma, temperature=args.temperature, objective=args.objective,
-        condition=args.condition, seed=args.seed, methods=methods,
-    )  # fmt: skip
+        budget_s=args.budget_s,
+        restarts=args.restarts,
+        samples=args.samples,
+        popsize=args.popsize,
+        sigma=args.sigma,
+        lr=args.lr,
+        temperature=args.temperature,
+        objective=args.objective,
+        condition=args.condition,
+        seed=args.seed,
+        methods=methods,
+        space=args.space,
+        actors=actors,
+        horizon_s=args.horizon_s,
+        **given,
+    )
     try:
-        _, traces = report.stress_test(pairs[0], args.policy, cfg, suite, knobs, ranges,
-                                       progress=not args.quiet)  # fmt: skip
+        problem, traces = report.stress_test(
+            pairs[0], args.policy, cfg, suite, knobs, ranges, progress=not args.quiet
+        )
     except (ValueError, KeyError) as e:
         raise UsageError(str(e).strip("'\"")) from None
-    from lantern_jax.stress.space import search_space
-
-    space = search_space(args.family, knobs, ranges)
-    title = f"{pairs[0].pair_id} ({args.family}), {args.policy}, {args.condition}, {args.objective}"
+    space = problem.space if problem is not None else None
+    title = f"{pairs[0].pair_id} ({args.family}), {args.policy}, {args.condition}, {args.space}"
     fig = convergence_plot(traces, title)
+
+    def views(entries):
+        return catalogue_figure(problem, entries)
+
     try:
-        files = report.write_results(args.out, pairs[0], space, traces, fig)
+        files = report.write_results(
+            args.out,
+            pairs[0],
+            space,
+            traces,
+            fig,
+            problem,
+            args.policy,
+            views if problem is not None else None,
+        )
     except OSError as e:
         return write_failed(args.out, e)
-    table = report.comparison_table(traces)
-    print(f"Stress test  ({title}; {args.budget_s:g} s per method, {args.restarts} restarts)")
-    print(tabulate(table, headers="keys", showindex=False, floatfmt=".2f"))
+    table = report.comparison_table(traces, problem)
+    budget = f"{args.budget_s:g} s per method"
+    if args.budget_rollouts is not None:
+        budget += f", {args.budget_rollouts} rollouts per restart"
+    print(f"Stress test  ({title}; {budget}, {args.restarts} restarts)")
+    if problem is not None and problem.info:
+        print(f"compile {problem.info['compile_s']:.1f} s (apart from the search times below)")
+    shown = list(report.SUMMARY_COLUMNS)
+    print(
+        tabulate(
+            table[[c for c in shown if c in table]], headers="keys", showindex=False, floatfmt=".2f"
+        )
+    )
     print(f"failure_rate_lo, _hi: {interval_note(over='restarts')}")
+    cat = args.out.rstrip("/") + "/catalogue.csv"
+    if "catalogue.csv" in {p.name for p in files.values()}:
+        import pandas as pd
+
+        entries = pd.read_csv(cat)
+        print(f"Failure catalogue: {len(entries)} distinct failures")
+        for _, e in entries.head(10).iterrows():
+            print(f"  {e['pair_id']} ({e['method']}): CUS {e['hard_cus']:.1f}; {e['description']}")
     print(f"Wrote {len(files)} files to {args.out}")
     return 0
 
@@ -118,26 +245,109 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``stress`` on the command line's sub-parsers."""
     st = sub.add_parser(
         "stress",
-        help="search scenario knobs for failures (gradient vs random search vs CMA-ES)",
+        help="search a scenario for failures (gradient vs random search vs CMA-ES)",
         description=__doc__.splitlines()[0],
         allow_abbrev=False,
     )
     st.add_argument("--policy", default="coop", metavar="NAME", help="policy under test")
     st.add_argument("--family", required=True, metavar="F", help="PE, VC, OR, LWW, RWW or RTY")
-    st.add_argument("--budget-s", type=float, default=60.0, metavar="S",
-                    help="wall-clock seconds per method, compilation excluded")  # fmt: skip
+    st.add_argument(
+        "--space",
+        default="knobs",
+        choices=("knobs", "adversary", "both"),
+        help="what is searched: the family's knobs, adversarial actor tracks, or both",
+    )
+    st.add_argument(
+        "--budget-s",
+        type=float,
+        default=60.0,
+        metavar="S",
+        help="wall-clock seconds per method, compilation excluded",
+    )
+    st.add_argument(
+        "--budget-rollouts",
+        type=int,
+        default=None,
+        metavar="N",
+        help="rollouts per restart and method, every kind counted (default: none)",
+    )
     st.add_argument("--out", default="results/stress", metavar="DIR", help="output folder")
     st.add_argument("--suite", default=None, metavar="ID|PATH", help="suite (default built-in)")
     st.add_argument("--pair", metavar="ID", help="pair to stress (default: the family's first)")
     st.add_argument("--knobs", metavar="K[,K...]", help="knobs to search (default: all)")
-    st.add_argument("--range", action="append", metavar="KNOB=LO:HI",
-                    help="narrow a knob's range (may be repeated)")  # fmt: skip
+    st.add_argument(
+        "--range",
+        action="append",
+        metavar="KNOB=LO:HI",
+        help="narrow a knob's range (may be repeated)",
+    )
+    st.add_argument(
+        "--actors",
+        default=None,
+        metavar="G[,G...]",
+        help="adversary: actors with tracks, hazard and/or background (default: hazard)",
+    )
+    st.add_argument(
+        "--knots",
+        type=int,
+        default=None,
+        metavar="N",
+        help="adversary: knots per track, 2 N dimensions per actor (default 16)",
+    )
+    st.add_argument(
+        "--knot-s",
+        type=float,
+        default=None,
+        metavar="S",
+        help="adversary: seconds per knot (default 0.5)",
+    )
+    st.add_argument(
+        "--background",
+        type=int,
+        default=None,
+        metavar="N",
+        help="adversary: background vehicles nearest the route (default 1)",
+    )
     st.add_argument("--restarts", type=int, default=8, metavar="R")
-    st.add_argument("--samples", type=int, default=8, metavar="M",
-                    help="perturbations per gradient step / CMA-ES population")  # fmt: skip
-    st.add_argument("--sigma", type=float, default=0.3, help="gradient smoothing scale")
+    st.add_argument(
+        "--samples",
+        type=int,
+        default=None,
+        metavar="M",
+        help="random draws per restart and iteration; gradient perturbations with "
+        "--sigma > 0 (default: 8 knobs, 1 adversary)",
+    )
+    st.add_argument(
+        "--popsize",
+        type=int,
+        default=0,
+        metavar="P",
+        help="CMA-ES population per restart (default: --samples for knobs, cma's "
+        "4 + 3 ln K otherwise)",
+    )
+    st.add_argument(
+        "--sigma",
+        type=float,
+        default=None,
+        help="gradient smoothing scale (default: 0.3 knobs, 0 adversary)",
+    )
+    st.add_argument("--lr", type=float, default=None, help="Adam step size (0.3 / 0.2)")
     st.add_argument("--temperature", type=float, default=0.1, help="soft-score temperature")
-    st.add_argument("--objective", default="clearance", choices=("clearance", "margin", "soft_cus"))
+    st.add_argument(
+        "--objective", default="plausible", choices=("plausible", "margin", "clearance", "soft_cus")
+    )
+    st.add_argument(
+        "--expert-weight",
+        type=float,
+        default=None,
+        help="weight of the expert's margin in the surrogate (0: none; default 2)",
+    )
+    st.add_argument(
+        "--horizon-s",
+        type=float,
+        default=None,
+        help="seconds of soft rollout (default: from the pair)",
+    )
     st.add_argument("--condition", default=CONDITIONS[0], choices=CONDITIONS)
     st.add_argument("--methods", default="gradient,random,cmaes", metavar="M[,M...]")
     st.add_argument("--seed", type=int, default=0)

@@ -50,6 +50,7 @@ from lantern_jax.constants import (
     MOTION_IDM,
     MOTION_SCRIPTED,
 )
+from lantern_jax.dynamics.adversary import commanded, track_start
 from lantern_jax.dynamics.bicycle import longitudinal_step
 from lantern_jax.dynamics.idm import (
     DEFAULT_IDM,
@@ -58,7 +59,7 @@ from lantern_jax.dynamics.idm import (
     idm_from_terms,
     interaction_term,
 )
-from lantern_jax.dynamics.scripted import scripted_pose, trigger_time
+from lantern_jax.dynamics.scripted import scripted_arc, scripted_pose, trigger_time
 from lantern_jax.polyline import interpolate, left_normal
 from lantern_jax.times import NEVER, happened
 from lantern_jax.world import ActorScript, ActorState, present
@@ -145,8 +146,14 @@ def _idm_update(
     ego_speed: Array,
     dt: float,
     params: IDMParams,
+    track_accel: Array | None = None,
 ) -> tuple[Array, Array, Array]:
-    """New (s, speed, active) of every slot integrated as an IDM actor, each (A,)."""
+    """New (s, speed, active) of every slot integrated as an IDM actor, each (A,).
+
+    ``track_accel`` (A,) m/s^2 is an adversarial track's commanded acceleration, added to the
+    IDM's and the sum kept within the track's limits (:mod:`lantern_jax.dynamics.adversary`;
+    an exact no-op when 0).
+    """
     v = jnp.maximum(actors.speed, 0.0)
     half = script.extent[:, 0]
     gap, v_lead = _idm_candidates(actors, script.extent, present, ego_xy, ego_yaw, ego_speed)
@@ -174,6 +181,10 @@ def _idm_update(
     # evaluate the free-road power once per actor.
     inter = jnp.max(interaction_term(v[:, None], gaps, v[:, None] - leads_v, params), axis=1)
     acc = idm_from_terms(free_road_term(v, script.v_pre, params), inter, script.v_pre, params)
+    if track_accel is not None:
+        tr = script.track
+        extra = jnp.where(v >= tr.v_max, jnp.minimum(track_accel, 0.0), track_accel)
+        acc = jnp.clip(acc + extra, jnp.minimum(-tr.b_max, acc), jnp.maximum(tr.a_max, acc))
 
     distance, v_next = longitudinal_step(v, acc, dt)
     s_next = actors.s + distance
@@ -199,22 +210,21 @@ def scripted_states(
         :func:`lantern_jax.dynamics.scripted.scripted_pose`.
     """
     tau = trigger_time(script.trigger, script.trigger_delay, t_event, script.trigger_deadline)
-    pose = jax.vmap(scripted_pose, in_axes=(0,) * 11 + (None, 0))
-    return pose(
-        script.path,
-        script.path_s,
-        script.path_valid,
-        script.s_init,
-        script.v_pre,
-        script.v_post,
-        script.s_hold,
-        script.s_end,
-        script.lat_shift,
-        script.lat_duration,
-        script.despawn_at_end,
-        t,
-        tau,
-    )
+    args = (
+        script.path, script.path_s, script.path_valid, script.s_init, script.v_pre,
+        script.v_post, script.s_hold, script.s_end, script.lat_shift, script.lat_duration,
+        script.despawn_at_end, t, tau,
+    )  # fmt: skip
+    if script.track is None:
+        return jax.vmap(scripted_pose, in_axes=(0,) * 11 + (None, 0))(*args)
+    return jax.vmap(scripted_pose, in_axes=(0,) * 11 + (None, 0, 0))(*args, track_args(script))
+
+
+def track_args(script: ActorScript) -> tuple[Array, ...]:
+    """The per-slot track profile that :func:`~lantern_jax.dynamics.scripted.scripted_arc`
+    takes, ``(dv, ds, q, g, dlat, knot_s)`` with a leading (A,) slot axis."""
+    tr = script.track
+    return (tr.dv, tr.ds, tr.q, tr.g, tr.dlat, tr.knot_s)
 
 
 def start_state(script: ActorScript) -> ActorState:
@@ -249,6 +259,34 @@ def start_state(script: ActorScript) -> ActorState:
 def _where_slot(mask: Array, a: Array, b) -> Array:
     """``where(mask, a, b)`` with an (A,) slot mask broadcast over ``a``'s trailing axes."""
     return jnp.where(mask.reshape(mask.shape + (1,) * (a.ndim - 1)), a, b)
+
+
+def _idm_track(
+    actors: ActorState, script: ActorScript, handed: Array, tau: Array, t_next: Array,
+    t_event: Array, dt: float,
+) -> tuple[Array, Array]:  # fmt: skip
+    """An adversarial track acting on the IDM-driven slots during the tick ending at ``t_next``.
+
+    Returns:
+        ``track_accel`` (A,) m/s^2, the commanded acceleration of the tick, and ``lat`` (A,) m,
+        the IDM slots' lateral offset at ``t_next``: the script's own (a handed-over actor's
+        manoeuvre, closed form) plus the track's deviation, integrated with the actual speed
+        (``w = gain * q``, :mod:`lantern_jax.dynamics.adversary`).
+    """
+    tr = script.track
+    start = track_start(script.trigger, tau, t_event)
+    t_prev = t_next - dt
+    u = jnp.where(happened(start), t_prev - jnp.where(happened(start), start, 0.0), -1.0)
+    accel, q_now = jax.vmap(commanded)(tr.accel, tr.q, tr.knot_s, u)
+    base = jax.vmap(scripted_arc, in_axes=(0,) * 8 + (None, 0))
+    fields = (
+        script.s_init, script.v_pre, script.v_post, script.s_hold, script.s_end,
+        script.lat_shift, script.lat_duration, script.despawn_at_end,
+    )  # fmt: skip
+    base_prev = jnp.where(handed, base(*fields, t_prev, tau)[1], 0.0)
+    base_next = jnp.where(handed, base(*fields, t_next, tau)[1], 0.0)
+    gain = jnp.where(tr.holonomic, 1.0, jnp.maximum(actors.speed, 0.0))
+    return accel, base_next + (actors.lat - base_prev) + dt * gain * q_now
 
 
 def step_actors(
@@ -301,11 +339,15 @@ def step_actors(
 
     # IDM: integrate along the path (a handed-over actor's lateral offset keeps following its
     # script in time, i.e. stays at lat_shift once its manoeuvre is over)
+    track_accel, track_lat = None, None
+    if script.track is not None:
+        track_accel, track_lat = _idm_track(clean, script, handed, tau, t_next, t_event, dt)
     id_s, id_speed, id_active = _idm_update(
-        clean, idm_script, is_present, light_state, ego_xy, ego_yaw, ego_speed, dt, idm_params
-    )
+        clean, idm_script, is_present, light_state, ego_xy, ego_yaw, ego_speed, dt, idm_params,
+        track_accel,
+    )  # fmt: skip
     id_pt, id_yaw = jax.vmap(interpolate)(script.path, script.path_s, script.path_valid, id_s)
-    id_lat = jnp.where(handed, sc_lat, 0.0)
+    id_lat = jnp.where(handed, sc_lat, 0.0) if track_lat is None else track_lat
     id_xy = id_pt + left_normal(id_yaw) * id_lat[:, None]
 
     s = jnp.where(is_idm, id_s, sc_s)

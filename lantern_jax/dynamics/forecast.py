@@ -18,6 +18,9 @@ vectorised.  Times are ``t + dt * k`` for ``k = 1 .. K``.
   of those two poses' boxes, taken in the frame of the untriggered pose; that box is reported
   (exact for the straight scenario paths; a slight under-cover of the intermediate headings
   during a lateral manoeuvre).
+* **Adversarial tracks** (:mod:`lantern_jax.dynamics.adversary`) are part of the script: a
+  scripted actor's forecast follows its track; an IDM actor with a track holds its current
+  lateral offset.
 * **IDM actors** (``MOTION_IDM``: background traffic, and any walker that is not scripted)
   keep their current speed along their path (PDM-Lite forecasts other vehicles with their last
   control and walkers at constant velocity); clipped at the path end, where a despawning actor
@@ -83,13 +86,21 @@ def earliest_event_time(
 
 def _places(script: ActorScript, times: Array, tau: Array) -> tuple[Array, ...]:
     """Scripted (s, lat, v_long, v_lat, active) of every slot at every time, each (A, K)."""
-    per_actor = jax.vmap(scripted_arc, in_axes=(0,) * 8 + (None, 0))
+    fields = (
+        script.s_init, script.v_pre, script.v_post, script.s_hold, script.s_end,
+        script.lat_shift, script.lat_duration, script.despawn_at_end,
+    )  # fmt: skip
+    if script.track is None:
+        per_actor = jax.vmap(scripted_arc, in_axes=(0,) * 8 + (None, 0))
 
-    def at(tk):
-        return per_actor(
-            script.s_init, script.v_pre, script.v_post, script.s_hold, script.s_end,
-            script.lat_shift, script.lat_duration, script.despawn_at_end, tk, tau,
-        )  # fmt: skip
+        def at(tk):
+            return per_actor(*fields, tk, tau)
+    else:  # the track is part of the script: the forecast follows it (exact once tau is known)
+        tr = script.track
+        per_actor = jax.vmap(scripted_arc, in_axes=(0,) * 8 + (None, 0, 0))
+
+        def at(tk):
+            return per_actor(*fields, tk, tau, (tr.dv, tr.ds, tr.q, tr.g, tr.dlat, tr.knot_s))
 
     return tuple(jnp.swapaxes(x, 0, 1) for x in jax.vmap(at)(times))
 
@@ -209,9 +220,12 @@ def forecast_actors(
         return jnp.where(idm, idm_value, scripted_value)
 
     zero = jnp.zeros_like(s_idm)
-    pose_lo = _pose(script, pick(s_idm, lo[0]), pick(zero, lo[1]), pick(v_idm, lo[2]),
+    lat_idm = zero
+    if script.track is not None:  # an IDM actor with a track holds its lateral offset
+        lat_idm = jnp.broadcast_to(actors.lat[:, None], s_idm.shape)
+    pose_lo = _pose(script, pick(s_idm, lo[0]), pick(lat_idm, lo[1]), pick(v_idm, lo[2]),
                     pick(zero, lo[3]))  # fmt: skip
-    pose_hi = _pose(script, pick(s_idm, hi[0]), pick(zero, hi[1]), pick(v_idm, hi[2]),
+    pose_hi = _pose(script, pick(s_idm, hi[0]), pick(lat_idm, hi[1]), pick(v_idm, hi[2]),
                     pick(zero, hi[3]))  # fmt: skip
     hl, hw = script.extent[:, 0:1], script.extent[:, 1:2]
     cx, cy, ux, uy, el, ew = _union_box(pose_lo, pose_hi, hl, hw)

@@ -9,12 +9,13 @@ For one actor with trigger time ``tau``::
     pose         xy = path(s) + left_normal(path_heading(s)) * lat
                  yaw = path_heading(s) + atan2(dlat/dt, ds/dt)
 
-with ``smoothstep(x) = 3 x^2 - 2 x^3`` on ``[0, 1]`` (0 below, 1 above).  Everything is a
-piecewise-smooth function of the script parameters and of ``tau``, so the position has finite
-gradients with respect to ``v_pre``, ``v_post``, ``s_init``, ``lat_shift``, ``lat_duration`` and
-the trigger time (hence ``trigger_delay`` and ``t_event``).  A trigger time that has not
-happened (``times.NEVER``) means "not (yet) triggered": it is replaced by ``t`` before any
-arithmetic, so no huge number ever enters a value or a gradient.
+with ``smoothstep(x) = 3 x^2 - 2 x^3`` on ``[0, 1]`` (0 below, 1 above).  An adversarial
+track (:mod:`lantern_jax.dynamics.adversary`) adds its closed-form deviations after ``tau``.
+Everything is a piecewise-smooth function of the script parameters and of ``tau``, so the
+position has finite gradients with respect to ``v_pre``, ``v_post``, ``s_init``, ``lat_shift``,
+``lat_duration`` and the trigger time (hence ``trigger_delay`` and ``t_event``).  A trigger
+time that has not happened (``times.NEVER``) means "not (yet) triggered": it is replaced by
+``t`` before any arithmetic, so no huge number ever enters a value or a gradient.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ import jax
 import jax.numpy as jnp
 
 from lantern_jax.constants import TRIGGER_CLOCK, TRIGGER_EVENT
+from lantern_jax.dynamics.adversary import scripted_offsets
 from lantern_jax.geometry import safe_norm
 from lantern_jax.polyline import interpolate, left_normal, safe_atan2
 from lantern_jax.times import NEVER, happened
@@ -83,6 +85,7 @@ def scripted_arc(
     despawn_at_end: Array,
     t: Array,
     t_trigger: Array,
+    track: tuple[Array, ...] | None = None,
 ) -> tuple[Array, Array, Array, Array, Array]:
     """Closed-form place of ONE scripted actor along its path at time ``t`` (no geometry).
 
@@ -97,6 +100,11 @@ def scripted_arc(
         despawn_at_end: () bool, the actor leaves the world when it reaches ``s_end``.
         t: () float32, s, time.
         t_trigger: () float32, s, trigger time ``tau`` (``NEVER`` = not triggered).
+        track: the actor's adversarial track after its trigger, ``(dv, ds, q, g, dlat,
+            knot_s)`` of :class:`lantern_jax.world.ActorTrack` for this slot
+            (:mod:`lantern_jax.dynamics.adversary`), or None for none; its deviations add to
+            the arc, the speed, the lateral offset and the lateral speed (exact zeros for
+            all-zero actions).
 
     Returns:
         s: () float32, m, arc along the path.
@@ -115,9 +123,14 @@ def scripted_arc(
     held = s_free >= s_hold
     s_pre = jnp.minimum(s_free, s_hold)
     s_raw = s_pre + v_post * dt_post
+    v_after = v_post
+    if track is not None:
+        off_s, off_v, off_lat, off_w = scripted_offsets(*track, dt_post)
+        s_raw = s_raw + off_s
+        v_after = v_post + off_v
     reached = s_raw >= s_end
     s = jnp.minimum(s_raw, s_end)
-    v_long = jnp.where(fired, v_post, jnp.where(held, 0.0, v_pre))
+    v_long = jnp.where(fired, v_after, jnp.where(held, 0.0, v_pre))
     v_long = jnp.where(reached, 0.0, v_long)
 
     dur = jnp.maximum(lat_duration, 1e-3)
@@ -126,6 +139,9 @@ def scripted_arc(
     in_manoeuvre = fired & (x < 1.0)
     xc = jnp.clip(x, 0.0, 1.0)
     v_lat = jnp.where(in_manoeuvre, lat_shift * 6.0 * xc * (1.0 - xc) / dur, 0.0)
+    if track is not None:
+        lat = lat + off_lat
+        v_lat = v_lat + jnp.where(reached, 0.0, off_w)
     active = ~(despawn_at_end & reached)
     return s, lat, v_long, v_lat, active
 
@@ -144,6 +160,7 @@ def scripted_pose(
     despawn_at_end: Array,
     t: Array,
     t_trigger: Array,
+    track: tuple[Array, ...] | None = None,
 ) -> tuple[Array, Array, Array, Array, Array, Array]:
     """Closed-form state of ONE scripted actor at time ``t``.
 
@@ -152,7 +169,7 @@ def scripted_pose(
         path_s: (P,) float32, m, its cumulative arc length.
         path_valid: (P,) bool, prefix mask of valid points.
         s_init, v_pre, v_post, s_hold, s_end, lat_shift, lat_duration, despawn_at_end, t,
-            t_trigger: as in :func:`scripted_arc`.
+            t_trigger, track: as in :func:`scripted_arc`.
 
     Returns:
         s: () float32, m, arc along the path.
@@ -164,7 +181,7 @@ def scripted_pose(
     """
     s, lat, v_long, v_lat, active = scripted_arc(
         s_init, v_pre, v_post, s_hold, s_end, lat_shift, lat_duration, despawn_at_end, t,
-        t_trigger,
+        t_trigger, track,
     )  # fmt: skip
     point, heading = interpolate(path, path_s, path_valid, s)
     xy = point + left_normal(heading) * lat

@@ -32,8 +32,10 @@ Shared conventions of every family:
 
 A parameter dict may carry an optional ``knobs`` object (knob name -> value, inside the family's
 :data:`KNOB_RANGES`), applied to the built pair with
-:func:`~lantern_jax.scenarios.knobs.apply_knobs`: that is how a scenario found by stress testing
-is written as an ordinary suite pair, hashed and validated like any other.
+:func:`~lantern_jax.scenarios.knobs.apply_knobs`, and an optional ``adversary`` object (actor
+tracks, :mod:`lantern_jax.scenarios.adversary`), applied after the knobs: that is how a scenario
+found by stress testing is written as an ordinary suite pair, hashed and validated like any
+other.
 
 Family geometry is documented in :mod:`~lantern_jax.scenarios.families_straight` (PE, VC, OR) and
 :mod:`~lantern_jax.scenarios.families_junction` (LWW, RWW, RTY).
@@ -52,6 +54,12 @@ from lantern_jax import family_codes
 from lantern_jax.constants import FAMILIES, FAMILY_NAMES, WEATHERS
 from lantern_jax.scenarios import families_junction as junction
 from lantern_jax.scenarios import families_straight as straight
+from lantern_jax.scenarios.adversary import (
+    ADVERSARY_FIELD,
+    adversary_errors,
+    apply_adversary,
+    slot_errors,
+)
 from lantern_jax.scenarios.knobs import apply_knobs
 from lantern_jax.scenarios.spec import content_hash, param_ranges, range_errors
 from lantern_jax.scenarios.warnings import canonical_text_id, get_text
@@ -267,9 +275,10 @@ def param_errors(params: Any, feasibility: bool = True) -> list[str]:
     (:func:`~lantern_jax.scenarios.spec.range_errors`), the optional knob overrides
     (:func:`knob_errors`) and, when those pass and ``feasibility`` is set, the family's
     cross-field geometry checks."""
-    if isinstance(params, dict) and KNOBS_FIELD in params:
-        errors = range_errors({k: v for k, v in params.items() if k != KNOBS_FIELD})
-        errors += knob_errors(params) if not errors else []
+    extras = (KNOBS_FIELD, ADVERSARY_FIELD)
+    if isinstance(params, dict) and any(k in params for k in extras):
+        errors = range_errors({k: v for k, v in params.items() if k not in extras})
+        errors += knob_errors(params) + adversary_errors(params) if not errors else []
     else:
         errors = range_errors(params)
     if feasibility and not errors:
@@ -277,7 +286,15 @@ def param_errors(params: Any, feasibility: bool = True) -> list[str]:
             check_feasible(params)
         except ValueError as e:
             errors.append(str(e))
+    if feasibility and not errors and ADVERSARY_FIELD in params:
+        a, _, _ = family(params["family"]).build(_scene(params))
+        errors += slot_errors(a, params[ADVERSARY_FIELD], params["family"])
     return errors
+
+
+def _scene(params: dict) -> dict:
+    """The parameters that build the scene (without the knob overrides and tracks)."""
+    return {k: v for k, v in params.items() if k not in (KNOBS_FIELD, ADVERSARY_FIELD)}
 
 
 def validate_params(params: dict, feasibility: bool = True) -> dict:
@@ -318,12 +335,15 @@ def build_pair(params: dict, validate: bool = True) -> tuple[Scenario, Scenario,
     """
     if validate:
         validate_params(params)
-    scene = {k: v for k, v in params.items() if k != KNOBS_FIELD}
-    a, b, meta = family(params["family"]).build(scene)
+    a, b, meta = family(params["family"]).build(_scene(params))
     if KNOBS_FIELD in params:
         values = {k: float(v) for k, v in params[KNOBS_FIELD].items()}
         a, b = apply_knobs(a, b, values)
+        meta["knobs"] = values
+    if ADVERSARY_FIELD in params:
+        a, b = apply_adversary(a, b, params[ADVERSARY_FIELD])
+        meta["adversary_slots"] = [int(t["slot"]) for t in params[ADVERSARY_FIELD]["tracks"]]
+    if KNOBS_FIELD in params or ADVERSARY_FIELD in params:
         meta["content_hash"] = content_hash(params)
         meta["params"] = dict(params)
-        meta["knobs"] = values
     return a, b, meta

@@ -36,6 +36,7 @@ import numpy as np
 from lantern_jax import family_codes
 from lantern_jax.constants import SUITE_ID, WEATHERS
 from lantern_jax.files import atomic_write
+from lantern_jax.scenarios.adversary import uniform_tracks
 from lantern_jax.scenarios.assemble import host_arrays
 from lantern_jax.scenarios.families import build_pair, param_errors, validate_params
 from lantern_jax.scenarios.premise import premise_error
@@ -513,5 +514,6 @@ def build_suite_batches(suite: Suite) -> tuple[Scenario, Scenario]:
     """
     with host_arrays():
         wa, wb, _ = build_suite_scenarios(suite)
+    wa, wb = uniform_tracks(wa), uniform_tracks(wb)  # pairs with and without actor tracks
     stack = lambda items: jax.tree.map(lambda *xs: np.stack(xs), *items)  # noqa: E731
     return stack(wa), stack(wb)

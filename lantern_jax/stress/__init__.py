@@ -1,15 +1,21 @@
-"""Scenario stress testing: search a family's scenario knobs for the hazards that break a policy.
+"""Scenario stress testing: search a scenario for the hazards that break a policy, plausibly.
 
-* :mod:`~lantern_jax.stress.space` — the search space of a family (its knobs and documented
-  ranges, :data:`lantern_jax.scenarios.families.KNOB_RANGES`) and the map from an unconstrained
-  vector into it (a sigmoid per knob, so every candidate is a valid scenario);
-* :mod:`~lantern_jax.stress.objective` — smooth failure surrogates computed through the
-  differentiable simulator, and their gradients: first-order (pathwise), zeroth-order (Gaussian
-  smoothing) and a blend of the two chosen by a bias test;
-* :mod:`~lantern_jax.stress.verify` — the exact (hard) verification of candidates: the policy's
-  pair CUS and gates, and the plausibility guard (the privileged expert must still pass);
-* :mod:`~lantern_jax.stress.search` — gradient search, random search and CMA-ES at equal
-  wall-clock budget with the same restarts and the same verification;
-* :mod:`~lantern_jax.stress.report` — the comparison table, the found scenarios (as a suite file
-  any evaluation can run) and the convergence plot.
+* :mod:`~lantern_jax.stress.space` — search spaces behind one interface: a family's knobs
+  (documented ranges, :data:`lantern_jax.scenarios.families.KNOB_RANGES`), adversarial tracks of
+  its actors (:mod:`lantern_jax.dynamics.adversary`; knots and knot length chosen by the user),
+  or both; a sigmoid maps an unconstrained vector into the space, so every candidate is valid;
+* :mod:`~lantern_jax.stress.plausibility` — what counts as a plausible failure (the privileged
+  expert drives the scene with margin; no actor freezes in the ego's path, leaves the road or
+  exceeds its limits) and the smooth terms that target it;
+* :mod:`~lantern_jax.stress.watch` — rollouts that also watch the actors a search controls;
+* :mod:`~lantern_jax.stress.objective` — the smooth surrogate (the policy's part and the
+  expert's part) through the differentiable simulator, and its gradients: first-order
+  (pathwise), zeroth-order (Gaussian smoothing) and a blend chosen by a bias test;
+* :mod:`~lantern_jax.stress.verify` — the exact (hard) verification every method shares;
+* :mod:`~lantern_jax.stress.search` — gradient search, random search and CMA-ES, interleaved in
+  one process, with rollouts counted by kind and per restart;
+* :mod:`~lantern_jax.stress.catalogue` — the distinct failures (the near-duplicate rule on the
+  adversary's trajectory), each a suite pair with a one-line description and a view;
+* :mod:`~lantern_jax.stress.report` — the whole run, the comparison table, the result files and
+  the gradient check.
 """

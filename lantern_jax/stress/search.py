@@ -1,70 +1,136 @@
-"""Batched scenario search at equal wall-clock budget: gradient, random search and CMA-ES.
+"""Gradient search, random search and CMA-ES with honest accounting, interleaved in one process.
 
-All three methods run ``R`` independent restarts at once, spend the same wall-clock budget
-(compilation excluded: every jitted function is compiled before the clock starts) and verify
-candidates with the same :class:`~lantern_jax.stress.verify.Verifier`.  Per restart and
-iteration:
+Every method runs ``R`` independent restarts at once and verifies candidates with the same
+:class:`~lantern_jax.stress.verify.Verifier` (two hard rollouts each: the policy's and the
+expert's).  Per restart and iteration:
 
-* **gradient** — estimate the smoothed surrogate's gradient from ``M`` perturbations of the
-  current candidate (:func:`~lantern_jax.stress.objective.estimate`, one batched call for all
-  restarts), verify those ``M`` perturbed candidates (hard), and take an Adam step on the
-  unconstrained vector; ``2 M`` evaluations (``M`` soft rollouts with their backward pass, ``M``
-  hard ones);
-* **random** — ``M`` candidates drawn uniformly inside the ranges, verified; ``M`` evaluations;
-* **cmaes** — one CMA-ES generation of population ``M`` (the ``cma`` package, in the
-  unconstrained space, started from the same point as the gradient restart), fitness = hard
-  CUS (ties broken by clearance); ``M`` evaluations.
+* **gradient** — the surrogate's gradient at the restart's current iterate ``z``
+  (:func:`~lantern_jax.stress.objective.batched_estimator`: one soft rollout with its backward
+  pass per part — the policy's and the expert's — or ``M`` of each with randomized smoothing),
+  the **iterate itself** verified (not samples around it), then an Adam step;
+* **random** — ``M`` candidates drawn uniformly in the space, verified;
+* **cmaes** — one CMA-ES generation (the ``cma`` package, in the unconstrained space, from the
+  gradient restart's starting point), fitness = the surrogate's expression of the hard
+  verification (:func:`lantern_jax.stress.plausibility.hard_objective`).
 
-An evaluation is one closed-loop rollout of Route A with the policy under test (soft for the
-gradient's perturbations, hard for verification).  A restart *finds* a failure the first time a
-verified, plausible failure appears among its candidates; the :class:`Trace` keeps when (seconds,
-evaluations), what (knob values, hard CUS) and the best hard CUS over time.
+**Accounting.**  Rollouts are counted per restart and by kind (:data:`ROLLOUT_KINDS`: soft with
+a backward pass, per part; hard verification, per driver); a restart *finds* a failure the first
+time one of its candidates is a verified plausible failure, and its cost to then is every
+rollout it had run, all kinds together (a batch is counted whole: it ran whole).  Methods
+compile everything before the search (:meth:`Method.compile`, timed apart), then run
+**interleaved**: one iteration of each method in turn, each method's clock counting only its own
+iterations, so machine load falls on all methods alike.  A method stops when its clock reaches
+``budget_s`` or its restarts have run ``budget_rollouts`` rollouts each.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Callable
 
 import numpy as np
 
-from lantern_jax.stress.objective import Problem, batched_estimator
+from lantern_jax.stress.objective import EXPERT, Problem, batched_estimator, parts_of
 from lantern_jax.stress.verify import Verdict, Verifier
 
 METHODS = ("gradient", "random", "cmaes")
-VERIFY_SPREAD = 0.3  # unconstrained units: spread of the verified candidates around an iterate
+ROLLOUT_KINDS = ("soft_policy", "soft_expert", "hard_policy", "hard_expert")
+INIT_Z = 0.5  # unconstrained units: spread of the restarts' starting points around 0 (nominal)
+CMA_SIGMA0 = 1.0  # unconstrained units: CMA-ES's initial step size
 
 
 @dataclasses.dataclass
 class Trace:
-    """What one method did within its budget."""
+    """What one method did within its budget (per restart where it says so)."""
 
     method: str
     restarts: int
-    seconds: list[float] = dataclasses.field(default_factory=list)  # elapsed, per iteration
-    evaluations: list[int] = dataclasses.field(default_factory=list)  # cumulative, all restarts
+    seconds: list[float] = dataclasses.field(default_factory=list)  # own clock, per iteration
+    rollouts: list[int] = dataclasses.field(default_factory=list)  # per restart, cumulative
+    evaluations: list[int] = dataclasses.field(default_factory=list)  # candidates, all restarts
     best_cus: list[float] = dataclasses.field(default_factory=list)  # lowest hard CUS so far
+    counts: dict = dataclasses.field(default_factory=lambda: dict.fromkeys(ROLLOUT_KINDS, 0))
     first_seconds: np.ndarray | None = None  # (R,) s to the restart's first failure (NaN none)
-    first_evaluations: np.ndarray | None = None  # (R,) evaluations of that restart until then
+    first_rollouts: np.ndarray | None = None  # (R,) its rollouts until then, all kinds
+    first_evaluations: np.ndarray | None = None  # (R,) its verified candidates until then
     found: list[dict] = dataclasses.field(default_factory=list)  # the first failure per restart
+    failures: list[dict] = dataclasses.field(default_factory=list)  # every verified failure
     lowest: dict | None = None  # the candidate with the lowest hard CUS (any restart)
+    verified: int = 0  # candidates verified, all restarts
+    policy_failed: int = 0  # of which the policy failed (plausible or not)
+    plausible_failed: int = 0  # of which were verified plausible failures
+    rejected_expert: int = 0  # policy failures the expert did not drive with margin
+    rejected_adversary: int = 0  # ... that it did, whose tracked actors broke rules 2-4
+    compile_s: float = 0.0  # s spent compiling before the search (not on the clock)
+    nan_gradients: int = 0  # gradient estimates with a non-finite entry (taken as 0 there)
 
     def __post_init__(self) -> None:
         self.first_seconds = np.full(self.restarts, np.nan)
+        self.first_rollouts = np.full(self.restarts, np.nan)
         self.first_evaluations = np.full(self.restarts, np.nan)
 
-    def record(self, owner: np.ndarray, values: np.ndarray, verdict: Verdict, elapsed: float,
-               evals_per_restart: int, evals_total: int) -> None:  # fmt: skip
-        """Fold one iteration's verified candidates (``owner[i]`` = restart of candidate i)."""
-        done_before = evals_total - evals_per_restart * self.restarts
+    @property
+    def rollouts_per_restart(self) -> int:
+        """Rollouts each restart has run so far, all kinds."""
+        return sum(self.counts.values())
+
+    def record(
+        self,
+        owner: np.ndarray,
+        values: np.ndarray,
+        verdict: Verdict,
+        elapsed: float,
+        iteration_cost: dict[str, int],
+        candidates_per_restart: int,
+    ) -> None:
+        """Fold one iteration's verified candidates (``owner[i]`` = restart of candidate i).
+
+        Args:
+            owner: (N,) int, the restart of each candidate.
+            values: (N, K) the candidates' values.
+            verdict: their verification.
+            elapsed: s on this method's clock at the end of the iteration.
+            iteration_cost: rollouts per restart of this iteration, by kind.
+            candidates_per_restart: candidates each restart verified this iteration.
+        """
+        for k, n in iteration_cost.items():
+            self.counts[k] += n
+        spent = self.rollouts_per_restart
+        self.verified += len(values)
+        policy_failed = verdict.failed if verdict.policy_failed is None else verdict.policy_failed
+        self.policy_failed += int(np.sum(policy_failed))
+        self.rejected_expert += int(np.sum(policy_failed & ~verdict.expert_ok))
+        if verdict.plausible is not None:
+            shared = policy_failed & verdict.expert_ok & ~verdict.plausible
+            self.rejected_adversary += int(np.sum(shared))
+        self.plausible_failed += int(np.sum(verdict.failed))
+        evals = len(self.evaluations) and self.evaluations[-1]
         for i in np.argsort(verdict.cus, kind="stable"):
             r = int(owner[i])
-            if verdict.failed[i] and np.isnan(self.first_seconds[r]):
+            if not verdict.failed[i]:
+                continue
+            entry = dict(
+                restart=r,
+                values=values[i].tolist(),
+                cus=float(verdict.cus[i]),
+                seconds=elapsed,
+                rollouts=spent,
+                iteration=len(self.seconds),
+                gates=list(verdict.failed_gates[i]) if verdict.failed_gates else [],
+                t_fail_s=float(verdict.t_fail_s[i]) if verdict.t_fail_s is not None else np.nan,
+                margin_m=float(verdict.margin_m[i]) if verdict.margin_m is not None else np.nan,
+                expert_dist_m=(
+                    float(verdict.expert_dist_m[i]) if verdict.expert_dist_m is not None else np.nan
+                ),
+                traj=None if verdict.traj is None else np.asarray(verdict.traj[i]),
+            )
+            self.failures.append(entry)
+            if np.isnan(self.first_seconds[r]):
                 self.first_seconds[r] = elapsed
-                self.first_evaluations[r] = done_before // self.restarts + evals_per_restart
-                self.found.append(dict(restart=r, values=values[i].tolist(),
-                                       cus=float(verdict.cus[i]), seconds=elapsed,
-                                       evaluations=int(self.first_evaluations[r])))  # fmt: skip
+                self.first_rollouts[r] = spent
+                self.first_evaluations[r] = evals // self.restarts + candidates_per_restart
+                self.found.append(entry)
         k = int(np.argmin(verdict.cus))
         if self.lowest is None or verdict.cus[k] < self.lowest["cus"]:
             self.lowest = dict(
@@ -74,99 +140,236 @@ class Trace:
                 expert_ok=bool(verdict.expert_ok[k]),
             )
         self.seconds.append(elapsed)
-        self.evaluations.append(evals_total)
+        self.rollouts.append(spent)
+        self.evaluations.append(evals + len(values))
         self.best_cus.append(self.lowest["cus"])
 
 
-def initial_points(problem: Problem, restarts: int, seed: int) -> np.ndarray:
-    """(R, K) unconstrained starting points shared by the gradient and CMA-ES restarts."""
-    return np.random.default_rng(seed).normal(0.0, 1.0, (restarts, problem.space.dim))
+def initial_points(problem: Problem, restarts: int, seed: int, scale: float = INIT_Z) -> np.ndarray:
+    """(R, K) unconstrained starting points shared by the gradient and CMA-ES restarts:
+    Gaussian around ``z = 0`` (the box's centre: in an adversary space, the benchmark's own
+    scene) with standard deviation ``scale``."""
+    rng = np.random.default_rng(seed)
+    return rng.normal(0.0, scale, (restarts, problem.space.dim)).astype(np.float32)
 
 
-def gradient_search(problem: Problem, verifier: Verifier, budget_s: float, restarts: int,
-                    samples: int, sigma: float, lr: float, seed: int) -> Trace:  # fmt: skip
-    """Adam on the smoothed surrogate from every restart (see the module docstring)."""
-    import optax
+class Method:
+    """One search method's state; :meth:`step` runs one iteration of every restart."""
 
-    space = problem.space
-    est = batched_estimator(problem, sigma)
-    rng = np.random.default_rng(seed + 1)
-    z = initial_points(problem, restarts, seed).astype(np.float32)
-    opt = optax.adam(lr)
-    opt_state = opt.init(z)
-    spread = max(sigma, VERIFY_SPREAD)  # where the verified candidates lie around z
+    name = ""
 
-    def perturb() -> np.ndarray:
-        return rng.normal(0.0, 1.0, (restarts, samples, space.dim)).astype(np.float32)
+    def __init__(self, problem: Problem, verifier: Verifier, restarts: int, seed: int):
+        self.problem = problem
+        self.verifier = verifier
+        self.restarts = restarts
+        self.seed = seed
+        self.trace = Trace(self.name, restarts)
+        self.clock = 0.0
 
-    eps = perturb()
-    est(z, eps)  # compile
-    verifier(np.asarray(space.values((z[:, None, :] + spread * eps).reshape(-1, space.dim))))
-    trace = Trace("gradient", restarts)
-    owner = np.repeat(np.arange(restarts), samples)
-    evals, t0 = 0, time.perf_counter()
-    while time.perf_counter() - t0 < budget_s:
-        eps = perturb()
-        g = np.asarray(est(z, eps).blend)
-        candidates = (z[:, None, :] + spread * eps).reshape(-1, space.dim)
-        values = np.asarray(space.values(candidates))
-        verdict = verifier(values)
-        updates, opt_state = opt.update(g, opt_state, z)
-        z = np.asarray(optax.apply_updates(z, updates))
-        evals += restarts * 2 * samples
-        trace.record(owner, values, verdict, time.perf_counter() - t0, 2 * samples, evals)
-    return trace
+    def compile(self) -> None:
+        """Compile (and warm) everything :meth:`step` runs; not on the clock."""
 
+    def iterate(self) -> None:
+        """One iteration (subclasses)."""
+        raise NotImplementedError
 
-def random_search(problem: Problem, verifier: Verifier, budget_s: float, restarts: int,
-                  samples: int, seed: int) -> Trace:  # fmt: skip
-    """Uniform samples inside the ranges, ``samples`` per restart and iteration."""
-    space = problem.space
-    rng = np.random.default_rng(seed + 2)
-    owner = np.repeat(np.arange(restarts), samples)
+    def step(self) -> None:
+        """One timed iteration on this method's own clock."""
+        self._t0 = time.perf_counter()
+        self.iterate()
+        self.clock = self.elapsed()
 
-    def draw() -> np.ndarray:
-        u = rng.uniform(0.0, 1.0, (restarts * samples, space.dim))
-        return (space.lo + (space.hi - space.lo) * u).astype(np.float32)
+    def elapsed(self) -> float:
+        """Seconds on the clock including the iteration running now."""
+        return self.clock + (time.perf_counter() - self._t0)
 
-    verifier(draw())  # compile
-    trace = Trace("random", restarts)
-    evals, t0 = 0, time.perf_counter()
-    while time.perf_counter() - t0 < budget_s:
-        values = draw()
-        verdict = verifier(values)
-        evals += restarts * samples
-        trace.record(owner, values, verdict, time.perf_counter() - t0, samples, evals)
-    return trace
+    def done(self, budget_s: float, budget_rollouts: float) -> bool:
+        """Whether the budget is spent."""
+        return self.clock >= budget_s or self.trace.rollouts_per_restart >= budget_rollouts
+
+    def _verify(
+        self, values: np.ndarray, owner: np.ndarray, cost: dict[str, int], per_restart: int
+    ) -> Verdict:
+        verdict = self.verifier(values)
+        self.trace.record(owner, values, verdict, self.elapsed(), cost, per_restart)
+        return verdict
 
 
-def cmaes_search(problem: Problem, verifier: Verifier, budget_s: float, restarts: int,
-                 samples: int, seed: int) -> Trace:  # fmt: skip
-    """One CMA-ES per restart (population ``samples``) on the unconstrained vector."""
-    import cma
+class GradientSearch(Method):
+    """Adam on the smoothed surrogate from every restart, verifying each iterate."""
 
-    space = problem.space
-    starts = initial_points(problem, restarts, seed)
-    opts = dict(popsize=samples, verbose=-9, CMA_diagonal=False)
-    strategies = [
-        cma.CMAEvolutionStrategy(starts[r].tolist(), 1.0, dict(opts, seed=seed + 100 + r))
-        for r in range(restarts)
-    ]
-    owner = np.repeat(np.arange(restarts), samples)
-    verifier(np.asarray(space.values(np.asarray(starts, np.float32))).repeat(samples, 0))  # compile
-    trace = Trace("cmaes", restarts)
-    evals, t0 = 0, time.perf_counter()
-    while time.perf_counter() - t0 < budget_s:
+    name = "gradient"
+
+    def __init__(
+        self,
+        problem,
+        verifier,
+        restarts,
+        seed,
+        lr: float,
+        sigma: float,
+        samples: int,
+        init_z: float = INIT_Z,
+    ):
+        super().__init__(problem, verifier, restarts, seed)
+        import optax
+
+        self.sigma = float(sigma)
+        self.samples = int(samples) if sigma > 0 else 1
+        self.est = batched_estimator(problem, self.sigma)
+        self.rng = np.random.default_rng(seed + 1)
+        self.z = initial_points(problem, restarts, seed, init_z)
+        self.opt = optax.adam(lr)
+        self.opt_state = self.opt.init(self.z)
+        self.owner = np.arange(restarts)
+        parts = parts_of(problem)
+        self.cost = dict(
+            soft_policy=self.samples,
+            soft_expert=self.samples if EXPERT in parts else 0,
+            hard_policy=1,
+            hard_expert=1,
+        )
+
+    def _eps(self) -> np.ndarray:
+        shape = (self.restarts, self.samples, self.problem.space.dim)
+        return self.rng.normal(0.0, 1.0, shape).astype(np.float32)
+
+    def compile(self) -> None:
+        """Compile the estimator (both parts)."""
+        np.asarray(self.est(self.z, self._eps()).blend)
+
+    def iterate(self) -> None:
+        """Gradient at the iterates, their verification, an Adam step."""
+        import optax
+
+        g = np.asarray(self.est(self.z, self._eps()).blend)
+        bad = ~np.isfinite(g)
+        self.trace.nan_gradients += int(np.any(bad, axis=1).sum())
+        g = np.where(bad, 0.0, g)
+        values = np.asarray(self.problem.space.values(self.z))
+        self._verify(values, self.owner, self.cost, 1)
+        updates, self.opt_state = self.opt.update(g, self.opt_state, self.z)
+        self.z = np.asarray(optax.apply_updates(self.z, updates), np.float32)
+
+
+class RandomSearch(Method):
+    """Uniform draws in the space, ``samples`` per restart and iteration."""
+
+    name = "random"
+
+    def __init__(self, problem, verifier, restarts, seed, samples: int):
+        super().__init__(problem, verifier, restarts, seed)
+        self.samples = int(samples)
+        self.rng = np.random.default_rng(seed + 2)
+        self.owner = np.repeat(np.arange(restarts), self.samples)
+        self.cost = dict(
+            soft_policy=0, soft_expert=0, hard_policy=self.samples, hard_expert=self.samples
+        )
+
+    def iterate(self) -> None:
+        """Draw and verify."""
+        values = self.problem.space.uniform(self.rng, self.restarts * self.samples)
+        self._verify(values, self.owner, self.cost, self.samples)
+
+
+class CMAESSearch(Method):
+    """One CMA-ES per restart on the unconstrained vector."""
+
+    name = "cmaes"
+
+    def __init__(self, problem, verifier, restarts, seed, popsize: int, init_z: float = INIT_Z):
+        super().__init__(problem, verifier, restarts, seed)
+        import cma
+
+        starts = initial_points(problem, restarts, seed, init_z)
+        opts = dict(verbose=-9, CMA_diagonal=False)
+        if popsize:
+            opts["popsize"] = int(popsize)
+        self.strategies = [
+            cma.CMAEvolutionStrategy(
+                starts[r].tolist(), CMA_SIGMA0, dict(opts, seed=seed + 100 + r)
+            )
+            for r in range(restarts)
+        ]
+        self.popsize = int(self.strategies[0].popsize)
+        self.owner = np.repeat(np.arange(restarts), self.popsize)
+        self.cost = dict(
+            soft_policy=0, soft_expert=0, hard_policy=self.popsize, hard_expert=self.popsize
+        )
+
+    def iterate(self) -> None:
+        """Ask, verify, tell."""
         # tell() must get the very arrays ask() returned: CMA-ES recognises its own injected
         # samples (selective mirrors, mean-shift samples) by their exact float64 values, and a
         # rounded copy would be updated as an ordinary sample ("orphanated injected solution")
-        asked = [es.ask() for es in strategies]  # R x M arrays (K,) float64
-        z = np.concatenate([np.asarray(a, np.float32) for a in asked])  # (R*M, K)
-        values = np.asarray(space.values(z))
-        verdict = verifier(values)
-        fitness = verdict.fitness.reshape(restarts, samples)
-        for r, es in enumerate(strategies):
+        asked = [es.ask() for es in self.strategies]  # R x P arrays (K,) float64
+        z = np.concatenate([np.asarray(a, np.float32) for a in asked])  # (R*P, K)
+        values = np.asarray(self.problem.space.values(z))
+        verdict = self._verify(values, self.owner, self.cost, self.popsize)
+        fitness = verdict.fitness.reshape(self.restarts, self.popsize)
+        for r, es in enumerate(self.strategies):
             es.tell(asked[r], fitness[r].tolist())
-        evals += restarts * samples
-        trace.record(owner, values, verdict, time.perf_counter() - t0, samples, evals)
-    return trace
+
+
+def run_interleaved(
+    methods: list[Method],
+    budget_s: float,
+    budget_rollouts: float,
+    progress: Callable[[str], None] | None = None,
+) -> list[Trace]:
+    """Run ``methods`` one iteration each in turn until every one has spent its budget.
+
+    Returns:
+        Their traces, in the order given.
+    """
+    active = list(methods)
+    while active:
+        for m in list(active):
+            if m.done(budget_s, budget_rollouts):
+                active.remove(m)
+                if progress:
+                    t = m.trace
+                    progress(
+                        f"{m.name}: {len(t.seconds)} iterations, {t.rollouts_per_restart} "
+                        f"rollouts per restart, {m.clock:.1f} s, "
+                        f"{int(np.sum(~np.isnan(t.first_seconds)))}/{t.restarts} restarts "
+                        "found a failure"
+                    )
+                continue
+            m.step()
+    return [m.trace for m in methods]
+
+
+# -- the knob-space interface of earlier versions (one method at a time, its own budget) -----
+def gradient_search(
+    problem: Problem,
+    verifier: Verifier,
+    budget_s: float,
+    restarts: int,
+    samples: int,
+    sigma: float,
+    lr: float,
+    seed: int,
+) -> Trace:
+    """Adam on the smoothed surrogate from every restart (see the module docstring)."""
+    m = GradientSearch(problem, verifier, restarts, seed, lr, sigma, samples)
+    m.compile()
+    return run_interleaved([m], budget_s, np.inf)[0]
+
+
+def random_search(
+    problem: Problem, verifier: Verifier, budget_s: float, restarts: int, samples: int, seed: int
+) -> Trace:
+    """Uniform samples inside the ranges, ``samples`` per restart and iteration."""
+    return run_interleaved(
+        [RandomSearch(problem, verifier, restarts, seed, samples)], budget_s, np.inf
+    )[0]
+
+
+def cmaes_search(
+    problem: Problem, verifier: Verifier, budget_s: float, restarts: int, samples: int, seed: int
+) -> Trace:
+    """One CMA-ES per restart (population ``samples``) on the unconstrained vector."""
+    return run_interleaved(
+        [CMAESSearch(problem, verifier, restarts, seed, samples)], budget_s, np.inf
+    )[0]
