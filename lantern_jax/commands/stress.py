@@ -135,13 +135,71 @@ def _check_space_options(args: argparse.Namespace) -> None:
         )
 
 
+def _config(args: argparse.Namespace, methods: tuple[str, ...]):
+    """The :class:`~lantern_jax.stress.report.StressConfig` of the command's options (None for
+    an option not given: the space's default)."""
+    from lantern_jax.stress import report
+
+    actors = tuple(a.strip() for a in (args.actors or "hazard").split(",") if a.strip())
+    given = {
+        k: getattr(args, k)
+        for k in ("budget_rollouts", "knots", "knot_s", "background", "expert_weight")
+        if getattr(args, k) is not None
+    }
+    return report.StressConfig(
+        budget_s=args.budget_s,
+        restarts=args.restarts,
+        samples=args.samples,
+        popsize=args.popsize,
+        sigma=args.sigma,
+        lr=args.lr,
+        temperature=args.temperature,
+        objective=args.objective,
+        condition=args.condition,
+        seed=args.seed,
+        methods=methods,
+        space=args.space,
+        actors=actors,
+        horizon_s=args.horizon_s,
+        **given,
+    )
+
+
+def _print_summary(args: argparse.Namespace, table, problem, title: str, files: dict) -> None:
+    """Print the comparison table, its interval note and the head of the failure catalogue."""
+    from tabulate import tabulate
+
+    from lantern_jax.report import interval_note
+    from lantern_jax.stress import report
+
+    budget = f"{args.budget_s:g} s per method"
+    if args.budget_rollouts is not None:
+        budget += f", {args.budget_rollouts} rollouts per restart"
+    print(f"Stress test  ({title}; {budget}, {args.restarts} restarts)")
+    if problem is not None and problem.info:
+        print(f"compile {problem.info['compile_s']:.1f} s (apart from the search times below)")
+    shown = list(report.SUMMARY_COLUMNS)
+    print(
+        tabulate(
+            table[[c for c in shown if c in table]], headers="keys", showindex=False, floatfmt=".2f"
+        )
+    )
+    print(f"failure_rate_lo, _hi: {interval_note(over='restarts')}")
+    cat = args.out.rstrip("/") + "/catalogue.csv"
+    if "catalogue.csv" in {p.name for p in files.values()}:
+        import pandas as pd
+
+        entries = pd.read_csv(cat)
+        print(f"Failure catalogue: {len(entries)} distinct failures")
+        for _, e in entries.head(10).iterrows():
+            print(f"  {e['pair_id']} ({e['method']}): CUS {e['hard_cus']:.1f}; {e['description']}")
+
+
 def cmd_stress(args: argparse.Namespace, argv: Sequence[str]) -> int:
     """Run the stress test and write its files; returns the exit code."""
     del argv
-    from tabulate import tabulate
 
     from lantern_jax.constants import FAMILIES
-    from lantern_jax.report import interval_note
     from lantern_jax.scenarios.suite import load_suite
     from lantern_jax.stress import report, search
     from lantern_jax.viz.stress import catalogue_figure, convergence_plot
@@ -166,29 +224,7 @@ def cmd_stress(args: argparse.Namespace, argv: Sequence[str]) -> int:
         if not pairs:
             raise UsageError(f"--pair {args.pair!r}: no {args.family} pair of that id")
     knobs = tuple(k.strip() for k in args.knobs.split(",") if k.strip()) if args.knobs else None
-    actors = tuple(a.strip() for a in (args.actors or "hazard").split(",") if a.strip())
-    given = {
-        k: getattr(args, k)
-        for k in ("budget_rollouts", "knots", "knot_s", "background", "expert_weight")
-        if getattr(args, k) is not None
-    }
-    cfg = report.StressConfig(
-        budget_s=args.budget_s,
-        restarts=args.restarts,
-        samples=args.samples,
-        popsize=args.popsize,
-        sigma=args.sigma,
-        lr=args.lr,
-        temperature=args.temperature,
-        objective=args.objective,
-        condition=args.condition,
-        seed=args.seed,
-        methods=methods,
-        space=args.space,
-        actors=actors,
-        horizon_s=args.horizon_s,
-        **given,
-    )
+    cfg = _config(args, methods)
     try:
         problem, traces = report.stress_test(
             pairs[0], args.policy, cfg, suite, knobs, ranges, progress=not args.quiet
@@ -215,30 +251,40 @@ def cmd_stress(args: argparse.Namespace, argv: Sequence[str]) -> int:
         )
     except OSError as e:
         return write_failed(args.out, e)
-    table = report.comparison_table(traces, problem)
-    budget = f"{args.budget_s:g} s per method"
-    if args.budget_rollouts is not None:
-        budget += f", {args.budget_rollouts} rollouts per restart"
-    print(f"Stress test  ({title}; {budget}, {args.restarts} restarts)")
-    if problem is not None and problem.info:
-        print(f"compile {problem.info['compile_s']:.1f} s (apart from the search times below)")
-    shown = list(report.SUMMARY_COLUMNS)
-    print(
-        tabulate(
-            table[[c for c in shown if c in table]], headers="keys", showindex=False, floatfmt=".2f"
-        )
-    )
-    print(f"failure_rate_lo, _hi: {interval_note(over='restarts')}")
-    cat = args.out.rstrip("/") + "/catalogue.csv"
-    if "catalogue.csv" in {p.name for p in files.values()}:
-        import pandas as pd
-
-        entries = pd.read_csv(cat)
-        print(f"Failure catalogue: {len(entries)} distinct failures")
-        for _, e in entries.head(10).iterrows():
-            print(f"  {e['pair_id']} ({e['method']}): CUS {e['hard_cus']:.1f}; {e['description']}")
+    _print_summary(args, report.comparison_table(traces, problem), problem, title, files)
     print(f"Wrote {len(files)} files to {args.out}")
     return 0
+
+
+def _add_adversary_options(st: argparse.ArgumentParser) -> None:
+    """The options only an adversary space reads (:data:`ADVERSARY_OPTIONS`)."""
+    st.add_argument(
+        "--actors",
+        default=None,
+        metavar="G[,G...]",
+        help="adversary: actors with tracks, hazard and/or background (default: hazard)",
+    )
+    st.add_argument(
+        "--knots",
+        type=int,
+        default=None,
+        metavar="N",
+        help="adversary: knots per track, 2 N dimensions per actor (default 16)",
+    )
+    st.add_argument(
+        "--knot-s",
+        type=float,
+        default=None,
+        metavar="S",
+        help="adversary: seconds per knot (default 0.5)",
+    )
+    st.add_argument(
+        "--background",
+        type=int,
+        default=None,
+        metavar="N",
+        help="adversary: background vehicles nearest the route (default 1)",
+    )
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -281,33 +327,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="KNOB=LO:HI",
         help="narrow a knob's range (may be repeated)",
     )
-    st.add_argument(
-        "--actors",
-        default=None,
-        metavar="G[,G...]",
-        help="adversary: actors with tracks, hazard and/or background (default: hazard)",
-    )
-    st.add_argument(
-        "--knots",
-        type=int,
-        default=None,
-        metavar="N",
-        help="adversary: knots per track, 2 N dimensions per actor (default 16)",
-    )
-    st.add_argument(
-        "--knot-s",
-        type=float,
-        default=None,
-        metavar="S",
-        help="adversary: seconds per knot (default 0.5)",
-    )
-    st.add_argument(
-        "--background",
-        type=int,
-        default=None,
-        metavar="N",
-        help="adversary: background vehicles nearest the route (default 1)",
-    )
+    _add_adversary_options(st)
     st.add_argument("--restarts", type=int, default=8, metavar="R")
     st.add_argument(
         "--samples",
