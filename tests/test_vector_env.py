@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -126,6 +128,30 @@ def test_same_seed_same_actions_same_observations(bank, run):
     np.testing.assert_array_equal(other.reset(seed=SEED)[0], obs0)
     assert not np.array_equal(other.reset(seed=SEED + 1)[0], obs0)
     other.close()
+
+
+def test_route_timeout_is_a_termination(bank, run):
+    """With a 1 s route timeout on the VC scenes, slots that survive the turn for 20 ticks on
+    them end at the timeout: a termination (a failed gate, return -1) marked ``route_timeout``.
+    A bank of the same size reuses the compiled step."""
+    cfg = bank.scenarios.config
+    short = jnp.where(jnp.arange(bank.size) >= 3, 1.0, cfg.timeout_s)  # s
+    scenarios = bank.scenarios.replace(config=cfg.replace(timeout_s=short))
+    short_bank = dataclasses.replace(bank, scenarios=scenarios)
+    env = LanternVectorEnv(B, bank=short_bank, seed=SEED, max_episode_steps=CAP)
+    env.reset()
+    timeouts = 0
+    for a in _actions(STEPS)[:30]:
+        _, _, term, trunc, infos = env.step(a)
+        assert not trunc.any()
+        if term.any():
+            ep = infos["episode"]
+            for i in np.nonzero(ep["route_timeout"])[0]:
+                timeouts += 1
+                assert term[i] and ep["l"][i] == 20 and ep["gate_failure"][i] == 1.0
+                assert ep["r"][i] == pytest.approx(-GATE_PENALTY, abs=1e-5)
+    assert timeouts >= 1
+    env.close()
 
 
 def test_bad_actions_and_calls_are_refused(bank, run):

@@ -61,6 +61,7 @@ only then, when the environment is built; it is not a dependency of the package)
 from __future__ import annotations
 
 import dataclasses
+import functools
 import time
 
 import jax
@@ -140,46 +141,38 @@ class _KeepFinal(Wrapper):
         return state
 
 
-# Compiled reset/step shared by environments over the same bank, settings and step cap (a
-# second environment, e.g. for evaluation, then costs no compilation).  Values keep the bank
-# alive, so an ``id`` in a key cannot be reused while its entry exists.
-_COMPILED: dict[tuple, tuple] = {}
-_COMPILED_MAX = 4
-
-
-def _compiled(bank: ScenarioBank, settings: Settings, max_episode_steps: int):
-    key = (id(bank), settings, max_episode_steps)
-    if key in _COMPILED:
-        return _COMPILED[key][1:]
-    # wrap_for_training's composition, with _KeepFinal before the scene reset replaces the obs
+def _wrapped(parts: tuple, settings: Settings, max_episode_steps: int) -> Wrapper:
+    """wrap_for_training's composition over the bank ``parts`` (its fields, traced arrays), with
+    _KeepFinal before the scene reset replaces the observation."""
+    bank = ScenarioBank(*parts)
     episodes = EpisodeWrapper(VmapWrapper(LanternEnv(bank, settings)), max_episode_steps, 1)
-    wrapped = SceneResetWrapper(_KeepFinal(episodes, bank))
+    return SceneResetWrapper(_KeepFinal(episodes, bank))
 
-    def reset(keys):
-        return wrapped.reset(keys)
 
-    def step(state, action):
-        nxt = wrapped.step(state, action)
-        info = nxt.info
-        truncated = info["truncation"] > 0
-        ended = nxt.done > 0
-        episode = {k: info["episode_metrics"][k] for k in ("sum_reward", "length", *METRICS)}
-        out = dict(
-            obs=nxt.obs,
-            reward=nxt.reward,
-            terminated=ended & ~truncated,
-            truncated=truncated,
-            final_obs=info["final_obs"],
-            route_timeout=info["route_timeout"] & ended,
-            episode=episode,
-        )
-        return nxt, out
+# The bank is an argument, not a constant of the program: environments over banks of one size
+# (and the same settings and step cap) share one compilation.
+@functools.partial(jax.jit, static_argnums=(1, 2))
+def _reset(parts: tuple, settings: Settings, max_episode_steps: int, keys: jax.Array) -> State:
+    return _wrapped(parts, settings, max_episode_steps).reset(keys)
 
-    fns = (jax.jit(reset), jax.jit(step))
-    if len(_COMPILED) >= _COMPILED_MAX:
-        _COMPILED.pop(next(iter(_COMPILED)))
-    _COMPILED[key] = (bank, *fns)
-    return fns
+
+@functools.partial(jax.jit, static_argnums=(1, 2))
+def _step(parts: tuple, settings: Settings, max_episode_steps: int, state: State, action):
+    nxt = _wrapped(parts, settings, max_episode_steps).step(state, action)
+    info = nxt.info
+    truncated = info["truncation"] > 0
+    ended = nxt.done > 0
+    episode = {k: info["episode_metrics"][k] for k in ("sum_reward", "length", *METRICS)}
+    out = dict(
+        obs=nxt.obs,
+        reward=nxt.reward,
+        terminated=ended & ~truncated,
+        truncated=truncated,
+        final_obs=info["final_obs"],
+        route_timeout=info["route_timeout"] & ended,
+        episode=episode,
+    )
+    return nxt, out
 
 
 class LanternVectorEnv:
@@ -228,7 +221,8 @@ class LanternVectorEnv:
         self.max_episode_steps = int(max_episode_steps)
         self.bank = build_bank(pairs_per_family, bank_seed, families) if bank is None else bank
         self.settings = settings.validate()
-        self._reset_fn, self._step_fn = _compiled(self.bank, self.settings, self.max_episode_steps)
+        b = self.bank
+        self._parts = (b.scenarios, b.states, jnp.asarray(b.family), jnp.asarray(b.route))
         self._key = jax.random.PRNGKey(int(seed))
         self._state: State | None = None
         self._started = np.zeros(self.num_envs, np.float64)  # wall clock at episode start, s
@@ -269,7 +263,8 @@ class LanternVectorEnv:
                 raise ValueError(f"LanternVectorEnv.reset: seed must be an int, got {seed!r}")
             self._key = jax.random.PRNGKey(int(seed))
         self._key, sub = jax.random.split(self._key)
-        self._state = self._reset_fn(jax.random.split(sub, self.num_envs))
+        keys = jax.random.split(sub, self.num_envs)
+        self._state = _reset(self._parts, self.settings, self.max_episode_steps, keys)
         self._started[:] = time.perf_counter()
         return np.array(self._state.obs, np.float32), {}
 
@@ -297,7 +292,8 @@ class LanternVectorEnv:
         if self._state is None:
             raise RuntimeError("LanternVectorEnv.step: call reset() first")
         act = self._check_actions(actions)
-        self._state, out = self._step_fn(self._state, jnp.asarray(act))
+        static = (self.settings, self.max_episode_steps)
+        self._state, out = _step(self._parts, *static, self._state, jnp.asarray(act))
         out = jax.device_get(out)
         now = time.perf_counter()
         terminated = np.asarray(out["terminated"], bool)
