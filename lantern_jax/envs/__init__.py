@@ -7,6 +7,9 @@ Importing this package imports brax, installs the JAX compatibility function bra
     from brax import envs
     env = envs.get_environment("lantern", pairs_per_family=4)
 
+:class:`~lantern_jax.envs.vector.LanternVectorEnv` offers the same environment, batched, behind
+the Gymnasium vector API over NumPy arrays (for CleanRL- or Stable-Baselines3-style loops).
+
 ``import lantern_jax`` alone never imports brax.
 """
 
@@ -17,6 +20,7 @@ from brax import envs as _brax_envs
 from lantern_jax.envs import compat
 from lantern_jax.envs.bank import ScenarioBank, build_bank
 from lantern_jax.envs.env import EnvState, LanternEnv
+from lantern_jax.envs.vector import LanternVectorEnv
 from lantern_jax.envs.wrappers import SceneResetWrapper, wrap_for_training
 
 compat.install()
@@ -27,6 +31,7 @@ __all__ = [
     "ENV_NAME",
     "EnvState",
     "LanternEnv",
+    "LanternVectorEnv",
     "ScenarioBank",
     "SceneResetWrapper",
     "build_bank",
