@@ -7,7 +7,7 @@
   (staged beside the folder and moved into place together, so a reader or a kill never sees a
   mix of two runs' files; :mod:`lantern_jax.files`):
 
-  ==================================  =========================================================
+  =================================== =========================================================
   ``route_level_results.csv``         one row per (model, condition, pair), schema order
   ``route_level_results.schema.json`` units, dtypes and missing-value rules of that CSV
   ``family_cus.csv`` / ``.md``        per-family CUS and Overall, warning-gain rows included
@@ -17,7 +17,7 @@
   ``reproducibility_manifest.json``   suite hash, seeds, policy parameter hashes, package
                                       versions, devices, ablation, and the SHA-256 of every
                                       file above but the run record (written last)
-  ==================================  =========================================================
+  =================================== =========================================================
 
 Every file but the run record depends only on the inputs and the results (fixed float format,
 no timestamps, no wall times), so the same inputs on the same machine give byte-identical
