@@ -3,14 +3,15 @@ Chromium with no console error, no uncaught exception and no resource that fails
 
 The site is one built beforehand where ``LANTERN_DOCS_HTML`` names its folder; without it the
 test builds one itself, warnings as errors, without executing the notebooks.  It skips, saying
-why, where Chromium (Debian's ``chromium``) or Sphinx and MyST-NB (the ``docs`` extra) are not
-installed; the browser is looked for first, so a machine without it builds nothing.  Both tests
-are marked slow.  Chromium is driven over its DevTools pipe (``--remote-debugging-pipe``), so no
-package beyond the browser is needed.
+why, where Chromium (Debian's ``chromium``) or the ``docs`` extra (Sphinx, MyST-NB, Furo,
+jupytext) is not installed; the browser is looked for first, so a machine without it builds
+nothing.  Both tests are marked slow.  Chromium is driven over its DevTools pipe
+(``--remote-debugging-pipe``), so no package beyond the browser is needed.
 """
 
 from __future__ import annotations
 
+import importlib
 import json
 import os
 import select
@@ -153,9 +154,11 @@ def site(tmp_path_factory) -> Path:
     built = os.environ.get("LANTERN_DOCS_HTML")
     if built and (Path(built) / "index.html").is_file():
         return Path(built)
-    why = "the docs extra is not installed (pip install -e '.[docs]')"
-    pytest.importorskip("sphinx", reason=why)
-    pytest.importorskip("myst_nb", reason=why)
+    for module in ("sphinx", "myst_nb", "furo", "jupytext"):
+        try:
+            importlib.import_module(module)
+        except ImportError as e:  # missing, or installed but broken
+            pytest.skip(f"the docs extra is not usable (pip install -e '.[docs]'): {e}")
     out = tmp_path_factory.mktemp("site") / "html"
     cmd = [sys.executable, "-m", "sphinx", "-W", "--keep-going", "-q", "-b", "html",
            "-D", "nb_execution_mode=off", str(ROOT / "docs"), str(out)]  # fmt: skip
