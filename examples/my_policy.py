@@ -13,7 +13,7 @@ What a policy is (:class:`lantern_jax.Policy`):
 * ``init(key) -> params`` — any pytree of arrays (weights, thresholds), built once;
 * ``act(params, obs) -> waypoints`` — ONE scenario's observation in, a ``(10, 2)`` float32
   array out: the ego's next ten positions, 0.25 s apart, in metres in the ego frame (x ahead,
-  y to the left).  It is traced by JAX, so write it with ``jax.numpy`` and no Python branching
+  y to the right).  It is traced by JAX, so write it with ``jax.numpy`` and no Python branching
   on array values; the simulator ``vmap``s it over the batch and a controller tracks the
   waypoints;
 * ``sensors`` — what ``obs`` holds.  ``"front_camera"`` (always): ego state, the route and the
@@ -34,8 +34,7 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from lantern_jax.language import PAD_ID
-from lantern_jax.observation import FRONT_CAMERA, WARNING
+from lantern_jax.observation import FRONT_CAMERA, WARNING, warning_delivered
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.reference import reference_act, reference_params
 
@@ -51,7 +50,7 @@ def init(key):
 def act(params, obs):
     """(10, 2) ego-frame waypoints, m: the planner's, shortened while a warning is delivered."""
     waypoints = reference_act(params, obs)  # plans on the camera's view only
-    warned = jnp.any(obs.warning_tokens != PAD_ID)  # () bool: a text is being delivered
+    warned = warning_delivered(obs)  # () bool: a text is being delivered
     return jnp.where(warned, CAUTION * waypoints, waypoints)
 
 

@@ -168,8 +168,9 @@ def scripted_pose(
         path: (P, 2) float32, m, world-frame polyline.
         path_s: (P,) float32, m, its cumulative arc length.
         path_valid: (P,) bool, prefix mask of valid points.
-        s_init, v_pre, v_post, s_hold, s_end, lat_shift, lat_duration, despawn_at_end, t,
-            t_trigger, track: as in :func:`scripted_arc`.
+        s_init: as in :func:`scripted_arc`, and so are ``v_pre``, ``v_post``, ``s_hold``,
+            ``s_end``, ``lat_shift``, ``lat_duration``, ``despawn_at_end``, ``t``,
+            ``t_trigger`` and ``track``.
 
     Returns:
         s: () float32, m, arc along the path.

@@ -4,7 +4,7 @@
   (staged beside the folder and moved into place together, so a reader or a kill never sees a
   mix of two runs' files; :mod:`lantern_jax.files`):
 
-  ==================================  =========================================================
+  =================================== =========================================================
   ``route_level_results.csv``         one row per (model, condition, pair), schema order
   ``route_level_results.schema.json`` units, dtypes and missing-value rules of that CSV
   ``family_cus.csv`` / ``.md``        per-family CUS and Overall, warning-gain rows included
@@ -14,7 +14,7 @@
   ``reproducibility_manifest.json``   suite hash, seeds, policy parameter hashes, package
                                       versions, devices, ablation, and the SHA-256 of every
                                       file above but the run record (written last)
-  ==================================  =========================================================
+  =================================== =========================================================
 
 * :func:`write_ablation_outputs` writes the ablation table's set (:data:`ABLATION_FILES`).
 
