@@ -43,13 +43,17 @@ def _profile(u_acc, u_lat, kind, v0):
 # ---------------------------------------------------------------------------------------------
 # the closed form
 # ---------------------------------------------------------------------------------------------
+# float32 values without subnormals: XLA's CPU kernels may flush a subnormal to zero in one
+# expression and not in another, which is not what this test is about
+def _f32(lo: float, hi: float):
+    return st.floats(lo, hi, width=32, allow_subnormal=False)
+
+
+_scripted_arc = jax.jit(scripted_arc)  # one compilation for every example
+
+
 @settings(max_examples=40, deadline=None)
-@given(
-    t=st.floats(0.0, 30.0),
-    tau=st.floats(0.0, 10.0),
-    v_post=st.floats(0.0, 12.0),
-    lat_shift=st.floats(-4.0, 4.0),
-)
+@given(t=_f32(0.0, 30.0), tau=_f32(0.0, 10.0), v_post=_f32(0.0, 12.0), lat_shift=_f32(-4.0, 4.0))
 def test_zero_actions_reproduce_the_scripted_motion_exactly(t, tau, v_post, lat_shift):
     """A track of zero actions adds exact zeros: every output of the closed form equals the
     script's own exactly (as numbers: ``-0.0 + 0.0`` is ``+0.0``)."""
@@ -57,8 +61,8 @@ def test_zero_actions_reproduce_the_scripted_motion_exactly(t, tau, v_post, lat_
     args += [jnp.asarray(True), jnp.float32(t), jnp.float32(tau)]
     _, prof = _profile(np.zeros(N), np.zeros(N), KIND_VEHICLE, v_post)
     track = tuple(jnp.asarray(prof[k], jnp.float32) for k in ("dv", "ds", "q", "g", "dlat"))
-    plain = scripted_arc(*args)
-    tracked = scripted_arc(*args, (*track, jnp.float32(H)))
+    plain = _scripted_arc(*args)
+    tracked = _scripted_arc(*args, (*track, jnp.float32(H)))
     for a, b in zip(plain, tracked, strict=True):
         assert np.asarray(a) == np.asarray(b)
 

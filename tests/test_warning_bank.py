@@ -103,7 +103,7 @@ def test_with_text_returns_a_new_bank_and_leaves_the_default_alone():
     )
     assert len(bank) == n + 1 and len(w.DEFAULT_BANK) == n
     assert bank.get(n).text_id == n and bank.get(n).tier == "low"
-    assert n + 1 == len(w.token_table(bank)) and len(w.token_table()) == n
+    assert n + 1 == len(w.token_table(bank)) and len(w.token_table(w.DEFAULT_BANK)) == n
     assert hash(bank) != hash(w.DEFAULT_BANK) and bank != w.DEFAULT_BANK
 
 

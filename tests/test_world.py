@@ -116,8 +116,8 @@ def _family_scenario():
         (lambda w: w.replace(route=_replace(w.route, length=w.route.length + 3.0)),
          r"Route.length: .* must equal the last valid arc length"),
         # family index out of range
-        (lambda w: w.replace(config=w.config.replace(family=jnp.int32(9))),
-         r"ExecutionConfig.family: 9 outside 0..5"),
+        (lambda w: w.replace(config=w.config.replace(family=jnp.int32(99))),
+         r"ExecutionConfig.family: 99 outside 0\.\.\d+"),  # 0..5, and registered families
         # an invalid light id for the ego and for an actor
         (lambda w: w.replace(config=w.config.replace(ego_light=jnp.int32(7))),
          r"ExecutionConfig.ego_light: 7 >= number of light slots"),
