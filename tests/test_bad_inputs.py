@@ -1460,6 +1460,7 @@ def test_the_written_promise_across_devices_and_batches(tmp_path):
 # ---------------------------------------------------------------------------------------------
 # interrupts and policy errors
 # ---------------------------------------------------------------------------------------------
+@pytest.mark.slow  # compiles its own programs; run by the slow tier
 def test_sigint_during_compile_exits_130(tmp_path):
     env = dict(os.environ, JAX_LOG_COMPILES="1", JAX_COMPILATION_CACHE_DIR=str(tmp_path / "cc"))
     out = tmp_path / "results"

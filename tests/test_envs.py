@@ -107,6 +107,7 @@ def _run(wrapped, steps: int, num_envs: int, action=(0.2, 0.0)):
     return state0, jax.jit(lambda s: jax.lax.scan(body, s, None, length=steps))(state0)
 
 
+@pytest.mark.slow  # compiles its own programs; run by the slow tier
 def test_brax_wrap_with_episode_length_and_auto_reset(env):
     wrapped = brax_training.wrap(env, episode_length=12)
     state0, (_, (done, reward, steps, index, obs)) = _run(wrapped, 26, 4)

@@ -152,6 +152,7 @@ def test_one_device_equals_two(tmp_path):
     assert ok, report
 
 
+@pytest.mark.slow  # compiles its own programs; run by the slow tier
 def test_one_program_serves_every_policy(base, suite2):
     """``expert`` and ``ego``/``coop`` run in one compiled program (a policy switch): only the
     first policy compiles, and each policy's rows equal those of its own program (the promise;

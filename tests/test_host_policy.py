@@ -71,6 +71,7 @@ def test_unbatched_and_nested_vmap_reach_the_model_as_one_flat_batch():
     np.testing.assert_allclose(np.asarray(both[0, 0]), np.asarray(single), atol=1e-5)
 
 
+@pytest.mark.slow  # compiles its own programs; run by the slow tier
 def test_one_call_per_tick_in_the_batched_rollout():
     counting = Counting()
     host = host_models.numpy_policy(WEIGHTS, fn=counting)

@@ -334,6 +334,7 @@ def test_make_act_matches_model_call(obs, tables):
     np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
 
 
+@pytest.mark.slow  # compiles its own programs; run by the slow tier
 def test_surround_rig_reads_the_simulators_360_degree_view(tmp_path):
     """A surround-rig model's act asks for the six-camera rig: the simulator fills
     ``Observation.surround`` for it (and only for it), its features read that view, and it

@@ -91,6 +91,7 @@ def pe_no_warning():
     return [sc.replace(config=sc.config.replace(warning_enabled=off)) for sc in scenarios]
 
 
+@pytest.mark.slow  # compiles its own programs; run by the slow tier
 def test_a_camera_policy_cannot_brake_for_a_hidden_pedestrian(pe_no_warning):
     """On every PE pair without warning, a policy that brakes for any pedestrian slot within
     40 m ahead, ignoring ``visible``, never brakes before the tick at which the front camera
@@ -218,6 +219,7 @@ def six_pairs():
                          for p in [q for q in suite.pairs if q.family == f][:1]])  # fmt: skip
 
 
+@pytest.mark.slow  # compiles its own programs; run by the slow tier
 def test_a_carry_resets_when_a_slot_takes_the_next_execution(six_pairs, monkeypatch):
     """Through two slots per device refilled every 20 ticks, every execution's final count is
     the number of ticks its own warning was delivered (a carry left over from the slot's
@@ -234,6 +236,7 @@ def test_a_carry_resets_when_a_slot_takes_the_next_execution(six_pairs, monkeypa
     assert (count[:6] > 0).sum() >= 3 and (count[6:] == 0).all()  # Route A warning only
 
 
+@pytest.mark.slow  # compiles its own programs; run by the slow tier
 def test_a_host_policy_with_memory(six_pairs):
     """The same counter as a host (NumPy) model: the carry travels through the callback."""
 

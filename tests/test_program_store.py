@@ -73,6 +73,7 @@ def _evaluate_in_new_process(cache: Path, out: Path) -> float:
     return rows["program load"], rows["trace + lower"]
 
 
+@pytest.mark.slow  # compiles its own programs; run by the slow tier
 def test_a_new_process_loads_the_stored_program_without_tracing_and_same_results(tmp_path):
     cache = tmp_path / "cache"
     load, lower = _evaluate_in_new_process(cache, tmp_path / "first")
@@ -99,6 +100,7 @@ def test_a_program_served_by_jax_cache_is_not_fresh():
     assert not fresh
 
 
+@pytest.mark.slow  # compiles its own programs; run by the slow tier
 def test_a_policy_from_outside_the_package_is_compiled_not_stored(store, monkeypatch):
     keyed = []
     real = program_store.program_key

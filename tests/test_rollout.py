@@ -281,6 +281,7 @@ def _soft_clearance_grad(policy: Policy):
     return float(value), float(grad)
 
 
+@pytest.mark.slow  # compiles its own programs; run by the slow tier
 def test_gradient_through_simulator_core():
     """Scripted actor, protocol and telemetry are differentiable (constant-speed ego plan)."""
     cruise = Policy("cruise", lambda key: None, lambda _, obs: constant_speed_waypoints(8.0))

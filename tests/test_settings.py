@@ -95,6 +95,7 @@ def test_in_process_changes_equal_fresh_processes_and_the_persistent_cache(tmp_p
     assert _run_probe(list(sp.CHANGES), cache) == in_process
 
 
+@pytest.mark.slow  # compiles its own programs; run by the slow tier
 def test_settings_batch_with_vmap():
     """Traced settings are pytree leaves: one pair's final telemetry scored under four TTC
     normalisers and recovery caps in one ``vmap`` equals four separate calls."""

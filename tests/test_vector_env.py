@@ -16,6 +16,9 @@ import lantern_jax.envs as lenvs  # noqa: E402
 from lantern_jax.envs.reward import GATE_PENALTY  # noqa: E402
 from lantern_jax.envs.vector import LanternVectorEnv  # noqa: E402
 
+# the vector environment compiles its own step (about a minute on two cores): the slow tier
+pytestmark = pytest.mark.slow
+
 B, STEPS, CAP, SEED = 4, 60, 40, 3
 
 
