@@ -38,7 +38,11 @@ import os
 import jax
 import numpy as np
 import pandas as pd
-from IPython.display import display
+
+try:
+    from IPython.display import display
+except ImportError:  # run as a plain script (python notebooks/...py): print what a cell shows
+    display = print
 
 from lantern_jax.evaluation import evaluate
 from lantern_jax.policies.registry import get_policy

@@ -44,7 +44,11 @@ import os
 
 import numpy as np
 import pandas as pd
-from IPython.display import display
+
+try:
+    from IPython.display import display
+except ImportError:  # run as a plain script (python notebooks/...py): print what a cell shows
+    display = print
 
 from lantern_jax.dynamics.adversary import KINEMATIC_LIMITS
 from lantern_jax.scenarios.families import KNOB_RANGES

@@ -33,7 +33,11 @@ from pathlib import Path
 
 import matplotlib.pyplot as plt
 import pandas as pd
-from IPython.display import display
+
+try:
+    from IPython.display import display
+except ImportError:  # run as a plain script (python notebooks/...py): print what a cell shows
+    display = print
 
 from lantern_jax.dataset.generate import generate_dataset
 from lantern_jax.dataset.store import card_markdown
