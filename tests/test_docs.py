@@ -131,8 +131,15 @@ def test_every_command_parses(argv):
     assert args is not None
 
 
+def _page_param(page: Path):
+    """The README's blocks run with the slow tests; a documentation page's are ``docs_pages``
+    as well (minutes each, run on demand: ``python -m pytest -q -m docs_pages``)."""
+    marks = () if page.name == "README.md" else (pytest.mark.docs_pages,)
+    return pytest.param(page, id=_rel(page), marks=marks)
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize("page", [pytest.param(p, id=_rel(p)) for p in PY_PAGES])
+@pytest.mark.parametrize("page", [_page_param(p) for p in PY_PAGES])
 def test_python_blocks_run(page, tmp_path, monkeypatch):
     """A page's Python blocks, in order, in one namespace, in an empty working folder."""
     monkeypatch.chdir(tmp_path)
