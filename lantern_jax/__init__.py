@@ -21,8 +21,13 @@ The names a user needs, importable from the package itself::
 * :class:`FamilyRecord` and :func:`register_family` — a hazard family of your own
   (``docs/families.md``).
 
+* :func:`setup` — JAX's CPU devices and compilation cache as the command line has them
+  (:mod:`lantern_jax.jax_setup`; done by ``import lantern_jax`` itself when JAX is not
+  imported yet).
+
 The names are loaded on first use, so ``import lantern_jax`` stays cheap and does not import
-JAX (the command line sets XLA's CPU device count before JAX starts).
+JAX; where JAX is not imported yet it exposes one XLA CPU device per core and turns JAX's
+persistent compilation cache on (``LANTERN_JAX_AUTO_SETUP=0`` leaves both alone).
 """
 
 from __future__ import annotations
@@ -30,6 +35,12 @@ from __future__ import annotations
 import importlib
 import importlib.metadata
 from typing import TYPE_CHECKING, Any
+
+from lantern_jax import jax_setup
+
+# One XLA CPU device per core and the persistent compilation cache, as the command line has
+# them, when JAX is not imported yet (lantern_jax.jax_setup; LANTERN_JAX_AUTO_SETUP=0: off).
+jax_setup.auto_setup()
 
 try:
     #: The installed package's version (``pyproject.toml``); ``lantern-jax --version``.
@@ -49,6 +60,7 @@ _EXPORTS = {
     "policy_names": "lantern_jax.policies.registry",
     "rollout": "lantern_jax.sim.rollout",
     "write_outputs": "lantern_jax.report",
+    "setup": "lantern_jax.jax_setup",
     "Settings": "lantern_jax.sim.settings",
     "DEFAULT_SETTINGS": "lantern_jax.sim.settings",
     "default_settings": "lantern_jax.sim.settings",
@@ -77,6 +89,7 @@ __all__ = [
     "register_family",
     "register_policy_source",
     "rollout",
+    "setup",
     "write_outputs",
 ]
 
@@ -85,6 +98,7 @@ def __getattr__(name: str) -> Any:
     module = _EXPORTS.get(name)
     if module is None:
         raise AttributeError(f"module 'lantern_jax' has no attribute {name!r}")
+    jax_setup.warn_pending()
     value = getattr(importlib.import_module(module), name)
     globals()[name] = value  # later lookups skip this function
     return value
@@ -96,6 +110,7 @@ def __dir__() -> list[str]:
 
 if TYPE_CHECKING:  # for type checkers and IDEs: the same names, imported eagerly
     from lantern_jax.evaluation import EvalResult, evaluate
+    from lantern_jax.jax_setup import setup
     from lantern_jax.policies.base import Policy
     from lantern_jax.policies.registry import get_policy, policy_names, register_policy_source
     from lantern_jax.report import write_outputs

@@ -39,10 +39,10 @@ selection; an output folder that cannot be written — all found before anything
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from collections.abc import Sequence
 
+from lantern_jax import jax_setup
 from lantern_jax.commands import (
     UsageError,
     ablations,
@@ -81,30 +81,21 @@ COMMANDS = (
 )  # fmt: skip
 
 #: Environment variable that sets the number of XLA CPU devices of the command line.
-CPU_DEVICES_ENV = "LANTERN_JAX_CPU_DEVICES"
+CPU_DEVICES_ENV = jax_setup.CPU_DEVICES_ENV
 
 
 def expose_cpu_cores() -> None:
-    """Expose one XLA CPU device per core, so that the evaluator can split its batch over them.
-
-    Only possible before JAX starts; skipped when JAX is already imported, when ``XLA_FLAGS``
-    already sets a device count, or when ``LANTERN_JAX_CPU_DEVICES`` says otherwise (e.g. 1).
+    """Expose one XLA CPU device per core, so that the evaluator can split its batch over them
+    (:func:`lantern_jax.jax_setup.expose_cpu_cores`: only before JAX starts, not where
+    ``XLA_FLAGS`` already sets a count; ``LANTERN_JAX_CPU_DEVICES`` sets another, e.g. 1).
 
     Raises:
         UsageError: when ``LANTERN_JAX_CPU_DEVICES`` is not a whole number >= 1.
     """
-    given = os.environ.get(CPU_DEVICES_ENV)
-    if given is not None and not (given.strip().isdigit() and int(given) >= 1):
-        raise UsageError(f"environment variable {CPU_DEVICES_ENV}: expected a whole number "
-                         f">= 1, got {given!r}")  # fmt: skip
-    if "jax" in sys.modules:
-        return
-    flags = os.environ.get("XLA_FLAGS", "")
-    if "xla_force_host_platform_device_count" in flags:
-        return
-    n = int(given) if given is not None else os.cpu_count() or 1
-    if n > 1:
-        os.environ["XLA_FLAGS"] = f"{flags} --xla_force_host_platform_device_count={n}".strip()
+    try:
+        jax_setup.expose_cpu_cores()
+    except jax_setup.SetupError as e:
+        raise UsageError(str(e)) from None
 
 
 def build_parser() -> argparse.ArgumentParser:

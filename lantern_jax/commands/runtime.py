@@ -15,6 +15,7 @@ import sys
 import threading
 from collections.abc import Callable
 
+from lantern_jax import jax_setup
 from lantern_jax.commands import UsageError
 
 #: Exit code of a usage error.
@@ -144,39 +145,12 @@ def stdout_failed(error: StdoutError) -> int:
 # compilation cache, distributed runtime
 # ---------------------------------------------------------------------------------------------
 #: Environment variable that moves the persistent compilation cache of the command line.
-CACHE_DIR_ENV = "LANTERN_JAX_CACHE_DIR"
-
-
-def compile_cache_dir() -> str:
-    """Where the command line keeps compiled programs between runs.
-
-    ``$LANTERN_JAX_CACHE_DIR`` if set, else JAX's own ``$JAX_COMPILATION_CACHE_DIR`` if set,
-    else ``$XDG_CACHE_HOME/lantern-jax/jax`` (``~/.cache/lantern-jax/jax`` by default).
-    """
-    for var in (CACHE_DIR_ENV, "JAX_COMPILATION_CACHE_DIR"):
-        if os.environ.get(var):
-            return os.environ[var]
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return os.path.join(base, "lantern-jax", "jax")
-
-
-def configure_compile_cache(enabled: bool) -> str | None:
-    """Turn JAX's persistent compilation cache on (in :func:`compile_cache_dir`) or off.
-
-    A second run of the same command then loads its compiled programs instead of compiling
-    them again (``--no-compile-cache`` turns this off).  Must run before the first compile.
-
-    Returns:
-        The cache folder, or None when disabled.
-    """
-    import jax
-
-    jax.config.update("jax_enable_compilation_cache", enabled)
-    if not enabled:
-        return None
-    path = compile_cache_dir()
-    jax.config.update("jax_compilation_cache_dir", path)
-    return path
+CACHE_DIR_ENV = jax_setup.CACHE_DIR_ENV
+#: Where the command line keeps compiled programs (:func:`lantern_jax.jax_setup.compile_cache_dir`).
+compile_cache_dir = jax_setup.compile_cache_dir
+#: Turn the persistent compilation cache on or off
+#: (:func:`lantern_jax.jax_setup.configure_compile_cache`).
+configure_compile_cache = jax_setup.configure_compile_cache
 
 
 def add_cache_flag(parser: argparse.ArgumentParser) -> None:

@@ -1,0 +1,187 @@
+"""JAX's process set-up for this package: one XLA CPU device per core and the persistent
+compilation cache — what makes the command line fast, for the Python API too.
+
+Both must happen before JAX starts (the CPU device count) or before the first compile (the
+cache).  The command line does both, and so does ``import lantern_jax`` when JAX is not
+imported yet (:func:`auto_setup`; ``LANTERN_JAX_AUTO_SETUP=0`` turns that off)::
+
+    import lantern_jax as lj       # before jax: one CPU device per core, the compile cache
+    result = lj.evaluate("coop")
+
+Where JAX was imported first, its CPU device count stays JAX's (one device: the evaluation then
+runs on one core); :func:`setup` still turns the compilation cache on and says, in the
+:class:`SetupReport` it returns, why the device count could not be set.  Nothing is changed
+that the environment already decides: ``XLA_FLAGS`` with a device count,
+``LANTERN_JAX_CPU_DEVICES``, a compilation cache folder already configured.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import sys
+import warnings
+
+#: Environment variable that sets the number of XLA CPU devices (default: one per core).
+CPU_DEVICES_ENV = "LANTERN_JAX_CPU_DEVICES"
+#: Environment variable that moves the persistent compilation cache.
+CACHE_DIR_ENV = "LANTERN_JAX_CACHE_DIR"
+#: Environment variable that turns the automatic set-up on first use off (``0``).
+AUTO_SETUP_ENV = "LANTERN_JAX_AUTO_SETUP"
+
+_PENDING = ""  # a set-up problem found at import, reported on first use
+
+
+class SetupError(ValueError):
+    """An environment variable of the set-up holds a value it cannot use; the message names
+    the variable."""
+
+
+@dataclasses.dataclass(frozen=True)
+class SetupReport:
+    """What :func:`setup` did."""
+
+    #: XLA CPU devices asked for in ``XLA_FLAGS`` (None: none asked for, JAX's default)
+    cpu_devices: int | None
+    #: why the device count could not be set (JAX already imported), else ""
+    cpu_devices_note: str
+    #: the persistent compilation cache folder in use (None: off)
+    compile_cache: str | None
+
+
+def cpu_device_request() -> int | None:
+    """The CPU device count to ask XLA for: ``$LANTERN_JAX_CPU_DEVICES``, else one per core
+    this process may run on; None when ``XLA_FLAGS`` already sets one.
+
+    Raises:
+        SetupError: when ``LANTERN_JAX_CPU_DEVICES`` is not a whole number >= 1.
+    """
+    given = os.environ.get(CPU_DEVICES_ENV)
+    if given is not None and not (given.strip().isdigit() and int(given) >= 1):
+        raise SetupError(f"environment variable {CPU_DEVICES_ENV}: expected a whole number "
+                         f">= 1, got {given!r}")  # fmt: skip
+    if "xla_force_host_platform_device_count" in os.environ.get("XLA_FLAGS", ""):
+        return None
+    if given is not None:
+        return int(given)
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+
+
+def expose_cpu_cores() -> int | None:
+    """Expose one XLA CPU device per core (or ``$LANTERN_JAX_CPU_DEVICES``), so that the
+    evaluator can split its batch over them; only possible before JAX is imported.
+
+    Returns:
+        The device count set in ``XLA_FLAGS``, or None when nothing was set (JAX already
+        imported, ``XLA_FLAGS`` already sets a count, or one device).
+
+    Raises:
+        SetupError: when ``LANTERN_JAX_CPU_DEVICES`` is not a whole number >= 1.
+    """
+    n = cpu_device_request()
+    if "jax" in sys.modules or n is None or n <= 1:
+        return None
+    flags = os.environ.get("XLA_FLAGS", "")
+    os.environ["XLA_FLAGS"] = f"{flags} --xla_force_host_platform_device_count={n}".strip()
+    return n
+
+
+def _flag_device_count() -> int | None:
+    """The CPU device count ``XLA_FLAGS`` asks for, or None."""
+    for flag in os.environ.get("XLA_FLAGS", "").split():
+        name, _, value = flag.partition("=")
+        if name == "--xla_force_host_platform_device_count" and value.isdigit():
+            return int(value)
+    return None
+
+
+def compile_cache_dir() -> str:
+    """Where compiled programs are kept between runs.
+
+    ``$LANTERN_JAX_CACHE_DIR`` if set, else JAX's own ``$JAX_COMPILATION_CACHE_DIR`` if set,
+    else ``$XDG_CACHE_HOME/lantern-jax/jax`` (``~/.cache/lantern-jax/jax`` by default).
+    """
+    for var in (CACHE_DIR_ENV, "JAX_COMPILATION_CACHE_DIR"):
+        if os.environ.get(var):
+            return os.environ[var]
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return os.path.join(base, "lantern-jax", "jax")
+
+
+def configure_compile_cache(enabled: bool) -> str | None:
+    """Turn JAX's persistent compilation cache on (in :func:`compile_cache_dir`) or off.
+
+    A second run of the same evaluation then loads its compiled programs instead of compiling
+    them again.  Must run before the first compile.
+
+    Returns:
+        The cache folder, or None when disabled.
+    """
+    import jax
+
+    jax.config.update("jax_enable_compilation_cache", enabled)
+    if not enabled:
+        return None
+    path = compile_cache_dir()
+    jax.config.update("jax_compilation_cache_dir", path)
+    return path
+
+
+def setup(compile_cache: bool = True) -> SetupReport:
+    """Set JAX up as the command line does: one XLA CPU device per core (when JAX is not
+    imported yet) and the persistent compilation cache (unless one is configured already).
+
+    Args:
+        compile_cache: keep compiled programs between runs (:func:`compile_cache_dir`);
+            ``False`` turns the cache off.
+
+    Returns:
+        :class:`SetupReport`: the device count asked for, why it could not be (if so), and the
+        cache folder.
+
+    Raises:
+        SetupError: when ``LANTERN_JAX_CPU_DEVICES`` is not a whole number >= 1.
+    """
+    late = "jax" in sys.modules
+    n = expose_cpu_cores() or _flag_device_count()
+    note = ""
+    if late and (cpu_device_request() or 1) > 1:
+        note = ("JAX was imported before lantern_jax set it up: it keeps its own CPU device "
+                "count (one by default; the evaluation then runs on one core). Import "
+                "lantern_jax before jax, or set XLA_FLAGS="
+                "--xla_force_host_platform_device_count=N")  # fmt: skip
+    import jax
+
+    configured = jax.config.jax_compilation_cache_dir
+    if not compile_cache:
+        cache = configure_compile_cache(False)
+    elif configured and jax.config.jax_enable_compilation_cache:
+        cache = configured
+    else:
+        cache = configure_compile_cache(True)
+    return SetupReport(cpu_devices=n, cpu_devices_note=note, compile_cache=cache)
+
+
+def auto_setup() -> None:
+    """The set-up at ``import lantern_jax``, without importing JAX: when JAX is not imported
+    yet and ``LANTERN_JAX_AUTO_SETUP`` is not ``0``, one XLA CPU device per core
+    (:func:`expose_cpu_cores`) and ``$JAX_COMPILATION_CACHE_DIR`` set to
+    :func:`compile_cache_dir` unless already set (JAX reads it when it starts).  A bad
+    ``LANTERN_JAX_CPU_DEVICES`` changes nothing here; it is reported, as a warning, on the
+    first use of a name of the package (:func:`warn_pending`)."""
+    global _PENDING
+    if os.environ.get(AUTO_SETUP_ENV, "1").strip() == "0" or "jax" in sys.modules:
+        return
+    try:
+        expose_cpu_cores()
+    except SetupError as e:
+        _PENDING = f"{e}; lantern_jax leaves JAX's CPU device count as it is"
+    os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", compile_cache_dir())
+
+
+def warn_pending() -> None:
+    """Warn, once, about a set-up that :func:`auto_setup` could not do."""
+    global _PENDING
+    if _PENDING:
+        message, _PENDING = _PENDING, ""
+        warnings.warn(message, stacklevel=3)
