@@ -45,6 +45,21 @@ def test_importing_lantern_jax_does_not_import_brax():
     subprocess.run([sys.executable, "-c", code], check=True)
 
 
+def test_importing_the_environment_prints_no_third_party_noise():
+    """MJX's "Failed to import warp" lines (brax imports it) stay out of the terminal; a line
+    printed by anything else during the import still gets through."""
+    code = (
+        "from lantern_jax.envs.quiet import filtered_stdout\n"
+        "with filtered_stdout():\n"
+        "    print('Failed to import warp: x'); print('kept line')\n"
+        "import lantern_jax.envs"
+    )
+    done = subprocess.run([sys.executable, "-c", code], check=True, capture_output=True,
+                          text=True)  # fmt: skip
+    assert "Failed to import" not in done.stdout + done.stderr
+    assert done.stdout.splitlines() == ["kept line"]
+
+
 def test_registered_with_brax_and_sizes(env):
     assert isinstance(env, lenvs.LanternEnv)
     assert env.bank.size == 6  # 2 families x 1 pair x (A warning, A no-warning, B)

@@ -15,9 +15,12 @@ the Gymnasium vector API over NumPy arrays (for CleanRL- or Stable-Baselines3-st
 
 from __future__ import annotations
 
-from brax import envs as _brax_envs
+from lantern_jax.envs.quiet import filtered_stdout
 
-from lantern_jax.envs import compat
+with filtered_stdout():  # MJX's "Failed to import warp" lines (lantern_jax.envs.quiet)
+    from brax import envs as _brax_envs
+
+from lantern_jax.envs import compat  # noqa: E402
 from lantern_jax.envs.bank import ScenarioBank, build_bank
 from lantern_jax.envs.env import EnvState, LanternEnv
 from lantern_jax.envs.vector import LanternVectorEnv
