@@ -33,6 +33,7 @@ import pandas as pd
 from lantern_jax.constants import CONDITIONS, DT, SUITE_ID
 from lantern_jax.evaluation import EvalResult, evaluate, package_versions
 from lantern_jax.policies.base import Policy
+from lantern_jax.report.tables import ABLATION_TABLE_COLUMNS
 from lantern_jax.scenarios.ablations import ABLATIONS, get_ablation
 from lantern_jax.scenarios.suite import Suite, load_suite
 from lantern_jax.scoring.aggregate import (
@@ -51,7 +52,8 @@ from lantern_jax.scoring.uncertainty import (
     table_resampling,
 )
 
-TABLE_COLUMNS = ("CUS", "A-Prog.", "Event Exp.", "Ant.", "Rec.", "Coll.-A", "Block-A")
+#: The ablation table's columns (their one home: the table's format).
+TABLE_COLUMNS = ABLATION_TABLE_COLUMNS
 
 
 @dataclasses.dataclass

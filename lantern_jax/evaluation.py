@@ -18,10 +18,12 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import importlib.metadata as md
+import os
 import platform
 import sys
 import time
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 import jax
@@ -158,8 +160,9 @@ def run_policy(
         members = (*members[:i], params, *members[i + 1 :])
         driver, run_params = switch, switch_params(switch, i, members)
     final, t_compile = run_executions(
-        driver, execs.scenarios, run_params, execs.max_ticks, settings, timings=timings
-    )
+        driver, execs.scenarios, run_params, execs.max_ticks, settings, timings=timings,
+        pad_to=execs.pad_to,
+    )  # fmt: skip
     t2 = time.perf_counter()
     m_struct = finalize_batch(final.telemetry, settings)
     proto = jax.tree.map(np.asarray, final.protocol)
@@ -199,6 +202,28 @@ class EvalResult:
     #: wall seconds of the shared phases: "world build", "tables" and "intervals" (per policy:
     #: ``runs``)
     seconds: dict[str, float] = dataclasses.field(default_factory=dict)
+
+    def write(self, folder: str | os.PathLike, run_record: dict | None = None) -> dict[str, Path]:
+        """Write this evaluation's files into ``folder``, the same set as ``lantern-jax
+        evaluate --out folder`` (tables, route-level CSV and its schema, reproducibility
+        manifest, run record): :func:`lantern_jax.report.write_outputs`.
+
+        Args:
+            folder: output folder (created if needed; result files already there are
+                replaced together, other entries kept).
+            run_record: more entries for the run record (e.g. how the result was made).
+
+        Returns:
+            File name -> path of every file written.
+
+        Raises:
+            ValueError: when the route-level table does not satisfy its schema (nothing is
+                written).
+            lantern_jax.files.OutputFolderError: when ``folder`` cannot receive the set.
+        """
+        from lantern_jax.report import write_outputs
+
+        return write_outputs(self, folder, run_record=run_record)
 
 
 def _policies_to_run(policies, suite) -> list[Policy]:
@@ -370,7 +395,7 @@ def evaluate(
         raise ValueError(f"policy_params: {len(policy_params)} entries for {len(pols)} policies")
     s = load_suite(suite) if isinstance(suite, str) else suite
     t0 = time.perf_counter()
-    execs = build_executions(s, ablation)
+    execs = build_executions(s, ablation, bucket=True)
     t_build = time.perf_counter() - t0
     runs = _run_all(pols, list(policy_params), execs, s.suite_id, progress, one_program, settings)
     t0 = time.perf_counter()

@@ -530,7 +530,7 @@ def used_slots(valid: Any) -> int:
     return int(np.nonzero(v)[0].max()) + 1 if v.any() else 1
 
 
-def trim_padding(scenario: Scenario) -> Scenario:
+def trim_padding(scenario: Scenario, at_least: tuple[int, int] = (1, 1)) -> Scenario:
     """The same scenario (or batch) with the actor and lane slots past the last valid one cut.
 
     Padding slots are inert (``valid = False``: not present, never a target, blocker, leader or
@@ -546,13 +546,15 @@ def trim_padding(scenario: Scenario) -> Scenario:
 
     Args:
         scenario: a :class:`Scenario` with any number of leading batch axes (concrete).
+        at_least: (actor slots, lane slots) to keep at least, e.g. those of a batch whose
+            compiled program should serve this one too (at most the capacity).
 
     Returns:
         The :class:`Scenario` with ``actors`` / ``actors0`` and ``lanes`` narrowed.
     """
     batch_ndim = np.ndim(scenario.actors.valid) - 1
-    n_act = used_slots(scenario.actors.valid)
-    n_lane = used_slots(scenario.lanes.valid)
+    n_act = max(used_slots(scenario.actors.valid), at_least[0])
+    n_lane = max(used_slots(scenario.lanes.valid), at_least[1])
     return scenario.replace(
         actors=_keep_leading(scenario.actors, batch_ndim, n_act),
         actors0=_keep_leading(scenario.actors0, batch_ndim, n_act),

@@ -40,6 +40,7 @@ from lantern_jax.scoring.table import (
     schema_columns,
     validate_route_table,
 )
+from lantern_jax.sim.engine import SUITE_BATCH_SHAPE, batch_shape
 
 PAIRS = ["pe_0001", "lww_0001"]  # v_ref 8.45 m/s and 6.29 m/s
 ALONE = "lww_0001"  # shorter timeout than pe_0001: alone it runs a shorter horizon
@@ -131,6 +132,27 @@ def test_pair_alone_equals_pair_in_suite(base, shipped):
     assert ok, report
 
 
+def test_built_in_suite_shape_is_the_bucket(shipped):
+    """:data:`~lantern_jax.sim.engine.SUITE_BATCH_SHAPE` is the built-in suite's trimmed batch,
+    and a subset is built at that shape (its slots kept, its executions padded to it)."""
+    assert batch_shape(build_executions(shipped).scenarios) == SUITE_BATCH_SHAPE
+    sub = build_executions(shipped.select(PAIRS), bucket=True)
+    assert sub.pad_to == SUITE_BATCH_SHAPE[0]
+    assert batch_shape(sub.scenarios)[1:] == SUITE_BATCH_SHAPE[1:]
+    assert build_executions(shipped.select(PAIRS)).pad_to is None
+
+
+def test_batches_of_different_sizes_share_one_program(base, shipped):
+    """Evaluations of different subsets (one pair, three pairs) run the program of the built-in
+    suite's batch shape: the second compiles nothing."""
+    one = evaluate(["coop"], suite=shipped.select(["vc_0001"]), progress=False)
+    three = evaluate(["coop"], suite=shipped.select(["or_0001", "rty_0001", "pe_0002"]),
+                     progress=False)  # fmt: skip
+    assert len(one.route_table) == 2 and len(three.route_table) == 6
+    spent = three.runs[0].timings
+    assert spent["trace + lower"] == spent["XLA compile"] == spent["program load"] == 0.0
+
+
 @pytest.mark.slow
 def test_one_device_equals_two(tmp_path):
     """The same suite evaluated on one XLA CPU device and split over two keeps the promise."""
@@ -172,7 +194,7 @@ def test_same_inputs_give_identical_files(base, suite2, tmp_path):
     coop_rows = base.route_table[base.route_table["model"] == "coop"].reset_index(drop=True)
     pd.testing.assert_frame_equal(r1.route_table, coop_rows, check_exact=True)
     f1 = write_outputs(r1, tmp_path / "one")
-    f2 = write_outputs(r2, tmp_path / "two")
+    f2 = r2.write(tmp_path / "two")  # EvalResult.write: the same files as write_outputs
     assert list(f1) == list(OUTPUT_FILES) == list(f2)
     for name in OUTPUT_FILES:  # the manifest too; only the run record holds wall times
         if name != RUN_RECORD_JSON:

@@ -3,7 +3,8 @@
 The package is layered (``docs/design.md``); a module may import from its own layer or any lower
 layer, never from a higher one, and the imports between modules form no cycle.  Every
 ``import`` statement counts, including those inside functions (a lazy import is still a
-dependency).
+dependency), except those under ``if TYPE_CHECKING:`` (names for type checkers only, never
+imported when the code runs).
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ PACKAGE = Path(lantern_jax.__file__).parent
 #: Layers from the bottom up; each entry is a top-level module or sub-package of lantern_jax.
 LAYERS: tuple[tuple[str, ...], ...] = (
     # values, the time sentinel, wall-clock breakdowns, the known family codes, array checks
-    ("constants", "times", "timing", "family_codes", "checks", "actor_track"),
+    ("constants", "times", "timing", "family_codes", "checks", "actor_track", "jax_setup"),
     ("geometry", "polyline", "split_map"),  # pure JAX maths and loop rewrites
     # scenario and observation types; I/O (files, configuration files, compiled programs on
     # disk); tokens
@@ -27,6 +28,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("scenarios",),  # roads, families, protocol, warnings, suites (NumPy builders + JAX protocol)
     ("policies",),  # reference planners and the registry
     ("sim",),  # one tick and the rollouts
+    ("report",),  # tables and result files (an evaluation's types only for type checkers)
     (
         "evaluation",
         "generate",
@@ -40,9 +42,11 @@ LAYERS: tuple[tuple[str, ...], ...] = (
         "transfer",
     ),  # evaluation, suites, stress testing, data, language diagnostics, ablations,
     #               brax env, chunks, training, transfer to unseen hazards
-    ("report", "viz", "compare"),  # tables, files, plots, differences between evaluations
+    ("viz", "compare"),  # plots, differences between evaluations
     ("cli", "commands", "__main__"),  # the command line
 )
+#: ``if`` tests whose block holds imports for type checkers only.
+TYPE_CHECKING_TESTS = ("TYPE_CHECKING", "typing.TYPE_CHECKING")
 LAYER_OF = {name: i for i, names in enumerate(LAYERS) for name in names}
 
 
@@ -58,6 +62,9 @@ def _imports(path: Path) -> set[str]:
     """Every lantern_jax module imported anywhere in the file (``from X import y`` counts as X,
     and as ``X.y`` when that is a module)."""
     tree = ast.parse(path.read_text())
+    for node in ast.walk(tree):  # type-checking-only imports are not dependencies
+        if isinstance(node, ast.If) and ast.unparse(node.test) in TYPE_CHECKING_TESTS:
+            node.body = []
     out: set[str] = set()
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):

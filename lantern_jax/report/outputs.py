@@ -39,6 +39,7 @@ import pandas as pd
 from lantern_jax.constants import CONDITIONS
 from lantern_jax.files import StagedFolder, atomic_write, check_target_folder
 from lantern_jax.report.tables import (
+    ABLATION_TABLE_COLUMNS,
     family_columns,
     format_ablation_table,
     format_decomposition,
@@ -350,10 +351,9 @@ def write_ablation_outputs(
     with StagedFolder(out_dir, ABLATION_FILES) as stage:
         out = stage.path
         written = _write_route_files(result.route_table, out / ABLATION_ROUTE_CSV)
-        from lantern_jax.ablations import TABLE_COLUMNS
 
         keys = ("model", "condition", "variant")
-        table = with_interval_columns(result.table, result.intervals, keys, TABLE_COLUMNS)
+        table = with_interval_columns(result.table, result.intervals, keys, ABLATION_TABLE_COLUMNS)
         written.append(atomic_write(out / ABLATION_CSV, _csv_bytes(table)))
         m = result.manifest
         legend = _legend(m, result.intervals is not None)

@@ -44,6 +44,8 @@ GAIN_CONDITION = uncertainty.GAIN
 FLAG = "*"  # marks a cell averaging fewer than uncertainty.MIN_N pairs
 CONDITION_ORDER = (*CONDITIONS, GAIN_CONDITION)
 MISSING = "-"
+#: Columns of the ablation table (:func:`format_ablation_table`; 0..100).
+ABLATION_TABLE_COLUMNS = ("CUS", "A-Prog.", "Event Exp.", "Ant.", "Rec.", "Coll.-A", "Block-A")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -367,11 +369,9 @@ def format_ablation_table(
             reads ``79.6 ±3.4`` (half the interval's width), :data:`FLAG` below ``MIN_N`` pairs,
             and a ``Pairs`` column is added.
     """
-    from lantern_jax.ablations import TABLE_COLUMNS
-
     sub = df[df["condition"] == condition]
     multi = sub["model"].nunique() > 1
     records = sub.to_dict("records")
     labels = [f"{r['label']} ({r['model']})" if multi else r["label"] for r in records]
     keys = ("model", "condition", "variant")
-    return _pm_table(records, labels, intervals, keys, TABLE_COLUMNS, "Variant", tablefmt)
+    return _pm_table(records, labels, intervals, keys, ABLATION_TABLE_COLUMNS, "Variant", tablefmt)

@@ -65,15 +65,21 @@ class Executions:
     families: list[str]
     weathers: list[str]
     max_ticks: int
+    #: run the batch padded to this many executions (:func:`batch_bucket`); None: as it is
+    pad_to: int | None = None
 
 
-def build_executions(suite: Suite, ablation: str = "none", trim: bool = True) -> Executions:
+def build_executions(
+    suite: Suite, ablation: str = "none", trim: bool = True, bucket: bool = False
+) -> Executions:
     """Build the batched scenarios of every execution of a suite under an ablation.
 
     With ``trim`` (default) the actor and lane slots past the last one any execution uses are
     cut (:func:`~lantern_jax.world.trim_padding`: narrower per-tick work, same results to the
     reproducibility promise); ``trim=False`` keeps the full slot capacity, one batch shape for
-    every suite of the same size.
+    every suite of the same size.  With ``bucket`` the batch takes the shape of a larger one
+    whose program this process has compiled, or of the built-in suite (:func:`batch_bucket`):
+    slots are kept to its widths and :attr:`Executions.pad_to` says how many executions to run.
 
     Raises:
         ValueError: listing the valid ablations for an unknown name.
@@ -87,8 +93,13 @@ def build_executions(suite: Suite, ablation: str = "none", trim: bool = True) ->
         a_warn = a_warn.replace(config=fn(a_warn.config))
         a_none = a_none.replace(config=fn(a_none.config))
     scenarios = jax.tree.map(lambda *x: np.concatenate(x), a_warn, a_none, b)
+    pad_to = None
     if trim:
         scenarios = trim_padding(scenarios)
+    if trim and bucket:
+        pad_to, *widths = batch_bucket(batch_shape(scenarios))
+        scenarios = trim_padding(jax.tree.map(lambda *x: np.concatenate(x), a_warn, a_none, b),
+                                 at_least=tuple(widths))  # fmt: skip
     scenarios = jax.device_put(scenarios)
     max_ticks = int(np.ceil(float(np.max(np.asarray(scenarios.config.timeout_s))) / DT))
     assert len(CONDITIONS) == 2  # the batch layout above holds one block per condition
@@ -99,7 +110,51 @@ def build_executions(suite: Suite, ablation: str = "none", trim: bool = True) ->
         families=[p.family for p in suite.pairs],
         weathers=[p.weather for p in suite.pairs],
         max_ticks=max_ticks,
+        pad_to=pad_to,
     )
+
+
+#: Batch shape (executions, actor slots, lane slots) of the built-in suite ``lantern-v3``
+#: (``3 x 120`` executions; 10 of 16 actor slots and 9 of 16 lane slots used), to which
+#: :func:`batch_bucket` pads a smaller batch that fits: a subset evaluated before the suite then
+#: compiles the suite's program (checked against the suite in ``tests/test_evaluate.py``).
+SUITE_BATCH_SHAPE = (360, 10, 9)
+#: A batch is padded to a larger compiled shape only up to this many times its own size (or the
+#: built-in suite's): padding executions are never stepped, but every one is laid out and given
+#: a start state.
+BUCKET_MAX_GROWTH = 4
+_SHAPES: collections.OrderedDict[tuple[int, int, int], None] = collections.OrderedDict()
+
+
+def batch_shape(scenarios: Scenario) -> tuple[int, int, int]:
+    """(executions, actor slots, lane slots) of a batch of scenarios."""
+    return (int(np.shape(scenarios.actors.valid)[0]), int(np.shape(scenarios.actors.valid)[-1]),
+            int(np.shape(scenarios.lanes.valid)[-1]))  # fmt: skip
+
+
+def batch_bucket(shape: tuple[int, int, int]) -> tuple[int, int, int]:
+    """The shape to run a batch of ``shape`` (executions, actor slots, lane slots) at, so that
+    batches of different sizes share a compiled program where padding can make them.
+
+    The smallest shape already run in this process that holds the batch (at most
+    :data:`BUCKET_MAX_GROWTH` times its executions or the built-in suite's), else the built-in
+    suite's (:data:`SUITE_BATCH_SHAPE`) when it holds the batch, else the batch's own.  Padding
+    changes no result beyond float rounding: extra slots are inert, extra executions start
+    ended and are never stepped (:func:`run_executions`' ``pad_to``).
+    """
+    n = shape[0]
+    limit = max(BUCKET_MAX_GROWTH * n, SUITE_BATCH_SHAPE[0])
+    holds = [s for s in (*_SHAPES, SUITE_BATCH_SHAPE)
+             if all(a >= b for a, b in zip(s, shape, strict=True)) and s[0] <= limit]  # fmt: skip
+    return min(holds) if holds else shape
+
+
+def remember_shape(shape: tuple[int, int, int]) -> None:
+    """Note a batch shape whose program this process compiled (bounded, as the programs)."""
+    _SHAPES[shape] = None
+    _SHAPES.move_to_end(shape)
+    while len(_SHAPES) > MAX_PROGRAMS:
+        _SHAPES.popitem(last=False)
 
 
 def compact_slots(backend: str | None = None) -> int:
@@ -338,6 +393,7 @@ def run_executions(
     if timings is not None:
         for k, v in init_timings.items():
             timings[k] += v
+    remember_shape((total, *batch_shape(host)[1:]))
     final = jax.tree.map(np.asarray, place.get(exe(*args)))
     # back to the batch order: the first position of every execution (padding repeats one)
     first = np.empty(total, int)
