@@ -39,8 +39,8 @@ def family_components(df: pd.DataFrame) -> pd.DataFrame:
             for name, col in COMPONENTS.items():
                 x = sub[col].to_numpy(float)
                 row[name] = 100.0 * float(np.nanmean(x)) if np.any(~np.isnan(x)) else np.nan
-            row["Coll.-A"] = 100.0 * float(np.mean(sub["gate_collision"] == 0))
-            row["FB-B"] = 100.0 * float(np.mean(sub["gate_false_brake"] == 0))
+            row["Coll.-A"] = 100.0 * float(np.mean(sub["no_collision"] == 0))
+            row["FB-B"] = 100.0 * float(np.mean(sub["no_false_brake"] == 0))
             rows.append(row)
     return pd.DataFrame(rows)
 

@@ -92,12 +92,24 @@ PE, VC, OR, LWW, RWW, RTY = range(6)
 CONDITIONS = ("warning", "no-warning")
 WARNING_CONDITION, NO_WARNING_CONDITION = CONDITIONS
 
-# --- the gates of a pair (result tables' ``gate_*`` columns: 1 = passed) ------------------------
-#: Route A gates by telemetry field, in failure-time order (column ``"gate_" + field``).
+# --- the gates of a pair (metrics' ``gate_*`` pass flags; result tables' GATE_COLUMNS) --------
+#: Route A gates by telemetry field, in failure-time order (metric ``"gate_" + field``).
 ROUTE_A_GATE_FIELDS = ("collision", "route_deviation", "lane", "rule", "block")
 ROUTE_A_GATE_NAMES = tuple(f"gate_{field}" for field in ROUTE_A_GATE_FIELDS)
 #: All six gates of a pair: Route A's, then Route B's false-brake gate.
 GATE_NAMES = (*ROUTE_A_GATE_NAMES, "gate_false_brake")
+#: The route-level table's column of each gate, named for what its 1 means (the gate passed):
+#: ``no_collision = 1`` is a pair without a collision.
+GATE_COLUMNS = {
+    "gate_collision": "no_collision",
+    "gate_route_deviation": "on_route",
+    "gate_lane": "in_lane",
+    "gate_rule": "no_red_light",
+    "gate_block": "not_blocked",
+    "gate_false_brake": "no_false_brake",
+}
+#: The gate columns of the route-level table, in :data:`GATE_NAMES` order.
+GATE_COLUMN_NAMES = tuple(GATE_COLUMNS[g] for g in GATE_NAMES)
 
 # --- weather profiles of the frozen suite -----------------------------------------------------
 WEATHERS = ("clear_day", "cloudy_day", "wet_day", "light_rain", "dusk")

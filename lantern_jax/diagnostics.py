@@ -156,7 +156,7 @@ def wording_intervals(
 
     Args:
         canonical, paraphrase, no_warning: route-level rows (``pair_id``, ``CUS``,
-            ``gate_collision``) of the three runs.
+            ``no_collision``) of the three runs.
         tiers: (n,) int, tier index of every pair of ``pair_ids``.
         pair_ids: (n,) pair ids in the order of ``tiers``.
         seed: the bootstrap's seed.
@@ -173,7 +173,7 @@ def wording_intervals(
         if ok:
             values = np.column_stack([
                 p.loc[ok, "CUS"], c.loc[ok, "CUS"],
-                100.0 * (p.loc[ok, "gate_collision"].to_numpy() == 0), nw.loc[ok, "CUS"],
+                100.0 * (p.loc[ok, "no_collision"].to_numpy() == 0), nw.loc[ok, "CUS"],
             ])  # fmt: skip
             res = resampling(ok, ["all"] * len(ok), seed=seed)
             reps = pooled(res, values)
@@ -198,7 +198,7 @@ def tier_rows(
     """The wording table from route-level rows (warning condition) of both runs.
 
     Args:
-        canonical: route-level rows (``pair_id``, ``CUS``, ``gate_collision``) with the
+        canonical: route-level rows (``pair_id``, ``CUS``, ``no_collision``) with the
             canonical template, warning condition.
         paraphrase: the same with the held-out paraphrases.
         tiers: (n,) int, tier index of every pair of ``pair_ids``.
@@ -216,7 +216,7 @@ def tier_rows(
     for label, ok in _tier_groups(c, p, tiers, pair_ids):
         para = float(p.loc[ok, "CUS"].mean()) if ok else np.nan
         canon = float(c.loc[ok, "CUS"].mean()) if ok else np.nan
-        coll = 100.0 * float((p.loc[ok, "gate_collision"] == 0).mean()) if ok else np.nan
+        coll = 100.0 * float((p.loc[ok, "no_collision"] == 0).mean()) if ok else np.nan
         rows.append(
             {
                 "Wording": label + (", no position" if label.startswith("High") else ""),

@@ -224,8 +224,8 @@ def run_transfer(
         )  # fmt: skip
         sel = table.index[table["condition"] == cond]
         table.loc[sel, "rc"] = 100.0 * route["A_progress"].to_numpy()
-        table.loc[sel, "collision"] = 100.0 * (1 - route["gate_collision"].to_numpy())
-        table.loc[sel, "blocked"] = 100.0 * (1 - route["gate_block"].to_numpy())
+        table.loc[sel, "collision"] = 100.0 * (1 - route["no_collision"].to_numpy())
+        table.loc[sel, "blocked"] = 100.0 * (1 - route["not_blocked"].to_numpy())
         table.loc[sel, "CUS"] = route["CUS"].to_numpy()
     return TransferResult(pol.name, table, summarize(table))
 

@@ -1422,10 +1422,10 @@ def test_plans_a_vehicle_cannot_drive_have_a_defined_outcome():
             row = rows.loc[(name, cond)]
             assert (row["controller_fault"], row["B_controller_fault"]) == (1, 1), name
             assert row["t_fault_s"] == row["B_t_fault_s"] == pytest.approx(0.05)
-            assert row["gate_block"] == 0 and row["CUS"] == 0.0 and row["A_progress"] < 0.1
+            assert row["not_blocked"] == 0 and row["CUS"] == 0.0 and row["A_progress"] < 0.1
     back = rows.loc[("plan-backwards", "warning")]
     assert (back["controller_fault"], back["B_controller_fault"]) == (0, 0)
-    assert back["B_progress"] == 1.0 and back["gate_collision"] == 0  # drove on, into the hazard
+    assert back["B_progress"] == 1.0 and back["no_collision"] == 0  # drove on, into the hazard
     validate_route_table(res.route_table)  # every value within its schema's rules
 
 

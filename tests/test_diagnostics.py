@@ -100,9 +100,9 @@ def test_tier_rows():
     ids = [f"p{i}" for i in range(6)]
     tiers = np.array([0, 0, 1, 1, 2, 2])
     canon = pd.DataFrame({"pair_id": ids, "CUS": [80.0, 60, 90, 70, 50, 100],
-                          "gate_collision": [1] * 6})  # fmt: skip
+                          "no_collision": [1] * 6})  # fmt: skip
     para = pd.DataFrame({"pair_id": ids, "CUS": [88.0, 66, 45, 0, np.nan, 40],
-                         "gate_collision": [1, 1, 1, 0, 1, 0]})  # fmt: skip
+                         "no_collision": [1, 1, 1, 0, 1, 0]})  # fmt: skip
     t = dg.tier_rows(canon, para, tiers, ids).set_index("Wording")
     low = t.loc["Low ambiguity"]
     # low: paraphrase (88 + 66) / 2 = 77, canonical (80 + 60) / 2 = 70, retention 110 %

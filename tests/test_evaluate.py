@@ -280,7 +280,7 @@ def test_nan_waypoints_are_recorded_failures(base, suite2, faulty):
     hit = ("warning", "pe_0001")
     row = got.loc[hit]
     assert row["controller_fault"] == 1
-    assert row["gate_block"] == 0
+    assert row["not_blocked"] == 0
     assert row["CUS"] == 0.0
     assert want.loc[hit, "controller_fault"] == 0 and want.loc[hit, "CUS"] > 0
     others = [k for k in want.index if k != hit]

@@ -41,8 +41,8 @@ REQUIRED = [
     "model", "condition", "pair_id", "family", "weather", "A_progress", "B_progress",
     "ttc_min_s", "clearance_min_m", "t_ref_s", "t_warn_on_s", "t_event_s", "t_warn_off_s",
     "t_clear_s", "t_react_s", "recovery_latency_s", "S_ttc", "S_clear", "S_ant", "S_rec",
-    "gate_collision", "gate_route_deviation", "gate_lane", "gate_rule", "gate_block",
-    "gate_false_brake", "CUS",
+    "no_collision", "on_route", "in_lane", "no_red_light", "not_blocked",
+    "no_false_brake", "CUS",
 ]  # fmt: skip
 
 
@@ -75,8 +75,8 @@ def test_family_means_and_macro_average():
 def test_decomposition_table():
     nan = math.nan
     base = {"model": "m", "condition": "warning", "family": "PE", "CUS": 50.0}
-    gates = ["gate_collision", "gate_route_deviation", "gate_lane", "gate_rule", "gate_block",
-             "gate_false_brake"]  # fmt: skip
+    gates = ["no_collision", "on_route", "in_lane", "no_red_light", "not_blocked",
+             "no_false_brake"]  # fmt: skip
     rows = [
         # A_prog, B_prog, S_ttc, S_clear, S_ant, S_rec, gates
         (1.0, 1.0, 0.5, 1.0, 1.0, 0.5, [1, 1, 1, 1, 1, 1]),
@@ -144,8 +144,8 @@ def test_build_route_table_columns_and_values(batch_metrics):
     validate_route_table(df)
     assert list(df["family"]) == ["PE", "VC", "RTY"]
     assert df["CUS"].iloc[0] > 50 and df["CUS"].iloc[1] == 0.0  # timeout fails the block gate
-    assert df["gate_block"].tolist() == [1, 0, 1]
-    assert df["gate_collision"].dtype == np.int64
+    assert df["not_blocked"].tolist() == [1, 0, 1]
+    assert df["no_collision"].dtype == np.int64
     # warning condition: delivery starts at the warning point
     assert np.allclose(df["t_warn_on_s"], df["t_ref_s"])
     nw = make_table(batch_metrics, condition="no_warning")
@@ -163,15 +163,15 @@ def test_schema_describes_every_column():
 
 
 def test_validation_names_missing_column(batch_metrics):
-    df = make_table(batch_metrics).drop(columns=["S_rec", "gate_lane"])
-    with pytest.raises(ValueError, match=r"missing column\(s\) \['S_rec', 'gate_lane'\]"):
+    df = make_table(batch_metrics).drop(columns=["S_rec", "in_lane"])
+    with pytest.raises(ValueError, match=r"missing column\(s\) \['S_rec', 'in_lane'\]"):
         validate_route_table(df)
 
 
 def test_validation_names_wrong_dtype(batch_metrics):
     df = make_table(batch_metrics)
-    df["gate_rule"] = df["gate_rule"].astype(float)
-    with pytest.raises(ValueError, match="gate_rule"):
+    df["no_red_light"] = df["no_red_light"].astype(float)
+    with pytest.raises(ValueError, match="no_red_light"):
         validate_route_table(df)
 
 

@@ -30,7 +30,7 @@ import numpy as np
 import pandas as pd
 
 from lantern_jax import family_codes
-from lantern_jax.constants import CONDITIONS, GATE_NAMES
+from lantern_jax.constants import CONDITIONS, GATE_COLUMN_NAMES
 
 GROUP_COLUMNS = ("model", "condition")
 #: The family tables' column of the macro average over families.
@@ -46,10 +46,12 @@ COMPONENT_COLUMNS = {
     "Rec.": "S_rec",
     "B-Prog.": "B_progress",
 }
-#: Gate failure columns (% of pairs failing it) -> the gate, in :data:`GATE_NAMES` order.
+#: Gate failure columns (% of pairs failing it) -> the route table's gate column, in
+#: :data:`~lantern_jax.constants.GATE_NAMES` order.
 FAILURE_COLUMNS = dict(
-    zip(("Coll.-A", "RD-A", "LC-A", "Rule-A", "Block-A", "False Brake-B"), GATE_NAMES, strict=True)
-)
+    zip(("Coll.-A", "RD-A", "LC-A", "Rule-A", "Block-A", "False Brake-B"), GATE_COLUMN_NAMES,
+        strict=True)
+)  # fmt: skip
 #: The policy whose Route B time is every model's yardstick (``B-Time/Exp.``): the privileged
 #: expert, which sees every actor's forecast and slows only for what is there.
 EFFICIENCY_REFERENCE = "expert"

@@ -19,7 +19,13 @@ import numpy as np
 import pandas as pd
 
 from lantern_jax import family_codes
-from lantern_jax.constants import FAMILIES, GATE_NAMES, WARNING_CONDITION
+from lantern_jax.constants import (
+    FAMILIES,
+    GATE_COLUMN_NAMES,
+    GATE_COLUMNS,
+    GATE_NAMES,
+    WARNING_CONDITION,
+)
 from lantern_jax.files import atomic_write
 from lantern_jax.scoring.cus import d_safe_for_family, pair_components
 from lantern_jax.scoring.metrics import ExecutionMetrics
@@ -119,7 +125,7 @@ def _measured_columns(a: ExecutionMetrics, b: ExecutionMetrics, comps: dict) -> 
         "S_clear": comps["S_clear"],
         "S_ant": comps["S_ant"],
         "S_rec": comps["S_rec"],
-        **{g: comps[g].astype(np.int64) for g in GATE_NAMES},
+        **{GATE_COLUMNS[g]: comps[g].astype(np.int64) for g in GATE_NAMES},
         "CUS": comps["CUS"],
         "controller_fault": i64(a.controller_fault),
         "t_fault_s": f64(a.t_fault_s),
@@ -251,7 +257,7 @@ def validate_route_table(df: pd.DataFrame, require_same_pairs: bool = True) -> p
     unknown = sorted(set(df["family"]) - set(known))
     if unknown:
         raise ValueError(f"route table: unknown family code(s) {unknown}; known: {known}")
-    for g in (*GATE_NAMES, "hazard_hidden_at_warning", "hazard_hidden_before_warning"):
+    for g in (*GATE_COLUMN_NAMES, "hazard_hidden_at_warning", "hazard_hidden_before_warning"):
         off = ~df[g].isin([0, 1])
         if off.any():
             raise ValueError(f"route table: {g} must be 0 or 1; offending rows {pairs(off)}")
