@@ -55,6 +55,7 @@ from lantern_jax.evaluation import build_executions, run_policy
 from lantern_jax.files import StagedFolder
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.registry import get_policy
+from lantern_jax.report.tables import MISSING, missing_shown
 from lantern_jax.scenarios.handmade import straight_scene
 from lantern_jax.scenarios.spec import route_timeout_s
 from lantern_jax.scenarios.suite import Suite, build_suite_scenarios, load_suite
@@ -593,7 +594,9 @@ def write_tables(tables: dict[str, tuple], out_dir: str | os.PathLike) -> list:
     with StagedFolder(out_dir, names) as stage:
         for stem, (title, df, *display) in tables.items():
             (stage.path / f"{stem}.csv").write_text(df.to_csv(index=False, float_format="%.4g"))
-            md = (display[0] if display else df).to_markdown(index=False, floatfmt=".1f")
+            md = missing_shown(display[0] if display else df).to_markdown(
+                index=False, floatfmt=".1f", missingval=MISSING
+            )
             (stage.path / f"{stem}.md").write_text(f"# {title}\n\n{md}\n")
         stage.commit()
     return [os.path.join(out_dir, n) for n in names]

@@ -255,10 +255,13 @@ def print_and_write(tables: dict, out: str, note: str) -> int:
     (:func:`write_and_list`); returns the exit code."""
     from tabulate import tabulate
 
+    from lantern_jax.report import MISSING, missing_shown
+
     for title, df, *display in tables.values():
         print(title)
-        print(tabulate(display[0] if display else df, headers="keys", showindex=False,
-                       floatfmt=".1f", disable_numparse=bool(display)))  # fmt: skip
+        print(tabulate(missing_shown(display[0] if display else df), headers="keys",
+                       showindex=False, floatfmt=".1f", disable_numparse=bool(display),
+                       missingval=MISSING))  # fmt: skip
         print()
     if note:
         print(note)

@@ -169,7 +169,7 @@ def _print_summary(args: argparse.Namespace, table, problem, title: str, files: 
     """Print the comparison table, its interval note and the head of the failure catalogue."""
     from tabulate import tabulate
 
-    from lantern_jax.report import interval_note
+    from lantern_jax.report import MISSING, interval_note, missing_shown
     from lantern_jax.stress import report
 
     budget = f"{args.budget_s:g} s per method"
@@ -178,12 +178,9 @@ def _print_summary(args: argparse.Namespace, table, problem, title: str, files: 
     print(f"Stress test  ({title}; {budget}, {args.restarts} restarts)")
     if problem is not None and problem.info:
         print(f"compile {problem.info['compile_s']:.1f} s (apart from the search times below)")
-    shown = list(report.SUMMARY_COLUMNS)
-    print(
-        tabulate(
-            table[[c for c in shown if c in table]], headers="keys", showindex=False, floatfmt=".2f"
-        )
-    )
+    shown = [c for c in report.SUMMARY_COLUMNS if c in table]
+    print(tabulate(missing_shown(table[shown]), headers="keys", showindex=False, floatfmt=".2f",
+                   missingval=MISSING))  # fmt: skip
     print(f"failure_rate_lo, _hi: {interval_note(over='restarts')}")
     cat = args.out.rstrip("/") + "/catalogue.csv"
     if "catalogue.csv" in {p.name for p in files.values()}:

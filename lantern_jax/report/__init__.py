@@ -50,6 +50,7 @@ from lantern_jax.report.tables import (
     format_tables,
     interval_display,
     interval_note,
+    missing_shown,
     order_rows,
     ordered_tables,
 )
@@ -71,6 +72,7 @@ __all__ = [
     "GAIN_CONDITION",
     "MANIFEST_JSON",
     "MISSING",
+    "missing_shown",
     "OUTPUT_FILES",
     "PAIRS_STRATIFIED",
     "ROUTE_CSV",

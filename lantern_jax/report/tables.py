@@ -51,6 +51,18 @@ ABLATION_TABLE_COLUMNS = ("CUS", "A-Prog.", "Event Exp.", "Ant.", "Rec.", "Coll.
 # ---------------------------------------------------------------------------------------------
 # terminal / Markdown tables
 # ---------------------------------------------------------------------------------------------
+def missing_shown(df: pd.DataFrame) -> pd.DataFrame:
+    """``df`` for printing: every NaN or infinite number becomes ``None``, which tabulate (and
+    ``DataFrame.to_markdown``) print as ``missingval=MISSING`` — a value that does not exist
+    (no failure found, a share of nothing) reads as :data:`MISSING`, never ``nan`` or ``inf``."""
+    out = df.astype(object)
+    for c in out.columns:
+        col = out[c]
+        bad = col.map(lambda v: isinstance(v, float | np.floating) and not math.isfinite(v))
+        out[c] = col.where(~bad.astype(bool), None)
+    return out
+
+
 def _fmt(value: Any, signed: bool = False) -> str:
     if value is None or (isinstance(value, float | np.floating) and math.isnan(value)):
         return MISSING

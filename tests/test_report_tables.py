@@ -1,0 +1,47 @@
+"""Tables as text: a value that does not exist reads as ``MISSING``, never ``nan`` or ``inf``,
+in the terminal tables (tabulate) and the Markdown files alike; the tables a command prints go
+through :func:`lantern_jax.report.missing_shown`."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+from tabulate import tabulate
+
+from lantern_jax.commands.common import print_and_write
+from lantern_jax.report import MISSING, format_interval, missing_shown
+
+
+def _table() -> pd.DataFrame:
+    return pd.DataFrame({"Variant": ["a", "b", "c"], "PE": [1.25, np.nan, -np.inf],
+                         "VC": [np.inf, 2.0, 3.0], "n": [1, 2, 3]})  # fmt: skip
+
+
+def test_missing_values_print_as_missing():
+    text = tabulate(missing_shown(_table()), headers="keys", floatfmt=".1f", missingval=MISSING)
+    md = missing_shown(_table()).to_markdown(index=False, floatfmt=".1f", missingval=MISSING)
+    for out in (text, md):
+        assert "nan" not in out and "inf" not in out
+        assert out.count(f" {MISSING} ") >= 3
+        assert "1.2" in out and "2.0" in out  # finite values keep their format
+
+
+def test_missing_shown_keeps_finite_values_and_the_original():
+    df = _table()
+    shown = missing_shown(df)
+    assert shown.loc[0, "PE"] == 1.25 and shown.loc[1, "PE"] is None and shown.loc[2, "PE"] is None
+    assert shown.loc[0, "VC"] is None and shown["n"].tolist() == [1, 2, 3]
+    assert math.isnan(df.loc[1, "PE"])  # the caller's table is not changed
+
+
+def test_printed_command_tables_show_missing(tmp_path, capsys):
+    print_and_write({"t": ("title", _table())}, str(tmp_path), note="")
+    out = capsys.readouterr().out
+    assert "nan" not in out and "inf" not in out
+    assert "nan" not in (tmp_path / "t.md").read_text()
+
+
+def test_an_interval_of_nothing_is_missing():
+    assert format_interval(float("nan"), None, None) == MISSING
