@@ -16,13 +16,14 @@ Example::
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import importlib.metadata as md
 import os
 import platform
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -133,6 +134,7 @@ def run_policy(
     model: str | None = None,
     shared: tuple[PolicySwitch, tuple] | None = None,
     settings: Settings = DEFAULT_SETTINGS,
+    stage: Callable[[str], None] | None = None,
 ) -> PolicyRun:
     """Run one policy on prepared executions and build its route-level rows.
 
@@ -145,6 +147,8 @@ def run_policy(
             :class:`~lantern_jax.sim.switch.PolicySwitch` (one program for several policies,
             see :func:`shared_program`); ``None`` compiles the policy's own program.
         settings: scoring, protocol and text bank.
+        stage: called with what the run does next (``"compiling"``, ``"<n> executions"``,
+            ``"scoring"``), for a progress display.
     """
     pol = get_policy(policy) if isinstance(policy, str) else policy
     params = pol.init(jax.random.PRNGKey(0)) if policy_params is None else policy_params
@@ -161,8 +165,10 @@ def run_policy(
         driver, run_params = switch, switch_params(switch, i, members)
     final, t_compile = run_executions(
         driver, execs.scenarios, run_params, execs.max_ticks, settings, timings=timings,
-        pad_to=execs.pad_to,
+        pad_to=execs.pad_to, stage=stage,
     )  # fmt: skip
+    if stage is not None:
+        stage("scoring")
     t2 = time.perf_counter()
     m_struct = finalize_batch(final.telemetry, settings)
     proto = jax.tree.map(np.asarray, final.protocol)
@@ -267,6 +273,17 @@ def shared_program(pols: list[Policy], policy_params: list) -> tuple[PolicySwitc
     return policy_switch(reps), tuple(params)
 
 
+#: The evaluation's progress bar: policies done, elapsed time and what the current policy does
+#: (``starting``, ``compiling``, ``<n> executions``, ``scoring``); no remaining-time estimate,
+#: which the first policy's compilation would make meaningless.
+BAR_FORMAT = "{desc}: {n_fmt}/{total_fmt} policies [{elapsed}]{postfix}"
+
+
+def _show_stage(bar: Any, name: str, what: str) -> None:
+    """Show what policy ``name`` does now on the progress bar."""
+    bar.set_postfix_str(f"{name}: {what}")
+
+
 def _run_all(pols: list[Policy], policy_params: list, execs: Executions, suite_id: str,
              progress: bool, share: bool, settings: Settings) -> list[PolicyRun]:  # fmt: skip
     """Run every policy (progress bar per policy); a failing policy raises :class:`PolicyError`.
@@ -276,15 +293,18 @@ def _run_all(pols: list[Policy], policy_params: list, execs: Executions, suite_i
     if progress:
         from tqdm.auto import tqdm
 
-        bar = tqdm(total=len(pols), desc=f"evaluating on {suite_id}", unit="policy")
+        bar = tqdm(total=len(pols), desc=f"evaluating on {suite_id}", unit="policy",
+                   bar_format=BAR_FORMAT)  # fmt: skip
     runs: list[PolicyRun] = []
     try:
         shared = shared_program(pols, policy_params) if share else None
         for pol, par in zip(pols, policy_params, strict=True):
-            if bar is not None:
-                bar.set_postfix_str(f"{pol.name}: {3 * execs.num_pairs} executions")
+            stage = None if bar is None else functools.partial(_show_stage, bar, pol.name)
+            if stage is not None:
+                stage("starting")
             try:
-                runs.append(run_policy(pol, execs, par, shared=shared, settings=settings))
+                runs.append(run_policy(pol, execs, par, shared=shared, settings=settings,
+                                       stage=stage))  # fmt: skip
             except Exception as e:
                 lines = str(e).strip().splitlines() or [""]
                 why = lines[0] if len(lines) == 1 else f"{lines[0]} ... {lines[-1]}"

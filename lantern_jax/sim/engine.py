@@ -22,6 +22,7 @@ import collections
 import dataclasses
 import functools
 import time
+from collections.abc import Callable
 from typing import Any
 
 import jax
@@ -228,7 +229,7 @@ def _avals(tree: Any) -> tuple:
 
 
 def executable(fn, *args, static: dict | None = None, timings: dict | None = None,
-               identity: Any = None):  # fmt: skip
+               identity: Any = None, stage: Callable[[str], None] | None = None):  # fmt: skip
     """AOT-compile ``fn(*args, **static)`` once per program (bounded in-process cache keyed by
     the function, its static arguments and the arguments' structure, shapes and dtypes).
 
@@ -239,7 +240,9 @@ def executable(fn, *args, static: dict | None = None, timings: dict | None = Non
     ``timings`` (optional) receives the seconds of tracing and lowering (``"trace + lower"``),
     of XLA's compilation or the load from JAX's persistent cache (``"XLA compile"``) and of a
     load from the program store (``"program load"``); all 0 when the program was already
-    compiled in this process.
+    compiled in this process.  ``stage`` (optional) is called with ``"compiling"`` just before
+    a program is traced and compiled (not when it is found in this process or the program
+    store).
     """
     static = static or {}
     key = (fn, tuple(sorted(static.items())), _avals(args))
@@ -253,6 +256,8 @@ def executable(fn, *args, static: dict | None = None, timings: dict | None = Non
         if exe is not None:
             spent["program load"] = time.perf_counter() - t0
         else:
+            if stage is not None:
+                stage("compiling")
             lowered = fn.lower(*args, **static)
             t1 = time.perf_counter()
             exe, fresh = program_store.compile_lowered(lowered)
@@ -317,6 +322,7 @@ def run_executions(
     compact: bool | None = None,
     timings: dict | None = None,
     pad_to: int | None = None,
+    stage: Callable[[str], None] | None = None,
 ):
     """Roll out a batch of executions until all have ended; returns (final states, seconds
     spent compiling).
@@ -346,6 +352,8 @@ def run_executions(
         pad_to: pad the batch to that many executions with copies of the first that start
             ended (never stepped, last in every device's queue), so that batches of different
             sizes share one compiled program at little cost.
+        stage: called with what the call does next, for a progress display: ``"compiling"``
+            (only when the rollout program must be compiled) and ``"<n> executions"``.
 
     Raises:
         ValueError: when ``pad_to`` is smaller than the batch, or the settings' bank lacks a
@@ -387,13 +395,15 @@ def run_executions(
     static = dict(program=Program(policy), slots=slots, chunk=REFILL_TICKS)
     exe = executable(
         _scheduled, *args, static=static, timings=timings,
-        identity=("rollout", program_identity(policy), slots, REFILL_TICKS),
+        identity=("rollout", program_identity(policy), slots, REFILL_TICKS), stage=stage,
     )  # fmt: skip
     t_compile += time.perf_counter() - t1
     if timings is not None:
         for k, v in init_timings.items():
             timings[k] += v
     remember_shape((total, *batch_shape(host)[1:]))
+    if stage is not None:
+        stage(f"{n} executions")
     final = jax.tree.map(np.asarray, place.get(exe(*args)))
     # back to the batch order: the first position of every execution (padding repeats one)
     first = np.empty(total, int)
