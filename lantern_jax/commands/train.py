@@ -1,13 +1,21 @@
-"""``lantern-jax train``: behaviour cloning of a learned driving policy on the dataset.
+"""``lantern-jax train``: every way this project trains a driving policy, chosen by the config.
 
 ::
 
     lantern-jax train --config configs/train_base.toml
     lantern-jax train --config configs/train_coop.toml --dataset data/lantern --epochs 4
+    lantern-jax train --config configs/train_ppo.toml --minutes 5
 
-Writes the run folder (orbax checkpoints — a rerun resumes —, ``curve.csv``, ``curve.png``) and
-exports the best model as ``<out>/<name>.msgpack`` + ``.json``, loadable with
+A config with a ``[train]`` table trains a learned model on the dataset (its ``recipe``: the
+paper's open-loop recipes and this project's own): it writes the run folder (orbax checkpoints —
+a rerun resumes —, ``curve.csv``, ``curve.png``) and exports the best model as
+``<out>/<name>.msgpack`` + ``.json``, loadable with
 ``lantern-jax evaluate --policy <name> --checkpoint <out>/<name>.msgpack``.
+
+A config with a ``[ppo]`` table runs brax's PPO on the benchmark environment
+(:mod:`lantern_jax.envs.train`, the ``rl`` extra): the learning curve goes to ``out``, the policy
+to ``checkpoint`` after every evaluation; evaluate it with
+``LANTERN_JAX_PPO_CHECKPOINT=<checkpoint> lantern-jax evaluate --policy ppo``.
 """
 
 from __future__ import annotations
@@ -18,10 +26,89 @@ from collections.abc import Sequence
 from lantern_jax.commands import UsageError
 from lantern_jax.commands.common import check_out
 
+#: Keys of a ``[ppo]`` config and their types (:func:`lantern_jax.envs.train.train`'s
+#: arguments; every key is optional, its default that function's).
+PPO_KEYS = {
+    "out": (str,),
+    "checkpoint": (str,),
+    "minutes": (int, float),
+    "num_timesteps": (int,),
+    "num_evals": (int,),
+    "pairs_per_family": (int,),
+    "seed": (int,),
+}
+#: Options of the dataset recipes that a ``[ppo]`` config cannot take.
+DATASET_ONLY = ("dataset", "epochs")
+
+
+def _table_of(path: str) -> str:
+    """``"ppo"`` for a config with a ``[ppo]`` table, else ``"train"`` (read and checked by the
+    loader of that kind)."""
+    from lantern_jax.files import read_toml
+
+    try:
+        raw = read_toml(path)
+    except (OSError, ValueError):
+        return "train"  # the dataset loader names the problem
+    return "ppo" if "ppo" in raw else "train"
+
+
+def load_ppo_config(path: str, args: argparse.Namespace) -> dict:
+    """The ``[ppo]`` table of ``path`` with the command line's ``--out``, ``--seed`` and
+    ``--minutes`` applied, as keyword arguments of :func:`lantern_jax.envs.train.train`.
+
+    Raises:
+        UsageError: naming the file and key for an unknown key, a wrong type or a value out of
+            range, and naming the option for ``--dataset`` or ``--epochs`` (dataset recipes only).
+    """
+    from lantern_jax.config_file import ConfigFileError, check_keys, read_table, typed_value
+
+    given = [f"--{o}" for o in DATASET_ONLY if getattr(args, o) is not None]
+    if given:
+        raise UsageError(f"{', '.join(given)}: config {path} trains with PPO on the "
+                         "environment, which reads no dataset and counts no epochs")  # fmt: skip
+    try:
+        cfg = read_table(path, "ppo")
+        check_keys(path, "ppo", list(cfg), tuple(PPO_KEYS))
+        for key, value in cfg.items():
+            typed_value(value, PPO_KEYS[key], f"config {path}: {key}")
+    except ConfigFileError as e:
+        raise UsageError(str(e)) from None
+    for option in ("out", "seed", "minutes"):
+        if getattr(args, option, None) is not None:
+            cfg[option] = getattr(args, option)
+    for key in ("minutes", "num_timesteps", "num_evals", "pairs_per_family"):
+        if key in cfg and not cfg[key] > 0:
+            raise UsageError(f"config {path}: {key} must be > 0 (got {cfg[key]})")
+    return cfg
+
+
+def _train_ppo(args: argparse.Namespace) -> int:
+    """Run PPO as the ``[ppo]`` config says."""
+    cfg = load_ppo_config(args.config, args)
+    out = cfg.setdefault("out", "runs/ppo")
+    cfg.setdefault("checkpoint", f"{out.rstrip('/')}/ppo_lantern.msgpack")
+    check_out(out, "--out" if args.out is not None else f"config {args.config}: ppo.out",
+              in_place=True)  # fmt: skip
+    from lantern_jax.envs.train import train as train_ppo
+
+    curve = train_ppo(**cfg)
+    if curve:
+        last = curve[-1]
+        print(f"{'env_steps':>16}: {last['env_steps']}")
+        print(f"{'eval_return':>16}: {last['eval_return']:.4g}")
+    print(f"{'checkpoint':>16}: {cfg['checkpoint']}")
+    return 0
+
 
 def cmd_train(args: argparse.Namespace, argv: Sequence[str]) -> int:
     """Train one model as the config says; print the summary."""
     del argv
+    if _table_of(args.config) == "ppo":
+        return _train_ppo(args)
+    if args.minutes is not None:
+        raise UsageError(f"--minutes: config {args.config} trains on the dataset; its time "
+                         "budget is the config's max_minutes")  # fmt: skip
     from lantern_jax.config_file import ConfigFileError
     from lantern_jax.dataset.store import DatasetError
     from lantern_jax.policies.learned.checkpoint import CheckpointError
@@ -48,12 +135,18 @@ def cmd_train(args: argparse.Namespace, argv: Sequence[str]) -> int:
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``train`` on the command line's sub-parsers."""
-    tr = sub.add_parser("train", help="train a learned driving policy on the dataset",
+    tr = sub.add_parser("train", help="train a driving policy (dataset recipes or PPO)",
                         description=__doc__.splitlines()[0], allow_abbrev=False)  # fmt: skip
-    tr.add_argument("--config", required=True, metavar="TOML", help="training config")
-    tr.add_argument("--dataset", metavar="DIR", help="dataset folder (overrides the config)")
+    tr.add_argument("--config", required=True, metavar="TOML",
+                    help="training config: a [train] table (dataset recipes, "
+                    "configs/train_*.toml) or a [ppo] table (configs/train_ppo.toml)")  # fmt: skip
+    tr.add_argument("--dataset", metavar="DIR",
+                    help="dataset folder (overrides the config; [train] only)")  # fmt: skip
     tr.add_argument("--out", metavar="DIR", help="run folder (overrides the config)")
-    tr.add_argument("--epochs", type=int, metavar="N", help="epochs (overrides the config)")
+    tr.add_argument("--epochs", type=int, metavar="N",
+                    help="epochs (overrides the config; [train] only)")  # fmt: skip
+    tr.add_argument("--minutes", type=float, metavar="M",
+                    help="wall-clock budget (overrides the config; [ppo] only)")  # fmt: skip
     tr.add_argument("--seed", type=int, help="seed (overrides the config)")
     tr.add_argument("--quiet", action="store_true", help="no progress bar")
     tr.set_defaults(func=cmd_train)

@@ -2,8 +2,9 @@
 
 ::
 
+    lantern-jax train --config configs/train_ppo.toml      # the [ppo] table: this module's train
     python -m lantern_jax.envs.train --minutes 28 --out runs/ppo \
-        --checkpoint lantern_jax/data/ppo_lantern.msgpack
+        --checkpoint runs/ppo/ppo_lantern.msgpack         # the same, with options
 
 ``brax.training.agents.ppo.train`` runs unchanged on :class:`~lantern_jax.envs.LanternEnv`,
 wrapped by :func:`~lantern_jax.envs.wrap_for_training` (new scenes at every reset).  After every

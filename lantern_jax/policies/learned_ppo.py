@@ -11,7 +11,7 @@ observation vector) and its position from the numbers the text writes.
 Parameters come from a checkpoint file (msgpack written with ``flax.serialization``; no brax
 needed to run the policy): the one shipped in ``lantern_jax/data`` (:data:`SHIPPED_CHECKPOINT`),
 or the file named by the environment variable ``LANTERN_JAX_PPO_CHECKPOINT`` (e.g. written by
-``python -m lantern_jax.envs.train``).  The layout (:func:`save_checkpoint`)::
+``lantern-jax train --config configs/train_ppo.toml``).  The layout (:func:`save_checkpoint`)::
 
     {"obs_mean": (D,), "obs_std": (D,),            float32, observation statistics
      "policy": {"hidden_0": {"kernel": (D, H), "bias": (H,)}, ..., "hidden_K": {...}},
@@ -74,8 +74,8 @@ def load_checkpoint(path: str | Path | None = None) -> dict:
     path = checkpoint_path() if path is None else Path(path)
     if not path.is_file():
         raise FileNotFoundError(
-            f"ppo checkpoint {path} not found; train one with `python -m lantern_jax.envs.train` "
-            f"or point {CHECKPOINT_ENV} at one"
+            f"ppo checkpoint {path} not found; train one with `lantern-jax train --config "
+            f"configs/train_ppo.toml` or point {CHECKPOINT_ENV} at one"
         )
     tree = serialization.msgpack_restore(path.read_bytes())
     meta = json.loads(tree["meta"])
