@@ -46,12 +46,10 @@ class       v_max  a_max  b_max  lateral bound   lateral rate     sources
 pedestrian  4.5    2.5    3.0    1.0 m/s         2.0 m/s^2        see below
 cyclist     8.3    1.5    3.4    0.35 rad        0.6 rad/s        AASHTO, FHWA-HRT-04-103
 car         16.7   3.0    8.0    0.2 rad         0.4 rad/s        the ego's own limits
-
-(lateral bound: of the sideways speed for walkers, of the heading offset from the path for
-vehicles; lateral rate: its rate of change).
 ==========  =====  =====  =====  ==============  ===============  =====================
 
-(m/s, m/s^2.)  *Pedestrian*: a run (adult running speeds in accident-reconstruction data are
+(m/s, m/s^2; lateral bound: of the sideways speed for walkers, of the heading offset from the
+path for vehicles; lateral rate: its rate of change.)  *Pedestrian*: a run (adult running speeds in accident-reconstruction data are
 about 3-5 m/s; the Pedestrian Emergence speed range ends here); acceleration from a standing
 start at signalised crosswalks 0.14 +/- 0.09 g (Randles et al., real-world video of 288
 pedestrians): 2.5 m/s^2 is the mean plus about one standard deviation; braking 3.0 m/s^2 and the
