@@ -98,6 +98,26 @@ def expose_cpu_cores() -> None:
         raise UsageError(str(e)) from None
 
 
+class HelpFormatter(argparse.HelpFormatter):
+    """``--help`` that gives every option's default where its help text does not already say
+    it (options that default to nothing or are flags show none)."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        if (not action.option_strings or action.default in (None, False, argparse.SUPPRESS)
+                or "default" in text):  # fmt: skip
+            return text
+        return f"{text} (default: %(default)s)".strip()
+
+
+class CommandParser(argparse.ArgumentParser):
+    """The parser of one command: :class:`HelpFormatter` unless the command asks for another."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        kwargs.setdefault("formatter_class", HelpFormatter)
+        super().__init__(*args, **kwargs)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``lantern-jax``: the top-level ``--families`` option and every
     command of :data:`COMMANDS`."""
@@ -110,7 +130,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     families.add_option(parser)
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True,
+                                parser_class=CommandParser)  # fmt: skip
     for command in COMMANDS:
         command.add_parser(sub)
     return parser

@@ -90,7 +90,7 @@ print(f"this notebook uses {len(small)} pairs:", ", ".join(p.pair_id for p in sm
 #   yield point at the position the warning names).
 #
 # One call runs all `3 x pairs` executions of each policy in one jitted, vmapped rollout. The
-# three policies share their `act` function, so the rollout compiles once.
+# three policies run in one compiled program (a policy switch), so the simulator compiles once.
 
 # %%
 result = evaluate(["expert", "ego", "coop"], suite=small, progress=False)

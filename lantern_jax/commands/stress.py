@@ -325,7 +325,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="narrow a knob's range (may be repeated)",
     )
     _add_adversary_options(st)
-    st.add_argument("--restarts", type=int, default=8, metavar="R")
+    st.add_argument("--restarts", type=int, default=8, metavar="R",
+                    help="independent restarts of every method")  # fmt: skip
     st.add_argument(
         "--samples",
         type=int,
@@ -348,10 +349,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         default=None,
         help="gradient smoothing scale (default: 0.3 knobs, 0 adversary)",
     )
-    st.add_argument("--lr", type=float, default=None, help="Adam step size (0.3 / 0.2)")
+    st.add_argument("--lr", type=float, default=None,
+                    help="Adam step size (default: 0.3 knobs, 0.2 adversary)")  # fmt: skip
     st.add_argument("--temperature", type=float, default=0.1, help="soft-score temperature")
     st.add_argument(
-        "--objective", default="plausible", choices=("plausible", "margin", "clearance", "soft_cus")
+        "--objective",
+        default="plausible",
+        choices=("plausible", "margin", "clearance", "soft_cus"),
+        help="what the gradient and CMA-ES minimise (docs/stress.md)",
     )
     st.add_argument(
         "--expert-weight",
@@ -365,8 +370,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         default=None,
         help="seconds of soft rollout (default: from the pair)",
     )
-    st.add_argument("--condition", default=CONDITIONS[0], choices=CONDITIONS)
-    st.add_argument("--methods", default="gradient,random,cmaes", metavar="M[,M...]")
-    st.add_argument("--seed", type=int, default=0)
+    st.add_argument("--condition", default=CONDITIONS[0], choices=CONDITIONS,
+                    help="the Route A execution searched")  # fmt: skip
+    st.add_argument("--methods", default="gradient,random,cmaes", metavar="M[,M...]",
+                    help="search methods compared, of gradient, random, cmaes")  # fmt: skip
+    st.add_argument("--seed", type=int, default=0, help="seed of every method's restarts")
     st.add_argument("--quiet", action="store_true", help="no progress lines")
     st.set_defaults(func=cmd_stress)

@@ -49,20 +49,20 @@ car         16.7   3.0    8.0    0.2 rad         0.4 rad/s        the ego's own 
 ==========  =====  =====  =====  ==============  ===============  =====================
 
 (m/s, m/s^2; lateral bound: of the sideways speed for walkers, of the heading offset from the
-path for vehicles; lateral rate: its rate of change.)  *Pedestrian*: a run (adult running speeds in accident-reconstruction data are
-about 3-5 m/s; the Pedestrian Emergence speed range ends here); acceleration from a standing
-start at signalised crosswalks 0.14 +/- 0.09 g (Randles et al., real-world video of 288
-pedestrians): 2.5 m/s^2 is the mean plus about one standard deviation; braking 3.0 m/s^2 and the
-sidestep (1 m/s, 2 m/s^2) are ours.  *Cyclist*: AASHTO's design speed 30 km/h (8.3 m/s) and
-design deceleration 0.35 g (3.4 m/s^2, "Guide for the Development of Bicycle Facilities"); the
-85th-percentile start acceleration measured for bicycles is 1.4 m/s^2 (FHWA-HRT-04-103, table
-10); heading bound and rate are ours.  No actor kind of the simulator is a cyclist yet
-(:data:`lantern_jax.constants.KIND_NAMES`); the row is what one gets.  *Car*: 60 km/h (an urban
-50 km/h limit + 20 %), the ego's throttle limit (3 m/s^2, ``EGO_MAX_ACCEL``) and full braking
-on dry asphalt (8 m/s^2, ``EGO_MAX_BRAKE``; passenger cars reach 0.6-0.9 g); heading offset
-0.2 rad (11 deg: a 2 m/s lateral speed at 10 m/s, an abrupt lane change; ordinary ones are
-0.5-1 m/s) and its rate 0.4 rad/s (4 m/s^2 of lateral acceleration at 10 m/s, half the friction
-limit) are ours.  Static objects take no track.
+path for vehicles; lateral rate: its rate of change.) *Pedestrian*: a run (adult running speeds
+in accident-reconstruction data are about 3-5 m/s; the Pedestrian Emergence speed range ends
+here); acceleration from a standing start at signalised crosswalks 0.14 +/- 0.09 g (Randles et
+al., real-world video of 288 pedestrians): 2.5 m/s^2 is the mean plus about one standard
+deviation; braking 3.0 m/s^2 and the sidestep (1 m/s, 2 m/s^2) are ours. *Cyclist*: AASHTO's
+design speed 30 km/h (8.3 m/s) and design deceleration 0.35 g (3.4 m/s^2, "Guide for the
+Development of Bicycle Facilities"); the 85th-percentile start acceleration measured for
+bicycles is 1.4 m/s^2 (FHWA-HRT-04-103, table 10); heading bound and rate are ours. No actor
+kind of the simulator is a cyclist yet (:data:`lantern_jax.constants.KIND_NAMES`); the row is
+what one gets. *Car*: 60 km/h (an urban 50 km/h limit + 20 %), the ego's throttle limit (3
+m/s^2, ``EGO_MAX_ACCEL``) and full braking on dry asphalt (8 m/s^2, ``EGO_MAX_BRAKE``; passenger
+cars reach 0.6-0.9 g); heading offset 0.2 rad (11 deg: a 2 m/s lateral speed at 10 m/s, an
+abrupt lane change; ordinary ones are 0.5-1 m/s) and its rate 0.4 rad/s (4 m/s^2 of lateral
+acceleration at 10 m/s, half the friction limit) are ours. Static objects take no track.
 """
 
 from __future__ import annotations
