@@ -45,3 +45,16 @@ def test_printed_command_tables_show_missing(tmp_path, capsys):
 
 def test_an_interval_of_nothing_is_missing():
     assert format_interval(float("nan"), None, None) == MISSING
+
+
+def test_a_one_iteration_trace_is_visible_in_the_convergence_plot():
+    from types import SimpleNamespace
+
+    from lantern_jax.viz.stress import convergence_plot
+
+    trace = SimpleNamespace(method="gradient", rollouts=[8], evaluations=[8], seconds=[1.5],
+                            best_cus=[72.0], found=[])  # fmt: skip
+    fig = convergence_plot([trace])
+    lines = [ln for ln in fig.axes[0].get_lines() if ln.get_label() == "gradient"]
+    assert len(lines) == 1 and lines[0].get_marker() == "o"
+    assert list(lines[0].get_ydata()) == [72.0]

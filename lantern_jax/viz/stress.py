@@ -35,7 +35,9 @@ def convergence_plot(traces: list[Any], title: str = "") -> Figure:
         style = METHOD_STYLE.get(t.method, {})
         cost = t.rollouts or t.evaluations
         for ax, x in zip(axes, (cost, t.seconds), strict=True):
-            ax.step(x, t.best_cus, where="post", label=t.method, **style)
+            # markers as well: a trace of one iteration is a single point, which a line alone
+            # would not draw
+            ax.step(x, t.best_cus, where="post", label=t.method, marker="o", ms=3, **style)
         for f in t.found[:1]:
             axes[0].plot(f["rollouts"], f["cus"], "o", color=style.get("color"))
             axes[1].plot(f["seconds"], f["cus"], "o", color=style.get("color"))
