@@ -37,7 +37,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import os
 from typing import Any
 
 import jax
@@ -52,10 +51,9 @@ from lantern_jax.constants import (
     WARNING_CONDITION,
 )
 from lantern_jax.evaluation import build_executions, run_policy
-from lantern_jax.files import StagedFolder
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.registry import get_policy
-from lantern_jax.report.tables import MISSING, missing_shown
+from lantern_jax.report.outputs import write_tables  # noqa: F401 (re-exported)
 from lantern_jax.scenarios.handmade import straight_scene
 from lantern_jax.scenarios.spec import route_timeout_s
 from lantern_jax.scenarios.suite import Suite, build_suite_scenarios, load_suite
@@ -573,30 +571,3 @@ def language_table(
             )
         rows.append({"Variant": f"gain kept by {v} (%)", **share})
     return pd.DataFrame(rows)
-
-
-# ---------------------------------------------------------------------------------------------
-# files
-# ---------------------------------------------------------------------------------------------
-def write_tables(tables: dict[str, tuple], out_dir: str | os.PathLike) -> list:
-    """Write ``name.csv`` and ``name.md`` for every table as one set (other files of
-    ``out_dir`` are kept; :class:`lantern_jax.files.StagedFolder`).
-
-    Args:
-        tables: file stem -> (title, table) or (title, table, display): the CSV holds the
-            table, the Markdown the display (cells with intervals) when there is one.
-        out_dir: output folder (created if needed).
-
-    Returns:
-        The paths written.
-    """
-    names = [f"{stem}{ext}" for stem in tables for ext in (".csv", ".md")]
-    with StagedFolder(out_dir, names) as stage:
-        for stem, (title, df, *display) in tables.items():
-            (stage.path / f"{stem}.csv").write_text(df.to_csv(index=False, float_format="%.4g"))
-            md = missing_shown(display[0] if display else df).to_markdown(
-                index=False, floatfmt=".1f", missingval=MISSING
-            )
-            (stage.path / f"{stem}.md").write_text(f"# {title}\n\n{md}\n")
-        stage.commit()
-    return [os.path.join(out_dir, n) for n in names]

@@ -237,9 +237,9 @@ def list_written(paths: Iterable[str | os.PathLike]) -> None:
 
 def write_and_list(tables: dict, out: str) -> int:
     """Write ``name.csv`` and ``name.md`` for every ``name: (title, table)`` into ``out`` as one
-    set (:func:`lantern_jax.diagnostics.write_tables`) and list the files; returns the exit
+    set (:func:`lantern_jax.report.write_tables`) and list the files; returns the exit
     code (1 when they cannot be written)."""
-    from lantern_jax.diagnostics import write_tables
+    from lantern_jax.report import write_tables
 
     try:
         paths = write_tables(tables, out)

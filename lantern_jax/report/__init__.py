@@ -33,6 +33,7 @@ from lantern_jax.report.outputs import (
     with_interval_columns,
     write_ablation_outputs,
     write_outputs,
+    write_tables,
 )
 from lantern_jax.report.tables import (
     CONDITION_ORDER,
@@ -94,4 +95,5 @@ __all__ = [
     "with_interval_columns",
     "write_ablation_outputs",
     "write_outputs",
+    "write_tables",
 ]

@@ -40,11 +40,13 @@ from lantern_jax.constants import CONDITIONS
 from lantern_jax.files import StagedFolder, atomic_write, check_target_folder
 from lantern_jax.report.tables import (
     ABLATION_TABLE_COLUMNS,
+    MISSING,
     family_columns,
     format_ablation_table,
     format_decomposition,
     format_family_table,
     interval_note,
+    missing_shown,
     ordered_tables,
 )
 from lantern_jax.scoring.aggregate import DECOMPOSITION_COLUMNS
@@ -371,3 +373,27 @@ def write_ablation_outputs(
         stage.commit()
     target = Path(out_dir)
     return {name: target / name for name in ABLATION_FILES}
+
+
+def write_tables(tables: dict[str, tuple], out_dir: str | os.PathLike) -> list:
+    """Write ``name.csv`` and ``name.md`` for every table as one set (other files of
+    ``out_dir`` are kept; :class:`lantern_jax.files.StagedFolder`).
+
+    Args:
+        tables: file stem -> (title, table) or (title, table, display): the CSV holds the
+            table, the Markdown the display (cells with intervals) when there is one.
+        out_dir: output folder (created if needed).
+
+    Returns:
+        The paths written.
+    """
+    names = [f"{stem}{ext}" for stem in tables for ext in (".csv", ".md")]
+    with StagedFolder(out_dir, names) as stage:
+        for stem, (title, df, *display) in tables.items():
+            (stage.path / f"{stem}.csv").write_text(df.to_csv(index=False, float_format="%.4g"))
+            md = missing_shown(display[0] if display else df).to_markdown(
+                index=False, floatfmt=".1f", missingval=MISSING
+            )
+            (stage.path / f"{stem}.md").write_text(f"# {title}\n\n{md}\n")
+        stage.commit()
+    return [os.path.join(out_dir, n) for n in names]
