@@ -46,6 +46,7 @@ from lantern_jax import jax_setup
 from lantern_jax.commands import (
     UsageError,
     ablations,
+    alarms,
     compare,
     dataset,
     diagnostics,
@@ -177,7 +178,8 @@ def main(argv: Sequence[str] | None = None, exit_on_interrupt: bool | None = Non
         except SystemExit as e:  # --help, or an argparse usage error (already printed)
             return e.code if isinstance(e.code, int) else (0 if e.code is None else EXIT_USAGE)
         try:
-            return _run(args, argv)
+            with alarms.AlarmFilter():  # XLA's slow-compile alarms stay out of the terminal
+                return _run(args, argv)
         except UsageError as e:
             print(f"lantern-jax {args.command}: error: {e}", file=sys.stderr)
             return EXIT_USAGE

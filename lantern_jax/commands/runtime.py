@@ -16,7 +16,7 @@ import threading
 from collections.abc import Callable
 
 from lantern_jax import jax_setup
-from lantern_jax.commands import UsageError
+from lantern_jax.commands import UsageError, alarms
 
 #: Exit code of a usage error.
 EXIT_USAGE = 2
@@ -82,6 +82,7 @@ def interrupted(exit_process: bool) -> int:
         # left to flush (a staged result set was already discarded on the way out).
         sys.stdout.flush()
         sys.stderr.flush()
+        alarms.close_active()  # what went to standard error reaches it before the end
         os._exit(EXIT_INTERRUPTED)
     return EXIT_INTERRUPTED
 
