@@ -99,6 +99,14 @@ def keyword_tables() -> tuple[np.ndarray, np.ndarray]:
     return ids, np.asarray(codes, np.int32)
 
 
+def _shifted(tokens: jax.Array, width: int) -> jax.Array:
+    """(width, L) int32: row ``m`` is the token row shifted left by ``m``, -2 past its end (a
+    window's ``m``-th token at every start; static slices, no gather)."""
+    n = tokens.shape[0]
+    ext = jnp.concatenate([tokens, jnp.full((width,), -2, tokens.dtype)])
+    return jnp.stack([ext[m : m + n] for m in range(width)])
+
+
 def contains(tokens: jax.Array, keyword: jax.Array) -> jax.Array:
     """() bool: the token row contains the keyword's ids in a run.
 
@@ -106,16 +114,19 @@ def contains(tokens: jax.Array, keyword: jax.Array) -> jax.Array:
         tokens: (L,) int32, a text's padded token ids.
         keyword: (M,) int32, the keyword's ids padded with -1.
     """
-    n = tokens.shape[0]
-    at = jnp.arange(n)[:, None] + jnp.arange(keyword.shape[0])[None, :]  # (L, M)
-    window = jnp.where(at < n, tokens[jnp.clip(at, 0, n - 1)], -2)
-    return jnp.any(jnp.all((window == keyword[None, :]) | (keyword[None, :] < 0), axis=1))
+    match = (_shifted(tokens, keyword.shape[0]) == keyword[:, None]) | (keyword[:, None] < 0)
+    return jnp.any(jnp.all(match, axis=0))
 
 
 def text_response(tokens: jax.Array) -> jax.Array:
-    """() int32: the response code the keyword rule gives a text (``SEM_NONE``: no keyword)."""
+    """() int32: the response code the keyword rule gives a text (``SEM_NONE``: no keyword).
+
+    Every keyword row is compared with every window of the text at once: (K, M, L) equalities
+    of the shifted token rows, no gather (the policy runs this every tick)."""
     ids, codes = keyword_tables()
-    hits = jax.vmap(lambda k: contains(tokens, k))(jnp.asarray(ids))  # (K,)
+    k = jnp.asarray(ids)[:, :, None]  # (K, M, 1)
+    match = (_shifted(tokens, ids.shape[1])[None] == k) | (k < 0)  # (K, M, L)
+    hits = jnp.any(jnp.all(match, axis=1), axis=1)  # (K,)
     first = jnp.argmax(hits)
     return jnp.where(jnp.any(hits), jnp.asarray(codes)[first], SEM_NONE)
 
