@@ -102,10 +102,11 @@ def visits_to_examples(v: Visits, seq_ids: list[str], like: Examples, keep: np.n
     return Examples(obs, targets, np.asarray(seq_ids)[b].astype(str), base)
 
 
-def collect(cfg: TrainConfig, model, like: Examples, specs: list[SceneSpec], r: int
-            ) -> tuple[Examples, dict]:  # fmt: skip
-    """Round ``r``'s visits of ``model`` on ``specs``, relabelled by the expert; returns
-    (examples, counts: executions, valid visits, kept visits)."""
+def collect(cfg: TrainConfig, model, like: Examples, specs: list[SceneSpec], r: int,
+            progress: bool = False) -> tuple[Examples, dict]:  # fmt: skip
+    """Round ``r``'s visits of ``model`` on ``specs``, relabelled by the expert (a progress bar
+    over the batched calls when ``progress``); returns (examples, counts: executions, valid
+    visits, kept visits)."""
     from lantern_jax.policies.learned.checkpoint import model_policy
     from lantern_jax.policies.registry import get_policy
     from lantern_jax.sim.rollout import horizon_ticks
@@ -118,7 +119,12 @@ def collect(cfg: TrainConfig, model, like: Examples, specs: list[SceneSpec], r: 
     phase = int(every * ((r * 0.618) % 1.0))  # a different offset every round
     beta = cfg.beta * cfg.beta_decay**r
     parts, counts = [], dict(executions=0, valid_visits=0, kept_visits=0)
-    for k in range(0, len(specs), CHUNK_PAIRS):
+    starts = range(0, len(specs), CHUNK_PAIRS)
+    if progress:
+        from tqdm.auto import tqdm
+
+        starts = tqdm(starts, desc=f"round {r}: drive + relabel", unit="batch")
+    for k in starts:
         chunk = specs[k : k + CHUNK_PAIRS]
         ids = [f"{s.family.lower()}_{s.index:05d}_{rt}" for rt in "AB" for s in chunk]
         key = jax.random.PRNGKey(hash((cfg.seed, r, k)) % (2**31))
@@ -177,9 +183,8 @@ def train_closed_loop(cfg: TrainConfig, progress: bool = True) -> dict:
         if (folder / VISITS_NPZ).exists():
             new, counts = _load_examples(folder / VISITS_NPZ), {}
         else:
-            _stage(progress, f"round {r}: driving {cfg.scenes_per_round} scene pairs")
-            new, counts = collect(cfg, model, data, round_specs(specs, cfg.scenes_per_round,
-                                                                 cfg.seed, r), r)  # fmt: skip
+            chosen = round_specs(specs, cfg.scenes_per_round, cfg.seed, r)
+            new, counts = collect(cfg, model, data, chosen, r, progress)
             _save_examples(folder / VISITS_NPZ, new)
         visits.append(new)
         t_collect = time.perf_counter() - t0
@@ -202,8 +207,3 @@ def train_closed_loop(cfg: TrainConfig, progress: bool = True) -> dict:
                                            rounds=len(rounds)))  # fmt: skip
     atomic_write(out / "rounds.json", json.dumps(rounds, indent=1, default=str) + "\n")
     return dict(summary, rounds=len(rounds), model=str(out / f"{cfg.name}.msgpack"))
-
-
-def _stage(on: bool, message: str) -> None:
-    if on:
-        print(message, flush=True)
