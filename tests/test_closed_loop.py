@@ -122,15 +122,21 @@ def test_relabel_of_an_expert_state_is_the_dataset_label():
     recs = jax.device_get(batched_recorder(expert, 30)(batch, ep)[0])
     v = jax.device_get(relabel_batch(batch, expert, ep, expert, ep, jax.random.PRNGKey(0),
                                      num_visits=3, every=40, phase=5))  # fmt: skip
-    assert np.asarray(v.valid).all()
+    valid = np.asarray(v.valid)
+    assert valid.sum() >= 3, valid
     for j in range(2):
         one = jax.tree.map(lambda x, j=j: x[j], recs)
+        live = np.asarray(one.live)
         for k in range(3):
             f = (5 + 40 * k) // 5  # the recorded frame of the visit's tick
+            # valid exactly where the dataset would keep the frame: it and ten more are live
+            assert valid[j, k] == bool(live[f : f + NUM_WAYPOINTS + 1].all()), (j, k)
+            if not valid[j, k]:
+                continue
             ref = fr.future_waypoints(np.asarray(one.ego_xy), np.asarray(one.ego_yaw), f)
             np.testing.assert_allclose(v.waypoints[j, k], ref, atol=1e-4)
             np.testing.assert_array_equal(v.obs.warning_tokens[j, k], one.obs.warning_tokens[f])
-            np.testing.assert_allclose(v.obs.range_image[j, k], one.obs.range_image[f])
+            np.testing.assert_allclose(v.obs.range_image[j, k], one.obs.range_image[f], atol=1e-4)
 
 
 @pytest.mark.slow
