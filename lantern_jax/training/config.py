@@ -11,7 +11,13 @@ carries — the paper's three learned rows:
   with base-style frames (``base_mix``: their share of every batch);
 * ``surround`` (the VAD analogue) — every frame, the six-camera rig, no language;
 * ``distance`` — like ``coop``, plus far-position counterexamples: Route B frames given the
-  family's warning at a far position (``far_m`` ahead) with the ordinary expert trajectory.
+  family's warning at a far position (``far_m`` ahead) with the ordinary expert trajectory;
+* ``closed_loop`` — DAgger from an open-loop model (``init_from``): ``rounds`` times, the
+  current model drives training scenes (the dataset's plan), the expert relabels the states it
+  visits, and the model trains ``epochs`` epochs on the distance recipe's examples plus every
+  relabelled visit so far (``closed_loop_mix`` of every batch) plus counterfactual warnings
+  (``counterfactual``: Route B frames told another family's text, a non-actionable message or
+  an empty text, with the ordinary trajectory; :mod:`lantern_jax.training.counterfactual`).
 """
 
 from __future__ import annotations
@@ -25,7 +31,7 @@ from lantern_jax.config_file import ConfigFileError, check_keys, read_table, typ
 from lantern_jax.dataset.store import EXCLUDE_CROSSING
 from lantern_jax.policies.names import name_problem
 
-RECIPES = ("base", "coop", "surround", "distance")
+RECIPES = ("base", "coop", "surround", "distance", "closed_loop")
 #: The table of a training config.
 TABLE = "train"
 
@@ -59,6 +65,15 @@ class TrainConfig:
     # frames whose 2.5-s waypoint horizon crosses a warning mark that are left out: "both" (onset
     # or termination, the paper's rule), "onset" or "none" (dataset.store.EXCLUDE_CROSSING)
     exclude_crossing: str = "both"
+    # closed_loop (DAgger) only:
+    rounds: int = 3  # collect-relabel-train rounds
+    scenes_per_round: int = 96  # dataset-plan scene pairs driven per round (A and B each)
+    visit_every_s: float = 2.0  # s, simulated time between two relabelled visits
+    max_seconds: float = 40.0  # s, visits are kept until this time of an execution
+    beta: float = 0.5  # round 0: probability that the expert drives a segment between visits
+    beta_decay: float = 0.5  # beta of round r: beta * beta_decay**r
+    closed_loop_mix: float = 0.3  # share of every batch drawn from the relabelled visits
+    counterfactual: float = 0.5  # counterfactual warning frames per Route B frame
 
     @property
     def rig(self) -> str:
@@ -120,19 +135,24 @@ def _range_problem(cfg: TrainConfig) -> tuple[str, str] | None:
             problems.append((f.name, f"must be a finite number, got {value}"))
     if cfg.recipe not in RECIPES:
         problems.append(("recipe", f"{cfg.recipe!r} not one of {', '.join(RECIPES)}"))
-    if cfg.recipe in ("coop", "distance") and not cfg.init_from:
+    if cfg.recipe in ("coop", "distance", "closed_loop") and not cfg.init_from:
         problems.append(("init_from", f"the {cfg.recipe} recipe fine-tunes a base model; give it"))
-    for key in ("epochs", "batch_size", "width", "heads", "layers"):
+    for key in ("epochs", "batch_size", "width", "heads", "layers", "rounds", "scenes_per_round"):
         if getattr(cfg, key) < 1:
             problems.append((key, f"must be >= 1, got {getattr(cfg, key)}"))
-    for key in ("lr", "max_minutes", "far_m"):
+    for key in ("lr", "max_minutes", "far_m", "visit_every_s", "max_seconds"):
         if not getattr(cfg, key) > 0:
             problems.append((key, f"must be > 0, got {getattr(cfg, key)}"))
     if not cfg.weight_decay >= 0:
         problems.append(("weight_decay", f"must be >= 0, got {cfg.weight_decay}"))
-    for key in ("base_mix", "warmup"):
+    for key in ("base_mix", "warmup", "closed_loop_mix"):
         if not 0.0 <= getattr(cfg, key) < 1.0:
             problems.append((key, f"must be in [0, 1), got {getattr(cfg, key)}"))
+    for key in ("beta", "beta_decay", "counterfactual"):
+        if not 0.0 <= getattr(cfg, key) <= 1.0:
+            problems.append((key, f"must be in [0, 1], got {getattr(cfg, key)}"))
+    if cfg.recipe == "closed_loop" and cfg.base_mix + cfg.closed_loop_mix >= 1.0:
+        problems.append(("closed_loop_mix", "base_mix + closed_loop_mix must be < 1"))
     if not 0.0 < cfg.val_fraction < 1.0:
         why = "the best model is chosen on the held-out sequences"
         problems.append(("val_fraction", f"must be in (0, 1) ({why}), got {cfg.val_fraction}"))

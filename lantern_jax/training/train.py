@@ -72,25 +72,31 @@ def make_loss(graphdef: Any, rig: str):
 
 
 class _Batches:
-    """Seeded mini-batches of training indices (with the base-style mix where asked)."""
+    """Seeded mini-batches of training indices: every batch draws ``base_mix`` of its rows from
+    the ordinary-driving frames (coop, distance, closed_loop) and ``pools``' shares from their
+    index pools (closed_loop: the relabelled visits), the rest in a shuffled pass."""
 
-    def __init__(self, ex: Examples, train_idx: np.ndarray, cfg: TrainConfig):
+    def __init__(self, ex: Examples, train_idx: np.ndarray, cfg: TrainConfig,
+                 pools: tuple[tuple[np.ndarray, float], ...] = ()):  # fmt: skip
         self.train_idx, self.cfg = train_idx, cfg
-        self.base_idx = train_idx[ex.base_style[train_idx]]
-        self.mix = cfg.base_mix if cfg.recipe in ("coop", "distance") else 0.0
+        base_idx = train_idx[ex.base_style[train_idx]]
+        mix = cfg.base_mix if cfg.recipe in ("coop", "distance", "closed_loop") else 0.0
+        self.pools = tuple((idx, share) for idx, share in ((base_idx, mix), *pools) if len(idx))
 
     def epoch(self, e: int) -> list[np.ndarray]:
+        """The batches of epoch ``e`` (index arrays; the same for the same seed and epoch)."""
         rng = np.random.default_rng([self.cfg.seed, e])
         order = rng.permutation(self.train_idx)
         bs = self.cfg.batch_size
-        n_mix = int(round(self.mix * bs)) if len(self.base_idx) else 0
-        main = bs - n_mix
+        n_pool = [int(round(share * bs)) for _, share in self.pools]
+        main = max(1, bs - sum(n_pool))
         out = []
         for k in range(len(order) // main):
-            idx = order[k * main : (k + 1) * main]
-            if n_mix:
-                idx = np.concatenate([idx, rng.choice(self.base_idx, n_mix)])
-            out.append(idx)
+            idx = [order[k * main : (k + 1) * main]]
+            idx += [
+                rng.choice(pool, n) for (pool, _), n in zip(self.pools, n_pool, strict=True) if n
+            ]
+            out.append(np.concatenate(idx))
         return out
 
 
@@ -102,11 +108,14 @@ def _checkpointer(folder: Path):
 
 
 def train(cfg: TrainConfig, progress: bool = True) -> dict:
-    """Train one model; returns a summary (best epoch and validation loss, frames/s, paths)."""
-    import orbax.checkpoint as ocp
+    """Train one model; returns a summary (best epoch and validation loss, frames/s, paths).
 
-    from lantern_jax.language import load_embedding
+    The ``closed_loop`` recipe runs :func:`lantern_jax.training.closed_loop.train_closed_loop`.
+    """
+    if cfg.recipe == "closed_loop":
+        from lantern_jax.training.closed_loop import train_closed_loop
 
+        return train_closed_loop(cfg, progress)
     out = Path(cfg.out)
     out.mkdir(parents=True, exist_ok=True)
     card = read_card(Path(cfg.dataset))
@@ -116,10 +125,26 @@ def train(cfg: TrainConfig, progress: bool = True) -> dict:
     ranges = ex.obs["surround_ranges" if cfg.rig == "surround" else "range_image"].shape[1]
     mcfg = model_config(cfg, ranges)
     model = load_model(cfg.init_from, expect=mcfg) if cfg.init_from else new_model(mcfg, cfg.seed)
+    batches = _Batches(ex, train_idx, cfg)
+    return fit(cfg, model, ex, batches, val_idx, out, progress)
+
+
+def fit(cfg: TrainConfig, model: Any, ex: Examples, batches: _Batches, val_idx: np.ndarray,
+        out: Path, progress: bool = True, info: dict | None = None) -> dict:  # fmt: skip
+    """``cfg.epochs`` epochs of ``model`` on the batches of ``ex``, checkpointed in ``out``
+    (a rerun resumes from the latest epoch); exports the best model (validation L1 on
+    ``val_idx``) as ``out/<name>.msgpack`` with ``info`` added to its description.
+
+    Returns:
+        The run's summary (best validation L1 in m and its epoch, examples, frames/s, path).
+    """
+    import orbax.checkpoint as ocp
+
+    from lantern_jax.language import load_embedding
+
     graphdef, params = nnx.split(model)
     embedding = jnp.asarray(load_embedding(), jnp.float32)
     nav = jnp.asarray(nav_token_table())
-    batches = _Batches(ex, train_idx, cfg)
     per_epoch = max(1, len(batches.epoch(0)))
     steps = per_epoch * cfg.epochs
     schedule = optax.warmup_cosine_decay_schedule(
@@ -166,7 +191,7 @@ def train(cfg: TrainConfig, progress: bool = True) -> dict:
             best = (val, e)
             save_model(nnx.merge(graphdef, params), out / cfg.name,
                        dict(recipe=cfg.recipe, dataset=str(cfg.dataset), epoch=e, val_l1_m=val,
-                            train_config=dataclasses.asdict(cfg)))  # fmt: skip
+                            train_config=dataclasses.asdict(cfg), **(info or {})))  # fmt: skip
         mngr.save(e, args=ocp.args.Composite(
             state=ocp.args.StandardSave(dict(params=params, opt=opt_state)),
             meta=ocp.args.JsonSave(dict(curve=curve, best=list(best)))))  # fmt: skip
@@ -179,7 +204,7 @@ def train(cfg: TrainConfig, progress: bool = True) -> dict:
     elapsed = time.perf_counter() - t_start
     _plot_curve(curve, out / "curve.png", cfg.name)
     return dict(name=cfg.name, best_val_l1_m=best[0], best_epoch=best[1], epochs=len(curve),
-                train_examples=int(len(train_idx)), val_examples=int(len(val_idx)),
+                train_examples=int(len(batches.train_idx)), val_examples=int(len(val_idx)),
                 frames_per_s=seen / max(elapsed, 1e-9), seconds=elapsed,
                 model=str(out / f"{cfg.name}.msgpack"))  # fmt: skip
 

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 #: The learned models whose checkpoints ship with the package (``data/models/``; README,
 #: "Learned warning-conditioned models"), with their descriptions: the paper's three learned
-#: rows, ``learned-coop`` fine-tuned with onset-only horizon exclusion, and the
-#: distance-conditioned models of the paper's language diagnostics (both exclusion rules).
+#: rows, ``learned-coop`` fine-tuned with onset-only horizon exclusion, the
+#: distance-conditioned models of the paper's language diagnostics (both exclusion rules), and
+#: the closed-loop model (beyond the paper's recipe).
 SHIPPED_MODELS = {
     "learned-base": "language interface trained on ordinary driving, never on warnings "
                     "(the SimLingo analogue)",
@@ -19,4 +20,7 @@ SHIPPED_MODELS = {
     "learned-distance-onset-only": "learned-distance, fine-tuned keeping the frames whose "
                                    "horizon crosses warning termination "
                                    "(configs/train_distance_onset_only.toml)",
+    "learned-closed-loop": "learned-distance-onset-only trained closed loop (DAgger: the expert "
+                           "relabels the states the model visits) with counterfactual warnings "
+                           "(configs/train_closed_loop.toml)",
 }  # fmt: skip

@@ -1,0 +1,167 @@
+"""Closed-loop training (DAgger): relabelling, counterfactual warnings, the recipe end to end.
+
+The fast tests check the pieces on synthetic data; the slow ones drive the simulator (each
+compiles the rollout: about a minute on two CPU cores).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from types import SimpleNamespace
+
+import jax
+import numpy as np
+import pandas as pd
+import pytest
+
+from lantern_jax.constants import FAMILIES, NUM_WAYPOINTS
+from lantern_jax.dataset import frames as fr
+from lantern_jax.language import PAD_ID
+from lantern_jax.training import counterfactual as cf
+from lantern_jax.training.closed_loop import round_specs
+from lantern_jax.training.config import ConfigError, TrainConfig, load_config
+from lantern_jax.training.data import Examples
+from lantern_jax.training.relabel import ego_frame_offsets
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_relabel_offsets_are_the_dataset_labellers_waypoints():
+    rng = np.random.default_rng(0)
+    xy = np.cumsum(rng.normal(size=(14, 2)), axis=0).astype(np.float32) * 3
+    yaw = rng.uniform(-3, 3, 14).astype(np.float32)
+    for f in (0, 3):
+        ref = fr.future_waypoints(xy, yaw, f)
+        got = ego_frame_offsets(xy[f], yaw[f], xy[f + 1 : f + 1 + NUM_WAYPOINTS])
+        np.testing.assert_allclose(np.asarray(got), ref, atol=1e-5)
+
+
+def _examples(n: int) -> tuple[Examples, np.ndarray, np.ndarray]:
+    from lantern_jax.language import MAX_TOKENS
+
+    rng = np.random.default_rng(1)
+    obs = dict(warning_tokens=np.full((n, MAX_TOKENS), PAD_ID, np.int32),
+               warning_values=np.zeros((n, MAX_TOKENS), np.float32),
+               ego_speed=rng.uniform(0, 10, n).astype(np.float32))  # fmt: skip
+    targets = rng.normal(size=(n, NUM_WAYPOINTS, 2)).astype(np.float32)
+    seq = np.asarray([f"s{i}" for i in range(n)])
+    families = np.asarray([FAMILIES[i % len(FAMILIES)] for i in range(n)])
+    routes = np.asarray(["A" if i % 4 == 0 else "B" for i in range(n)])
+    return Examples(obs, targets, seq, np.ones(n, bool)), families, routes
+
+
+def test_counterfactual_frames_carry_the_ordinary_label_and_a_text_of_no_hazard_here():
+    from lantern_jax.observation import stated_position
+    from lantern_jax.scenarios.warnings import text_tables
+
+    ex, families, routes = _examples(240)
+    out, variant = cf.counterfactual_examples(ex, families, routes, share=0.5, seed=0)
+    n_b = int(np.sum(routes == "B"))
+    assert len(out) == round(0.5 * n_b) and set(variant) == {0, 1}
+    src = np.asarray([int(s[1:]) for s in out.sequence])
+    assert np.all(routes[src] == "B")  # only frames whose route holds no hazard
+    np.testing.assert_array_equal(out.targets, ex.targets[src])  # the ordinary expert plan
+    np.testing.assert_array_equal(out.obs["ego_speed"], ex.obs["ego_speed"][src])
+    assert not out.base_style.any()
+    tables = text_tables()
+    ids = {tuple(t): i for i, t in enumerate(tables.tokens)}
+    text = np.asarray([ids[tuple(t)] for t in out.obs["warning_tokens"]])
+    na = set(cf.nonactionable_ids().tolist())
+    for i in np.flatnonzero(variant == 0):  # another road type's family: not on this route
+        assert text[i] in cf.other_road_families(families[src][i])
+    assert all(t in na for t in text[variant == 1])
+    # the value channel states a near position where the text writes one
+    for i in np.flatnonzero(variant == 0)[:5]:
+        text_obs = SimpleNamespace(warning_tokens=out.obs["warning_tokens"][i],
+                                   warning_values=out.obs["warning_values"][i])  # fmt: skip
+        pos, stated = stated_position(text_obs)
+        assert bool(stated) and cf.NEAR_X_M[0] <= float(pos[0]) <= cf.NEAR_X_M[1]
+
+
+def test_other_road_families_split_straight_and_junction():
+    assert [FAMILIES[i] for i in cf.other_road_families("PE")] == ["LWW", "RWW", "RTY"]
+    assert [FAMILIES[i] for i in cf.other_road_families("RTY")] == ["PE", "VC", "OR"]
+
+
+def test_closed_loop_config_loads_and_needs_a_model_to_start_from(tmp_path):
+    cfg = load_config(ROOT / "configs" / "train_closed_loop.toml")
+    assert cfg.recipe == "closed_loop" and cfg.init_from and cfg.rounds >= 1
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[train]\nname = "x"\nrecipe = "closed_loop"\n')
+    with pytest.raises(ConfigError, match="init_from"):
+        load_config(bad)
+    bad.write_text('[train]\nname = "x"\nrecipe = "closed_loop"\ninit_from = "m"\nbeta = 2.0\n')
+    with pytest.raises(ConfigError, match="beta"):
+        load_config(bad)
+
+
+def test_round_specs_spread_over_families_and_change_by_round():
+    from lantern_jax.dataset.scenes import SceneSpec
+
+    specs = [SceneSpec(i, FAMILIES[i % 6], "clear", {}, f"{i:064x}") for i in range(60)]
+    a, b = round_specs(specs, 12, 0, 0), round_specs(specs, 12, 0, 1)
+    assert pd.Series([s.family for s in a]).value_counts().to_dict() == {f: 2 for f in FAMILIES}
+    assert [s.index for s in a] != [s.index for s in b]
+    assert [s.index for s in a] == [s.index for s in round_specs(specs, 12, 0, 0)]
+
+
+@pytest.mark.slow
+def test_relabel_of_an_expert_state_is_the_dataset_label():
+    from lantern_jax.dataset.record import batched_recorder
+    from lantern_jax.dataset.scenes import build_scenes, plan_scenes
+    from lantern_jax.policies.registry import get_policy
+    from lantern_jax.training.relabel import relabel_batch
+    from lantern_jax.world import tree_stack
+
+    specs = plan_scenes(1, 5, families=("PE",))
+    a, b = build_scenes(specs)
+    batch = tree_stack(a + b)
+    expert = get_policy("expert")
+    ep = expert.init(jax.random.PRNGKey(0))
+    recs = jax.device_get(batched_recorder(expert, 30)(batch, ep)[0])
+    v = jax.device_get(relabel_batch(batch, expert, ep, expert, ep, jax.random.PRNGKey(0),
+                                     num_visits=3, every=40, phase=5))  # fmt: skip
+    valid = np.asarray(v.valid)
+    assert valid.sum() >= 3, valid
+    for j in range(2):
+        one = jax.tree.map(lambda x, j=j: x[j], recs)
+        live = np.asarray(one.live)
+        for k in range(3):
+            f = (5 + 40 * k) // 5  # the recorded frame of the visit's tick
+            # valid exactly where the dataset would keep the frame: it and ten more are live
+            assert valid[j, k] == bool(live[f : f + NUM_WAYPOINTS + 1].all()), (j, k)
+            if not valid[j, k]:
+                continue
+            ref = fr.future_waypoints(np.asarray(one.ego_xy), np.asarray(one.ego_yaw), f)
+            np.testing.assert_allclose(v.waypoints[j, k], ref, atol=1e-4)
+            np.testing.assert_array_equal(v.obs.warning_tokens[j, k], one.obs.warning_tokens[f])
+            np.testing.assert_allclose(v.obs.range_image[j, k], one.obs.range_image[f], atol=1e-4)
+
+
+@pytest.mark.slow
+def test_one_round_trains_checkpoints_and_resumes(tmp_path):
+    from lantern_jax.dataset.generate import generate_dataset
+    from lantern_jax.policies.learned.checkpoint import checkpoint_policy, read_meta
+    from lantern_jax.training.train import train
+
+    ds = tmp_path / "ds"
+    generate_dataset(ds, pairs_per_family=1, seed=5, chunk_pairs=6, progress=False)
+    common = dict(dataset=str(ds), width=16, heads=2, epochs=1, batch_size=32,
+                  val_fraction=0.2, seed=3)  # fmt: skip
+    train(TrainConfig(name="learned-tiny", recipe="base", out=str(tmp_path / "b"), **common),
+          progress=False)  # fmt: skip
+    cl = dict(common, name="learned-tiny-cl", recipe="closed_loop", out=str(tmp_path / "c"),
+              init_from=str(tmp_path / "b" / "learned-tiny.msgpack"), rounds=1,
+              scenes_per_round=2, max_seconds=6.0, exclude_crossing="onset")  # fmt: skip
+    s = train(TrainConfig(**cl), progress=False)
+    r0 = tmp_path / "c" / "round-0"
+    assert s["rounds"] == 1 and s["kept_visits"] > 0 and s["executions"] == 4
+    assert (r0 / "visits.npz").exists() and (r0 / "done.json").exists()
+    assert checkpoint_policy(tmp_path / "c" / "learned-tiny-cl.msgpack").name == "learned-tiny-cl"
+    # an interrupted round resumes its training from the latest epoch (visits kept)
+    (r0 / "done.json").unlink()
+    again = train(TrainConfig(**dict(cl, epochs=2)), progress=False)
+    assert list(pd.read_csv(r0 / "curve.csv")["epoch"]) == [0, 1] and again["epochs"] == 2
+    assert json.loads((r0 / "done.json").read_text())["visits"] == s["visits"]
+    assert read_meta(tmp_path / "c" / "learned-tiny-cl")["recipe"] == "closed_loop"
