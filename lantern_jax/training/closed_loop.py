@@ -166,7 +166,7 @@ def train_closed_loop(cfg: TrainConfig, progress: bool = True) -> dict:
     """Run (or resume) the ``closed_loop`` recipe; returns the last round's summary with the
     collection counts and times (s) of every round."""
     from lantern_jax.policies.learned.checkpoint import load_model, save_model
-    from lantern_jax.training.train import _Batches, fit, model_config
+    from lantern_jax.training.fit import Batches, fit, model_config
 
     out = Path(cfg.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -195,7 +195,7 @@ def train_closed_loop(cfg: TrainConfig, progress: bool = True) -> dict:
             ex = concat([data, *visits])
             train_idx, val_idx = split_by_sequence(ex, cfg.val_fraction, cfg.seed)
             cl = train_idx[train_idx >= len(data)]
-            batches = _Batches(ex, train_idx, cfg, pools=((cl, cfg.closed_loop_mix),))
+            batches = Batches(ex, train_idx, cfg, pools=((cl, cfg.closed_loop_mix),))
             summary = fit(cfg, model, ex, batches, val_idx, folder, progress,
                           info=dict(round=r, visits=int(sum(len(v) for v in visits))))  # fmt: skip
             summary.update(round=r, visits=len(new), collect_seconds=round(t_collect, 1), **counts)
