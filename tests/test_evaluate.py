@@ -132,15 +132,9 @@ def test_pair_alone_equals_pair_in_suite(base, shipped):
     assert ok, report
 
 
-def test_built_in_suite_shape_is_the_bucket(shipped, monkeypatch):
+def test_built_in_suite_shape_is_the_bucket(shipped):
     """:data:`~lantern_jax.sim.engine.SUITE_BATCH_SHAPE` is the built-in suite's trimmed batch,
-    and a subset is built at that shape (its slots kept, its executions padded to it) when no
-    smaller compiled shape holds it."""
-    import collections
-
-    from lantern_jax.sim import engine
-
-    monkeypatch.setattr(engine, "_SHAPES", collections.OrderedDict())
+    and a subset is built at that shape (its slots kept, its executions padded to it)."""
     assert batch_shape(build_executions(shipped).scenarios) == SUITE_BATCH_SHAPE
     sub = build_executions(shipped.select(PAIRS), bucket=True)
     assert sub.pad_to == SUITE_BATCH_SHAPE[0]
@@ -586,19 +580,12 @@ def test_trimmed_batch_keeps_the_flat_observation_vector(suite2):
     np.testing.assert_array_equal(cut, full)
 
 
-def test_batch_bucket_prefers_the_smallest_compiled_shape(monkeypatch):
-    """A batch runs at the smallest shape already compiled that holds it, within
-    ``BUCKET_MAX_GROWTH``; else the built-in suite's when it fits; else its own."""
-    import collections
-
+def test_batch_bucket_depends_on_the_batch_alone():
+    """A batch that fits in the built-in suite's shape runs at it, any other at its own, whatever
+    the process compiled before (so an evaluation gives the same bits in any process)."""
     from lantern_jax.sim import engine
 
-    monkeypatch.setattr(engine, "_SHAPES", collections.OrderedDict())
     assert engine.batch_bucket((6, 8, 7)) == SUITE_BATCH_SHAPE
-    assert engine.batch_bucket((400, 8, 7)) == (400, 8, 7)  # larger than the suite: its own
+    assert engine.batch_bucket(SUITE_BATCH_SHAPE) == SUITE_BATCH_SHAPE
+    assert engine.batch_bucket((400, 8, 7)) == (400, 8, 7)  # more executions than the suite
     assert engine.batch_bucket((6, 12, 7)) == (6, 12, 7)  # wider than the suite
-    engine.remember_shape((12, 12, 9))
-    assert engine.batch_bucket((6, 12, 7)) == (12, 12, 9)
-    engine.remember_shape((9000, 16, 16))
-    assert engine.batch_bucket((400, 8, 7)) == (400, 8, 7)  # 9000 > 4 x 400: not padded so far
-    assert engine.batch_bucket((3000, 16, 9)) == (9000, 16, 16)

@@ -191,4 +191,4 @@ def test_coop_false_brake_rate_on_the_suite():
 
     rt = evaluate(["coop"], progress=False).route_table
     warned = rt[rt["condition"] == "warning"]
-    assert 100.0 * float((warned["gate_false_brake"] == 0).mean()) <= 5.0
+    assert 100.0 * float((warned["no_false_brake"] == 0).mean()) <= 5.0

@@ -78,9 +78,9 @@ def build_executions(
     With ``trim`` (default) the actor and lane slots past the last one any execution uses are
     cut (:func:`~lantern_jax.world.trim_padding`: narrower per-tick work, same results to the
     reproducibility promise); ``trim=False`` keeps the full slot capacity, one batch shape for
-    every suite of the same size.  With ``bucket`` the batch takes the shape of a larger one
-    whose program this process has compiled, or of the built-in suite (:func:`batch_bucket`):
-    slots are kept to its widths and :attr:`Executions.pad_to` says how many executions to run.
+    every suite of the same size.  With ``bucket`` a batch that fits in the built-in suite's
+    shape takes it (:func:`batch_bucket`): slots are kept to its widths and
+    :attr:`Executions.pad_to` says how many executions to run.
 
     Raises:
         ValueError: listing the valid ablations for an unknown name.
@@ -117,14 +117,9 @@ def build_executions(
 
 #: Batch shape (executions, actor slots, lane slots) of the built-in suite ``lantern-v3``
 #: (``3 x 120`` executions; 10 of 16 actor slots and 9 of 16 lane slots used), to which
-#: :func:`batch_bucket` pads a smaller batch that fits: a subset evaluated before the suite then
-#: compiles the suite's program (checked against the suite in ``tests/test_evaluate.py``).
+#: :func:`batch_bucket` pads a smaller batch that fits: a subset evaluated before or after the
+#: suite runs the suite's program (checked against the suite in ``tests/test_evaluate.py``).
 SUITE_BATCH_SHAPE = (360, 10, 9)
-#: A batch is padded to a larger compiled shape only up to this many times its own size (or the
-#: built-in suite's): padding executions are never stepped, but every one is laid out and given
-#: a start state.
-BUCKET_MAX_GROWTH = 4
-_SHAPES: collections.OrderedDict[tuple[int, int, int], None] = collections.OrderedDict()
 
 
 def batch_shape(scenarios: Scenario) -> tuple[int, int, int]:
@@ -135,27 +130,16 @@ def batch_shape(scenarios: Scenario) -> tuple[int, int, int]:
 
 def batch_bucket(shape: tuple[int, int, int]) -> tuple[int, int, int]:
     """The shape to run a batch of ``shape`` (executions, actor slots, lane slots) at, so that
-    batches of different sizes share a compiled program where padding can make them.
+    batches of different sizes share a compiled program where padding can make them: the
+    built-in suite's (:data:`SUITE_BATCH_SHAPE`) when it holds the batch, else the batch's own.
 
-    The smallest shape already run in this process that holds the batch (at most
-    :data:`BUCKET_MAX_GROWTH` times its executions or the built-in suite's), else the built-in
-    suite's (:data:`SUITE_BATCH_SHAPE`) when it holds the batch, else the batch's own.  Padding
-    changes no result beyond float rounding: extra slots are inert, extra executions start
-    ended and are never stepped (:func:`run_executions`' ``pad_to``).
+    The choice depends on the batch alone, never on what the process compiled before, so an
+    evaluation runs the same program (and gives the same bits) in any process.  Padding changes
+    no result beyond float rounding: extra slots are inert, extra executions start ended and
+    are never stepped (:func:`run_executions`' ``pad_to``).
     """
-    n = shape[0]
-    limit = max(BUCKET_MAX_GROWTH * n, SUITE_BATCH_SHAPE[0])
-    holds = [s for s in (*_SHAPES, SUITE_BATCH_SHAPE)
-             if all(a >= b for a, b in zip(s, shape, strict=True)) and s[0] <= limit]  # fmt: skip
-    return min(holds) if holds else shape
-
-
-def remember_shape(shape: tuple[int, int, int]) -> None:
-    """Note a batch shape whose program this process compiled (bounded, as the programs)."""
-    _SHAPES[shape] = None
-    _SHAPES.move_to_end(shape)
-    while len(_SHAPES) > MAX_PROGRAMS:
-        _SHAPES.popitem(last=False)
+    holds = all(a >= b for a, b in zip(SUITE_BATCH_SHAPE, shape, strict=True))
+    return SUITE_BATCH_SHAPE if holds else tuple(shape)
 
 
 def compact_slots(backend: str | None = None) -> int:
@@ -401,7 +385,6 @@ def run_executions(
     if timings is not None:
         for k, v in init_timings.items():
             timings[k] += v
-    remember_shape((total, *batch_shape(host)[1:]))
     if stage is not None:
         stage(f"{n} executions")
     final = jax.tree.map(np.asarray, place.get(exe(*args)))
