@@ -73,10 +73,14 @@ def test_the_pages_hold_code_blocks():
 
 
 def test_every_python_block_compiles():
+    compiled = 0
     for page in PY_PAGES:
         for b in _python_blocks(page):
             if b["skip"] is None:
-                compile(b["code"], f"{_rel(page)}:{b['line']}", "exec")
+                code = compile(b["code"], f"{_rel(page)}:{b['line']}", "exec")
+                assert code.co_filename.endswith(f":{b['line']}")
+                compiled += 1
+    assert compiled >= 10, f"only {compiled} Python blocks found in the pages"
 
 
 def test_skipped_blocks_are_few_and_say_why():
@@ -144,9 +148,10 @@ def test_python_blocks_run(page, tmp_path, monkeypatch):
     """A page's Python blocks, in order, in one namespace, in an empty working folder."""
     monkeypatch.chdir(tmp_path)
     namespace: dict = {"__name__": "__docs__"}
-    for b in _python_blocks(page):
-        if b["skip"]:
-            continue
+    runnable = [b for b in _python_blocks(page) if not b["skip"]]
+    if not runnable:
+        pytest.skip(f"{_rel(page)}: every Python block is marked to skip (see the marker's reason)")
+    for b in runnable:
         where = f"{_rel(page)}:{b['line']}"
         try:
             with redirect_stdout(io.StringIO()):
@@ -155,3 +160,5 @@ def test_python_blocks_run(page, tmp_path, monkeypatch):
             if e.name and e.name.split(".")[0] in OPTIONAL_MODULES:
                 pytest.skip(f"{where} needs the optional {e.name!r}")
             raise
+    defined = set(namespace) - {"__name__", "__builtins__"}
+    assert defined, f"{_rel(page)}: its blocks ran but defined nothing"
