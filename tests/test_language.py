@@ -37,7 +37,7 @@ def test_canonical_templates_round_trip(text_id):
 
 
 def test_every_bank_text_round_trips_through_its_table_row():
-    rows = warnings.token_table()
+    rows = warnings.token_table(DEFAULT_BANK)
     assert rows.shape == (len(DEFAULT_BANK), language.MAX_TOKENS) and rows.dtype == np.int32
     for e in DEFAULT_BANK:
         assert language.detokenize(rows[e.text_id]) == e.text, e.text_id
@@ -151,10 +151,12 @@ def test_token_table_is_built_once(monkeypatch):
 
     monkeypatch.setattr(language, "tokenize", counting)
     warnings._text_tables.cache_clear()
-    first = warnings.text_tables()
+    first = warnings.text_tables(DEFAULT_BANK)
     assert len(calls) == len(DEFAULT_BANK)
-    assert warnings.text_tables() is first
-    lookup = jax.jit(lambda i: warnings.warning_language(i, jnp.asarray(True), jnp.ones(2)))
+    assert warnings.text_tables(DEFAULT_BANK) is first
+    lookup = jax.jit(
+        lambda i: warnings.warning_language(i, jnp.asarray(True), jnp.ones(2), DEFAULT_BANK)
+    )
     for i in (0, 7, len(DEFAULT_BANK) - 1):
         tokens, values = lookup(jnp.int32(i))
         np.testing.assert_array_equal(np.asarray(tokens), first.tokens[i])
@@ -164,7 +166,9 @@ def test_token_table_is_built_once(monkeypatch):
 
 def test_lookup_of_inactive_or_unknown_text_is_padding():
     for tid, active in ((0, False), (-1, True), (len(DEFAULT_BANK), True)):
-        tokens, values = warnings.warning_language(jnp.int32(tid), jnp.asarray(active), jnp.ones(2))
+        tokens, values = warnings.warning_language(
+            jnp.int32(tid), jnp.asarray(active), jnp.ones(2), DEFAULT_BANK
+        )
         assert (np.asarray(tokens) == language.PAD_ID).all()
         assert not np.asarray(values).any()
 
