@@ -109,15 +109,7 @@ def segments_hit_boxes_minor(x: dict[str, Array], d: Array) -> Array:
     qx = x["ends"][:, 0, None] - x["c"][None, :, 0]  # (P, N, B)
     qy = x["ends"][:, 1, None] - x["c"][None, :, 1]
     bx, by = qx * ca + qy * sa, -qx * sa + qy * ca
-    gx, gy = bx - ax, by - ay
-    separated = (
-        (jnp.minimum(ax, bx) > ex)
-        | (jnp.maximum(ax, bx) < -ex)
-        | (jnp.minimum(ay, by) > ey)
-        | (jnp.maximum(ay, by) < -ey)
-        | (jnp.abs(ay * gx - ax * gy) > ex * jnp.abs(gy) + ey * jnp.abs(gx))
-    )
-    return ~separated
+    return ~geometry.segment_separated_from_box(ax, ay, bx, by, ex, ey)
 
 
 def program(fn, steps: int, minor: bool):

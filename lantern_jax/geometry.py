@@ -438,8 +438,25 @@ def segments_hit_boxes(
     )
     ax, ay = _to_box_frame(sx[..., None] - cx, sy[..., None] - cy, ca, sa)
     bx, by = _to_box_frame(qx[:, None] - cx, qy[:, None] - cy, ca, sa)
+    return ~segment_separated_from_box(ax, ay, bx, by, ex, ey)
+
+
+def segment_separated_from_box(
+    ax: Array, ay: Array, bx: Array, by: Array, ex: Array, ey: Array
+) -> Array:
+    """Separating-axis test of segments against boxes, everything in the box frame
+    (elementwise: any broadcastable shapes, in any axis order).
+
+    Args:
+        ax, ay: float32, m, the segments' start points in the box frame.
+        bx, by: float32, m, their end points in the box frame.
+        ex, ey: float32, m, the boxes' half extents.
+
+    Returns:
+        bool, True where a separating axis exists (the segment and the box share no point).
+    """
     gx, gy = bx - ax, by - ay
-    separated = (
+    return (
         (jnp.minimum(ax, bx) > ex)
         | (jnp.maximum(ax, bx) < -ex)
         | (jnp.minimum(ay, by) > ey)
@@ -447,4 +464,3 @@ def segments_hit_boxes(
         # axis normal to the segment, (-gy, gx): the segment projects to a single value
         | (jnp.abs(ay * gx - ax * gy) > ex * jnp.abs(gy) + ey * jnp.abs(gx))
     )
-    return ~separated
