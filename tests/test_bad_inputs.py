@@ -1153,6 +1153,10 @@ STRESS_CASES = [
     (["--temperature", "nan"], "--temperature: must be a finite number > 0, got nan"),
     (["--budget-s", "inf"], "--budget-s: must be a finite number of seconds > 0, got inf"),
     (["--range", "v_ref=0:inf"], "--range 'v_ref=0:inf': LO and HI must be finite numbers"),
+    (["--hybrid-draws", "0"], "--hybrid-draws: must be a whole number >= 1, got 0"),
+    (["--hybrid-steps", "-2"], "--hybrid-steps: must be a whole number >= 1, got -2"),
+    (["--methods", "hybrid,annealing"],
+     "--methods: ['annealing']; valid: gradient, random, cmaes, hybrid"),
 ]  # fmt: skip
 
 

@@ -81,7 +81,9 @@ def test_non_positive_budget_and_unknown_method(suite):
     pair = suite.pairs[0]
     with pytest.raises(ValueError, match=r"budget_s: must be > 0, got 0"):
         report.stress_test(pair, "coop", report.StressConfig(budget_s=0.0), progress=False)
-    with pytest.raises(ValueError, match=r"methods: \['annealing'\] not among"):
+    with pytest.raises(
+        ValueError, match=r"methods: \['annealing'\] not among gradient, random, cmaes, hybrid"
+    ):
         cfg = report.StressConfig(budget_s=1.0, methods=("annealing",))
         report.stress_test(pair, "coop", cfg, progress=False)
 
@@ -194,6 +196,71 @@ def test_cmaes_tells_its_own_samples_and_converges_on_a_bowl():
                                     seed=0)  # fmt: skip
     assert len(trace.evaluations) > 20
     assert trace.lowest["cus"] < 1e-3
+
+
+def test_hybrid_descends_from_its_best_draw_and_counts_every_rollout(monkeypatch):
+    """The hybrid method on a bowl in a box: each cycle verifies its draws, starts Adam at each
+    restart's best draw (lowest fitness), verifies every new iterate, and counts the draws as
+    hard rollouts and each step as one soft rollout per part plus two hard ones; the descent
+    goes below the draws it started from."""
+    from lantern_jax.stress import search
+
+    lo, hi, centre = -3.0, 3.0, np.array([0.7, -1.2, 0.4])
+    sigmoid = lambda z: 1.0 / (1.0 + np.exp(-np.asarray(z, np.float64)))  # noqa: E731
+
+    def values(z):
+        return (lo + (hi - lo) * sigmoid(z)).astype(np.float32)
+
+    def unconstrained(v):
+        u = (np.asarray(v, np.float64) - lo) / (hi - lo)
+        return np.log(u) - np.log1p(-u)
+
+    def uniform(rng, n):
+        return rng.uniform(lo, hi, (n, 3)).astype(np.float32)
+
+    space = types.SimpleNamespace(dim=3, values=values, unconstrained=unconstrained,
+                                  uniform=uniform)  # fmt: skip
+    problem = types.SimpleNamespace(space=space, expert=object(), expert_weight=1.0)
+
+    def estimator(problem, sigma):  # the bowl's exact gradient in z, as an Estimate would carry
+        def run(z, eps):
+            x = values(z).astype(np.float64)
+            u = sigmoid(z)
+            return types.SimpleNamespace(blend=2.0 * (x - centre) * (hi - lo) * u * (1.0 - u))
+
+        return run
+
+    monkeypatch.setattr(search, "batched_estimator", estimator)
+    seen = []
+
+    def verifier(v):
+        v = np.asarray(v, np.float64)
+        seen.append(v)
+        cus = np.sum((v - centre) ** 2, axis=1)
+        n = len(cus)
+        return search.Verdict(cus=cus, gates_passed=np.ones(n, bool),
+                              clearance_m=np.full(n, np.nan), expert_ok=np.ones(n, bool),
+                              failed=np.zeros(n, bool))  # fmt: skip
+
+    draws, steps, restarts = 5, 6, 3
+    m = search.HybridSearch(problem, verifier, restarts, 0, lr=0.3, draws=draws, steps=steps)
+    m.compile()
+    m.step()  # the draws
+    assert m.trace.counts == dict(soft_policy=0, soft_expert=0, hard_policy=draws,
+                                  hard_expert=draws)  # fmt: skip
+    first = seen[-1].reshape(restarts, draws, 3)
+    best = first[np.arange(restarts), np.argmin(np.sum((first - centre) ** 2, axis=2), axis=1)]
+    np.testing.assert_allclose(values(m.z), best, atol=1e-4)  # the descent starts at the best
+    for _ in range(steps):
+        m.step()
+    assert m.trace.counts == dict(soft_policy=steps, soft_expert=steps,
+                                  hard_policy=draws + steps, hard_expert=draws + steps)  # fmt: skip
+    assert [len(v) for v in seen] == [restarts * draws] + [restarts] * steps
+    start = np.sum((best - centre) ** 2, axis=1)
+    end = np.sum((seen[-1] - centre) ** 2, axis=1)
+    assert np.all(end < start)  # every descent went downhill from its draw
+    m.step()  # the next cycle starts with new draws
+    assert len(seen[-1]) == restarts * draws and m.phase == 1
 
 
 @pytest.mark.slow

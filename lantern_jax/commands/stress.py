@@ -58,6 +58,8 @@ def _check_numbers(args: argparse.Namespace, methods: tuple[str, ...]) -> None:
             "a finite number of seconds > 0",
         ),
         ("--restarts", args.restarts, args.restarts >= 1, "a whole number >= 1"),
+        ("--hybrid-draws", args.hybrid_draws, args.hybrid_draws >= 1, "a whole number >= 1"),
+        ("--hybrid-steps", args.hybrid_steps, args.hybrid_steps >= 1, "a whole number >= 1"),
         (
             "--sigma",
             args.sigma,
@@ -158,6 +160,8 @@ def _config(args: argparse.Namespace, methods: tuple[str, ...]):
         condition=args.condition,
         seed=args.seed,
         methods=methods,
+        hybrid_draws=args.hybrid_draws,
+        hybrid_steps=args.hybrid_steps,
         space=args.space,
         actors=actors,
         horizon_s=args.horizon_s,
@@ -204,9 +208,9 @@ def cmd_stress(args: argparse.Namespace, argv: Sequence[str]) -> int:
     if args.family not in FAMILIES:
         raise UsageError(f"--family {args.family!r}: not one of {', '.join(FAMILIES)}")
     methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())
-    bad = [m for m in methods if m not in search.METHODS]
+    bad = [m for m in methods if m not in search.ALL_METHODS]
     if bad or not methods:
-        raise UsageError(f"--methods: {bad or 'none'}; valid: {', '.join(search.METHODS)}")
+        raise UsageError(f"--methods: {bad or 'none'}; valid: {', '.join(search.ALL_METHODS)}")
     _check_numbers(args, methods)
     _check_space_options(args)
     ranges = _ranges(args.range)
@@ -373,7 +377,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     st.add_argument("--condition", default=CONDITIONS[0], choices=CONDITIONS,
                     help="the Route A execution searched")  # fmt: skip
     st.add_argument("--methods", default="gradient,random,cmaes", metavar="M[,M...]",
-                    help="search methods compared, of gradient, random, cmaes")  # fmt: skip
+                    help="search methods compared, of gradient, random, cmaes, hybrid "
+                    "(draws, then descent from the best: docs/stress.md)")  # fmt: skip
+    st.add_argument("--hybrid-draws", type=int, default=8, metavar="N",
+                    help="hybrid: uniform draws per restart before each descent")  # fmt: skip
+    st.add_argument("--hybrid-steps", type=int, default=8, metavar="N",
+                    help="hybrid: Adam steps per descent")  # fmt: skip
     st.add_argument("--seed", type=int, default=0, help="seed of every method's restarts")
     st.add_argument("--quiet", action="store_true", help="no progress lines")
     st.set_defaults(func=cmd_stress)

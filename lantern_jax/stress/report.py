@@ -79,7 +79,9 @@ class StressConfig:
     objective: str = "plausible"
     condition: str = WARNING_CONDITION  # one of CONDITIONS
     seed: int = 0
-    methods: tuple[str, ...] = search.METHODS
+    methods: tuple[str, ...] = search.METHODS  # of search.ALL_METHODS
+    hybrid_draws: int = search.HYBRID_DRAWS  # hybrid: uniform draws per restart per descent
+    hybrid_steps: int = search.HYBRID_STEPS  # hybrid: Adam steps per descent
     space: str = "knobs"  # knobs | adversary | both
     actors: tuple[str, ...] = ("hazard",)  # adversary: groups of actors with tracks
     knots: int = 16  # adversary: knots per track
@@ -171,9 +173,9 @@ def _check(cfg: StressConfig) -> None:
             if not cfg.budget_s > 0
             else f"budget_rollouts: must be > 0, got {cfg.budget_rollouts}"
         )
-    bad = [m for m in cfg.methods if m not in search.METHODS]
+    bad = [m for m in cfg.methods if m not in search.ALL_METHODS]
     if bad:
-        raise ValueError(f"methods: {bad} not among {', '.join(search.METHODS)}")
+        raise ValueError(f"methods: {bad} not among {', '.join(search.ALL_METHODS)}")
 
 
 def make_methods(problem: Problem, verifier: Verifier, cfg: StressConfig) -> list[search.Method]:
@@ -195,6 +197,18 @@ def make_methods(problem: Problem, verifier: Verifier, cfg: StressConfig) -> lis
             )
         elif m == "random":
             out.append(search.RandomSearch(problem, verifier, cfg.restarts, cfg.seed, cfg.samples))
+        elif m == "hybrid":
+            out.append(
+                search.HybridSearch(
+                    problem,
+                    verifier,
+                    cfg.restarts,
+                    cfg.seed,
+                    cfg.lr,
+                    cfg.hybrid_draws,
+                    cfg.hybrid_steps,
+                )
+            )
         else:
             popsize = cfg.popsize or (cfg.samples if cfg.space == "knobs" else 0)
             out.append(

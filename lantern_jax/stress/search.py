@@ -11,7 +11,12 @@ expert's).  Per restart and iteration:
 * **random** — ``M`` candidates drawn uniformly in the space, verified;
 * **cmaes** — one CMA-ES generation (the ``cma`` package, in the unconstrained space, from the
   gradient restart's starting point), fitness = the surrogate's expression of the hard
-  verification (:func:`lantern_jax.stress.plausibility.hard_objective`).
+  verification (:func:`lantern_jax.stress.plausibility.hard_objective`);
+* **hybrid** (not in the default comparison; name it in ``methods``) — gradient descent started
+  from global samples: a cycle of ``draws`` uniform candidates per restart (verified), then
+  ``steps`` Adam steps on the surrogate from the restart's best draw by the hard fitness (each
+  new iterate verified), then the next cycle from new draws.  It asks whether
+  local descent pays once a global sample has found the right region.
 
 **Accounting.**  Rollouts are counted per restart and by kind (:data:`ROLLOUT_KINDS`: soft with
 a backward pass, per part; hard verification, per driver); a restart *finds* a failure the first
@@ -34,10 +39,14 @@ import numpy as np
 from lantern_jax.stress.objective import EXPERT, Problem, batched_estimator, parts_of
 from lantern_jax.stress.verify import Verdict, Verifier
 
-METHODS = ("gradient", "random", "cmaes")
+METHODS = ("gradient", "random", "cmaes")  # the default comparison
+ALL_METHODS = (*METHODS, "hybrid")  # every method :func:`make_method` knows
 ROLLOUT_KINDS = ("soft_policy", "soft_expert", "hard_policy", "hard_expert")
 INIT_Z = 0.5  # unconstrained units: spread of the restarts' starting points around 0 (nominal)
 CMA_SIGMA0 = 1.0  # unconstrained units: CMA-ES's initial step size
+HYBRID_DRAWS = 8  # hybrid: uniform draws per restart that start each descent
+HYBRID_STEPS = 8  # hybrid: Adam steps per descent before the next draws
+ADAM_B1, ADAM_B2, ADAM_EPS = 0.9, 0.999, 1e-8  # hybrid's per-restart Adam (optax's defaults)
 
 
 @dataclasses.dataclass
@@ -309,6 +318,76 @@ class CMAESSearch(Method):
         fitness = verdict.fitness.reshape(self.restarts, self.popsize)
         for r, es in enumerate(self.strategies):
             es.tell(asked[r], fitness[r].tolist())
+
+
+class HybridSearch(Method):
+    """Cycles of global draws and local descent, every restart in step (see the module
+    docstring): ``draws`` uniform candidates per restart, then ``steps`` Adam steps from each
+    restart's best draw (lowest :attr:`~lantern_jax.stress.verify.Verdict.fitness`), every
+    iterate verified.  Adam's moments and step count restart with each descent, so each
+    descent is an ordinary Adam run from its draw (kept per restart in NumPy: optax's state
+    shares one step count across the batch)."""
+
+    name = "hybrid"
+
+    def __init__(
+        self,
+        problem,
+        verifier,
+        restarts,
+        seed,
+        lr: float,
+        draws: int = HYBRID_DRAWS,
+        steps: int = HYBRID_STEPS,
+    ):
+        super().__init__(problem, verifier, restarts, seed)
+        if draws < 1 or steps < 1:
+            raise ValueError(f"hybrid: draws and steps must be >= 1, got {draws} and {steps}")
+        self.lr, self.draws, self.steps = float(lr), int(draws), int(steps)
+        self.est = batched_estimator(problem, 0.0)
+        self.rng = np.random.default_rng(seed + 3)
+        dim = problem.space.dim
+        self.z = np.zeros((restarts, dim), np.float32)
+        self.m = np.zeros_like(self.z)
+        self.v = np.zeros_like(self.z)
+        self.phase = 0  # 0: draw; 1..steps: the descent's step number
+        self.owner = np.arange(restarts)
+        two = EXPERT in parts_of(problem)
+        self.draw_cost = dict(
+            soft_policy=0, soft_expert=0, hard_policy=self.draws, hard_expert=self.draws
+        )
+        self.step_cost = dict(soft_policy=1, soft_expert=int(two), hard_policy=1, hard_expert=1)
+
+    def compile(self) -> None:
+        """Compile the estimator (both parts)."""
+        np.asarray(self.est(self.z, np.zeros((self.restarts, 1, self.z.shape[1]))).blend)
+
+    def iterate(self) -> None:
+        """The cycle's next iteration: the draws, or one verified Adam step."""
+        if self.phase == 0:
+            values = self.problem.space.uniform(self.rng, self.restarts * self.draws)
+            owner = np.repeat(self.owner, self.draws)
+            verdict = self._verify(values, owner, self.draw_cost, self.draws)
+            best = np.argmin(verdict.fitness.reshape(self.restarts, self.draws), axis=1)
+            picked = values.reshape(self.restarts, self.draws, -1)[self.owner, best]
+            self.z = np.asarray(self.problem.space.unconstrained(picked), np.float32)
+            self.m[:] = 0.0
+            self.v[:] = 0.0
+            self.phase = 1
+            return
+        g = np.asarray(self.est(self.z, np.zeros((self.restarts, 1, self.z.shape[1]))).blend)
+        bad = ~np.isfinite(g)
+        self.trace.nan_gradients += int(np.any(bad, axis=1).sum())
+        g = np.where(bad, 0.0, g)
+        t = self.phase
+        self.m = ADAM_B1 * self.m + (1 - ADAM_B1) * g
+        self.v = ADAM_B2 * self.v + (1 - ADAM_B2) * g * g
+        m_hat, v_hat = self.m / (1 - ADAM_B1**t), self.v / (1 - ADAM_B2**t)
+        self.z = (self.z - self.lr * m_hat / (np.sqrt(v_hat) + ADAM_EPS)).astype(np.float32)
+        # the step's new iterate is verified (the draw it started from already was)
+        values = np.asarray(self.problem.space.values(self.z))
+        self._verify(values, self.owner, self.step_cost, 1)
+        self.phase = 0 if t >= self.steps else t + 1
 
 
 def run_interleaved(

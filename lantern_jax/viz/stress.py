@@ -13,6 +13,7 @@ METHOD_STYLE = {
     "gradient": dict(color="#d62828", lw=2.0),
     "random": dict(color="#6c757d", lw=1.6, ls="--"),
     "cmaes": dict(color="#1d3557", lw=1.6, ls="-."),
+    "hybrid": dict(color="#f4a261", lw=1.8, ls=":"),
 }
 
 
