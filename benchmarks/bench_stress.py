@@ -107,7 +107,7 @@ def main() -> None:
         default=20.0,
         help="one soft horizon for every family (one program per policy)",
     )
-    ap.add_argument("--quality-points", type=int, default=4)
+    ap.add_argument("--quality-points", type=int, default=4, help="0: no gradient check")
     ap.add_argument("--out", default="runs/bench_stress")
     args = ap.parse_args()
     out = Path(args.out)
@@ -183,27 +183,33 @@ def main() -> None:
                 f" s) {verdict}"
             )
             print(table[cols].to_string(index=False, float_format=lambda x: f"{x:.2f}"))
-            points = np.random.default_rng(7).normal(
-                0.0, 0.5, (args.quality_points, problem.space.dim)
-            )
-            q = report.gradient_quality(problem, points, 0.0, 1, directions=8, batch=args.restarts)
-            quality.append(q.assign(family=fam, policy=name))
-            print(
-                f"gradient vs finite differences (cosine): {np.round(q['cos_first'], 3)}",
-                flush=True,
-            )
+            if args.quality_points > 0:
+                points = np.random.default_rng(7).normal(
+                    0.0, 0.5, (args.quality_points, problem.space.dim)
+                )
+                q = report.gradient_quality(
+                    problem, points, 0.0, 1, directions=8, batch=args.restarts
+                )
+                quality.append(q.assign(family=fam, policy=name))
+                print(
+                    f"gradient vs finite differences (cosine): {np.round(q['cos_first'], 3)}",
+                    flush=True,
+                )
             pd.concat(comps).to_csv(out / "comparison.csv", index=False)
             pd.DataFrame(cells).to_csv(out / "cells.csv", index=False)
-            pd.concat(quality).to_csv(out / "gradient_quality.csv", index=False)
+            if quality:
+                pd.concat(quality).to_csv(out / "gradient_quality.csv", index=False)
     load1 = os.getloadavg()
     print(
         f"\ntotal {time.perf_counter() - t_all:.0f} s; load at the end {load1[0]:.1f} (1 min) "
         f"{load1[1]:.1f} (5 min)"
     )
     print(pd.DataFrame(cells).to_string(index=False))
-    qual = pd.concat(quality).groupby(["policy", "family"])["cos_first"].agg(["mean", "min"])
-    print("\nGradient quality (cosine with central finite differences, 8 directions per point)")
-    print(qual.to_string(float_format=lambda x: f"{x:.3f}"))
+    if quality:
+        by = ["policy", "family"]
+        qual = pd.concat(quality).groupby(by)["cos_first"].agg(["mean", "min"])
+        print("\nGradient quality (cosine with central finite differences, 8 directions per point)")
+        print(qual.to_string(float_format=lambda x: f"{x:.3f}"))
 
 
 if __name__ == "__main__":
