@@ -162,3 +162,20 @@ def test_python_blocks_run(page, tmp_path, monkeypatch):
             raise
     defined = set(namespace) - {"__name__", "__builtins__"}
     assert defined, f"{_rel(page)}: its blocks ran but defined nothing"
+
+
+def test_the_stress_page_shows_the_recorded_cells():
+    """The stress page's table of every cell is what ``benchmarks/stress_cells.py`` prints
+    from the recorded comparison files today."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(
+        "stress_cells", ROOT / "benchmarks" / "stress_cells.py"
+    )
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    results = ROOT / "benchmarks" / "results"
+    folders = [results / f"stress_adversary_{n}" for n in ("cpu", "learned", "hybrid")]
+    table = module.markdown(*module.load(folders))
+    assert table.count("\n") > 40  # a row per policy, family and method
+    assert table in (ROOT / "docs" / "stress.md").read_text()
