@@ -196,6 +196,14 @@ class Method:
         """Whether the budget is spent."""
         return self.clock >= budget_s or self.trace.rollouts_per_restart >= budget_rollouts
 
+    def _gradient(self, est: Callable, z: np.ndarray, eps: np.ndarray) -> np.ndarray:
+        """(R, K) the estimate ``est(z, eps).blend``, a non-finite entry counted in the trace
+        and taken as 0."""
+        g = np.asarray(est(z, eps).blend)
+        bad = ~np.isfinite(g)
+        self.trace.nan_gradients += int(np.any(bad, axis=1).sum())
+        return np.where(bad, 0.0, g)
+
     def _verify(
         self, values: np.ndarray, owner: np.ndarray, cost: dict[str, int], per_restart: int
     ) -> Verdict:
@@ -251,10 +259,7 @@ class GradientSearch(Method):
         """Gradient at the iterates, their verification, an Adam step."""
         import optax
 
-        g = np.asarray(self.est(self.z, self._eps()).blend)
-        bad = ~np.isfinite(g)
-        self.trace.nan_gradients += int(np.any(bad, axis=1).sum())
-        g = np.where(bad, 0.0, g)
+        g = self._gradient(self.est, self.z, self._eps())
         values = np.asarray(self.problem.space.values(self.z))
         self._verify(values, self.owner, self.cost, 1)
         updates, self.opt_state = self.opt.update(g, self.opt_state, self.z)
@@ -360,7 +365,11 @@ class HybridSearch(Method):
 
     def compile(self) -> None:
         """Compile the estimator (both parts)."""
-        np.asarray(self.est(self.z, np.zeros((self.restarts, 1, self.z.shape[1]))).blend)
+        np.asarray(self.est(self.z, self._no_eps()).blend)
+
+    def _no_eps(self) -> np.ndarray:
+        """(R, 1, K) zeros: the pathwise estimate at the iterates (no smoothing)."""
+        return np.zeros((self.restarts, 1, self.z.shape[1]), np.float32)
 
     def iterate(self) -> None:
         """The cycle's next iteration: the draws, or one verified Adam step."""
@@ -375,10 +384,7 @@ class HybridSearch(Method):
             self.v[:] = 0.0
             self.phase = 1
             return
-        g = np.asarray(self.est(self.z, np.zeros((self.restarts, 1, self.z.shape[1]))).blend)
-        bad = ~np.isfinite(g)
-        self.trace.nan_gradients += int(np.any(bad, axis=1).sum())
-        g = np.where(bad, 0.0, g)
+        g = self._gradient(self.est, self.z, self._no_eps())
         t = self.phase
         self.m = ADAM_B1 * self.m + (1 - ADAM_B1) * g
         self.v = ADAM_B2 * self.v + (1 - ADAM_B2) * g * g
