@@ -44,9 +44,19 @@ from lantern_jax.scoring.aggregate import (
 )
 from lantern_jax.scoring.table import build_route_table
 from lantern_jax.scoring.uncertainty import SEED, TableIntervals, table_intervals
-from lantern_jax.sim.engine import Executions, build_executions, finalize_batch, run_executions
+from lantern_jax.sim.engine import (
+    PATHS,
+    Executions,
+    PathChoice,
+    build_executions,
+    finalize_batch,
+    fused_ready,
+    plan_path,
+    run_executions,
+)
 from lantern_jax.sim.observe import observe
 from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings, default_settings
+from lantern_jax.sim.split import prepare
 from lantern_jax.sim.state import init_state
 from lantern_jax.sim.switch import PolicySwitch, policy_switch, switch_params
 from lantern_jax.times import happened, time_or_nan
@@ -92,6 +102,8 @@ class PolicyRun:
     seconds_run: float
     #: wall seconds by phase: "trace + lower", "XLA compile", "rollout", "scoring"
     timings: dict[str, float] = dataclasses.field(default_factory=dict)
+    #: how it was rolled out and why (:class:`~lantern_jax.sim.engine.PathChoice` as text)
+    program: str = ""
 
 
 def _route_rows(
@@ -135,6 +147,7 @@ def run_policy(
     shared: tuple[PolicySwitch, tuple] | None = None,
     settings: Settings = DEFAULT_SETTINGS,
     stage: Callable[[str], None] | None = None,
+    path: str | PathChoice = "auto",
 ) -> PolicyRun:
     """Run one policy on prepared executions and build its route-level rows.
 
@@ -149,6 +162,9 @@ def run_policy(
         settings: scoring, protocol and text bank.
         stage: called with what the run does next (``"compiling"``, ``"<n> executions"``,
             ``"scoring"``), for a progress display.
+        path: ``"auto"``, ``"fused"`` or ``"split"``
+            (:func:`~lantern_jax.sim.engine.choose_path`; a shared program is always fused), or
+            a :class:`~lantern_jax.sim.engine.PathChoice` made beforehand.
     """
     pol = get_policy(policy) if isinstance(policy, str) else policy
     params = pol.init(jax.random.PRNGKey(0)) if policy_params is None else policy_params
@@ -163,9 +179,11 @@ def run_policy(
         i = switch.index_of(pol)
         members = (*members[:i], params, *members[i + 1 :])
         driver, run_params = switch, switch_params(switch, i, members)
+    chosen: list = []
+    shown = stage if stage is None else lambda what: stage(f"{what}, {chosen[-1].path} path")
     final, t_compile = run_executions(
         driver, execs.scenarios, run_params, execs.max_ticks, settings, timings=timings,
-        pad_to=execs.pad_to, stage=stage,
+        pad_to=execs.pad_to, stage=shown, path=path, chosen=chosen,
     )  # fmt: skip
     if stage is not None:
         stage("scoring")
@@ -184,6 +202,7 @@ def run_policy(
         seconds_compile=t_compile,
         seconds_run=t2 - t0 - t_compile,
         timings=timings,
+        program=str(chosen[-1]),
     )
 
 
@@ -205,8 +224,9 @@ class EvalResult:
     #: pair-level bootstrap intervals (``uncertainty.CONFIDENCE``) and counts of the three tables
     #: (:func:`lantern_jax.scoring.uncertainty.table_intervals`)
     intervals: TableIntervals | None = None
-    #: wall seconds of the shared phases: "world build", "tables" and "intervals" (per policy:
-    #: ``runs``)
+    #: wall seconds of the shared phases: "world build", "tables", "intervals" and, when the
+    #: split path ran, "split programs" (the world's and the policies' programs prepared
+    #: together; per policy: ``runs``)
     seconds: dict[str, float] = dataclasses.field(default_factory=dict)
 
     def write(self, folder: str | os.PathLike, run_record: dict | None = None) -> dict[str, Path]:
@@ -285,10 +305,13 @@ def _show_stage(bar: Any, name: str, what: str) -> None:
 
 
 def _run_all(pols: list[Policy], policy_params: list, execs: Executions, suite_id: str,
-             progress: bool, share: bool, settings: Settings) -> list[PolicyRun]:  # fmt: skip
+             progress: bool, share: bool, settings: Settings,
+             path: str = "auto") -> tuple[list[PolicyRun], float]:  # fmt: skip
     """Run every policy (progress bar per policy); a failing policy raises :class:`PolicyError`.
 
-    With ``share`` the policies run in one program (:func:`shared_program`)."""
+    How each runs is :func:`_plan`'s choice (with ``share``, one fused program for several
+    policies where that is cheaper).  Returns the runs and the wall seconds spent preparing the
+    split path's programs together (0 when none)."""
     bar = None
     if progress:
         from tqdm.auto import tqdm
@@ -297,14 +320,16 @@ def _run_all(pols: list[Policy], policy_params: list, execs: Executions, suite_i
                    bar_format=BAR_FORMAT)  # fmt: skip
     runs: list[PolicyRun] = []
     try:
-        shared = shared_program(pols, policy_params) if share else None
-        for pol, par in zip(pols, policy_params, strict=True):
+        shared, choices, prepared = _plan(pols, list(policy_params), execs, settings, share, path,
+                                          bar)  # fmt: skip
+        for pol, par, choice in zip(pols, policy_params, choices, strict=True):
             stage = None if bar is None else functools.partial(_show_stage, bar, pol.name)
             if stage is not None:
                 stage("starting")
             try:
                 runs.append(run_policy(pol, execs, par, shared=shared, settings=settings,
-                                       stage=stage))  # fmt: skip
+                                       stage=stage, path=choice))  # fmt: skip
+                runs[-1].seconds_compile += prepared.get(pol.name, 0.0)
             except Exception as e:
                 lines = str(e).strip().splitlines() or [""]
                 why = lines[0] if len(lines) == 1 else f"{lines[0]} ... {lines[-1]}"
@@ -317,7 +342,56 @@ def _run_all(pols: list[Policy], policy_params: list, execs: Executions, suite_i
     finally:
         if bar is not None:
             bar.close()
-    return runs
+    return runs, prepared.get("programs", 0.0)
+
+
+def _plan(pols: list[Policy], policy_params: list, execs: Executions, settings: Settings,
+          share: bool, path: str, bar: Any) -> tuple[Any, list, dict[str, float]]:  # fmt: skip
+    """How every policy of an evaluation is rolled out: ``(shared, choices, seconds)``.
+
+    ``shared`` is the policies' shared fused program (:func:`shared_program`) or None; with
+    ``"auto"`` it is used when it is ready, or when every policy would take the fused path
+    anyway (one compilation for all, as :func:`~lantern_jax.sim.engine.choose_path` rule 3).
+    Once one policy takes the split path the world program is compiled for it, so every
+    policy whose fused program is not ready takes the split path too.  The split policies'
+    programs are compiled at once (:func:`lantern_jax.sim.split.prepare`); ``seconds`` gives
+    each one's compile time."""
+    if path == "split" or not share:
+        shared = None
+    else:
+        shared = shared_program(pols, policy_params)
+    if shared is not None and path == "fused":
+        return shared, [path] * len(pols), {}
+    if shared is not None and _shared_ready(shared, execs, settings):
+        return shared, [PathChoice("fused", "the policies' shared fused program already "
+                                   "compiled")] * len(pols), {}  # fmt: skip
+    params = [p.init(jax.random.PRNGKey(0)) if par is None else par
+              for p, par in zip(pols, policy_params, strict=True)]  # fmt: skip
+    choices = [plan_path(p, execs.scenarios, par, execs.max_ticks, settings, execs.pad_to, path)
+               for p, par in zip(pols, params, strict=True)]  # fmt: skip
+    if not any(c.path == "split" for c in choices):
+        return shared, choices, {}
+    choices = [
+        PathChoice("split", "world program compiled for another policy of this evaluation")
+        if path == "auto" and c.reason.startswith("nothing compiled") else c
+        for c in choices
+    ]  # fmt: skip
+    split = [(p, par) for p, par, c in zip(pols, params, choices, strict=True) if c.path == "split"]
+    if bar is not None:
+        bar.set_postfix_str(f"programs of the world and {len(split)} "
+                            f"polic{'ies' if len(split) > 1 else 'y'}")  # fmt: skip
+    try:
+        return None, choices, prepare(split, execs.scenarios, settings)
+    except Exception:  # noqa: BLE001  (a policy that fails is named when it runs on its own)
+        return None, choices, {}
+
+
+def _shared_ready(shared: tuple[PolicySwitch, tuple], execs: Executions,
+                  settings: Settings) -> bool:  # fmt: skip
+    """The shared fused program of ``shared`` is compiled in this process or stored."""
+    switch, members = shared
+    return fused_ready(switch, execs.scenarios, switch_params(switch, 0, members),
+                       execs.max_ticks, settings, pad_to=execs.pad_to)  # fmt: skip
 
 
 def settings_record(settings: Settings) -> dict:
@@ -358,6 +432,7 @@ def _manifest(s: Suite, ablation: str, execs: Executions, runs: list[PolicyRun],
                 params_sha256=r.params_sha256,
                 seconds_compile=round(r.seconds_compile, 3),
                 seconds_run=round(r.seconds_run, 3),
+                program=r.program,
                 # a policy loaded from a user's code: its file and the SHA-256 of its source
                 **({"source": policy_source(r.policy)} if policy_source(r.policy) else {}),
             )
@@ -380,6 +455,7 @@ def evaluate(
     one_program: bool = True,
     bootstrap_seed: int = SEED,
     settings: Settings | None = None,
+    path: str = "auto",
 ) -> EvalResult:
     """Evaluate policies on a suite: one jitted, vmapped rollout call per policy, then score.
 
@@ -397,6 +473,11 @@ def evaluate(
         settings: scoring thresholds and weights, protocol thresholds, text bank
             (:class:`~lantern_jax.sim.settings.Settings`; recorded in the manifest; default:
             :func:`~lantern_jax.sim.settings.default_settings`, the paper's).
+        path: how each policy is rolled out: ``"fused"`` (world and policy one compiled
+            program), ``"split"`` (the world program shared by every policy, the policy's own
+            small program) or ``"auto"`` (the fused program where it is ready or the batch is
+            bulk, else the split one: :func:`~lantern_jax.sim.engine.choose_path`); recorded
+            per policy in the run record.  Results agree to float32 rounding.
 
     Returns:
         :class:`EvalResult` with the route-level table, the family table (with paired warning
@@ -408,6 +489,8 @@ def evaluate(
         PolicyError: naming the policy whose ``act`` failed while traced or run.
     """
     pols = _policies_to_run(policies, suite)
+    if path not in PATHS:
+        raise ValueError(f"evaluate: path {path!r} is not one of {', '.join(PATHS)}")
     settings = (default_settings() if settings is None else settings).validate()
     if policy_params is None:
         policy_params = [None] * len(pols)
@@ -417,7 +500,8 @@ def evaluate(
     t0 = time.perf_counter()
     execs = build_executions(s, ablation, bucket=True)
     t_build = time.perf_counter() - t0
-    runs = _run_all(pols, list(policy_params), execs, s.suite_id, progress, one_program, settings)
+    runs, t_programs = _run_all(pols, list(policy_params), execs, s.suite_id, progress,
+                                one_program, settings, path)  # fmt: skip
     t0 = time.perf_counter()
     route = pd.concat([r.route_table for r in runs], ignore_index=True)
     tables = dict(
@@ -436,4 +520,6 @@ def evaluate(
         **tables,
     )
     result.seconds = {"world build": t_build, "tables": t1 - t0, "intervals": t2 - t1}
+    if t_programs:
+        result.seconds["split programs"] = t_programs
     return result

@@ -292,6 +292,18 @@ def program_key(identity: Any, args: tuple) -> str | None:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
+def keyable(identity: Any) -> bool:
+    """Whether a program of ``identity`` would be stored: the store is on and the identity
+    can be described with certainty (:func:`describe`)."""
+    if store_dir() is None:
+        return False
+    try:
+        describe(identity)
+    except Unkeyable:
+        return False
+    return True
+
+
 _JAX_CACHE_HIT = "/jax/compilation_cache/cache_hits"
 _jax_cache_hits = 0
 
@@ -326,6 +338,12 @@ def _devices_of(compiled: Any) -> list[int] | None:
         if assignment:
             return [d.id for d in assignment]
     return None
+
+
+def exists(key: str) -> bool:
+    """Whether the store holds an entry named ``key`` (not checked: :func:`load` checks)."""
+    folder = store_dir()
+    return folder is not None and (folder / (key + _SUFFIX)).is_file()
 
 
 def load(key: str) -> Any | None:

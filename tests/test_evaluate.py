@@ -495,6 +495,7 @@ def test_slot_scheduling_matches_one_group(shipped, monkeypatch):
     from lantern_jax.scoring.metrics import finalize
     from lantern_jax.scoring.thresholds import DEFAULT_SCORING
     from lantern_jax.sim import engine as ev
+    from lantern_jax.sim import programs
 
     monkeypatch.setattr(ev, "REFILL_TICKS", 80)
     monkeypatch.setattr(ev, "compact_slots", lambda backend=None: 4 // jax.device_count())
@@ -503,7 +504,7 @@ def test_slot_scheduling_matches_one_group(shipped, monkeypatch):
     params = pol.init(jax.random.PRNGKey(0))
 
     def init_programs():
-        return {k for k in ev._EXECUTABLES if k[0] is ev.initial_states}
+        return {k for k in programs._EXECUTABLES if k[0] is ev.initial_states}
 
     known = init_programs()
     one, _ = ev.run_executions(pol, execs.scenarios, params, execs.max_ticks, compact=False)

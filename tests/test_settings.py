@@ -26,7 +26,7 @@ from lantern_jax.scenarios.suite import load_suite
 from lantern_jax.scoring.cus import pair_components
 from lantern_jax.scoring.metrics import finalize
 from lantern_jax.scoring.thresholds import DEFAULT_SCORING, ScoringSettings
-from lantern_jax.sim import engine
+from lantern_jax.sim import engine, programs
 from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings
 
 PROBE = Path(__file__).with_name("settings_probe.py")
@@ -50,19 +50,19 @@ def test_there_are_at_least_ten_settings_of_every_kind():
 def test_a_traced_setting_changed_in_process_is_answered_without_compiling(name, default_answer):
     """The changed value's answer differs from the default's, runs the programs already
     compiled (none added to the evaluator's cache), and the default comes back unchanged."""
-    before = set(engine._EXECUTABLES)
+    before = set(programs._EXECUTABLES)
     changed = sp.probe(name)
     assert changed != default_answer, name
-    assert set(engine._EXECUTABLES) == before, "a traced setting compiled a new program"
+    assert set(programs._EXECUTABLES) == before, "a traced setting compiled a new program"
     assert sp.probe(None) == default_answer
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", STATIC)
 def test_a_static_setting_changed_in_process_compiles_its_own_program(name, default_answer):
-    before = set(engine._EXECUTABLES)
+    before = set(programs._EXECUTABLES)
     assert sp.probe(name) != default_answer, name
-    assert set(engine._EXECUTABLES) - before, "a static setting must be another program"
+    assert set(programs._EXECUTABLES) - before, "a static setting must be another program"
     assert sp.probe(None) == default_answer
 
 

@@ -175,7 +175,8 @@ def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
     with bd.phase("suite load and validation"):
         suite = load_selected_suite(args)
     # the bootstrap's seed only when given (evaluate's default is the project's fixed seed)
-    kwargs = dict(ablation=args.ablation, one_program=not args.program_per_policy)
+    kwargs = dict(ablation=args.ablation, one_program=not args.program_per_policy,
+                  path=args.rollout)  # fmt: skip
     if args.bootstrap_seed is not None:
         kwargs["bootstrap_seed"] = args.bootstrap_seed
     if args.seed is not None and args.fresh_suites is None:
@@ -208,11 +209,14 @@ def _report(args: argparse.Namespace, argv: Sequence[str], bd, result, t_eval: f
 
     if jax.process_index() != 0:  # every process has the whole result; one writes it
         return 0
+    if "split programs" in result.seconds:
+        seconds = result.seconds["split programs"]
+        stage(args, f"world and policy programs (split path): {seconds:.1f} s")
     for run in result.manifest["policies"]:
         stage(
             args,
             f"{run['name']}: compile {run['seconds_compile']:.1f} s, "
-            f"rollout {run['seconds_run']:.2f} s",
+            f"rollout {run['seconds_run']:.2f} s ({run['program']})",
         )
     stage(args, f"evaluation done in {t_eval:.1f} s; writing {args.out}")
     _evaluate_breakdown(bd, result, t_eval)
@@ -240,6 +244,9 @@ def _evaluate_breakdown(bd, result, seconds: float) -> None:
     start = len(bd.phases)
     bd.add(f"world build ({result.manifest['executions_per_policy']} executions)",
            result.seconds.get("world build", 0.0))  # fmt: skip
+    if "split programs" in result.seconds:
+        bd.add("world and policy programs (split path, together)",
+               result.seconds["split programs"])  # fmt: skip
     for run in result.runs:
         bd.add(f"policy {run.policy}", sum(run.timings.values()))
         for label, value in run.timings.items():
@@ -345,6 +352,16 @@ def _add_running(ev: argparse.ArgumentParser) -> None:
         help="compile each policy's own rollout program (default: policies with different act "
         "functions share one program that picks the policy at run time, so the simulator is "
         "compiled once; results are the same to float32 rounding)",
+    )
+    ev.add_argument(
+        "--rollout",
+        choices=("auto", "fused", "split"),
+        default="auto",
+        help="how each policy is rolled out: 'fused' compiles world and policy as one program "
+        "(the fastest rollout, a full compile per new policy), 'split' runs the world program "
+        "shared by every policy (compiled once, kept on disk) beside the policy's own small "
+        "program, 'auto' takes the fused program where it is already compiled and the split one "
+        "otherwise; the run record says which ran and why",
     )
     ev.add_argument(
         "--coordinator",

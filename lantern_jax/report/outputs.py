@@ -66,8 +66,8 @@ MANIFEST_JSON = "reproducibility_manifest.json"
 RUN_RECORD_JSON = "run_record.json"
 #: Keys of a manifest (at any depth) that record this run rather than what it computed: they go
 #: to the run record (:func:`split_manifest`): timings, and where a user's policy file lies on
-#: this machine (its name and SHA-256 stay in the manifest).
-RUN_RECORD_KEYS = ("seconds_compile", "seconds_run", "source_spec", "source_path")
+#: this machine (its name and SHA-256 stay in the manifest), and which rollout path ran.
+RUN_RECORD_KEYS = ("seconds_compile", "seconds_run", "program", "source_spec", "source_path")
 
 #: Every file :func:`write_outputs` writes, in writing order (the manifest, which names the
 #: others, last).

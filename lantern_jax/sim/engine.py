@@ -18,7 +18,6 @@ another one).  The cache is bounded (:data:`MAX_PROGRAMS`), and kept on disk by 
 
 from __future__ import annotations
 
-import collections
 import dataclasses
 import functools
 import time
@@ -34,9 +33,10 @@ from lantern_jax.scenarios.ablations import get_ablation
 from lantern_jax.scenarios.suite import Suite, build_suite_batches
 from lantern_jax.scoring.metrics import finalize
 from lantern_jax.sim.distributed import placement
+from lantern_jax.sim.programs import MAX_PROGRAMS, available, executable, remember  # noqa: F401
 from lantern_jax.sim.rollout import rollout_scheduled_parallel, with_carry
 from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings, default_settings
-from lantern_jax.sim.state import init_state
+from lantern_jax.sim.split import initial_states, run_split, start_states, world_ready
 from lantern_jax.sim.step import Driver
 from lantern_jax.sim.switch import PolicySwitch
 from lantern_jax.world import Scenario, trim_padding
@@ -53,7 +53,6 @@ COMPACT_SLOTS = {"cpu": 24}
 COMPACT_SLOTS_OTHER = 96
 REFILL_TICKS = 20
 COMPACT_MIN_BATCH = 256
-MAX_PROGRAMS = 32  # compiled programs kept in this process (least recently used dropped)
 
 
 @dataclasses.dataclass
@@ -180,81 +179,9 @@ def _scheduled(scenarios, policy_params, starts, max_ticks, settings, *, program
     )
 
 
-#: ``jit(vmap(init_state))``: the executions' states at ``t = 0`` (ego, actors, the first
-#: sensing, empty telemetry of the scoring settings' ring lengths).  It does not depend on the
-#: policy, so every policy (and every ablation of the same batch shape) reuses one program.
-initial_states = jax.jit(jax.vmap(init_state, in_axes=(0, None, None)))
-
 #: :func:`~lantern_jax.scoring.metrics.finalize` of a batch as one compiled program (op by op,
 #: its first call compiled each operation on its own: about a second).
 _finalize = jax.jit(finalize)
-
-_EXECUTABLES: collections.OrderedDict[tuple, Any] = collections.OrderedDict()
-_BUILT: collections.OrderedDict[tuple, Any] = collections.OrderedDict()
-
-
-def remember(key: tuple, build) -> Any:
-    """``build()`` once per ``key`` (what the built function depends on besides its
-    arguments), in a bounded cache (:data:`MAX_PROGRAMS` entries, least recently used
-    dropped)."""
-    if key in _BUILT:
-        _BUILT.move_to_end(key)
-    else:
-        _BUILT[key] = build()
-        while len(_BUILT) > MAX_PROGRAMS:
-            _BUILT.popitem(last=False)
-    return _BUILT[key]
-
-
-def _avals(tree: Any) -> tuple:
-    """Tree structure (static settings included), shapes and dtypes of arguments."""
-    leaves, treedef = jax.tree.flatten(tree)
-    return treedef, tuple((tuple(np.shape(x)), str(np.result_type(x))) for x in leaves)
-
-
-def executable(fn, *args, static: dict | None = None, timings: dict | None = None,
-               identity: Any = None, stage: Callable[[str], None] | None = None):  # fmt: skip
-    """AOT-compile ``fn(*args, **static)`` once per program (bounded in-process cache keyed by
-    the function, its static arguments and the arguments' structure, shapes and dtypes).
-
-    With an ``identity`` (what determines the program besides the package's code and the
-    arguments, :func:`lantern_jax.program_store.program_key`) the compiled program is also kept
-    on disk in the program store and, in a later process, loaded from there.
-
-    ``timings`` (optional) receives the seconds of tracing and lowering (``"trace + lower"``),
-    of XLA's compilation or the load from JAX's persistent cache (``"XLA compile"``) and of a
-    load from the program store (``"program load"``); all 0 when the program was already
-    compiled in this process.  ``stage`` (optional) is called with ``"compiling"`` just before
-    a program is traced and compiled (not when it is found in this process or the program
-    store).
-    """
-    static = static or {}
-    key = (fn, tuple(sorted(static.items())), _avals(args))
-    spent = {"trace + lower": 0.0, "XLA compile": 0.0, "program load": 0.0}
-    if key in _EXECUTABLES:
-        _EXECUTABLES.move_to_end(key)
-    else:
-        t0 = time.perf_counter()
-        stored = program_store.program_key(identity, args) if identity is not None else None
-        exe = program_store.load(stored) if stored is not None else None
-        if exe is not None:
-            spent["program load"] = time.perf_counter() - t0
-        else:
-            if stage is not None:
-                stage("compiling")
-            lowered = fn.lower(*args, **static)
-            t1 = time.perf_counter()
-            exe, fresh = program_store.compile_lowered(lowered)
-            spent["trace + lower"], spent["XLA compile"] = t1 - t0, time.perf_counter() - t1
-            if stored is not None and fresh:
-                program_store.save(stored, exe)
-        _EXECUTABLES[key] = exe
-        while len(_EXECUTABLES) > MAX_PROGRAMS:
-            _EXECUTABLES.popitem(last=False)
-    if timings is not None:
-        timings.update(spent)
-    return _EXECUTABLES[key]
-
 
 def _take(tree, idx):
     return jax.tree.map(lambda x: x[idx], tree)
@@ -281,20 +208,90 @@ def schedule_layout(timeout_s: np.ndarray, devices: int) -> np.ndarray:
     return order.reshape(per_device, devices).T.reshape(-1)
 
 
-def _start_states(laid: Scenario, block: int, settings: Settings, timings: dict) -> Any:
-    """The laid-out executions' states at ``t = 0``, through the initial-state program in
-    blocks of ``block`` executions (one compiled shape whatever the batch size)."""
-    n = len(jax.tree.leaves(laid)[0])
-    exe = executable(
-        initial_states, _take(laid, np.arange(block)), (), settings.scoring,
-        timings=timings, identity=("initial_states",),
-    )  # fmt: skip
-    parts = []
-    for lo in range(0, n, block):
-        rows = np.resize(np.arange(lo, min(lo + block, n)), block)
-        out = jax.tree.map(np.asarray, exe(_take(laid, rows), (), settings.scoring))
-        parts.append(_take(out, np.arange(min(block, n - lo))))
-    return jax.tree.map(lambda *x: np.concatenate(x), *parts)
+#: How a batch is rolled out (:func:`run_executions`' ``path``): ``"fused"`` -- world and
+#: policy in one compiled program; ``"split"`` -- the world program shared by every policy and
+#: the policy's own small program, joined tick by tick (:mod:`lantern_jax.sim.split`);
+#: ``"auto"`` -- :func:`choose_path`.
+PATHS = ("auto", "fused", "split")
+#: Above this many executions ``"auto"`` takes the fused program even when it must be
+#: compiled: the split rollout's extra time per execution then exceeds the compile it saves
+#: (about 15 s of compile against 6 ms per execution on a 2-core CPU,
+#: ``benchmarks/bench_iterate.py``).
+SPLIT_MAX_EXECUTIONS = 2400
+
+
+@dataclasses.dataclass(frozen=True)
+class PathChoice:
+    """Which rollout :func:`run_executions` takes, and why (shown in the progress line and
+    kept in the run record)."""
+
+    path: str  # "fused" or "split"
+    reason: str  # one line, e.g. "fused program not compiled; world program stored"
+
+    def __str__(self) -> str:
+        return f"{self.path} ({self.reason})"
+
+
+def split_possible(policy: Driver) -> str:
+    """Why the split path cannot run ``policy`` here ("" when it can)."""
+    if isinstance(policy, PolicySwitch):
+        return "a policy switch is one fused program"
+    if jax.process_count() > 1:
+        return "several processes (the split path steps one process's devices)"
+    return ""
+
+
+@dataclasses.dataclass(frozen=True)
+class Readiness:
+    """What :func:`choose_path` weighs: which programs exist without compiling."""
+
+    fused: bool = False  # the fused program is compiled in this process or stored
+    world: bool = False  # the world program is (:func:`lantern_jax.sim.split.world_ready`)
+    storable: bool = True  # a fused program compiled now would be stored for later runs
+
+
+def choose_path(policy: Driver, n: int, ready: Readiness = Readiness(), requested: str = "auto",
+                backend: str | None = None) -> PathChoice:  # fmt: skip
+    """The rollout :func:`run_executions` takes for ``n`` executions of ``policy``.
+
+    ``"auto"``, in order:
+
+    1. the fused program when it is ready (its rollout is the fastest), when the split path
+       cannot run the driver (:func:`split_possible`), on a backend other than the CPU (a
+       dispatch per tick costs more there than a compile), or for a bulk batch (over
+       :data:`SPLIT_MAX_EXECUTIONS`: the split rollout's extra time exceeds the compile);
+    2. the split path when the world program is ready (only the policy is compiled, about
+       1-2 s) or when a fused program could not be kept for a later run (the policy's code is
+       outside this package -- a policy being written -- or the program store is off);
+    3. else the fused program, compiled once and stored for every later run.
+
+    Raises:
+        ValueError: for a path not in :data:`PATHS`, or ``"split"`` where it cannot run.
+    """
+    if requested not in PATHS:
+        raise ValueError(f"path: {requested!r} is not one of {', '.join(PATHS)}")
+    why_not = split_possible(policy)
+    if requested == "split":
+        if why_not:
+            raise ValueError(f"path 'split': not possible here: {why_not}")
+        return PathChoice("split", "asked for")
+    if requested == "fused":
+        return PathChoice("fused", "asked for")
+    backend = backend or jax.default_backend()
+    if why_not:
+        return PathChoice("fused", why_not)
+    if ready.fused:
+        return PathChoice("fused", "fused program already compiled")
+    if backend != "cpu":
+        return PathChoice("fused", f"{backend} backend")
+    if n > SPLIT_MAX_EXECUTIONS:
+        return PathChoice("fused", f"bulk batch of {n} executions")
+    if ready.world:
+        return PathChoice("split", "world program ready; the policy alone is compiled")
+    if not ready.storable:
+        return PathChoice("split", "a fused program of this policy would not be kept; the "
+                          "world program is compiled once and kept")  # fmt: skip
+    return PathChoice("fused", "nothing compiled yet; the fused program is compiled and kept")
 
 
 def run_executions(
@@ -307,19 +304,23 @@ def run_executions(
     timings: dict | None = None,
     pad_to: int | None = None,
     stage: Callable[[str], None] | None = None,
+    path: str | PathChoice = "fused",
+    chosen: list | None = None,
 ):
     """Roll out a batch of executions until all have ended; returns (final states, seconds
     spent compiling).
 
-    One compiled program does all the stepping, in one call.  A small batch steps every
-    execution at once; a large one (``compact``, see ``COMPACT_*`` and :func:`compact_slots`)
-    is stepped through a fixed number of slots per device, refilled inside the program with the
-    waiting executions as earlier ones end (:func:`schedule_layout` deals them to the devices):
-    the same executions, only grouped differently.  Every execution starts from its state at
-    ``t = 0`` given by :data:`initial_states` and the policy's initial carry.  Under JAX's
-    distributed runtime (several processes) the call runs on the global mesh, each process
-    stepping its devices' blocks, and the final states are gathered on every process
-    (:mod:`lantern_jax.sim.distributed`).
+    With ``path="fused"`` (default) one compiled program does all the stepping, in one call.  A
+    small batch steps every execution at once; a large one (``compact``, see ``COMPACT_*`` and
+    :func:`compact_slots`) is stepped through a fixed number of slots per device, refilled
+    inside the program with the waiting executions as earlier ones end (:func:`schedule_layout`
+    deals them to the devices): the same executions, only grouped differently.  Every execution
+    starts from its state at ``t = 0`` given by :data:`initial_states` and the policy's initial
+    carry.  Under JAX's distributed runtime (several processes) the call runs on the global
+    mesh, each process stepping its devices' blocks, and the final states are gathered on every
+    process (:mod:`lantern_jax.sim.distributed`).  With ``path="split"`` the world program and
+    the policy's program are joined from the host (:func:`lantern_jax.sim.split.run_split`;
+    ``compact`` and ``pad_to`` do not apply); ``"auto"`` chooses (:func:`choose_path`).
 
     Args:
         policy: a :class:`~lantern_jax.policies.base.Policy` or a
@@ -337,11 +338,14 @@ def run_executions(
             ended (never stepped, last in every device's queue), so that batches of different
             sizes share one compiled program at little cost.
         stage: called with what the call does next, for a progress display: ``"compiling"``
-            (only when the rollout program must be compiled) and ``"<n> executions"``.
+            (only when a program must be compiled) and ``"<n> executions"``.
+        path: ``"fused"``, ``"split"`` or ``"auto"`` (:data:`PATHS`), or a :class:`PathChoice`
+            made beforehand (:func:`plan_path`).
+        chosen: if given, receives the :class:`PathChoice` taken (appended).
 
     Raises:
-        ValueError: when ``pad_to`` is smaller than the batch, or the settings' bank lacks a
-            text the executions read.
+        ValueError: when ``pad_to`` is smaller than the batch, the settings' bank lacks a
+            text the executions read, or ``path`` is unknown or impossible here.
 
     Returns:
         (final states as NumPy arrays with leading axis ``n``, seconds spent compiling).
@@ -352,49 +356,111 @@ def run_executions(
     total = n if pad_to is None else pad_to
     if total < n:
         raise ValueError(f"run_executions: pad_to={pad_to} is smaller than the batch ({n})")
-    if compact is None:
-        compact = total >= COMPACT_MIN_BATCH and max_ticks > REFILL_TICKS
-    place = placement()
-    devices = jax.device_count()
-    host = jax.tree.map(np.asarray, scenarios)
-    if total > n:  # padding: copies of the first execution, queued after every real one
-        host = _take(host, np.concatenate([np.arange(n), np.zeros(total - n, int)]))
-    timeout = np.where(np.arange(total) < n, host.config.timeout_s, -np.inf)
-    layout = schedule_layout(timeout, devices)
-    per_device = len(layout) // devices
-    slots = min(per_device, compact_slots()) if compact else per_device
-    laid = _take(host, layout)
+    fused = _FusedCall(policy, scenarios, policy_params, max_ticks, settings, compact, total)
+    if isinstance(path, PathChoice):
+        choice = path
+    else:
+        choice = plan_path(policy, scenarios, policy_params, max_ticks, settings, pad_to, path)
+    if chosen is not None:
+        chosen.append(choice)
+    if choice.path == "split":
+        return run_split(policy, scenarios, policy_params, max_ticks, settings, timings, stage)
+    return fused.run(timings, stage)
 
-    t0 = time.perf_counter()
-    init_timings: dict[str, float] = {}
-    starts = _start_states(laid, min(len(layout), slots * devices), settings, init_timings)
-    t_compile = time.perf_counter() - t0
-    starts = starts.replace(done=starts.done | (layout >= n))  # padding starts ended
-    starts = jax.tree.map(np.asarray, with_carry(starts, policy, policy_params))
-    args = (
-        place.put(laid), place.replicate(policy_params), place.put(starts),
-        place.replicate(np.int32(max_ticks)), place.replicate(settings),
-    )  # fmt: skip
-    t1 = time.perf_counter()
-    static = dict(program=Program(policy), slots=slots, chunk=REFILL_TICKS)
-    exe = executable(
-        _scheduled, *args, static=static, timings=timings,
-        identity=("rollout", program_identity(policy), slots, REFILL_TICKS), stage=stage,
-    )  # fmt: skip
-    t_compile += time.perf_counter() - t1
-    if timings is not None:
-        for k, v in init_timings.items():
-            timings[k] += v
-    if stage is not None:
-        stage(f"{n} executions")
-    final = jax.tree.map(np.asarray, place.get(exe(*args)))
-    # back to the batch order: the first position of every execution (padding repeats one)
-    first = np.empty(total, int)
-    first[layout[::-1]] = np.arange(len(layout))[::-1]
-    final = _take(final, first[:n])
-    if timings is not None:
-        timings["rollout"] = time.perf_counter() - t0 - t_compile
-    return final, t_compile
+
+def plan_path(policy: Driver, scenarios: Scenario, policy_params: Any, max_ticks: int,
+              settings: Settings, pad_to: int | None = None,
+              requested: str = "auto") -> PathChoice:  # fmt: skip
+    """The :class:`PathChoice` :func:`run_executions` would make for this batch."""
+    n = jax.tree.leaves(scenarios)[0].shape[0]
+    if requested != "auto" or split_possible(policy):
+        return choose_path(policy, n, Readiness(), requested)
+    ready = Readiness(
+        fused=fused_ready(policy, scenarios, policy_params, max_ticks, settings, pad_to),
+        world=world_ready(scenarios, settings),
+        storable=program_store.keyable(("rollout", program_identity(policy))),
+    )
+    return choose_path(policy, n, ready, requested)
+
+
+def fused_ready(policy: Driver, scenarios: Scenario, policy_params: Any, max_ticks: int,
+                settings: Settings, pad_to: int | None = None) -> bool:  # fmt: skip
+    """Whether the fused program of this batch is ready without compiling (in this process or
+    the program store)."""
+    n = jax.tree.leaves(scenarios)[0].shape[0]
+    total = n if pad_to is None else pad_to
+    return _FusedCall(policy, scenarios, policy_params, max_ticks, settings, None, total).ready()
+
+
+class _FusedCall:
+    """The fused program's call for one batch: its arguments, whether it is ready, its run."""
+
+    def __init__(self, policy, scenarios, policy_params, max_ticks, settings, compact, total):
+        n = jax.tree.leaves(scenarios)[0].shape[0]
+        if compact is None:
+            compact = total >= COMPACT_MIN_BATCH and max_ticks > REFILL_TICKS
+        self.policy, self.params, self.settings = policy, policy_params, settings
+        self.n, self.total, self.max_ticks = n, total, max_ticks
+        self.place = placement()
+        devices = jax.device_count()
+        host = jax.tree.map(np.asarray, scenarios)
+        if total > n:  # padding: copies of the first execution, queued after every real one
+            host = _take(host, np.concatenate([np.arange(n), np.zeros(total - n, int)]))
+        timeout = np.where(np.arange(total) < n, host.config.timeout_s, -np.inf)
+        self.layout = schedule_layout(timeout, devices)
+        per_device = len(self.layout) // devices
+        self.slots = min(per_device, compact_slots()) if compact else per_device
+        self.laid = _take(host, self.layout)
+        self.static = dict(program=Program(policy), slots=self.slots, chunk=REFILL_TICKS)
+        self.identity = ("rollout", program_identity(policy), self.slots, REFILL_TICKS)
+
+    def _args(self, starts) -> tuple:
+        place = self.place
+        return (
+            place.put(self.laid), place.replicate(self.params), place.put(starts),
+            place.replicate(np.int32(self.max_ticks)), place.replicate(self.settings),
+        )  # fmt: skip
+
+    def ready(self) -> bool:
+        """The fused program is compiled in this process or stored (nothing is compiled)."""
+        block = min(len(self.layout), self.slots * jax.device_count())
+        one = _take(self.laid, np.arange(block))
+        shapes = jax.eval_shape(initial_states, one, (), self.settings.scoring)
+        starts = jax.tree.map(
+            lambda x: np.zeros((len(self.layout), *x.shape[1:]), x.dtype), shapes
+        )
+        starts = jax.tree.map(np.asarray, with_carry(starts, self.policy, self.params))
+        return available(_scheduled, *self._args(starts), static=self.static,
+                         identity=self.identity)  # fmt: skip
+
+    def run(self, timings: dict | None, stage: Callable[[str], None] | None):
+        """Roll the batch out through the fused program; (final states, compile seconds)."""
+        n, total, layout, devices = self.n, self.total, self.layout, jax.device_count()
+        t0 = time.perf_counter()
+        init_timings: dict[str, float] = {}
+        starts = start_states(self.laid, min(len(layout), self.slots * devices), self.settings,
+                               init_timings)  # fmt: skip
+        t_compile = time.perf_counter() - t0
+        starts = starts.replace(done=starts.done | (layout >= n))  # padding starts ended
+        starts = jax.tree.map(np.asarray, with_carry(starts, self.policy, self.params))
+        args = self._args(starts)
+        t1 = time.perf_counter()
+        exe = executable(_scheduled, *args, static=self.static, timings=timings,
+                         identity=self.identity, stage=stage)  # fmt: skip
+        t_compile += time.perf_counter() - t1
+        if timings is not None:
+            for k, v in init_timings.items():
+                timings[k] += v
+        if stage is not None:
+            stage(f"{n} executions")
+        final = jax.tree.map(np.asarray, self.place.get(exe(*args)))
+        # back to the batch order: the first position of every execution (padding repeats one)
+        first = np.empty(total, int)
+        first[layout[::-1]] = np.arange(len(layout))[::-1]
+        final = _take(final, first[:n])
+        if timings is not None:
+            timings["rollout"] = time.perf_counter() - t0 - t_compile
+        return final, t_compile
 
 
 def check_texts(settings: Settings, scenarios: Scenario) -> None:

@@ -19,6 +19,9 @@ ground truth (:func:`actors_in_ego_frame`, :func:`delivered_warning`).
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any
+
 import jax
 import jax.numpy as jnp
 
@@ -260,3 +263,52 @@ def observe(
         privileged=forecast_view(scenario, state, truth) if PRIVILEGED in sensors else None,
         surround=surround,
     )
+
+
+def _when(on: Array, view: Callable[[], Any]) -> Any:
+    """``view()`` when ``on`` (a traced, unbatched bool), else zeros of its shapes: a real
+    branch (``lax.cond``), so the view costs nothing when off."""
+    shapes = jax.eval_shape(view)
+    return jax.lax.cond(
+        on, view, lambda: jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype), shapes)
+    )
+
+
+def observe_every_sensor(
+    scenario: Scenario,
+    state: State,
+    privileged: Array,
+    surround: Array,
+    bank: warnings.TextBank | None = None,
+    privileged_as: Callable[[PrivilegedView], Any] = lambda view: view,
+) -> tuple[Observation, Any]:
+    """The observation of a policy whose heavy sensors are chosen at run time: the front
+    camera and the warning always, the six-camera rig (``surround``) and the ground truth
+    (``privileged``) when the traced bools say so (zeros otherwise, never computed).
+
+    One program for every sensor declaration: :func:`observe` with the same sensors equals it
+    field by field once the undeclared views are dropped (``surround=None``, the ground truth
+    left out, the warning fields blanked for a policy without the warning sensor).  The
+    simulator's world program (:mod:`lantern_jax.sim.split`) builds this; the policy's own
+    program drops what its policy did not declare, so the boundary holds.
+
+    Args:
+        scenario, state: as :func:`observe`.
+        privileged: () bool, compute the ground truth and forecasts.
+        surround: () bool, fill ``Observation.surround`` and add what the rig sees.
+        bank: static; the warning texts.
+        privileged_as: applied to the ground-truth view inside its branch (e.g. packing it,
+            so that the branch that is off writes zeros of the packed shape only).
+
+    Returns:
+        (the observation with ``privileged=None``, ``privileged_as`` of the
+        :class:`~lantern_jax.observation.PrivilegedView` or zeros of its shapes).
+    """
+    obs = observe(scenario, state, (FRONT_CAMERA, WARNING), bank)
+    truth = actors_in_ego_frame(scenario, state)
+    rig = _when(surround, lambda: surround_view(scenario, state))
+    seen = obs.visible | rig.visible
+    fields = {k: v for k, v in truth.items() if k != "present"}
+    obs = obs.replace(visible=seen, **mask_actors(fields, seen), surround=rig)
+    view = _when(privileged, lambda: privileged_as(forecast_view(scenario, state, truth)))
+    return obs, view

@@ -1,0 +1,105 @@
+"""Compiled programs of this process: a bounded cache in front of the program store.
+
+* :func:`executable` — AOT-compile a jitted function for its arguments once (keyed by the
+  function, its static arguments and the arguments' structure, shapes and dtypes); with an
+  identity, the program is also kept on disk by :mod:`lantern_jax.program_store` and loaded
+  from there by a later process;
+* :func:`remember` — build a value (a jitted function, usually) once per key;
+* :func:`available` — whether a program is ready without compiling (in this process or in
+  the store), so that a caller can choose between programs by what they would cost.
+
+Both caches keep at most :data:`MAX_PROGRAMS` entries (least recently used dropped).
+"""
+
+from __future__ import annotations
+
+import collections
+import time
+from collections.abc import Callable
+from typing import Any
+
+import jax
+import numpy as np
+
+from lantern_jax import program_store
+
+MAX_PROGRAMS = 32  # compiled programs kept in this process (least recently used dropped)
+
+_EXECUTABLES: collections.OrderedDict[tuple, Any] = collections.OrderedDict()
+_BUILT: collections.OrderedDict[tuple, Any] = collections.OrderedDict()
+
+
+def remember(key: tuple, build) -> Any:
+    """``build()`` once per ``key`` (what the built function depends on besides its
+    arguments), in a bounded cache (:data:`MAX_PROGRAMS` entries, least recently used
+    dropped)."""
+    if key in _BUILT:
+        _BUILT.move_to_end(key)
+    else:
+        _BUILT[key] = build()
+        while len(_BUILT) > MAX_PROGRAMS:
+            _BUILT.popitem(last=False)
+    return _BUILT[key]
+
+
+def _avals(tree: Any) -> tuple:
+    """Tree structure (static settings included), shapes and dtypes of arguments."""
+    leaves, treedef = jax.tree.flatten(tree)
+    return treedef, tuple((tuple(np.shape(x)), str(np.result_type(x))) for x in leaves)
+
+
+def _key(fn, static: dict, args: tuple) -> tuple:
+    return (fn, tuple(sorted(static.items())), _avals(args))
+
+
+def executable(fn, *args, static: dict | None = None, timings: dict | None = None,
+               identity: Any = None, stage: Callable[[str], None] | None = None):  # fmt: skip
+    """AOT-compile ``fn(*args, **static)`` once per program (bounded in-process cache keyed by
+    the function, its static arguments and the arguments' structure, shapes and dtypes).
+
+    With an ``identity`` (what determines the program besides the package's code and the
+    arguments, :func:`lantern_jax.program_store.program_key`) the compiled program is also kept
+    on disk in the program store and, in a later process, loaded from there.
+
+    ``timings`` (optional) receives the seconds of tracing and lowering (``"trace + lower"``),
+    of XLA's compilation or the load from JAX's persistent cache (``"XLA compile"``) and of a
+    load from the program store (``"program load"``); all 0 when the program was already
+    compiled in this process.  ``stage`` (optional) is called with ``"compiling"`` just before
+    a program is traced and compiled (not when it is found in this process or the program
+    store).
+    """
+    static = static or {}
+    key = _key(fn, static, args)
+    spent = {"trace + lower": 0.0, "XLA compile": 0.0, "program load": 0.0}
+    if key in _EXECUTABLES:
+        _EXECUTABLES.move_to_end(key)
+    else:
+        t0 = time.perf_counter()
+        stored = program_store.program_key(identity, args) if identity is not None else None
+        exe = program_store.load(stored) if stored is not None else None
+        if exe is not None:
+            spent["program load"] = time.perf_counter() - t0
+        else:
+            if stage is not None:
+                stage("compiling")
+            lowered = fn.lower(*args, **static)
+            t1 = time.perf_counter()
+            exe, fresh = program_store.compile_lowered(lowered)
+            spent["trace + lower"], spent["XLA compile"] = t1 - t0, time.perf_counter() - t1
+            if stored is not None and fresh:
+                program_store.save(stored, exe)
+        _EXECUTABLES[key] = exe
+        while len(_EXECUTABLES) > MAX_PROGRAMS:
+            _EXECUTABLES.popitem(last=False)
+    if timings is not None:
+        timings.update(spent)
+    return _EXECUTABLES[key]
+
+
+def available(fn, *args, static: dict | None = None, identity: Any = None) -> bool:
+    """Whether :func:`executable` would find ``fn`` for ``args`` without compiling: in this
+    process, or stored in the program store under ``identity``."""
+    if _key(fn, static or {}, args) in _EXECUTABLES:
+        return True
+    stored = program_store.program_key(identity, args) if identity is not None else None
+    return stored is not None and program_store.exists(stored)

@@ -1,0 +1,544 @@
+"""The world compiled apart from the policy: one world program shared by every policy, a small
+program per policy, joined tick by tick from the host.
+
+Compiling a fused rollout (:func:`lantern_jax.sim.engine.run_executions`) compiles the whole
+world's tick -- sensing, actors, protocol, measurement, about 600 XLA kernels -- together with
+the policy's ``act``, so a changed policy pays for compiling the world again (about 90 % of a
+15-20 s compile on a 2-core CPU).  Here the two are separate programs:
+
+* the **world program** (:func:`world_programs`) advances ``slots`` executions by one tick
+  under given waypoints and returns their new states and the observations of the new tick (a
+  slot marked inactive keeps its state and is only observed: that gives the first
+  observations).  It depends only on the :class:`WorldSignature` (slot count, scenario shapes,
+  the sensors observed, the static settings), never on the policy, and is kept in the program
+  store: every policy -- and every later process -- reuses it.  The start states come from
+  :data:`initial_states`, which the fused path shares;
+* the **policy program** (:func:`policy_program`) is ``vmap(policy.step)`` over the slots'
+  observations: the only thing compiled for a new policy (1-2 s).
+
+:func:`run_split` steps a batch from the host: every ``REFILL_TICKS`` ticks it reads the slots
+back, stores the states of the executions that ended and gives their slots the next waiting
+ones (the same slot scheduling as the fused program's, longest timeout first).  One worker
+thread per CPU core steps its own slots (its own share of the executions, dealt before the run
+so that every execution always runs in the same slot of the same worker: the results do not
+depend on timing).  States, scenarios and observations cross the program boundary packed
+(:mod:`lantern_jax.sim.packing`), so a call costs microseconds, not one per leaf.
+
+Results equal the fused rollout's to float32 rounding (the two programs are fused differently
+by XLA), within :data:`lantern_jax.scoring.table.REPRODUCIBLE_ATOL`; bit-identical from run to
+run.  The host loop costs a dispatch per program per tick, so the rollout itself is slower than
+the fused one (``docs/performance.md`` gives the measured ratio); it pays where compiling the
+fused program would cost more than it saves, which :func:`lantern_jax.sim.engine.choose_path`
+decides.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import dataclasses
+import os
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from lantern_jax.constants import NUM_WAYPOINTS
+from lantern_jax.observation import WARNING
+from lantern_jax.policies.base import Policy
+from lantern_jax.sim.observe import no_warning_fields, observe_every_sensor
+from lantern_jax.sim.packing import Layout
+from lantern_jax.sim.programs import available, executable
+from lantern_jax.sim.settings import Settings
+from lantern_jax.sim.state import State, init_state
+from lantern_jax.sim.step import transition
+from lantern_jax.world import Scenario
+
+Array = jax.Array
+
+#: Executions one worker steps together.  On a 2-core CPU 48 stepped the suite fastest of
+#: 24, 48 and 90 (``benchmarks/bench_iterate.py --slots``): the per-call overhead favours many
+#: slots, the tail of long executions few.
+SPLIT_SLOTS = 48
+#: ``jit(vmap(init_state))``: the executions' states at ``t = 0`` (ego, actors, the first
+#: sensing, empty telemetry of the scoring settings' ring lengths).  It depends on neither the
+#: policy nor the path, so every policy, ablation and rollout path of a batch shape reuses one
+#: program (:func:`start_states`).
+initial_states = jax.jit(jax.vmap(init_state, in_axes=(0, None, None)))
+#: Ticks between two refills of ended slots (as the fused program's ``REFILL_TICKS``).
+SPLIT_REFILL_TICKS = 20
+#: Environment variable that sets the number of worker threads (default: one per core).
+WORKERS_ENV = "LANTERN_JAX_SPLIT_WORKERS"
+
+
+@dataclasses.dataclass(frozen=True)
+class WorldSignature:
+    """What a world program depends on besides this package's code: everything else is an
+    argument.
+
+    Attributes:
+        slots: executions stepped per call.
+        scenario, state, observation, privileged, settings: the packed layouts of one
+            execution's scenario, state, observation (every sensor's fields but the ground
+            truth, :func:`~lantern_jax.sim.observe.observe_every_sensor`), ground-truth view,
+            and of the settings (:class:`~lantern_jax.sim.packing.Layout`).
+    """
+
+    slots: int
+    scenario: Layout
+    state: Layout
+    observation: Layout  # without the ground truth (``privileged=None``)
+    privileged: Layout  # the ground truth and forecasts (:class:`PrivilegedView`)
+    settings: Layout
+
+    def observations(self, slots: int, device: Any) -> tuple:
+        """Zero packed observations (ground truth included) of ``slots`` executions."""
+        return (*_blank(self.observation, slots, device), *_blank(self.privileged, slots, device))
+
+    def identity(self) -> tuple:
+        """The program store's identity of its programs (plain values only: the layouts are
+        determined by the scenario's leaf shapes, the settings' structure and the code)."""
+        shapes = tuple(leaf.shape for leaf in self.scenario.leaves)
+        return ("world", self.slots, shapes, str(self.settings.treedef))
+
+
+def world_signature(scenario: Scenario, settings: Settings, slots: int) -> WorldSignature:
+    """The :class:`WorldSignature` of a batch's executions (``scenario``: one execution, or
+    ShapeDtypeStructs of one)."""
+    one = jax.tree.map(lambda x: jax.ShapeDtypeStruct(np.shape(x), jnp.result_type(x)), scenario)
+    on = jnp.asarray(True)
+    state = jax.eval_shape(lambda sc: init_state(sc, (), settings.scoring), one)
+    obs, view = jax.eval_shape(
+        lambda sc: observe_every_sensor(sc, init_state(sc), on, on, settings.bank), one
+    )
+    return WorldSignature(slots, Layout.of(one), Layout.of(state), Layout.of(obs),
+                          Layout.of(view), Layout.of(settings))  # fmt: skip
+
+
+def sensor_switches(policy: Policy) -> np.ndarray:
+    """(2,) bool: the world program observes the ground truth, the six-camera rig (the
+    :func:`~lantern_jax.sim.observe.observe_every_sensor` switches of ``policy``'s sensors)."""
+    return np.asarray([policy.privileged, policy.surround])
+
+
+def _tick_one(sig: WorldSignature, scp: tuple, stp: tuple, waypoints: Array, active: Array,
+              switches: Array, setp: tuple) -> tuple:  # fmt: skip
+    """One execution's tick under ``waypoints`` (:func:`~lantern_jax.sim.step.transition`;
+    a slot that is not ``active`` keeps its state), and the next tick's observation with the
+    heavy sensors ``switches`` (:func:`sensor_switches`) on.
+
+    Returns:
+        (packed state, packed observation, () bool: the policy's carry is to be kept -- the
+        execution has ended or its slot is idle).
+    """
+    sc, st, settings = sig.scenario.unpack(scp), sig.state.unpack(stp), sig.settings.unpack(setp)
+    new, _ = transition(sc, st, waypoints, settings)
+    new = jax.tree.map(lambda n, o: jnp.where(active, n, o), new, st)
+    obs, view = observe_every_sensor(sc, new, switches[0], switches[1], settings.bank,
+                                     privileged_as=sig.privileged.pack)  # fmt: skip
+    return sig.state.pack(new), (*sig.observation.pack(obs), *view), new.done | ~active
+
+
+@dataclasses.dataclass(frozen=True)
+class _Signed:
+    """A world function as a static argument of ``jit``: equal by signature."""
+
+    sig: WorldSignature
+
+
+def _tick_batch(scp, stp, waypoints, active, switches, setp, *, signed):
+    return jax.vmap(lambda a, b, w, m: _tick_one(signed.sig, a, b, w, m, switches, setp))(
+        scp, stp, waypoints, active
+    )
+
+
+_tick_jit = jax.jit(_tick_batch, static_argnames=("signed",), donate_argnums=(1,))
+
+
+def _blank(layout: Layout, slots: int, device: Any) -> tuple:
+    """Zero buffers of ``slots`` items of a layout, on ``device``."""
+    return tuple(jax.device_put(np.zeros((slots, size), dt), device) for dt, size in layout.groups)
+
+
+@dataclasses.dataclass
+class WorldPrograms:
+    """The compiled world program of one :class:`WorldSignature`."""
+
+    sig: WorldSignature
+    #: (scenarios, states, waypoints, active, sensor switches, settings) -> (states,
+    #: observations, keep carry), packed, ``slots`` executions; an inactive slot keeps its
+    #: state and is observed as it is
+    tick: Any
+
+
+def world_programs(sig: WorldSignature, setp: tuple, device: Any, timings: dict | None = None,
+                   stage: Callable[[str], None] | None = None) -> WorldPrograms:  # fmt: skip
+    """The world program of ``sig`` on ``device``: from this process, the program store, or
+    compiled (``setp``: the packed settings on ``device``; ``timings`` as
+    :func:`~lantern_jax.sim.programs.executable` gives them)."""
+    tick = executable(_tick_jit, *_tick_args(sig, setp, device), static=dict(signed=_Signed(sig)),
+                      timings=timings, identity=(sig.identity(), "tick"), stage=stage)  # fmt: skip
+    return WorldPrograms(sig, tick)
+
+
+def _tick_args(sig: WorldSignature, setp: tuple, device: Any) -> tuple:
+    """Example arguments of the world program (zeros of its shapes)."""
+    s = sig.slots
+    return (
+        _blank(sig.scenario, s, device), _blank(sig.state, s, device),
+        jax.device_put(np.zeros((s, NUM_WAYPOINTS, 2), np.float32), device),
+        jax.device_put(np.zeros(s, bool), device), jax.device_put(np.zeros(2, bool), device),
+        setp,
+    )  # fmt: skip
+
+
+def world_ready(scenarios: Scenario, settings: Settings, slots: int = SPLIT_SLOTS) -> bool:
+    """Whether the world program of this batch exists without compiling (in this process or
+    the program store)."""
+    device = jax.local_devices()[0]
+    one = jax.tree.map(lambda x: np.asarray(x)[0], scenarios)
+    sig = world_signature(one, settings, slots)
+    setp = tuple(jax.device_put(b, device) for b in _pack_one(sig.settings, settings))
+    return available(_tick_jit, *_tick_args(sig, setp, device), static=dict(signed=_Signed(sig)),
+                     identity=(sig.identity(), "tick"))  # fmt: skip
+
+
+def _take(tree: Any, idx: np.ndarray) -> Any:
+    return jax.tree.map(lambda x: x[idx], tree)
+
+
+def start_states(laid: Scenario, block: int, settings: Settings, timings: dict) -> Any:
+    """The executions' states at ``t = 0`` (NumPy, leading axis ``n``), through
+    :data:`initial_states` in blocks of ``block`` executions (one compiled shape whatever the
+    batch size)."""
+    n = len(jax.tree.leaves(laid)[0])
+    exe = executable(
+        initial_states, _take(laid, np.resize(np.arange(n), block)), (), settings.scoring,
+        timings=timings, identity=("initial_states",),
+    )  # fmt: skip
+    parts = []
+    for lo in range(0, n, block):
+        rows = np.resize(np.arange(lo, min(lo + block, n)), block)
+        out = jax.tree.map(np.asarray, exe(_take(laid, rows), (), settings.scoring))
+        parts.append(_take(out, np.arange(min(block, n - lo))))
+    return jax.tree.map(lambda *x: np.concatenate(x), *parts)
+
+
+@dataclasses.dataclass(frozen=True)
+class _PolicyStep:
+    """A policy's per-slot step as a static argument of ``jit``: equal by the policy's program
+    and the layouts it reads."""
+
+    policy: Policy
+    observation: Layout
+    privileged: Layout
+    params: Layout
+    carry: Layout
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, _PolicyStep) and self.key() == other.key()
+
+    def __hash__(self) -> int:
+        return hash(self.key())
+
+    def key(self) -> tuple:
+        return (self.policy.program, self.observation, self.privileged, self.params, self.carry)
+
+
+def _policy_batch(parp, carryp, obp, fresh, keep, *, step):
+    """``vmap`` of one slot's policy step: the observation trimmed to the policy's own sensors,
+    the carry reset where the slot took a new execution (``fresh``) and kept where the
+    execution has ended (``keep``)."""
+    pol = step.policy
+    params = step.params.unpack(parp)
+    start = pol.initial_carry(params)
+
+    def one(cp, op, f, k):
+        k_obs = len(step.observation.groups)
+        obs = step.observation.unpack(op[:k_obs])
+        obs = obs.replace(privileged=step.privileged.unpack(op[k_obs:]) if pol.privileged else None,
+                          surround=obs.surround if pol.surround else None)  # fmt: skip
+        if WARNING not in pol.sensors:
+            obs = obs.replace(**no_warning_fields())
+        carry = jax.tree.map(lambda c0, c: jnp.where(f, c0, c), start, step.carry.unpack(cp))
+        waypoints, new = pol.step(params, carry, obs)
+        new = jax.tree.map(lambda n, c: jnp.where(k, c, n), new, carry)
+        return jnp.asarray(waypoints, jnp.float32), step.carry.pack(new)
+
+    return jax.vmap(one)(carryp, obp, fresh, keep)
+
+
+_policy_jit = jax.jit(_policy_batch, static_argnames=("step",))
+
+
+def policy_program(
+    policy: Policy,
+    params: Any,
+    sig: WorldSignature,
+    device: Any,
+    timings: dict | None = None,
+    stage: Callable[[str], None] | None = None,
+) -> tuple[Any, tuple, Layout]:
+    """The compiled per-slot step of ``policy`` for world ``sig`` and its packed parameters.
+
+    Returns:
+        (the program ``(params, carry, obs, fresh, keep) -> (waypoints, carry)``, the packed
+        parameters on ``device``, the carry's layout).
+    """
+    carry = jax.eval_shape(policy.initial_carry, params)
+    step = _PolicyStep(policy, sig.observation, sig.privileged, Layout.of(params),
+                       Layout.of(carry))  # fmt: skip
+    parp = tuple(jax.device_put(b, device) for b in _pack_one(step.params, params))
+    s = sig.slots
+    args = (
+        parp, _blank(step.carry, s, device), sig.observations(s, device),
+        jax.device_put(np.zeros(s, bool), device), jax.device_put(np.zeros(s, bool), device),
+    )  # fmt: skip
+    identity = ("policy-step", policy.program, sig.identity())
+    exe = executable(_policy_jit, *args, static=dict(step=step), timings=timings,
+                     identity=identity, stage=stage)  # fmt: skip
+    return exe, parp, step.carry
+
+
+def _pack_one(layout: Layout, tree: Any) -> tuple[np.ndarray, ...]:
+    """One item (no batch axis) packed on the host."""
+    return tuple(b[0] for b in layout.pack_host(jax.tree.map(lambda x: np.asarray(x)[None], tree)))
+
+
+def worker_count() -> int:
+    """Worker threads of :func:`run_split`: ``$LANTERN_JAX_SPLIT_WORKERS``, else one per core
+    this process may run on.
+
+    Raises:
+        ValueError: naming the variable when it is not a whole number >= 1.
+    """
+    given = os.environ.get(WORKERS_ENV)
+    if given is not None:
+        if not (given.strip().isdigit() and int(given) >= 1):
+            raise ValueError(f"environment variable {WORKERS_ENV}: expected a whole number "
+                             f">= 1, got {given!r}")  # fmt: skip
+        return int(given)
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+
+
+def deal(timeout_s: np.ndarray, workers: int) -> list[np.ndarray]:
+    """The executions of every worker, in the order it takes them: sorted by timeout, longest
+    first (stable), dealt round-robin (as :func:`~lantern_jax.sim.engine.schedule_layout`)."""
+    order = np.argsort(-np.asarray(timeout_s), kind="stable")
+    return [order[w::workers] for w in range(workers)]
+
+
+@dataclasses.dataclass
+class _Run:
+    """What every worker of one :func:`run_split` call shares (read-only but ``final``)."""
+
+    world: WorldPrograms
+    policy: Any
+    params: tuple
+    carry: Layout
+    settings: tuple
+    switches: Array  # (2,) bool, :func:`sensor_switches` of the policy, on the device
+    scenarios: tuple  # (n, size) NumPy buffers
+    starts: tuple  # (n, size) packed start states
+    first_obs: tuple  # (n, size) packed first observations
+    final: list  # (n, size) packed final states, written by the workers (disjoint rows)
+    max_ticks: int
+    device: Any
+    done: tuple  # (group, offset) of the state's ``done`` leaf
+    tick: tuple  # (group, offset) of the state's ``tick`` leaf
+    stop: threading.Event
+
+
+def _field(layout: Layout, path: str) -> tuple[int, int]:
+    leaf = layout.index_of(path)
+    return leaf.group, leaf.offset
+
+
+def _worker(run: _Run, mine: np.ndarray) -> int:
+    """Step the executions ``mine`` (in order) through this worker's slots to their ends;
+    writes their final states into ``run.final``; returns the ticks stepped."""
+    s, put = run.world.sig.slots, lambda x: jax.device_put(x, run.device)
+    queue = list(mine)
+    slot_of = np.full(s, -1)
+    h_sc = [np.zeros((s, b.shape[1]), b.dtype) for b in run.scenarios]
+    h_st = [np.zeros((s, b.shape[1]), b.dtype) for b in run.starts]
+    h_ob = [np.zeros((s, b.shape[1]), b.dtype) for b in run.first_obs]
+    fresh = np.zeros(s, bool)
+
+    def fill(free) -> None:
+        for k in free:
+            if not queue:
+                return
+            i = queue.pop(0)
+            slot_of[k], fresh[k] = i, True
+            for dst, src in ((h_sc, run.scenarios), (h_st, run.starts), (h_ob, run.first_obs)):
+                for a, b in zip(dst, src, strict=True):
+                    a[k] = b[i]
+
+    fill(range(s))
+    carry = _blank(run.carry, s, run.device)
+    no_fresh = put(np.zeros(s, bool))
+    ticks = 0
+    while (slot_of >= 0).any():
+        if run.stop.is_set():
+            return ticks
+        active = slot_of >= 0
+        d_sc, d_st, d_ob = (tuple(put(x) for x in h) for h in (h_sc, h_st, h_ob))
+        d_active, keep = put(active), put(~active)
+        d_fresh = put(fresh.copy())
+        for k in range(SPLIT_REFILL_TICKS):
+            waypoints, carry = run.policy(run.params, carry, d_ob, d_fresh if k == 0 else no_fresh,
+                                          keep)  # fmt: skip
+            d_st, d_ob, keep = run.world.tick(d_sc, d_st, waypoints, d_active, run.switches,
+                                              run.settings)  # fmt: skip
+        ticks += SPLIT_REFILL_TICKS
+        h_st, h_ob = [np.array(x) for x in d_st], [np.array(x) for x in d_ob]
+        fresh[:] = False
+        ended = h_st[run.done[0]][:, run.done[1]].astype(bool)
+        ended |= h_st[run.tick[0]][:, run.tick[1]] >= run.max_ticks
+        free = np.flatnonzero(active & ended)
+        for k in free:
+            for f, x in zip(run.final, h_st, strict=True):
+                f[slot_of[k]] = x[k]
+            slot_of[k] = -1
+        fill(free)
+    return ticks
+
+
+def run_split(
+    policy: Policy,
+    scenarios: Scenario,
+    policy_params: Any,
+    max_ticks: int,
+    settings: Settings,
+    timings: dict | None = None,
+    stage: Callable[[str], None] | None = None,
+    slots: int = SPLIT_SLOTS,
+    workers: int | None = None,
+) -> tuple[State, float]:
+    """Roll out a batch with the world and the policy as two programs (module docstring).
+
+    Args:
+        policy: a :class:`~lantern_jax.policies.base.Policy` (a policy switch is the fused
+            program's; here every policy has its own small program).
+        scenarios: (n, ...) batched scenarios.
+        policy_params: the policy's parameters.
+        max_ticks: horizon, ticks (an execution still ends at its own timeout).
+        settings: scoring, protocol and text bank.
+        timings: receives ``"trace + lower"``, ``"XLA compile"``, ``"program load"`` (world and
+            policy programs together) and ``"rollout"`` seconds.
+        stage: called with ``"compiling"`` (only when a program must be compiled) and
+            ``"<n> executions"``, for a progress display.
+        slots: executions per worker stepped together (:data:`SPLIT_SLOTS`).
+        workers: worker threads (default :func:`worker_count`; at most one per ``slots``
+            executions).
+
+    Returns:
+        (final states as NumPy arrays with leading axis ``n`` -- ``policy_carry`` is ``()``:
+        the carry lives in the policy program --, seconds spent compiling or loading
+        programs).
+    """
+    host = jax.tree.map(np.asarray, scenarios)
+    n = int(host.config.timeout_s.shape[0])
+    workers = max(1, min(worker_count() if workers is None else workers, -(-n // slots)))
+    device = jax.local_devices()[0]
+    one = jax.tree.map(lambda x: x[0], host)
+    sig = world_signature(one, settings, slots)
+    setp = tuple(jax.device_put(b, device) for b in _pack_one(sig.settings, settings))
+    t0 = time.perf_counter()
+    tw: dict[str, float] = {}
+    tp: dict[str, float] = {}
+    ts: dict[str, float] = {}
+    with concurrent.futures.ThreadPoolExecutor(3) as pool:  # compiled or loaded at once
+        fw = pool.submit(world_programs, sig, setp, device, tw, stage)
+        fp = pool.submit(policy_program, policy, policy_params, sig, device, tp, stage)
+        fs = pool.submit(start_states, host, slots, settings, ts)
+        world, (pol_exe, parp, carry), start = fw.result(), fp.result(), fs.result()
+    t_compile = time.perf_counter() - t0
+    scp = sig.scenario.pack_host(host)
+    starts = sig.state.pack_host(start)
+    switches = jax.device_put(sensor_switches(policy), device)
+    first_obs = _first_observations(world, scp, starts, switches, setp, device)
+    run = _Run(
+        world, pol_exe, parp, carry, setp, switches, scp, starts, first_obs,
+        [b.copy() for b in starts], int(max_ticks), device, _field(sig.state, ".done"),
+        _field(sig.state, ".tick"), threading.Event(),
+    )  # fmt: skip
+    if stage is not None:
+        stage(f"{n} executions")
+    t1 = time.perf_counter()
+    with concurrent.futures.ThreadPoolExecutor(workers) as pool:
+        futures = [pool.submit(_worker, run, mine) for mine in deal(host.config.timeout_s, workers)]
+        try:
+            for f in futures:
+                f.result()
+        except BaseException:
+            run.stop.set()
+            raise
+    final = sig.state.unpack_host(run.final)
+    if timings is not None:
+        for k in ("trace + lower", "XLA compile", "program load"):
+            timings[k] = tw.get(k, 0.0) + tp.get(k, 0.0) + ts.get(k, 0.0)
+        timings["rollout"] = time.perf_counter() - t1
+    return final, t_compile
+
+
+def prepare(policies: list[tuple[Policy, Any]], scenarios: Scenario, settings: Settings,
+            slots: int = SPLIT_SLOTS) -> dict[str, float]:  # fmt: skip
+    """Compile (or load) every program that :func:`run_split` needs for several policies on
+    one batch: the world program, one program per policy and the start states' program, side
+    by side in threads (a policy's tracing overlaps the world's compilation).  A later
+    :func:`run_split` of each policy finds them in this process.
+
+    Args:
+        policies: ``(policy, parameters)`` pairs.
+        scenarios: the batch (only its shapes matter).
+        settings: as :func:`run_split` will be given them.
+        slots: as :func:`run_split` will be given them.
+
+    Returns:
+        Wall seconds of the whole preparation under ``"programs"``, and per policy name the
+        seconds its own program took (overlapping the others).
+    """
+    host = jax.tree.map(np.asarray, scenarios)
+    one = jax.tree.map(lambda x: x[0], host)
+    device = jax.local_devices()[0]
+    setp = tuple(jax.device_put(b, device) for b in _pack_one(Layout.of(settings), settings))
+    sig = world_signature(one, settings, slots)
+    block = _take(host, np.arange(min(slots, host.config.timeout_s.shape[0])))  # shapes only
+    out: dict[str, float] = {}
+
+    def timed(name: str, fn, *args) -> None:
+        t0 = time.perf_counter()
+        fn(*args)
+        out[name] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    with concurrent.futures.ThreadPoolExecutor(max(2, worker_count())) as pool:
+        jobs = [pool.submit(world_programs, sig, setp, device)]
+        jobs.append(pool.submit(start_states, block, slots, settings, {}))
+        jobs += [pool.submit(timed, p.name, policy_program, p, par, sig, device)
+                 for p, par in policies]  # fmt: skip
+        for job in jobs:
+            job.result()
+    out["programs"] = time.perf_counter() - t0
+    return out
+
+
+def _first_observations(world: WorldPrograms, scp: tuple, stp: tuple, switches: Array,
+                        setp: tuple, device: Any) -> tuple:  # fmt: skip
+    """Every execution's packed observation of its start state: the world program with every
+    slot inactive (states kept, observed as they are), ``slots`` executions at a time."""
+    s, n = world.sig.slots, scp[0].shape[0]
+    idle = jax.device_put(np.zeros(s, bool), device)
+    waypoints = jax.device_put(np.zeros((s, NUM_WAYPOINTS, 2), np.float32), device)
+    parts = []
+    for lo in range(0, n, s):
+        rows = np.resize(np.arange(lo, min(lo + s, n)), s)
+        put = [tuple(jax.device_put(b[rows], device) for b in x) for x in (scp, stp)]
+        _, obs, _ = world.tick(put[0], put[1], waypoints, idle, switches, setp)
+        parts.append([np.asarray(b)[: min(s, n - lo)] for b in obs])
+    return tuple(np.concatenate(c) for c in zip(*parts, strict=True))
