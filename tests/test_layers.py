@@ -19,7 +19,8 @@ PACKAGE = Path(lantern_jax.__file__).parent
 #: Layers from the bottom up; each entry is a top-level module or sub-package of lantern_jax.
 LAYERS: tuple[tuple[str, ...], ...] = (
     # values, the time sentinel, wall-clock breakdowns, the known family codes, array checks
-    ("constants", "times", "timing", "family_codes", "checks", "actor_track", "jax_setup"),
+    ("constants", "times", "timing", "family_codes", "checks", "actor_track", "jax_setup",
+     "user_code"),  # fmt: skip
     ("geometry", "polyline", "split_map"),  # pure JAX maths and loop rewrites
     # scenario and observation types; I/O (files, configuration files, compiled programs on
     # disk); tokens

@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from lantern_jax.policies.base import Policy
+from lantern_jax.user_code import UserCodeError, as_guest
 
 #: ``package.module`` (dotted Python identifiers).
 _MODULE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*$")
@@ -57,7 +58,8 @@ def _import_file(path: Path, digest: str) -> Any:
     module = importlib.util.module_from_spec(module_spec)
     sys.modules[name] = module
     try:
-        module_spec.loader.exec_module(module)
+        as_guest(f"policy file {path.name}", module_spec.loader.exec_module, module,
+                 argv0=str(path))  # fmt: skip
     except BaseException:
         del sys.modules[name]
         raise
@@ -101,16 +103,15 @@ def load_policy_source(spec: str) -> tuple[Policy, dict]:
         kind = "file"
         try:
             module = _import_file(path, digest)
-        except Exception as e:  # noqa: BLE001 - the user's code: any failure is reported as such
-            raise ValueError(f"policy source {spec!r}: importing {path} failed: "
-                             f"{type(e).__name__}: {e}") from e  # fmt: skip
+        except UserCodeError as e:
+            raise ValueError(f"policy source {spec!r}: importing {path} failed: {e}") from e
     else:
         kind = "module"
         try:
-            module = importlib.import_module(where)
-        except Exception as e:  # noqa: BLE001
+            module = as_guest(f"module {where}", importlib.import_module, where)
+        except UserCodeError as e:
             raise ValueError(f"policy source {spec!r}: importing module {where!r} failed: "
-                             f"{type(e).__name__}: {e}") from e  # fmt: skip
+                             f"{e}") from e  # fmt: skip
         file = getattr(module, "__file__", None)
         path = Path(file).resolve() if file else None
         digest = _sha256(path) if path is not None and path.is_file() else None
@@ -123,10 +124,9 @@ def load_policy_source(spec: str) -> tuple[Policy, dict]:
             raise TypeError(f"policy source {spec!r}: {attr} is a {type(obj).__name__}, "
                             "expected a Policy or a function returning one")  # fmt: skip
         try:
-            policy = obj()
-        except Exception as e:  # noqa: BLE001
-            raise ValueError(f"policy source {spec!r}: calling {attr}() failed: "
-                             f"{type(e).__name__}: {e}") from e  # fmt: skip
+            policy = as_guest(f"{where}:{attr}", obj)
+        except UserCodeError as e:
+            raise ValueError(f"policy source {spec!r}: calling {attr}() failed: {e}") from e
         if not isinstance(policy, Policy):
             raise TypeError(f"policy source {spec!r}: {attr}() returned a "
                             f"{type(policy).__name__}, expected a Policy")  # fmt: skip
