@@ -8,6 +8,8 @@ from typing import Any
 
 import numpy as np
 
+from lantern_jax.constants import MAX_SEED
+
 
 def _arr(name: str, x: Any) -> np.ndarray:
     try:
@@ -52,3 +54,15 @@ def check_nonneg(name: str, x: Any, mask: Any = None) -> None:
     if np.any(a < 0):
         idx = np.argwhere(a < 0)[0].tolist()
         raise ValueError(f"{name}: must be non-negative (first negative at index {idx})")
+
+
+def check_seed(name: str, value: Any) -> int:
+    """A generator seed: a whole number in ``0 .. MAX_SEED`` (not a bool); returns it as int.
+
+    Raises:
+        ValueError: naming ``name`` and the value.
+    """
+    ok = isinstance(value, int | np.integer) and not isinstance(value, bool | np.bool_)
+    if not ok or not 0 <= int(value) <= MAX_SEED:
+        raise ValueError(f"{name}: expected a whole number in 0 .. 2**63 - 1, got {value!r}")
+    return int(value)

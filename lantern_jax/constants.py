@@ -119,3 +119,15 @@ SUITE_ID = "lantern-v3"  # lantern_jax/data/<SUITE_ID>.json
 
 BIG = 1.0e6  # finite stand-in for "infinitely far" distances (keeps gradients finite)
 INF_TIME = 1.0e9  # s, stand-in for "not yet happened" times
+
+# --- stress testing: adversary tracks, background traffic, verification horizon -----------------
+MAX_KNOTS = 64  # knots per adversary track
+KNOT_S_RANGE = (0.1, 2.0)  # s, an adversary track's knot length
+BACKGROUND_SLOTS = range(2, 7)  # actor slots of a scene's background traffic
+MAX_BACKGROUND = len(BACKGROUND_SLOTS)  # background vehicles a scene holds at most
+#: s, the longest verified rollout: >= the longest route timeout (20 s + 164 m / 3 m/s); each
+#: execution still ends at its own timeout
+MAX_VERIFY_S = 90.0
+
+# --- seeds -----------------------------------------------------------------------------------
+MAX_SEED = 2**63 - 1  # largest seed anything takes (NumPy's and JAX's generators: 64-bit seeds)

@@ -31,9 +31,10 @@ import jax
 import numpy as np
 import pandas as pd
 
+from lantern_jax.checks import check_seed
 from lantern_jax.constants import CONDITIONS, DT, SUITE_ID
 from lantern_jax.policies.base import Policy, check_policy_output
-from lantern_jax.policies.registry import get_policy, policy_source
+from lantern_jax.policies.registry import get_policy, policy_names, policy_source
 from lantern_jax.scenarios.ablations import ablation_names
 from lantern_jax.scenarios.suite import Suite, load_suite
 from lantern_jax.scoring.aggregate import (
@@ -268,7 +269,30 @@ def _policies_to_run(policies, suite) -> list[Policy]:
         )
     if isinstance(suite, Suite) and not suite.pairs:
         raise ValueError(f"evaluate: suite {suite.suite_id!r} has no pairs")
+    for p in policies:
+        if not isinstance(p, str | Policy):
+            raise TypeError(f"evaluate: a policy is a registered name or a Policy, got "
+                            f"{type(p).__name__} {p!r}")  # fmt: skip
+        if isinstance(p, Policy) and p.name in policy_names():
+            _check_not_impostor(p)
     return [get_policy(p) if isinstance(p, str) else p for p in policies]
+
+
+def _check_not_impostor(pol: Policy) -> None:
+    """Refuse a Policy object that carries a registered policy's name but is another policy --
+    another act function, sensors, carry or parameters (its rows would be labelled as the
+    registered one's)."""
+    registered = get_policy(pol.name)
+    same = (pol.act, pol.sensors, pol.init_carry) == (
+        registered.act, registered.sensors, registered.init_carry
+    )  # fmt: skip
+    key = jax.random.PRNGKey(0)
+    if not same or params_hash(pol.init(key)) != params_hash(registered.init(key)):
+        raise ValueError(
+            f"evaluate: policy name {pol.name!r} is a registered policy's, but this Policy "
+            "is another one (its rows could not be told from the registered policy's); give it "
+            "a name of its own"
+        )
 
 
 def shared_program(pols: list[Policy], policy_params: list) -> tuple[PolicySwitch, tuple] | None:
@@ -489,6 +513,7 @@ def evaluate(
         PolicyError: naming the policy whose ``act`` failed while traced or run.
     """
     pols = _policies_to_run(policies, suite)
+    check_seed("evaluate: bootstrap_seed", bootstrap_seed)
     if path not in PATHS:
         raise ValueError(f"evaluate: path {path!r} is not one of {', '.join(PATHS)}")
     settings = (default_settings() if settings is None else settings).validate()

@@ -371,7 +371,8 @@ def in_place_reason(target: str | os.PathLike) -> str | None:
     return None
 
 
-def check_target_folder(target: str | os.PathLike, in_place: bool | None = None) -> Path:
+def check_target_folder(target: str | os.PathLike, in_place: bool | None = None,
+                        owned: Collection[str] = ()) -> Path:  # fmt: skip
     """Check, without touching any existing file, that a folder can receive a staged result set
     (the folder that must be writable: the target itself where the set is written in place,
     :func:`in_place_reason`, else the folder that holds it).
@@ -380,19 +381,32 @@ def check_target_folder(target: str | os.PathLike, in_place: bool | None = None)
         target: the result folder (may not exist yet).
         in_place: whether files are written into the folder itself (a dataset or training
             run folder, resumed in place); default: as :class:`StagedFolder` will decide.
+        owned: the names of the set's files: an entry of ``target`` with one of those names
+            that is not a regular file (a folder, a link) is someone else's, and is refused
+            rather than replaced.
 
     Returns:
         The resolved target path.
 
     Raises:
-        OutputFolderError: when ``target`` is empty, is a file, lies under a file, or it or the
-            folder that will hold it cannot be written (tried for real with a probe folder).
+        OutputFolderError: when ``target`` is empty, is a file, lies under a file, holds an
+            entry named like a result file that is not one, or it or the folder that will hold
+            it cannot be written (tried for real with a probe folder).
     """
     if not str(target).strip():
         raise OutputFolderError("output folder: empty path")
     resolved = Path(os.path.realpath(target))
     if resolved.exists() and not resolved.is_dir():
         raise OutputFolderError(f"output folder {target}: is a file, not a folder")
+    for name in sorted(owned):
+        entry = resolved / name
+        if os.path.lexists(entry) and (entry.is_symlink() or not entry.is_file()):
+            kind = "a folder" if entry.is_dir() else "a special file"
+            kind = "a link" if entry.is_symlink() else kind
+            raise OutputFolderError(
+                f"output folder {target}: {entry} is {kind} (not a result file this project "
+                "wrote); a result set would replace it: move it, or choose another folder"
+            )
     anc = resolved.parent
     while not anc.exists():
         anc = anc.parent
@@ -444,7 +458,7 @@ class StagedFolder:
     """
 
     def __init__(self, target: str | os.PathLike, owned: Sequence[str]) -> None:
-        self.target = check_target_folder(target)
+        self.target = check_target_folder(target, owned=owned)
         self.owned = frozenset(owned)
         self.last = list(owned)[-1] if owned else None
         self.target.parent.mkdir(parents=True, exist_ok=True)

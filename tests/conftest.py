@@ -66,6 +66,21 @@ def pytest_xdist_auto_num_workers(config) -> int:
     return max(1, min(len(os.sched_getaffinity(0)), MAX_WORKERS))
 
 
+def pytest_configure(config) -> None:
+    """Before any test runs (in the controlling process, before pytest-xdist starts its
+    workers): compile the world program of the built-in suite's batch shape once and keep it
+    in the session's program store (:func:`lantern_jax.sim.engine.warm_world`), so that every
+    evaluation in every worker compiles only its policy's own program.
+    ``LANTERN_TEST_WARM_WORLD=0`` skips it (each worker then compiles what it needs)."""
+    if hasattr(config, "workerinput") or os.environ.get("LANTERN_TEST_WARM_WORLD") == "0":
+        return
+    if config.getoption("collectonly", False):
+        return
+    from lantern_jax.sim.engine import warm_world
+
+    warm_world()
+
+
 HORIZON = 600  # ticks (30 s) of the shared runners
 BATCH = 12  # executions per call of the shared batched runner
 

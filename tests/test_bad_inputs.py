@@ -924,7 +924,7 @@ def test_explicit_flags_win_over_the_config(tmp_path, monkeypatch):
     class Stop(Exception):
         pass
 
-    def capture(policies, suite, ablation, progress, one_program):
+    def capture(policies, suite, ablation, progress, one_program, path):
         seen.update(policies=policies, pairs=len(suite), ablation=ablation, one=one_program)
         raise Stop
 

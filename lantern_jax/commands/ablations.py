@@ -23,6 +23,7 @@ from lantern_jax.commands.common import (
     stage,
     write_failed,
 )
+from lantern_jax.commands.values import count
 from lantern_jax.constants import CONDITIONS, SUITE_ID
 
 
@@ -46,7 +47,9 @@ def cmd_ablations(args: argparse.Namespace, argv: Sequence[str]) -> int:
     policies = resolve_policies([args.policy])
     if len(policies) != 1:
         raise UsageError(f"--policy: give one policy, got {', '.join(policies)}")
-    check_out(args.out)
+    from lantern_jax.report.outputs import ABLATION_FILES
+
+    check_out(args.out, owned=ABLATION_FILES)
     suite = load_selected_suite(args)
     from lantern_jax.ablations import run_ablations
     from lantern_jax.evaluation import PolicyError
@@ -99,7 +102,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--suite", default=SUITE_ID, metavar="ID|PATH", help="suite id or manifest path"
     )
     ab.add_argument(
-        "--pairs-per-family", type=int, metavar="N", help="only the first N pairs of each family"
+        "--pairs-per-family", type=count(), metavar="N",
+        help="only the first N pairs of each family",
     )
     ab.add_argument("--pairs", action="append", metavar="ID[,ID...]", help="only these pair ids")
     ab.add_argument(

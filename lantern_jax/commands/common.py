@@ -11,7 +11,7 @@ import argparse
 import os
 import shlex
 import sys
-from collections.abc import Iterable, Sequence
+from collections.abc import Collection, Iterable, Sequence
 
 from lantern_jax.commands import UsageError
 from lantern_jax.commands.runtime import check_interrupt
@@ -200,7 +200,8 @@ def _select_pairs(suite, given: Sequence[str], source: str):
 # ---------------------------------------------------------------------------------------------
 # output
 # ---------------------------------------------------------------------------------------------
-def check_out(out: str, source: str = "--out", in_place: bool | None = None) -> None:
+def check_out(out: str, source: str = "--out", in_place: bool | None = None,
+              owned: Collection[str] = ()) -> None:  # fmt: skip
     """Refuse an output folder that cannot receive the result set, before anything runs.
 
     Args:
@@ -209,6 +210,8 @@ def check_out(out: str, source: str = "--out", in_place: bool | None = None) -> 
         in_place: whether the files are written into the folder itself (a dataset or a training
             run, resumed there); default: as the result set's writer decides
             (:func:`lantern_jax.files.check_target_folder`).
+        owned: the names of the files the command writes there (an entry of one of those
+            names that is not a regular file is refused).
 
     Raises:
         UsageError: naming the option (or config key) and why.
@@ -216,7 +219,7 @@ def check_out(out: str, source: str = "--out", in_place: bool | None = None) -> 
     from lantern_jax.files import OutputFolderError, check_target_folder
 
     try:
-        check_target_folder(out, in_place=in_place)
+        check_target_folder(out, in_place=in_place, owned=owned)
     except OutputFolderError as e:
         raise UsageError(f"{source}: {e}") from None
 

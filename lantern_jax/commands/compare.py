@@ -7,49 +7,42 @@
 
 Per family and overall, under every condition both sides hold and for the warning gain: the
 paired difference of mean CUS (first minus second), its bootstrap interval and a paired
-bootstrap p-value (:func:`lantern_jax.compare.compare_runs`).  Two result sets must hold the
-same pairs (and, where both manifests record it, the same suite hash).  A result set is a
-folder written by ``lantern-jax evaluate`` (or ``ablations``), or its route-level CSV.  The
+bootstrap p-value (:func:`lantern_jax.compare.compare_runs`).  A result set is a folder
+written by ``lantern-jax evaluate`` (or ``ablations``), or its route-level CSV, and it is read
+as evidence (:mod:`lantern_jax.report.evidence`): every file checked against its manifest's
+SHA-256, the table against its schema and the manifest's row count.  Two result sets must hold
+the same pairs under one protocol (suite, ablation, settings: refused otherwise unless
+``--accept-protocol-difference``); differing package versions are named above the table.  The
 table is printed and written as ``comparison.md`` and ``comparison.csv`` into ``--out``.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import shlex
 from collections.abc import Sequence
 from pathlib import Path
 
 from lantern_jax.commands import UsageError
 from lantern_jax.commands.common import check_out, split_values
+from lantern_jax.commands.values import seed
 
 COMPARISON_MD = "comparison.md"
 COMPARISON_CSV = "comparison.csv"
-#: Route-level CSVs a result folder may hold, with the manifest beside each.
-RESULT_FILES = (
-    ("route_level_results.csv", "reproducibility_manifest.json"),
-    ("ablation_route_level_results.csv", "ablations_manifest.json"),
-)
 
 
-def _result_set(path: str) -> tuple[Path, dict]:
-    """The route-level CSV of a result folder (or the CSV itself) and its manifest ({} if none).
+def _read(path: str):
+    """The checked result set at ``path`` (:func:`lantern_jax.report.evidence.read_result_set`).
 
     Raises:
-        UsageError: when there is no route-level CSV there.
+        UsageError: naming the file and what is wrong with it.
     """
-    p = Path(path)
-    if p.is_file():
-        manifests = [m for c, m in RESULT_FILES if c == p.name]
-        m = p.with_name(manifests[0]) if manifests else None
-        return p, json.loads(m.read_text()) if m is not None and m.is_file() else {}
-    for csv, manifest in RESULT_FILES:
-        if (p / csv).is_file():
-            m = p / manifest
-            return p / csv, json.loads(m.read_text()) if m.is_file() else {}
-    names = " or ".join(c for c, _ in RESULT_FILES)
-    raise UsageError(f"{path}: no result set there (expected a folder with {names})")
+    from lantern_jax.report.evidence import ResultSetError, read_result_set
+
+    try:
+        return read_result_set(path)
+    except ResultSetError as e:
+        raise UsageError(str(e)) from None
 
 
 def _rows(df, model: str, where: str):
@@ -65,26 +58,26 @@ def cmd_compare(args: argparse.Namespace, argv: Sequence[str]) -> int:
     from lantern_jax.compare import compare_runs, format_comparison
     from lantern_jax.files import StagedFolder, atomic_write
     from lantern_jax.report import interval_note
-    from lantern_jax.scoring.table import read_route_table
     from lantern_jax.scoring.uncertainty import SEED, settings
 
     policies = split_values(args.policy)
     sets = list(args.results)
+    notes: list[str] = []
     if len(sets) == 1 and len(policies) == 2:
-        (path, manifest) = _result_set(sets[0])
-        df = read_route_table(path)
+        if policies[0] == policies[1]:
+            raise UsageError(f"--policy {policies[0]!r} given twice: a policy compared with "
+                             "itself differs by nothing")  # fmt: skip
+        df = _read(sets[0]).table
         a, b = (_rows(df, p, sets[0]) for p in policies)
         labels = policies
     elif len(sets) == 2 and len(policies) == 1:
-        (pa, ma), (pb, mb) = _result_set(sets[0]), _result_set(sets[1])
-        ha, hb = ma.get("suite_sha256"), mb.get("suite_sha256")
-        if ha and hb and ha != hb:
-            raise UsageError(
-                f"{sets[0]} and {sets[1]} were evaluated on different suites (suite hashes "
-                f"{ha[:12]} and {hb[:12]}); a paired comparison needs the same pairs"
-            )
-        a = _rows(read_route_table(pa), policies[0], sets[0])
-        b = _rows(read_route_table(pb), policies[0], sets[1])
+        ra, rb = _read(sets[0]), _read(sets[1])
+        if ra.csv.resolve() == rb.csv.resolve():
+            raise UsageError(f"{sets[0]} and {sets[1]} are the same result set: a policy "
+                             "compared with itself differs by nothing")  # fmt: skip
+        notes = _protocol_notes(ra.manifest, rb.manifest, sets, args.accept_protocol_difference)
+        a = _rows(ra.table, policies[0], sets[0])
+        b = _rows(rb.table, policies[0], sets[1])
         labels = [f"{policies[0]} ({s})" for s in sets]
     else:
         raise UsageError(
@@ -92,7 +85,7 @@ def cmd_compare(args: argparse.Namespace, argv: Sequence[str]) -> int:
             f"(got {len(sets)} result set(s) and {len(policies)} policy name(s))"
         )
     seed = SEED if args.bootstrap_seed is None else args.bootstrap_seed
-    check_out(args.out)
+    check_out(args.out, owned=(COMPARISON_MD, COMPARISON_CSV))
     try:
         table = compare_runs(a, b, seed=seed)
     except ValueError as e:
@@ -102,10 +95,14 @@ def cmd_compare(args: argparse.Namespace, argv: Sequence[str]) -> int:
         f"{interval_note(settings(seed))}; p: two-sided paired bootstrap p-value of a zero "
         "difference; n: pairs compared."
     )
+    for line in notes:
+        print(line)
     print(title)
     print(format_comparison(table, *labels))
     print(note)
-    md = f"# {title}\n\n{note}\n\n{format_comparison(table, *labels, tablefmt='github')}\n"
+    head = "".join(f"> {line}\n\n" for line in notes)
+    md = (f"# {title}\n\n{head}{note}\n\n"
+          f"{format_comparison(table, *labels, tablefmt='github')}\n")  # fmt: skip
     command = shlex.join(["lantern-jax", *argv])
     with StagedFolder(args.out, (COMPARISON_MD, COMPARISON_CSV)) as stage:
         atomic_write(stage.path / COMPARISON_MD, f"{md}\nCommand: `{command}`\n".encode())
@@ -114,6 +111,26 @@ def cmd_compare(args: argparse.Namespace, argv: Sequence[str]) -> int:
         stage.commit()
     print(f"Wrote {Path(args.out) / COMPARISON_MD} and {Path(args.out) / COMPARISON_CSV}")
     return 0
+
+
+def _protocol_notes(ma: dict, mb: dict, sets: list[str], accept: bool) -> list[str]:
+    """The lines to show above the table: differences of protocol (refused unless ``accept``)
+    and of package versions.
+
+    Raises:
+        UsageError: naming every protocol field that differs, when not ``accept``.
+    """
+    from lantern_jax.report.evidence import protocol_differences, version_differences
+
+    protocol = protocol_differences(ma, mb)
+    if protocol and not accept:
+        raise UsageError(
+            f"{sets[0]} and {sets[1]} were not run under one protocol ({'; '.join(protocol)}); "
+            "a difference would mix the policy with the protocol (--accept-protocol-difference "
+            "compares them anyway, saying so above the table)"
+        )
+    notes = [f"protocol differs (accepted): {line}" for line in protocol]
+    return notes + [f"package versions differ: {line}" for line in version_differences(ma, mb)]
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -140,9 +157,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="the policy (two result sets) or each of the two policies (one result set)",
     )
     co.add_argument(
-        "--bootstrap-seed", type=int, metavar="N", help="seed of the bootstrap (default fixed)"
+        "--bootstrap-seed", type=seed(), metavar="N", help="seed of the bootstrap (default fixed)"
     )
     co.add_argument(
         "--out", default="results/compare", metavar="DIR", help="output folder (comparison.md)"
+    )
+    co.add_argument(
+        "--accept-protocol-difference",
+        action="store_true",
+        help="compare two result sets run under different protocols (suite, ablation, "
+        "settings); the differences are printed above the table and kept in comparison.md",
     )
     co.set_defaults(func=cmd_compare)

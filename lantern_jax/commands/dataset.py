@@ -20,6 +20,7 @@ from collections.abc import Sequence
 
 from lantern_jax.commands import UsageError
 from lantern_jax.commands.common import check_out
+from lantern_jax.commands.values import count, seed
 
 
 def cmd_dataset(args: argparse.Namespace, argv: Sequence[str]) -> int:
@@ -61,10 +62,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         allow_abbrev=False,
     )
     ds.add_argument("--out", required=True, metavar="DIR", help="dataset folder (resumable)")
-    ds.add_argument("--sequences", type=int, metavar="N",
+    ds.add_argument("--sequences", type=count(), metavar="N",
                     help="about N sequences (Route A + Route B: N/12 candidate pairs per "
                          f"family) instead of the default {PAIRS_PER_FAMILY} pairs per family, "
                          "sized to reach the paper's 236,309 frames")  # fmt: skip
-    ds.add_argument("--seed", type=int, default=DATASET_SEED, help="generation seed")
+    ds.add_argument("--seed", type=seed(), default=DATASET_SEED, help="generation seed")
     ds.add_argument("--quiet", action="store_true", help="no progress bar")
     ds.set_defaults(func=cmd_dataset)

@@ -23,6 +23,7 @@ from lantern_jax.commands.common import (
     print_and_write,
     stage,
 )
+from lantern_jax.commands.values import count, number
 from lantern_jax.constants import FAMILIES, SUITE_ID
 
 #: Options of ``diagnostics`` that only the distance diagnostic reads.
@@ -176,7 +177,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     dg.add_argument(
         "--pairs-per-family",
-        type=int,
+        type=count(),
         metavar="N",
         help="only the first N pairs of each family (language)",
     )
@@ -184,11 +185,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--family", choices=FAMILIES, help="family (distance; default: diagnostics.DISTANCE_FAMILY)"
     )
     dg.add_argument(
-        "--routes", type=int, metavar="N",
+        "--routes", type=count(), metavar="N",
         help="Route B count (distance; default: diagnostics.DISTANCE_ROUTES)",
     )  # fmt: skip
     dg.add_argument(
-        "--window", type=float, metavar="S",
+        "--window", type=number(0.0, 60.0, low_open=True), metavar="S",
         help="warning window, s (distance; default: diagnostics.DISTANCE_WINDOW_S)",
     )  # fmt: skip
     dg.add_argument("--out", default="results/language", metavar="DIR", help="output folder")

@@ -33,6 +33,7 @@ from lantern_jax.commands.common import (
     write_failed,
 )
 from lantern_jax.commands.runtime import add_cache_flag, check_interrupt
+from lantern_jax.commands.values import count, seed, whole
 from lantern_jax.constants import SUITE_ID
 
 #: Defaults of the ``evaluate`` options an experiment file may set (used when neither the
@@ -170,7 +171,9 @@ def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
     apply_config(args)
     policies = _policies(args)
     _check_ablation(args)
-    check_out(args.out, option_source(args, "out"))
+    from lantern_jax.report import OUTPUT_FILES
+
+    check_out(args.out, option_source(args, "out"), owned=OUTPUT_FILES)
     stage(args, f"loading suite {args.suite}")
     with bd.phase("suite load and validation"):
         suite = load_selected_suite(args)
@@ -213,10 +216,11 @@ def _report(args: argparse.Namespace, argv: Sequence[str], bd, result, t_eval: f
         seconds = result.seconds["split programs"]
         stage(args, f"world and policy programs (split path): {seconds:.1f} s")
     for run in result.manifest["policies"]:
+        how = f" ({run['program']})" if run.get("program") else ""
         stage(
             args,
             f"{run['name']}: compile {run['seconds_compile']:.1f} s, "
-            f"rollout {run['seconds_run']:.2f} s ({run['program']})",
+            f"rollout {run['seconds_run']:.2f} s{how}",
         )
     stage(args, f"evaluation done in {t_eval:.1f} s; writing {args.out}")
     _evaluate_breakdown(bd, result, t_eval)
@@ -280,14 +284,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     ev.add_argument("--quiet", action="store_true", help="no progress bar or stage lines")
     ev.add_argument(
         "--bootstrap-seed",
-        type=int,
+        type=seed(),
         metavar="N",
         help="seed of the pair-level bootstrap behind every interval (default: the project's "
         "fixed seed, lantern_jax.scoring.uncertainty.SEED); recorded in the manifest",
     )
     ev.add_argument(
         "--fresh-suites",
-        type=int,
+        type=count(100),
         metavar="K",
         help="also generate K fresh suites (the --suite's design and validator, seeds S .. "
         "S + K - 1 from --seed), evaluate --suite and each of them, and report every suite's "
@@ -295,7 +299,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     ev.add_argument(
         "--seed",
-        type=int,
+        type=seed(),
         metavar="S",
         help="generation seed of the first fresh suite (with --fresh-suites)",
     )
@@ -332,7 +336,8 @@ def _add_selection(ev: argparse.ArgumentParser) -> None:
         "--suite", metavar="ID|PATH", help=f"suite id or manifest path (default: {SUITE_ID})"
     )
     ev.add_argument(
-        "--pairs-per-family", type=int, metavar="N", help="only the first N pairs of each family"
+        "--pairs-per-family", type=count(), metavar="N",
+        help="only the first N pairs of each family",
     )
     ev.add_argument("--pairs", action="append", metavar="ID[,ID...]", help="only these pair ids")
 
@@ -369,5 +374,6 @@ def _add_running(ev: argparse.ArgumentParser) -> None:
         help="run across processes with JAX's distributed runtime: address of process 0 "
         "(with --num-processes and --process-id; process 0 writes the results)",
     )
-    ev.add_argument("--num-processes", type=int, metavar="N", help="processes in the run")
-    ev.add_argument("--process-id", type=int, metavar="I", help="this process, 0 .. N-1")
+    ev.add_argument("--num-processes", type=count(4096), metavar="N", help="processes in the run")
+    ev.add_argument("--process-id", type=whole(0, 4095), metavar="I",
+                    help="this process, 0 .. N-1")  # fmt: skip

@@ -23,7 +23,14 @@ from collections.abc import Sequence
 
 from lantern_jax.commands import UsageError
 from lantern_jax.commands.common import check_out, write_failed
-from lantern_jax.constants import CONDITIONS
+from lantern_jax.commands.values import count, number, seed, whole
+from lantern_jax.constants import (
+    CONDITIONS,
+    KNOT_S_RANGE,
+    MAX_BACKGROUND,
+    MAX_KNOTS,
+    MAX_VERIFY_S,
+)
 
 #: Options only a knob space reads, and options only an adversary space reads (None = not given).
 KNOB_OPTIONS = ("knobs", "range")
@@ -214,7 +221,9 @@ def cmd_stress(args: argparse.Namespace, argv: Sequence[str]) -> int:
     _check_numbers(args, methods)
     _check_space_options(args)
     ranges = _ranges(args.range)
-    check_out(args.out)
+    from lantern_jax.stress.report import RESULT_FILES
+
+    check_out(args.out, owned=RESULT_FILES)
     try:
         suite = load_suite(args.suite) if args.suite else load_suite()
     except (OSError, ValueError) as e:
@@ -267,21 +276,21 @@ def _add_adversary_options(st: argparse.ArgumentParser) -> None:
     )
     st.add_argument(
         "--knots",
-        type=int,
+        type=count(MAX_KNOTS),
         default=None,
         metavar="N",
         help="adversary: knots per track, 2 N dimensions per actor (default 16)",
     )
     st.add_argument(
         "--knot-s",
-        type=float,
+        type=number(*KNOT_S_RANGE),
         default=None,
         metavar="S",
         help="adversary: seconds per knot (default 0.5)",
     )
     st.add_argument(
         "--background",
-        type=int,
+        type=count(MAX_BACKGROUND),
         default=None,
         metavar="N",
         help="adversary: background vehicles nearest the route (default 1)",
@@ -306,14 +315,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     st.add_argument(
         "--budget-s",
-        type=float,
+        type=number(0.0, 10.0**6, low_open=True),
         default=60.0,
         metavar="S",
         help="wall-clock seconds per method, compilation excluded",
     )
     st.add_argument(
         "--budget-rollouts",
-        type=int,
+        type=count(),
         default=None,
         metavar="N",
         help="rollouts per restart and method, every kind counted (default: none)",
@@ -329,11 +338,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="narrow a knob's range (may be repeated)",
     )
     _add_adversary_options(st)
-    st.add_argument("--restarts", type=int, default=8, metavar="R",
+    st.add_argument("--restarts", type=count(4096), default=8, metavar="R",
                     help="independent restarts of every method")  # fmt: skip
     st.add_argument(
         "--samples",
-        type=int,
+        type=count(4096),
         default=None,
         metavar="M",
         help="random draws per restart and iteration; gradient perturbations with "
@@ -341,7 +350,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     st.add_argument(
         "--popsize",
-        type=int,
+        type=whole(0, 4096),
         default=0,
         metavar="P",
         help="CMA-ES population per restart (default: --samples for knobs, cma's "
@@ -349,13 +358,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     st.add_argument(
         "--sigma",
-        type=float,
+        type=number(0.0, 10.0),
         default=None,
         help="gradient smoothing scale (default: 0.3 knobs, 0 adversary)",
     )
-    st.add_argument("--lr", type=float, default=None,
+    st.add_argument("--lr", type=number(0.0, 10.0, low_open=True), default=None,
                     help="Adam step size (default: 0.3 knobs, 0.2 adversary)")  # fmt: skip
-    st.add_argument("--temperature", type=float, default=0.1, help="soft-score temperature")
+    st.add_argument("--temperature", type=number(0.0, 10.0, low_open=True), default=0.1,
+                    help="soft-score temperature")  # fmt: skip
     st.add_argument(
         "--objective",
         default="plausible",
@@ -364,13 +374,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     st.add_argument(
         "--expert-weight",
-        type=float,
+        type=number(0.0, 1000.0),
         default=None,
         help="weight of the expert's margin in the surrogate (0: none; default 2)",
     )
     st.add_argument(
         "--horizon-s",
-        type=float,
+        type=number(0.0, MAX_VERIFY_S, low_open=True),
         default=None,
         help="seconds of soft rollout (default: from the pair)",
     )
@@ -379,10 +389,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     st.add_argument("--methods", default="gradient,random,cmaes", metavar="M[,M...]",
                     help="search methods compared, of gradient, random, cmaes, hybrid "
                     "(draws, then descent from the best: docs/stress.md)")  # fmt: skip
-    st.add_argument("--hybrid-draws", type=int, default=8, metavar="N",
+    st.add_argument("--hybrid-draws", type=count(4096), default=8, metavar="N",
                     help="hybrid: uniform draws per restart before each descent")  # fmt: skip
-    st.add_argument("--hybrid-steps", type=int, default=8, metavar="N",
+    st.add_argument("--hybrid-steps", type=count(4096), default=8, metavar="N",
                     help="hybrid: Adam steps per descent")  # fmt: skip
-    st.add_argument("--seed", type=int, default=0, help="seed of every method's restarts")
+    st.add_argument("--seed", type=seed(), default=0, help="seed of every method's restarts")
     st.add_argument("--quiet", action="store_true", help="no progress lines")
     st.set_defaults(func=cmd_stress)

@@ -17,6 +17,7 @@ from collections.abc import Sequence
 from lantern_jax.commands import UsageError
 from lantern_jax.commands.common import load_selected_suite, resolve_policies, stage
 from lantern_jax.commands.runtime import add_cache_flag
+from lantern_jax.commands.values import seed
 from lantern_jax.constants import SUITE_ID
 
 
@@ -166,7 +167,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--verify", action="store_true", help="regenerate from the seed and compare every hash"
     )
     su.add_argument("--regenerate", metavar="PATH", help="write a freshly generated manifest")
-    su.add_argument("--seed", type=int, help="generation seed for --regenerate")
+    su.add_argument("--seed", type=seed(), help="generation seed for --regenerate")
     su.add_argument(
         "--validator",
         metavar="POLICY",

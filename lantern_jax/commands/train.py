@@ -25,6 +25,7 @@ from collections.abc import Sequence
 
 from lantern_jax.commands import UsageError
 from lantern_jax.commands.common import check_out
+from lantern_jax.commands.values import count, number, seed
 
 #: Keys of a ``[ppo]`` config and their types (:func:`lantern_jax.envs.train.train`'s
 #: arguments; every key is optional, its default that function's).
@@ -143,10 +144,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     tr.add_argument("--dataset", metavar="DIR",
                     help="dataset folder (overrides the config; [train] only)")  # fmt: skip
     tr.add_argument("--out", metavar="DIR", help="run folder (overrides the config)")
-    tr.add_argument("--epochs", type=int, metavar="N",
+    tr.add_argument("--epochs", type=count(), metavar="N",
                     help="epochs (overrides the config; [train] only)")  # fmt: skip
-    tr.add_argument("--minutes", type=float, metavar="M",
+    tr.add_argument("--minutes", type=number(0.0, 10**6, low_open=True), metavar="M",
                     help="wall-clock budget (overrides the config; [ppo] only)")  # fmt: skip
-    tr.add_argument("--seed", type=int, help="seed (overrides the config)")
+    tr.add_argument("--seed", type=seed(), help="seed (overrides the config)")
     tr.add_argument("--quiet", action="store_true", help="no progress bar")
     tr.set_defaults(func=cmd_train)

@@ -18,6 +18,7 @@ from lantern_jax.commands.common import (
     print_and_write,
     stage,
 )
+from lantern_jax.commands.values import count
 from lantern_jax.constants import SUITE_ID
 
 
@@ -25,7 +26,7 @@ def cmd_wording(args: argparse.Namespace, argv: Sequence[str]) -> int:
     """``lantern-jax wording``: the warning-wording table by ambiguity tier."""
     del argv
     policy = one_policy(args)
-    check_out(args.out)
+    check_out(args.out, owned=("wording.csv", "wording.md"))
     suite = load_selected_suite(args)
     stage(args, f"{policy} on {suite.suite_id} ({len(suite)} pairs): canonical and tiered "
                 "paraphrase warnings")  # fmt: skip
@@ -59,7 +60,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_one_policy(wo)
     wo.add_argument("--suite", default=SUITE_ID, metavar="ID|PATH", help="suite id or path")
     wo.add_argument(
-        "--pairs-per-family", type=int, metavar="N", help="only the first N pairs of each family"
+        "--pairs-per-family", type=count(), metavar="N",
+        help="only the first N pairs of each family",
     )
     wo.add_argument("--out", default="results/language", metavar="DIR", help="output folder")
     wo.add_argument("--quiet", action="store_true", help="no stage lines")

@@ -62,16 +62,35 @@ class SceneSpec:
     sha256: str
 
 
+#: m, how far a suite file's recorded ``route_2m`` may lie from the route its parameters build
+#: (the file rounds it to ``generate.ROUTE_DECIMALS`` decimals: 5e-4 m).
+ROUTE_2M_ATOL = 1e-3
+
+
 def _suite_routes(suite: Suite | None) -> dict[str, list[np.ndarray]]:
-    """Every suite pair's route samples (2 m, world frame) per family: the manifest's
-    ``route_2m`` where it records one, else built from the pair's parameters."""
+    """Every suite pair's route samples (2 m, world frame) per family, built from the pair's
+    parameters; a ``route_2m`` the suite file records is checked against them first.
+
+    Raises:
+        ValueError: naming the suite, the pair and the field when the recorded route is not the
+            one its parameters build (the file was edited).
+    """
     routes: dict[str, list[np.ndarray]] = {f: [] for f in family_codes.codes()}
     for p in suite.pairs if suite is not None else ():
+        with host_arrays():
+            built = route_samples(build_pair(p.params, validate=False)[0])
         if p.route_2m is not None:
-            routes[p.family].append(np.asarray(p.route_2m, np.float64))
-        else:
-            with host_arrays():
-                routes[p.family].append(route_samples(build_pair(p.params, validate=False)[0]))
+            recorded = np.asarray(p.route_2m, np.float64)
+            far = (recorded.shape != built.shape
+                   or float(np.max(np.abs(recorded - built))) > ROUTE_2M_ATOL)  # fmt: skip
+            if far:
+                off = ("another number of points" if recorded.shape != built.shape else
+                       f"{float(np.max(np.abs(recorded - built))):.3g} m off")  # fmt: skip
+                raise ValueError(
+                    f"suite {suite.suite_id}: pair {p.pair_id}: route_2m is not the route its "
+                    f"params build ({off}; tolerance {ROUTE_2M_ATOL:g} m): the file was edited"
+                )
+        routes[p.family].append(built)
     return routes
 
 

@@ -232,7 +232,7 @@ def check_output_folder(out_dir: str | os.PathLike) -> Path:
         lantern_jax.files.OutputFolderError: when it is a file, lies under a file, or cannot be
             written.
     """
-    return check_target_folder(out_dir)
+    return check_target_folder(out_dir, owned=OUTPUT_FILES)
 
 
 def _write_set(result: EvalResult, out: Path, extra_manifest: dict | None,

@@ -35,15 +35,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from lantern_jax.constants import KIND_STATIC, ROLE_BACKGROUND
+from lantern_jax.constants import KIND_STATIC, KNOT_S_RANGE, MAX_KNOTS, ROLE_BACKGROUND
 from lantern_jax.dynamics.adversary import CLASS_OF_KIND, set_track, zero_track
 from lantern_jax.scenarios.families_common import SCENE_SLOT
 from lantern_jax.scenarios.road import MAX_ACTORS
 from lantern_jax.world import Scenario
 
 ADVERSARY_FIELD = "adversary"
-MAX_KNOTS = 64  # knots per track
-KNOT_S_RANGE = (0.1, 2.0)  # s, knot length
 TRACK_KEYS = ("slot", "accel", "lateral")
 ACTOR_GROUPS = ("hazard", "background")
 NEAR_ROUTE_M = 20.0  # m, a background vehicle's path must come this close to the ego route

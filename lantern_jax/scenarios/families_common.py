@@ -29,10 +29,12 @@ import numpy as np
 
 from lantern_jax import family_codes
 from lantern_jax.constants import (
+    BACKGROUND_SLOTS,
     BIG,
     EGO_HALF_LENGTH,
     EGO_HALF_WIDTH,
     KIND_VEHICLE,
+    MAX_BACKGROUND,
     MOTION_IDM,
     ROLE_BACKGROUND,
 )
@@ -50,8 +52,6 @@ from lantern_jax.world import Scenario
 
 HAZARD_SLOT = 0
 SCENE_SLOT = 1
-BACKGROUND_SLOTS = range(2, 7)
-MAX_BACKGROUND = len(BACKGROUND_SLOTS)
 FLOW_SLOTS = range(7, 10)
 
 #: The parameter that places each occluder (by name prefix), for error messages.

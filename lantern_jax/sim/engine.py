@@ -30,13 +30,19 @@ import numpy as np
 from lantern_jax import program_store
 from lantern_jax.constants import CONDITIONS, DT
 from lantern_jax.scenarios.ablations import get_ablation
-from lantern_jax.scenarios.suite import Suite, build_suite_batches
+from lantern_jax.scenarios.suite import Suite, build_suite_batches, load_suite
 from lantern_jax.scoring.metrics import finalize
 from lantern_jax.sim.distributed import placement
 from lantern_jax.sim.programs import MAX_PROGRAMS, available, executable, remember  # noqa: F401
 from lantern_jax.sim.rollout import rollout_scheduled_parallel, with_carry
 from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings, default_settings
-from lantern_jax.sim.split import initial_states, run_split, start_states, world_ready
+from lantern_jax.sim.split import (
+    initial_states,
+    prepare,
+    run_split,
+    start_states,
+    world_ready,
+)
 from lantern_jax.sim.step import Driver
 from lantern_jax.sim.switch import PolicySwitch
 from lantern_jax.world import Scenario, trim_padding
@@ -461,6 +467,22 @@ class _FusedCall:
         if timings is not None:
             timings["rollout"] = time.perf_counter() - t0 - t_compile
         return final, t_compile
+
+
+def warm_world(suite: Suite | str | None = None, settings: Settings | None = None) -> float:
+    """Compile (or load) the world program of a suite's batch shape (the split path's,
+    :mod:`lantern_jax.sim.split`) and keep it in the program store for every later process;
+    returns the seconds it took.
+
+    Args:
+        suite: a :class:`~lantern_jax.scenarios.suite.Suite` or suite id (default: the built-in
+            suite, whose batch shape every subset of it shares).
+        settings: default :func:`~lantern_jax.sim.settings.default_settings`.
+    """
+    if suite is None or isinstance(suite, str):
+        suite = load_suite() if suite is None else load_suite(suite)
+    execs = build_executions(suite, bucket=True)
+    return prepare([], execs.scenarios, settings or default_settings())["programs"]
 
 
 def check_texts(settings: Settings, scenarios: Scenario) -> None:

@@ -21,7 +21,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from lantern_jax.constants import ROUTE_A_GATE_NAMES
+from lantern_jax.constants import DT, MAX_VERIFY_S, ROUTE_A_GATE_NAMES
 from lantern_jax.dynamics.adversary import limits_of_kind
 from lantern_jax.scoring.cus import pair_components
 from lantern_jax.sim.engine import remember
@@ -31,8 +31,7 @@ from lantern_jax.stress.watch import hard_batch
 
 FAIL_BELOW_CUS = rules.FAIL_BELOW_CUS
 ROUTE_A_GATES = ROUTE_A_GATE_NAMES  # the five gates of a Route A execution
-MAX_VERIFY_TICKS = 1800  # ticks (90 s) >= the longest route timeout (20 s + 164 m / 3 m/s);
-#                          each execution still ends at its own timeout, and the batch exits early
+MAX_VERIFY_TICKS = int(round(MAX_VERIFY_S / DT))  # ticks; the batch exits early
 
 
 @dataclasses.dataclass

@@ -1,0 +1,363 @@
+"""Bad inputs, third round: a result folder is evidence, user code is a guest, and nothing the
+project did not write is ever touched (see ``docs/reproducibility.md``, bad inputs).
+
+Every case here failed before: a user file that calls ``sys.exit`` ended the tool with exit
+0; ``compare`` took a tampered or truncated CSV and ignored the protocol; a user's folder named
+like a result file was deleted; a negative bootstrap seed was refused only after the
+evaluation; a ``Policy`` could take a registered name through the API; two families files of
+one name were one module; an edited ``route_2m`` was read without a check.  The principle tests
+run every numeric option of every command at a bad value (refused by argparse, before anything
+is loaded) and every writing command into a folder pre-filled with user entries named like its
+outputs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import csv
+import io
+import json
+import shutil
+import time
+import types
+from pathlib import Path
+
+import pytest
+
+from lantern_jax import cli
+from lantern_jax.commands import families as families_cmd
+from lantern_jax.user_code import UserCodeError, as_guest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def run_cli(argv: list[str]) -> types.SimpleNamespace:
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        rc = cli.main(argv)
+    return types.SimpleNamespace(rc=rc, out=out.getvalue(), err=err.getvalue())
+
+
+# ---------------------------------------------------------------------------------------------
+# user code is a guest
+# ---------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("body, said", [
+    ("import sys\nsys.exit(0)\n", "sys.exit(0)"),
+    ("raise SystemExit(3)\n", "sys.exit(3)"),
+    ("raise KeyboardInterrupt\n", "raised KeyboardInterrupt itself"),
+    ("import argparse\nargparse.ArgumentParser().parse_args(['--nope'])\n", "sys.exit(2)"),
+])  # fmt: skip
+def test_a_policy_file_that_exits_is_refused_naming_the_file(tmp_path, body, said):
+    path = tmp_path / "exit0.py"
+    path.write_text(body)
+    r = run_cli(["evaluate", "--policy", f"{path}:POLICY", "--pairs", "pe_0001", "--out",
+                 str(tmp_path / "r")])  # fmt: skip
+    assert r.rc == 2, r.err
+    assert "exit0.py" in r.err and said in r.err
+    assert not (tmp_path / "r").exists()
+
+
+def test_sys_exit_named_as_a_policy_is_refused():
+    r = run_cli(["evaluate", "--policy", "sys:exit", "--pairs", "pe_0001"])
+    assert r.rc == 2 and "sys.exit" in r.err, r.err
+
+
+def test_a_families_file_that_exits_is_refused(tmp_path):
+    path = tmp_path / "fam.py"
+    path.write_text("import sys\nsys.exit(3)\n")
+    r = run_cli(["--families", str(path), "suite", "--list"])
+    assert r.rc == 2 and "fam.py" in r.err and "sys.exit(3)" in r.err, r.err
+
+
+def test_what_user_code_prints_goes_to_standard_error_named(capsys):
+    def noisy():
+        print("hello from the file")
+        return 7
+
+    assert as_guest("policy file x.py", noisy) == 7
+    captured = capsys.readouterr()
+    assert captured.out == "" and "[policy file x.py] hello from the file" in captured.err
+
+
+def test_a_guest_sees_its_own_name_as_argv():
+    import sys
+
+    seen = {}
+    as_guest("file", lambda: seen.setdefault("argv", list(sys.argv)), argv0="/x/my.py")
+    assert seen["argv"] == ["/x/my.py"]
+    with pytest.raises(UserCodeError, match="file: ValueError: bad"):
+        as_guest("file", lambda: (_ for _ in ()).throw(ValueError("bad")))
+
+
+def test_two_families_files_of_one_name_in_two_folders_are_two_modules(tmp_path):
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    for d in ("a", "b"):
+        (tmp_path / d / "fams.py").write_text(f"ORIGIN = {d!r}\n")
+    names = families_cmd.load([str(tmp_path / "a" / "fams.py"), str(tmp_path / "b" / "fams.py")])
+    import sys
+
+    assert names[0] != names[1]
+    assert [sys.modules[n].ORIGIN for n in names] == ["a", "b"]
+    # the same file again is the same module, imported once
+    assert families_cmd.load([str(tmp_path / "a" / "fams.py")]) == names[:1]
+
+
+# ---------------------------------------------------------------------------------------------
+# arguments checked before anything runs
+# ---------------------------------------------------------------------------------------------
+def _numeric_options() -> list[tuple[str, str, str]]:
+    """(command, option, converter kind) of every numeric option of every command."""
+    parser = cli.build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    out = []
+    for name, command in sorted(sub.choices.items()):
+        for action in command._actions:
+            kind = getattr(action.type, "__name__", "")
+            if action.option_strings and kind in ("whole number", "number", "int", "float"):
+                out.append((name, action.option_strings[0], kind))
+    return out
+
+
+NUMERIC = _numeric_options()
+
+
+def test_every_numeric_option_has_a_checked_type():
+    assert len(NUMERIC) >= 30
+    plain = [(c, o) for c, o, k in NUMERIC if k in ("int", "float")]
+    assert not plain, f"options with an unchecked int/float type: {plain}"
+
+
+@pytest.mark.parametrize("command, option, kind", NUMERIC)
+def test_every_numeric_option_refuses_bad_values_before_running(command, option, kind):
+    bad = ["-1", str(2**70), "abc", "1e400"] + (["nan", "inf"] if kind == "number" else ["1.5"])
+    for value in bad:
+        t0 = time.perf_counter()
+        argv = [command, f"{option}={value}"]
+        r = run_cli(argv)
+        assert r.rc == 2, (argv, r.err)
+        assert option in r.err, (argv, r.err)
+        assert time.perf_counter() - t0 < 10.0
+
+
+def test_a_negative_bootstrap_seed_is_refused_by_the_api_before_compiling(monkeypatch):
+    from lantern_jax import evaluation
+    from lantern_jax.scenarios.suite import load_suite
+
+    def refuse(*a, **k):
+        raise AssertionError("evaluation started")
+
+    monkeypatch.setattr(evaluation, "build_executions", refuse)
+    for seed in (-1, 2**70, 1.5, True):
+        with pytest.raises(ValueError, match="bootstrap_seed"):
+            evaluation.evaluate(["coop"], suite=load_suite().subset(1), bootstrap_seed=seed,
+                                progress=False)  # fmt: skip
+
+
+def test_a_policy_object_cannot_take_a_registered_name(monkeypatch):
+    import lantern_jax as lj
+    from lantern_jax import evaluation
+    from lantern_jax.policies.registry import get_policy
+    from lantern_jax.scenarios.suite import load_suite
+
+    monkeypatch.setattr(evaluation, "build_executions", lambda *a, **k: 1 / 0)
+    impostor = lj.Policy("expert", init=lambda key: None, act=get_policy("ego").act)
+    with pytest.raises(ValueError, match="'expert' is a registered policy's"):
+        evaluation.evaluate([impostor], suite=load_suite().subset(1), progress=False)
+    # the registered policy itself, as an object, is of course accepted
+    evaluation._policies_to_run([get_policy("expert")], load_suite().subset(1))
+
+
+# ---------------------------------------------------------------------------------------------
+# a result folder is evidence
+# ---------------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def result_set(tmp_path_factory):
+    """A real result set of two policies on one pair (written by ``evaluate``)."""
+    out = tmp_path_factory.mktemp("evidence") / "r"
+    r = run_cli(["evaluate", "--policy", "ego,coop", "--pairs", "pe_0001", "--out", str(out),
+                 "--quiet"])  # fmt: skip
+    assert r.rc == 0, r.err
+    return out
+
+
+def _copy(src: Path, dst: Path) -> Path:
+    shutil.copytree(src, dst)
+    return dst
+
+
+def _edit_csv(path: Path, column: str, value: str) -> None:
+    rows = list(csv.reader(path.open()))
+    i = rows[0].index(column)
+    for row in rows[1:]:
+        row[i] = value
+    with path.open("w", newline="") as fh:
+        csv.writer(fh, lineterminator="\n").writerows(rows)
+
+
+@pytest.mark.parametrize("value", ["500", "nan"])
+def test_compare_refuses_a_tampered_route_csv(result_set, tmp_path, value):
+    b = _copy(result_set, tmp_path / "b")
+    _edit_csv(b / "route_level_results.csv", "CUS", value)
+    r = run_cli(["compare", str(result_set), str(b), "--policy", "coop", "--out",
+                 str(tmp_path / "c")])  # fmt: skip
+    assert r.rc == 2 and ("SHA-256" in r.err or "bytes" in r.err), r.err
+    assert not (tmp_path / "c").exists()
+
+
+def test_compare_refuses_a_tampered_csv_even_when_the_manifest_is_rehashed(result_set, tmp_path):
+    """A careful forger who rewrites the manifest's hash still meets the schema's range."""
+    import hashlib
+
+    b = _copy(result_set, tmp_path / "b")
+    csv_path = b / "route_level_results.csv"
+    _edit_csv(csv_path, "CUS", "500")
+    manifest = json.loads((b / "reproducibility_manifest.json").read_text())
+    raw = csv_path.read_bytes()
+    for entry in manifest["files"]:
+        if entry["name"] == csv_path.name:
+            entry.update(sha256=hashlib.sha256(raw).hexdigest(), bytes=len(raw))
+    (b / "reproducibility_manifest.json").write_text(json.dumps(manifest))
+    r = run_cli(["compare", str(b), "--policy", "coop", "--policy", "ego", "--out",
+                 str(tmp_path / "c")])  # fmt: skip
+    assert r.rc == 2 and "CUS must lie in [0, 100]" in r.err, r.err
+
+
+def test_compare_refuses_a_route_csv_cut_short(result_set, tmp_path):
+    b = _copy(result_set, tmp_path / "b")
+    lines = (b / "route_level_results.csv").read_text().splitlines(keepends=True)
+    (b / "route_level_results.csv").write_text("".join(lines[:2]))
+    r = run_cli(["compare", str(result_set), str(b), "--policy", "coop", "--out",
+                 str(tmp_path / "c")])  # fmt: skip
+    assert r.rc == 2 and "cut short" in r.err, r.err
+
+
+def test_compare_refuses_two_protocols_unless_accepted(result_set, tmp_path):
+    """A late-onset ablation run against a normal run is another protocol, not a policy
+    difference: refused, or compared with the difference named above the table."""
+    b = tmp_path / "late"
+    r = run_cli(["evaluate", "--policy", "coop", "--pairs", "pe_0001", "--ablation",
+                 "late_onset", "--out", str(b), "--quiet"])  # fmt: skip
+    assert r.rc == 0, r.err
+    r = run_cli(["compare", str(result_set), str(b), "--policy", "coop", "--out",
+                 str(tmp_path / "c")])  # fmt: skip
+    assert r.rc == 2 and "ablation: 'none' vs 'late_onset'" in r.err, r.err
+    r = run_cli(["compare", str(result_set), str(b), "--policy", "coop", "--out",
+                 str(tmp_path / "c"), "--accept-protocol-difference"])  # fmt: skip
+    assert r.rc == 0, r.err
+    assert r.out.splitlines()[0].startswith("protocol differs (accepted): ablation")
+    assert "protocol differs (accepted)" in (tmp_path / "c" / "comparison.md").read_text()
+
+
+def test_compare_refuses_a_policy_or_a_set_compared_with_itself(result_set, tmp_path):
+    r = run_cli(["compare", str(result_set), "--policy", "coop", "--policy", "coop"])
+    assert r.rc == 2 and "compared with itself" in r.err
+    r = run_cli(["compare", str(result_set), str(result_set), "--policy", "coop"])
+    assert r.rc == 2 and "the same result set" in r.err
+
+
+def test_compare_refuses_a_folder_without_its_manifest(result_set, tmp_path):
+    b = _copy(result_set, tmp_path / "b")
+    (b / "reproducibility_manifest.json").unlink()
+    r = run_cli(["compare", str(b), "--policy", "coop", "--policy", "ego"])
+    assert r.rc == 2 and "no reproducibility_manifest.json beside it" in r.err, r.err
+    (b / "reproducibility_manifest.json").write_text("{not json")
+    r = run_cli(["compare", str(b), "--policy", "coop", "--policy", "ego"])
+    assert r.rc == 2 and "not a readable manifest" in r.err, r.err
+
+
+# ---------------------------------------------------------------------------------------------
+# nothing the project did not write is touched
+# ---------------------------------------------------------------------------------------------
+def _prefill(folder: Path, names) -> dict[Path, bytes]:
+    """A folder of the user's: an entry named like every output (a folder holding a note),
+    and a file of its own; returns every user byte."""
+    folder.mkdir(parents=True)
+    kept = {}
+    for name in names:
+        (folder / name).mkdir()
+        note = folder / name / "my_notes.txt"
+        note.write_text(f"keep {name}")
+        kept[note] = note.read_bytes()
+    mine = folder / "mine.txt"
+    mine.write_text("my own file")
+    kept[mine] = mine.read_bytes()
+    return kept
+
+
+def _all_kept(kept: dict[Path, bytes]) -> bool:
+    return all(p.is_file() and p.read_bytes() == b for p, b in kept.items())
+
+
+def test_a_user_folder_named_like_a_result_file_is_never_deleted(tmp_path):
+    from lantern_jax.report import OUTPUT_FILES
+
+    out = tmp_path / "res"
+    kept = _prefill(out, ["family_cus.csv"])
+    r = run_cli(["evaluate", "--policy", "ego", "--pairs", "pe_0001", "--out", str(out)])
+    assert r.rc == 2 and "family_cus.csv is a folder" in r.err, r.err
+    assert _all_kept(kept)
+    assert not any((out / n).is_file() for n in OUTPUT_FILES)
+
+
+@pytest.mark.parametrize("argv, names", [
+    (["evaluate", "--policy", "ego", "--pairs", "pe_0001"], "OUTPUT_FILES"),
+    (["ablations", "--policy", "ego", "--pairs", "pe_0001"], "ABLATION_FILES"),
+    (["wording", "--policy", "coop", "--pairs-per-family", "1"], ("wording.csv", "wording.md")),
+    (["stress", "--family", "PE", "--policy", "ego"], "STRESS"),
+    (["compare", "RESULT", "--policy", "coop", "--policy", "ego"],
+     ("comparison.md", "comparison.csv")),
+])  # fmt: skip
+def test_every_writing_command_keeps_the_user_entries_named_like_its_outputs(
+    tmp_path, argv, names, result_set
+):
+    from lantern_jax.report.outputs import ABLATION_FILES, OUTPUT_FILES
+    from lantern_jax.stress.report import RESULT_FILES
+
+    names = {"OUTPUT_FILES": OUTPUT_FILES, "ABLATION_FILES": ABLATION_FILES,
+             "STRESS": RESULT_FILES}.get(names, names)  # fmt: skip
+    out = tmp_path / "out"
+    kept = _prefill(out, names)
+    argv = [str(result_set) if a == "RESULT" else a for a in argv]
+    t0 = time.perf_counter()
+    r = run_cli([*argv, "--out", str(out)])
+    assert r.rc == 2 and "is a folder" in r.err, r.err
+    assert time.perf_counter() - t0 < 10.0  # refused before anything ran
+    assert _all_kept(kept)
+
+
+def test_a_staged_set_refuses_a_user_folder_at_commit_time_too(tmp_path):
+    """Writers that check no folder up front still never replace a user's entry."""
+    from lantern_jax.files import OutputFolderError, StagedFolder, atomic_write
+
+    out = tmp_path / "t"
+    kept = _prefill(out, ["a.csv"])
+    with pytest.raises(OutputFolderError, match="a.csv is a folder"):
+        with StagedFolder(out, ("a.csv", "b.md")) as stage:
+            atomic_write(stage.path / "a.csv", b"x")
+            stage.commit()
+    assert _all_kept(kept)
+
+
+# ---------------------------------------------------------------------------------------------
+# every field of a file is covered by a hash or checked
+# ---------------------------------------------------------------------------------------------
+def test_a_suite_with_an_edited_route_2m_is_refused_where_the_route_is_read():
+    from lantern_jax.dataset.scenes import _suite_routes
+    from lantern_jax.scenarios.suite import load_suite
+
+    suite = load_suite().select(["pe_0001", "vc_0001"])
+    assert _suite_routes(suite)  # the recorded routes are the ones the parameters build
+    shifted = [p.route_2m for p in suite.pairs]
+    shifted[1] = [[x + 5.0, y] for x, y in shifted[1]]
+    edited = dataclasses_replace_pairs(suite, shifted)
+    with pytest.raises(ValueError, match="pair vc_0001: route_2m is not the route its params"):
+        _suite_routes(edited)
+
+
+def dataclasses_replace_pairs(suite, routes):
+    import dataclasses
+
+    pairs = [dataclasses.replace(p, route_2m=r) for p, r in zip(suite.pairs, routes, strict=True)]
+    return dataclasses.replace(suite, pairs=pairs)
