@@ -34,7 +34,13 @@ import pandas as pd
 from lantern_jax.checks import check_seed
 from lantern_jax.constants import CONDITIONS, DT, SUITE_ID
 from lantern_jax.policies.base import Policy, check_policy_output
-from lantern_jax.policies.registry import get_policy, policy_names, policy_source
+from lantern_jax.policies.external import is_policy_source
+from lantern_jax.policies.registry import (
+    get_policy,
+    policy_names,
+    policy_source,
+    register_policy_source,
+)
 from lantern_jax.scenarios.ablations import ablation_names
 from lantern_jax.scenarios.suite import Suite, load_suite
 from lantern_jax.scoring.aggregate import (
@@ -207,6 +213,48 @@ def run_policy(
     )
 
 
+#: Hints for errors a policy's own code commonly raises while JAX traces it.
+_HINTS = {
+    "TracerBoolConversionError": "a Python `if`/`and`/`or` on an array value: write it with "
+    "jnp.where(condition, a, b) (or jax.lax.cond), which JAX can trace",
+    "ConcretizationTypeError": "a Python value needed from an array (an `if`, `int()`, a "
+    "shape): use jnp.where / jax.lax.cond, and shapes that do not depend on array values",
+    "TracerIntegerConversionError": "an array used as a Python int (an index into a list, "
+    "range()): index arrays with jnp.take or x[i] on a jnp array",
+}
+
+
+def _user_frame(e: BaseException) -> str:
+    """``file.py:LINE`` of the innermost frame of ``e``'s traceback outside JAX and this
+    package (the user's own code), or ""."""
+    import traceback
+
+    here = os.path.dirname(os.path.abspath(__file__))
+    found = ""
+    for frame in traceback.extract_tb(e.__traceback__):
+        name = os.path.abspath(frame.filename)
+        lib = name.startswith(here) or f"{os.sep}site-packages{os.sep}" in name
+        if not lib and "<frozen" not in name:
+            found = f"{os.path.basename(name)}:{frame.lineno}"
+    return found
+
+
+def explain_failure(e: BaseException) -> str:
+    """One line for a policy's failure: the error's type and first (and last) message line,
+    where in the user's code it happened, and a hint for the errors tracing commonly raises."""
+    lines = str(e).strip().splitlines() or [""]
+    why = lines[0] if len(lines) == 1 else f"{lines[0]} ... {lines[-1]}"
+    text = f"{type(e).__name__}: {why}"
+    where = _user_frame(e)
+    if where:
+        text += f" (at {where})"
+    hint = _HINTS.get(type(e).__name__)
+    if hint is None and isinstance(e, AttributeError) and "'NoneType'" in str(e):
+        hint = ("obs.privileged and obs.surround are None unless the policy declares the "
+                "'privileged' / 'surround_rig' sensor (Policy(..., sensors=(...)))")  # fmt: skip
+    return f"{text}; hint: {hint}" if hint else text
+
+
 class PolicyError(ValueError):
     """A policy that cannot be evaluated: its ``act`` failed while being traced, compiled or
     run, or returned the wrong shape; the message names the policy."""
@@ -253,7 +301,7 @@ class EvalResult:
         return write_outputs(self, folder, run_record=run_record)
 
 
-def _policies_to_run(policies, suite) -> list[Policy]:
+def _policies_to_run(policies, suite, settings_given: Any = None) -> list[Policy]:
     """Resolve policy names and refuse inputs that cannot give a well-keyed result."""
     if isinstance(policies, str | Policy):
         policies = [policies]
@@ -261,6 +309,9 @@ def _policies_to_run(policies, suite) -> list[Policy]:
     if not policies:
         raise ValueError("evaluate: no policies given")
     names = [p if isinstance(p, str) else getattr(p, "name", repr(p)) for p in policies]
+    if settings_given is not None and not isinstance(settings_given, Settings):
+        raise TypeError(f"evaluate: settings must be a lantern_jax.Settings, got "
+                        f"{type(settings_given).__name__}")  # fmt: skip
     twice = sorted({n for n in names if names.count(n) > 1})
     if twice:
         raise ValueError(
@@ -269,13 +320,27 @@ def _policies_to_run(policies, suite) -> list[Policy]:
         )
     if isinstance(suite, Suite) and not suite.pairs:
         raise ValueError(f"evaluate: suite {suite.suite_id!r} has no pairs")
+    out = []
     for p in policies:
         if not isinstance(p, str | Policy):
             raise TypeError(f"evaluate: a policy is a registered name or a Policy, got "
                             f"{type(p).__name__} {p!r}")  # fmt: skip
-        if isinstance(p, Policy) and p.name in policy_names():
-            _check_not_impostor(p)
-    return [get_policy(p) if isinstance(p, str) else p for p in policies]
+        if isinstance(p, str) and is_policy_source(p):  # file.py:NAME or package.module:attr
+            p = register_policy_source(p)
+        if isinstance(p, Policy):
+            bad = sorted({c for c in p.name if c in NAME_BREAKERS or not c.isprintable()})
+            if bad:
+                raise ValueError(f"evaluate: policy name {p.name!r} holds {bad}, which break "
+                                 "the result tables and the command line's lists")  # fmt: skip
+            if p.name in policy_names():
+                _check_not_impostor(p)
+        out.append(get_policy(p) if isinstance(p, str) else p)
+    return out
+
+
+#: Characters a policy's name may not hold: they split the command line's lists (``,``) and
+#: the Markdown tables (``|``).
+NAME_BREAKERS = (",", "|")
 
 
 def _check_not_impostor(pol: Policy) -> None:
@@ -355,11 +420,9 @@ def _run_all(pols: list[Policy], policy_params: list, execs: Executions, suite_i
                                        stage=stage, path=choice))  # fmt: skip
                 runs[-1].seconds_compile += prepared.get(pol.name, 0.0)
             except Exception as e:
-                lines = str(e).strip().splitlines() or [""]
-                why = lines[0] if len(lines) == 1 else f"{lines[0]} ... {lines[-1]}"
                 raise PolicyError(
                     f"policy {pol.name!r} failed while being traced or run on suite {suite_id}: "
-                    f"{type(e).__name__}: {why}"
+                    f"{explain_failure(e)}"
                 ) from e
             if bar is not None:
                 bar.update(1)
@@ -512,7 +575,7 @@ def evaluate(
             suite without pairs, or settings out of range.
         PolicyError: naming the policy whose ``act`` failed while traced or run.
     """
-    pols = _policies_to_run(policies, suite)
+    pols = _policies_to_run(policies, suite, settings)
     check_seed("evaluate: bootstrap_seed", bootstrap_seed)
     if path not in PATHS:
         raise ValueError(f"evaluate: path {path!r} is not one of {', '.join(PATHS)}")

@@ -328,6 +328,58 @@ def detokenize(
     return text
 
 
+def shifted_rows(tokens: Array, width: int) -> Array:
+    """(width, L) int32: row ``m`` is the token row shifted left by ``m``, -2 past its end (a
+    window's ``m``-th token at every start; static slices, no gather).  Traceable."""
+    n = tokens.shape[0]
+    ext = jnp.concatenate([tokens, jnp.full((width,), -2, tokens.dtype)])
+    return jnp.stack([ext[m : m + n] for m in range(width)])
+
+
+@functools.cache
+def word_spellings(word: str, root: str | None = None) -> np.ndarray:
+    """(S, M) int32: the token ids of every spelling :func:`mentions` looks for, padded with -1:
+    the word as given, lower case, capitalised and upper case, each also with ``s`` and ``es``
+    (a plural splits into other sub-words: ``pedestrians`` is not ``pedestrian`` + ``s``)."""
+    if not isinstance(word, str) or not word.strip():
+        raise ValueError(f"mentions: expected a word, got {word!r}")
+    w = word.strip()
+    forms = [w, w.lower(), w[:1].upper() + w[1:].lower(), w.upper()]
+    forms += [f + end for f in list(forms) for end in ("s", "es")]
+    tok = load_tokenizer(root)
+    rows = [tok.encode(f, add_special_tokens=False).ids for f in dict.fromkeys(forms)]
+    rows = [r for r in rows if r]
+    out = np.full((len(rows), max(map(len, rows))), -1, np.int32)
+    for i, r in enumerate(rows):
+        out[i, : len(r)] = r
+    return out
+
+
+def mentions(tokens: Array, word: str) -> Array:
+    """() bool: the warning (its padded token ids, ``obs.warning_tokens``) mentions ``word``.
+
+    Usable inside ``jit`` and ``vmap`` (``word`` is a Python string, tokenised once outside the
+    trace).  Case (``pedestrian``, ``Pedestrian``, ``PEDESTRIAN``) and a plural in ``s`` or
+    ``es`` are found, whatever sub-words the tokenizer splits each into::
+
+        from lantern_jax.language import mentions
+        slow = mentions(obs.warning_tokens, "pedestrian")    # in a policy's act
+
+    Limits: it matches token ids, not meaning -- a synonym (``walker``), a negation (``no
+    pedestrian``) or another inflection (``pedestrian's``) is not told apart; a word glued to
+    the character before it (no space) is tokenised differently and missed; a word inside a
+    longer one (``cyclist`` in ``cyclists``) is found.
+
+    Args:
+        tokens: (L,) int32, padded token ids.
+        word: the word (one or several words, as written).
+    """
+    table = jnp.asarray(word_spellings(word))  # (S, M)
+    k = table[:, :, None]  # (S, M, 1)
+    match = (shifted_rows(tokens, table.shape[1])[None] == k) | (k < 0)  # (S, M, L)
+    return jnp.any(jnp.all(match, axis=1))
+
+
 def word_mask(tokens: Array) -> Array:
     """(..., L) bool: the word tokens of padded token rows (neither padding nor a number)."""
     return (tokens != PAD_ID) & (tokens != NUMBER_ID)

@@ -113,6 +113,28 @@ def shell_commands(path: Path) -> list[tuple[int, list[str]]]:
 
 COMMANDS = [(p, line, argv) for p in PAGES for line, argv in shell_commands(p)]
 
+#: Commands of the project's environment that a page's shell blocks run: written one way only,
+#: from the project's virtual environment (``.venv/bin/NAME``), as the README's first commands.
+VENV_COMMANDS = ("lantern-jax", "python", "pip", "sphinx-build", "pytest")
+
+
+def test_every_page_writes_commands_one_way():
+    """Every command of the environment in a shell block is ``.venv/bin/NAME`` (never a bare
+    ``lantern-jax`` or ``python`` that only works in an activated environment)."""
+    bare = []
+    for p in PAGES:
+        for b in blocks(p):
+            if b["lang"] not in SHELL or b["skip"]:
+                continue
+            for k, line in enumerate(b["code"].replace("\\\n", " ").splitlines()):
+                for part in re.split(r"&&|\|\||;|\|", line):
+                    words = shlex.split(part, comments=True)
+                    while words and re.match(r"^[A-Za-z_][A-Za-z0-9_]*=", words[0]):
+                        words = words[1:]
+                    if words and words[0] in VENV_COMMANDS:
+                        bare.append(f"{_rel(p)}:{b['line'] + k}: {words[0]}")
+    assert not bare, f"write .venv/bin/NAME: {bare}"
+
 
 def test_the_pages_show_commands():
     assert len(COMMANDS) >= 30

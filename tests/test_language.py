@@ -260,3 +260,17 @@ def test_paraphrases_embed_closer_to_their_template_than_non_actionable_texts(ta
     for f in range(len(TEMPLATES)):
         para = emb[warnings.paraphrase_text_id(f)]
         assert emb[f] @ para > float(np.mean(na @ emb[f])), f
+
+
+def test_mentions_finds_a_word_in_any_case_and_plural_inside_jit():
+    """``language.mentions`` matches the word's token ids whatever sub-words the tokenizer
+    splits a spelling into (``pedestrians`` is not ``pedestrian`` + ``s``), and nothing else."""
+    from lantern_jax.language import mentions, pad, tokenize
+
+    found = jax.jit(jax.vmap(lambda t: mentions(t, "pedestrian")))
+    texts = ["A pedestrian may step out.", "PEDESTRIAN ahead", "Pedestrians near the bus stop.",
+             "A cyclist may cut in.", "", "The ego lane is blocked."]  # fmt: skip
+    rows = jnp.asarray(np.stack([pad(tokenize(t)) for t in texts]))
+    assert np.asarray(found(rows)).tolist() == [True, True, True, False, False, False]
+    with pytest.raises(ValueError, match="expected a word"):
+        mentions(rows[0], " ")

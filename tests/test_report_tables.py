@@ -58,3 +58,20 @@ def test_a_one_iteration_trace_is_visible_in_the_convergence_plot():
     lines = [ln for ln in fig.axes[0].get_lines() if ln.get_label() == "gradient"]
     assert len(lines) == 1 and lines[0].get_marker() == "o"
     assert list(lines[0].get_ydata()) == [72.0]
+
+
+def test_format_family_table_of_a_result_renders_as_the_command_line():
+    """Given the evaluation itself, the family table is the command line's: title, the policies
+    in the order given, intervals with their pairs per column, and the legend."""
+    import lantern_jax as lj
+    from lantern_jax.report import format_family_table, format_tables
+
+    result = lj.evaluate(["coop", "ego"], suite=lj.load_suite().select(["pe_0001", "vc_0001"]),
+                         progress=False)  # fmt: skip
+    text = format_family_table(result)
+    lines = text.splitlines()
+    assert lines[0].startswith("Per-family CUS  (suite lantern-v3, 2 pairs, ablation none")
+    assert "n=1" in lines[1] and "[" in lines[3]
+    rows = [ln.split("  ")[0] for ln in lines[3:9]]
+    assert rows[0].startswith("coop (warning)") and rows[3].startswith("ego (warning)")
+    assert text in format_tables(result)

@@ -177,3 +177,25 @@ def test_num_valid_ticks():
     assert num_valid_ticks(rec) == 3
     rec = types.SimpleNamespace(done=np.zeros(5, bool))
     assert num_valid_ticks(rec) == 5
+
+
+def test_timeline_axes_show_a_constant_speed_and_keep_ripple_small(pe_runs):
+    """A run at one constant speed and a ripple of 1e-3 m/s^2: the speed line sits inside the
+    frame (not on its edge), the acceleration axis spans at least +-1 m/s^2 (ripple is not drawn
+    as braking), and every line style drawn has a legend entry."""
+    n = num_valid_ticks(pe_runs.rec_w)
+    flat = pe_runs.rec_w.replace(
+        ego_speed=jnp.full_like(pe_runs.rec_w.ego_speed, 8.0),
+        ego_accel=jnp.asarray(1e-3 * np.sin(np.arange(len(pe_runs.rec_w.ego_accel))),
+                              jnp.float32),
+    )  # fmt: skip
+    fig = timeline_plot(flat, flat, pe_runs.proto_w, pe_runs.proto_nw)
+    ax_v, ax_a = fig.axes
+    lo, hi = ax_v.get_ylim()
+    assert lo <= 0.0 and hi > 8.0 + 0.5, (lo, hi)
+    lo, hi = ax_a.get_ylim()
+    assert lo <= -1.0 and hi >= 1.0, (lo, hi)
+    labels = [t.get_text() for t in ax_v.get_legend().get_texts()]
+    styles = {ln.get_linestyle() for ln in ax_v.get_legend().get_lines()}
+    assert {"-", "--"} <= styles and "transition, no warning" in labels
+    assert n > 0

@@ -68,6 +68,8 @@ def resolve_policies(names: Sequence[str] | None, source: str = "--policy") -> l
     out: list[str] = []
     for name in split_values(names or ["all"]):
         for n in list(REFERENCE_POLICIES) if name == "all" else [name]:
+            if n.lower().endswith(".py") and os.path.isfile(n):
+                raise UsageError(f"{source}: {_file_without_name(n)}")
             if is_policy_source(n):  # a user's code: file.py:NAME or package.module:attr
                 try:
                     n = register_policy_source(n)
@@ -79,12 +81,36 @@ def resolve_policies(names: Sequence[str] | None, source: str = "--policy") -> l
                 raise UsageError(
                     f"{source}: unknown policy {n!r}; known policies: "
                     f"{', '.join(policy_names())} (or 'all' = {', '.join(REFERENCE_POLICIES)})"
+                    f"{_path_hint(names)}"
                 ) from None
             if n not in out:
                 out.append(n)
     if not out:
         raise UsageError(f"{source}: no policy given")
     return out
+
+
+def _file_without_name(path: str) -> str:
+    """What to say about a policy file given without ``:NAME``."""
+    from lantern_jax.policies.external import policies_in_file
+
+    try:
+        found = policies_in_file(path)
+    except ValueError as e:
+        return str(e)
+    listed = (f"it defines {', '.join(found)} (e.g. {path}:{found[0]})" if found else
+              "it defines no Policy object")  # fmt: skip
+    return f"a policy file is given as {path}:NAME, NAME the Policy to evaluate; {listed}"
+
+
+def _path_hint(values: Sequence[str] | None) -> str:
+    """A hint when a value looks like a policy file whose path holds ``,`` or ``:`` (commas
+    separate policies, the colon separates the file from its NAME)."""
+    looks = [v for v in values or () if ".py" in v.lower() or "/" in v]
+    if not looks:
+        return ""
+    return ("; a policy file is given as path/to/file.py:NAME, and its path may hold no ',' or "
+            "':' (commas separate policies, the colon ends the path)")  # fmt: skip
 
 
 def _checkpoint_item(item: str) -> tuple[str | None, str]:

@@ -207,11 +207,16 @@ def cmd_stress(args: argparse.Namespace, argv: Sequence[str]) -> int:
     """Run the stress test and write its files; returns the exit code."""
     del argv
 
+    from lantern_jax.commands.common import resolve_policies
     from lantern_jax.constants import FAMILIES
     from lantern_jax.scenarios.suite import load_suite
     from lantern_jax.stress import report, search
     from lantern_jax.viz.stress import catalogue_figure, convergence_plot
 
+    policies = resolve_policies([args.policy])  # a registered name, or file.py:NAME
+    if len(policies) != 1:
+        raise UsageError(f"--policy: give one policy, got {', '.join(policies)}")
+    args.policy = policies[0]
     if args.family not in FAMILIES:
         raise UsageError(f"--family {args.family!r}: not one of {', '.join(FAMILIES)}")
     methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())

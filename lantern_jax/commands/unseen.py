@@ -31,14 +31,14 @@ def cmd_unseen(args: argparse.Namespace, argv: Sequence[str]) -> int:
     from tabulate import tabulate
 
     from lantern_jax import transfer
-    from lantern_jax.policies.registry import get_policy, policy_names
+    from lantern_jax.commands.common import resolve_policies
+    from lantern_jax.policies.registry import get_policy
     from lantern_jax.scenarios.suite import SuiteError, load_suite
 
-    try:
-        policy = get_policy(args.policy)
-    except KeyError:
-        raise UsageError(f"--policy: unknown policy {args.policy!r}; known policies: "
-                         f"{', '.join(policy_names())}") from None  # fmt: skip
+    names = resolve_policies([args.policy])  # a registered name, or file.py:NAME
+    if len(names) != 1:
+        raise UsageError(f"--policy: give one policy, got {', '.join(names)}")
+    policy = get_policy(names[0])
     check_out(args.out)
     try:
         suite = transfer.unseen_suite() if args.suite is None else load_suite(args.suite)

@@ -17,8 +17,15 @@ from __future__ import annotations
 
 from lantern_jax.envs.quiet import filtered_stdout
 
-with filtered_stdout():  # MJX's "Failed to import warp" lines (lantern_jax.envs.quiet)
-    from brax import envs as _brax_envs
+try:
+    with filtered_stdout():  # MJX's "Failed to import warp" lines (lantern_jax.envs.quiet)
+        from brax import envs as _brax_envs
+except ModuleNotFoundError as _missing:  # the plain install has no brax
+    raise ModuleNotFoundError(
+        f"lantern_jax.envs (the brax environment and the Gymnasium vector environment) needs "
+        f"the 'rl' extra: pip install -e '.[rl]' (or pip install 'lantern-jax[rl]'); "
+        f"{_missing}"
+    ) from _missing
 
 from lantern_jax.envs import compat  # noqa: E402
 from lantern_jax.envs.bank import ScenarioBank, build_bank

@@ -17,9 +17,12 @@ file between runs gives another module (and another hash in the manifest).
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import importlib
 import importlib.util
+import inspect
+import os
 import re
 import sys
 from pathlib import Path
@@ -40,7 +43,7 @@ def is_policy_source(spec: str) -> bool:
     if not isinstance(spec, str) or spec.count(":") != 1:
         return False
     where, _ = spec.split(":")
-    return where.endswith(".py") or bool(_MODULE.match(where))
+    return where.lower().endswith(".py") or bool(_MODULE.match(where))
 
 
 def _sha256(path: Path) -> str:
@@ -64,6 +67,54 @@ def _import_file(path: Path, digest: str) -> Any:
         del sys.modules[name]
         raise
     return module
+
+
+@contextlib.contextmanager
+def _working_folder_importable():
+    """The working folder on ``sys.path`` while a ``package.module`` is imported, as under
+    ``python -m`` (an installed ``lantern-jax`` script starts without it)."""
+    cwd = os.getcwd()
+    added = cwd not in sys.path and "" not in sys.path
+    if added:
+        sys.path.insert(0, cwd)
+    try:
+        yield
+    finally:
+        if added and cwd in sys.path:
+            sys.path.remove(cwd)
+
+
+def _required_parameters(fn: Any) -> str:
+    """The names of ``fn``'s parameters without defaults, comma-separated ("" for none, or when
+    its signature cannot be read)."""
+    try:
+        params = inspect.signature(fn).parameters.values()
+    except (TypeError, ValueError):
+        return ""
+    return ", ".join(p.name for p in params if p.default is p.empty
+                     and p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD))  # fmt: skip
+
+
+def _defined(module: Any) -> str:
+    """"; the file defines Policy objects: A, B" (or that it defines none)."""
+    names = sorted(k for k, v in vars(module).items() if isinstance(v, Policy))
+    if not names:
+        return "; the file defines no Policy object"
+    return f"; the file defines Policy object(s): {', '.join(names)}"
+
+
+def policies_in_file(path: str | os.PathLike) -> list[str]:
+    """The names of the Policy objects a policy file defines (the file is imported as a guest).
+
+    Raises:
+        ValueError: when the file cannot be imported.
+    """
+    file = Path(path).expanduser().resolve()
+    try:
+        module = _import_file(file, _sha256(file))
+    except UserCodeError as e:
+        raise ValueError(f"policy file {path}: importing it failed: {e}") from e
+    return sorted(k for k, v in vars(module).items() if isinstance(v, Policy))
 
 
 def load_policy_source(spec: str) -> tuple[Policy, dict]:
@@ -95,6 +146,9 @@ def load_policy_source(spec: str) -> tuple[Policy, dict]:
     where, attr = spec.split(":")
     if not _ATTR.match(attr):
         raise ValueError(f"policy source {spec!r}: {attr!r} is not a Python identifier")
+    if where.lower().endswith(".py") and not where.endswith(".py"):
+        raise ValueError(f"policy source {spec!r}: a policy file's name ends in '.py' (lower "
+                         f"case), got {Path(where).suffix!r}")  # fmt: skip
     if where.endswith(".py"):
         path = Path(where).expanduser().resolve()
         if not path.is_file():
@@ -108,7 +162,8 @@ def load_policy_source(spec: str) -> tuple[Policy, dict]:
     else:
         kind = "module"
         try:
-            module = as_guest(f"module {where}", importlib.import_module, where)
+            with _working_folder_importable():
+                module = as_guest(f"module {where}", importlib.import_module, where)
         except UserCodeError as e:
             raise ValueError(f"policy source {spec!r}: importing module {where!r} failed: "
                              f"{e}") from e  # fmt: skip
@@ -116,10 +171,16 @@ def load_policy_source(spec: str) -> tuple[Policy, dict]:
         path = Path(file).resolve() if file else None
         digest = _sha256(path) if path is not None and path.is_file() else None
     if not hasattr(module, attr):
-        raise ValueError(f"policy source {spec!r}: {where} defines no {attr!r}")
+        raise ValueError(f"policy source {spec!r}: {where} defines no {attr!r}{_defined(module)}")
     obj = getattr(module, attr)
     policy = obj
     if not isinstance(obj, Policy):
+        if callable(obj) and _required_parameters(obj):
+            raise TypeError(
+                f"policy source {spec!r}: {attr} is a function of ({_required_parameters(obj)}); "
+                "NAME must be a Policy, or a function with no argument returning one (wrap an "
+                f"act function in lantern_jax.Policy(...)){_defined(module)}"
+            )
         if not callable(obj):
             raise TypeError(f"policy source {spec!r}: {attr} is a {type(obj).__name__}, "
                             "expected a Policy or a function returning one")  # fmt: skip

@@ -99,25 +99,6 @@ def keyword_tables() -> tuple[np.ndarray, np.ndarray]:
     return ids, np.asarray(codes, np.int32)
 
 
-def _shifted(tokens: jax.Array, width: int) -> jax.Array:
-    """(width, L) int32: row ``m`` is the token row shifted left by ``m``, -2 past its end (a
-    window's ``m``-th token at every start; static slices, no gather)."""
-    n = tokens.shape[0]
-    ext = jnp.concatenate([tokens, jnp.full((width,), -2, tokens.dtype)])
-    return jnp.stack([ext[m : m + n] for m in range(width)])
-
-
-def contains(tokens: jax.Array, keyword: jax.Array) -> jax.Array:
-    """() bool: the token row contains the keyword's ids in a run.
-
-    Args:
-        tokens: (L,) int32, a text's padded token ids.
-        keyword: (M,) int32, the keyword's ids padded with -1.
-    """
-    match = (_shifted(tokens, keyword.shape[0]) == keyword[:, None]) | (keyword[:, None] < 0)
-    return jnp.any(jnp.all(match, axis=0))
-
-
 def text_response(tokens: jax.Array) -> jax.Array:
     """() int32: the response code the keyword rule gives a text (``SEM_NONE``: no keyword).
 
@@ -125,7 +106,7 @@ def text_response(tokens: jax.Array) -> jax.Array:
     of the shifted token rows, no gather (the policy runs this every tick)."""
     ids, codes = keyword_tables()
     k = jnp.asarray(ids)[:, :, None]  # (K, M, 1)
-    match = (_shifted(tokens, ids.shape[1])[None] == k) | (k < 0)  # (K, M, L)
+    match = (language.shifted_rows(tokens, ids.shape[1])[None] == k) | (k < 0)  # (K, M, L)
     hits = jnp.any(jnp.all(match, axis=1), axis=1)  # (K,)
     first = jnp.argmax(hits)
     return jnp.where(jnp.any(hits), jnp.asarray(codes)[first], SEM_NONE)

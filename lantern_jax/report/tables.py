@@ -185,13 +185,18 @@ def _interval_cell(rec: dict, iv: dict | None, column: str, signed: bool, style:
 
 
 def format_family_table(
-    df: pd.DataFrame, tablefmt: str = "simple", intervals: pd.DataFrame | None = None
-) -> str:
+    df: pd.DataFrame | EvalResult, tablefmt: str = "simple",
+    intervals: pd.DataFrame | None = None,
+) -> str:  # fmt: skip
     """Per-family CUS table as text.
 
+    Given an :class:`~lantern_jax.evaluation.EvalResult`, the table as the command line prints
+    it: its title (suite, pairs, ablation), the policies in the order they were given, every
+    cell with its interval and the pairs per column, and the intervals' legend.
+
     Args:
-        df: :attr:`EvalResult.family_table` (columns ``model, condition, PE, VC, OR, LWW, RWW,
-            RTY, Overall``; CUS points 0..100).
+        df: an :class:`EvalResult`, or its :attr:`EvalResult.family_table` (columns ``model,
+            condition, PE, VC, OR, LWW, RWW, RTY, Overall``; CUS points 0..100).
         tablefmt: a tabulate format (``"simple"`` for the terminal, ``"github"`` for Markdown).
         intervals: the family table's intervals (``EvalResult.intervals.family``); each cell
             then reads ``79.6 [76.1, 82.9]`` and the headers carry the pairs per cell.
@@ -200,6 +205,14 @@ def format_family_table(
         One row per ``model (condition)``, one decimal; ``warning gain`` rows carry a sign;
         ``-`` marks a family without pairs; :data:`FLAG` a cell of fewer than ``MIN_N`` pairs.
     """
+    if hasattr(df, "family_table") and hasattr(df, "manifest"):  # an EvalResult
+        result, iv = df, df.intervals
+        fam, _ = ordered_tables(result)
+        parts = [family_title(result.manifest),
+                 format_family_table(fam, tablefmt, iv.family if iv else None)]  # fmt: skip
+        if iv is not None:
+            parts.append(interval_note(result.manifest.get("intervals")))
+        return "\n".join(parts)
     df = _with_keys(df)
     columns = family_columns(df)
     missing = [c for c in columns if c not in df.columns]
@@ -337,6 +350,13 @@ def interval_display(df: pd.DataFrame, columns: Sequence[str], n: str | int) -> 
     return out.drop(columns=[x for c in columns for x in interval_columns(c)[:2]])
 
 
+def family_title(manifest: dict) -> str:
+    """The per-family CUS table's title line (suite, pairs, ablation)."""
+    m = manifest
+    return (f"Per-family CUS  (suite {m['suite_id']}, {m['num_pairs']} pairs, "
+            f"ablation {m['ablation']}; warning gain = warning - no-warning)")  # fmt: skip
+
+
 def format_tables(result: EvalResult) -> str:
     """The main command's three tables of an evaluation, with their intervals and legend: the
     per-family CUS, the decomposition (Route B efficiency beside it) and the premise."""
@@ -344,12 +364,12 @@ def format_tables(result: EvalResult) -> str:
     fam, dec = ordered_tables(result)
     iv = result.intervals
     parts = [
-        f"Per-family CUS  (suite {m['suite_id']}, {m['num_pairs']} pairs, "
-        f"ablation {m['ablation']}; warning gain = warning - no-warning)",
+        family_title(m),
         format_family_table(fam, intervals=iv.family if iv else None),
         "",
         "CUS decomposition  (components: mean x 100; Gate Pass and gate failures: % of pairs; "
-        "Route B efficiency beside the CUS: B-Time/Exp. % of the expert's time, B-Slow s "
+        "Route B efficiency beside the CUS: B-Time/Exp. % of the expert's time, - without the "
+        "expert in the run, B-Slow s "
         "below half the reference speed unjustified)",
         format_decomposition(dec, intervals=iv.decomposition if iv else None),
         "",

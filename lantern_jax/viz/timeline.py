@@ -69,6 +69,17 @@ def warning_interval(record: Any, protocol: Any) -> tuple[float, float] | None:
     return start, end
 
 
+#: The speed axis shows this share above the fastest speed plus ``SPEED_PAD_MPS`` (m/s), so a
+#: constant-speed line is never drawn on the frame's edge.
+SPEED_HEADROOM = 0.08
+SPEED_PAD_MPS = 0.5
+#: m/s^2: the acceleration axis spans at least +-this, so numerical ripple around zero is not
+#: drawn as braking.
+MIN_ACCEL_SPAN = 1.0
+#: The colour of the legend's two transition-line styles (solid: warning run, dashed: not).
+EVENT_KEY_COLOR = "#555555"
+
+
 def _legend(ax_v: Any, shaded: bool, collided: bool) -> None:
     """The timeline's legend, right of the speed axes: the two runs, the warning's delivery
     (when ``shaded``), the protocol's transitions and (when ``collided``) the collision."""
@@ -78,6 +89,8 @@ def _legend(ax_v: Any, shaded: bool, collided: bool) -> None:
             Line2D([], [], color=SHADE_COLOR, alpha=0.6, lw=8, label="warning delivered")
         )
     handles += [Line2D([], [], color=c, lw=1.1, label=lab) for _, lab, c in EVENT_LINES]
+    handles += [Line2D([], [], color=EVENT_KEY_COLOR, lw=1.1, ls=ls, label=f"transition, {lab}")
+                for _, lab, _, ls in RUN_STYLES]  # fmt: skip
     if collided:
         handles.append(
             Line2D([], [], color=COLLISION_COLOR, lw=2.0, marker="X", ms=8, label="collision")
@@ -162,7 +175,10 @@ def timeline_plot(
     ax_a.set_ylabel("long. accel. (m/s$^2$)")
     ax_a.set_xlabel("time (s)")
     ax_a.set_xlim(0.0, max(t_max, DT))
-    ax_v.set_ylim(bottom=min(0.0, ax_v.get_ylim()[0]))
+    v_top = max(float(np.max(recs[k].ego_speed[: num_valid_ticks(recs[k])])) for k in recs)
+    ax_v.set_ylim(min(0.0, ax_v.get_ylim()[0]), v_top * (1.0 + SPEED_HEADROOM) + SPEED_PAD_MPS)
+    lo, hi = ax_a.get_ylim()
+    ax_a.set_ylim(min(lo, -MIN_ACCEL_SPAN), max(hi, MIN_ACCEL_SPAN))
     for ax in (ax_v, ax_a):
         ax.grid(alpha=0.3, lw=0.5)
         ax.tick_params(labelsize=8)
