@@ -10,6 +10,7 @@ as earlier ones end, all stepped by one compiled program).
 Usage::
 
     python benchmarks/bench_evaluate.py [--policy coop] [--suite lantern-v3] [--repeats 3]
+    python benchmarks/bench_evaluate.py --path split   # the world program beside the policy's
     python benchmarks/bench_evaluate.py --compile-cache /tmp/cc   # twice: cold, then warm
                                         # (the warm run loads the program store's programs)
     LANTERN_JAX_CPU_DEVICES=1 python benchmarks/bench_evaluate.py   # one device only
@@ -46,6 +47,9 @@ def main() -> None:
     ap.add_argument("--policy", default="coop")
     ap.add_argument("--suite", default=SUITE_ID)
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--path", default="fused", choices=("fused", "split"),
+                    help="the fused program, or the world program with the policy's own "
+                    "(lantern_jax.sim.split)")  # fmt: skip
     ap.add_argument(
         "--compile-cache",
         default="off",
@@ -66,7 +70,7 @@ def main() -> None:
     policy = get_policy(args.policy)
     params = policy.init(jax.random.PRNGKey(0))
     t0 = time.perf_counter()
-    run = {}
+    run = {"path": args.path}
     first: dict[str, float] = {}
     final, t_compile = run_executions(
         policy, execs.scenarios, params, execs.max_ticks, timings=first, **run
@@ -86,7 +90,8 @@ def main() -> None:
 
     print(f"machine: {platform.machine()} {os.cpu_count()} cores, {platform.platform()}")
     print(f"jax {jax.__version__} on {jax.default_backend()}, {jax.device_count()} device(s)")
-    print(f"suite {suite.suite_id}: {len(suite.pairs)} pairs, {n} executions, policy {args.policy}")
+    print(f"suite {suite.suite_id}: {len(suite.pairs)} pairs, {n} executions, policy {args.policy}, "
+          f"{args.path} path")  # fmt: skip
     print(f"persistent compilation cache: {cache}")
     print(f"build worlds        {t_build:8.2f} s")
     lower, xla, load = first["trace + lower"], first["XLA compile"], first["program load"]

@@ -111,7 +111,16 @@ class HelpFormatter(argparse.HelpFormatter):
         return f"{text} (default: %(default)s)".strip()
 
 
-class CommandParser(argparse.ArgumentParser):
+class OneLineErrors(argparse.ArgumentParser):
+    """A parser whose usage errors are one line (``PROG: error: MESSAGE; PROG --help lists the
+    options``), exit code 2: the message names the option and the value, and ``--help`` has
+    the rest (argparse's own prints the whole usage block first)."""
+
+    def error(self, message: str):  # noqa: D102  (argparse's hook)
+        self.exit(2, f"{self.prog}: error: {message}; {self.prog} --help lists the options\n")
+
+
+class CommandParser(OneLineErrors):
     """The parser of one command: :class:`HelpFormatter` unless the command asks for another."""
 
     def __init__(self, *args, **kwargs) -> None:
@@ -122,7 +131,7 @@ class CommandParser(argparse.ArgumentParser):
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``lantern-jax``: the top-level ``--families`` option and every
     command of :data:`COMMANDS`."""
-    parser = argparse.ArgumentParser(
+    parser = OneLineErrors(
         prog="lantern-jax",
         description="LANTERN cooperative-warning driving benchmark (JAX, batched).",
         allow_abbrev=False,

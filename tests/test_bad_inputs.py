@@ -863,7 +863,8 @@ FLAG_CASES = [
     (["--pairs", "pe_0001,pe_0001"], "--pairs: pair ids given more than once: pe_0001"),
     (["--checkpoint", ""], "--checkpoint: no checkpoint given (leave the option out for none)"),
     (["--checkpoint", ",", "--policy", "coop"], "--checkpoint: no checkpoint given"),
-    (["--pairs-per-family", "0"], "--pairs-per-family must be >= 1 (got 0)"),
+    (["--pairs-per-family", "0"],
+     "argument --pairs-per-family: expected a whole number in 1 .. 1000000, got 0"),
 ]
 
 
@@ -983,7 +984,10 @@ def test_a_bad_training_option_names_the_option(tmp_path, monkeypatch):
     path = tmp_path / "t.toml"
     path.write_text('[train]\nname = "mine"\nrecipe = "base"\n')
     res = run_cli(["train", "--config", str(path), "--epochs", "0"])
-    assert res.rc == 2 and res.err == "lantern-jax train: error: --epochs: must be >= 1, got 0\n"
+    assert res.rc == 2 and res.err == (
+        "lantern-jax train: error: argument --epochs: expected a whole number in 1 .. 1000000, got "
+        "0; lantern-jax train --help lists the options\n"
+    )
 
 
 # ---------------------------------------------------------------------------------------------
@@ -1143,18 +1147,29 @@ def test_non_finite_weights_are_refused(saved_models, tmp_path, registry):
 # ---------------------------------------------------------------------------------------------
 # stress and diagnostics options
 # ---------------------------------------------------------------------------------------------
+#: What the command line adds to an option's refusal (the one line of argparse's error).
+STRESS_HELP = "; lantern-jax stress --help lists the options"
 STRESS_CASES = [
-    (["--restarts", "0"], "--restarts: must be a whole number >= 1, got 0"),
-    (["--samples", "0"], "--samples: must be a whole number >= 2 (CMA-ES's population), got 0"),
+    (["--restarts", "0"],
+     "argument --restarts: expected a whole number in 1 .. 4096, got 0" + STRESS_HELP),
+    (["--samples", "0"],
+     "argument --samples: expected a whole number in 1 .. 4096, got 0" + STRESS_HELP),
     (["--samples", "1"], "--samples: must be a whole number >= 2 (CMA-ES's population), got 1"),
-    (["--samples", "0", "--methods", "gradient"], "--samples: must be a whole number >= 1, got 0"),
-    (["--sigma", "-1"], "--sigma: must be a finite number >= 0, got -1"),
-    (["--temperature", "0"], "--temperature: must be a finite number > 0, got 0"),
-    (["--temperature", "nan"], "--temperature: must be a finite number > 0, got nan"),
-    (["--budget-s", "inf"], "--budget-s: must be a finite number of seconds > 0, got inf"),
+    (["--samples", "0", "--methods", "gradient"],
+     "argument --samples: expected a whole number in 1 .. 4096, got 0" + STRESS_HELP),
+    (["--sigma", "-1"],
+     "argument --sigma: expected a finite number in [0, 10], got -1" + STRESS_HELP),
+    (["--temperature", "0"],
+     "argument --temperature: expected a finite number in (0, 10], got 0" + STRESS_HELP),
+    (["--temperature", "nan"],
+     "argument --temperature: expected a finite number in (0, 10], got nan" + STRESS_HELP),
+    (["--budget-s", "inf"],
+     "argument --budget-s: expected a finite number in (0, 1e+06], got inf" + STRESS_HELP),
     (["--range", "v_ref=0:inf"], "--range 'v_ref=0:inf': LO and HI must be finite numbers"),
-    (["--hybrid-draws", "0"], "--hybrid-draws: must be a whole number >= 1, got 0"),
-    (["--hybrid-steps", "-2"], "--hybrid-steps: must be a whole number >= 1, got -2"),
+    (["--hybrid-draws", "0"],
+     "argument --hybrid-draws: expected a whole number in 1 .. 4096, got 0" + STRESS_HELP),
+    (["--hybrid-steps", "-2"],
+     "argument --hybrid-steps: expected a whole number in 1 .. 4096, got -2" + STRESS_HELP),
     (["--methods", "hybrid,annealing"],
      "--methods: ['annealing']; valid: gradient, random, cmaes, hybrid"),
 ]  # fmt: skip
@@ -1174,7 +1189,7 @@ def test_bad_stress_options(flags, expected, tmp_path, monkeypatch):
 
 DIAGNOSTICS_CASES = [
     (["diagnostics", "distance", "--window", "inf"],
-     "--window must be a finite number of seconds > 0 (got inf)"),
+     "argument --window: expected a finite number in (0, 60], got inf"),
     (["diagnostics", "distance", "--routes", "100000"],
      "--routes 100000: suite lantern-v3 has 20 PE pairs"),
     (["diagnostics", "nonactionable", "--family", "OR"],

@@ -12,6 +12,7 @@ import io
 import json
 import math
 import os
+import shutil
 import subprocess
 import sys
 import types
@@ -169,8 +170,14 @@ def test_pairs_option_gives_the_same_rows(evaluated, tmp_path):
 
 
 def test_compare_a_policy_against_itself_gives_zero_with_p_one(evaluated, tmp_path):
-    """The same result set twice (one policy in two result sets over the same pairs)."""
+    """A copy of a result set (one policy in two identical result sets over the same pairs);
+    the same folder given twice is refused as a comparison with itself."""
+    copy = tmp_path / "copy"
+    shutil.copytree(evaluated.out_dir, copy)
     res = run_cli(["compare", str(evaluated.out_dir), str(evaluated.out_dir), "--policy", "coop",
+                   "--out", str(tmp_path / "same")])  # fmt: skip
+    assert res.rc == 2 and "the same result set" in res.err
+    res = run_cli(["compare", str(evaluated.out_dir), str(copy), "--policy", "coop",
                    "--out", str(tmp_path)])  # fmt: skip
     assert res.rc == 0, res.err
     table = pd.read_csv(tmp_path / "comparison.csv")
@@ -191,17 +198,14 @@ def test_compare_refuses_a_bad_selection_and_other_suites(evaluated, tmp_path):
     res = run_cli(["compare", str(tmp_path), "--policy", "coop", "--policy", "ego"])
     assert res.rc == 2 and "no result set there" in res.err
     other = tmp_path / "other"
-    other.mkdir()
-    for name in ("route_level_results.csv", "reproducibility_manifest.json"):
-        text = (evaluated.out_dir / name).read_text()
-        if name.endswith(".json"):
-            m = json.loads(text)
-            m["suite_sha256"] = "0" * 64
-            text = json.dumps(m)
-        (other / name).write_text(text)
+    shutil.copytree(evaluated.out_dir, other)
+    manifest = other / "reproducibility_manifest.json"
+    m = json.loads(manifest.read_text())
+    m["suite_sha256"] = "0" * 64
+    manifest.write_text(json.dumps(m))
     res = run_cli(["compare", str(evaluated.out_dir), str(other), "--policy", "coop",
                    "--out", str(tmp_path / "cmp")])  # fmt: skip
-    assert res.rc == 2 and "different suites" in res.err
+    assert res.rc == 2 and "not run under one protocol (suite_sha256:" in res.err
 
 
 def test_fresh_suites_evaluate_every_suite_and_report_the_spread(

@@ -70,7 +70,7 @@ def test_a_file_a_factory_and_a_module_load(tmp_path):
     [
         ("MISSING", ValueError, "defines no 'MISSING'"),
         ("NOT_A_POLICY", TypeError, "expected a Policy"),
-        ("act", ValueError, "calling act() failed"),
+        ("act", TypeError, "act is a function of (params, obs); NAME must be a Policy"),
     ],
 )
 def test_a_bad_attribute_is_named(tmp_path, attr, error, says):

@@ -82,6 +82,17 @@ def test_a_layout_finds_a_leaf_by_path_and_names_a_missing_one():
 # ---------------------------------------------------------------------------------------------
 # the observation of every sensor
 # ---------------------------------------------------------------------------------------------
+def _same(a, b) -> None:
+    """Equal: exactly for masks, kinds and ids; to float32 rounding for numbers (a view built
+    inside a branch is compiled apart from the rest, so its last bits may differ)."""
+    a, b = np.asarray(a), np.asarray(b)
+    assert a.shape == b.shape and a.dtype == b.dtype
+    if np.issubdtype(a.dtype, np.floating):
+        np.testing.assert_allclose(a, b, rtol=1e-5, atol=REPRODUCIBLE_ATOL)
+    else:
+        np.testing.assert_array_equal(a, b)
+
+
 @pytest.mark.parametrize("sensors", [(), (WARNING,), (PRIVILEGED,), (SURROUND_RIG, WARNING),
                                      (PRIVILEGED, SURROUND_RIG)])  # fmt: skip
 def test_the_observation_of_every_sensor_equals_the_declared_one(family_runs, sensors):
@@ -103,7 +114,7 @@ def test_the_observation_of_every_sensor_equals_the_declared_one(family_runs, se
             if WARNING not in sensors:
                 got = got.replace(warning_tokens=want.warning_tokens,
                                   warning_values=want.warning_values)  # fmt: skip
-            jax.tree.map(np.testing.assert_array_equal, got, want)
+            jax.tree.map(_same, got, want)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -272,8 +283,8 @@ def test_a_changed_setting_never_reuses_a_stale_world_program():
 
 def test_the_store_refuses_a_world_program_of_another_signature(tmp_path, monkeypatch):
     """A stored world program answers only its own signature: another slot count or another
-    scenario shape has another key, and the program stored under one key is not found under
-    the other."""
+    scenario shape (the pair cut to its own actor and lane slots) has another key, and the
+    program stored under one key is not found under the other."""
     monkeypatch.setattr(program_store, "store_dir", lambda: tmp_path)
     execs = engine.build_executions(load_suite().select(["pe_0001"]), bucket=True)
     one = jax.tree.map(lambda x: np.asarray(x)[0], execs.scenarios)
@@ -282,7 +293,7 @@ def test_the_store_refuses_a_world_program_of_another_signature(tmp_path, monkey
     setp = split._pack_one(Layout.of(settings), settings)
     keys = {}
     for name, scen, slots in (("suite", one, 48), ("slots", one, 24),
-                              ("shape", trim_padding(one, (12, 9)), 48)):  # fmt: skip
+                              ("shape", trim_padding(one), 48)):  # fmt: skip
         sig = split.world_signature(scen, settings, slots)
         args = split._tick_args(sig, setp, device)
         keys[name] = program_store.program_key((sig.identity(), "tick"), args)

@@ -18,6 +18,7 @@ another one).  The cache is bounded (:data:`MAX_PROGRAMS`), and kept on disk by 
 
 from __future__ import annotations
 
+import collections
 import dataclasses
 import functools
 import time
@@ -27,13 +28,19 @@ from typing import Any
 import jax
 import numpy as np
 
-from lantern_jax import program_store
+from lantern_jax import family_codes, program_store
 from lantern_jax.constants import CONDITIONS, DT
 from lantern_jax.scenarios.ablations import get_ablation
 from lantern_jax.scenarios.suite import Suite, build_suite_batches, load_suite
 from lantern_jax.scoring.metrics import finalize
 from lantern_jax.sim.distributed import placement
-from lantern_jax.sim.programs import MAX_PROGRAMS, available, executable, remember  # noqa: F401
+from lantern_jax.sim.programs import (  # noqa: F401  (MAX_PROGRAMS, remember: re-exported)
+    MAX_PROGRAMS,
+    available,
+    compiled_here,
+    executable,
+    remember,
+)
 from lantern_jax.sim.rollout import rollout_scheduled_parallel, with_carry
 from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings, default_settings
 from lantern_jax.sim.split import (
@@ -75,7 +82,30 @@ class Executions:
     pad_to: int | None = None
 
 
+#: Executions built in this process, by suite content and options (a few suites: bounded).
+_BUILT_EXECUTIONS: collections.OrderedDict[tuple, Executions] = collections.OrderedDict()
+MAX_BUILT_EXECUTIONS = 4
+
+
 def build_executions(
+    suite: Suite, ablation: str = "none", trim: bool = True, bucket: bool = False
+) -> Executions:
+    """:func:`build_new_executions`, once per suite content (every pair's id, hash, family and
+    weather), ablation and options in this process: a second evaluation of the same suite
+    (another policy, in a notebook) builds nothing."""
+    key = (tuple((p.pair_id, p.sha256, p.family, p.weather) for p in suite.pairs), ablation,
+           trim, bucket, tuple(family_codes.codes()))  # fmt: skip
+    if key in _BUILT_EXECUTIONS:
+        _BUILT_EXECUTIONS.move_to_end(key)
+        return _BUILT_EXECUTIONS[key]
+    execs = build_new_executions(suite, ablation, trim, bucket)
+    _BUILT_EXECUTIONS[key] = execs
+    while len(_BUILT_EXECUTIONS) > MAX_BUILT_EXECUTIONS:
+        _BUILT_EXECUTIONS.popitem(last=False)
+    return execs
+
+
+def build_new_executions(
     suite: Suite, ablation: str = "none", trim: bool = True, bucket: bool = False
 ) -> Executions:
     """Build the batched scenarios of every execution of a suite under an ablation.
@@ -429,6 +459,10 @@ class _FusedCall:
 
     def ready(self) -> bool:
         """The fused program is compiled in this process or stored (nothing is compiled)."""
+        if not program_store.keyable(self.identity) and not compiled_here(
+            _scheduled, self.static
+        ):  # not stored, and no program of this driver in this process: nothing to look up
+            return False
         block = min(len(self.layout), self.slots * jax.device_count())
         one = _take(self.laid, np.arange(block))
         shapes = jax.eval_shape(initial_states, one, (), self.settings.scoring)

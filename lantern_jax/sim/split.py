@@ -107,8 +107,22 @@ class WorldSignature:
 
 def world_signature(scenario: Scenario, settings: Settings, slots: int) -> WorldSignature:
     """The :class:`WorldSignature` of a batch's executions (``scenario``: one execution, or
-    ShapeDtypeStructs of one)."""
+    ShapeDtypeStructs of one); computed once per process for each scenario structure, settings
+    structure and slot count (it traces the observation abstractly)."""
     one = jax.tree.map(lambda x: jax.ShapeDtypeStruct(np.shape(x), jnp.result_type(x)), scenario)
+    leaves, treedef = jax.tree.flatten(one)
+    key = (treedef, tuple((x.shape, str(x.dtype)) for x in leaves), jax.tree.structure(settings),
+           slots)  # fmt: skip
+    if key not in _SIGNATURES:
+        _SIGNATURES[key] = _new_signature(one, settings, slots)
+    return _SIGNATURES[key]
+
+
+#: The signatures computed in this process (a few: one per batch structure and slot count).
+_SIGNATURES: dict[tuple, WorldSignature] = {}
+
+
+def _new_signature(one: Scenario, settings: Settings, slots: int) -> WorldSignature:
     on = jnp.asarray(True)
     state = jax.eval_shape(lambda sc: init_state(sc, (), settings.scoring), one)
     obs, view = jax.eval_shape(
