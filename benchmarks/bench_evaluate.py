@@ -90,8 +90,8 @@ def main() -> None:
 
     print(f"machine: {platform.machine()} {os.cpu_count()} cores, {platform.platform()}")
     print(f"jax {jax.__version__} on {jax.default_backend()}, {jax.device_count()} device(s)")
-    print(f"suite {suite.suite_id}: {len(suite.pairs)} pairs, {n} executions, policy {args.policy}, "
-          f"{args.path} path")  # fmt: skip
+    print(f"suite {suite.suite_id}: {len(suite.pairs)} pairs, {n} executions, "
+          f"policy {args.policy}, {args.path} path")  # fmt: skip
     print(f"persistent compilation cache: {cache}")
     print(f"build worlds        {t_build:8.2f} s")
     lower, xla, load = first["trace + lower"], first["XLA compile"], first["program load"]

@@ -57,14 +57,16 @@ def _policy(edit: str):
 
         def init(key):
             params = coop.init(key)
-            return params.replace(planner=params.planner.replace(max_brake=params.planner.max_brake * 0.9))  # noqa: E501
+            planner = params.planner
+            return params.replace(planner=planner.replace(max_brake=planner.max_brake * 0.9))
 
         return lj.Policy("coop-edited", init, coop.act, sensors=coop.sensors)
     if edit == "mlp":
 
         def init(key):
             k1, k2 = jax.random.split(key)
-            return dict(w1=jax.random.normal(k1, (8, 32)) * 0.1, w2=jax.random.normal(k2, (32, 1)) * 0.1)
+            return dict(w1=jax.random.normal(k1, (8, 32)) * 0.1,
+                        w2=jax.random.normal(k2, (32, 1)) * 0.1)  # fmt: skip
 
         def act(params, obs):
             x = jnp.stack([obs.ego_speed, obs.v_ref, obs.dist_to_stop.clip(0, 50) / 50,
