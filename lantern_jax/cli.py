@@ -39,6 +39,7 @@ selection; an output folder that cannot be written — all found before anything
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Sequence
 
@@ -54,6 +55,7 @@ from lantern_jax.commands import (
     families,
     plot,
     policies,
+    report,
     runtime,
     stress,
     suite,
@@ -77,8 +79,8 @@ __all__ = [
 
 #: The command modules, in the order ``lantern-jax --help`` lists them.
 COMMANDS = (
-    evaluate, suite, policies, ablations, stress, compare, dataset, train, unseen, wording,
-    diagnostics, plot,
+    evaluate, suite, policies, ablations, stress, compare, report, dataset, train, unseen,
+    wording, diagnostics, plot,
 )  # fmt: skip
 
 #: Environment variable that sets the number of XLA CPU devices of the command line.
@@ -161,6 +163,13 @@ def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:
     return code
 
 
+#: How JAX's error begins when the environment asks for a backend it cannot start
+#: (``JAX_PLATFORMS`` naming a platform that is not there, ``XLA_FLAGS`` with a device count of
+#: 0): reported in one line naming the variables, exit 2.
+BACKEND_FAILURE = "Unable to initialize backend"
+BACKEND_ENV = ("JAX_PLATFORMS", "XLA_FLAGS")
+
+
 def main(argv: Sequence[str] | None = None, exit_on_interrupt: bool | None = None) -> int:
     """Run the command line; returns the exit code.
 
@@ -191,6 +200,14 @@ def main(argv: Sequence[str] | None = None, exit_on_interrupt: bool | None = Non
                 return _run(args, argv)
         except UsageError as e:
             print(f"lantern-jax {args.command}: error: {e}", file=sys.stderr)
+            return EXIT_USAGE
+        except RuntimeError as e:
+            if not str(e).startswith(BACKEND_FAILURE):
+                raise
+            where = ", ".join(f"{k}={os.environ[k]!r}" for k in BACKEND_ENV if os.environ.get(k))
+            print(f"lantern-jax {args.command}: error: JAX could not start its backend "
+                  f"({where or 'no JAX_PLATFORMS or XLA_FLAGS set'}): "
+                  f"{str(e).splitlines()[0]}", file=sys.stderr)  # fmt: skip
             return EXIT_USAGE
     except KeyboardInterrupt:
         return runtime.interrupted(exit_on_interrupt)

@@ -300,6 +300,25 @@ class EvalResult:
 
         return write_outputs(self, folder, run_record=run_record)
 
+    def report(self, path: str | os.PathLike, folder: str | os.PathLike | None = None) -> Path:
+        """Write this evaluation's result files and its HTML report
+        (:func:`lantern_jax.report.page.build_report`: built from the files, as ``lantern-jax
+        report`` builds it; failure figures: ``lantern-jax report --figures``).
+
+        Args:
+            path: the HTML file.
+            folder: where the result files go (default: ``<path's stem>_results`` beside it).
+
+        Returns:
+            The HTML file's path.
+        """
+        from lantern_jax.report.page import build_report
+
+        path = Path(path)
+        folder = path.with_name(path.stem + "_results") if folder is None else Path(folder)
+        self.write(folder)
+        return build_report([folder], path)
+
 
 def _policies_to_run(policies, suite, settings_given: Any = None) -> list[Policy]:
     """Resolve policy names and refuse inputs that cannot give a well-keyed result."""
@@ -575,6 +594,9 @@ def evaluate(
             suite without pairs, or settings out of range.
         PolicyError: naming the policy whose ``act`` failed while traced or run.
     """
+    if jax.config.jax_enable_x64:
+        raise ValueError("evaluate: JAX's 64-bit mode is on (JAX_ENABLE_X64): the simulator, its "
+                         "scores and its stored programs are float32; turn it off")  # fmt: skip
     pols = _policies_to_run(policies, suite, settings)
     check_seed("evaluate: bootstrap_seed", bootstrap_seed)
     if path not in PATHS:
@@ -585,6 +607,10 @@ def evaluate(
     if len(policy_params) != len(pols):
         raise ValueError(f"policy_params: {len(policy_params)} entries for {len(pols)} policies")
     s = load_suite(suite) if isinstance(suite, str) else suite
+    ids = [p.pair_id for p in s.pairs]
+    twice = sorted({i for i in ids if ids.count(i) > 1})
+    if twice:
+        raise ValueError(f"evaluate: suite {s.suite_id!r} holds pair(s) {twice} more than once")
     t0 = time.perf_counter()
     execs = build_executions(s, ablation, bucket=True)
     t_build = time.perf_counter() - t0

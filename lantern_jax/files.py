@@ -140,8 +140,7 @@ def atomic_write(path: str | os.PathLike, data: bytes | str) -> Path:
     if path.is_dir():
         raise IsADirectoryError(f"cannot write {path}: it is a folder, not a file")
     payload = data.encode("utf-8") if isinstance(data, str) else bytes(data)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{name_stem(path.name)}.", suffix=".tmp", dir=path.parent)
+    fd, tmp = temporary_beside(path, ".tmp")
     try:
         with os.fdopen(fd, "wb") as fh:
             fh.write(payload)
@@ -155,6 +154,23 @@ def atomic_write(path: str | os.PathLike, data: bytes | str) -> Path:
         raise
     _fsync_dir(path.parent)
     return path
+
+
+def temporary_beside(path: Path, suffix: str) -> tuple[int, str]:
+    """A new temporary file in ``path``'s folder for writing ``path`` atomically: named
+    ``.{stem}.{pid}.XXXX{suffix}`` (:func:`is_temporary_of` knows it); the temporaries of the
+    same file that a process no longer running left there (killed while writing) are removed
+    first.  Returns ``(fd, name)`` as :func:`tempfile.mkstemp`."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    stem = name_stem(path.name)
+    with contextlib.suppress(OSError):
+        for entry in os.listdir(path.parent):
+            if not (entry.startswith(f".{stem}.") and entry.endswith(".tmp")):
+                continue
+            pid = entry[len(stem) + 2 :].split(".", 1)[0]
+            if pid.isdigit() and not _alive(int(pid)):
+                (path.parent / entry).unlink()
+    return tempfile.mkstemp(prefix=f".{stem}.{os.getpid()}.", suffix=suffix, dir=path.parent)
 
 
 def read_toml(path: str | os.PathLike) -> dict:

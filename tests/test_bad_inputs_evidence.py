@@ -18,7 +18,10 @@ import contextlib
 import csv
 import io
 import json
+import os
 import shutil
+import subprocess
+import sys
 import time
 import types
 from pathlib import Path
@@ -306,6 +309,9 @@ def test_a_user_folder_named_like_a_result_file_is_never_deleted(tmp_path):
     (["ablations", "--policy", "ego", "--pairs", "pe_0001"], "ABLATION_FILES"),
     (["wording", "--policy", "coop", "--pairs-per-family", "1"], ("wording.csv", "wording.md")),
     (["stress", "--family", "PE", "--policy", "ego"], "STRESS"),
+    (["diagnostics", "language", "--policy", "coop"], ("language.csv", "language.md")),
+    (["diagnostics", "distance", "--policy", "coop"],
+     ("distance_summary.csv", "distance_open_loop.md")),
     (["compare", "RESULT", "--policy", "coop", "--policy", "ego"],
      ("comparison.md", "comparison.csv")),
 ])  # fmt: skip
@@ -361,3 +367,104 @@ def dataclasses_replace_pairs(suite, routes):
 
     pairs = [dataclasses.replace(p, route_2m=r) for p, r in zip(suite.pairs, routes, strict=True)]
     return dataclasses.replace(suite, pairs=pairs)
+
+
+# ---------------------------------------------------------------------------------------------
+# the partly handled cases of the third round, now one line each
+# ---------------------------------------------------------------------------------------------
+def _program(argv: list[str], **env) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "lantern_jax", *argv], capture_output=True,
+                          text=True, cwd=ROOT, env={**os.environ, **env}, timeout=120)  # fmt: skip
+
+
+def test_a_backend_that_cannot_start_is_one_line_naming_the_variable(tmp_path):
+    r = _program(["evaluate", "--policy", "ego", "--pairs", "pe_0001", "--out",
+                  str(tmp_path / "r"), "--quiet"], JAX_PLATFORMS="tpu")  # fmt: skip
+    assert r.returncode == 2, r.stderr
+    assert r.stderr.count("\n") == 1 and "JAX_PLATFORMS='tpu'" in r.stderr, r.stderr
+
+
+def test_the_unseen_suite_without_its_families_is_refused_naming_families():
+    code = ("from lantern_jax.scenarios.suite import load_suite\n"
+            "try:\n    load_suite('lantern-unseen')\n"
+            "except ValueError as e:\n    print(e)")  # fmt: skip
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT,
+                       timeout=120)  # fmt: skip
+    lines = r.stdout.strip().splitlines()
+    assert len(lines) == 1 and "--families lantern_jax.scenarios.unseen" in lines[0], r.stdout
+
+
+def test_evaluate_refuses_a_suite_holding_one_pair_twice_before_building(monkeypatch):
+    import dataclasses
+
+    from lantern_jax import evaluation
+    from lantern_jax.scenarios.suite import load_suite
+
+    monkeypatch.setattr(evaluation, "build_executions", lambda *a, **k: 1 / 0)
+    suite = load_suite().select(["pe_0001"])
+    twice = dataclasses.replace(suite, pairs=[*suite.pairs, *suite.pairs])
+    with pytest.raises(ValueError, match=r"holds pair\(s\) \['pe_0001'\] more than once"):
+        evaluation.evaluate(["ego"], suite=twice, progress=False)
+
+
+def test_jax_64_bit_mode_is_refused_by_name(monkeypatch):
+    import jax
+
+    from lantern_jax import evaluation
+
+    monkeypatch.setattr(evaluation, "build_executions", lambda *a, **k: 1 / 0)
+    jax.config.update("jax_enable_x64", True)
+    try:
+        with pytest.raises(ValueError, match="64-bit mode is on"):
+            evaluation.evaluate(["coop"], progress=False)
+    finally:
+        jax.config.update("jax_enable_x64", False)
+
+
+@pytest.mark.parametrize("rng, says", [
+    ("FloatRange(5.0, 1.0)", "empty interval"),
+    ("FloatRange(0.0, float('nan'))", "bounds must be finite"),
+    ("Choice(())", "a choice of no option"),
+])  # fmt: skip
+def test_a_family_with_an_empty_or_nan_range_is_refused_when_registered(rng, says):
+    import dataclasses
+
+    import family_example  # the cyclist example family (tests/family_example.py)
+
+    from lantern_jax.scenarios import registry
+    from lantern_jax.scenarios.spec import Choice, FloatRange  # noqa: F401  (in rng's text)
+
+    record = family_example.RECORD
+    bad = dataclasses.replace(record, code="ZZQ", ranges={**record.ranges, "extra": eval(rng)})
+    with pytest.raises(ValueError, match=f"ranges\\['extra'\\]: {says}"):
+        registry._check_record(bad)
+
+
+def test_a_vector_environment_of_a_fractional_size_is_refused():
+    pytest.importorskip("brax")
+    from lantern_jax.envs.vector import LanternVectorEnv
+
+    with pytest.raises(TypeError, match="num_envs must be a whole number, got 1.7"):
+        LanternVectorEnv(num_envs=1.7)
+
+
+def test_a_temporary_file_left_by_a_killed_writer_is_removed_by_the_next_write(tmp_path):
+    from lantern_jax.files import atomic_write
+
+    stale = tmp_path / ".out.csv.999999999.abcd1234.tmp"  # a process id that is not running
+    stale.write_bytes(b"half")
+    live = tmp_path / f".out.csv.{os.getpid()}.efgh5678.tmp"  # this process: kept
+    live.write_bytes(b"mine")
+    atomic_write(tmp_path / "out.csv", b"whole")
+    assert not stale.exists() and live.exists()
+    assert (tmp_path / "out.csv").read_bytes() == b"whole"
+
+
+def test_a_ppo_checkpoint_variable_naming_junk_is_one_message(tmp_path, monkeypatch):
+    from lantern_jax.policies import learned_ppo
+
+    junk = tmp_path / "junk.msgpack"
+    junk.write_bytes(b"not msgpack at all")
+    monkeypatch.setenv(learned_ppo.CHECKPOINT_ENV, str(junk))
+    with pytest.raises(ValueError, match="from LANTERN_JAX_PPO_CHECKPOINT.*not a PPO checkpoint"):
+        learned_ppo.load_checkpoint()

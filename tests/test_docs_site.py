@@ -12,6 +12,7 @@ nothing.  Both tests are marked slow.  Chromium is driven over its DevTools pipe
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import importlib
 import json
 import os
@@ -49,9 +50,8 @@ class Browser:
         to_chrome_r, self._w = os.pipe()
         self._r, from_chrome_w = os.pipe()
 
-        def _pipes() -> None:  # in the child: the pipe ends become fds 3 and 4
-            import fcntl
-
+        def _pipes() -> None:  # in the child: the pipe ends become fds 3 and 4 (no import
+            # here: another thread of the parent may hold the import lock at the fork)
             a = fcntl.fcntl(to_chrome_r, fcntl.F_DUPFD, 10)
             b = fcntl.fcntl(from_chrome_w, fcntl.F_DUPFD, 10)
             os.dup2(a, 3)

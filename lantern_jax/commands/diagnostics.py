@@ -48,12 +48,21 @@ def _check_options(args: argparse.Namespace) -> None:
                          f"{'it' if len(given) == 1 else 'them'}")  # fmt: skip
 
 
+#: The tables each diagnostic writes (``STEM.csv`` and ``STEM.md`` into ``--out``).
+OUTPUT_STEMS = {
+    "nonactionable": ("nonactionable",),
+    "distance": ("distance_open_loop", "distance_closed_loop", "distance_summary"),
+    "language": ("language",),
+}
+
+
 def cmd_diagnostics(args: argparse.Namespace, argv: Sequence[str]) -> int:
     """``lantern-jax diagnostics nonactionable|distance|language``."""
     del argv
     _check_options(args)
     policy = one_policy(args)
-    check_out(args.out)
+    check_out(args.out, owned=[f"{stem}{ext}" for stem in OUTPUT_STEMS[args.which]
+                               for ext in (".csv", ".md")])  # fmt: skip
     run = {"nonactionable": _nonactionable, "distance": _distance, "language": _language}
     return run[args.which](args, policy)
 

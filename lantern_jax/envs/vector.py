@@ -62,6 +62,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import numbers
 import time
 
 import jax
@@ -211,6 +212,10 @@ class LanternVectorEnv:
         bank_seed: int = TRAIN_SEED,
         families: tuple[str, ...] | list[str] = FAMILIES,
     ):
+        for name, value in (("num_envs", num_envs), ("max_episode_steps", max_episode_steps)):
+            whole = isinstance(value, numbers.Integral) and not isinstance(value, bool)
+            if not whole:
+                raise TypeError(f"LanternVectorEnv: {name} must be a whole number, got {value!r}")
         if int(num_envs) < 1:
             raise ValueError(f"LanternVectorEnv: num_envs must be >= 1, got {num_envs}")
         if int(max_episode_steps) < 1:

@@ -77,9 +77,16 @@ def load_checkpoint(path: str | Path | None = None) -> dict:
             f"ppo checkpoint {path} not found; train one with `lantern-jax train --config "
             f"configs/train_ppo.toml` or point {CHECKPOINT_ENV} at one"
         )
-    tree = serialization.msgpack_restore(path.read_bytes())
-    meta = json.loads(tree["meta"])
-    layers = [tree["policy"][f"hidden_{i}"] for i in range(len(tree["policy"]))]
+    where = f" (from {CHECKPOINT_ENV})" if os.environ.get(CHECKPOINT_ENV) and path == \
+        checkpoint_path() else ""  # fmt: skip
+    try:
+        tree = serialization.msgpack_restore(path.read_bytes())
+        meta = json.loads(tree["meta"])
+        layers = [tree["policy"][f"hidden_{i}"] for i in range(len(tree["policy"]))]
+        layers[0]["kernel"].shape, layers[-1]["kernel"].shape  # noqa: B018  (present)
+    except Exception as e:  # noqa: BLE001  (any unreadable file: one message naming it)
+        raise ValueError(f"ppo checkpoint {path}{where}: not a PPO checkpoint this project "
+                         f"wrote ({type(e).__name__}: {e})") from None  # fmt: skip
     if meta.get("obs_size") != OBS_SIZE or layers[0]["kernel"].shape[0] != OBS_SIZE:
         raise ValueError(f"ppo checkpoint {path}: observation size {meta.get('obs_size')}, "
                          f"this version has {OBS_SIZE}")  # fmt: skip

@@ -287,6 +287,22 @@ def registered_families() -> dict[str, FamilyRecord]:
     return dict(_RECORDS)
 
 
+def _range_problem(rng: Any) -> str | None:
+    """What makes a parameter range unusable (an empty, inverted or non-finite interval, an
+    empty choice), or None."""
+    if isinstance(rng, FloatRange | IntRange):
+        lo, hi = rng.lo, rng.hi
+        if not (isinstance(lo, int | float) and isinstance(hi, int | float)):
+            return f"bounds must be numbers, got ({lo!r}, {hi!r})"
+        if not (math.isfinite(lo) and math.isfinite(hi)):
+            return f"bounds must be finite, got ({lo}, {hi})"
+        if lo > hi:
+            return f"empty interval: lo {lo} > hi {hi}"
+    if isinstance(rng, Choice) and not rng.options:
+        return "a choice of no option"
+    return None
+
+
 def _check_record(record: FamilyRecord) -> None:
     """Refuse a record that cannot be registered (ValueError naming the field)."""
     if not isinstance(record, FamilyRecord):
@@ -306,6 +322,9 @@ def _check_record(record: FamilyRecord) -> None:
     for key, rng in record.ranges.items():
         if not callable(getattr(rng, "check", None)):
             raise ValueError(f"{where}: ranges[{key!r}] is not a range type")
+        problem = _range_problem(rng)
+        if problem:
+            raise ValueError(f"{where}: ranges[{key!r}]: {problem}")
     if record.premise not in PREMISE_RULES:
         raise ValueError(f"{where}: premise {record.premise!r} not one of {PREMISE_RULES}")
     if not record.paraphrases:

@@ -240,6 +240,29 @@ class SuiteError(ValueError):
         super().__init__(text)
 
 
+def _unregistered_families(raw: object) -> str:
+    """One line naming the family codes of a suite file that no registered family has, and how
+    to register them ("" when every code is known, or the file is too broken to say)."""
+    pairs = raw.get("pairs") if isinstance(raw, dict) else None
+    if not isinstance(pairs, list):
+        return ""
+    known = set(family_codes.codes())
+
+    def code(p: object) -> str | None:  # a family its label and its parameters agree on
+        if not isinstance(p, dict) or not isinstance(p.get("params"), dict):
+            return None
+        label = p.get("family")
+        return label if isinstance(label, str) and p["params"].get("family") == label else None
+
+    codes = sorted({c for c in map(code, pairs) if c is not None and c not in known})
+    if not codes:
+        return ""
+    return (f"family code(s) {', '.join(codes)} are not registered in this process; register "
+            "them first: on the command line --families FILE.py (the shipped unseen hazards: "
+            "--families lantern_jax.scenarios.unseen, or run lantern-jax unseen), from Python "
+            "by importing the module that registers them")  # fmt: skip
+
+
 #: Fields of a suite manifest: name -> required.
 MANIFEST_FIELDS = {
     "suite_id": True,
@@ -476,6 +499,9 @@ def load_suite(name_or_path: str | Path = SUITE_ID) -> Suite:
         raw = json.loads(text, object_pairs_hook=_json_object)
     except json.JSONDecodeError as e:
         raise SuiteError(source, [f"suite {source}: not valid JSON ({e})"]) from None
+    unregistered = _unregistered_families(raw)
+    if unregistered:
+        raise SuiteError(source, [f"suite {source}: {unregistered}"])
     errs, suite = _manifest_errors(raw)
     if errs:
         raise SuiteError(source, [f"suite {source}: {m}" for m in errs])

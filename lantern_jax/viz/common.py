@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -13,7 +12,7 @@ from matplotlib.figure import Figure
 
 from lantern_jax import times
 from lantern_jax.constants import DT
-from lantern_jax.files import file_mode
+from lantern_jax.files import file_mode, temporary_beside
 
 COLLISION_COLOR = "#e00000"  # collision markers (bird's-eye view and timeline)
 
@@ -82,8 +81,7 @@ def save_figure(fig: Figure, path: str | os.PathLike, dpi: int = 110) -> Path:
         The destination path.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".png.tmp", dir=path.parent)
+    fd, tmp = temporary_beside(path, ".png.tmp")
     try:
         with os.fdopen(fd, "wb") as fh:
             fig.savefig(fh, format="png", dpi=dpi, bbox_inches="tight")

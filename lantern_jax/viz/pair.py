@@ -379,8 +379,12 @@ def _settings_from_record(record: dict | None) -> Settings:
     return base.replace(scoring=scoring, protocol=protocol).validate()
 
 
-def _safe(name: str) -> str:
+def safe_name(name: str) -> str:
+    """``name`` as a file name's part (what :func:`plot_pair` names its files with)."""
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("._") or "policy"
+
+
+_safe = safe_name
 
 
 def _gate_text(ex: RecordedExecution, settings: Settings) -> str:
