@@ -468,3 +468,14 @@ def test_a_ppo_checkpoint_variable_naming_junk_is_one_message(tmp_path, monkeypa
     monkeypatch.setenv(learned_ppo.CHECKPOINT_ENV, str(junk))
     with pytest.raises(ValueError, match="from LANTERN_JAX_PPO_CHECKPOINT.*not a PPO checkpoint"):
         learned_ppo.load_checkpoint()
+
+
+def test_the_environment_without_brax_names_the_extra(monkeypatch):
+    """``import lantern_jax.envs`` on the plain install (no brax) says which extra to install."""
+    envs = [m for m in sys.modules if m.split(".")[:2] == ["lantern_jax", "envs"]]
+    for name in envs:
+        monkeypatch.delitem(sys.modules, name)
+    monkeypatch.setitem(sys.modules, "brax", None)
+    says = r"needs the 'rl' extra: pip install -e '\.\[rl\]'"
+    with pytest.raises(ModuleNotFoundError, match=says):
+        import lantern_jax.envs  # noqa: F401

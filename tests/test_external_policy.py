@@ -5,7 +5,9 @@ message."""
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
+import io
 import json
 from pathlib import Path
 
@@ -130,3 +132,42 @@ def test_the_template_evaluates_from_the_command_line_with_its_source_hash(tmp_p
     assert entry["source"]["file"] == "my_policy.py" and "source_path" not in entry["source"]
     record = json.loads((out / "run_record.json").read_text())
     assert f"{TEMPLATE}:POLICY" in json.dumps(record)  # where it lay: the run's own record
+
+
+def test_a_policy_file_without_its_name_lists_the_policies_it_defines(tmp_path):
+    """``--policy mine.py`` (no ``:NAME``) says how a file is given and names its Policy
+    objects, instead of "unknown policy"."""
+    from lantern_jax import cli
+
+    path = _write(tmp_path, "user-listed")
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        rc = cli.main(["evaluate", "--policy", str(path), "--pairs", "pe_0001", "--out",
+                       str(tmp_path / "r")])  # fmt: skip
+    assert rc == 2
+    assert f"a policy file is given as {path}:NAME" in err.getvalue()
+    assert "it defines" in err.getvalue() and "SLOW" in err.getvalue()
+
+
+def test_a_trace_error_in_a_users_act_names_its_line_and_suggests_jnp_where(tmp_path):
+    """A Python ``if`` on an array inside ``act``: the PolicyError names the user's file and
+    line and hints at ``jnp.where``."""
+    import lantern_jax as lj
+    from lantern_jax.evaluation import PolicyError
+
+    path = tmp_path / "iffy.py"
+    path.write_text(
+        "import jax.numpy as jnp\n"
+        "import lantern_jax as lj\n"
+        "def act(params, obs):\n"
+        "    if obs.ego_speed > 3.0:\n"
+        "        return jnp.zeros((10, 2))\n"
+        "    return jnp.ones((10, 2))\n"
+        "POLICY = lj.Policy('iffy', init=lambda key: None, act=act)\n"
+    )
+    policy, _ = load_policy_source(f"{path}:POLICY")
+    with pytest.raises(PolicyError) as info:
+        lj.evaluate([policy], suite=lj.load_suite().select(["pe_0001"]), progress=False)
+    text = str(info.value)
+    assert "TracerBoolConversionError" in text and "iffy.py:4" in text
+    assert "jnp.where" in text

@@ -129,3 +129,16 @@ def _open(browser, url: str) -> tuple[list[str], dict]:
     problems = [_problem(e) for e in browser.events[first:] if e.get("sessionId") == sid]
     browser.send("Target.closeTarget", {"targetId": target})
     return [p for p in problems if p], json.loads(value)
+
+
+def test_a_report_of_two_result_folders_compares_them(folder, tmp_path):
+    """Two runs (here: the folder and a copy) side by side: both identities, every policy of
+    both in the plots, and the paired differences across the folders."""
+    import shutil
+
+    other = tmp_path / "rerun"
+    shutil.copytree(folder, other)
+    page = build_report([folder, other], tmp_path / "two.html").read_text()
+    assert page.count("<dt>folder</dt>") == 2
+    assert "coop (rerun) - ego (results)" in page
+    assert page.count('<div class="fail"') == 2 * len(failures(read_result_set(folder).table))

@@ -76,3 +76,7 @@ def test_format_family_table_of_a_result_renders_as_the_command_line():
     assert rows[0].startswith("coop (warning)") and rows[3].startswith("ego (warning)")
     table, legend = text.rsplit("\n", 1)
     assert table in format_tables(result) and format_tables(result).endswith(legend)
+    # without the expert in the run, B-Time/Exp. is '-', and the title says why
+    assert "B-Time/Exp. % of the expert's time, - without the expert in the run" in format_tables(
+        result
+    )
