@@ -479,3 +479,18 @@ def test_the_environment_without_brax_names_the_extra(monkeypatch):
     says = r"needs the 'rl' extra: pip install -e '\.\[rl\]'"
     with pytest.raises(ModuleNotFoundError, match=says):
         import lantern_jax.envs  # noqa: F401
+
+
+def test_a_family_code_clash_with_the_unseen_hazards_is_one_line(tmp_path):
+    fams = tmp_path / "clash.py"
+    fams.write_text(
+        "import dataclasses, sys\n"
+        f"sys.path.insert(0, {str(ROOT / 'tests')!r})\n"
+        "import family_example\n"
+        "from lantern_jax.scenarios.registry import register_family\n"
+        "register_family(dataclasses.replace(family_example.RECORD, code='CYC'))\n"
+    )
+    r = _program(["--families", str(fams), "unseen", "--policy", "ego", "--out",
+                  str(tmp_path / "u")])  # fmt: skip
+    assert r.returncode == 2, r.stderr
+    assert r.stderr.strip().count("\n") == 0 and "CYC" in r.stderr, r.stderr

@@ -30,7 +30,13 @@ def cmd_unseen(args: argparse.Namespace, argv: Sequence[str]) -> int:
     del argv
     from tabulate import tabulate
 
-    from lantern_jax import transfer
+    try:  # registers the shipped unseen hazards: refused if a family of yours took a code
+        from lantern_jax import transfer
+    except ValueError as e:
+        raise UsageError(
+            f"the unseen hazards cannot be registered: {e} (a --families file registered a "
+            "family under one of their codes)"
+        ) from None
     from lantern_jax.commands.common import resolve_policies
     from lantern_jax.policies.registry import get_policy
     from lantern_jax.scenarios.suite import SuiteError, load_suite
