@@ -56,9 +56,9 @@ from lantern_jax.sim.engine import (
     Executions,
     PathChoice,
     build_executions,
+    choose_path,
     finalize_batch,
-    fused_ready,
-    plan_path,
+    fused_kept,
     run_executions,
 )
 from lantern_jax.sim.observe import observe
@@ -435,7 +435,8 @@ def _run_all(pols: list[Policy], policy_params: list, execs: Executions, suite_i
             if stage is not None:
                 stage("starting")
             try:
-                runs.append(run_policy(pol, execs, par, shared=shared, settings=settings,
+                joined = shared if choice.path == "fused" else None
+                runs.append(run_policy(pol, execs, par, shared=joined, settings=settings,
                                        stage=stage, path=choice))  # fmt: skip
                 runs[-1].seconds_compile += prepared.get(pol.name, 0.0)
             except Exception as e:
@@ -455,49 +456,38 @@ def _plan(pols: list[Policy], policy_params: list, execs: Executions, settings: 
           share: bool, path: str, bar: Any) -> tuple[Any, list, dict[str, float]]:  # fmt: skip
     """How every policy of an evaluation is rolled out: ``(shared, choices, seconds)``.
 
-    ``shared`` is the policies' shared fused program (:func:`shared_program`) or None; with
-    ``"auto"`` it is used when it is ready, or when every policy would take the fused path
-    anyway (one compilation for all, as :func:`~lantern_jax.sim.engine.choose_path` rule 3).
-    Once one policy takes the split path the world program is compiled for it, so every
-    policy whose fused program is not ready takes the split path too.  The split policies'
-    programs are compiled at once (:func:`lantern_jax.sim.split.prepare`); ``seconds`` gives
-    each one's compile time."""
-    if path == "split" or not share:
-        shared = None
-    else:
-        shared = shared_program(pols, policy_params)
-    if shared is not None and path == "fused":
-        return shared, [path] * len(pols), {}
-    if shared is not None and _shared_ready(shared, execs, settings):
-        return shared, [PathChoice("fused", "the policies' shared fused program already "
-                                   "compiled")] * len(pols), {}  # fmt: skip
-    params = [p.init(jax.random.PRNGKey(0)) if par is None else par
-              for p, par in zip(pols, policy_params, strict=True)]  # fmt: skip
-    choices = [plan_path(p, execs.scenarios, par, execs.max_ticks, settings, execs.pad_to, path)
-               for p, par in zip(pols, params, strict=True)]  # fmt: skip
-    if not any(c.path == "split" for c in choices):
+    Each policy's path is :func:`~lantern_jax.sim.engine.choose_path`'s (the policy, the batch
+    and the backend decide, never what is cached); beside a policy that takes the split path,
+    the package's policies take it too (the world program is compiled for it anyway).
+    ``shared`` joins the policies that take the fused path in one program
+    (:func:`shared_program`, with ``share``: one compilation for all of them), or is None.
+    The split policies' programs are compiled at once (:func:`lantern_jax.sim.split.prepare`);
+    ``seconds`` gives each one's compile time."""
+    n = 3 * execs.num_pairs if execs.pad_to is None else execs.pad_to
+    choices = [choose_path(p, n, path) for p in pols]
+    if path == "auto" and any(c.path == "split" for c in choices):
+        # the world program serves one policy: the package's policies beside it need only
+        # their own small programs too (the same choice for the same policies, whatever ran)
+        choices = [PathChoice("split", "beside a policy from outside the package, whose world "
+                              "program it shares") if fused_kept(p) and c.path == "fused" else c
+                   for p, c in zip(pols, choices, strict=True)]  # fmt: skip
+    fused = [(p, par) for p, par, c in zip(pols, policy_params, choices, strict=True)
+             if c.path == "fused"]  # fmt: skip
+    shared = None
+    if share and len(fused) > 1:
+        shared = shared_program([p for p, _ in fused], [par for _, par in fused])
+    split = [(p, p.init(jax.random.PRNGKey(0)) if par is None else par)
+             for p, par, c in zip(pols, policy_params, choices, strict=True)
+             if c.path == "split"]  # fmt: skip
+    if not split:
         return shared, choices, {}
-    choices = [
-        PathChoice("split", "world program compiled for another policy of this evaluation")
-        if path == "auto" and c.reason.startswith("nothing compiled") else c
-        for c in choices
-    ]  # fmt: skip
-    split = [(p, par) for p, par, c in zip(pols, params, choices, strict=True) if c.path == "split"]
     if bar is not None:
         bar.set_postfix_str(f"programs of the world and {len(split)} "
                             f"polic{'ies' if len(split) > 1 else 'y'}")  # fmt: skip
     try:
-        return None, choices, prepare(split, execs.scenarios, settings)
+        return shared, choices, prepare(split, execs.scenarios, settings)
     except Exception:  # noqa: BLE001  (a policy that fails is named when it runs on its own)
-        return None, choices, {}
-
-
-def _shared_ready(shared: tuple[PolicySwitch, tuple], execs: Executions,
-                  settings: Settings) -> bool:  # fmt: skip
-    """The shared fused program of ``shared`` is compiled in this process or stored."""
-    switch, members = shared
-    return fused_ready(switch, execs.scenarios, switch_params(switch, 0, members),
-                       execs.max_ticks, settings, pad_to=execs.pad_to)  # fmt: skip
+        return shared, choices, {}
 
 
 def settings_record(settings: Settings) -> dict:
@@ -581,9 +571,10 @@ def evaluate(
             :func:`~lantern_jax.sim.settings.default_settings`, the paper's).
         path: how each policy is rolled out: ``"fused"`` (world and policy one compiled
             program), ``"split"`` (the world program shared by every policy, the policy's own
-            small program) or ``"auto"`` (the fused program where it is ready or the batch is
-            bulk, else the split one: :func:`~lantern_jax.sim.engine.choose_path`); recorded
-            per policy in the run record.  Results agree to float32 rounding.
+            small program) or ``"auto"`` (the package's policies, GPUs and bulk batches fused, a
+            policy from outside the package split: :func:`~lantern_jax.sim.engine.choose_path`,
+            which never depends on what is cached); recorded per policy in the run record.
+            The two paths' results agree to float32 rounding.
 
     Returns:
         :class:`EvalResult` with the route-level table, the family table (with paired warning

@@ -292,11 +292,9 @@ def program_key(identity: Any, args: tuple) -> str | None:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
-def keyable(identity: Any) -> bool:
-    """Whether a program of ``identity`` would be stored: the store is on and the identity
-    can be described with certainty (:func:`describe`)."""
-    if store_dir() is None:
-        return False
+def describable(identity: Any) -> bool:
+    """Whether a program of ``identity`` could be stored: the identity can be described with
+    certainty (:func:`describe`), whether or not the store is on."""
     try:
         describe(identity)
     except Unkeyable:
@@ -344,29 +342,6 @@ def exists(key: str) -> bool:
     """Whether the store holds an entry named ``key`` (not checked: :func:`load` checks)."""
     folder = store_dir()
     return folder is not None and (folder / (key + _SUFFIX)).is_file()
-
-
-_JAX_CACHE_MARK = ".in-jax-cache"
-
-
-def mark_in_jax_cache(key: str) -> None:
-    """Record that JAX's persistent cache served program ``key`` (so it was not stored: see
-    :func:`compile_lowered`); :func:`in_jax_cache` then says it is cheap to get again.  A mark
-    that outlives JAX's cache only costs a compilation, never a wrong program."""
-    folder = store_dir()
-    if folder is None:
-        return
-    with contextlib.suppress(OSError):
-        folder.mkdir(parents=True, exist_ok=True)
-        atomic_write(folder / (key + _JAX_CACHE_MARK), b"")
-        prune(folder)
-
-
-def in_jax_cache(key: str) -> bool:
-    """Whether program ``key`` was served by JAX's persistent cache before
-    (:func:`mark_in_jax_cache`)."""
-    folder = store_dir()
-    return folder is not None and (folder / (key + _JAX_CACHE_MARK)).is_file()
 
 
 def load(key: str) -> Any | None:
@@ -432,17 +407,16 @@ def save(key: str, compiled: Any) -> bool:
 
 
 def prune(folder: Path, keep: int = MAX_PROGRAMS) -> list[Path]:
-    """Remove all but the ``keep`` most recently used programs of ``folder`` (and all but the
-    ``keep`` newest marks of :func:`mark_in_jax_cache`); returns what was removed."""
+    """Remove all but the ``keep`` most recently used programs of ``folder``; returns what was
+    removed."""
+    entries = []
+    for p in folder.glob("*" + _SUFFIX):
+        with contextlib.suppress(OSError):
+            entries.append((p.stat().st_mtime, p))
+    entries.sort(reverse=True)
     removed = []
-    for suffix in (_SUFFIX, _JAX_CACHE_MARK):
-        entries = []
-        for p in folder.glob("*" + suffix):
-            with contextlib.suppress(OSError):
-                entries.append((p.stat().st_mtime, p))
-        entries.sort(reverse=True)
-        for _, p in entries[keep:]:
-            with contextlib.suppress(OSError):
-                p.unlink()
-                removed.append(p)
+    for _, p in entries[keep:]:
+        with contextlib.suppress(OSError):
+            p.unlink()
+            removed.append(p)
     return removed

@@ -118,9 +118,9 @@ def test_a_policy_from_outside_the_package_is_compiled_not_stored(store, monkeyp
     assert len(result.route_table) == 2  # it ran
     assert result.runs[0].program.startswith("split")
     # only the programs that do not depend on the policy can be keyed: the world's, not the
-    # policy's own nor a fused one (asked about when the path was chosen)
+    # policy's own
     assert set(keyed) == {("finalize", True), ("initial_states", True), ("world", True),
-                          ("policy-step", False), ("rollout", False)}  # fmt: skip
+                          ("policy-step", False)}  # fmt: skip
 
 
 def test_describe_accepts_package_functions_and_refuses_what_it_cannot_vouch_for(monkeypatch):

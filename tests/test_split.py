@@ -26,7 +26,7 @@ from lantern_jax.policies.base import Policy
 from lantern_jax.scenarios.suite import load_suite
 from lantern_jax.scoring.table import REPRODUCIBLE_ATOL
 from lantern_jax.sim import engine, programs, split
-from lantern_jax.sim.engine import SUITE_BATCH_SHAPE, PathChoice, Readiness, choose_path
+from lantern_jax.sim.engine import SUITE_BATCH_SHAPE, PathChoice, choose_path
 from lantern_jax.sim.observe import observe, observe_every_sensor
 from lantern_jax.sim.packing import Layout
 from lantern_jax.sim.settings import Settings, default_settings
@@ -200,32 +200,31 @@ def test_executions_are_dealt_longest_first_round_robin():
 # ---------------------------------------------------------------------------------------------
 # the path's choice
 # ---------------------------------------------------------------------------------------------
-def test_the_path_is_chosen_by_what_each_would_cost():
-    pol = Policy("p", lambda k: None, lambda p, o: jnp.zeros((NUM_WAYPOINTS, 2)))
-    n = 360
-    ready = choose_path(pol, n, Readiness(fused=True, world=True), backend="cpu")
-    assert ready.path == "fused" and "already compiled" in ready.reason
-    assert choose_path(pol, n, Readiness(world=True), backend="cpu").path == "split"
-    assert choose_path(pol, n, Readiness(storable=False), backend="cpu").path == "split"
-    assert choose_path(pol, n, Readiness(storable=True), backend="cpu").path == "fused"
-    assert choose_path(pol, n, Readiness(world=True), backend="gpu").path == "fused"
-    bulk = choose_path(pol, engine.SPLIT_MAX_EXECUTIONS + 1, Readiness(world=True), backend="cpu")
-    assert bulk.path == "fused" and "bulk" in bulk.reason
-    assert choose_path(pol, n, Readiness(fused=True), "split").path == "split"
-    assert choose_path(pol, n, Readiness(world=True), "fused").path == "fused"
-    assert str(PathChoice("split", "why")) == "split (why)"
-    with pytest.raises(ValueError, match="not one of"):
-        choose_path(pol, n, Readiness(), "fast")
-
-
-def test_a_policy_switch_cannot_take_the_split_path():
+def test_the_path_depends_on_the_policy_the_batch_and_the_backend_only():
+    """The package's policies run fused (their programs are kept), a policy from outside the
+    package split; GPUs and bulk batches fused; an explicit request wins.  Nothing cached
+    enters the choice, so a run gives the same bits whatever ran before it."""
     from lantern_jax.policies.registry import get_policy
     from lantern_jax.sim.switch import policy_switch
 
-    switch = policy_switch([get_policy("expert"), get_policy("coop")])
-    assert choose_path(switch, 10, Readiness(world=True)).path == "fused"
+    mine = Policy("p", lambda k: None, lambda p, o: jnp.zeros((NUM_WAYPOINTS, 2)))
+    coop = get_policy("coop")
+    n = 360
+    assert choose_path(mine, n, backend="cpu").path == "split"
+    kept = choose_path(coop, n, backend="cpu")
+    assert kept.path == "fused" and "compiled once and kept" in kept.reason
+    assert choose_path(mine, n, backend="gpu").path == "fused"
+    bulk = choose_path(mine, engine.SPLIT_MAX_EXECUTIONS + 1, backend="cpu")
+    assert bulk.path == "fused" and "bulk" in bulk.reason
+    assert choose_path(coop, n, "split").path == "split"
+    assert choose_path(mine, n, "fused").path == "fused"
+    assert str(PathChoice("split", "why")) == "split (why)"
+    with pytest.raises(ValueError, match="not one of"):
+        choose_path(mine, n, "fast")
+    switch = policy_switch([get_policy("expert"), coop])
+    assert choose_path(switch, 10).path == "fused"
     with pytest.raises(ValueError, match="not possible here: a policy switch"):
-        choose_path(switch, 10, Readiness(world=True), "split")
+        choose_path(switch, 10, "split")
 
 
 def test_evaluate_refuses_an_unknown_path_before_compiling():

@@ -365,8 +365,8 @@ def _add_running(ev: argparse.ArgumentParser) -> None:
         help="how each policy is rolled out: 'fused' compiles world and policy as one program "
         "(the fastest rollout, a full compile per new policy), 'split' runs the world program "
         "shared by every policy (compiled once, kept on disk) beside the policy's own small "
-        "program, 'auto' takes the fused program where it is already compiled and the split one "
-        "otherwise; the run record says which ran and why",
+        "program, 'auto' runs the package's policies fused (compiled once, kept) and a policy "
+        "from your own file split; the run record says which ran and why",
     )
     ev.add_argument(
         "--coordinator",

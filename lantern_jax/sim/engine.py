@@ -36,19 +36,16 @@ from lantern_jax.scoring.metrics import finalize
 from lantern_jax.sim.distributed import placement
 from lantern_jax.sim.programs import (  # noqa: F401  (MAX_PROGRAMS, remember: re-exported)
     MAX_PROGRAMS,
-    available,
-    compiled_here,
     executable,
     remember,
 )
 from lantern_jax.sim.rollout import rollout_scheduled_parallel, with_carry
 from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings, default_settings
-from lantern_jax.sim.split import (
+from lantern_jax.sim.split import (  # noqa: F401  (initial_states: re-exported)
     initial_states,
     prepare,
     run_split,
     start_states,
-    world_ready,
 )
 from lantern_jax.sim.step import Driver
 from lantern_jax.sim.switch import PolicySwitch
@@ -277,29 +274,28 @@ def split_possible(policy: Driver) -> str:
     return ""
 
 
-@dataclasses.dataclass(frozen=True)
-class Readiness:
-    """What :func:`choose_path` weighs: which programs exist without compiling."""
+def fused_kept(policy: Driver) -> bool:
+    """Whether a fused program of ``policy`` can be kept between runs: its code is this
+    package's (or of a library whose version keys the store), so the program store can describe
+    it with certainty (:func:`lantern_jax.program_store.describable`).  A policy defined outside
+    (a file being written, a notebook cell) cannot."""
+    return program_store.describable(("rollout", program_identity(policy)))
 
-    fused: bool = False  # the fused program is compiled in this process or stored
-    world: bool = False  # the world program is (:func:`lantern_jax.sim.split.world_ready`)
-    storable: bool = True  # a fused program compiled now would be stored for later runs
 
-
-def choose_path(policy: Driver, n: int, ready: Readiness = Readiness(), requested: str = "auto",
+def choose_path(policy: Driver, n: int, requested: str = "auto",
                 backend: str | None = None) -> PathChoice:  # fmt: skip
     """The rollout :func:`run_executions` takes for ``n`` executions of ``policy``.
 
-    ``"auto"``, in order:
+    ``"auto"`` depends on the policy, the batch and the backend only -- never on what is
+    compiled or cached -- so the same run gives the same bits whatever ran before it:
 
-    1. the fused program when it is ready (its rollout is the fastest), when the split path
-       cannot run the driver (:func:`split_possible`), on a backend other than the CPU (a
-       dispatch per tick costs more there than a compile), or for a bulk batch (over
-       :data:`SPLIT_MAX_EXECUTIONS`: the split rollout's extra time exceeds the compile);
-    2. the split path when the world program is ready (only the policy is compiled, about
-       1-2 s) or when a fused program could not be kept for a later run (the policy's code is
-       outside this package -- a policy being written -- or the program store is off);
-    3. else the fused program, compiled once and stored for every later run.
+    * the fused program when the split path cannot run the driver (:func:`split_possible`), on
+      a backend other than the CPU (a dispatch per tick costs more there than a compile), for a
+      bulk batch (over :data:`SPLIT_MAX_EXECUTIONS`: the split rollout's extra time exceeds the
+      compile), or for a policy whose fused program is kept between runs (:func:`fused_kept`:
+      the package's own policies, compiled once per machine);
+    * else the split path: a policy defined outside the package -- the one being written --
+      compiles only its own program beside the world program, which is compiled once and kept.
 
     Raises:
         ValueError: for a path not in :data:`PATHS`, or ``"split"`` where it cannot run.
@@ -316,18 +312,15 @@ def choose_path(policy: Driver, n: int, ready: Readiness = Readiness(), requeste
     backend = backend or jax.default_backend()
     if why_not:
         return PathChoice("fused", why_not)
-    if ready.fused:
-        return PathChoice("fused", "fused program already compiled")
     if backend != "cpu":
         return PathChoice("fused", f"{backend} backend")
     if n > SPLIT_MAX_EXECUTIONS:
         return PathChoice("fused", f"bulk batch of {n} executions")
-    if ready.world:
-        return PathChoice("split", "world program ready; the policy alone is compiled")
-    if not ready.storable:
-        return PathChoice("split", "a fused program of this policy would not be kept; the "
-                          "world program is compiled once and kept")  # fmt: skip
-    return PathChoice("fused", "nothing compiled yet; the fused program is compiled and kept")
+    if fused_kept(policy):
+        return PathChoice("fused", "the package's policy: its fused program is compiled once "
+                          "and kept")  # fmt: skip
+    return PathChoice("split", "a policy from outside the package: only its own program is "
+                      "compiled, beside the world program")  # fmt: skip
 
 
 def run_executions(
@@ -375,8 +368,8 @@ def run_executions(
             sizes share one compiled program at little cost.
         stage: called with what the call does next, for a progress display: ``"compiling"``
             (only when a program must be compiled) and ``"<n> executions"``.
-        path: ``"fused"``, ``"split"`` or ``"auto"`` (:data:`PATHS`), or a :class:`PathChoice`
-            made beforehand (:func:`plan_path`).
+        path: ``"fused"``, ``"split"`` or ``"auto"`` (:data:`PATHS`, :func:`choose_path`), or
+            a :class:`PathChoice` made beforehand.
         chosen: if given, receives the :class:`PathChoice` taken (appended).
 
     Raises:
@@ -396,36 +389,12 @@ def run_executions(
     if isinstance(path, PathChoice):
         choice = path
     else:
-        choice = plan_path(policy, scenarios, policy_params, max_ticks, settings, pad_to, path)
+        choice = choose_path(policy, n, path)
     if chosen is not None:
         chosen.append(choice)
     if choice.path == "split":
         return run_split(policy, scenarios, policy_params, max_ticks, settings, timings, stage)
     return fused.run(timings, stage)
-
-
-def plan_path(policy: Driver, scenarios: Scenario, policy_params: Any, max_ticks: int,
-              settings: Settings, pad_to: int | None = None,
-              requested: str = "auto") -> PathChoice:  # fmt: skip
-    """The :class:`PathChoice` :func:`run_executions` would make for this batch."""
-    n = jax.tree.leaves(scenarios)[0].shape[0]
-    if requested != "auto" or split_possible(policy):
-        return choose_path(policy, n, Readiness(), requested)
-    ready = Readiness(
-        fused=fused_ready(policy, scenarios, policy_params, max_ticks, settings, pad_to),
-        world=world_ready(scenarios, settings),
-        storable=program_store.keyable(("rollout", program_identity(policy))),
-    )
-    return choose_path(policy, n, ready, requested)
-
-
-def fused_ready(policy: Driver, scenarios: Scenario, policy_params: Any, max_ticks: int,
-                settings: Settings, pad_to: int | None = None) -> bool:  # fmt: skip
-    """Whether the fused program of this batch is ready without compiling (in this process or
-    the program store)."""
-    n = jax.tree.leaves(scenarios)[0].shape[0]
-    total = n if pad_to is None else pad_to
-    return _FusedCall(policy, scenarios, policy_params, max_ticks, settings, None, total).ready()
 
 
 class _FusedCall:
@@ -456,22 +425,6 @@ class _FusedCall:
             place.put(self.laid), place.replicate(self.params), place.put(starts),
             place.replicate(np.int32(self.max_ticks)), place.replicate(self.settings),
         )  # fmt: skip
-
-    def ready(self) -> bool:
-        """The fused program is compiled in this process or stored (nothing is compiled)."""
-        if not program_store.keyable(self.identity) and not compiled_here(
-            _scheduled, self.static
-        ):  # not stored, and no program of this driver in this process: nothing to look up
-            return False
-        block = min(len(self.layout), self.slots * jax.device_count())
-        one = _take(self.laid, np.arange(block))
-        shapes = jax.eval_shape(initial_states, one, (), self.settings.scoring)
-        starts = jax.tree.map(
-            lambda x: np.zeros((len(self.layout), *x.shape[1:]), x.dtype), shapes
-        )
-        starts = jax.tree.map(np.asarray, with_carry(starts, self.policy, self.params))
-        return available(_scheduled, *self._args(starts), static=self.static,
-                         identity=self.identity)  # fmt: skip
 
     def run(self, timings: dict | None, stage: Callable[[str], None] | None):
         """Roll the batch out through the fused program; (final states, compile seconds)."""

@@ -4,9 +4,7 @@
   function, its static arguments and the arguments' structure, shapes and dtypes); with an
   identity, the program is also kept on disk by :mod:`lantern_jax.program_store` and loaded
   from there by a later process;
-* :func:`remember` — build a value (a jitted function, usually) once per key;
-* :func:`available` — whether a program is ready without compiling (in this process or in
-  the store), so that a caller can choose between programs by what they would cost.
+* :func:`remember` — build a value (a jitted function, usually) once per key.
 
 Both caches keep at most :data:`MAX_PROGRAMS` entries (least recently used dropped).
 """
@@ -88,29 +86,9 @@ def executable(fn, *args, static: dict | None = None, timings: dict | None = Non
             spent["trace + lower"], spent["XLA compile"] = t1 - t0, time.perf_counter() - t1
             if stored is not None and fresh:
                 program_store.save(stored, exe)
-            elif stored is not None:  # JAX's cache served it: not storable, but cheap again
-                program_store.mark_in_jax_cache(stored)
         _EXECUTABLES[key] = exe
         while len(_EXECUTABLES) > MAX_PROGRAMS:
             _EXECUTABLES.popitem(last=False)
     if timings is not None:
         timings.update(spent)
     return _EXECUTABLES[key]
-
-
-def compiled_here(fn, static: dict) -> bool:
-    """Whether this process holds a compiled program of ``fn`` with these static arguments,
-    for any argument shapes (a cheap first test before :func:`available`)."""
-    items = tuple(sorted(static.items()))
-    return any(k[0] is fn and k[1] == items for k in _EXECUTABLES)
-
-
-def available(fn, *args, static: dict | None = None, identity: Any = None) -> bool:
-    """Whether :func:`executable` would find ``fn`` for ``args`` without compiling: in this
-    process, stored in the program store under ``identity``, or (marked so by the store) served
-    by JAX's persistent cache, which costs a trace and a load but no XLA compilation."""
-    if _key(fn, static or {}, args) in _EXECUTABLES:
-        return True
-    stored = program_store.program_key(identity, args) if identity is not None else None
-    return stored is not None and (program_store.exists(stored)
-                                   or program_store.in_jax_cache(stored))  # fmt: skip

@@ -51,7 +51,7 @@ from lantern_jax.observation import WARNING
 from lantern_jax.policies.base import Policy
 from lantern_jax.sim.observe import no_warning_fields, observe_every_sensor
 from lantern_jax.sim.packing import Layout
-from lantern_jax.sim.programs import available, executable
+from lantern_jax.sim.programs import executable
 from lantern_jax.sim.settings import Settings
 from lantern_jax.sim.state import State, init_state
 from lantern_jax.sim.step import transition
@@ -207,17 +207,6 @@ def _tick_args(sig: WorldSignature, setp: tuple, device: Any) -> tuple:
         jax.device_put(np.zeros(s, bool), device), jax.device_put(np.zeros(2, bool), device),
         setp,
     )  # fmt: skip
-
-
-def world_ready(scenarios: Scenario, settings: Settings, slots: int = SPLIT_SLOTS) -> bool:
-    """Whether the world program of this batch exists without compiling (in this process or
-    the program store)."""
-    device = jax.local_devices()[0]
-    one = jax.tree.map(lambda x: np.asarray(x)[0], scenarios)
-    sig = world_signature(one, settings, slots)
-    setp = tuple(jax.device_put(b, device) for b in _pack_one(sig.settings, settings))
-    return available(_tick_jit, *_tick_args(sig, setp, device), static=dict(signed=_Signed(sig)),
-                     identity=(sig.identity(), "tick"))  # fmt: skip
 
 
 def _take(tree: Any, idx: np.ndarray) -> Any:
