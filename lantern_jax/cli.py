@@ -39,6 +39,8 @@ selection; an output folder that cannot be written — all found before anything
 from __future__ import annotations
 
 import argparse
+import contextlib
+import logging
 import os
 import sys
 from collections.abc import Sequence
@@ -170,6 +172,30 @@ BACKEND_FAILURE = "Unable to initialize backend"
 BACKEND_ENV = ("JAX_PLATFORMS", "XLA_FLAGS")
 
 
+class _DropCallbackTraceback(logging.Filter):
+    """Drops JAX's log record of a failed host callback (the traceback it logs before raising)."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return not record.getMessage().startswith(CALLBACK_FAILED_LOG)
+
+
+#: how JAX's callback module logs a failed host callback before re-raising its error
+CALLBACK_FAILED_LOG = "jax.pure_callback failed"
+
+
+@contextlib.contextmanager
+def _quiet_callback_log():
+    """While a command runs, JAX's own log of a failed host callback is dropped: the error
+    reaches the command, which names it in one line
+    (:func:`lantern_jax.evaluation.explain_failure`)."""
+    logger, drop = logging.getLogger("jax._src.callback"), _DropCallbackTraceback()
+    logger.addFilter(drop)
+    try:
+        yield
+    finally:
+        logger.removeFilter(drop)
+
+
 def main(argv: Sequence[str] | None = None, exit_on_interrupt: bool | None = None) -> int:
     """Run the command line; returns the exit code.
 
@@ -196,7 +222,9 @@ def main(argv: Sequence[str] | None = None, exit_on_interrupt: bool | None = Non
         except SystemExit as e:  # --help, or an argparse usage error (already printed)
             return e.code if isinstance(e.code, int) else (0 if e.code is None else EXIT_USAGE)
         try:
-            with alarms.AlarmFilter():  # XLA's slow-compile alarms stay out of the terminal
+            # XLA's slow-compile alarms and JAX's log of a failed host callback stay out of the
+            # terminal (the callback's error is reported in one line, with its file and line)
+            with alarms.AlarmFilter(), _quiet_callback_log():
                 return _run(args, argv)
         except UsageError as e:
             print(f"lantern-jax {args.command}: error: {e}", file=sys.stderr)

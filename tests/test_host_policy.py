@@ -109,3 +109,34 @@ def test_onnx_runtime_example_matches_the_jax_model():
     want = jax.jit(jax.vmap(lambda o: host_models.jax_act(WEIGHTS)({}, o)))(obs)
     np.testing.assert_allclose(np.asarray(got), np.asarray(want), atol=1e-4)
     assert jnp.all(jnp.isfinite(got))
+
+
+def test_a_host_model_of_the_wrong_shape_is_one_line_on_the_command_line(tmp_path, capfd):
+    """A host model returning the wrong shape from a policy file: the command ends with one
+    line naming the policy and both shapes (no runtime wrapper, no logged traceback), the
+    callback's error named as raised in the user's file when it is raised there."""
+    from lantern_jax.cli import main
+
+    path = tmp_path / "bad_host.py"
+    path.write_text(
+        "import numpy as np\n"
+        "from lantern_jax.policies.host import host_policy\n"
+        "from lantern_jax.policies.features import observation_vector\n"
+        "def model(x):\n"
+        "    return np.zeros((x.shape[0], 3, 2), np.float32)\n"
+        "def broken(x):\n"
+        "    return x.no_such_attribute\n"
+        "SHAPE = host_policy('badshape', model, preprocess=observation_vector)\n"
+        "RAISES = host_policy('raises', broken, preprocess=observation_vector)\n"
+    )
+    code = main(["evaluate", "--policy", f"{path}:SHAPE", "--pairs", "pe_0001",
+                 "--out", str(tmp_path / "r"), "--quiet"])  # fmt: skip
+    err = capfd.readouterr().err
+    lines = [ln for ln in err.splitlines() if "error" in ln.lower() or "Traceback" in ln]
+    assert code == 1 and len(lines) == 1, err
+    assert "'badshape'" in lines[0] and "(48, 3, 2)" in lines[0] and "(48, 10, 2)" in lines[0]
+    assert "Runtime" not in lines[0] and "pure_callback" not in err
+    assert main(["evaluate", "--policy", f"{path}:RAISES", "--pairs", "pe_0001",
+                 "--out", str(tmp_path / "r2"), "--quiet"]) == 1  # fmt: skip
+    err = capfd.readouterr().err
+    assert "AttributeError" in err and "bad_host.py:7" in err and "Traceback" not in err, err
