@@ -9,8 +9,10 @@ Three edits, each measured in a fresh process (so nothing of an earlier edit sta
   loads it.
 
 Each edit runs on the 6-pair subset and on the whole suite, with a **cold store** (an empty
-compile cache and program store) and with the **world program stored** (only the world's:
-:func:`lantern_jax.sim.engine.warm_world` run first in another process), on the path that
+compile cache and program store), with the **world program stored** (only the world's:
+:func:`lantern_jax.sim.engine.warm_world` run first in another process) and, for ``constant``,
+with **coop's program stored** (an earlier process ran the unedited ``coop`` on the same batch
+and path: the edited policy has ``coop``'s code, so it shares that program), on the path that
 ``"auto"`` chooses and on the fused path.  The time is the wall time of
 ``lantern_jax.evaluate([policy], suite=..., path=...)`` and the family table's formatting,
 inside the process (what a notebook user waits for); the process's own start-up (Python,
@@ -38,7 +40,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 EDITS = ("constant", "mlp", "template")
 BATCHES = ("subset", "suite")
-STORES = ("cold", "stored")
+STORES = ("cold", "stored", "coop-stored")
 PATHS = ("auto", "fused")
 
 
@@ -52,6 +54,8 @@ def _policy(edit: str):
     from lantern_jax.observation import WARNING
     from lantern_jax.policies.registry import get_policy
 
+    if edit == "coop":  # the unedited policy (what an earlier run left in the store)
+        return get_policy("coop")
     if edit == "constant":
         coop = get_policy("coop")
 
@@ -135,15 +139,19 @@ def main() -> None:
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         stored = os.path.join(tmp, "stored")
-        t_world = _warm(stored) if "stored" in args.stores else float("nan")
+        t_world = _warm(stored) if "stored" in args.stores.split(",") else float("nan")
         for store in args.stores.split(","):
             for edit in args.edits.split(","):
+                if store == "coop-stored" and edit != "constant":
+                    continue  # a new policy shares no program with an earlier one
                 for batch in args.batches.split(","):
                     for path in args.paths.split(","):
                         cache = stored if store == "stored" else os.path.join(
-                            tmp, f"cold-{edit}-{batch}-{path}")  # fmt: skip
+                            tmp, f"{store}-{edit}-{batch}-{path}")  # fmt: skip
                         if store == "stored":  # only the world program: drop what runs added
                             _keep_world_only(stored)
+                        if store == "coop-stored":  # an earlier run of the unedited coop
+                            _child(["--one", "coop", batch, path], cache)
                         r = _child(["--one", edit, batch, path], cache)
                         rows.append(dict(store=store, edit=edit, batch=batch, asked=path, **r))
                         print(_row(rows[-1]), flush=True)

@@ -13,6 +13,10 @@ from __future__ import annotations
 
 # --- time -------------------------------------------------------------------------------------
 DT = 0.05  # s, simulation tick (20 Hz, CARLA leaderboard)
+#: s, a recorded rollout (figures, diagnostics) runs to its longest route timeout rounded up to a
+#: multiple of this, so the pairs of a suite share a few compiled programs instead of one each
+#: (the ticks past an execution's end are frozen and trimmed by every reader)
+RECORD_HORIZON_STEP_S = 15.0
 WAYPOINT_DT = 0.25  # s, spacing of policy waypoints
 NUM_WAYPOINTS = 10  # policy output horizon: 10 x 0.25 s = 2.5 s
 

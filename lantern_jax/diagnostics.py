@@ -47,6 +47,7 @@ from lantern_jax.constants import (
     DT,
     FAMILIES,
     NO_WARNING_CONDITION,
+    RECORD_HORIZON_STEP_S,
     SUITE_ID,
     WARNING_CONDITION,
 )
@@ -279,11 +280,15 @@ def run_recorded(
     """Roll out a few executions with full records (one jitted, vmapped call) under
     ``settings`` (default :func:`~lantern_jax.sim.settings.default_settings`); returns (final
     states, tick records, hard metrics), NumPy, leading axis = execution, over a horizon
-    covering the longest route timeout."""
+    covering the longest route timeout, rounded up to a multiple of
+    :data:`~lantern_jax.constants.RECORD_HORIZON_STEP_S` (so that pairs share a program; the
+    ticks past an execution's end repeat its final state, ``done`` set)."""
     batch = tree_stack(scenarios)
     settings = default_settings() if settings is None else settings
     check_texts(settings, batch)
-    horizon = int(np.ceil(float(np.max(np.asarray(batch.config.timeout_s))) / DT))
+    longest = float(np.max(np.asarray(batch.config.timeout_s)))
+    horizon_s = np.ceil(longest / RECORD_HORIZON_STEP_S) * RECORD_HORIZON_STEP_S
+    horizon = int(np.ceil(horizon_s / DT - 1e-6))
     final, rec = _recorded(batch, params, settings, program=Program(policy), horizon=horizon)
     metrics = jax.vmap(lambda t: finalize(t, settings.scoring))(final.telemetry)
     return jax.tree.map(np.asarray, (final, rec, metrics))

@@ -131,3 +131,21 @@ def test_the_plot_command_writes_the_figure_and_names_a_bad_pair(tmp_path, capsy
     assert str(png) in capsys.readouterr().out
     assert main(["plot", "--pair", "zz_9999", "--out", str(out), "--quiet"]) == 2
     assert "zz_9999" in capsys.readouterr().err
+
+
+def test_pairs_of_one_horizon_step_share_a_recorded_program(coop_pe):
+    """Recorded rollouts run to the longest timeout rounded up to RECORD_HORIZON_STEP_S: a pair
+    whose timeout falls in the first one's step (pe_0001 47.4 s, pe_0004 51.1 s: both 60 s)
+    compiles nothing new, and its records end with frozen, ``done`` ticks past its end."""
+    from lantern_jax import diagnostics
+    from lantern_jax.constants import DT, RECORD_HORIZON_STEP_S
+
+    assert coop_pe.pair_id == "pe_0001"
+    before = diagnostics._recorded._cache_size()
+    other = record_pair("coop", "pe_0004")
+    assert diagnostics._recorded._cache_size() == before
+    ticks = len(other.warning.record.t)
+    assert ticks == len(coop_pe.warning.record.t) == round(60.0 / DT)
+    assert 60.0 % RECORD_HORIZON_STEP_S == 0
+    done = np.asarray(other.route_b.record.done, bool)
+    assert done[-1] and not done[0]

@@ -16,12 +16,16 @@ recording it again.
 from __future__ import annotations
 
 import argparse
+import collections
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 
 from lantern_jax.commands import UsageError
 from lantern_jax.commands.common import stage
+
+#: recordings of pairs kept in memory while the gallery's figures are drawn (the rest are dropped)
+KEPT_RECORDINGS = 8
 
 
 def _figure_maker(sets, quiet: bool):
@@ -36,7 +40,9 @@ def _figure_maker(sets, quiet: bool):
     for rs in sets:
         for model in dict.fromkeys(rs.table["model"]):
             owner.setdefault(model, rs)
-    recordings: dict[tuple, object] = {}
+    # the pair's recordings drawn last, for its other failing executions: a few are kept (each
+    # holds every tick of three executions), the oldest dropped and recorded again if needed
+    recordings: collections.OrderedDict[tuple, object] = collections.OrderedDict()
 
     def make(model: str, pair_id: str, condition: str, folder: Path) -> Path:
         png = folder / f"{safe_name(pair_id)}_{safe_name(model)}_{condition}.png"
@@ -52,6 +58,9 @@ def _figure_maker(sets, quiet: bool):
             suite = load_suite(rs.manifest.get("suite_id"))
             recordings[key] = record_pair(get_policy(name), pair_id, suite,
                                           ablation=rs.manifest.get("ablation", "none"))  # fmt: skip
+            while len(recordings) > KEPT_RECORDINGS:
+                recordings.popitem(last=False)
+        recordings.move_to_end(key)
         return save_figure(pair_figure(recordings[key], condition), png)
 
     return make
