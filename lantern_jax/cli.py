@@ -176,11 +176,13 @@ class _DropCallbackTraceback(logging.Filter):
     """Drops JAX's log record of a failed host callback (the traceback it logs before raising)."""
 
     def filter(self, record: logging.LogRecord) -> bool:
-        return not record.getMessage().startswith(CALLBACK_FAILED_LOG)
+        return not record.getMessage().startswith(CALLBACK_FAILED_LOGS)
 
 
-#: how JAX's callback module logs a failed host callback before re-raising its error
-CALLBACK_FAILED_LOG = "jax.pure_callback failed"
+#: how JAX logs a failed host callback (``jax.pure_callback``, ``jax.debug.callback``) before
+#: re-raising its error, and the loggers it logs them with
+CALLBACK_FAILED_LOGS = ("jax.pure_callback failed", "jax.debug.callback failed")
+CALLBACK_LOGGERS = ("jax._src.callback", "jax._src.debugging")
 
 
 @contextlib.contextmanager
@@ -188,12 +190,14 @@ def _quiet_callback_log():
     """While a command runs, JAX's own log of a failed host callback is dropped: the error
     reaches the command, which names it in one line
     (:func:`lantern_jax.evaluation.explain_failure`)."""
-    logger, drop = logging.getLogger("jax._src.callback"), _DropCallbackTraceback()
-    logger.addFilter(drop)
+    loggers, drop = [logging.getLogger(n) for n in CALLBACK_LOGGERS], _DropCallbackTraceback()
+    for logger in loggers:
+        logger.addFilter(drop)
     try:
         yield
     finally:
-        logger.removeFilter(drop)
+        for logger in loggers:
+            logger.removeFilter(drop)
 
 
 def main(argv: Sequence[str] | None = None, exit_on_interrupt: bool | None = None) -> int:
