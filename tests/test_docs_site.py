@@ -102,6 +102,19 @@ class Browser:
         want = self._id
         return self.wait(lambda m: m.get("id") == want).get("result", {})
 
+    def navigate(self, url: str, sid: str) -> None:
+        """Navigate the session's tab to ``url`` and wait for its load event.  The event can
+        arrive before Chromium answers ``Page.navigate`` (a small local page under load): then
+        :meth:`send` has already stored it among the events, and it is taken from there."""
+        first = len(self.events)
+
+        def loaded(m: dict) -> bool:
+            return m.get("method") == "Page.loadEventFired" and m.get("sessionId") == sid
+
+        self.send("Page.navigate", {"url": url}, session=sid)
+        if not any(loaded(m) for m in self.events[first:]):
+            self.wait(loaded)
+
     def open(self, url: str) -> tuple[list[str], dict]:
         """Load ``url`` in a new tab; returns (problems reported while it loaded, facts about
         the page: title, text length, the main heading)."""
@@ -111,8 +124,7 @@ class Browser:
         for domain in ("Runtime.enable", "Log.enable", "Page.enable"):
             self.send(domain, session=sid)
         first = len(self.events)
-        self.send("Page.navigate", {"url": url}, session=sid)
-        self.wait(lambda m: m.get("method") == "Page.loadEventFired" and m.get("sessionId") == sid)
+        self.navigate(url, sid)
         end = time.monotonic() + 1.0  # late scripts (search index, theme) report here
         while time.monotonic() < end:
             self.events.extend(m for m in self._read(end - time.monotonic()) if "id" not in m)

@@ -119,8 +119,7 @@ def _open(browser, url: str) -> tuple[list[str], dict]:
     for domain in ("Runtime.enable", "Log.enable", "Page.enable"):
         browser.send(domain, session=sid)
     first = len(browser.events)
-    browser.send("Page.navigate", {"url": url}, session=sid)
-    browser.wait(lambda m: m.get("method") == "Page.loadEventFired" and m.get("sessionId") == sid)
+    browser.navigate(url, sid)
     end = time.monotonic() + 1.0
     while time.monotonic() < end:
         browser.events.extend(m for m in browser._read(end - time.monotonic()) if "id" not in m)
