@@ -347,15 +347,27 @@ def test_a_user_folder_named_like_a_result_file_is_never_deleted(tmp_path):
      ("distance_summary.csv", "distance_open_loop.md")),
     (["compare", "RESULT", "--policy", "coop", "--policy", "ego"],
      ("comparison.md", "comparison.csv")),
+    (["unseen", "--policy", "coop"], "UNSEEN"),
+    (["plot", "--policy", "ego", "--pair", "pe_0001"], ("pe_0001_ego_warning.png",)),
+    (["plot", "--policy", "ego", "--pair", "pe_0001", "--condition", "route-b", "--animate"],
+     ("pe_0001_ego_route-b.gif",)),
+    (["dataset", "--sequences", "12"], ("plan.json", "dataset_card.json", "dataset_card.md")),
+    (["train", "--config", "configs/train_coop.toml"], "TRAIN"),
 ])  # fmt: skip
 def test_every_writing_command_keeps_the_user_entries_named_like_its_outputs(
     tmp_path, argv, names, result_set
 ):
+    from lantern_jax.commands.unseen import unseen_files
     from lantern_jax.report.outputs import ABLATION_FILES, OUTPUT_FILES
     from lantern_jax.stress.report import RESULT_FILES
+    from lantern_jax.training.config import load_config
+    from lantern_jax.training.train import run_files
 
-    names = {"OUTPUT_FILES": OUTPUT_FILES, "ABLATION_FILES": ABLATION_FILES,
-             "STRESS": RESULT_FILES}.get(names, names)  # fmt: skip
+    train = run_files(load_config(ROOT / "configs/train_coop.toml"))
+    named = {"OUTPUT_FILES": OUTPUT_FILES, "ABLATION_FILES": ABLATION_FILES,
+             "STRESS": RESULT_FILES, "UNSEEN": unseen_files(), "TRAIN": train}  # fmt: skip
+    names = named.get(names, names) if isinstance(names, str) else names
+    argv = [str(ROOT / a) if a.startswith("configs/") else a for a in argv]
     out = tmp_path / "out"
     kept = _prefill(out, names)
     argv = [str(result_set) if a == "RESULT" else a for a in argv]
@@ -364,6 +376,38 @@ def test_every_writing_command_keeps_the_user_entries_named_like_its_outputs(
     assert r.rc == 2 and "is a folder" in r.err, r.err
     assert programs_so_far() == before  # refused before anything was compiled or loaded
     assert _all_kept(kept)
+
+
+def test_a_training_run_refuses_a_checkpoint_folder_holding_user_entries(tmp_path):
+    """orbax prunes old steps in ``checkpoints/``: a user's entry there is refused up front."""
+    out = tmp_path / "run"
+    (out / "checkpoints").mkdir(parents=True)
+    note = out / "checkpoints" / "notes.txt"
+    note.write_text("keep")
+    before = programs_so_far()
+    r = run_cli(["train", "--config", str(ROOT / "configs/train_coop.toml"), "--out", str(out)])
+    assert r.rc == 2 and "notes.txt: not an orbax step of a run" in r.err, r.err
+    assert programs_so_far() == before
+    assert note.read_text() == "keep"
+
+
+def test_report_never_replaces_a_file_or_folder_it_did_not_write(tmp_path, result_set):
+    """``report --out`` over the user's own HTML file, a folder or (with ``--figures``) a file
+    where the figure folder goes: one line, nothing replaced; its own page is rewritten."""
+    mine = tmp_path / "page.html"
+    mine.write_text("<html>my page</html>")
+    r = run_cli(["report", str(result_set), "--out", str(mine)])
+    assert r.rc == 2 and "is not a report this project wrote" in r.err, r.err
+    assert mine.read_text() == "<html>my page</html>"
+    ours = tmp_path / "ours.html"
+    blocker = tmp_path / "ours_files"
+    blocker.write_text("not a folder")
+    r = run_cli(["report", str(result_set), "--out", str(ours), "--figures"])
+    assert r.rc == 2 and "the report's figure folder is a file" in r.err, r.err
+    assert blocker.read_text() == "not a folder" and not ours.exists()
+    for _ in range(2):  # a page this project wrote is replaced by the next report
+        r = run_cli(["report", str(result_set), "--out", str(ours), "--quiet"])
+        assert r.rc == 0, r.err
 
 
 def test_a_staged_set_refuses_a_user_folder_at_commit_time_too(tmp_path):

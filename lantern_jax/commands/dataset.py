@@ -28,10 +28,10 @@ def cmd_dataset(args: argparse.Namespace, argv: Sequence[str]) -> int:
     del argv
     from lantern_jax.constants import FAMILIES
     from lantern_jax.dataset.generate import generate_dataset
-    from lantern_jax.dataset.scenes import PAIRS_PER_FAMILY
-    from lantern_jax.dataset.store import DatasetError, card_markdown
+    from lantern_jax.dataset.scenes import PAIRS_PER_FAMILY, PLAN_JSON
+    from lantern_jax.dataset.store import CARD_JSON, CARD_MD, DatasetError, card_markdown
 
-    check_out(args.out, in_place=True)
+    check_out(args.out, in_place=True, owned=(PLAN_JSON, CARD_JSON, CARD_MD))
     if args.sequences is not None:
         if args.sequences < 2 * len(FAMILIES):
             raise UsageError(f"--sequences: at least {2 * len(FAMILIES)} (one Route A and one "

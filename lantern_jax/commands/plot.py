@@ -28,10 +28,12 @@ def cmd_plot(args: argparse.Namespace, argv: Sequence[str]) -> int:
     """``lantern-jax plot``: record one pair's executions for one policy and write the figure
     (and with ``--animate`` the animation) into ``--out``."""
     del argv
-    check_out(args.out, in_place=True)
     name = one_policy(args)
     from lantern_jax.scenarios.suite import SuiteError, load_suite
-    from lantern_jax.viz.pair import plot_pair
+    from lantern_jax.viz.pair import figure_stem, plot_pair
+
+    stem = figure_stem(args.pair, name, args.condition)
+    check_out(args.out, in_place=True, owned=(f"{stem}.png", f"{stem}.gif"))
 
     try:
         suite = load_suite(args.suite)

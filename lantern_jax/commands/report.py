@@ -92,6 +92,13 @@ def cmd_report(args: argparse.Namespace, argv: Sequence[str]) -> int:
         raise UsageError(f"--out {args.out}: the report is one HTML file (name it *.html)")
     if out.is_dir():
         raise UsageError(f"--out {args.out}: is a folder; name the HTML file to write")
+    from lantern_jax.files import OutputFolderError
+    from lantern_jax.report.page import check_report_target
+
+    try:
+        check_report_target(out, args.figures)
+    except OutputFolderError as e:
+        raise UsageError(f"--out {e}") from None
     try:
         sets = [read_result_set(r) for r in args.results]
     except ResultSetError as e:

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 from collections.abc import Sequence
+from pathlib import Path
 
 from lantern_jax.commands import UsageError
 from lantern_jax.commands.common import check_out
@@ -121,8 +122,14 @@ def cmd_train(args: argparse.Namespace, argv: Sequence[str]) -> int:
                           seed=args.seed)  # fmt: skip
     except ConfigFileError as e:
         raise UsageError(str(e)) from None
+    from lantern_jax.training.train import check_checkpoint_folder, run_files
+
     where = "--out" if args.out is not None else f"config {args.config}: train.out"
-    check_out(cfg.out, where, in_place=True)
+    check_out(cfg.out, where, in_place=True, owned=run_files(cfg))
+    try:
+        check_checkpoint_folder(Path(cfg.out))
+    except OSError as e:
+        raise UsageError(f"{where}: {e}") from None
     try:
         summary = train(cfg, progress=not args.quiet)
     except DatasetError as e:  # names the dataset's file

@@ -25,6 +25,16 @@ from lantern_jax.commands.common import check_out, write_and_list
 DEFAULT_OUT = "results/unseen"
 
 
+def unseen_files() -> tuple[str, ...]:
+    """Every file ``unseen`` may write: ``unseen_<k>`` for each of the paper's tables and one
+    for other families (:func:`lantern_jax.transfer.table_groups`), and ``unseen_pairs``, each
+    as ``.csv`` and ``.md``; checked up front so that no entry of the user's is in the way."""
+    from lantern_jax.transfer import PAPER_TABLES
+
+    stems = [f"unseen_{k + 1}" for k in range(len(PAPER_TABLES) + 1)] + ["unseen_pairs"]
+    return tuple(f"{stem}{ext}" for stem in stems for ext in (".csv", ".md"))
+
+
 def cmd_unseen(args: argparse.Namespace, argv: Sequence[str]) -> int:
     """Run the unseen-hazard tables for one policy; returns the exit code."""
     del argv
@@ -45,7 +55,7 @@ def cmd_unseen(args: argparse.Namespace, argv: Sequence[str]) -> int:
     if len(names) != 1:
         raise UsageError(f"--policy: give one policy, got {', '.join(names)}")
     policy = get_policy(names[0])
-    check_out(args.out)
+    check_out(args.out, owned=unseen_files())
     try:
         suite = transfer.unseen_suite() if args.suite is None else load_suite(args.suite)
     except (FileNotFoundError, SuiteError, ValueError) as e:

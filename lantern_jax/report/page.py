@@ -38,7 +38,7 @@ import numpy as np
 import pandas as pd
 
 from lantern_jax.constants import FAMILIES, GATE_COLUMN_NAMES
-from lantern_jax.files import atomic_write
+from lantern_jax.files import OutputFolderError, atomic_write
 from lantern_jax.report.evidence import ResultSet, read_result_set
 from lantern_jax.report.outputs import DECOMPOSITION_CSV, FAMILY_CSV
 from lantern_jax.scoring.aggregate import premise_table
@@ -57,6 +57,9 @@ CAUSES = {
 }
 #: A figure of one failing execution: ``(policy, pair id, condition, folder) -> PNG path``.
 FigureMaker = Callable[[str, str, str, Path], Path]
+
+#: The page's generator tag: an existing ``--out`` file without it is the user's, never replaced.
+GENERATOR = "<meta name='generator' content='lantern_jax report'>"
 
 _STYLE = """
 body{font-family:system-ui,sans-serif;margin:2em auto;max-width:1200px;color:#222;padding:0 1em}
@@ -357,6 +360,31 @@ def _relative(png: Path, files: Path) -> str:
     return f"{files.name}/{os.path.relpath(png, files)}"
 
 
+def check_report_target(out: Path, figures: bool) -> Path:
+    """Refuse a report target that would replace something this project did not write: an
+    ``out`` that is a folder, a link or a file without the report's :data:`GENERATOR` tag (or,
+    from before the tag, its sorting script); with ``figures``, a ``<stem>_files`` entry that
+    is not a plain folder.  Returns the figures' folder.
+
+    Raises:
+        OutputFolderError: naming the entry.
+    """
+    files = out.with_name(out.stem + "_files")
+    if os.path.lexists(out):
+        if out.is_symlink() or not out.is_file():
+            raise OutputFolderError(f"{out}: is not a file this project wrote (a folder, a link "
+                                    "or a special file); choose another name")  # fmt: skip
+        with open(out, "rb") as fh:
+            head = fh.read(1 << 20).decode("utf-8", "replace")
+        if GENERATOR not in head and _SORT not in head:
+            raise OutputFolderError(f"{out}: exists and is not a report this project wrote; "
+                                    "choose another name, or move it")  # fmt: skip
+    if figures and os.path.lexists(files) and (files.is_symlink() or not files.is_dir()):
+        raise OutputFolderError(f"{files}: the report's figure folder is a file or a link "
+                                "here; move it, or choose another name")  # fmt: skip
+    return files
+
+
 def build_report(
     results: Sequence[str | os.PathLike | ResultSet],
     out: str | os.PathLike,
@@ -377,10 +405,12 @@ def build_report(
 
     Raises:
         lantern_jax.report.evidence.ResultSetError: for a folder that is not valid evidence.
+        lantern_jax.files.OutputFolderError: when ``out`` (or its figure folder) is something
+            this project did not write (:func:`check_report_target`), before anything runs.
     """
-    sets = [r if isinstance(r, ResultSet) else read_result_set(r) for r in results]
     out = Path(out)
-    files = out.with_name(out.stem + "_files")
+    files = check_report_target(out, figures is not None)
+    sets = [r if isinstance(r, ResultSet) else read_result_set(r) for r in results]
     title = title or "lantern_jax report: " + ", ".join(rs.folder.name for rs in sets)
     body = [f"<h1>{_esc(title)}</h1>", "<h2>The run</h2>"]
     body += [_identity(rs) for rs in sets]
@@ -401,7 +431,7 @@ def build_report(
     if forest:
         body += ["<h2>Paired differences</h2>", forest]
     body += ["<h2>The failures</h2>", _gallery(sets, figures, files)]
-    page = (f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
+    page = (f"<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>{GENERATOR}"
             f"<title>{_esc(title)}</title><style>{_STYLE}</style></head><body>"
             f"{''.join(body)}<script>{_SORT}</script></body></html>")  # fmt: skip
     atomic_write(out, page.encode())

@@ -20,6 +20,7 @@ CPU is deterministic).
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 from lantern_jax.dataset.store import load_frames, read_card
@@ -27,6 +28,37 @@ from lantern_jax.policies.learned.checkpoint import load_model, new_model
 from lantern_jax.training.config import TrainConfig
 from lantern_jax.training.data import recipe_examples, split_by_sequence
 from lantern_jax.training.fit import Batches, fit, model_config
+
+#: The files a run writes at the top of its folder besides ``<name>.msgpack`` / ``<name>.json``.
+RUN_FILES = ("curve.csv", "curve.png", "rounds.json")
+#: The folder of the run's orbax checkpoints (its entries are step folders orbax prunes).
+CHECKPOINT_FOLDER = "checkpoints"
+
+
+def run_files(cfg: TrainConfig) -> tuple[str, ...]:
+    """The files a run of ``cfg`` writes at the top of its folder (checked up front, so that
+    an entry of the user's of one of these names is refused rather than replaced)."""
+    return (f"{cfg.name}.msgpack", f"{cfg.name}.json", *RUN_FILES)
+
+
+def check_checkpoint_folder(out: Path) -> None:
+    """Refuse a run folder whose ``checkpoints/`` holds anything but orbax's step folders:
+    orbax deletes old steps there, so a user's entry in it could be lost.
+
+    Raises:
+        OSError: naming the entry.
+    """
+    import re
+
+    folder = Path(out) / CHECKPOINT_FOLDER
+    if not os.path.lexists(folder):
+        return
+    if folder.is_symlink() or not folder.is_dir():
+        raise OSError(f"{folder}: is not the checkpoint folder of a run (a file or a link)")
+    for entry in sorted(folder.iterdir()):
+        if entry.is_symlink() or not entry.is_dir() or not re.fullmatch(r"\d+(\..+)?", entry.name):
+            raise OSError(f"{entry}: not an orbax step of a run (the checkpoint folder's old "
+                          "steps are deleted); move it, or choose another --out")  # fmt: skip
 
 
 def train(cfg: TrainConfig, progress: bool = True) -> dict:

@@ -387,6 +387,12 @@ def safe_name(name: str) -> str:
 _safe = safe_name
 
 
+def figure_stem(pair_id: str, policy: str, condition: str) -> str:
+    """The file stem :func:`plot_pair` writes one execution's figure under:
+    ``<pair>_<policy>_<condition>`` (``.png``, and ``.gif`` for the animation)."""
+    return f"{_safe(pair_id)}_{_safe(policy)}_{condition}"
+
+
 def _gate_text(ex: RecordedExecution, settings: Settings) -> str:
     g = first_failed_gate(ex, settings)
     if g is None:
@@ -550,7 +556,7 @@ def plot_pair(
     fig = pair_figure(rec, ex.condition)
     if out is None:
         return fig
-    stem = f"{_safe(rec.pair_id)}_{_safe(rec.policy)}_{ex.condition}"
+    stem = figure_stem(rec.pair_id, rec.policy, ex.condition)
     folder = Path(out)
     paths = [save_figure(fig, folder / f"{stem}.png")]
     if animate:
