@@ -19,6 +19,13 @@ DT = 0.05  # s, simulation tick (20 Hz, CARLA leaderboard)
 RECORD_HORIZON_STEP_S = 15.0
 WAYPOINT_DT = 0.25  # s, spacing of policy waypoints
 NUM_WAYPOINTS = 10  # policy output horizon: 10 x 0.25 s = 2.5 s
+# m/s, fastest plan a vehicle is asked to drive: a leg of a plan (ego to its first waypoint, or
+# one waypoint to the next, 0.25 s apart) longer than MAX_PLAN_SPEED * WAYPOINT_DT (25 m) is a
+# controller fault, like a NaN.  Not the paper's (CARLA drives any plan at the controller's
+# limits): a project rule, so that a plan in the wrong units or scaled (a model's output x1e4)
+# is flagged rather than driven; about nine times the built-in suite's fastest reference speed
+# (10.9 m/s), far above any plan a road vehicle follows.
+MAX_PLAN_SPEED = 100.0
 
 # --- ego vehicle (Lincoln MKZ 2020, reference/parameters.md) ----------------------------------
 EGO_HALF_LENGTH = 2.4508  # m

@@ -1415,7 +1415,8 @@ def test_select_of_one_id_string():
 
 def _plan_policies() -> list[Policy]:
     """User policies (Python API) whose plans the vehicle cannot drive: NaN, an infinite
-    waypoint, 1e30 m, and a plan pointing backwards at 8 m/s."""
+    waypoint, 1e30 m, a plan pointing backwards at 8 m/s and the same scaled by 1e4 (a model's
+    output in other units)."""
     import jax.numpy as jnp
 
     coop = get_policy("coop")
@@ -1425,19 +1426,21 @@ def _plan_policies() -> list[Policy]:
         "plan-inf": lambda params, obs: ahead.at[3, 0].set(jnp.inf),
         "plan-huge": lambda params, obs: ahead * 1e30,
         "plan-backwards": lambda params, obs: -ahead,
+        "plan-backwards-x1e4": lambda params, obs: -ahead * 1e4,
     }
     return [Policy(name, coop.init, act) for name, act in plans.items()]
 
 
 def test_plans_a_vehicle_cannot_drive_have_a_defined_outcome():
-    """NaN, infinite and huge waypoints are controller faults, recorded with their time in the
-    row (Route A and Route B), braking fully from the first tick; a plan pointing backwards is
-    driven as the controller defines it (the plan's speeds are magnitudes and the vehicle has
-    no reverse gear: it drives forward at the plan's 8 m/s), with no fault; every row keeps
-    the route table's schema (missing values only where it allows them)."""
+    """NaN, infinite and huge waypoints, and a plan faster than ``MAX_PLAN_SPEED`` (a backwards
+    plan scaled by 1e4: 80 km/s), are controller faults, recorded with their time in the row
+    (Route A and Route B), braking fully from the first tick; a plan pointing backwards at a
+    drivable speed is driven as the controller defines it (the plan's speeds are magnitudes
+    and the vehicle has no reverse gear: it drives forward at the plan's 8 m/s), with no fault;
+    every row keeps the route table's schema (missing values only where it allows them)."""
     res = ev.evaluate(_plan_policies(), suite=load_suite().select(["pe_0001"]), progress=False)
     rows = res.route_table.set_index(["model", "condition"])
-    for name in ("plan-nan", "plan-inf", "plan-huge"):
+    for name in ("plan-nan", "plan-inf", "plan-huge", "plan-backwards-x1e4"):
         for cond in ("warning", "no-warning"):
             row = rows.loc[(name, cond)]
             assert (row["controller_fault"], row["B_controller_fault"]) == (1, 1), name

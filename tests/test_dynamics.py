@@ -440,6 +440,24 @@ def test_controller_gradients_finite():
             assert _finite(grad(wp, _f(v)))
 
 
+def test_a_plan_faster_than_the_limit_is_a_fault_and_one_just_under_is_not():
+    """Legs of MAX_PLAN_SPEED * WAYPOINT_DT = 25 m: a straight plan at 99 m/s is driven, one at
+    101 m/s is a fault, as is a single 26 m jump between two waypoints of a slow plan (or from
+    the ego to the first waypoint), whatever its direction."""
+    from lantern_jax.constants import MAX_PLAN_SPEED, WAYPOINT_DT
+
+    leg = MAX_PLAN_SPEED * WAYPOINT_DT
+    assert leg == 25.0
+    straight = jnp.stack([K_STEPS * WAYPOINT_DT, jnp.zeros(10)], axis=1)  # 1 m/s
+    assert not bool(waypoints_fault(99.0 * straight))
+    assert bool(waypoints_fault(101.0 * straight))
+    assert bool(waypoints_fault(-101.0 * straight))  # backwards as well
+    jump = straight.at[5:, 1].add(26.0)  # waypoints 5..9 shifted 26 m sideways
+    assert bool(waypoints_fault(jump))
+    assert bool(waypoints_fault(straight.at[0, 0].set(26.0)))  # from the ego
+    assert not bool(waypoints_fault(straight.at[5:, 1].add(24.0)))
+
+
 def test_controller_nan_waypoints_fault():
     wp = jnp.stack([2 * K_STEPS, jnp.zeros(10)], axis=1).at[4, 1].set(jnp.nan)
     assert bool(waypoints_fault(wp))

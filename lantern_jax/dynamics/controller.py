@@ -35,7 +35,9 @@ Longitudinal (proportional speed control with feed-forward, no integral state):
 There is no integral term: the bicycle has no drag or grade, so proportional control has no
 steady-state error, and a stateless controller keeps a rollout step a pure function of the world.
 
-Faults: non-finite waypoints make both outputs NaN (computed from zeroed waypoints, so no NaN
+Faults: non-finite waypoints, or a plan faster than
+:data:`~lantern_jax.constants.MAX_PLAN_SPEED` (:func:`waypoints_fault`), make both outputs NaN
+(computed from zeroed waypoints, so no NaN
 reaches a gradient); :func:`lantern_jax.dynamics.bicycle.sanitize_controls` then turns them into
 full braking and reports the fault.  :func:`waypoints_fault` gives the same flag directly.
 """
@@ -45,7 +47,14 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from lantern_jax.constants import BIG, EGO_MAX_ACCEL, EGO_MAX_STEER, EGO_WHEELBASE, WAYPOINT_DT
+from lantern_jax.constants import (
+    BIG,
+    EGO_MAX_ACCEL,
+    EGO_MAX_STEER,
+    EGO_WHEELBASE,
+    MAX_PLAN_SPEED,
+    WAYPOINT_DT,
+)
 from lantern_jax.dynamics.bicycle import EGO_LR, bicycle_step, brake_limit, sanitize_controls
 from lantern_jax.geometry import safe_norm
 from lantern_jax.polyline import arc_length, interpolate, safe_atan2
@@ -75,15 +84,22 @@ def lookahead_distance(speed: Array) -> Array:
 
 
 def waypoints_fault(waypoints: Array) -> Array:
-    """Whether a plan is unusable (any NaN or infinite coordinate).
+    """Whether a plan is unusable: any NaN or infinite coordinate, or a leg (the ego to the
+    first waypoint, or one waypoint to the next) faster than
+    :data:`~lantern_jax.constants.MAX_PLAN_SPEED` (a plan in other units, or scaled).
 
     Args:
-        waypoints: (N, 2) float32, m, ego frame.
+        waypoints: (N, 2) float32, m, ego frame, ``WAYPOINT_DT`` apart.
 
     Returns:
         () bool.
     """
-    return ~jnp.all(jnp.isfinite(waypoints))
+    finite = jnp.isfinite(waypoints)
+    wp = jnp.where(finite, waypoints, 0.0)
+    pts = jnp.concatenate([jnp.zeros((1, 2), wp.dtype), wp], axis=0)
+    leg2 = jnp.sum(jnp.square(pts[1:] - pts[:-1]), axis=-1)  # m^2 (inf where it overflows)
+    too_fast = jnp.any(leg2 > (MAX_PLAN_SPEED * WAYPOINT_DT) ** 2)
+    return ~jnp.all(finite) | too_fast
 
 
 def desired_speed(waypoints: Array) -> Array:
@@ -154,8 +170,9 @@ def track_waypoints(ego: EgoState, waypoints: Array, friction: Array) -> tuple[A
 def follow_plan(ego: EgoState, waypoints: Array, friction: Array) -> tuple[EgoState, Array, Array]:
     """One tick of the ego driving a plan: controller, fault handling, bicycle.
 
-    Non-finite waypoints (or controls) are a controller fault: the ego brakes fully (friction
-    limited) and keeps its wheel angle; the fault is returned, never propagated as NaN.
+    An unusable plan (non-finite, or faster than :data:`~lantern_jax.constants.MAX_PLAN_SPEED`:
+    :func:`waypoints_fault`) or non-finite controls are a controller fault: the ego brakes fully
+    (friction limited) and keeps its wheel angle; the fault is returned, never propagated as NaN.
 
     Args:
         ego: the ego at the start of the tick.
@@ -167,7 +184,7 @@ def follow_plan(ego: EgoState, waypoints: Array, friction: Array) -> tuple[EgoSt
         fault: () bool, the plan or the controls were not finite.
         safe_waypoints: (10, 2) float32, m, the waypoints with a faulty plan replaced by zeros.
     """
-    wp_fault = ~jnp.all(jnp.isfinite(waypoints))
+    wp_fault = waypoints_fault(waypoints)
     safe = jnp.where(wp_fault, 0.0, waypoints)
     steer_cmd, accel_cmd = track_waypoints(ego, safe, friction)
     steer_cmd, accel_cmd, ctl_fault = sanitize_controls(steer_cmd, accel_cmd)

@@ -24,9 +24,9 @@ frame history or a recurrent state) the model is called ``fn(batch, carry_batch)
 ``(outputs, new_carry_batch)``, both with the leading batch axis; the simulator keeps each
 execution's carry between ticks and resets it when an execution starts.  The model must be
 a pure function of its input (JAX may call it again, e.g. when a rollout is retried), must
-return finite values of the promised shape (non-finite waypoints are recorded as a controller
-fault like any policy's), and holds its own weights (the policy's ``params`` are empty).  Not
-differentiable: gradients do not flow through a host call.
+return finite values of the promised shape (non-finite or impossibly fast waypoints are
+recorded as a controller fault like any policy's), and holds its own weights (the policy's
+``params`` are empty).  Not differentiable: gradients do not flow through a host call.
 """
 
 from __future__ import annotations

@@ -93,7 +93,8 @@ class ExecutionMetrics:
     gate_block: Array  # () bool, passed (no 20 s standstill, route completed, no controller fault)
     gate_false_brake: Array  # () bool, passed (no unjustified 1 s stop touching the matched
     #                          stretch of route; see scoring.components.false_brake)
-    controller_fault: Array  # () bool, the policy produced NaN/inf waypoints on some tick
+    controller_fault: Array  # () bool, the policy's plan was unusable (NaN/inf, or over
+    #                          MAX_PLAN_SPEED) on some tick
     t_fault_s: Array  # float32, s, first controller fault (NaN none)
     stalled: Array  # () bool, standstill of >= 20 s with the route unfinished
     timed_out: Array  # () bool, route not completed at the end of the execution

@@ -36,7 +36,8 @@ class TickSample:
     #                          speed while nothing justifies it (the efficiency diagnostic)
     fb_window: Array  # () bool, the ego's route progress lies in the stretch matched to Route A's
     #                    warning-to-event approach (Route B false brake)
-    controller_fault: Array  # () bool, the policy produced NaN/inf waypoints this tick
+    controller_fault: Array  # () bool, the policy's plan was unusable (NaN/inf, or over
+    #                          MAX_PLAN_SPEED) this tick
     t_warn_point: Array  # () s, protocol: ego reached the warning point (t_ref); NEVER if not
     t_event: Array  # () s, protocol: physical-event onset; NEVER if not yet
     t_warn_off: Array  # () s, protocol: warning termination; NEVER if not yet

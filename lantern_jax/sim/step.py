@@ -9,7 +9,8 @@ A tick (time ``t`` -> ``t + DT``) is two functions composed by :func:`step`:
   the ground truth, never an observation:
 
   1. **ego** — controller and bicycle (:func:`lantern_jax.dynamics.controller.follow_plan`);
-     non-finite waypoints are a controller fault (full braking, recorded), never propagated;
+     an unusable plan (non-finite, or faster than ``MAX_PLAN_SPEED``) is a controller fault
+     (full braking, recorded), never propagated;
   2. **protocol, before the actors** — warning point, anti-deadlock countdown (paused while a
      light or a queue holds the ego) and event onset, with sub-tick times
      (:mod:`lantern_jax.scenarios.protocol`);

@@ -7,7 +7,8 @@ Fails on any of:
   consecutive ticks (20 s) -- failure time: the tick at which it reached 20 s;
 * an unfinished route at the end (``progress < route_length - 2 m``: timeout) -- failure time:
   the last folded tick;
-* a controller fault (NaN/inf waypoints) on any tick -- failure time: the first fault.
+* a controller fault (NaN/inf waypoints, or a plan over ``MAX_PLAN_SPEED``) on any tick --
+  failure time: the first fault.
 
 Soft: ``sigmoid((399.5 ticks - longest standstill) * DT / T) * sigmoid((progress - (length -
 2 m)) / T) * (1 - fault)``.
