@@ -12,7 +12,10 @@ Each edit runs on the 6-pair subset and on the whole suite, with a **cold store*
 compile cache and program store), with the **world program stored** (only the world's:
 :func:`lantern_jax.sim.engine.warm_world` run first in another process) and, for ``constant``,
 with **coop's program stored** (an earlier process ran the unedited ``coop`` on the same batch
-and path: the edited policy has ``coop``'s code, so it shares that program), on the path that
+and path: the edited policy has ``coop``'s code, so it shares that program), and, for the new
+policies, as a **rerun** (the world program stored, then another new policy -- ``template``,
+or ``mlp`` for the template -- ran on the same batch: the loop of editing a policy and running
+it again, where only the edited policy's own program is new), on the path that
 ``"auto"`` chooses and on the fused path.  The time is the wall time of
 ``lantern_jax.evaluate([policy], suite=..., path=...)`` and the family table's formatting,
 inside the process (what a notebook user waits for); the process's own start-up (Python,
@@ -40,7 +43,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 EDITS = ("constant", "mlp", "template")
 BATCHES = ("subset", "suite")
-STORES = ("cold", "stored", "coop-stored")
+STORES = ("cold", "stored", "coop-stored", "rerun")
 PATHS = ("auto", "fused")
 
 
@@ -144,6 +147,8 @@ def main() -> None:
             for edit in args.edits.split(","):
                 if store == "coop-stored" and edit != "constant":
                     continue  # a new policy shares no program with an earlier one
+                if store == "rerun" and edit == "constant":
+                    continue  # coop-stored is the constant's rerun
                 for batch in args.batches.split(","):
                     for path in args.paths.split(","):
                         cache = stored if store == "stored" else os.path.join(
@@ -152,6 +157,10 @@ def main() -> None:
                             _keep_world_only(stored)
                         if store == "coop-stored":  # an earlier run of the unedited coop
                             _child(["--one", "coop", batch, path], cache)
+                        if store == "rerun":  # the world stored, then another new policy ran
+                            _warm(cache)
+                            other = "template" if edit != "template" else "mlp"
+                            _child(["--one", other, batch, path], cache)
                         r = _child(["--one", edit, batch, path], cache)
                         rows.append(dict(store=store, edit=edit, batch=batch, asked=path, **r))
                         print(_row(rows[-1]), flush=True)

@@ -63,6 +63,7 @@ from lantern_jax.sim.engine import (
     run_executions,
 )
 from lantern_jax.sim.observe import observe
+from lantern_jax.sim.programs import abstract
 from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings, default_settings
 from lantern_jax.sim.split import prepare
 from lantern_jax.sim.state import init_state
@@ -147,6 +148,11 @@ def _route_rows(
     return pd.concat(rows, ignore_index=True)
 
 
+def _first_observation(scenario: Any, sensors: tuple[str, ...], bank: Any) -> Any:
+    """The observation of one execution's start state through ``sensors`` (for its shapes)."""
+    return observe(scenario, init_state(scenario), sensors, bank)
+
+
 def run_policy(
     policy: Policy | str,
     execs: Executions,
@@ -177,7 +183,10 @@ def run_policy(
     pol = get_policy(policy) if isinstance(policy, str) else policy
     params = pol.init(jax.random.PRNGKey(0)) if policy_params is None else policy_params
     sc0 = jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape[1:], x.dtype), execs.scenarios)
-    obs = jax.eval_shape(lambda sc: observe(sc, init_state(sc), pol.sensors, settings.bank), sc0)
+    bank = hashlib.sha256(repr(settings.bank).encode()).hexdigest()
+    obs = abstract("observe", functools.partial(_first_observation, sensors=pol.sensors,
+                                                bank=settings.bank), sc0,
+                   parts=(repr(pol.sensors), bank))  # fmt: skip
     check_policy_output(pol, params, obs)
     timings: dict[str, float] = {}
     t0 = time.perf_counter()

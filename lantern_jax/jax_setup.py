@@ -28,6 +28,13 @@ CPU_DEVICES_ENV = "LANTERN_JAX_CPU_DEVICES"
 CACHE_DIR_ENV = "LANTERN_JAX_CACHE_DIR"
 #: Environment variable that turns the automatic set-up on first use off (``0``).
 AUTO_SETUP_ENV = "LANTERN_JAX_AUTO_SETUP"
+#: JAX's variable of the shortest compilation it keeps in its persistent cache (s).
+CACHE_MIN_COMPILE_ENV = "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"
+#: s, what lantern_jax keeps unless that variable is set: every program (JAX's default keeps
+#: only those of >= 1 s).  An evaluation's scoring and tables run about 30 small programs
+#: (20-400 ms each to compile, about 1 s together on a 2-core CPU, every process); loading
+#: them back costs milliseconds (docs/performance.md, the inner loop).
+CACHE_MIN_COMPILE_S = 0.0
 
 _PENDING = ""  # a set-up problem found at import, reported on first use
 
@@ -124,6 +131,8 @@ def configure_compile_cache(enabled: bool) -> str | None:
         return None
     path = compile_cache_dir()
     jax.config.update("jax_compilation_cache_dir", path)
+    if CACHE_MIN_COMPILE_ENV not in os.environ:
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", CACHE_MIN_COMPILE_S)
     return path
 
 
@@ -177,6 +186,7 @@ def auto_setup() -> None:
     except SetupError as e:
         _PENDING = f"{e}; lantern_jax leaves JAX's CPU device count as it is"
     os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", compile_cache_dir())
+    os.environ.setdefault(CACHE_MIN_COMPILE_ENV, str(CACHE_MIN_COMPILE_S))
 
 
 def warn_pending() -> None:

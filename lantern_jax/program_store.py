@@ -97,6 +97,7 @@ _PACKAGE = "lantern_jax"
 #: objects are described by name and fields like this package's own.
 LIBRARIES = ("jax", "jaxlib", "flax", "numpy", "optax")
 _SUFFIX = ".program"
+_VALUE_SUFFIX = ".value"  # small values kept beside the programs (save_value)
 
 
 class Unkeyable(Exception):
@@ -406,11 +407,63 @@ def save(key: str, compiled: Any) -> bool:
     return True
 
 
-def prune(folder: Path, keep: int = MAX_PROGRAMS) -> list[Path]:
-    """Remove all but the ``keep`` most recently used programs of ``folder``; returns what was
-    removed."""
+def value_key(*parts: str) -> str | None:
+    """The store key of a value computed from this package's code (the environment of
+    :func:`environment`) and ``parts`` (texts that name everything else it depends on), or
+    ``None`` when a part names an object by its address (not the same in another process)."""
+    if any(" at 0x" in part for part in parts):
+        return None
+    text = "\n".join([repr(sorted(environment().items())), "value", *parts])
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def load_value(key: str) -> Any | None:
+    """The value stored under ``key`` by :func:`save_value`, or ``None`` (none, unreadable, or
+    holding another key: such an entry is deleted)."""
+    folder = store_dir()
+    if folder is None:
+        return None
+    path = folder / (key + _VALUE_SUFFIX)
+    try:
+        blob = path.read_bytes()
+    except OSError:
+        return None
+    try:
+        stored_key, value = pickle.loads(blob)
+        if stored_key != key:
+            raise ValueError("it holds another key")
+    except Exception as e:  # noqa: BLE001  (any unreadable entry: computed instead)
+        log.warning("stored value %s could not be read (%s); computing it again", path, e)
+        with contextlib.suppress(OSError):
+            path.unlink()
+        return None
+    with contextlib.suppress(OSError):
+        os.utime(path)  # recently used
+    return value
+
+
+def save_value(key: str, value: Any) -> bool:
+    """Store a small picklable ``value`` under ``key`` (atomically); ``False`` when it cannot
+    be pickled or written."""
+    folder = store_dir()
+    if folder is None:
+        return False
+    try:
+        blob = pickle.dumps((key, value), protocol=pickle.HIGHEST_PROTOCOL)
+        folder.mkdir(parents=True, exist_ok=True)
+        atomic_write(folder / (key + _VALUE_SUFFIX), blob)
+    except Exception as e:  # noqa: BLE001  (not picklable or not writable: not stored)
+        log.debug("value %s not stored: %s", key[:12], e)
+        return False
+    prune(folder, suffix=_VALUE_SUFFIX)
+    return True
+
+
+def prune(folder: Path, keep: int = MAX_PROGRAMS, suffix: str = _SUFFIX) -> list[Path]:
+    """Remove all but the ``keep`` most recently used entries of ``folder`` named ``*suffix``
+    (programs by default); returns what was removed."""
     entries = []
-    for p in folder.glob("*" + _SUFFIX):
+    for p in folder.glob("*" + suffix):
         with contextlib.suppress(OSError):
             entries.append((p.stat().st_mtime, p))
     entries.sort(reverse=True)

@@ -4,7 +4,10 @@
   function, its static arguments and the arguments' structure, shapes and dtypes); with an
   identity, the program is also kept on disk by :mod:`lantern_jax.program_store` and loaded
   from there by a later process;
-* :func:`remember` — build a value (a jitted function, usually) once per key.
+* :func:`remember` — build a value (a jitted function, usually) once per key;
+* :func:`abstract` — ``jax.eval_shape`` of a package function once per argument structure,
+  kept in the program store for later processes (an abstract trace of the observation costs
+  about a second).
 
 Both caches keep at most :data:`MAX_PROGRAMS` entries (least recently used dropped).
 """
@@ -92,3 +95,33 @@ def executable(fn, *args, static: dict | None = None, timings: dict | None = Non
     if timings is not None:
         timings.update(spent)
     return _EXECUTABLES[key]
+
+
+_ABSTRACT: collections.OrderedDict[str, Any] = collections.OrderedDict()
+
+
+def abstract(name: str, fn: Callable, *args: Any, parts: tuple[str, ...] = ()) -> Any:
+    """``jax.eval_shape(fn, *args)``, computed once per argument structure: in this process,
+    and through the program store (:func:`lantern_jax.program_store.save_value`) in later ones.
+
+    Only for a function of this package's code (the store's key covers the code through
+    :func:`lantern_jax.program_store.environment`, not the function object): ``name`` names
+    it, ``parts`` whatever else it depends on besides the arguments' structure, leaf shapes
+    and dtypes (a policy's sensors, say).
+    """
+    leaves, treedef = jax.tree.flatten(args)
+    shapes = repr([(tuple(np.shape(x)), str(jax.numpy.result_type(x))) for x in leaves])
+    key = program_store.value_key("abstract", name, str(treedef), shapes, *parts)
+    text = key or f"{name}|{treedef}|{shapes}|{parts}"
+    if text in _ABSTRACT:
+        _ABSTRACT.move_to_end(text)
+        return _ABSTRACT[text]
+    out = program_store.load_value(key) if key is not None else None
+    if out is None:
+        out = jax.eval_shape(fn, *args)
+        if key is not None:
+            program_store.save_value(key, out)
+    _ABSTRACT[text] = out
+    while len(_ABSTRACT) > MAX_PROGRAMS:
+        _ABSTRACT.popitem(last=False)
+    return out
