@@ -46,8 +46,16 @@ another program than its name says (entries swapped or copied under another name
 with a warning and the program compiled again (JAX's persistent cache still serves the XLA
 compilation).
 
-Loading an executable runs code from the file, like JAX's own cache: keep the cache folder
-writable by you alone.
+**Values** (:func:`save_value`, :func:`load_value`): a few small results that every process
+would otherwise compute again before its first program runs -- the split path's world
+signature, a policy's observation shapes, the built-in families' worlds of a suite -- are kept
+beside the programs (``*.value``, at most :data:`MAX_PROGRAMS`), keyed by :func:`value_key`
+(the same environment and code fingerprint, and texts naming everything else the value depends
+on).  An entry that cannot be read back or holds another key is deleted and the value computed
+again.
+
+Loading an executable (or a value) runs code from the file, like JAX's own cache: keep the
+cache folder writable by you alone.
 """
 
 from __future__ import annotations

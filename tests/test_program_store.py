@@ -262,3 +262,79 @@ def _unrooted_fingerprint(signature: tuple) -> str:
     for name, _, _ in signature:
         h.update(name.encode() + b"\0" + Path(name).read_bytes())
     return h.hexdigest()
+
+
+# ---------------------------------------------------------------------------------------------
+# values kept beside the programs: the world signature, observation shapes, built worlds
+# ---------------------------------------------------------------------------------------------
+def test_a_value_round_trips_and_a_swapped_or_damaged_one_is_deleted(store):
+    key = program_store.value_key("test", "a")
+    assert key is not None and key != program_store.value_key("test", "b")
+    assert program_store.value_key("test", "<function f at 0x7f00>") is None  # an address
+    assert program_store.save_value(key, {"x": np.arange(3)})
+    np.testing.assert_array_equal(program_store.load_value(key)["x"], np.arange(3))
+    other = program_store.value_key("test", "b")
+    (store / f"{key}.value").rename(store / f"{other}.value")  # swapped under another name
+    assert program_store.load_value(other) is None
+    assert not (store / f"{other}.value").exists()
+    (store / f"{key}.value").write_bytes(b"\x80not a pickle")
+    assert program_store.load_value(key) is None and not (store / f"{key}.value").exists()
+    assert program_store.load_value("absent") is None
+
+
+def test_the_world_signature_is_kept_and_a_stale_one_is_computed_again(store, monkeypatch):
+    """A new process (no signature in memory) reads the signature the store keeps, equal to a
+    fresh computation; an entry whose layouts do not match the batch is not used."""
+    from lantern_jax.sim import engine, split
+    from lantern_jax.sim.packing import Layout
+    from lantern_jax.sim.settings import default_settings
+
+    execs = engine.build_new_executions(load_suite().select(PAIR))
+    one = jax.tree.map(lambda x: jax.ShapeDtypeStruct(np.shape(x)[1:], x.dtype), execs.scenarios)
+    settings = default_settings()
+    monkeypatch.setattr(split, "_SIGNATURES", {})
+    fresh = split.world_signature(one, settings, 48)
+    assert list(store.glob("*.value"))  # kept
+    monkeypatch.setattr(split, "_SIGNATURES", {})
+    computed = []
+    real = split._new_signature
+    monkeypatch.setattr(split, "_new_signature", lambda *a: computed.append(1) or real(*a))
+    assert split.world_signature(one, settings, 48) == fresh and not computed  # read back
+    (key,) = [p.stem for p in store.glob("*.value")]
+    program_store.save_value(key, fresh.__class__(48, Layout.of({"x": np.zeros(2)}), *(
+        fresh.state, fresh.observation, fresh.privileged, fresh.settings)))  # fmt: skip
+    monkeypatch.setattr(split, "_SIGNATURES", {})
+    assert split.world_signature(one, settings, 48) == fresh and computed == [1]
+
+
+def test_built_worlds_are_kept_for_the_package_families_only(store, monkeypatch):
+    """The built-in families' worlds are read back equal, leaf for leaf; a suite holding a
+    family registered from outside the package is never kept (its code is not in the key)."""
+    from lantern_jax.sim import engine
+
+    suite = load_suite().select(["pe_0001", "vc_0001"])
+    monkeypatch.setattr(engine, "_BUILT_EXECUTIONS", collections.OrderedDict())
+    built = engine.build_executions(suite)
+    assert len(list(store.glob("*.value"))) == 1
+    monkeypatch.setattr(engine, "_BUILT_EXECUTIONS", collections.OrderedDict())
+    monkeypatch.setattr(engine, "build_new_executions", lambda *a: pytest.fail("built again"))
+    again = engine.build_executions(suite)
+    assert again.pair_ids == built.pair_ids and again.max_ticks == built.max_ticks
+    for a, b in zip(jax.tree.leaves(again.scenarios), jax.tree.leaves(built.scenarios),
+                    strict=True):  # fmt: skip
+        np.testing.assert_array_equal(a, b)
+    monkeypatch.setattr(engine, "FAMILIES", ("VC",))  # PE as if it came from outside
+    monkeypatch.setattr(engine, "_BUILT_EXECUTIONS", collections.OrderedDict())
+    with pytest.raises(pytest.fail.Exception, match="built again"):
+        engine.build_executions(suite)
+
+
+def test_abstract_equals_eval_shape_and_is_read_back(store, monkeypatch):
+    fn = functools.partial(jnp.tile, reps=3)
+    x = jax.ShapeDtypeStruct((2, 5), jnp.float32)
+    want = jax.eval_shape(fn, x)
+    monkeypatch.setattr(programs, "_ABSTRACT", collections.OrderedDict())
+    assert programs.abstract("tile3", fn, x, parts=("reps=3",)) == want
+    monkeypatch.setattr(programs, "_ABSTRACT", collections.OrderedDict())
+    monkeypatch.setattr(jax, "eval_shape", lambda *a: pytest.fail("traced again"))
+    assert programs.abstract("tile3", fn, x, parts=("reps=3",)) == want
