@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import errno
 import logging
 import os
 import sys
@@ -151,9 +152,57 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: Options that name files or folders (``--policy`` may be ``file.py:NAME``), checked for a name
+#: the file system cannot hold before anything runs (:func:`check_path_lengths`).
+PATH_OPTIONS = ("out", "suite", "regenerate", "results", "checkpoint", "config", "dataset",
+                "families", "policy")  # fmt: skip
+
+
+def _shown(path: str) -> str:
+    """A long path as a message shows it: its start and its length."""
+    return repr(path) if len(path) <= 80 else f"'{path[:60]}...' ({len(path)} characters)"
+
+
+def _too_long(path: str) -> str | None:
+    """Why the file system cannot hold ``path`` (a name over its NAME_MAX, the whole over its
+    PATH_MAX), or None."""
+    try:
+        name_max = os.pathconf("/", "PC_NAME_MAX")
+        path_max = os.pathconf("/", "PC_PATH_MAX")
+    except (OSError, ValueError, AttributeError):
+        name_max, path_max = 255, 4096
+    longest = max((len(os.fsencode(part)) for part in path.split(os.sep)), default=0)
+    if longest > name_max:
+        return f"a name in it is {longest} bytes, over the file system's {name_max}"
+    if len(os.fsencode(path)) >= path_max:
+        return f"it is {len(os.fsencode(path))} bytes, over the file system's {path_max}"
+    return None
+
+
+def check_path_lengths(args: argparse.Namespace) -> None:
+    """Refuse, before anything runs, a path option (:data:`PATH_OPTIONS`) that no file system
+    name can hold.
+
+    Raises:
+        UsageError: naming the option, the path's start and why.
+    """
+    for dest in PATH_OPTIONS:
+        value = getattr(args, dest, None)
+        values = value if isinstance(value, list | tuple) else [value]
+        for v in values:
+            parts = v.split(",") if dest == "policy" and isinstance(v, str) else [v]
+            for path in (x for x in parts if isinstance(x, str)):
+                why = _too_long(path)
+                if why:
+                    option = "RESULTS" if dest == "results" else f"--{dest}"
+                    raise UsageError(f"{option}: {_shown(path)}: too long a path ({why})")
+
+
 def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:
-    """Load ``--families``, set up the compilation cache and the distributed runtime where the
-    command has those options, then run the command; returns its exit code."""
+    """Check the path options' lengths, load ``--families``, set up the compilation cache and
+    the distributed runtime where the command has those options, then run the command; returns
+    its exit code."""
+    check_path_lengths(args)
     families.load(args.families)
     if hasattr(args, "no_compile_cache"):
         runtime.configure_compile_cache(not args.no_compile_cache)
@@ -232,6 +281,12 @@ def main(argv: Sequence[str] | None = None, exit_on_interrupt: bool | None = Non
                 return _run(args, argv)
         except UsageError as e:
             print(f"lantern-jax {args.command}: error: {e}", file=sys.stderr)
+            return EXIT_USAGE
+        except OSError as e:
+            if e.errno != errno.ENAMETOOLONG:
+                raise
+            print(f"lantern-jax {args.command}: error: {_shown(str(e.filename or ''))}: too "
+                  "long a path for the file system", file=sys.stderr)  # fmt: skip
             return EXIT_USAGE
         except RuntimeError as e:
             if not str(e).startswith(BACKEND_FAILURE):

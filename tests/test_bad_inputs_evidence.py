@@ -454,6 +454,47 @@ def _program(argv: list[str], **env) -> subprocess.CompletedProcess:
                           text=True, cwd=ROOT, env={**os.environ, **env}, timeout=120)  # fmt: skip
 
 
+LONG_NAME = "c" * 300  # a file name over every common file system's 255 bytes
+
+
+@pytest.mark.parametrize("argv, option", [
+    (["evaluate", "--policy", "ego", "--out", "LONG"], "--out"),
+    (["evaluate", "--policy", "ego", "--suite", "LONG.json", "--out", "OK"], "--suite"),
+    (["evaluate", "--policy", "LONG.py:POLICY", "--out", "OK"], "--policy"),
+    (["--families", "LONG.py", "evaluate", "--policy", "ego", "--out", "OK"], "--families"),
+    (["compare", "LONG", "--policy", "coop", "--policy", "ego"], "RESULTS"),
+    (["compare", "DEEP", "--policy", "coop", "--policy", "ego"], "RESULTS"),
+    (["report", "LONG", "--out", "OK.html"], "RESULTS"),
+    (["dataset", "--out", "LONG"], "--out"),
+    (["stress", "--family", "PE", "--policy", "ego", "--out", "LONG"], "--out"),
+    (["suite", "--regenerate", "LONG.json"], "--regenerate"),
+])  # fmt: skip
+def test_a_path_too_long_for_the_file_system_is_one_line_before_anything_runs(
+    tmp_path, argv, option
+):
+    """A name over NAME_MAX (or a path over PATH_MAX) in any path option: one line naming the
+    option and the path's start, exit 2, nothing compiled (a traceback before)."""
+    deep = str(tmp_path / ("d/" * 2100))
+    subs = {"LONG": str(tmp_path / LONG_NAME), "DEEP": deep, "OK": str(tmp_path / "ok")}
+    argv = [next((a.replace(k, v, 1) for k, v in subs.items() if a.startswith(k)), a)
+            for a in argv]  # fmt: skip
+    before = programs_so_far()
+    r = run_cli(argv)
+    assert r.rc == 2 and r.err.count("\n") == 1, r.err
+    assert f"error: {option}: " in r.err and "too long a path" in r.err, r.err
+    assert "characters)" in r.err  # the path's start, not all of it
+    assert programs_so_far() == before
+
+
+def test_a_path_too_long_from_a_config_file_is_one_line(tmp_path):
+    """A path from a config file (not an option) that the file system refuses: one line."""
+    cfg = tmp_path / "long.toml"
+    cfg.write_text(f'[evaluate]\nout = "{tmp_path / LONG_NAME}"\npairs = ["pe_0001"]\n')
+    r = run_cli(["evaluate", "--config", str(cfg), "--policy", "ego"])
+    assert r.rc == 2 and r.err.count("\n") == 1, r.err
+    assert "too long a path for the file system" in r.err, r.err
+
+
 def test_a_backend_that_cannot_start_is_one_line_naming_the_variable(tmp_path):
     r = _program(["evaluate", "--policy", "ego", "--pairs", "pe_0001", "--out",
                   str(tmp_path / "r"), "--quiet"], JAX_PLATFORMS="tpu")  # fmt: skip
