@@ -71,6 +71,7 @@ import os
 import pickle
 import sys
 import types
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -405,13 +406,23 @@ def save(key: str, compiled: Any) -> bool:
 
         payload, in_tree, out_tree = se.serialize(compiled)
         record = (key, hashlib.sha256(payload).hexdigest(), payload, in_tree, out_tree, ids)
-        blob = pickle.dumps(record, protocol=pickle.HIGHEST_PROTOCOL)
-        folder.mkdir(parents=True, exist_ok=True)
-        atomic_write(folder / (key + _SUFFIX), blob)
-    except Exception as e:  # noqa: BLE001  (not serializable or not writable: not stored)
+    except Exception as e:  # noqa: BLE001  (not serializable: not stored)
         log.debug("program %s not stored: %s", key[:12], e)
         return False
-    prune(folder)
+    return _write(folder, key, record, _SUFFIX)
+
+
+def _write(folder: Path, key: str, record: Any, suffix: str) -> bool:
+    """Pickle ``record`` into ``folder/<key><suffix>`` atomically and prune the entries of that
+    suffix; ``False`` when it cannot be pickled or written."""
+    try:
+        blob = pickle.dumps(record, protocol=pickle.HIGHEST_PROTOCOL)
+        folder.mkdir(parents=True, exist_ok=True)
+        atomic_write(folder / (key + suffix), blob)
+    except Exception as e:  # noqa: BLE001  (not picklable or not writable: not stored)
+        log.debug("entry %s%s not stored: %s", key[:12], suffix, e)
+        return False
+    prune(folder, suffix=suffix)
     return True
 
 
@@ -454,17 +465,21 @@ def save_value(key: str, value: Any) -> bool:
     """Store a small picklable ``value`` under ``key`` (atomically); ``False`` when it cannot
     be pickled or written."""
     folder = store_dir()
-    if folder is None:
-        return False
-    try:
-        blob = pickle.dumps((key, value), protocol=pickle.HIGHEST_PROTOCOL)
-        folder.mkdir(parents=True, exist_ok=True)
-        atomic_write(folder / (key + _VALUE_SUFFIX), blob)
-    except Exception as e:  # noqa: BLE001  (not picklable or not writable: not stored)
-        log.debug("value %s not stored: %s", key[:12], e)
-        return False
-    prune(folder, suffix=_VALUE_SUFFIX)
-    return True
+    return folder is not None and _write(folder, key, (key, value), _VALUE_SUFFIX)
+
+
+def kept(key: str | None, compute: Callable[[], Any],
+         valid: Callable[[Any], bool] | None = None) -> Any:  # fmt: skip
+    """The value stored under ``key`` when there is one (that ``valid`` accepts, when given),
+    else ``compute()``, stored under ``key`` for later processes (``key`` None: computed, not
+    stored)."""
+    stored = load_value(key) if key is not None else None
+    if stored is not None and (valid is None or valid(stored)):
+        return stored
+    value = compute()
+    if key is not None:
+        save_value(key, value)
+    return value
 
 
 def prune(folder: Path, keep: int = MAX_PROGRAMS, suffix: str = _SUFFIX) -> list[Path]:

@@ -333,8 +333,8 @@ def test_abstract_equals_eval_shape_and_is_read_back(store, monkeypatch):
     fn = functools.partial(jnp.tile, reps=3)
     x = jax.ShapeDtypeStruct((2, 5), jnp.float32)
     want = jax.eval_shape(fn, x)
-    monkeypatch.setattr(programs, "_ABSTRACT", collections.OrderedDict())
+    monkeypatch.setattr(programs, "_BUILT", collections.OrderedDict())
     assert programs.abstract("tile3", fn, x, parts=("reps=3",)) == want
-    monkeypatch.setattr(programs, "_ABSTRACT", collections.OrderedDict())
+    monkeypatch.setattr(programs, "_BUILT", collections.OrderedDict())
     monkeypatch.setattr(jax, "eval_shape", lambda *a: pytest.fail("traced again"))
     assert programs.abstract("tile3", fn, x, parts=("reps=3",)) == want

@@ -102,11 +102,8 @@ def build_executions(
     stored = (program_store.value_key("executions", repr(key),
                                       repr([repr(p.params) for p in suite.pairs]))
               if all(p.family in FAMILIES for p in suite.pairs) else None)  # fmt: skip
-    execs = program_store.load_value(stored) if stored is not None else None
-    if not isinstance(execs, Executions):
-        execs = build_new_executions(suite, ablation, trim, bucket)
-        if stored is not None:
-            program_store.save_value(stored, execs)
+    execs = program_store.kept(stored, lambda: build_new_executions(suite, ablation, trim, bucket),
+                               valid=lambda v: isinstance(v, Executions))  # fmt: skip
     _BUILT_EXECUTIONS[key] = execs
     while len(_BUILT_EXECUTIONS) > MAX_BUILT_EXECUTIONS:
         _BUILT_EXECUTIONS.popitem(last=False)

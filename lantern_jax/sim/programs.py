@@ -97,12 +97,10 @@ def executable(fn, *args, static: dict | None = None, timings: dict | None = Non
     return _EXECUTABLES[key]
 
 
-_ABSTRACT: collections.OrderedDict[str, Any] = collections.OrderedDict()
-
-
 def abstract(name: str, fn: Callable, *args: Any, parts: tuple[str, ...] = ()) -> Any:
-    """``jax.eval_shape(fn, *args)``, computed once per argument structure: in this process,
-    and through the program store (:func:`lantern_jax.program_store.save_value`) in later ones.
+    """``jax.eval_shape(fn, *args)``, computed once per argument structure: in this process
+    (:func:`remember`), and through the program store (:func:`lantern_jax.program_store.kept`)
+    in later ones.
 
     Only for a function of this package's code (the store's key covers the code through
     :func:`lantern_jax.program_store.environment`, not the function object): ``name`` names
@@ -112,16 +110,5 @@ def abstract(name: str, fn: Callable, *args: Any, parts: tuple[str, ...] = ()) -
     leaves, treedef = jax.tree.flatten(args)
     shapes = repr([(tuple(np.shape(x)), str(jax.numpy.result_type(x))) for x in leaves])
     key = program_store.value_key("abstract", name, str(treedef), shapes, *parts)
-    text = key or f"{name}|{treedef}|{shapes}|{parts}"
-    if text in _ABSTRACT:
-        _ABSTRACT.move_to_end(text)
-        return _ABSTRACT[text]
-    out = program_store.load_value(key) if key is not None else None
-    if out is None:
-        out = jax.eval_shape(fn, *args)
-        if key is not None:
-            program_store.save_value(key, out)
-    _ABSTRACT[text] = out
-    while len(_ABSTRACT) > MAX_PROGRAMS:
-        _ABSTRACT.popitem(last=False)
-    return out
+    return remember(("abstract", key or f"{name}|{treedef}|{shapes}|{parts}"),
+                    lambda: program_store.kept(key, lambda: jax.eval_shape(fn, *args)))

@@ -133,15 +133,12 @@ def _stored_signature(one: Scenario, settings: Settings, slots: int) -> WorldSig
         repr([(x.shape, str(x.dtype)) for x in leaves]), str(set_def),
         repr([(np.shape(x), str(jnp.result_type(x))) for x in set_leaves]),
     )  # fmt: skip
-    stored = program_store.load_value(key) if key is not None else None
-    if isinstance(stored, WorldSignature) and (stored.slots, stored.scenario, stored.settings) == (
-        slots, Layout.of(one), Layout.of(settings)
-    ):
-        return stored
-    sig = _new_signature(one, settings, slots)
-    if key is not None:
-        program_store.save_value(key, sig)
-    return sig
+    expected = (slots, Layout.of(one), Layout.of(settings))
+    return program_store.kept(
+        key, lambda: _new_signature(one, settings, slots),
+        valid=lambda v: isinstance(v, WorldSignature)
+        and (v.slots, v.scenario, v.settings) == expected,
+    )  # fmt: skip
 
 
 #: The signatures computed in this process (a few: one per batch structure and slot count).
