@@ -43,14 +43,13 @@ families are exactly those of ``lantern-v2``; new suites use ``expert`` by defau
 from __future__ import annotations
 
 import collections
-import math
 from collections.abc import Sequence
 
 import jax
 import numpy as np
 
 from lantern_jax import family_codes
-from lantern_jax.constants import DT, FAMILIES, ROUTE_A_GATE_NAMES, WEATHERS
+from lantern_jax.constants import FAMILIES, ROUTE_A_GATE_NAMES, WEATHERS
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.duplicates import near_duplicate, route_samples
 from lantern_jax.scenarios.families import sample_params
@@ -65,7 +64,7 @@ from lantern_jax.scenarios.suite import (
 )
 from lantern_jax.scoring.metrics import finalize
 from lantern_jax.sim.engine import run_executions
-from lantern_jax.times import happened
+from lantern_jax.times import happened, ticks_covering
 from lantern_jax.world import Scenario, tree_stack
 
 DEFAULT_SEED = 20260611
@@ -78,7 +77,7 @@ ROUTE_DECIMALS = 3  # the manifest's route samples are rounded to 1 mm
 
 def _timeout_ticks(route_length_m: float) -> int:
     """Ticks that cover the route timeout of a route this long."""
-    return int(math.ceil(route_timeout_s(route_length_m) / DT))
+    return ticks_covering(route_timeout_s(route_length_m))
 
 
 #: Ticks of every expert call: the longest route timeout of any family.
@@ -337,11 +336,28 @@ def suite_validator(report: dict | None) -> str:
     return (report or {}).get("validator", LEGACY_VALIDATOR)
 
 
-def verify_regeneration(name: str = SUITE_ID) -> tuple[bool, str]:
-    """Regenerate a shipped suite from its seed (with its own validator) and compare every pair
-    hash, every recorded route and the suite hash."""
+def regenerates_suite(name: str, seed: int, validator: str) -> bool:
+    """Whether a generation from ``seed`` with ``validator`` (the six families) is what
+    :func:`verify_regeneration` of suite ``name`` would generate, so that its manifest can be
+    compared instead of generating the suite a second time."""
     shipped = load_suite(name)
-    fresh = generate_suite(shipped.seed, progress=False, validator=suite_validator(shipped.report))
+    return seed == shipped.seed and validator == suite_validator(shipped.report)
+
+
+def verify_regeneration(name: str = SUITE_ID, fresh: dict | None = None) -> tuple[bool, str]:
+    """Regenerate a shipped suite from its seed (with its own validator) and compare every pair
+    hash, every recorded route and the suite hash.
+
+    Args:
+        name: the suite id or manifest path.
+        fresh: a manifest already generated from the suite's seed with its validator
+            (:func:`regenerates_suite` says whether one was); compared instead of generating
+            the suite again.
+    """
+    shipped = load_suite(name)
+    if fresh is None:
+        fresh = generate_suite(shipped.seed, progress=False,
+                               validator=suite_validator(shipped.report))  # fmt: skip
     got = [(p["pair_id"], p["sha256"], p["route_2m"]) for p in fresh["pairs"]]
     want = [(p.pair_id, p.sha256, p.route_2m) for p in shipped.pairs]
     for g, w in zip(got, want, strict=False):

@@ -364,15 +364,32 @@ def test_python_dash_m():
 
 
 @pytest.mark.slow
-def test_suite_regenerates(tmp_path, capsys):
+def test_suite_regenerates(tmp_path, capsys, monkeypatch):
+    """``--regenerate`` and ``--verify`` together generate the suite once: the manifest just
+    written is the one compared with the shipped suite."""
+    from lantern_jax import generate
+
+    calls, real = [], generate.generate_suite
+    monkeypatch.setattr(generate, "generate_suite",
+                        lambda *a, **k: calls.append(a) or real(*a, **k))  # fmt: skip
     path = tmp_path / "fresh.json"
     assert cli.main(["suite", "--regenerate", str(path), "--verify", "--quiet"]) == 0
     out = capsys.readouterr().out
     assert "OK: lantern-v3" in out
+    assert len(calls) == 1
     fresh, shipped = load_suite(path), load_suite()
     assert fresh.suite_sha256 == shipped.suite_sha256
     assert [p.route_2m for p in fresh.pairs] == [p.route_2m for p in shipped.pairs]
     assert path.read_text() == _shipped_text()  # the whole manifest, bit for bit
+
+
+def test_verify_reuses_a_generation_only_of_the_suite_s_own_seed_and_validator():
+    from lantern_jax.generate import DEFAULT_SEED, regenerates_suite, suite_validator
+
+    own = suite_validator(load_suite().report)
+    assert regenerates_suite("lantern-v3", DEFAULT_SEED, own)
+    assert not regenerates_suite("lantern-v3", DEFAULT_SEED + 1, own)
+    assert not regenerates_suite("lantern-v3", DEFAULT_SEED, "coop")
 
 
 def test_shipped_configs_parse_and_bad_configs_name_the_field(tmp_path):

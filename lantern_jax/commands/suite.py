@@ -111,8 +111,9 @@ def _check_regenerate_path(path: str) -> None:
         raise UsageError(f"--regenerate {path}: {where} is a file, not a folder")
 
 
-def _regenerate(args: argparse.Namespace) -> int:
-    """Generate a fresh manifest into ``--regenerate``; returns the exit code."""
+def _regenerate(args: argparse.Namespace) -> tuple[int, dict]:
+    """Generate a fresh manifest into ``--regenerate``; returns the exit code and the
+    manifest."""
     from lantern_jax.generate import DEFAULT_SEED, generate_suite, suite_validator
     from lantern_jax.scenarios.suite import write_manifest
 
@@ -125,29 +126,41 @@ def _regenerate(args: argparse.Namespace) -> int:
         write_manifest(manifest, args.regenerate)
     except OSError as e:
         print(f"lantern-jax suite: error: cannot write {args.regenerate}: {e}", file=sys.stderr)
-        return 1
+        return 1, manifest
     print(f"wrote {args.regenerate}: {len(manifest['pairs'])} pairs, "
           f"suite sha256 {manifest['suite_sha256']}")  # fmt: skip
-    return 0
+    return 0, manifest
 
 
 def cmd_suite(args: argparse.Namespace, argv: Sequence[str]) -> int:
     """``lantern-jax suite``: list, verify or regenerate a suite."""
     del argv
-    from lantern_jax.generate import verify_regeneration
+    from lantern_jax.generate import (
+        DEFAULT_SEED,
+        regenerates_suite,
+        suite_validator,
+        verify_regeneration,
+    )
 
     if args.regenerate is not None:
         _check_regenerate_path(args.regenerate)
     if args.list or not (args.verify or args.regenerate):
         print_suite(load_selected_suite(args))
+    fresh = None
     if args.regenerate:
-        rc = _regenerate(args)
+        rc, fresh = _regenerate(args)
         if rc:
             return rc
     if args.verify:
-        load_selected_suite(args)  # hash check of the manifest itself
-        stage(args, f"regenerating {args.suite} from its seed and comparing hashes")
-        ok, msg = verify_regeneration(args.suite)
+        suite = load_selected_suite(args)  # hash check of the manifest itself
+        seed = DEFAULT_SEED if args.seed is None else args.seed
+        validator = args.validator or suite_validator(suite.report)
+        if fresh is not None and regenerates_suite(args.suite, seed, validator):
+            stage(args, f"comparing the manifest just generated with {args.suite}")
+        else:  # nothing generated, or another seed or validator: generate the suite's own
+            fresh = None
+            stage(args, f"regenerating {args.suite} from its seed and comparing hashes")
+        ok, msg = verify_regeneration(args.suite, fresh)
         print(f"{'OK' if ok else 'MISMATCH'}: {args.suite}: {msg}")
         return 0 if ok else 1
     return 0
