@@ -40,6 +40,13 @@ CAMERA_BACK_OFFSET = 1.5  # m, front camera behind the vehicle centre
 FRONT_CAMERA_FOV = 110.0  # degrees
 SURROUND_FOV = 360.0  # degrees, the six-camera rig (6 x 60 deg, one mounting point)
 
+# --- fixed capacities of a scenario (static shapes shared by every scenario, so they batch) -----
+MAX_ACTORS = 16  # A, actor slots
+PATH_POINTS = 32  # P, points of an actor's path
+MAX_LANES = 16  # L, lane polylines of the road map
+LANE_POINTS = 48  # Q, points of a lane polyline
+ROUTE_POINTS = 96  # R, points of the ego's route
+
 # --- actor kinds ------------------------------------------------------------------------------
 KIND_VEHICLE = 0
 KIND_PEDESTRIAN = 1

@@ -86,6 +86,7 @@ from lantern_jax.scoring.uncertainty import (
 from lantern_jax.sim.engine import Program, check_texts
 from lantern_jax.sim.rollout import rollout
 from lantern_jax.sim.settings import Settings, default_settings
+from lantern_jax.times import ticks, ticks_covering
 from lantern_jax.world import Scenario, tree_stack
 
 EMPTY_ROAD_LENGTH_M = 150.0  # m, the non-actionable diagnostic's empty straight route
@@ -288,7 +289,7 @@ def run_recorded(
     check_texts(settings, batch)
     longest = float(np.max(np.asarray(batch.config.timeout_s)))
     horizon_s = np.ceil(longest / RECORD_HORIZON_STEP_S) * RECORD_HORIZON_STEP_S
-    horizon = int(np.ceil(horizon_s / DT - 1e-6))
+    horizon = ticks_covering(horizon_s, slack=1e-6)
     final, rec = _recorded(batch, params, settings, program=Program(policy), horizon=horizon)
     metrics = jax.vmap(lambda t: finalize(t, settings.scoring))(final.telemetry)
     return jax.tree.map(np.asarray, (final, rec, metrics))
@@ -467,7 +468,7 @@ def distance_table(
     _, rec, metrics = run_recorded(pol, params, scenarios)
     live = live_mask(rec)
     conds = DISTANCE_CONDITIONS
-    n_win = int(round(window_s / DT))
+    n_win = ticks(window_s)
     opened, closed = [], []
     for r, pid in enumerate(pair_ids):
         row = {"Route": f"Route {r + 1}", "pair": pid}

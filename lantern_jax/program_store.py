@@ -39,7 +39,7 @@ serialized and are not stored either, and neither is a program that JAX's own ca
 whenever that cache is on (``lantern-jax`` turns it on by default; ``--no-compile-cache`` and
 ``jax.config.update("jax_enable_compilation_cache", False)`` turn the store off with it), and
 never under JAX's distributed runtime.  Files are written atomically (two processes storing
-the same program leave one whole entry); at most :data:`MAX_PROGRAMS` are kept, the least
+the same program leave one whole entry); at most :data:`MAX_STORED_PROGRAMS` are kept, the least
 recently used removed first.  An entry records its own key and the SHA-256 of its executable:
 an entry that cannot be read back (truncated, corrupted, of another store format) or that holds
 another program than its name says (entries swapped or copied under another name) is deleted
@@ -49,7 +49,7 @@ compilation).
 **Values** (:func:`save_value`, :func:`load_value`): a few small results that every process
 would otherwise compute again before its first program runs -- the split path's world
 signature, a policy's observation shapes, the built-in families' worlds of a suite -- are kept
-beside the programs (``*.value``, at most :data:`MAX_PROGRAMS`), keyed by :func:`value_key`
+beside the programs (``*.value``, at most :data:`MAX_STORED_PROGRAMS`), keyed by :func:`value_key`
 (the same environment and code fingerprint, and texts naming everything else the value depends
 on).  An entry that cannot be read back or holds another key is deleted and the value computed
 again.
@@ -85,8 +85,10 @@ log = logging.getLogger(__name__)
 
 #: Sub-folder of JAX's compilation cache folder that holds the stored programs.
 STORE_SUBDIR = "lantern-programs"
-#: Most programs kept (least recently used removed first); an evaluation program is 5-15 MB.
-MAX_PROGRAMS = 32
+#: Most programs (and, apart, values) kept on disk, least recently used removed first; an
+#: evaluation program is 5-15 MB.  (:data:`lantern_jax.sim.programs.MAX_PROGRAMS` bounds the
+#: programs held in a process.)
+MAX_STORED_PROGRAMS = 32
 #: Bumped when the file layout changes (old entries then simply miss).
 STORE_FORMAT = 2
 #: JAX options that change what a trace or a compilation produces.
@@ -482,7 +484,7 @@ def kept(key: str | None, compute: Callable[[], Any],
     return value
 
 
-def prune(folder: Path, keep: int = MAX_PROGRAMS, suffix: str = _SUFFIX) -> list[Path]:
+def prune(folder: Path, keep: int = MAX_STORED_PROGRAMS, suffix: str = _SUFFIX) -> list[Path]:
     """Remove all but the ``keep`` most recently used entries of ``folder`` named ``*suffix``
     (programs by default); returns what was removed."""
     entries = []

@@ -26,11 +26,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from lantern_jax.constants import DT, SUITE_ID
+from lantern_jax.constants import SUITE_ID
 from lantern_jax.scenarios.knobs import get_knobs, set_knobs
 from lantern_jax.scenarios.suite import Suite, load_suite
 from lantern_jax.scoring.metrics import finalize
 from lantern_jax.sim.engine import build_executions, run_executions
+from lantern_jax.times import ticks_covering
 from lantern_jax.world import Scenario
 
 Source = Callable[[np.ndarray], Scenario]
@@ -67,7 +68,7 @@ def stress_source(suite: Suite | str = SUITE_ID, seed: int = 0, ablation: str = 
         )
 
     make = jax.jit(jax.vmap(one))
-    slack = int(np.ceil(hi_d / DT))  # a later trigger may need more ticks
+    slack = ticks_covering(hi_d)  # a later trigger may need more ticks
     return (lambda ids: make(jnp.asarray(ids, jnp.int32))), execs.max_ticks + slack, n_base
 
 

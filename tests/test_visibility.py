@@ -13,7 +13,13 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from lantern_jax.constants import CAMERA_BACK_OFFSET, FRONT_CAMERA_FOV, OCC_BUILDING, OCC_WALL
+from lantern_jax.constants import (
+    CAMERA_BACK_OFFSET,
+    FRONT_CAMERA_FOV,
+    OCC_BUILDING,
+    OCC_WALL,
+    SURROUND_FOV,
+)
 from lantern_jax.scenarios.handmade import straight_scene
 from lantern_jax.scenarios.road import OccluderSpec
 from lantern_jax.scoring.measure import measure
@@ -112,11 +118,11 @@ def test_field_of_view():
     for sign in (1.0, -1.0):
         actors = scene((20 * math.cos(b), sign * 20 * math.sin(b), 0, 0.3, 0.3))
         assert see(actors).tolist() == [False]
-        assert see(actors, fov=vis.SIX_CAMERA_FOV).tolist() == [True]
+        assert see(actors, fov=SURROUND_FOV).tolist() == [True]
     # straight behind the camera: only the six-camera rig sees it
     actors = scene((-15, 0, 0, *CAR))
     assert see(actors).tolist() == [False]
-    assert see(actors, fov=vis.SIX_CAMERA_FOV).tolist() == [True]
+    assert see(actors, fov=SURROUND_FOV).tolist() == [True]
     # the field follows the camera heading: looking north, the +60 deg pedestrian (30 deg
     # off the heading) is in view
     actors = scene((20 * math.cos(b), 20 * math.sin(b), 0, 0.3, 0.3))
@@ -156,7 +162,7 @@ def test_padding_changes_nothing():
 def test_camera_inside_a_box_sees_only_that_box():
     # a present box around the camera blocks every sight line that leaves it
     actors = scene((20, 0, 0, *CAR), (0, 0, 0, 2, 2))
-    assert see(actors, fov=vis.SIX_CAMERA_FOV).tolist() == [False, True]
+    assert see(actors, fov=SURROUND_FOV).tolist() == [False, True]
 
 
 def test_matches_reference_on_random_scenes():
@@ -168,7 +174,7 @@ def test_matches_reference_on_random_scenes():
     present = rng.uniform(size=(n, a)) < 0.8
     cams = rng.uniform(-5, 5, (n, 2)).astype(np.float32)
     cam_yaws = rng.uniform(-np.pi, np.pi, n).astype(np.float32)
-    for fov in (FRONT_CAMERA_FOV, vis.SIX_CAMERA_FOV):
+    for fov in (FRONT_CAMERA_FOV, SURROUND_FOV):
         f = jax.jit(jax.vmap(functools.partial(vis.visible_actors, fov_deg=fov, max_range=RANGE)))
         got = np.asarray(f(cams, cam_yaws, centers, yaws, ext, present))
         want = np.array(
@@ -209,7 +215,7 @@ def test_compiles_once():
 def test_ray_angles_layout():
     a = vis.ray_angles(FRONT_CAMERA_FOV, 11)
     np.testing.assert_allclose(a[[0, 5, 10]], np.radians([-55, 0, 55]), atol=1e-6)
-    a = vis.ray_angles(vis.SIX_CAMERA_FOV, 8)
+    a = vis.ray_angles(SURROUND_FOV, 8)
     # full circle at 45 deg spacing, ray 4 straight ahead, no duplicated seam
     np.testing.assert_allclose(a, np.radians(np.arange(-180, 180, 45)), atol=1e-6)
     assert vis.ray_angles(FRONT_CAMERA_FOV, 1).tolist() == [0.0]
@@ -226,7 +232,7 @@ def test_range_image_box_ahead():
     assert np.all(np.asarray(idx)[mask] == -1)
     assert r.dtype == jnp.float32 and idx.dtype == jnp.int32
     # the six-camera rig with 8 rays: ray 4 looks ahead (9 m), ray 0 looks back (nothing)
-    r, idx = ranges_of(CAM, CAM_YAW, c, y, e, p, vis.SIX_CAMERA_FOV, 8, RANGE)
+    r, idx = ranges_of(CAM, CAM_YAW, c, y, e, p, SURROUND_FOV, 8, RANGE)
     assert float(r[4]) == pytest.approx(9.0, abs=1e-5) and int(idx[4]) == 0
     assert float(r[0]) == 50.0 and int(idx[0]) == -1
     # nearest box wins; beyond max_range is capped and reported as no hit
@@ -245,7 +251,7 @@ def test_range_image_matches_reference():
     e = rng.uniform(0.3, 3.0, (10, 2)).astype(np.float32)
     p = rng.uniform(size=10) < 0.8
     cam, cam_yaw = np.float32([1.0, -2.0]), np.float32(0.7)
-    for fov, n in ((FRONT_CAMERA_FOV, 33), (vis.SIX_CAMERA_FOV, 64)):
+    for fov, n in ((FRONT_CAMERA_FOV, 33), (SURROUND_FOV, 64)):
         r, idx = ranges_of(cam, cam_yaw, c, y, e, p, fov, n, RANGE)
         want_r, want_idx = ref.range_image(cam, float(cam_yaw), c, y, e, p, fov, n, 50.0)
         assert (want_idx >= 0).sum() > 3
@@ -307,7 +313,7 @@ def test_building_blocks_every_ray_to_an_actor():
     assert see(car).tolist() == [True]  # without the building: in plain view
     assert see_occ(car, occluders((15, 7, 0, 5, 5))).tolist() == [False]
     # the 360-degree rig is blocked the same way
-    assert see_occ(car, occluders((15, 7, 0, 5, 5)), fov=vis.SIX_CAMERA_FOV).tolist() == [False]
+    assert see_occ(car, occluders((15, 7, 0, 5, 5)), fov=SURROUND_FOV).tolist() == [False]
     # an invalid (padding) occluder at the same place blocks nothing
     padded = occluders((15, 7, 0, 5, 5))
     padded = padded.replace(valid=jnp.zeros_like(padded.valid))

@@ -60,12 +60,12 @@ from lantern_jax.constants import (
     EGO_MAX_BRAKE,
     EGO_MAX_STEER,
     EGO_WHEELBASE,
+    MAX_ACTORS,
     NUM_ACTOR_KINDS,
     NUM_WAYPOINTS,
     WAYPOINT_DT,
 )
 from lantern_jax.observation import Observation, stated_position, warning_delivered
-from lantern_jax.scenarios.road import MAX_ACTORS
 from lantern_jax.scenarios.warnings import token_table
 
 Array = jax.Array

@@ -35,10 +35,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from lantern_jax.constants import KIND_STATIC, KNOT_S_RANGE, MAX_KNOTS, ROLE_BACKGROUND
+from lantern_jax.constants import KIND_STATIC, KNOT_S_RANGE, MAX_ACTORS, MAX_KNOTS, ROLE_BACKGROUND
 from lantern_jax.dynamics.adversary import CLASS_OF_KIND, set_track, zero_track
 from lantern_jax.scenarios.families_common import SCENE_SLOT
-from lantern_jax.scenarios.road import MAX_ACTORS
 from lantern_jax.world import Scenario
 
 ADVERSARY_FIELD = "adversary"

@@ -69,7 +69,6 @@ SPAWN_OFFSET = {"LWW": 25.0, "RWW": 20.0}  # m along the reversed route before C
 CLEAR_TARGET = {"LWW": 15.0, "RWW": 20.0}  # m past C where the wrong-way path ends
 RTY_CLEAR_PAST = 5.0  # m the RTY actor's rear must be past its crossing point
 SAFETY_LIMIT_S = 12.0  # s after the event (wrong-way and cross-traffic actors)
-CORRIDOR_MARGIN = 0.5  # m
 APPROACH_MIN = {"left": 12.0, "right": 15.0}  # m (warning point >= ~10 m into the route)
 APPROACH_MIN_SIGNALIZED = 20.0  # m, room to stop for the initial red
 PATH_TAIL = 10.0  # m of path beyond the clearance point
@@ -133,7 +132,7 @@ def _rty_conflict(road_map: rj.RoadMap, route: road.RouteSpec):
     """RTY conflict arc, the flow lane's arc of the crossing point, and the flow lane."""
     _, arm, k_out = ego_lanes("right", road_map.lanes_per_direction)
     lane = road_map.lane(rj.outbound_lane(road_map, arm, k_out)[0])
-    thr = EGO_HALF_LENGTH + CAR_EXTENT[1] + CORRIDOR_MARGIN
+    thr = EGO_HALF_LENGTH + CAR_EXTENT[1] + road.CORRIDOR_MARGIN
     s_route = np.arange(0.0, route.length, RTY_CONFLICT_STEP)
     first = road.first_within(road.point_at(route.xy, s_route), lane.center, thr,
                               RTY_CONFLICT_STEP)  # fmt: skip

@@ -48,6 +48,7 @@ from lantern_jax.scenarios.families_common import (
     finish_pair,
     with_changes,
 )
+from lantern_jax.scenarios.road import ROAD_MARGIN, VAN_HALF_WIDTH
 from lantern_jax.scenarios.road_straight import (
     Centerline,
     StraightLayout,
@@ -57,8 +58,6 @@ from lantern_jax.scenarios.road_straight import (
 )
 from lantern_jax.scenarios.spec import MIN_RECOVERY_M, PARAM_RANGES
 from lantern_jax.scoring.thresholds import D_SAFE_LARGE_M, D_SAFE_SMALL_M
-
-ROAD_MARGIN = 60.0  # m of road before the route start and after the route end
 
 # --- PE geometry -------------------------------------------------------------------------------
 PE_WARN_LEAD, PE_EVENT_LEAD = 18.0, 9.0
@@ -79,7 +78,6 @@ VC_MIN_WARN_S = 15.0  # m, minimum route arc of the warning point (normal approa
 
 # --- OR geometry -------------------------------------------------------------------------------
 OR_WARN_LEAD, OR_EVENT_LEAD = 12.0, 6.0
-VAN_HALF_WIDTH = 1.1  # m
 OBJECT_HALF_LENGTH = 1.0  # m
 OR_LANE_CHANGE_S = 2.5
 OR_STOP_LIMIT_S = 8.0

@@ -97,6 +97,8 @@ from lantern_jax.scenarios.premise import (
 from lantern_jax.scenarios.road import (
     CORRIDOR_MARGIN,
     PATH_POINTS,
+    ROAD_MARGIN,
+    VAN_HALF_WIDTH,
     OccluderSpec,
     RoadMap,
     RouteSpec,
@@ -116,6 +118,7 @@ from lantern_jax.scenarios.road_straight import (
 )
 from lantern_jax.scenarios.spec import (
     COMMON_RANGES,
+    MAX_CURVATURE,
     MIN_RECOVERY_M,
     Choice,
     Flag,
@@ -143,7 +146,8 @@ __all__ = [
     "ROLE_CONTEXT", "ROLE_BACKGROUND", "TRIGGER_CLOCK", "TRIGGER_EVENT", "TRIGGER_NEVER",
     "MOTION_SCRIPTED", "MOTION_IDM", "OCC_BUILDING", "OCC_WALL", "OCC_PARKED_VEHICLE",
     "CAR_EXTENT", "EGO_HALF_LENGTH", "EGO_HALF_WIDTH", "CORRIDOR_MARGIN", "PATH_POINTS",
-    "MIN_RECOVERY_M", "D_SAFE_SMALL_M", "D_SAFE_LARGE_M", "BIG", "WEATHERS",
+    "ROAD_MARGIN", "VAN_HALF_WIDTH", "MAX_CURVATURE", "MIN_RECOVERY_M", "D_SAFE_SMALL_M",
+    "D_SAFE_LARGE_M", "BIG", "WEATHERS",
     "PREMISE_NONE", "PREMISE_AT_WARNING", "PREMISE_WHOLE_APPROACH",
 ]  # fmt: skip
 

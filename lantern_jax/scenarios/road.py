@@ -19,21 +19,30 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from lantern_jax.constants import BIG, EGO_HALF_WIDTH, OCC_PARKED_VEHICLE
+from lantern_jax.constants import (  # noqa: F401  (the capacities: road.MAX_ACTORS, ...)
+    BIG,
+    EGO_HALF_WIDTH,
+    LANE_POINTS,
+    MAX_ACTORS,
+    MAX_LANES,
+    OCC_PARKED_VEHICLE,
+    PATH_POINTS,
+    ROUTE_POINTS,
+)
 
 #: m, lateral margin beyond the ego half width kept clear of occluders along the route
 CORRIDOR_MARGIN = 0.5
+
+#: m of road before the route start and after the route end (straight-road families)
+ROAD_MARGIN = 60.0
+#: m, half width of a parked van (Obstacle Reveal's, the reversing car's bay neighbour)
+VAN_HALF_WIDTH = 1.1
 
 # --- geometry defaults -------------------------------------------------------------------------
 ROUTE_SPACING = 2.0  # m, maximum spacing of route points
 LANE_SPACING = 4.0  # m, preferred spacing of straight-lane points
 
-# --- fixed capacities (static shapes shared by every scenario, so they batch) -------------------
-MAX_ACTORS = 16  # A
-PATH_POINTS = 32  # P
-MAX_LANES = 16  # L
-LANE_POINTS = 48  # Q
-ROUTE_POINTS = 96  # R
+# --- fixed capacities: constants.MAX_ACTORS, PATH_POINTS, MAX_LANES, LANE_POINTS, ROUTE_POINTS
 MAX_LIGHTS = 2  # T
 MAX_OCCLUDERS = 8  # K
 

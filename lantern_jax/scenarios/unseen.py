@@ -61,7 +61,6 @@ import numpy as np
 
 from lantern_jax.scenarios import registry as fam
 from lantern_jax.scenarios.unseen_common import (
-    ROAD_MARGIN,
     STRAIGHT_RANGES,
     road_path,
     sample_straight,
@@ -215,7 +214,7 @@ def build_cyc(p: dict) -> fam.Scene:
         markers=(sc - warning_lead(lead, p["v_ref"]), sc - lead, sc),
         clearance=fam.Clearance(path_arc=ride["length"], despawn=True),
         conflict_xy=road_path(line, [sc], [0.0])[0],
-        traffic=fam.opposing_sections(road_map, line, layout, -ROAD_MARGIN + 10.0, sc - 10.0),
+        traffic=fam.opposing_sections(road_map, line, layout, -fam.ROAD_MARGIN + 10.0, sc - 10.0),
         d_safe=fam.D_SAFE_SMALL_M,
         details=dict(cyclist_xy=path[0].tolist(), ride_m=ride["length"], event_lead_m=lead),
     )

@@ -10,16 +10,14 @@ import numpy as np
 from lantern_jax.scenarios import registry as fam
 
 WARN_GAP_S = 1.0  # s at v_ref from the warning point to the event point
-ROAD_MARGIN = 60.0  # m of road before the route start and after the route end
-MAX_CURVATURE = 1.0 / 70.0  # 1/m, gentle curves (as the built-in straight-road families)
 
 #: Straight-road geometry shared by CYC and REV.
 STRAIGHT_RANGES = {
     "lane_width": fam.FloatRange(3.0, 3.75),  # m
     "lanes_fwd": fam.Choice((1, 2)),  # the ego drives the rightmost one
     "lanes_back": fam.Choice((1, 2)),  # opposing lanes
-    "curvature_1": fam.FloatRange(-MAX_CURVATURE, MAX_CURVATURE),  # 1/m before curve_split
-    "curvature_2": fam.FloatRange(-MAX_CURVATURE, MAX_CURVATURE),  # 1/m from curve_split on
+    "curvature_1": fam.FloatRange(-fam.MAX_CURVATURE, fam.MAX_CURVATURE),  # 1/m before curve_split
+    "curvature_2": fam.FloatRange(-fam.MAX_CURVATURE, fam.MAX_CURVATURE),  # 1/m from curve_split on
     "curve_split": fam.FloatRange(20.0, 80.0),  # m, route arc where the curvature changes
 }
 
@@ -57,7 +55,7 @@ def straight_scene(p: dict, parking_width: float = 0.0):
                                 parking_width)  # fmt: skip
     line = fam.Centerline.two_piece(p["curvature_1"], p["curvature_2"], p["curve_split"])
     length = float(p["route_length"])
-    road_map = fam.straight_road(layout, line, -ROAD_MARGIN, length + ROAD_MARGIN)
+    road_map = fam.straight_road(layout, line, -fam.ROAD_MARGIN, length + fam.ROAD_MARGIN)
     route = fam.ego_route(line, length, f"fwd_{layout.ego_lane}")
     return road_map, route, line, layout
 

@@ -11,7 +11,6 @@ import numpy as np
 
 from lantern_jax.scenarios import registry as fam
 from lantern_jax.scenarios.unseen_common import (
-    ROAD_MARGIN,
     STRAIGHT_RANGES,
     road_path,
     sample_straight,
@@ -23,7 +22,6 @@ REV_EVENT_LEAD = 10.0  # m before the conflict point
 REV_TURN_RADIUS = 5.0  # m, of the car centre's path while it swings out
 REV_STRAIGHT_OUT = 1.0  # m the car's rear is in the road when it starts to turn
 REV_STOP_LIMIT_S = 8.0  # s after the event: the car drives off (as Obstacle Reveal's object)
-VAN_HALF_WIDTH = 1.1  # m
 VAN_KERB_GAP = 0.2  # m, the van's rear behind the kerb line
 REV_RECOVERY = 30.0  # m of route after the conflict point
 REV_ARC_POINTS = 16
@@ -117,7 +115,7 @@ def build_rev(p: dict) -> fam.Scene:
     road_map, route, line, layout = straight_scene(p)
     kerb = layout.kerb_d
     s_bay, bay_w = float(p["bay_s"]), float(p["bay_width"])
-    occ = [_bay_box(line, s_bay - bay_w, kerb, float(p["van_length"]), VAN_HALF_WIDTH, "van")]
+    occ = [_bay_box(line, s_bay - bay_w, kerb, float(p["van_length"]), fam.VAN_HALF_WIDTH, "van")]
     for k in range(int(p["parked_count"])):
         occ.append(_bay_box(line, s_bay + (k + 1) * bay_w, kerb, 2.0 * fam.CAR_EXTENT[0],
                             fam.CAR_EXTENT[1], f"parked_{k}", float(p["car_setback"])))  # fmt: skip
@@ -136,7 +134,7 @@ def build_rev(p: dict) -> fam.Scene:
         markers=(sc - warning_lead(REV_EVENT_LEAD, p["v_ref"]), sc - REV_EVENT_LEAD, sc),
         clearance=fam.Clearance(time_limit=REV_STOP_LIMIT_S, on_ego_stop=True, despawn=True),
         conflict_xy=road_path(line, [sc], [0.0])[0],
-        traffic=fam.opposing_sections(road_map, line, layout, -ROAD_MARGIN + 10.0, sc - 10.0),
+        traffic=fam.opposing_sections(road_map, line, layout, -fam.ROAD_MARGIN + 10.0, sc - 10.0),
         d_safe=fam.D_SAFE_SMALL_M,
         details=dict(car_xy=path[0].tolist(), end_xy=path[-1].tolist(),
                      turn_deg=math.degrees(man["turn"])),

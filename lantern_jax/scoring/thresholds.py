@@ -20,6 +20,7 @@ import jax
 from flax import struct
 
 from lantern_jax.constants import DT, FAMILIES
+from lantern_jax.times import ticks  # noqa: F401  (thresholds.ticks: re-exported)
 
 Array = jax.Array
 
@@ -28,11 +29,6 @@ COUNT_HALF = 0.5  # ticks, a soft threshold on an integer count sits half a tick
 #                   that fails (e.g. 7.5 of 10 flags for "at least 8", 19.5 ticks for "20 ticks")
 PROB_EPS = 1e-12  # a soft first-crossing probability at or below this counts as "never crossed"
 COINCIDENT_SQ_M2 = 1e-12  # m^2, |r|^2 at or below this: coincident centres, no closing speed
-
-
-def ticks(seconds: float) -> int:
-    """Number of 20 Hz ticks spanning ``seconds`` (``round(seconds / DT)``)."""
-    return int(round(seconds / DT))
 
 
 @struct.dataclass

@@ -4,7 +4,7 @@ the map's static occluders.
 The front camera sits ``constants.CAMERA_BACK_OFFSET`` behind the ego centre and looks along
 the ego heading with a ``constants.FRONT_CAMERA_FOV`` (110 degree) horizontal field of view.
 A six-camera rig covering the full circle is the same machinery with
-``fov_deg = SIX_CAMERA_FOV`` (360 degrees): the field-of-view test then accepts every bearing,
+``fov_deg = SURROUND_FOV`` (360 degrees): the field-of-view test then accepts every bearing,
 and occlusion and range work exactly as for a single camera (the rig's cameras share one
 mounting point here).
 
@@ -41,7 +41,6 @@ from lantern_jax.world import Occluders
 
 Array = jax.Array
 
-SIX_CAMERA_FOV = 360.0  # degrees, the six-camera rig: full circle
 OCCLUSION_EPS = 0.05  # m, a blocker must be hit at least this far before the sample point
 NUM_SAMPLE_POINTS = 9  # per actor: centre, 4 corners, 4 edge midpoints
 
@@ -146,7 +145,7 @@ def visible_actors(
         extents: (A, 2) float32 actor (half length, half width), m.
         present: (A,) bool, actor exists in the world (valid and active).
         fov_deg: static Python float, horizontal field of view in degrees
-            (``FRONT_CAMERA_FOV`` = 110 or ``SIX_CAMERA_FOV`` = 360).
+            (``FRONT_CAMERA_FOV`` = 110 or ``SURROUND_FOV`` = 360).
         max_range: () float32 sensing range, m.
         occluders: the map's static occluders (K slots, ``valid``-masked); None = none.
 

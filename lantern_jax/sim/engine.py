@@ -29,7 +29,7 @@ import jax
 import numpy as np
 
 from lantern_jax import family_codes, program_store
-from lantern_jax.constants import CONDITIONS, DT, FAMILIES
+from lantern_jax.constants import CONDITIONS, FAMILIES
 from lantern_jax.scenarios.ablations import get_ablation
 from lantern_jax.scenarios.suite import Suite, build_suite_batches, load_suite
 from lantern_jax.scoring.metrics import finalize
@@ -49,6 +49,7 @@ from lantern_jax.sim.split import (  # noqa: F401  (initial_states: re-exported)
 )
 from lantern_jax.sim.step import Driver
 from lantern_jax.sim.switch import PolicySwitch
+from lantern_jax.times import ticks_covering
 from lantern_jax.world import Scenario, trim_padding
 
 #: Slot scheduling of large batches (``compact``): each device steps a fixed number of slots
@@ -142,7 +143,7 @@ def build_new_executions(
         scenarios = trim_padding(jax.tree.map(lambda *x: np.concatenate(x), a_warn, a_none, b),
                                  at_least=tuple(widths))  # fmt: skip
     scenarios = jax.device_put(scenarios)
-    max_ticks = int(np.ceil(float(np.max(np.asarray(scenarios.config.timeout_s))) / DT))
+    max_ticks = ticks_covering(float(np.max(np.asarray(scenarios.config.timeout_s))))
     assert len(CONDITIONS) == 2  # the batch layout above holds one block per condition
     return Executions(
         scenarios=scenarios,

@@ -27,12 +27,12 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
-from lantern_jax.constants import DT
 from lantern_jax.sim.distributed import batch_mesh
 from lantern_jax.sim.record import TickRecord
 from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings
 from lantern_jax.sim.state import State, init_state
 from lantern_jax.sim.step import Driver, step
+from lantern_jax.times import ticks
 from lantern_jax.world import Scenario
 
 Array = jax.Array
@@ -55,9 +55,9 @@ def with_carry(states: State, policy: Driver, policy_params: Any) -> State:
     )
 
 
-def horizon_ticks(seconds: float) -> int:
-    """Number of 20 Hz ticks covering ``seconds``."""
-    return int(round(seconds / DT))
+#: Number of 20 Hz ticks of a horizon of ``seconds`` (:func:`lantern_jax.times.ticks`; the
+#: name kept for the public API).
+horizon_ticks = ticks
 
 
 def rollout(

@@ -33,7 +33,7 @@ import jax.numpy as jnp
 import numpy as np
 import pandas as pd
 
-from lantern_jax.constants import CONDITIONS, DT, WARNING_CONDITION
+from lantern_jax.constants import CONDITIONS, WARNING_CONDITION
 from lantern_jax.files import StagedFolder, atomic_write
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.registry import get_policy
@@ -47,6 +47,7 @@ from lantern_jax.stress import plausibility as rules
 from lantern_jax.stress.objective import Problem, batched_estimator, part_samples, parts_of
 from lantern_jax.stress.space import Space, adversary_space, product_space, search_space
 from lantern_jax.stress.verify import Verifier
+from lantern_jax.times import ticks_covering
 
 INTERACTION_TAIL_S = 10.0  # s of soft rollout after the ego would reach the conflict point
 HORIZON_QUANTUM_S = 5.0  # s, soft horizons are rounded up to this (fewer distinct programs)
@@ -129,7 +130,7 @@ def soft_horizon(scenario_a: Any, horizon_s: float | None) -> int:
     if horizon_s is None:
         reach = float(cfg.s_conflict) / float(cfg.v_ref) + INTERACTION_TAIL_S
         horizon_s = math.ceil(reach / HORIZON_QUANTUM_S) * HORIZON_QUANTUM_S
-    return int(np.ceil(min(horizon_s, float(cfg.timeout_s)) / DT))
+    return ticks_covering(min(horizon_s, float(cfg.timeout_s)))
 
 
 def make_problem(

@@ -21,17 +21,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from lantern_jax.constants import DT, MAX_VERIFY_S, ROUTE_A_GATE_NAMES
+from lantern_jax.constants import MAX_VERIFY_S, ROUTE_A_GATE_NAMES
 from lantern_jax.dynamics.adversary import limits_of_kind
 from lantern_jax.scoring.cus import pair_components
 from lantern_jax.sim.engine import remember
 from lantern_jax.stress import plausibility as rules
 from lantern_jax.stress.objective import EXPERT, POLICY, Problem
 from lantern_jax.stress.watch import hard_batch
+from lantern_jax.times import ticks
 
 FAIL_BELOW_CUS = rules.FAIL_BELOW_CUS
 ROUTE_A_GATES = ROUTE_A_GATE_NAMES  # the five gates of a Route A execution
-MAX_VERIFY_TICKS = int(round(MAX_VERIFY_S / DT))  # ticks; the batch exits early
+MAX_VERIFY_TICKS = ticks(MAX_VERIFY_S)  # ticks; the batch exits early
 
 
 @dataclasses.dataclass

@@ -70,8 +70,8 @@ def catalogue_figure(problem: Any, entries: list[dict], max_panels: int = MAX_PA
     import jax.numpy as jnp
     import numpy as np
 
-    from lantern_jax.constants import DT
     from lantern_jax.diagnostics import run_recorded
+    from lantern_jax.times import ticks
     from lantern_jax.viz.plots import bev_plot
 
     shown = entries[:max_panels]
@@ -94,7 +94,7 @@ def catalogue_figure(problem: Any, entries: list[dict], max_panels: int = MAX_PA
         r = jax.tree.map(lambda x, k=k: x[k], rec)
         t_fail = e["t_fail_s"]
         if np.isfinite(t_fail):
-            tick = int(round(t_fail / DT)) - 1
+            tick = ticks(t_fail) - 1
         else:
             d = np.min(
                 [np.linalg.norm(r.actor_xy[:, s] - r.ego_xy, axis=1) for s in problem.watched],

@@ -34,13 +34,11 @@ from flax import nnx, serialization, struct
 
 from lantern_jax.observation import FRONT_CAMERA, SURROUND_RIG, WARNING, Observation
 from lantern_jax.policies.base import Policy
-from lantern_jax.policies.learned.features import features, nav_token_table
+from lantern_jax.policies.learned.features import RIGS, features, nav_token_table
 from lantern_jax.policies.learned.model import DrivingModel, ModelConfig
 from lantern_jax.policies.learned.shipped import SHIPPED_MODELS
 from lantern_jax.policies.names import name_problem
 
-#: Camera rigs a model may be trained for.
-RIGS = ("front", "surround")
 #: Field of a description holding the SHA-256 of the rest of it.
 DESCRIPTION_HASH = "sha256"
 

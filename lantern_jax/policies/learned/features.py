@@ -41,6 +41,7 @@ NAV_TEXTS = (
     "Turn left at the junction ahead.",
     "Turn right at the junction ahead.",
 )
+#: Camera rigs a model may be trained for (its ``config.rig``).
 RIGS = ("front", "surround")
 
 
