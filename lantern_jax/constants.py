@@ -109,6 +109,11 @@ PE, VC, OR, LWW, RWW, RTY = range(6)
 # --- the two conditions of every Route A execution (result tables' "condition" column) --------
 CONDITIONS = ("warning", "no-warning")
 WARNING_CONDITION, NO_WARNING_CONDITION = CONDITIONS
+#: The blocks of a suite's batch of executions, in order (``sim.engine.Executions``): Route A
+#: under each condition, then Route B (the same scene without the hazard).
+ROUTE_B = "route-b"
+BLOCKS = (*CONDITIONS, ROUTE_B)
+EXECUTIONS_PER_PAIR = len(BLOCKS)
 
 # --- the gates of a pair (metrics' ``gate_*`` pass flags; result tables' GATE_COLUMNS) --------
 #: Route A gates by telemetry field, in failure-time order (metric ``"gate_" + field``).

@@ -251,8 +251,7 @@ def wording_table(
         execs = build_executions(s, ablation)
         runs[ablation] = run_policy(pol, execs, params).route_table
         if ablation == "held_out_paraphrase":
-            n = execs.num_pairs
-            tiers = paraphrase_tiers(jax.tree.map(lambda x, n=n: x[:n], execs.scenarios.config))
+            tiers = paraphrase_tiers(execs.take(execs.scenarios.config, WARNING_CONDITION))
     pair_ids = [p.pair_id for p in s.pairs]
     canon, para = (r[r["condition"] == WARNING_CONDITION] for r in runs.values())
     table = tier_rows(canon, para, tiers, pair_ids)

@@ -33,7 +33,7 @@ import numpy as np
 import pandas as pd
 
 from lantern_jax.checks import check_seed
-from lantern_jax.constants import CONDITIONS, DT, SUITE_ID
+from lantern_jax.constants import CONDITIONS, DT, ROUTE_B, SUITE_ID
 from lantern_jax.policies.base import Policy, check_policy_output
 from lantern_jax.policies.external import is_policy_source
 from lantern_jax.policies.registry import (
@@ -104,7 +104,7 @@ class PolicyRun:
 
     policy: str
     params_sha256: str
-    metrics: dict[str, np.ndarray]  # per execution (3 * num_pairs), numpy
+    metrics: dict[str, np.ndarray]  # per execution (Executions.num_executions), numpy
     protocol: dict[str, np.ndarray]
     route_table: pd.DataFrame
     seconds_compile: float
@@ -119,19 +119,18 @@ def _route_rows(
     m_struct: Any, proto: dict, execs: Executions, model: str, settings: Settings
 ) -> pd.DataFrame:
     """The route-level rows of one policy's final metrics and protocol (both conditions)."""
-    n = execs.num_pairs
     onset = np.asarray(time_or_nan(proto["t_warn_on"]))
     d_safe = np.asarray(execs.scenarios.config.d_safe)
     reached = np.asarray(happened(proto["t_warn_point"]))
     hidden_at = reached & ~np.asarray(proto["hazard_visible_at_warn"], bool)
     hidden_before = reached & ~np.asarray(proto["hazard_seen_before_warn"], bool)
     rows = []
-    for ci, cond in enumerate(CONDITIONS):
-        sl = slice(ci * n, (ci + 1) * n)
+    for cond in CONDITIONS:
+        sl = execs.block(cond)
         rows.append(
             build_route_table(
-                jax.tree.map(lambda x, sl=sl: x[sl], m_struct),
-                jax.tree.map(lambda x: x[2 * n : 3 * n], m_struct),
+                execs.take(m_struct, cond),
+                execs.take(m_struct, ROUTE_B),
                 model=model,
                 condition=cond,
                 pair_ids=execs.pair_ids,
@@ -511,7 +510,7 @@ def _plan(pols: list[Policy], policy_params: list, execs: Executions, settings: 
     (:func:`shared_program`, with ``share``: one compilation for all of them), or is None.
     The split policies' programs are compiled at once (:func:`lantern_jax.sim.split.prepare`);
     ``seconds`` gives each one's compile time."""
-    n = 3 * execs.num_pairs if execs.pad_to is None else execs.pad_to
+    n = execs.num_executions if execs.pad_to is None else execs.pad_to
     choices = [choose_path(p, n, path) for p in pols]
     if path == "auto" and any(c.path == "split" for c in choices):
         # the world program serves one policy: the package's policies beside it need only
@@ -566,7 +565,7 @@ def _manifest(s: Suite, ablation: str, execs: Executions, runs: list[PolicyRun],
         num_pairs=len(s.pairs),
         ablation=ablation,
         conditions=list(CONDITIONS),
-        executions_per_policy=3 * execs.num_pairs,
+        executions_per_policy=execs.num_executions,
         max_ticks=execs.max_ticks,
         dt_s=DT,
         settings=settings_record(settings),

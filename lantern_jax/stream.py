@@ -42,9 +42,10 @@ STRESS_RANGES = {"hazard_speed_factor": (0.8, 1.25), "hazard_delay_add_s": (0.0,
 
 
 def stress_source(suite: Suite | str = SUITE_ID, seed: int = 0, ablation: str = "none"):
-    """Execution ``i`` = the suite's execution ``i mod (3 * pairs)`` (``[A warning | A
-    no-warning | B]`` order) with its hazard perturbed (:data:`STRESS_RANGES`), drawn from
-    ``fold_in(PRNGKey(seed), i)``; copy 0 of every execution (``i < 3 * pairs``) is unperturbed.
+    """Execution ``i`` = the suite's execution ``i mod (3 * pairs)`` (the order of
+    :class:`~lantern_jax.sim.engine.Executions`) with its hazard perturbed
+    (:data:`STRESS_RANGES`), drawn from ``fold_in(PRNGKey(seed), i)``; copy 0 of every execution
+    (``i < 3 * pairs``) is unperturbed.
 
     Returns:
         ``(source, max_ticks, base_count)``: the source, the static horizon covering every
@@ -53,7 +54,7 @@ def stress_source(suite: Suite | str = SUITE_ID, seed: int = 0, ablation: str = 
     s = load_suite(suite) if isinstance(suite, str) else suite
     execs = build_executions(s, ablation)
     base = execs.scenarios
-    n_base = 3 * execs.num_pairs
+    n_base = execs.num_executions
     (lo_f, hi_f), (lo_d, hi_d) = STRESS_RANGES.values()
 
     def one(i: jax.Array) -> Scenario:

@@ -23,6 +23,7 @@ from typing import Any
 import jax
 import numpy as np
 
+from lantern_jax.constants import ROUTE_B, WARNING_CONDITION
 from lantern_jax.evaluation import evaluate
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.suite import load_suite
@@ -94,11 +95,10 @@ def probe(name: str | None) -> bytes:
 def _soft_cus(policy, params, suite, settings: Settings) -> bytes:
     execs = build_executions(suite)
     final, _ = run_executions(policy, execs.scenarios, params, execs.max_ticks, settings)
-    n = execs.num_pairs
     tel = final.telemetry
-    a = jax.tree.map(lambda x: x[:n], tel)  # Route A with warning
-    b = jax.tree.map(lambda x: x[2 * n :], tel)  # Route B
-    d_safe = execs.scenarios.config.d_safe[:n]
+    a = execs.take(tel, WARNING_CONDITION)  # Route A with warning
+    b = execs.take(tel, ROUTE_B)
+    d_safe = execs.take(execs.scenarios.config.d_safe, WARNING_CONDITION)
     soft = jax.vmap(lambda ta, tb, d: soft_pair_cus(ta, tb, d, settings=settings.scoring))
     return np.asarray(soft(a, b, d_safe), np.float32).tobytes()
 

@@ -590,3 +590,24 @@ def test_batch_bucket_depends_on_the_batch_alone():
     assert engine.batch_bucket(SUITE_BATCH_SHAPE) == SUITE_BATCH_SHAPE
     assert engine.batch_bucket((400, 8, 7)) == (400, 8, 7)  # more executions than the suite
     assert engine.batch_bucket((6, 12, 7)) == (6, 12, 7)  # wider than the suite
+
+
+def test_the_batch_blocks_are_read_by_name():
+    """``Executions.block``/``take``: Route A with and without the warning, then Route B, each
+    ``num_pairs`` long in pair order; both Route A blocks hold the same physical scene."""
+    from lantern_jax.constants import BLOCKS, EXECUTIONS_PER_PAIR, ROUTE_B
+    from lantern_jax.sim.engine import build_executions
+
+    execs = build_executions(load_suite().select(PAIRS + ["rty_0001"]))
+    n = execs.num_pairs
+    assert n == 3 and execs.num_executions == EXECUTIONS_PER_PAIR * n == 9
+    assert jax.tree.leaves(execs.scenarios)[0].shape[0] == execs.num_executions
+    assert [execs.block(b) for b in BLOCKS] == [slice(0, 3), slice(3, 6), slice(6, 9)]
+    ids = np.arange(execs.num_executions)
+    assert [execs.take(ids, b).tolist() for b in BLOCKS] == [[0, 1, 2], [3, 4, 5], [6, 7, 8]]
+    xy = np.asarray(execs.scenarios.actors0.xy)
+    warned, unwarned = (execs.take(xy, c) for c in BLOCKS[:2])
+    np.testing.assert_array_equal(warned, unwarned)
+    assert not np.array_equal(warned, execs.take(xy, ROUTE_B))  # no hazard on Route B
+    with pytest.raises(ValueError, match="block: 'A' is not one of warning, no-warning, route-b"):
+        execs.block("A")

@@ -24,7 +24,7 @@ from lantern_jax.commands.common import (
     write_failed,
 )
 from lantern_jax.commands.values import count
-from lantern_jax.constants import CONDITIONS, SUITE_ID
+from lantern_jax.constants import CONDITIONS, EXECUTIONS_PER_PAIR, SUITE_ID
 
 
 def list_ablations() -> None:
@@ -59,7 +59,7 @@ def cmd_ablations(args: argparse.Namespace, argv: Sequence[str]) -> int:
     stage(
         args,
         f"suite {suite.suite_id}: {len(suite)} pairs; policy {policies[0]}; "
-        f"{len(ABLATIONS)} protocol variants x {3 * len(suite)} executions",
+        f"{len(ABLATIONS)} protocol variants x {EXECUTIONS_PER_PAIR * len(suite)} executions",
     )
     t0 = time.perf_counter()
     try:

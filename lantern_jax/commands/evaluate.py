@@ -34,7 +34,7 @@ from lantern_jax.commands.common import (
 )
 from lantern_jax.commands.runtime import add_cache_flag, check_interrupt
 from lantern_jax.commands.values import count, seed, whole
-from lantern_jax.constants import SUITE_ID
+from lantern_jax.constants import EXECUTIONS_PER_PAIR, SUITE_ID
 
 #: Defaults of the ``evaluate`` options an experiment file may set (used when neither the
 #: command line nor the file gives one).
@@ -192,7 +192,8 @@ def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
         stage(
             args,
             f"suite {suite.suite_id}: {len(suite)} pairs (hash {suite.suite_sha256[:12]}); "
-            f"building {3 * len(suite)} executions per policy (ablation {args.ablation}); "
+            f"building {EXECUTIONS_PER_PAIR * len(suite)} executions per policy "
+            f"(ablation {args.ablation}); "
             f"policies: {', '.join(policies)}",
         )
         t0 = time.perf_counter()

@@ -29,7 +29,7 @@ import jax
 import numpy as np
 
 from lantern_jax import family_codes, program_store
-from lantern_jax.constants import CONDITIONS, FAMILIES
+from lantern_jax.constants import BLOCKS, CONDITIONS, EXECUTIONS_PER_PAIR, FAMILIES
 from lantern_jax.scenarios.ablations import get_ablation
 from lantern_jax.scenarios.suite import Suite, build_suite_batches, load_suite
 from lantern_jax.scoring.metrics import finalize
@@ -68,9 +68,11 @@ COMPACT_MIN_BATCH = 256
 
 @dataclasses.dataclass
 class Executions:
-    """The batched executions of a suite: ``[A warning | A no-warning | B]`` x pairs."""
+    """The batched executions of a suite: ``[A warning | A no-warning | B]`` x pairs (the
+    blocks :data:`~lantern_jax.constants.BLOCKS`, each ``num_pairs`` long, in pair order).
+    :meth:`block` and :meth:`take` read a block; nothing else needs the layout."""
 
-    scenarios: Scenario  # leaves with leading axis 3 * num_pairs
+    scenarios: Scenario  # leaves with leading axis EXECUTIONS_PER_PAIR * num_pairs
     num_pairs: int
     pair_ids: list[str]
     families: list[str]
@@ -78,6 +80,29 @@ class Executions:
     max_ticks: int
     #: run the batch padded to this many executions (:func:`batch_bucket`); None: as it is
     pad_to: int | None = None
+
+    @property
+    def num_executions(self) -> int:
+        """Executions of the batch (``EXECUTIONS_PER_PAIR * num_pairs``, before any padding)."""
+        return EXECUTIONS_PER_PAIR * self.num_pairs
+
+    def block(self, name: str) -> slice:
+        """Positions of block ``name`` (``"warning"``, ``"no-warning"`` or ``"route-b"``,
+        :data:`~lantern_jax.constants.BLOCKS`) on the batch's leading axis.
+
+        Raises:
+            ValueError: for a name not in ``BLOCKS``.
+        """
+        if name not in BLOCKS:
+            raise ValueError(f"block: {name!r} is not one of {', '.join(BLOCKS)}")
+        i = BLOCKS.index(name)
+        return slice(i * self.num_pairs, (i + 1) * self.num_pairs)
+
+    def take(self, tree: Any, name: str) -> Any:
+        """Block ``name`` of a tree whose leaves have the batch's leading axis (the scenarios,
+        final states, metrics, ...): leaves of leading axis ``num_pairs``, in pair order."""
+        sl = self.block(name)
+        return jax.tree.map(lambda x: x[sl], tree)
 
 
 #: Executions built in this process, by suite content and options (a few suites: bounded).
