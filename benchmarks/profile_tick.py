@@ -45,16 +45,16 @@ def stages(policy, params, settings=DEFAULT_SETTINGS):
         """Every intermediate of one tick (the same code as ``step``)."""
         obs = observe(sc, st, policy.sensors, settings.bank)
         wp, _ = policy.step(params, st.policy_carry, obs)
-        return dict(obs=obs, **transition_outputs(sc, st, wp, settings))
+        return obs, transition_outputs(sc, st, wp, settings)
 
     def s_observe(sc, st, x):
         return observe(sc, st, policy.sensors, settings.bank)
 
     def s_policy(sc, st, x):
-        return policy.step(params, st.policy_carry, x["obs"])
+        return policy.step(params, st.policy_carry, x[0])
 
     def staged(stage):
-        return lambda sc, st, x: stage(sc, st, x, settings)
+        return lambda sc, st, x: stage(sc, st, x[1], settings)
 
     def s_tick(sc, st, x):
         return step(policy, params, sc, st, settings)[0]
@@ -95,7 +95,7 @@ def mid_run_states(policy: str, batch: int, warmup_ticks: int):
     execs = build_executions(load_suite())
     pol = get_policy(policy)
     params = pol.init(jax.random.PRNGKey(0))
-    idx = np.linspace(0, 3 * execs.num_pairs - 1, batch).astype(int)
+    idx = np.linspace(0, execs.num_executions - 1, batch).astype(int)
     sc = jax.tree.map(lambda x: np.asarray(x)[idx], execs.scenarios)
     st, _ = run_executions(pol, sc, params, warmup_ticks, compact=False)
     return pol, params, sc, st

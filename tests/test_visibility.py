@@ -22,7 +22,7 @@ from lantern_jax.constants import (
 )
 from lantern_jax.scenarios.handmade import straight_scene
 from lantern_jax.scenarios.road import OccluderSpec
-from lantern_jax.scoring.measure import measure
+from lantern_jax.scoring.measure import TickEnd, measure
 from lantern_jax.scoring.thresholds import DEFAULT_SCORING
 from lantern_jax.sensors import visibility as vis
 from lantern_jax.world import Occluders, ProtocolState
@@ -354,20 +354,17 @@ def test_ego_collides_with_an_occluder():
     # the ego drives straight into a wall across its lane: the collision gate fails
     wall = OccluderSpec(np.array([20.0, 0.0]), 0.0, (0.5, 3.0), OCC_WALL, "wall")
     world = straight_scene([], length=60.0, occluders=[wall])
-    sample = measure(
-        world, world.ego0.replace(xy=jnp.asarray([18.0, 0.0], jnp.float32)), world.actors0,
-        jnp.zeros(world.actors.num, bool), ProtocolState.initial(), jnp.float32(1.0),
-        jnp.float32(18.0), jnp.float32(0.0), jnp.float32(17.9), jnp.float32(18.0),
-        jnp.int32(0), jnp.asarray(False), jnp.asarray(False), DEFAULT_SCORING,
+    end = TickEnd(
+        ego=world.ego0.replace(xy=jnp.asarray([18.0, 0.0], jnp.float32)),
+        actors=world.actors0, present=jnp.zeros(world.actors.num, bool),
+        protocol=ProtocolState.initial(), t=jnp.float32(1.0), progress=jnp.float32(18.0),
+        dist_to_route=jnp.float32(0.0), arc_before=jnp.float32(17.9), arc_now=jnp.float32(18.0),
+        light=jnp.int32(0), justified=jnp.asarray(False), fault=jnp.asarray(False),
     )  # fmt: skip
+    sample = measure(world, end, DEFAULT_SCORING)
     # ego front at 18 + 2.45 = 20.45 > wall face 19.5, moving at 8 m/s -> collision
     assert bool(sample.collision)
-    at_rest = measure(
-        world, world.ego0.replace(xy=jnp.asarray([18.0, 0.0], jnp.float32), speed=0.0),
-        world.actors0, jnp.zeros(world.actors.num, bool), ProtocolState.initial(),
-        jnp.float32(1.0), jnp.float32(18.0), jnp.float32(0.0), jnp.float32(17.9),
-        jnp.float32(18.0), jnp.int32(0), jnp.asarray(False), jnp.asarray(False), DEFAULT_SCORING,
-    )  # fmt: skip
+    at_rest = measure(world, end.replace(ego=end.ego.replace(speed=0.0)), DEFAULT_SCORING)
     assert not bool(at_rest.collision)  # contacts at standstill are ignored (leaderboard)
 
 

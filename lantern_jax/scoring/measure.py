@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+from flax import struct
 
 from lantern_jax import geometry, polyline
 from lantern_jax.constants import EGO_HALF_LENGTH, EGO_HALF_WIDTH, LIGHT_RED
@@ -83,38 +84,36 @@ def justified_stop(
     return light_holds | lead | (dist_to_end < settings.justify_route_end_m)
 
 
-def measure(
-    scenario: Scenario,
-    ego: EgoState,
-    actors: ActorState,
-    present: Array,
-    protocol: ProtocolState,
-    t: Array,
-    progress: Array,
-    dist_to_route: Array,
-    arc_before: Array,
-    arc_now: Array,
-    light: Array,
-    justified: Array,
-    fault: Array,
-    settings: ScoringSettings,
-) -> TickSample:
+@struct.dataclass
+class TickEnd:
+    """The world at the end of one tick of one execution, as :func:`measure` reads it (built
+    by keyword in :func:`lantern_jax.sim.step.transition`, so no two fields can be swapped)."""
+
+    ego: EgoState  # the ego at the end of the tick
+    actors: ActorState  # the actors at the end of the tick
+    present: Array  # (A,) bool, actors in the world at the end of the tick
+    protocol: ProtocolState  # protocol times after the tick
+    t: Array  # () float32, s, time at the end of the tick
+    progress: Array  # () float32, m, furthest route arc reached
+    dist_to_route: Array  # () float32, m, ego centre distance from the route
+    arc_before: Array  # () float32, m, the ego's route arc at the start of the tick
+    arc_now: Array  # () float32, m, the ego's route arc at the end of the tick
+    light: Array  # () int32, LIGHT_* state of the ego's light at ``t``
+    justified: Array  # () bool, from :func:`justified_stop`
+    fault: Array  # () bool, controller fault this tick
+
+
+def measure(scenario: Scenario, end: TickEnd, settings: ScoringSettings) -> TickSample:
     """The tick's :class:`TickSample` (one execution, after the world was stepped).
 
     Args:
         scenario: the execution's static scenario.
-        ego, actors: the world at the end of the tick.
-        present: (A,) bool, actors in the world at the end of the tick.
-        protocol: protocol times after the tick.
-        t: () float32, s, time at the end of the tick.
-        progress: () float32, m, furthest route arc reached.
-        dist_to_route: () float32, m, ego centre distance from the route.
-        arc_before, arc_now: () float32, m, the ego's route arc at the start and end of the tick.
-        light: () int32, LIGHT_* state of the ego's light at ``t``.
-        justified: () bool, from :func:`justified_stop`.
-        fault: () bool, controller fault this tick.
+        end: the world at the end of the tick (:class:`TickEnd`).
         settings: scoring thresholds.
     """
+    ego, actors, present, protocol = end.ego, end.actors, end.present, end.protocol
+    t, progress, dist_to_route, light = end.t, end.progress, end.dist_to_route, end.light
+    arc_before, arc_now, justified, fault = end.arc_before, end.arc_now, end.justified, end.fault
     cfg = scenario.config
     h = cfg.hazard_index
     ext = scenario.actors.extent

@@ -33,6 +33,7 @@ from typing import Any
 
 import jax
 import jax.numpy as jnp
+from flax import struct
 
 from lantern_jax.constants import DT
 from lantern_jax.dynamics.actors import step_actors
@@ -41,7 +42,7 @@ from lantern_jax.dynamics.lights import ego_light_state, light_states
 from lantern_jax.observation import corridor_gaps
 from lantern_jax.policies.base import Policy
 from lantern_jax.scenarios import protocol
-from lantern_jax.scoring.measure import execution_ended, justified_stop, measure
+from lantern_jax.scoring.measure import TickEnd, execution_ended, justified_stop, measure
 from lantern_jax.scoring.telemetry import update_telemetry
 from lantern_jax.sim.observe import actors_in_ego_frame, delivered_warning, observe, route_ahead
 from lantern_jax.sim.record import TickRecord, tick_record
@@ -49,7 +50,7 @@ from lantern_jax.sim.sense import locate_on_route, sense
 from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings
 from lantern_jax.sim.state import State, freeze
 from lantern_jax.sim.switch import PolicySwitch
-from lantern_jax.world import Scenario, present
+from lantern_jax.world import ActorState, EgoState, ProtocolState, Scenario, present
 
 Array = jax.Array
 Driver = Policy | PolicySwitch
@@ -93,17 +94,47 @@ def policy_waypoints(
     return waypoints, carry
 
 
-def _stage_ego(sc: Scenario, st: State, x: dict, settings: Settings) -> dict:
+@struct.dataclass
+class TickParts:
+    """Every intermediate of the world's part of one tick (one execution): what each stage of
+    :data:`TRANSITION_STAGES` reads from the earlier ones and adds (None until its stage ran).
+    """
+
+    waypoints: Array  # (10, 2) float32, m, ego frame: the policy's plan
+    warning: tuple | None = None  # delivered now: (active () bool, text id () int32, (2,) pos)
+    # ego stage
+    ego: EgoState | None = None  # the ego at the end of the tick
+    fault: Array | None = None  # () bool, the plan was unusable (a controller fault)
+    plan: Array | None = None  # (10, 2) float32, m, the plan the controller followed
+    t: Array | None = None  # () float32, s, time at the end of the tick
+    arc: Array | None = None  # () float32, m, the ego's route arc at the end of the tick
+    dist: Array | None = None  # () float32, m, ego centre distance from the route
+    progress: Array | None = None  # () float32, m, furthest route arc reached
+    light: Array | None = None  # () int32, LIGHT_* state of the ego's light at ``t``
+    # protocol before the actors
+    gap: Array | None = None  # (A,) float32, m, route gap from the ego front to each actor
+    lateral: Array | None = None  # (A,) float32, m, actor distance from the route - half size
+    present_before: Array | None = None  # (A,) bool, actors present at the start of the tick
+    light_holds: Array | None = None  # () bool, a red/yellow light holds the ego
+    proto: ProtocolState | None = None  # protocol state (markers, then the hazard's)
+    # actors, sensing, measurement
+    actors: ActorState | None = None  # the actors at the end of the tick
+    percept: Any = None  # the sensing of the new tick (:func:`lantern_jax.sim.sense.sense`)
+    telemetry: Any = None  # the telemetry with the tick folded in
+    done: Array | None = None  # () bool, the execution has ended
+
+
+def _stage_ego(sc: Scenario, st: State, x: TickParts, settings: Settings) -> TickParts:
     """Controller and bicycle under the waypoints; the route place and light at the new time."""
-    ego, fault, plan = follow_plan(st.ego, x["waypoints"], sc.config.friction)
+    ego, fault, plan = follow_plan(st.ego, x.waypoints, sc.config.friction)
     t = st.t + DT
     arc, dist, progress = locate_on_route(sc.route, ego.xy, st.percept.progress)
     light = ego_light_state(sc.lights, sc.config.ego_light, t)
-    return dict(ego=ego, fault=fault, plan=plan, t=t, arc=arc, dist=dist, progress=progress,
-                light=light)  # fmt: skip
+    return x.replace(ego=ego, fault=fault, plan=plan, t=t, arc=arc, dist=dist, progress=progress,
+                     light=light)  # fmt: skip
 
 
-def _stage_markers(sc: Scenario, st: State, x: dict, settings: Settings) -> dict:
+def _stage_markers(sc: Scenario, st: State, x: TickParts, settings: Settings) -> TickParts:
     """Warning point, anti-deadlock countdown and event onset (the actors as at the start)."""
     cfg = sc.config
     route, _ = route_ahead(sc, st)
@@ -111,63 +142,62 @@ def _stage_markers(sc: Scenario, st: State, x: dict, settings: Settings) -> dict
     gap, lateral = corridor_gaps(
         route, truth["actor_xy"], truth["actor_dir"], truth["actor_extent"]
     )
-    light_holds = settings.protocol.light_holds(x["light"], cfg.ego_stop_s - x["arc"])
+    light_holds = settings.protocol.light_holds(x.light, cfg.ego_stop_s - x.arc)
     held = protocol.ego_held(
-        x["light"], cfg.ego_stop_s - x["arc"], gap, lateral, truth["present"], sc.actors.role,
+        x.light, cfg.ego_stop_s - x.arc, gap, lateral, truth["present"], sc.actors.role,
         st.actors.speed, settings.protocol,
     )  # fmt: skip
-    proto = protocol.advance_markers(
-        st.protocol, cfg, x["t"], st.percept.progress, x["progress"], held
-    )
-    return dict(gap=gap, lateral=lateral, present_before=truth["present"],
-                light_holds=light_holds, proto=proto)  # fmt: skip
+    proto = protocol.advance_markers(st.protocol, cfg, x.t, st.percept.progress, x.progress, held)
+    return x.replace(gap=gap, lateral=lateral, present_before=truth["present"],
+                     light_holds=light_holds, proto=proto)  # fmt: skip
 
 
-def _stage_actors(sc: Scenario, st: State, x: dict, settings: Settings) -> dict:
+def _stage_actors(sc: Scenario, st: State, x: TickParts, settings: Settings) -> TickParts:
     """Scripted actors, IDM traffic and lights."""
-    ego = x["ego"]
+    ego = x.ego
     actors = step_actors(
-        st.actors, sc.actors, x["t"], x["proto"].t_event, light_states(sc.lights, x["t"]),
+        st.actors, sc.actors, x.t, x.proto.t_event, light_states(sc.lights, x.t),
         ego.xy, ego.yaw, ego.speed,
     )  # fmt: skip
-    return dict(actors=actors)
+    return x.replace(actors=actors)
 
 
-def _stage_sense(sc: Scenario, st: State, x: dict, settings: Settings) -> dict:
+def _stage_sense(sc: Scenario, st: State, x: TickParts, settings: Settings) -> TickParts:
     """Front camera and route place of the new tick."""
-    return dict(percept=sense(sc, x["ego"], x["actors"], x["arc"], x["dist"], x["progress"]))
+    return x.replace(percept=sense(sc, x.ego, x.actors, x.arc, x.dist, x.progress))
 
 
-def _stage_hazard(sc: Scenario, st: State, x: dict, settings: Settings) -> dict:
+def _stage_hazard(sc: Scenario, st: State, x: TickParts, settings: Settings) -> TickParts:
     """Warning termination, clearance, onset bookkeeping, removal of a cleared hazard."""
-    cfg, h, actors = sc.config, sc.config.hazard_index, x["actors"]
-    visible = x["percept"].visible[h] & present(sc.actors, actors)[h]
+    cfg, h, actors = sc.config, sc.config.hazard_index, x.actors
+    visible = x.percept.visible[h] & present(sc.actors, actors)[h]
     proto = protocol.advance_hazard(
-        x["proto"], cfg, x["t"], visible, actors.s[h], x["ego"].speed, settings.protocol
+        x.proto, cfg, x.t, visible, actors.s[h], x.ego.speed, settings.protocol
     )
-    proto = protocol.record_onset(proto, st.protocol, cfg, visible, x["warned"][0])
-    return dict(proto=proto, actors=protocol.despawn_cleared(actors, proto, cfg))
+    warning_active = x.warning[0]
+    proto = protocol.record_onset(proto, st.protocol, cfg, visible, warning_active)
+    return x.replace(proto=proto, actors=protocol.despawn_cleared(actors, proto, cfg))
 
 
-def _stage_measure(sc: Scenario, st: State, x: dict, settings: Settings) -> dict:
+def _stage_measure(sc: Scenario, st: State, x: TickParts, settings: Settings) -> TickParts:
     """The tick's measurement folded into the telemetry, and whether the execution ended."""
     s = settings.scoring
     justified = justified_stop(
-        x["light_holds"], x["gap"], x["lateral"], x["present_before"],
-        sc.route.length - x["arc"], s,
+        x.light_holds, x.gap, x.lateral, x.present_before, sc.route.length - x.arc, s
+    )
+    end = TickEnd(
+        ego=x.ego, actors=x.actors, present=present(sc.actors, x.actors), protocol=x.proto,
+        t=x.t, progress=x.progress, dist_to_route=x.dist, arc_before=st.percept.route_arc,
+        arc_now=x.arc, light=x.light, justified=justified, fault=x.fault,
     )  # fmt: skip
-    sample = measure(
-        sc, x["ego"], x["actors"], present(sc.actors, x["actors"]), x["proto"], x["t"],
-        x["progress"], x["dist"], st.percept.route_arc, x["arc"], x["light"], justified,
-        x["fault"], s,
-    )  # fmt: skip
-    ended = execution_ended(sc, x["t"], x["progress"], x["dist"], x["proto"].ego_still_time, s)
-    return dict(telemetry=update_telemetry(st.telemetry, sample, s), done=ended)
+    sample = measure(sc, end, s)
+    ended = execution_ended(sc, x.t, x.progress, x.dist, x.proto.ego_still_time, s)
+    return x.replace(telemetry=update_telemetry(st.telemetry, sample, s), done=ended)
 
 
-#: The world's stages of a tick, in order: ``(label, stage(scenario, state, x, settings) ->
-#: outputs)``, each reading what the earlier ones put into ``x`` (``benchmarks/profile_tick.py``
-#: times them one by one).
+#: The world's stages of a tick, in order: ``(label, stage(scenario, state, parts, settings) ->
+#: parts)``, each reading what the earlier ones put into the :class:`TickParts`
+#: (``benchmarks/profile_tick.py`` times them one by one).
 TRANSITION_STAGES = (
     ("controller + bicycle + route place", _stage_ego),
     ("protocol before the actors", _stage_markers),
@@ -180,11 +210,12 @@ TRANSITION_STAGES = (
 
 def transition_outputs(
     scenario: Scenario, state: State, waypoints: Array, settings: Settings = DEFAULT_SETTINGS
-) -> dict:
+) -> TickParts:
     """Every intermediate of the world's part of a tick (:data:`TRANSITION_STAGES` in order)."""
-    x = dict(waypoints=waypoints, warned=delivered_warning(scenario, state, settings.bank))
+    x = TickParts(waypoints=waypoints,
+                  warning=delivered_warning(scenario, state, settings.bank))  # fmt: skip
     for _, stage in TRANSITION_STAGES:
-        x.update(stage(scenario, state, x, settings))
+        x = stage(scenario, state, x, settings)
     return x
 
 
@@ -206,18 +237,18 @@ def transition(
     """
     x = transition_outputs(scenario, state, waypoints, settings)
     new = state.replace(
-        t=x["t"],
+        t=x.t,
         tick=state.tick + 1,
-        ego=x["ego"],
-        actors=x["actors"],
-        protocol=x["proto"],
-        percept=x["percept"],
-        telemetry=x["telemetry"],
-        done=x["done"],
-        fault=state.fault | x["fault"],
+        ego=x.ego,
+        actors=x.actors,
+        protocol=x.proto,
+        percept=x.percept,
+        telemetry=x.telemetry,
+        done=x.done,
+        fault=state.fault | x.fault,
     )
     new = freeze(state, new)
-    rec = tick_record(scenario, new, x["warned"], x["plan"], x["light"], live=~state.done)
+    rec = tick_record(scenario, new, x.warning, x.plan, x.light, live=~state.done)
     return new, rec
 
 
