@@ -48,7 +48,7 @@ from lantern_jax.dynamics.bicycle import (
 from lantern_jax.dynamics.controller import track_waypoints, waypoints_fault
 from lantern_jax.dynamics.idm import IDMParams, idm_accel
 from lantern_jax.dynamics.lights import light_states
-from lantern_jax.dynamics.scripted import scripted_pose, trigger_time
+from lantern_jax.dynamics.scripted import ScriptedMotion, scripted_pose, trigger_time
 from lantern_jax.world import (
     ActorScript,
     ActorState,
@@ -720,10 +720,9 @@ _scripted_pose_jit = jax.jit(scripted_pose)
 
 
 def _pose(script, i, t, tau):
-    args = [getattr(script, k)[i] for k in (
-        "path path_s path_valid s_init v_pre v_post s_hold s_end lat_shift lat_duration "
-        "despawn_at_end").split()]  # fmt: skip
-    return _scripted_pose_jit(*args, _f(t), _f(tau))
+    motion = jax.tree.map(lambda x: x[i], ScriptedMotion.of(script))
+    path = (script.path[i], script.path_s[i], script.path_valid[i])
+    return _scripted_pose_jit(*path, motion, _f(t), _f(tau))
 
 
 def test_pedestrian_triggered_by_event_moves_6m_in_2s():
@@ -840,8 +839,11 @@ def test_scripted_gradients_finite_and_nonzero():
 
     def xy_at(v_pre, v_post, delay, lat_shift, s_init, t_event=2.0, t=4.0):
         tau = trigger_time(jnp.int32(TRIGGER_EVENT), delay, _f(t_event))
-        out = scripted_pose(pts, s, valid, s_init, v_pre, v_post, _f(BIG), _f(30.0),
-                            lat_shift, _f(2.0), jnp.bool_(True), _f(t), tau)  # fmt: skip
+        motion = ScriptedMotion(
+            s_init=s_init, v_pre=v_pre, v_post=v_post, s_hold=_f(BIG), s_end=_f(30.0),
+            lat_shift=lat_shift, lat_duration=_f(2.0), despawn_at_end=jnp.bool_(True),
+        )  # fmt: skip
+        out = scripted_pose(pts, s, valid, motion, _f(t), tau)
         return out[3]
 
     args = (_f(1.0), _f(3.0), _f(0.5), _f(1.5), _f(2.0))

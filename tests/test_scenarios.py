@@ -30,7 +30,7 @@ from lantern_jax.constants import (
     TRIGGER_NEVER,
     WEATHERS,
 )
-from lantern_jax.dynamics.scripted import scripted_pose, trigger_time
+from lantern_jax.dynamics.scripted import ScriptedMotion, scripted_pose, trigger_time
 from lantern_jax.scenarios import road as rd
 from lantern_jax.scenarios import road_junction as rj
 from lantern_jax.scenarios.duplicates import near_duplicate, resample_route, route_samples
@@ -343,10 +343,9 @@ def test_or_van_never_slows_before_the_event_and_never_touches_the_object(seed):
     params, wa, _, meta = make_pair("OR", seed)
     sc = wa.actors
     v_lead = params["lead_speed_kmh"] / 3.6
+    van = jax.tree.map(lambda x: x[1], ScriptedMotion.of(sc))
     pose = jax.jit(lambda t, tau: scripted_pose(
-        sc.path[1], sc.path_s[1], sc.path_valid[1], sc.s_init[1], sc.v_pre[1], sc.v_post[1],
-        sc.s_hold[1], sc.s_end[1], sc.lat_shift[1], sc.lat_duration[1], sc.despawn_at_end[1],
-        t, tau))  # fmt: skip
+        sc.path[1], sc.path_s[1], sc.path_valid[1], van, t, tau))  # fmt: skip
     tau = trigger_time(sc.trigger[1], sc.trigger_delay[1], jnp.float32(INF_TIME),
                        sc.trigger_deadline[1])  # fmt: skip
     assert float(tau) == pytest.approx((params["reveal_s"] - params["lead_gap"]) / v_lead, 1e-4)

@@ -59,7 +59,12 @@ from lantern_jax.dynamics.idm import (
     idm_from_terms,
     interaction_term,
 )
-from lantern_jax.dynamics.scripted import scripted_arc, scripted_pose, trigger_time
+from lantern_jax.dynamics.scripted import (
+    ScriptedMotion,
+    scripted_arc,
+    scripted_pose,
+    trigger_time,
+)
 from lantern_jax.polyline import interpolate, left_normal
 from lantern_jax.times import NEVER, happened
 from lantern_jax.world import ActorScript, ActorState, present
@@ -210,14 +215,10 @@ def scripted_states(
         :func:`lantern_jax.dynamics.scripted.scripted_pose`.
     """
     tau = trigger_time(script.trigger, script.trigger_delay, t_event, script.trigger_deadline)
-    args = (
-        script.path, script.path_s, script.path_valid, script.s_init, script.v_pre,
-        script.v_post, script.s_hold, script.s_end, script.lat_shift, script.lat_duration,
-        script.despawn_at_end, t, tau,
-    )  # fmt: skip
+    args = (script.path, script.path_s, script.path_valid, ScriptedMotion.of(script), t, tau)
     if script.track is None:
-        return jax.vmap(scripted_pose, in_axes=(0,) * 11 + (None, 0))(*args)
-    return jax.vmap(scripted_pose, in_axes=(0,) * 11 + (None, 0, 0))(*args, track_args(script))
+        return jax.vmap(scripted_pose, in_axes=(0, 0, 0, 0, None, 0))(*args)
+    return jax.vmap(scripted_pose, in_axes=(0, 0, 0, 0, None, 0, 0))(*args, track_args(script))
 
 
 def track_args(script: ActorScript) -> tuple[Array, ...]:
@@ -278,13 +279,10 @@ def _idm_track(
     t_prev = t_next - dt
     u = jnp.where(happened(start), t_prev - jnp.where(happened(start), start, 0.0), -1.0)
     accel, q_now = jax.vmap(commanded)(tr.accel, tr.q, tr.knot_s, u)
-    base = jax.vmap(scripted_arc, in_axes=(0,) * 8 + (None, 0))
-    fields = (
-        script.s_init, script.v_pre, script.v_post, script.s_hold, script.s_end,
-        script.lat_shift, script.lat_duration, script.despawn_at_end,
-    )  # fmt: skip
-    base_prev = jnp.where(handed, base(*fields, t_prev, tau)[1], 0.0)
-    base_next = jnp.where(handed, base(*fields, t_next, tau)[1], 0.0)
+    base = jax.vmap(scripted_arc, in_axes=(0, None, 0))
+    motion = ScriptedMotion.of(script)
+    base_prev = jnp.where(handed, base(motion, t_prev, tau)[1], 0.0)
+    base_next = jnp.where(handed, base(motion, t_next, tau)[1], 0.0)
     gain = jnp.where(tr.holonomic, 1.0, jnp.maximum(actors.speed, 0.0))
     return accel, base_next + (actors.lat - base_prev) + dt * gain * q_now
 

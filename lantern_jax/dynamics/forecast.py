@@ -38,7 +38,7 @@ import jax.numpy as jnp
 from flax import struct
 
 from lantern_jax.constants import MOTION_IDM, TRIGGER_EVENT
-from lantern_jax.dynamics.scripted import scripted_arc, trigger_time
+from lantern_jax.dynamics.scripted import ScriptedMotion, scripted_arc, trigger_time
 from lantern_jax.times import NEVER, happened
 from lantern_jax.world import ActorScript, ActorState
 
@@ -86,21 +86,18 @@ def earliest_event_time(
 
 def _places(script: ActorScript, times: Array, tau: Array) -> tuple[Array, ...]:
     """Scripted (s, lat, v_long, v_lat, active) of every slot at every time, each (A, K)."""
-    fields = (
-        script.s_init, script.v_pre, script.v_post, script.s_hold, script.s_end,
-        script.lat_shift, script.lat_duration, script.despawn_at_end,
-    )  # fmt: skip
+    motion = ScriptedMotion.of(script)
     if script.track is None:
-        per_actor = jax.vmap(scripted_arc, in_axes=(0,) * 8 + (None, 0))
+        per_actor = jax.vmap(scripted_arc, in_axes=(0, None, 0))
 
         def at(tk):
-            return per_actor(*fields, tk, tau)
+            return per_actor(motion, tk, tau)
     else:  # the track is part of the script: the forecast follows it (exact once tau is known)
         tr = script.track
-        per_actor = jax.vmap(scripted_arc, in_axes=(0,) * 8 + (None, 0, 0))
+        per_actor = jax.vmap(scripted_arc, in_axes=(0, None, 0, 0))
 
         def at(tk):
-            return per_actor(*fields, tk, tau, (tr.dv, tr.ds, tr.q, tr.g, tr.dlat, tr.knot_s))
+            return per_actor(motion, tk, tau, (tr.dv, tr.ds, tr.q, tr.g, tr.dlat, tr.knot_s))
 
     return tuple(jnp.swapaxes(x, 0, 1) for x in jax.vmap(at)(times))
 

@@ -22,14 +22,41 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+from flax import struct
 
 from lantern_jax.constants import TRIGGER_CLOCK, TRIGGER_EVENT
 from lantern_jax.dynamics.adversary import scripted_offsets
 from lantern_jax.geometry import safe_norm
 from lantern_jax.polyline import interpolate, left_normal, safe_atan2
 from lantern_jax.times import NEVER, happened
+from lantern_jax.world import ActorScript
 
 Array = jax.Array
+
+
+@struct.dataclass
+class ScriptedMotion:
+    """The closed-form motion of scripted actors: the fields of
+    :class:`~lantern_jax.world.ActorScript` that :func:`scripted_arc` reads, shaped ``()`` for
+    one actor or ``(A,)`` for every slot (:meth:`of`)."""
+
+    s_init: Array  # float32, m, arc at t = 0
+    v_pre: Array  # float32, m/s, speed before the trigger (>= 0)
+    v_post: Array  # float32, m/s, speed after the trigger (>= 0)
+    s_hold: Array  # float32, m, arc where the actor waits for its trigger (BIG = none)
+    s_end: Array  # float32, m, arc where the actor stops or despawns
+    lat_shift: Array  # float32, m, lateral offset reached after the trigger, + = left
+    lat_duration: Array  # float32, s, duration of the lateral manoeuvre (> 0)
+    despawn_at_end: Array  # bool, the actor leaves the world when it reaches ``s_end``
+
+    @classmethod
+    def of(cls, script: ActorScript) -> ScriptedMotion:
+        """Every slot's motion (leaves (A,)) from the actors' scripts."""
+        return cls(
+            s_init=script.s_init, v_pre=script.v_pre, v_post=script.v_post,
+            s_hold=script.s_hold, s_end=script.s_end, lat_shift=script.lat_shift,
+            lat_duration=script.lat_duration, despawn_at_end=script.despawn_at_end,
+        )  # fmt: skip
 
 
 def trigger_time(
@@ -75,14 +102,7 @@ def smoothstep(x: Array) -> Array:
 
 
 def scripted_arc(
-    s_init: Array,
-    v_pre: Array,
-    v_post: Array,
-    s_hold: Array,
-    s_end: Array,
-    lat_shift: Array,
-    lat_duration: Array,
-    despawn_at_end: Array,
+    motion: ScriptedMotion,
     t: Array,
     t_trigger: Array,
     track: tuple[Array, ...] | None = None,
@@ -90,14 +110,7 @@ def scripted_arc(
     """Closed-form place of ONE scripted actor along its path at time ``t`` (no geometry).
 
     Args:
-        s_init: () float32, m, arc at t = 0.
-        v_pre: () float32, m/s, speed before the trigger (>= 0).
-        v_post: () float32, m/s, speed after the trigger (>= 0).
-        s_hold: () float32, m, arc where the actor waits for its trigger (BIG = none).
-        s_end: () float32, m, arc where the actor stops or despawns.
-        lat_shift: () float32, m, lateral offset reached after the trigger, + = left of travel.
-        lat_duration: () float32, s, duration of the lateral manoeuvre (> 0).
-        despawn_at_end: () bool, the actor leaves the world when it reaches ``s_end``.
+        motion: the actor's :class:`ScriptedMotion` (leaves shaped ``()``).
         t: () float32, s, time.
         t_trigger: () float32, s, trigger time ``tau`` (``NEVER`` = not triggered).
         track: the actor's adversarial track after its trigger, ``(dv, ds, q, g, dlat,
@@ -113,6 +126,9 @@ def scripted_arc(
         v_lat: () float32, m/s, lateral speed (during the manoeuvre).
         active: () bool, False once ``s_end`` is reached when ``despawn_at_end``.
     """
+    m = motion
+    s_init, v_pre, v_post, s_hold, s_end = m.s_init, m.v_pre, m.v_post, m.s_hold, m.s_end
+    lat_shift, lat_duration, despawn_at_end = m.lat_shift, m.lat_duration, m.despawn_at_end
     pending = ~happened(t_trigger)
     tau = jnp.where(pending, t, t_trigger)
     t_pre = jnp.minimum(t, tau)  # time spent in the pre-trigger phase
@@ -150,14 +166,7 @@ def scripted_pose(
     path: Array,
     path_s: Array,
     path_valid: Array,
-    s_init: Array,
-    v_pre: Array,
-    v_post: Array,
-    s_hold: Array,
-    s_end: Array,
-    lat_shift: Array,
-    lat_duration: Array,
-    despawn_at_end: Array,
+    motion: ScriptedMotion,
     t: Array,
     t_trigger: Array,
     track: tuple[Array, ...] | None = None,
@@ -168,9 +177,7 @@ def scripted_pose(
         path: (P, 2) float32, m, world-frame polyline.
         path_s: (P,) float32, m, its cumulative arc length.
         path_valid: (P,) bool, prefix mask of valid points.
-        s_init: as in :func:`scripted_arc`, and so are ``v_pre``, ``v_post``, ``s_hold``,
-            ``s_end``, ``lat_shift``, ``lat_duration``, ``despawn_at_end``, ``t``,
-            ``t_trigger`` and ``track``.
+        motion: as in :func:`scripted_arc`, and so are ``t``, ``t_trigger`` and ``track``.
 
     Returns:
         s: () float32, m, arc along the path.
@@ -180,10 +187,7 @@ def scripted_pose(
         yaw: () float32, rad, CCW from +x.
         active: () bool, False once ``s_end`` is reached when ``despawn_at_end``.
     """
-    s, lat, v_long, v_lat, active = scripted_arc(
-        s_init, v_pre, v_post, s_hold, s_end, lat_shift, lat_duration, despawn_at_end, t,
-        t_trigger, track,
-    )  # fmt: skip
+    s, lat, v_long, v_lat, active = scripted_arc(motion, t, t_trigger, track)
     point, heading = interpolate(path, path_s, path_valid, s)
     xy = point + left_normal(heading) * lat
     yaw = heading + safe_atan2(v_lat, v_long)
