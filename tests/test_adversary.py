@@ -9,12 +9,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from lantern_jax.constants import DT, KIND_PEDESTRIAN, KIND_VEHICLE
 from lantern_jax.dynamics import adversary as adv
-from lantern_jax.dynamics.scripted import scripted_arc
+from lantern_jax.dynamics.scripted import ScriptedMotion, scripted_arc
 from lantern_jax.scenarios import adversary as spec
 from lantern_jax.scenarios.families import build_pair, param_errors
 from lantern_jax.scenarios.spec import content_hash
@@ -57,8 +57,12 @@ _scripted_arc = jax.jit(scripted_arc)  # one compilation for every example
 def test_zero_actions_reproduce_the_scripted_motion_exactly(t, tau, v_post, lat_shift):
     """A track of zero actions adds exact zeros: every output of the closed form equals the
     script's own exactly (as numbers: ``-0.0 + 0.0`` is ``+0.0``)."""
-    args = [jnp.float32(x) for x in (2.0, 0.0, v_post, 1e6, 60.0, lat_shift, 2.0)]
-    args += [jnp.asarray(True), jnp.float32(t), jnp.float32(tau)]
+    motion = ScriptedMotion(
+        s_init=jnp.float32(2.0), v_pre=jnp.float32(0.0), v_post=jnp.float32(v_post),
+        s_hold=jnp.float32(1e6), s_end=jnp.float32(60.0), lat_shift=jnp.float32(lat_shift),
+        lat_duration=jnp.float32(2.0), despawn_at_end=jnp.asarray(True),
+    )  # fmt: skip
+    args = [motion, jnp.float32(t), jnp.float32(tau)]
     _, prof = _profile(np.zeros(N), np.zeros(N), KIND_VEHICLE, v_post)
     track = tuple(jnp.asarray(prof[k], jnp.float32) for k in ("dv", "ds", "q", "g", "dlat"))
     plain = _scripted_arc(*args)
@@ -74,8 +78,10 @@ def test_zero_actions_reproduce_the_scripted_motion_exactly(t, tau, v_post, lat_
     seed=st.integers(0, 2**31 - 1),
     extreme=st.booleans(),
 )
+@example(kind=KIND_PEDESTRIAN, v0=16.0, seed=83917044, extreme=True)  # braked from 16 m/s
 def test_kinematic_limits_hold_for_any_action(kind, v0, seed, extreme):
-    """Whatever the actions, the realised speed stays in [0, max(v_max, v0)], its change per
+    """Whatever the actions, the realised speed stays in [max(0, v0 - v_max), max(v_max, v0)]
+    (so that an actor scripted faster than its kind's v_max still gets back), its change per
     knot within the acceleration and braking limits, the lateral channel within its bound and
     rate, a vehicle's lateral speed within its heading bound times its speed, and after the last
     knot the actor is back to its scripted speed and heading."""
@@ -84,7 +90,7 @@ def test_kinematic_limits_hold_for_any_action(kind, v0, seed, extreme):
     lim, p = _profile(draw(), draw(), kind, v0)
     v = v0 + p["dv"]
     tol = 1e-4
-    assert np.all(v >= -tol) and np.all(v <= max(lim.v_max, v0) + tol)
+    assert np.all(v >= max(0.0, v0 - lim.v_max) - tol) and np.all(v <= max(lim.v_max, v0) + tol)
     dv = np.diff(v) / H
     assert np.all(dv <= lim.a_max + tol) and np.all(-dv <= lim.b_max + tol)
     assert np.all(np.abs(p["q"]) <= lim.lat_max + tol)

@@ -157,10 +157,16 @@ def track_profile(
         channel, ``g`` lateral gain (1 or the speed ``v_j``), ``dlat`` the lateral offset's
         integral (m); each (N + E + 1,) float32 at the knots ``u = j h``
         (:func:`return_knots`).
+
+    The speed stays in ``[max(0, v0 - v_max), max(v_max, v0)]``: never more than ``v_max``
+    below the script, so the return window (:data:`RETURN_S`) brings back every actor, also one
+    scripted faster than its kind's ``v_max`` (a pedestrian braked to a stop from 16 m/s could
+    not regain its speed in it).
     """
     h = jnp.float32(knot_s)
     v0 = jnp.asarray(v0, jnp.float32)
     v_hi = jnp.maximum(jnp.float32(lim.v_max), v0)
+    v_lo = jnp.maximum(v0 - jnp.float32(lim.v_max), 0.0)
     a_max, b_max = jnp.float32(lim.a_max), jnp.float32(lim.b_max)
     step, lat_max = jnp.float32(lim.lat_rate * float(knot_s)), jnp.float32(lim.lat_max)
     e = return_knots(knot_s)
@@ -172,7 +178,7 @@ def track_profile(
         v, q = carry
         a, target, acting = action
         a = jnp.where(acting, a, jnp.clip((v0 - v) / h, -b_max, a_max))
-        v_next = jnp.clip(v + a * h, 0.0, v_hi)
+        v_next = jnp.clip(v + a * h, v_lo, v_hi)
         q_next = jnp.clip(q + jnp.clip(target - q, -step, step), -lat_max, lat_max)
         return (v_next, q_next), (v_next, q_next)
 
