@@ -154,3 +154,12 @@ MAX_VERIFY_S = 90.0
 
 # --- seeds -----------------------------------------------------------------------------------
 MAX_SEED = 2**63 - 1  # largest seed anything takes (NumPy's and JAX's generators: 64-bit seeds)
+
+# --- the open-loop dataset's default plan (lantern_jax.dataset.scenes) -------------------------
+DATASET_SEED = 3272  # default generation seed
+# Default size: the paper's release is 3,272 sequences and 236,309 frames (store.PAPER_*; 72 each
+# on average); our sequences are shorter (54 frames: see the README, "Dataset"), so matching the
+# paper's sequence count gives 178k frames.  380 pairs per family is the round count whose
+# default run reaches the paper's frame count (seed 3272: 4,457 sequences, 240,881 frames);
+# 280 per family matched its sequence count.
+PAIRS_PER_FAMILY = 380  # default: 2280 pairs -> up to 2280 Route A + 2280 Route B sequences

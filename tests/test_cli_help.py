@@ -33,3 +33,19 @@ def test_help_shows_defaults_and_choices(name):
 
 def test_every_command_is_listed():
     assert len(_commands()) == len(COMMANDS)
+
+
+def test_the_command_line_is_built_without_importing_jax_or_pandas():
+    """Every ``lantern-jax`` run builds the whole parser first (``--help`` and argument errors
+    answer from it): it imports neither JAX nor pandas (about 2 s on a 2-core CPU), so those
+    answers are immediate."""
+    import subprocess
+    import sys
+
+    code = ("import sys; from lantern_jax.cli import build_parser; build_parser(); "
+            "print(sorted(m for m in ('jax', 'pandas', 'numpy') if m in sys.modules))")  # fmt: skip
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=120)  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    loaded = res.stdout.strip()
+    assert "jax" not in loaded and "pandas" not in loaded, loaded

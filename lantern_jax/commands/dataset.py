@@ -53,7 +53,7 @@ def cmd_dataset(args: argparse.Namespace, argv: Sequence[str]) -> int:
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``dataset`` on the command line's sub-parsers."""
-    from lantern_jax.dataset.scenes import DATASET_SEED, PAIRS_PER_FAMILY
+    from lantern_jax.constants import DATASET_SEED, PAIRS_PER_FAMILY  # no JAX at start-up
 
     ds = sub.add_parser(
         "dataset",

@@ -30,7 +30,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from lantern_jax import family_codes
-from lantern_jax.constants import FAMILIES, WEATHERS
+from lantern_jax.constants import (  # noqa: F401  (DATASET_SEED, PAIRS_PER_FAMILY re-exported)
+    DATASET_SEED,
+    FAMILIES,
+    PAIRS_PER_FAMILY,
+    WEATHERS,
+)
 from lantern_jax.dataset.store import DatasetError
 from lantern_jax.files import atomic_write
 from lantern_jax.scenarios.assemble import host_arrays
@@ -40,14 +45,9 @@ from lantern_jax.scenarios.spec import content_hash
 from lantern_jax.scenarios.suite import Suite
 from lantern_jax.world import Scenario
 
-DATASET_SEED = 3272  # default generation seed
-# Default size: the paper's release is 3,272 sequences and 236,309 frames (store.PAPER_*; 72 each on
-# average); our sequences are shorter (54 frames: see the README, "Dataset"), so matching the
-# paper's sequence count gives 178k frames.  380 pairs per family is the round count whose
-# default run reaches the paper's frame count (seed 3272: 4,457 sequences, 240,881 frames);
-# 280 per family matched its sequence count.  The scenes of a smaller plan are the first ones of
-# every family in a larger plan of the same seed (:func:`plan_scenes`).
-PAIRS_PER_FAMILY = 380  # default: 2280 pairs -> up to 2280 Route A + 2280 Route B sequences
+# DATASET_SEED and PAIRS_PER_FAMILY (the default plan) live in constants.py, so that the command
+# line's options read them without importing JAX.  The scenes of a smaller plan are the first
+# ones of every family in a larger plan of the same seed (:func:`plan_scenes`).
 PLAN_JSON = "plan.json"  # the planned scenes, kept in the dataset folder for resuming
 
 
