@@ -23,7 +23,9 @@ import os
 import platform
 import re
 import sys
+import sysconfig
 import time
+import traceback
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -31,6 +33,7 @@ from typing import Any
 import jax
 import numpy as np
 import pandas as pd
+from tqdm.auto import tqdm
 
 from lantern_jax.checks import check_seed
 from lantern_jax.constants import CONDITIONS, DT, ROUTE_B, SUITE_ID
@@ -42,6 +45,8 @@ from lantern_jax.policies.registry import (
     policy_source,
     register_policy_source,
 )
+from lantern_jax.report import write_outputs
+from lantern_jax.report.page import build_report
 from lantern_jax.scenarios.ablations import ablation_names
 from lantern_jax.scenarios.suite import Suite, load_suite
 from lantern_jax.scoring.aggregate import (
@@ -235,7 +240,6 @@ _HINTS = {
 
 def _is_library(filename: str) -> bool:
     """Whether ``filename`` is this package's, an installed package's or Python's own."""
-    import sysconfig
 
     name = os.path.abspath(filename)
     here = os.path.dirname(os.path.abspath(__file__))
@@ -250,7 +254,6 @@ def _is_library(filename: str) -> bool:
 def _user_frame(e: BaseException) -> str:
     """``file.py:LINE`` of the innermost frame of ``e``'s traceback outside JAX, Python's own
     library and this package (the user's own code), or ""."""
-    import traceback
 
     found = ""
     for frame in traceback.extract_tb(e.__traceback__):
@@ -343,7 +346,6 @@ class EvalResult:
                 written).
             lantern_jax.files.OutputFolderError: when ``folder`` cannot receive the set.
         """
-        from lantern_jax.report import write_outputs
 
         return write_outputs(self, folder, run_record=run_record)
 
@@ -359,7 +361,6 @@ class EvalResult:
         Returns:
             The HTML file's path.
         """
-        from lantern_jax.report.page import build_report
 
         path = Path(path)
         folder = path.with_name(path.stem + "_results") if folder is None else Path(folder)
@@ -469,7 +470,6 @@ def _run_all(pols: list[Policy], policy_params: list, execs: Executions, suite_i
     split path's programs together (0 when none)."""
     bar = None
     if progress:
-        from tqdm.auto import tqdm
 
         bar = tqdm(total=len(pols), desc=f"evaluating on {suite_id}", unit="policy",
                    bar_format=BAR_FORMAT)  # fmt: skip

@@ -57,6 +57,7 @@ import secrets
 import shutil
 import sys
 import tempfile
+import tomllib
 from collections.abc import Collection, Sequence
 from pathlib import Path
 
@@ -181,7 +182,6 @@ def read_toml(path: str | os.PathLike) -> dict:
         OSError: when the file cannot be read.
         ValueError: when it is not UTF-8 or not valid TOML (the message says where).
     """
-    import tomllib
 
     with open(path, "rb") as fh:
         data = fh.read()
@@ -253,6 +253,7 @@ def _locked(folder: Path):
     left behind) while two writers of sets into it could otherwise interleave; without the
     lock where the system has none."""
     try:
+        # deferred: POSIX only: elsewhere the lock is not taken
         import fcntl
 
         fd = os.open(folder, os.O_RDONLY)

@@ -124,6 +124,7 @@ def configure_compile_cache(enabled: bool) -> str | None:
     Returns:
         The cache folder, or None when disabled.
     """
+    # deferred: JAX is configured here before its first import
     import jax
 
     jax.config.update("jax_enable_compilation_cache", enabled)
@@ -159,6 +160,7 @@ def setup(compile_cache: bool = True) -> SetupReport:
                 "count (one by default; the evaluation then runs on one core). Import "
                 "lantern_jax before jax, or set XLA_FLAGS="
                 "--xla_force_host_platform_device_count=N")  # fmt: skip
+    # deferred: JAX is configured here before its first import
     import jax
 
     configured = jax.config.jax_compilation_cache_dir

@@ -123,6 +123,7 @@ def load_tokenizer(root: str | None = None):
     Raises:
         LanguageAssetError: naming the missing or unreadable file.
     """
+    # deferred: loaded once, at the first text tokenized
     from tokenizers import Tokenizer
 
     path = _asset(root, TOKENIZER_FILE, "tokenizer")
@@ -148,6 +149,7 @@ def load_embedding(root: str | None = None) -> np.ndarray:
     Raises:
         LanguageAssetError: naming the missing or unreadable file, or a wrong shape.
     """
+    # deferred: loaded once, at the first embedding read
     from safetensors.numpy import load_file
 
     path = _asset(root, WEIGHTS_FILE, "embedding weights")

@@ -369,6 +369,7 @@ def load(key: str) -> Any | None:
     except OSError:
         return None
     try:
+        # deferred: only when a program is stored or loaded
         from jax.experimental import serialize_executable as se
 
         record = pickle.loads(blob)
@@ -404,6 +405,7 @@ def save(key: str, compiled: Any) -> bool:
     if ids is None:
         return False
     try:
+        # deferred: only when a program is stored or loaded
         from jax.experimental import serialize_executable as se
 
         payload, in_tree, out_tree = se.serialize(compiled)

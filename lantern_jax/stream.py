@@ -25,6 +25,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 import numpy as np
+from tqdm.auto import tqdm
 
 from lantern_jax.constants import SUITE_ID
 from lantern_jax.scenarios.knobs import get_knobs, set_knobs
@@ -116,7 +117,6 @@ def stream_executions(
     t0, t_compile, n_chunks = time.perf_counter(), 0.0, 0
     bar = None
     if progress:
-        from tqdm.auto import tqdm
 
         bar = tqdm(total=count, unit="exec", desc="executions", smoothing=0.1)
     try:

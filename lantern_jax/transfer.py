@@ -37,6 +37,7 @@ from lantern_jax.diagnostics import live_mask, run_recorded
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios import unseen  # noqa: F401  (registers the unseen families)
+from lantern_jax.scenarios.families import family
 from lantern_jax.scenarios.suite import Suite, build_suite_scenarios, load_suite
 from lantern_jax.scenarios.warnings import paraphrase_text_id
 from lantern_jax.scoring.response import (
@@ -253,7 +254,6 @@ def table_rows(summary: pd.DataFrame, families: tuple[str, ...]) -> pd.DataFrame
         summary: :attr:`TransferResult.summary`.
         families: the family codes of the table, in row order.
     """
-    from lantern_jax.scenarios.families import family
 
     out = []
     for fam in families:

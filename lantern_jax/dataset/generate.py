@@ -22,6 +22,7 @@ from typing import Any
 import jax
 import numpy as np
 import pandas as pd
+from tqdm.auto import tqdm
 
 from lantern_jax import family_codes
 from lantern_jax.constants import DT, FAMILIES, WEATHERS
@@ -217,7 +218,6 @@ def generate_dataset(
     recorder = batched_recorder(expert, int(np.ceil(MAX_SECONDS / (FRAME_TICKS * DT))))
     bar = None
     if progress:
-        from tqdm.auto import tqdm
 
         bar = tqdm(total=len(chunks), initial=card["chunks_done"], desc="dataset", unit="chunk")
     t0 = time.perf_counter()

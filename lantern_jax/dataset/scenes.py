@@ -28,6 +28,7 @@ from pathlib import Path
 
 import jax.numpy as jnp
 import numpy as np
+from tqdm.auto import tqdm
 
 from lantern_jax import family_codes
 from lantern_jax.constants import (  # noqa: F401  (DATASET_SEED, PAIRS_PER_FAMILY re-exported)
@@ -143,7 +144,6 @@ def plan_scenes(
     out: list[SceneSpec] = []
     bar = None
     if progress:
-        from tqdm.auto import tqdm
 
         bar = tqdm(total=pairs_per_family * len(families), desc="scenes", unit="pair")
     for fam in families:

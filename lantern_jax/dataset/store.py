@@ -67,6 +67,7 @@ def file_sha256(path: Path) -> str:
 def to_table(columns: dict[str, np.ndarray]) -> tuple[Any, dict[str, list[int]]]:
     """A pyarrow table of the columns (arrays with more than one axis become fixed-size lists
     of their flattened trailing axes) and each column's per-row shape."""
+    # deferred: pyarrow (heavy) only when a table is written
     import pyarrow as pa
 
     arrays, shapes = {}, {}
@@ -85,6 +86,7 @@ def to_table(columns: dict[str, np.ndarray]) -> tuple[Any, dict[str, list[int]]]
 
 def write_shard(path: Path, columns: dict[str, np.ndarray]) -> tuple[int, dict]:
     """Write one Parquet shard atomically; returns (rows, column shapes)."""
+    # deferred: pyarrow (heavy) only when shards are read or written
     import pyarrow.parquet as pq
 
     table, shapes = to_table(columns)
@@ -183,6 +185,7 @@ EXCLUDE_CROSSING = ("both", "onset", "none")
 
 def _read_shards(folder: Path, card: dict, kind: str, columns: list[str] | None) -> pd.DataFrame:
     """Every ``kind`` (``"frames"`` / ``"sequences"``) shard listed in the card, hash-checked."""
+    # deferred: pyarrow (heavy) only when shards are read or written
     import pyarrow.parquet as pq
 
     schema = card["frame_columns"] if kind == "frames" else None
@@ -295,6 +298,7 @@ def batches(
 ) -> Any:
     """A seeded, shuffled stream of batches (dicts of arrays) over ``frames``: a
     ``grain.MapDataset`` (one pass; re-create it with another seed for the next epoch)."""
+    # deferred: grain (heavy) only when batches are drawn
     import grain
 
     arrays = {c: column_array(frames, c, card["frame_columns"][c]) for c in columns}

@@ -60,9 +60,11 @@ class _OutOfTime(Exception):
 
 
 def _plot(curve: list[dict], path: Path) -> None:
+    # deferred: matplotlib only when a curve is drawn
     import matplotlib
 
     matplotlib.use("Agg")
+    # deferred: matplotlib only when a curve is drawn
     import matplotlib.pyplot as plt
 
     steps = np.asarray([r["env_steps"] for r in curve]) / 1e6

@@ -103,6 +103,7 @@ def _box(low: float, high: float, shape: tuple[int, ...]):
     lo = np.full(shape, low, np.float32)
     hi = np.full(shape, high, np.float32)
     try:
+        # deferred: gymnasium is optional (with brax, the rl extra)
         from gymnasium import spaces
     except ImportError:
         return BoxSpec(low=lo, high=hi, shape=tuple(shape), dtype=np.dtype(np.float32))
@@ -111,6 +112,7 @@ def _box(low: float, high: float, shape: tuple[int, ...]):
 
 def _autoreset_mode():
     try:
+        # deferred: gymnasium is optional (with brax, the rl extra)
         from gymnasium.vector import AutoresetMode
     except ImportError:  # gymnasium missing, or older than 1.1
         return "SameStep"  # the value of gymnasium.vector.AutoresetMode.SAME_STEP

@@ -18,6 +18,7 @@ from collections.abc import Callable
 
 from lantern_jax.policies import expert, learned_ppo, reference
 from lantern_jax.policies.base import Policy
+from lantern_jax.policies.external import load_policy_source
 from lantern_jax.policies.learned.shipped import SHIPPED_MODELS
 from lantern_jax.policies.names import name_problem
 
@@ -37,6 +38,7 @@ def _shipped(name: str) -> Callable[[], Policy]:
     and compiles nothing new."""
 
     def factory() -> Policy:
+        # deferred: flax.nnx and the model code load only when a learned model is asked for
         from lantern_jax.policies.learned.checkpoint import checkpoint_policy, shipped_path
 
         return checkpoint_policy(shipped_path(name), name)
@@ -80,6 +82,7 @@ def _registered_hash(name: str) -> str | None:
     """The description hash of the checkpoint registered as ``name`` (a shipped model's from
     its file), or None for a policy that is not a checkpoint."""
     if name in SHIPPED_MODELS and name not in _CHECKPOINT_HASHES:
+        # deferred: flax.nnx and the model code load only when a learned model is asked for
         from lantern_jax.policies.learned.checkpoint import (
             DESCRIPTION_HASH,
             read_meta,
@@ -102,6 +105,7 @@ def register_checkpoint(path: str, name: str | None = None) -> str:
             registered for another policy (a built-in one, a shipped model or another
             checkpoint).
     """
+    # deferred: flax.nnx and the model code load only when a learned model is asked for
     from lantern_jax.policies.learned.checkpoint import (
         DESCRIPTION_HASH,
         CheckpointError,
@@ -145,7 +149,6 @@ def register_policy_source(spec: str) -> str:
             model, a checkpoint, or other code).
         TypeError: when the named object is neither a Policy nor a factory of one.
     """
-    from lantern_jax.policies.external import load_policy_source
 
     policy, source = load_policy_source(spec)
     problem = name_problem(policy.name)

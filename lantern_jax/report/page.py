@@ -179,6 +179,7 @@ def _identity(rs: ResultSet) -> str:
 def _family_plot(sets: Sequence[ResultSet]) -> str:
     """Per-family CUS with intervals, every policy side by side: warning and no-warning above,
     the warning gain below."""
+    # deferred: matplotlib only when a figure is drawn
     from matplotlib.figure import Figure
 
     cols = [*FAMILIES, "Overall"]
@@ -222,6 +223,7 @@ def _family_plot(sets: Sequence[ResultSet]) -> str:
 
 def _gate_plot(sets: Sequence[ResultSet]) -> str:
     """Each gate's failure rate (% of pairs) per policy and condition, with intervals."""
+    # deferred: matplotlib only when a figure is drawn
     from matplotlib.figure import Figure
 
     gates = ["Coll.-A", "RD-A", "LC-A", "Rule-A", "Block-A", "False Brake-B"]
@@ -261,6 +263,7 @@ def _sides(sets: Sequence[ResultSet]) -> list[tuple[str, pd.DataFrame]]:
 def _forest(sets: Sequence[ResultSet]) -> str:
     """Every policy against the first, per family, the warning condition and the gain, with
     intervals; "" for fewer than two policies."""
+    # deferred: matplotlib only when a figure is drawn
     from matplotlib.figure import Figure
 
     sides = _sides(sets)

@@ -71,6 +71,7 @@ from lantern_jax.constants import (
     OVERRIDE_FRAME_EGO,
     OVERRIDE_FRAME_WORLD,
 )
+from lantern_jax.geometry import world_to_ego
 from lantern_jax.scenarios.warning_texts import (
     DEFAULT_BANK,
     TEMPLATES,
@@ -341,7 +342,6 @@ def ground_position(hazard_xy: jax.Array, ego_xy: jax.Array, ego_yaw: jax.Array)
     Returns:
         (..., 2) float32, m: ``(forward, right)`` relative to the ego.
     """
-    from lantern_jax.geometry import world_to_ego
 
     return world_to_ego(jnp.asarray(hazard_xy), jnp.asarray(ego_xy), jnp.asarray(ego_yaw))
 

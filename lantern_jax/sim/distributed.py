@@ -66,6 +66,7 @@ def _global(tree: Any, spec: PartitionSpec) -> Any:
 
 
 def _gather(tree: Any) -> Any:
+    # deferred: only in a run of several processes
     from jax.experimental import multihost_utils
 
     return jax.tree.map(jnp.asarray, multihost_utils.process_allgather(tree, tiled=True))

@@ -26,6 +26,7 @@ from typing import Any
 
 import jax
 import jax.numpy as jnp
+from jax.sharding import PartitionSpec
 
 from lantern_jax.sim.distributed import batch_mesh
 from lantern_jax.sim.record import TickRecord
@@ -119,7 +120,6 @@ def on_every_device(fn: Callable[..., Any], *batched: Any) -> Any:
     the leading (batch) axis of every argument (``None`` arguments stay ``None``); the results'
     blocks are joined along the batch axis.  No communication: each device runs on its own.
     The batch must divide by the device count."""
-    from jax.sharding import PartitionSpec
 
     mesh = batch_mesh()  # every device of every process (lantern_jax.sim.distributed)
     spec = jax.sharding.NamedSharding(mesh, PartitionSpec("batch"))

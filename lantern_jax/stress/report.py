@@ -445,6 +445,7 @@ def write_results(out: str | Path, pair: PairSpec, space: Space | None,
     Returns:
         File name -> path, for every file written.
     """
+    # deferred: matplotlib only when a figure is drawn
     from matplotlib.figure import Figure
 
     written = []

@@ -35,6 +35,7 @@ import time
 from collections.abc import Callable
 
 import numpy as np
+import optax
 
 from lantern_jax.stress.objective import EXPERT, Problem, batched_estimator, parts_of
 from lantern_jax.stress.verify import Verdict, Verifier
@@ -229,7 +230,6 @@ class GradientSearch(Method):
         init_z: float = INIT_Z,
     ):
         super().__init__(problem, verifier, restarts, seed)
-        import optax
 
         self.sigma = float(sigma)
         self.samples = int(samples) if sigma > 0 else 1
@@ -257,7 +257,6 @@ class GradientSearch(Method):
 
     def iterate(self) -> None:
         """Gradient at the iterates, their verification, an Adam step."""
-        import optax
 
         g = self._gradient(self.est, self.z, self._eps())
         values = np.asarray(self.problem.space.values(self.z))
@@ -293,6 +292,7 @@ class CMAESSearch(Method):
 
     def __init__(self, problem, verifier, restarts, seed, popsize: int, init_z: float = INIT_Z):
         super().__init__(problem, verifier, restarts, seed)
+        # deferred: cma only for the CMA-ES method
         import cma
 
         starts = initial_points(problem, restarts, seed, init_z)

@@ -32,16 +32,23 @@ from pathlib import Path
 
 import jax
 import numpy as np
+from tqdm.auto import tqdm
 
 from lantern_jax.constants import FAMILIES
 from lantern_jax.dataset.scenes import PLAN_JSON, SceneSpec
 from lantern_jax.dataset.store import load_frames, read_card
 from lantern_jax.files import atomic_write
 from lantern_jax.language import PAD_ID
+from lantern_jax.policies.learned.checkpoint import load_model, model_policy, save_model
+from lantern_jax.policies.registry import get_policy
+from lantern_jax.scenarios.families import build_pair
+from lantern_jax.sim.rollout import horizon_ticks
 from lantern_jax.training.config import TrainConfig
 from lantern_jax.training.counterfactual import frame_counterfactuals
 from lantern_jax.training.data import Examples, concat, recipe_examples, split_by_sequence
+from lantern_jax.training.fit import Batches, fit, model_config
 from lantern_jax.training.relabel import Visits, relabel_batch
+from lantern_jax.world import tree_stack
 
 CHUNK_PAIRS = 24  # scene pairs per batched collection call (48 executions)
 VISITS_NPZ = "visits.npz"
@@ -74,8 +81,6 @@ def round_specs(specs: list[SceneSpec], n: int, seed: int, r: int) -> list[Scene
 def _scene_batch(specs: list[SceneSpec]):
     """Route A (warning condition) then Route B scenarios of ``specs``, stacked, as the suite
     runs them (closed loop: the anti-deadlock event rule on)."""
-    from lantern_jax.scenarios.families import build_pair
-    from lantern_jax.world import tree_stack
 
     pairs = [build_pair(s.params, validate=False) for s in specs]
     return tree_stack([p[0] for p in pairs] + [p[1] for p in pairs])
@@ -107,9 +112,6 @@ def collect(cfg: TrainConfig, model, like: Examples, specs: list[SceneSpec], r: 
     """Round ``r``'s visits of ``model`` on ``specs``, relabelled by the expert (a progress bar
     over the batched calls when ``progress``); returns (examples, counts: executions, valid
     visits, kept visits)."""
-    from lantern_jax.policies.learned.checkpoint import model_policy
-    from lantern_jax.policies.registry import get_policy
-    from lantern_jax.sim.rollout import horizon_ticks
 
     learner = model_policy(cfg.name, model)
     lp = learner.init(jax.random.PRNGKey(0))
@@ -121,7 +123,6 @@ def collect(cfg: TrainConfig, model, like: Examples, specs: list[SceneSpec], r: 
     parts, counts = [], dict(executions=0, valid_visits=0, kept_visits=0)
     starts = range(0, len(specs), CHUNK_PAIRS)
     if progress:
-        from tqdm.auto import tqdm
 
         starts = tqdm(starts, desc=f"round {r}: drive + relabel", unit="batch")
     for k in starts:
@@ -165,8 +166,6 @@ def _dataset_examples(cfg: TrainConfig) -> Examples:
 def train_closed_loop(cfg: TrainConfig, progress: bool = True) -> dict:
     """Run (or resume) the ``closed_loop`` recipe; returns the last round's summary with the
     collection counts and times (s) of every round."""
-    from lantern_jax.policies.learned.checkpoint import load_model, save_model
-    from lantern_jax.training.fit import Batches, fit, model_config
 
     out = Path(cfg.out)
     out.mkdir(parents=True, exist_ok=True)

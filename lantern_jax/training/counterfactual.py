@@ -23,6 +23,8 @@ import numpy as np
 import pandas as pd
 
 from lantern_jax.constants import FAMILIES
+from lantern_jax.language import round_number
+from lantern_jax.scenarios.warnings import DEFAULT_BANK, text_tables
 from lantern_jax.training.data import Examples
 
 NEAR_X_M = (10.0, 60.0)  # m, forward range of a counterfactual's stated position
@@ -40,7 +42,6 @@ def other_road_families(family: str) -> tuple[int, ...]:
 
 def nonactionable_ids() -> np.ndarray:
     """(5,) int32 text ids of the bank's non-actionable messages."""
-    from lantern_jax.scenarios.warnings import DEFAULT_BANK
 
     return np.asarray([e.text_id for e in DEFAULT_BANK if e.kind == "non_actionable"], np.int32)
 
@@ -61,8 +62,6 @@ def counterfactual_examples(
         (the counterfactual examples — text replaced, labels kept, not ordinary driving —,
         (m,) int32 variant index into :data:`VARIANTS`).
     """
-    from lantern_jax.language import round_number
-    from lantern_jax.scenarios.warnings import text_tables
 
     rng = np.random.default_rng([seed, 42])
     is_b = np.flatnonzero(np.asarray(routes) == "B")

@@ -20,8 +20,9 @@ import pandas as pd
 from lantern_jax.constants import FAMILIES, NUM_WAYPOINTS
 from lantern_jax.dataset.record import RIG_FIELDS
 from lantern_jax.dataset.store import column_array
-from lantern_jax.language import PAD_ID
+from lantern_jax.language import PAD_ID, round_number
 from lantern_jax.observation import Observation
+from lantern_jax.scenarios.warnings import text_tables
 from lantern_jax.training.config import TrainConfig
 
 OBS_PREFIX = "obs."
@@ -89,8 +90,6 @@ def examples_from_frames(frames: pd.DataFrame, card: dict, rig: str = "front") -
 def _far_counterexamples(ex: Examples, frames: pd.DataFrame, far_m: float) -> Examples:
     """Route B frames told of their family's hazard far ahead (its canonical text, grounded at
     ``(far_m, 0.5)`` m), with the ordinary trajectory."""
-    from lantern_jax.language import round_number
-    from lantern_jax.scenarios.warnings import text_tables
 
     is_b = frames["route"].to_numpy(str) == "B"
     sel = ex.take(np.flatnonzero(is_b))

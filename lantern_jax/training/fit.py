@@ -20,8 +20,10 @@ import numpy as np
 import optax
 import pandas as pd
 from flax import nnx
+from tqdm.auto import tqdm
 
 from lantern_jax.files import atomic_write
+from lantern_jax.language import load_embedding
 from lantern_jax.observation import Observation, SurroundView
 from lantern_jax.policies.learned.checkpoint import save_model
 from lantern_jax.policies.learned.features import features, nav_token_table
@@ -89,6 +91,7 @@ class Batches:
 
 
 def _checkpointer(folder: Path):
+    # deferred: orbax (heavy) only when checkpoints are written
     import orbax.checkpoint as ocp
 
     opts = ocp.CheckpointManagerOptions(max_to_keep=2)
@@ -104,9 +107,9 @@ def fit(cfg: TrainConfig, model: Any, ex: Examples, batches: Batches, val_idx: n
     Returns:
         The run's summary (best validation L1 in m and its epoch, examples, frames/s, path).
     """
+    # deferred: orbax (heavy) only when checkpoints are written
     import orbax.checkpoint as ocp
 
-    from lantern_jax.language import load_embedding
 
     graphdef, params = nnx.split(model)
     embedding = jnp.asarray(load_embedding(), jnp.float32)
@@ -190,15 +193,16 @@ def _progress(on: bool, cfg: TrainConfig, done: int, total: int):
     """A progress bar over every batch of the run (``done`` of them already, when resumed)."""
     if not on:
         return None
-    from tqdm.auto import tqdm
 
     return tqdm(desc=f"train {cfg.name}", unit="batch", initial=done, total=total)
 
 
 def _plot_curve(curve: list[dict], path: Path, name: str) -> None:
+    # deferred: matplotlib only when a curve is drawn
     import matplotlib
 
     matplotlib.use("Agg")
+    # deferred: matplotlib only when a curve is drawn
     from matplotlib.figure import Figure
 
     df = pd.DataFrame(curve)

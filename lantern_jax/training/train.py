@@ -21,10 +21,12 @@ CPU is deterministic).
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 
 from lantern_jax.dataset.store import load_frames, read_card
 from lantern_jax.policies.learned.checkpoint import load_model, new_model
+from lantern_jax.training.closed_loop import train_closed_loop
 from lantern_jax.training.config import TrainConfig
 from lantern_jax.training.data import recipe_examples, split_by_sequence
 from lantern_jax.training.fit import Batches, fit, model_config
@@ -48,7 +50,6 @@ def check_checkpoint_folder(out: Path) -> None:
     Raises:
         OSError: naming the entry.
     """
-    import re
 
     folder = Path(out) / CHECKPOINT_FOLDER
     if not os.path.lexists(folder):
@@ -67,7 +68,6 @@ def train(cfg: TrainConfig, progress: bool = True) -> dict:
     The ``closed_loop`` recipe runs :func:`lantern_jax.training.closed_loop.train_closed_loop`.
     """
     if cfg.recipe == "closed_loop":
-        from lantern_jax.training.closed_loop import train_closed_loop
 
         return train_closed_loop(cfg, progress)
     out = Path(cfg.out)

@@ -4,7 +4,15 @@ from __future__ import annotations
 
 from typing import Any
 
+import jax
+import jax.numpy as jnp
 import matplotlib
+import numpy as np
+
+from lantern_jax.diagnostics import run_recorded
+from lantern_jax.stress.verify import FAIL_BELOW_CUS
+from lantern_jax.times import ticks
+from lantern_jax.viz.plots import bev_plot
 
 matplotlib.use("Agg")
 from matplotlib.figure import Figure  # noqa: E402
@@ -28,7 +36,6 @@ def convergence_plot(traces: list[Any], title: str = "") -> Figure:
         A figure with two panels (rollouts per restart, seconds); a horizontal line marks the
         failure threshold of the verifier (CUS 50) and markers the first verified failures.
     """
-    from lantern_jax.stress.verify import FAIL_BELOW_CUS
 
     fig = Figure(figsize=(10, 3.8))
     axes = fig.subplots(1, 2, sharey=True)
@@ -66,13 +73,6 @@ def catalogue_figure(problem: Any, entries: list[dict], max_panels: int = MAX_PA
         entries: catalogue entries (:func:`lantern_jax.stress.catalogue.catalogue_entries`).
         max_panels: at most this many panels.
     """
-    import jax
-    import jax.numpy as jnp
-    import numpy as np
-
-    from lantern_jax.diagnostics import run_recorded
-    from lantern_jax.times import ticks
-    from lantern_jax.viz.plots import bev_plot
 
     shown = entries[:max_panels]
     cols = min(3, max(1, len(shown)))

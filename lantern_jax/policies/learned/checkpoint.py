@@ -24,6 +24,7 @@ import dataclasses
 import hashlib
 import json
 import math
+from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +33,8 @@ import jax.numpy as jnp
 import numpy as np
 from flax import nnx, serialization, struct
 
+from lantern_jax.files import atomic_write
+from lantern_jax.language import load_embedding
 from lantern_jax.observation import FRONT_CAMERA, SURROUND_RIG, WARNING, Observation
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.learned.features import RIGS, features, nav_token_table
@@ -101,7 +104,6 @@ def model_sensors(config: ModelConfig) -> tuple[str, ...]:
 def learned_params(model: DrivingModel, embedding: Array | None = None) -> LearnedParams:
     """The policy parameters of a model (loads the shipped embedding table when not given)."""
     if embedding is None:
-        from lantern_jax.language import load_embedding
 
         embedding = load_embedding()
     graphdef, state = nnx.split(model)
@@ -132,7 +134,6 @@ def save_model(model: DrivingModel, path: str | Path, info: dict | None = None) 
     The description is written second: a kill between the two writes leaves a pair whose
     hashes disagree, which :func:`load_model` refuses.
     """
-    from lantern_jax.files import atomic_write
 
     path = Path(path).with_suffix("")
     _, state = nnx.split(model)
@@ -294,7 +295,6 @@ SHIPPED_DIR = "data/models"  # inside the package: the default checkpoints of th
 
 def shipped_path(name: str) -> Path:
     """Where the package ships the default checkpoint of ``name``."""
-    from importlib import resources
 
     return Path(str(resources.files("lantern_jax") / SHIPPED_DIR / f"{name}.msgpack"))
 

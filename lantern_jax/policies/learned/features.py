@@ -26,6 +26,7 @@ import numpy as np
 from flax import struct
 
 from lantern_jax.constants import NUM_ACTOR_KINDS
+from lantern_jax.language import pad, pooled_embedding, tokenize
 from lantern_jax.observation import Observation, stated_position, warning_delivered
 from lantern_jax.polyline import safe_atan2
 
@@ -63,7 +64,6 @@ class Features:
 @functools.cache
 def nav_token_table() -> np.ndarray:
     """(3, MAX_TOKENS) int32 token ids of :data:`NAV_TEXTS` (tokenised once, outside jit)."""
-    from lantern_jax.language import pad, tokenize
 
     return np.stack([pad(tokenize(t)) for t in NAV_TEXTS]).astype(np.int32)
 
@@ -86,7 +86,6 @@ def features(obs: Observation, rig: str, embedding: Array, nav_tokens: Array) ->
         embedding: (V, D) float32 token-embedding table (frozen; not a model parameter).
         nav_tokens: (3, L) int32, :func:`nav_token_table`.
     """
-    from lantern_jax.language import pooled_embedding
 
     if rig not in RIGS:
         raise ValueError(f"rig: {rig!r} not one of {', '.join(RIGS)}")
