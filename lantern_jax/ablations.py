@@ -23,7 +23,6 @@ variants share one compiled rollout (they change protocol data only).
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Sequence
 from typing import Any
 
@@ -31,8 +30,9 @@ import numpy as np
 import pandas as pd
 
 from lantern_jax.constants import CONDITIONS, DT, SUITE_ID
-from lantern_jax.evaluation import EvalResult, evaluate, package_versions
+from lantern_jax.evaluation import evaluate, package_versions
 from lantern_jax.policies.base import Policy
+from lantern_jax.report.results import AblationResult  # noqa: F401  (re-exported)
 from lantern_jax.report.tables import ABLATION_TABLE_COLUMNS
 from lantern_jax.scenarios.ablations import ABLATIONS, get_ablation
 from lantern_jax.scenarios.suite import Suite, load_suite
@@ -54,19 +54,6 @@ from lantern_jax.scoring.uncertainty import (
 
 #: The ablation table's columns (their one home: the table's format).
 TABLE_COLUMNS = ABLATION_TABLE_COLUMNS
-
-
-@dataclasses.dataclass
-class AblationResult:
-    """Everything :func:`run_ablations` produces."""
-
-    table: pd.DataFrame  # model, condition, variant, label, then TABLE_COLUMNS (0..100)
-    route_table: pd.DataFrame  # every variant's route rows; condition "<c>" or "<c>:<variant>"
-    manifest: dict
-    results: dict[str, EvalResult]  # per variant
-    #: model, condition, variant, then <c>_lo, <c>_hi, <c>_n per TABLE_COLUMNS
-    #: (:func:`ablation_intervals`)
-    intervals: pd.DataFrame | None = None
 
 
 def variant_condition(condition: str, variant: str) -> str:

@@ -47,6 +47,7 @@ from lantern_jax.policies.registry import (
 )
 from lantern_jax.report import write_outputs
 from lantern_jax.report.page import build_report
+from lantern_jax.report.results import Evaluation, PolicyRun
 from lantern_jax.scenarios.ablations import ablation_names
 from lantern_jax.scenarios.suite import Suite, load_suite
 from lantern_jax.scoring.aggregate import (
@@ -56,7 +57,7 @@ from lantern_jax.scoring.aggregate import (
     premise_table,
 )
 from lantern_jax.scoring.table import build_route_table
-from lantern_jax.scoring.uncertainty import SEED, TableIntervals, table_intervals
+from lantern_jax.scoring.uncertainty import SEED, table_intervals
 from lantern_jax.sim.engine import (
     PATHS,
     Executions,
@@ -101,23 +102,6 @@ def package_versions() -> dict[str, str]:
             out[name] = "not installed"
     out["jax_backend"] = jax.default_backend()
     return out
-
-
-@dataclasses.dataclass
-class PolicyRun:
-    """Raw results of one policy on one suite."""
-
-    policy: str
-    params_sha256: str
-    metrics: dict[str, np.ndarray]  # per execution (Executions.num_executions), numpy
-    protocol: dict[str, np.ndarray]
-    route_table: pd.DataFrame
-    seconds_compile: float
-    seconds_run: float
-    #: wall seconds by phase: "trace + lower", "XLA compile", "rollout", "scoring"
-    timings: dict[str, float] = dataclasses.field(default_factory=dict)
-    #: how it was rolled out and why (:class:`~lantern_jax.sim.engine.PathChoice` as text)
-    program: str = ""
 
 
 def _route_rows(
@@ -311,22 +295,9 @@ class PolicyError(ValueError):
 
 
 @dataclasses.dataclass
-class EvalResult:
-    """Everything an evaluation produces."""
-
-    route_table: pd.DataFrame
-    family_table: pd.DataFrame
-    decomposition: pd.DataFrame
-    manifest: dict
-    runs: list[PolicyRun]
-    premise: pd.DataFrame  # % of Route A executions with the hazard unseen (``premise_table``)
-    #: pair-level bootstrap intervals (``uncertainty.CONFIDENCE``) and counts of the three tables
-    #: (:func:`lantern_jax.scoring.uncertainty.table_intervals`)
-    intervals: TableIntervals | None = None
-    #: wall seconds of the shared phases: "world build", "tables", "intervals" and, when the
-    #: split path ran, "split programs" (the world's and the policies' programs prepared
-    #: together; per policy: ``runs``)
-    seconds: dict[str, float] = dataclasses.field(default_factory=dict)
+class EvalResult(Evaluation):
+    """Everything an evaluation produces (the fields of
+    :class:`~lantern_jax.report.results.Evaluation`), and the methods that write it."""
 
     def write(self, folder: str | os.PathLike, run_record: dict | None = None) -> dict[str, Path]:
         """Write this evaluation's files into ``folder``, the same set as ``lantern-jax

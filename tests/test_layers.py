@@ -3,8 +3,9 @@
 The package is layered (``docs/design.md``); a module may import from its own layer or any lower
 layer, never from a higher one, and the imports between modules form no cycle.  Every
 ``import`` statement counts, including those inside functions (a lazy import is still a
-dependency), except those under ``if TYPE_CHECKING:`` (names for type checkers only, never
-imported when the code runs).
+dependency) and those under ``if TYPE_CHECKING:`` (a name for type checkers is a dependency of
+the reader: the report names the results it writes from :mod:`lantern_jax.report.results`, not
+from the evaluation above it).
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("scenarios",),  # roads, families, protocol, warnings, suites (NumPy builders + JAX protocol)
     ("policies",),  # reference planners and the registry
     ("sim",),  # one tick and the rollouts
-    ("report",),  # tables and result files (an evaluation's types only for type checkers)
+    ("report",),  # the results as data, their tables and files
     (
         "evaluation",
         "generate",
@@ -46,8 +47,6 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("viz", "compare"),  # plots, differences between evaluations
     ("cli", "commands", "__main__"),  # the command line
 )
-#: ``if`` tests whose block holds imports for type checkers only.
-TYPE_CHECKING_TESTS = ("TYPE_CHECKING", "typing.TYPE_CHECKING")
 LAYER_OF = {name: i for i, names in enumerate(LAYERS) for name in names}
 
 
@@ -63,9 +62,6 @@ def _imports(path: Path) -> set[str]:
     """Every lantern_jax module imported anywhere in the file (``from X import y`` counts as X,
     and as ``X.y`` when that is a module)."""
     tree = ast.parse(path.read_text())
-    for node in ast.walk(tree):  # type-checking-only imports are not dependencies
-        if isinstance(node, ast.If) and ast.unparse(node.test) in TYPE_CHECKING_TESTS:
-            node.body = []
     out: set[str] = set()
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):

@@ -31,13 +31,14 @@ import json
 import os
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import pandas as pd
 
 from lantern_jax.constants import CONDITIONS
 from lantern_jax.files import StagedFolder, atomic_write, check_target_folder
+from lantern_jax.report.results import AblationResult, Evaluation
 from lantern_jax.report.tables import (
     ABLATION_TABLE_COLUMNS,
     MISSING,
@@ -52,10 +53,6 @@ from lantern_jax.report.tables import (
 from lantern_jax.scoring.aggregate import DECOMPOSITION_COLUMNS
 from lantern_jax.scoring.table import schema_path_for, write_route_table
 from lantern_jax.scoring.uncertainty import interval_columns
-
-if TYPE_CHECKING:
-    from lantern_jax.ablations import AblationResult
-    from lantern_jax.evaluation import EvalResult
 
 ROUTE_CSV = "route_level_results.csv"
 FAMILY_CSV = "family_cus.csv"
@@ -235,7 +232,7 @@ def check_output_folder(out_dir: str | os.PathLike) -> Path:
     return check_target_folder(out_dir, owned=OUTPUT_FILES)
 
 
-def _write_set(result: EvalResult, out: Path, extra_manifest: dict | None,
+def _write_set(result: Evaluation, out: Path, extra_manifest: dict | None,
                run_record: dict | None) -> None:  # fmt: skip
     """Write every file of a result set into the (staging) folder ``out``."""
     written = _write_route_files(result.route_table, out / ROUTE_CSV)
@@ -287,7 +284,7 @@ def _write_set(result: EvalResult, out: Path, extra_manifest: dict | None,
 
 
 def write_outputs(
-    result: EvalResult,
+    result: Evaluation,
     out_dir: str | os.PathLike,
     extra_manifest: dict | None = None,
     run_record: dict | None = None,

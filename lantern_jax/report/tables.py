@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -23,12 +23,10 @@ from tabulate import tabulate
 
 from lantern_jax import family_codes
 from lantern_jax.constants import CONDITIONS
+from lantern_jax.report.results import Evaluation
 from lantern_jax.scoring import uncertainty
 from lantern_jax.scoring.aggregate import DECOMPOSITION_COLUMNS
 from lantern_jax.scoring.uncertainty import CONFIDENCE, MIN_N, interval_columns
-
-if TYPE_CHECKING:
-    from lantern_jax.evaluation import EvalResult
 
 FAMILY_COLUMNS = uncertainty.FAMILY_COLUMNS
 
@@ -98,7 +96,7 @@ def order_rows(df: pd.DataFrame, models: list[str] | None = None) -> pd.DataFram
     return df.iloc[order].reset_index(drop=True)
 
 
-def ordered_tables(result: EvalResult) -> tuple[pd.DataFrame, pd.DataFrame]:
+def ordered_tables(result: Evaluation) -> tuple[pd.DataFrame, pd.DataFrame]:
     """The family table and the decomposition of ``result`` with models in evaluation order and
     conditions as in :func:`order_rows` (the order of the printed and written tables)."""
     models = list(dict.fromkeys(result.route_table["model"]))
@@ -185,7 +183,7 @@ def _interval_cell(rec: dict, iv: dict | None, column: str, signed: bool, style:
 
 
 def format_family_table(
-    df: pd.DataFrame | EvalResult, tablefmt: str = "simple",
+    df: pd.DataFrame | Evaluation, tablefmt: str = "simple",
     intervals: pd.DataFrame | None = None,
 ) -> str:  # fmt: skip
     """Per-family CUS table as text.
@@ -357,7 +355,7 @@ def family_title(manifest: dict) -> str:
             f"ablation {m['ablation']}; warning gain = warning - no-warning)")  # fmt: skip
 
 
-def format_tables(result: EvalResult) -> str:
+def format_tables(result: Evaluation) -> str:
     """The main command's three tables of an evaluation, with their intervals and legend: the
     per-family CUS, the decomposition (Route B efficiency beside it) and the premise."""
     m = result.manifest
