@@ -10,13 +10,18 @@
 
 from __future__ import annotations
 
+import json
 from collections.abc import Sequence
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
 from tabulate import tabulate
 
-from lantern_jax.report import format_interval
+from lantern_jax.files import StagedFolder, atomic_write
+from lantern_jax.report import format_interval, ordered_tables
+from lantern_jax.report.results import Evaluation
+from lantern_jax.scoring.aggregate import DECOMPOSITION_COLUMNS
 from lantern_jax.scoring.paired import (  # noqa: F401  (the paired comparison, re-exported)
     COMPARE_COLUMNS,
     check_shared_pairs,
@@ -118,3 +123,51 @@ def format_across_suites(
         disable_numparse=True,
         colalign=("left", *["right"] * len(columns)),
     )
+
+
+#: The files of :func:`write_across_suites` (``lantern-jax evaluate --fresh-suites``).
+ACROSS_MD = "across_suites.md"
+ACROSS_CSV = "across_suites.csv"
+ACROSS_DECOMPOSITION_CSV = "across_suites_decomposition.csv"
+ACROSS_JSON = "across_suites.json"
+ACROSS_FILES = (ACROSS_MD, ACROSS_CSV, ACROSS_DECOMPOSITION_CSV, ACROSS_JSON)
+
+
+def write_across_suites(results: Sequence[Evaluation], record: dict, out: Path) -> str:
+    """The family table and the decomposition across several suites' evaluations, written
+    with the record of the suites into ``out`` as one set (:data:`ACROSS_FILES`: Markdown, two
+    CSVs, the record as JSON).
+
+    Args:
+        results: one evaluation per suite, the same policies in each.
+        record: what the run was (``suites``: each suite's id, seed, hash and result folder);
+            written as :data:`ACROSS_JSON`.
+        out: the folder.
+
+    Returns:
+        The text to print: both tables across the suites and the files written.
+    """
+    fam_across = across_suites([ordered_tables(r)[0] for r in results])
+    dec_across = across_suites([ordered_tables(r)[1] for r in results],
+                               columns=DECOMPOSITION_COLUMNS)  # fmt: skip
+    ids = ", ".join(r["suite_id"] for r in record["suites"])
+    title = f"Per-family CUS across {len(results)} suites ({ids})"
+    note = "Each cell: mean over the suites ± the sample standard deviation across them."
+    table = format_across_suites(fam_across)
+    dec_table = format_across_suites(dec_across, columns=DECOMPOSITION_COLUMNS)
+    md = (
+        f"# {title}\n\n{note} Every suite's own tables, with their intervals, are in its "
+        f"folder.\n\n{format_across_suites(fam_across, tablefmt='github')}\n\n"
+        f"## CUS decomposition across the suites\n\n"
+        f"{format_across_suites(dec_across, columns=DECOMPOSITION_COLUMNS, tablefmt='github')}\n"
+    )
+    with StagedFolder(out, ACROSS_FILES) as st:
+        atomic_write(st.path / ACROSS_MD, md.encode())
+        for name, df in ((ACROSS_CSV, fam_across), (ACROSS_DECOMPOSITION_CSV, dec_across)):
+            text = df.to_csv(index=False, float_format="%.6f", lineterminator="\n")
+            atomic_write(st.path / name, text.encode())
+        atomic_write(st.path / ACROSS_JSON, (json.dumps(record, indent=2) + "\n").encode())
+        st.commit()
+    written = ", ".join(str(out / f) for f in ACROSS_FILES)
+    return (f"{title}\n{note}\n{table}\n\nCUS decomposition across the suites\n{dec_table}"
+            f"\n\nWrote {written} and one result set per suite")  # fmt: skip

@@ -19,17 +19,12 @@ loaded instead of generated again.
 from __future__ import annotations
 
 import argparse
-import json
 import shlex
 from collections.abc import Sequence
 from pathlib import Path
 
 from lantern_jax.commands import UsageError
 
-ACROSS_MD = "across_suites.md"
-ACROSS_CSV = "across_suites.csv"
-ACROSS_DECOMPOSITION_CSV = "across_suites_decomposition.csv"
-ACROSS_JSON = "across_suites.json"
 SUITES_DIR = "suites"
 
 
@@ -112,7 +107,9 @@ def run_fresh_suites(
         ))  # fmt: skip
     record = dict(command=command, suites=records, policies=policies,
                   intervals=results[0].manifest.get("intervals"))  # fmt: skip
-    _across(results, record, out)
+    from lantern_jax.compare import write_across_suites
+
+    print(write_across_suites(results, record, out))
     return 0
 
 
@@ -138,37 +135,3 @@ def _fresh_suites(args: argparse.Namespace, base, out: Path, stage) -> list[tupl
               f"({'generated' if made else 'loaded'} {path})")  # fmt: skip
         suites.append((suite, seed, path))
     return suites
-
-
-def _across(results: list, record: dict, out: Path) -> None:
-    """Print the family table and the decomposition across the suites and write them with the
-    record of the suites (:data:`ACROSS_MD`, ... as one set into ``out``)."""
-    from lantern_jax.compare import across_suites, format_across_suites
-    from lantern_jax.files import StagedFolder, atomic_write
-    from lantern_jax.report import ordered_tables
-    from lantern_jax.scoring.aggregate import DECOMPOSITION_COLUMNS
-
-    fam_across = across_suites([ordered_tables(r)[0] for r in results])
-    dec_across = across_suites([ordered_tables(r)[1] for r in results],
-                               columns=DECOMPOSITION_COLUMNS)  # fmt: skip
-    ids = ", ".join(r["suite_id"] for r in record["suites"])
-    title = f"Per-family CUS across {len(results)} suites ({ids})"
-    note = "Each cell: mean over the suites ± the sample standard deviation across them."
-    table = format_across_suites(fam_across)
-    dec_table = format_across_suites(dec_across, columns=DECOMPOSITION_COLUMNS)
-    print(f"{title}\n{note}\n{table}\n\nCUS decomposition across the suites\n{dec_table}")
-    md = (
-        f"# {title}\n\n{note} Every suite's own tables, with their intervals, are in its "
-        f"folder.\n\n{format_across_suites(fam_across, tablefmt='github')}\n\n"
-        f"## CUS decomposition across the suites\n\n"
-        f"{format_across_suites(dec_across, columns=DECOMPOSITION_COLUMNS, tablefmt='github')}\n"
-    )
-    files = (ACROSS_MD, ACROSS_CSV, ACROSS_DECOMPOSITION_CSV, ACROSS_JSON)
-    with StagedFolder(out, files) as st:
-        atomic_write(st.path / ACROSS_MD, md.encode())
-        for name, df in ((ACROSS_CSV, fam_across), (ACROSS_DECOMPOSITION_CSV, dec_across)):
-            text = df.to_csv(index=False, float_format="%.6f", lineterminator="\n")
-            atomic_write(st.path / name, text.encode())
-        atomic_write(st.path / ACROSS_JSON, (json.dumps(record, indent=2) + "\n").encode())
-        st.commit()
-    print(f"\nWrote {', '.join(str(out / f) for f in files)} and one result set per suite")
