@@ -1,7 +1,8 @@
 """Running-accumulator primitives shared by the score components (one execution, scalars).
 
 Every component folds a tick into its state with these few operations: a short ring of the last
-values, a first-crossing time, a saturating counter and a run length of consecutive ticks.
+values, a first-crossing time, a saturating counter and a run length of consecutive ticks; and
+:func:`expected_time` decodes a soft first crossing at the end.
 """
 
 from __future__ import annotations
@@ -47,3 +48,19 @@ def count(n: Array, inc: Array) -> Array:
 def run(n: Array, cond: Array) -> Array:
     """() int32, ticks: length of the current run of ticks with ``cond`` (() bool), saturated."""
     return jnp.where(cond, jnp.minimum(n + 1, thresholds.COUNT_CAP), 0)
+
+
+def expected_time(p: Array, pt: Array) -> tuple[Array, Array]:
+    """Decode a soft first crossing: whether it happened and its expected time.
+
+    Args:
+        p: () float32, probability that the crossing happened (sum of the per-tick
+            probabilities of a first crossing).
+        pt: () float32, s, sum of those probabilities times their tick's time.
+
+    Returns:
+        ``(has, t)``: () bool, ``p`` above ``thresholds.PROB_EPS``; () float32, s,
+        ``E[t | crossed] = pt / p`` (``pt`` itself where ``has`` is False: never divided by ~0).
+    """
+    has = p > thresholds.PROB_EPS
+    return has, pt / jnp.where(has, p, 1.0)

@@ -38,7 +38,7 @@ import jax.numpy as jnp
 from flax import struct
 
 from lantern_jax.scoring import thresholds
-from lantern_jax.scoring.components.accumulate import count, first_time, push
+from lantern_jax.scoring.components.accumulate import count, expected_time, first_time, push
 from lantern_jax.scoring.components.context import Context, Tick, opened_by, ring_length
 from lantern_jax.scoring.sample import TickSample
 from lantern_jax.scoring.smooth import smooth_clip01
@@ -258,8 +258,7 @@ def soft(
         ``(s_ant, valid)``: () float32 in [0, 1]; () bool (the hard availability).
     """
     ok = valid(state, ctx, t_fail)
-    has = state.p > thresholds.PROB_EPS
-    e_react = state.pt / jnp.where(has, state.p, 1.0)
+    has, e_react = expected_time(state.p, state.pt)
     span = ctx.t_event - ctx.t_warn_point
     safe_span = jnp.where(ok & (span > 0), span, 1.0)
     clipped = smooth_clip01((ctx.t_event - e_react) / safe_span, temperature)

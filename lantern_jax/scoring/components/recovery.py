@@ -24,8 +24,7 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from lantern_jax.scoring import thresholds
-from lantern_jax.scoring.components.accumulate import first_time, push, run
+from lantern_jax.scoring.components.accumulate import expected_time, first_time, push, run
 from lantern_jax.scoring.components.context import Context, Tick, opened_by, ring_length
 from lantern_jax.scoring.sample import TickSample
 from lantern_jax.scoring.smooth import smooth_clip01
@@ -182,8 +181,7 @@ def soft(
         ``(s_rec, valid)``: () float32 in [0, 1]; () bool (the hard availability).
     """
     ok = valid(state, ctx, t_fail)
-    has = state.p > thresholds.PROB_EPS
-    e_rec = state.pt / jnp.where(has, state.p, 1.0)
+    has, e_rec = expected_time(state.p, state.pt)
     t_rel = jnp.where(ok, release_time(ctx.t_warn_off, ctx.t_clear), 0.0)
     clipped = smooth_clip01(1.0 - (e_rec - t_rel) / settings.recover_cap_s, temperature)
     return jnp.where(has, state.p * clipped, 0.0), ok
