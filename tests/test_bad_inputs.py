@@ -1636,7 +1636,8 @@ def test_an_interrupted_dataset_is_refused_then_resumed(point, dataset_reference
 TRAIN_EXPORT_SCRIPT = textwrap.dedent(
     """
     import os, signal, sys
-    from lantern_jax import cli, files
+    from lantern_jax import cli
+    from lantern_jax.policies.learned import checkpoint
     from lantern_jax.policies.learned.checkpoint import new_model, save_model
     from lantern_jax.policies.learned.model import ModelConfig
     from lantern_jax.training import train as train_module
@@ -1644,7 +1645,7 @@ TRAIN_EXPORT_SCRIPT = textwrap.dedent(
     point, config, out = sys.argv[1], sys.argv[2], sys.argv[3]
     small = ModelConfig(width=8, heads=2)
     info = dict(train_config=dict(name="mine", recipe="base"))
-    real = files.atomic_write
+    real = checkpoint.atomic_write  # the writer save_model calls
 
     def write(path, data):  # the new weights are written, their description is not
         if str(path).endswith(".json"):
@@ -1653,7 +1654,7 @@ TRAIN_EXPORT_SCRIPT = textwrap.dedent(
 
     def train(cfg, progress=True):  # an earlier epoch's export, then the best epoch's
         save_model(new_model(small, 1), f"{out}/mine", info)
-        files.atomic_write = write
+        checkpoint.atomic_write = write
         save_model(new_model(small, 2), f"{out}/mine", info)
 
     train_module.train = train
