@@ -441,7 +441,6 @@ def _run_all(pols: list[Policy], policy_params: list, execs: Executions, suite_i
     split path's programs together (0 when none)."""
     bar = None
     if progress:
-
         bar = tqdm(total=len(pols), desc=f"evaluating on {suite_id}", unit="policy",
                    bar_format=BAR_FORMAT)  # fmt: skip
     runs: list[PolicyRun] = []

@@ -117,7 +117,6 @@ def stream_executions(
     t0, t_compile, n_chunks = time.perf_counter(), 0.0, 0
     bar = None
     if progress:
-
         bar = tqdm(total=count, unit="exec", desc="executions", smoothing=0.1)
     try:
         for start in range(0, count, chunk):

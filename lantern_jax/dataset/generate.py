@@ -218,7 +218,6 @@ def generate_dataset(
     recorder = batched_recorder(expert, int(np.ceil(MAX_SECONDS / (FRAME_TICKS * DT))))
     bar = None
     if progress:
-
         bar = tqdm(total=len(chunks), initial=card["chunks_done"], desc="dataset", unit="chunk")
     t0 = time.perf_counter()
     for k in range(card["chunks_done"], len(chunks)):

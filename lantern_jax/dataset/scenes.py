@@ -144,7 +144,6 @@ def plan_scenes(
     out: list[SceneSpec] = []
     bar = None
     if progress:
-
         bar = tqdm(total=pairs_per_family * len(families), desc="scenes", unit="pair")
     for fam in families:
         rng = np.random.default_rng([seed, family_codes.stream(fam)])

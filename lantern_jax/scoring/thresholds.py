@@ -20,7 +20,7 @@ import jax
 from flax import struct
 
 from lantern_jax.constants import DT, FAMILIES
-from lantern_jax.times import ticks  # noqa: F401  (thresholds.ticks: re-exported)
+from lantern_jax.times import ticks
 
 Array = jax.Array
 

@@ -453,7 +453,6 @@ def write_results(out: str | Path, pair: PairSpec, space: Space | None,
     entries = ([] if problem is None
                else catalogue.catalogue_entries(problem, pair, traces, name))  # fmt: skip
     with StagedFolder(out, RESULT_FILES) as stage:
-
         def put(file: str, data: str | bytes) -> None:
             atomic_write(stage.path / file, data)
             written.append(file)

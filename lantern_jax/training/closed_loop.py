@@ -123,7 +123,6 @@ def collect(cfg: TrainConfig, model, like: Examples, specs: list[SceneSpec], r: 
     parts, counts = [], dict(executions=0, valid_visits=0, kept_visits=0)
     starts = range(0, len(specs), CHUNK_PAIRS)
     if progress:
-
         starts = tqdm(starts, desc=f"round {r}: drive + relabel", unit="batch")
     for k in starts:
         chunk = specs[k : k + CHUNK_PAIRS]

@@ -68,7 +68,6 @@ def train(cfg: TrainConfig, progress: bool = True) -> dict:
     The ``closed_loop`` recipe runs :func:`lantern_jax.training.closed_loop.train_closed_loop`.
     """
     if cfg.recipe == "closed_loop":
-
         return train_closed_loop(cfg, progress)
     out = Path(cfg.out)
     out.mkdir(parents=True, exist_ok=True)

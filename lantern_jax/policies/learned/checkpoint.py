@@ -104,7 +104,6 @@ def model_sensors(config: ModelConfig) -> tuple[str, ...]:
 def learned_params(model: DrivingModel, embedding: Array | None = None) -> LearnedParams:
     """The policy parameters of a model (loads the shipped embedding table when not given)."""
     if embedding is None:
-
         embedding = load_embedding()
     graphdef, state = nnx.split(model)
     return LearnedParams(state, jnp.asarray(embedding, jnp.float32),
