@@ -6,7 +6,9 @@ hold indices 0-5; a family registered from user code
 (:func:`lantern_jax.scenarios.registry.register_family`) gets the next free index, in
 registration order.  This module keeps only the codes, names and indices, so that the lowest
 layers (the scenario types' validation, the scoring tables) can check a family code without
-knowing how families are built.
+knowing how families are built.  It is written only by the family registry
+(:data:`lantern_jax.scenarios.family_registry.FAMILY_REGISTRY`, where every family's data
+lives).
 
 Tables list the six families first, in the paper's order, then the registered families that
 the table's rows hold (:func:`table_codes`), so a table of the six alone is what it was before
@@ -73,8 +75,24 @@ def name(code_: str) -> str:
     return FAMILY_NAMES[i] if i < len(FAMILIES) else _REGISTERED[code_]
 
 
+def check_new(code_: str, name_: str) -> None:
+    """Refuse a code and name that :func:`register` would refuse (ValueError naming why)."""
+    if not isinstance(code_, str) or not CODE_PATTERN.fullmatch(code_):
+        raise ValueError(
+            f"family code: {code_!r} must be 1-8 upper-case letters or digits, starting with a "
+            "letter"
+        )
+    if code_ in FAMILIES:
+        raise ValueError(f"family code: {code_!r} is a built-in family")
+    if not isinstance(name_, str) or not name_.strip():
+        raise ValueError(f"family name: expected a non-empty string, got {name_!r}")
+    if code_ in _REGISTERED and _REGISTERED[code_] != name_:
+        raise ValueError(f"family code: {code_!r} is already registered as {_REGISTERED[code_]!r}")
+
+
 def register(code_: str, name_: str) -> int:
-    """Register a family code and its long name; return its index.
+    """Register a family code and its long name; return its index (called by the family
+    registry, :meth:`lantern_jax.scenarios.family_registry.FamilyRegistry.register`).
 
     Registering the same code with the same name again returns its index (a module imported
     twice registers nothing new).
@@ -87,19 +105,23 @@ def register(code_: str, name_: str) -> int:
         ValueError: for a built-in code, a code that breaks :data:`CODE_PATTERN`, an empty name,
             or a code already registered under another name.
     """
-    if not isinstance(code_, str) or not CODE_PATTERN.fullmatch(code_):
-        raise ValueError(
-            f"family code: {code_!r} must be 1-8 upper-case letters or digits, starting with a "
-            "letter"
-        )
-    if code_ in FAMILIES:
-        raise ValueError(f"family code: {code_!r} is a built-in family")
-    if not isinstance(name_, str) or not name_.strip():
-        raise ValueError(f"family name: expected a non-empty string, got {name_!r}")
-    if code_ in _REGISTERED and _REGISTERED[code_] != name_:
-        raise ValueError(f"family code: {code_!r} is already registered as {_REGISTERED[code_]!r}")
+    check_new(code_, name_)
     _REGISTERED[code_] = name_
     return index(code_)
+
+
+def reset(registered_codes: dict[str, str]) -> None:
+    """Set the registered codes to ``registered_codes`` (code -> long name, in index order):
+    how :meth:`lantern_jax.scenarios.family_registry.FamilyRegistry.restore` forgets families.
+
+    Raises:
+        ValueError: for a built-in or malformed code.
+    """
+    for code_ in registered_codes:
+        if code_ in FAMILIES or not CODE_PATTERN.fullmatch(str(code_)):
+            raise ValueError(f"family code: {code_!r} cannot be registered")
+    _REGISTERED.clear()
+    _REGISTERED.update(registered_codes)
 
 
 def stream(code_: str) -> int:

@@ -67,7 +67,6 @@ def build(p: dict) -> fam.Scene:
         markers=(sc - WARN_LEAD, sc - EVENT_LEAD, sc),
         clearance=fam.Clearance(path_arc=12.0),
         conflict_xy=line.to_xy(sc, 0.0),
-        d_safe=fam.D_SAFE_SMALL_M,
     )
 
 
@@ -81,5 +80,6 @@ RECORD = fam.FamilyRecord(
     warning="A pedestrian behind the parked van at <FRONT_CAR_POS> is stepping into the road.",
     paraphrases={"low": ("Someone will walk out from behind the van near <FRONT_CAR_POS>.",)},
     knobs={"hazard_speed": (1.0, 2.0)},
+    d_safe=fam.D_SAFE_SMALL_M,  # m, a pedestrian's clearance normaliser (as PE)
 )
 FAMILY = fam.register_family(RECORD)

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from lantern_jax.constants import FAMILIES
+from lantern_jax.scenarios.families import family
 from lantern_jax.scoring.cus import (
     components_from_values,
     cus_from_values,
@@ -62,8 +63,17 @@ def test_clearance_clip_boundaries():
     assert float(s_clear(1.5, 3.0)) == pytest.approx(0.5)
     assert float(s_clear(0.0, 2.0)) == 0.0
     assert math.isnan(float(s_clear(math.nan, 2.0)))
-    assert [float(d_safe_for_family(f)) for f in FAMILIES] == [2.0, 3.0, 2.0, 3.0, 3.0, 3.0]
-    assert np.allclose(d_safe_for_family(np.arange(6)), [2, 3, 2, 3, 3, 3])
+
+
+def test_the_family_registry_holds_d_safe_and_the_deprecated_lookup_agrees():
+    """The paper's 2 m for PE and OR, 3 m otherwise: in each family's registry entry, in every
+    scene it builds, and in the deprecated lookup by family (kept for one release)."""
+    assert [family(f).d_safe for f in FAMILIES] == [2.0, 3.0, 2.0, 3.0, 3.0, 3.0]
+    with pytest.warns(DeprecationWarning, match="d_safe_for_family is deprecated"):
+        old = [float(d_safe_for_family(f)) for f in FAMILIES]
+    assert old == [family(f).d_safe for f in FAMILIES]
+    with pytest.warns(DeprecationWarning):
+        assert np.allclose(d_safe_for_family(np.arange(6)), [2, 3, 2, 3, 3, 3])
 
 
 def test_anticipation_clip_boundaries():

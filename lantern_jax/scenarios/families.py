@@ -9,11 +9,14 @@ Usage::
 A frozen suite stores only the parameter dicts (and their
 :func:`~lantern_jax.scenarios.spec.content_hash`); building is deterministic.
 
-Every family is one :class:`Family` record in :data:`FAMILY_RECORDS` — its sampler, cross-field
-feasibility check, builder, documented parameter ranges, canonical warning text and what that
-warning asks the ego to do — so a new family is one record and one builder.  Families written
-outside the package are registered through :mod:`lantern_jax.scenarios.registry` (the public
-way; ``docs/families.md``), which adds their record here after the six.
+Every family is one entry of the family registry
+(:data:`~lantern_jax.scenarios.family_registry.FAMILY_REGISTRY`,
+:class:`~lantern_jax.scenarios.family_registry.FamilyEntry`) — its sampler, cross-field
+feasibility check, builder, parameter ranges, stress knobs, premise rule, clearance normaliser
+and what its warning asks the ego to do.  This module registers the six
+(:data:`BUILTIN_FAMILIES`); families written outside the package are registered through
+:mod:`lantern_jax.scenarios.registry` (the public way; ``docs/families.md``), whose
+:func:`~lantern_jax.scenarios.registry.register_family` ends in the same registry call.
 
 Shared conventions of every family:
 
@@ -45,7 +48,6 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -60,9 +62,11 @@ from lantern_jax.scenarios.adversary import (
     apply_adversary,
     slot_errors,
 )
+from lantern_jax.scenarios.family_registry import FAMILY_REGISTRY, FamilyEntry
 from lantern_jax.scenarios.knobs import apply_knobs
-from lantern_jax.scenarios.spec import content_hash, param_ranges, range_errors
-from lantern_jax.scenarios.warnings import canonical_text_id, get_text
+from lantern_jax.scenarios.premise import PREMISE_AT_WARNING, PREMISE_NONE, PREMISE_WHOLE_APPROACH
+from lantern_jax.scenarios.spec import PARAM_RANGES, content_hash, range_errors
+from lantern_jax.scoring.thresholds import D_SAFE_LARGE_M, D_SAFE_SMALL_M
 from lantern_jax.world import Scenario
 
 # What a family's warning asks the ego to do (read by warning-aware policies).
@@ -74,35 +78,9 @@ RESPONSES = (RESPONSE_LANE_OBSTACLE, RESPONSE_CUT_IN, RESPONSE_YIELD_TURN)
 Sampler = Callable[[np.random.Generator, str], dict]
 Builder = Callable[[dict], tuple[Scenario, Scenario, dict]]
 
-
-@dataclass(frozen=True)
-class Family:
-    """One scenario family: how to sample, check and build it, and what its warning means."""
-
-    code: str  # "PE", ...
-    name: str  # "Pedestrian Emergence", ...
-    sample: Sampler  # (rng, weather) -> parameter dict
-    check: Callable[[dict], None]  # cross-field feasibility; ValueError naming the field
-    build: Builder  # parameter dict -> (Route A, Route B, meta)
-    response: str  # one of RESPONSES
-    knobs: dict[str, tuple[float, float]]  # stress-testing search space: knob -> (lo, hi)
-
-    @property
-    def index(self) -> int:
-        """Family index: in ``constants.FAMILIES`` (the paper's order) for the six, then the
-        registered families in registration order (:mod:`lantern_jax.family_codes`)."""
-        return family_codes.index(self.code)
-
-    @property
-    def ranges(self) -> dict[str, Any]:
-        """The documented parameter ranges (:func:`~lantern_jax.scenarios.spec.param_ranges`)."""
-        return param_ranges(self.code)
-
-    @property
-    def template(self) -> str:
-        """The canonical warning template (paper, warning-template table; a registered
-        family's exact warning)."""
-        return get_text(canonical_text_id(self.index)).text
+#: A family's record: :class:`~lantern_jax.scenarios.family_registry.FamilyEntry` (the one record
+#: type of the family registry; the name is kept for code written against this module).
+Family = FamilyEntry
 
 
 def _junction_sampler(code: str) -> Sampler:
@@ -127,96 +105,67 @@ KNOB_RANGES: dict[str, dict[str, tuple[float, float]]] = {
     "RTY": {"hazard_speed": (8.0, 12.0), "hazard_delay": (0.0, 1.5), "hazard_start": (0.0, 8.0)},
 }  # fmt: skip
 
-FAMILY_RECORDS: dict[str, Family] = {
-    f.code: f
-    for f in (
-        Family(
-            "PE",
-            FAMILY_NAMES[0],
-            straight.sample_pe,
-            straight.check_pe,
-            straight.build_pe,
-            RESPONSE_LANE_OBSTACLE,
-            KNOB_RANGES["PE"],
-        ),
-        Family(
-            "VC",
-            FAMILY_NAMES[1],
-            straight.sample_vc,
-            straight.check_vc,
-            straight.build_vc,
-            RESPONSE_CUT_IN,
-            KNOB_RANGES["VC"],
-        ),
-        Family(
-            "OR",
-            FAMILY_NAMES[2],
-            straight.sample_or,
-            straight.check_or,
-            straight.build_or,
-            RESPONSE_LANE_OBSTACLE,
-            KNOB_RANGES["OR"],
-        ),
-        Family(
-            "LWW",
-            FAMILY_NAMES[3],
-            _junction_sampler("LWW"),
-            junction.check_junction,
-            junction.build_junction,
-            RESPONSE_YIELD_TURN,
-            KNOB_RANGES["LWW"],
-        ),
-        Family(
-            "RWW",
-            FAMILY_NAMES[4],
-            _junction_sampler("RWW"),
-            junction.check_junction,
-            junction.build_junction,
-            RESPONSE_YIELD_TURN,
-            KNOB_RANGES["RWW"],
-        ),
-        Family(
-            "RTY",
-            FAMILY_NAMES[5],
-            _junction_sampler("RTY"),
-            junction.check_junction,
-            junction.build_junction,
-            RESPONSE_YIELD_TURN,
-            KNOB_RANGES["RTY"],
-        ),
-    )  # fmt: skip
+#: The premise rule of each of the six (:mod:`lantern_jax.scenarios.premise`): the hazard hidden
+#: at the warning point and from the whole approach where nothing that could hide it moves
+#: before the event (PE, LWW, RWW), at the warning point for Obstacle Reveal (the lead van
+#: moves), none for Vehicle Cut-In (its vehicle is meant to be visible; the warning adds the
+#: intent) and Right-Turn Yield (its cross traffic is often visible, as the paper says).
+PREMISES = {
+    "PE": PREMISE_WHOLE_APPROACH,
+    "VC": PREMISE_NONE,
+    "OR": PREMISE_AT_WARNING,
+    "LWW": PREMISE_WHOLE_APPROACH,
+    "RWW": PREMISE_WHOLE_APPROACH,
+    "RTY": PREMISE_NONE,
 }
-assert tuple(FAMILY_RECORDS) == FAMILIES
+#: The clearance normaliser of each of the six (paper): 2 m for the pedestrian and the revealed
+#: obstacle, 3 m for the vehicle interactions.
+D_SAFE = {
+    "PE": D_SAFE_SMALL_M,
+    "VC": D_SAFE_LARGE_M,
+    "OR": D_SAFE_SMALL_M,
+    "LWW": D_SAFE_LARGE_M,
+    "RWW": D_SAFE_LARGE_M,
+    "RTY": D_SAFE_LARGE_M,
+}
+_BEHAVIOUR = {
+    "PE": (straight.sample_pe, straight.check_pe, straight.build_pe, RESPONSE_LANE_OBSTACLE),
+    "VC": (straight.sample_vc, straight.check_vc, straight.build_vc, RESPONSE_CUT_IN),
+    "OR": (straight.sample_or, straight.check_or, straight.build_or, RESPONSE_LANE_OBSTACLE),
+    **{code: (_junction_sampler(code), junction.check_junction, junction.build_junction,
+              RESPONSE_YIELD_TURN) for code in ("LWW", "RWW", "RTY")},
+}  # fmt: skip
+
+#: The six built-in families' entries, registered below exactly as a registered family's
+#: entry is (:meth:`FamilyRegistry.register`).
+BUILTIN_FAMILIES: tuple[FamilyEntry, ...] = tuple(
+    FamilyEntry(
+        code=code,
+        name=FAMILY_NAMES[i],
+        ranges=PARAM_RANGES[code],
+        knobs=KNOB_RANGES[code],
+        premise=PREMISES[code],
+        d_safe=D_SAFE[code],
+        sample=_BEHAVIOUR[code][0],
+        check=_BEHAVIOUR[code][1],
+        build=_BEHAVIOUR[code][2],
+        response=_BEHAVIOUR[code][3],
+    )  # fmt: skip
+    for i, code in enumerate(FAMILIES)
+)
+for _entry in BUILTIN_FAMILIES:
+    FAMILY_REGISTRY.register(_entry)
 
 
 def family(code_or_index: int | str) -> Family:
-    """The record of a family given by abbreviation (``"PE"``) or index.
+    """The entry of a family given by abbreviation (``"PE"``) or index.
 
     Raises:
         ValueError: naming the valid families.
     """
     if isinstance(code_or_index, str):
-        if code_or_index not in FAMILY_RECORDS:
-            known = ", ".join(FAMILY_RECORDS)
-            raise ValueError(f"family: {code_or_index!r} not one of {{{known}}}")
-        return FAMILY_RECORDS[code_or_index]
-    return FAMILY_RECORDS[family_codes.code(code_or_index)]
-
-
-def add_record(record: Family) -> Family:
-    """Add a registered family's record after the six (used by
-    :func:`lantern_jax.scenarios.registry.register_family`, which registers its code first).
-
-    Raises:
-        ValueError: for a code that is not registered, or already holds another record.
-    """
-    if record.code not in family_codes.registered():
-        raise ValueError(f"family: {record.code!r} is not a registered family code")
-    have = FAMILY_RECORDS.get(record.code)
-    if have is not None and have != record:
-        raise ValueError(f"family: {record.code!r} already has another record")
-    FAMILY_RECORDS[record.code] = record
-    return record
+        return FAMILY_REGISTRY.entry(code_or_index)
+    return FAMILY_REGISTRY.entry(family_codes.code(code_or_index))
 
 
 def sample_params(family_: int | str, rng: np.random.Generator, weather: str = "clear_day") -> dict:
@@ -257,7 +206,7 @@ def knob_errors(params: dict) -> list[str]:
     if not isinstance(knobs, dict) or not knobs:
         return [f"{fam}.{KNOBS_FIELD}: expected a non-empty JSON object, got {knobs!r}"]
     errors = []
-    space = FAMILY_RECORDS[fam].knobs if fam in FAMILY_RECORDS else {}
+    space = FAMILY_REGISTRY.entry(fam).knobs if fam in FAMILY_REGISTRY else {}
     for name, value in knobs.items():
         where = f"{fam}.{KNOBS_FIELD}.{name}"
         if name not in space:

@@ -40,6 +40,7 @@ from lantern_jax.constants import (
 )
 from lantern_jax.scenarios import road
 from lantern_jax.scenarios.assemble import ActorSpec, assemble_scenario, initial_pose
+from lantern_jax.scenarios.family_registry import FAMILY_REGISTRY
 from lantern_jax.scenarios.spec import (
     SEED_MAX,
     WEATHER_PROFILES,
@@ -205,12 +206,12 @@ def pair_params(
     force_event: bool,
     ego_light: int,
     ego_stop_s: float,
-    d_safe: float,
     v_ref: float,
     friction: float,
     sensing_range: float,
     route_length: float,
     seed: int,
+    d_safe: float | None = None,
 ) -> tuple[dict, dict]:
     """:class:`~lantern_jax.world.ExecutionConfig` field values for Route A (warning enabled)
     and Route B.
@@ -218,8 +219,11 @@ def pair_params(
     Route B differs only in ``is_route_a`` and ``warning_enabled`` (False): the markers are kept
     so that Route B's matched warning-to-event interval is defined.  The warning text is the
     family's exact warning (:func:`~lantern_jax.scenarios.warnings.canonical_text_id`: the
-    family index for the six built-in families).
+    family index for the six built-in families); ``d_safe`` (m) is the family's registry entry's
+    unless a scene overrides it.
     """
+    if d_safe is None:
+        d_safe = FAMILY_REGISTRY.entry(family_codes.code(family)).d_safe
     s_warn, s_event, s_conflict = markers
     text_id = canonical_text_id(family)
     a = dict(
@@ -371,7 +375,8 @@ def finish_pair(
             :func:`place_background`).
         markers: ``(s_warn, s_event, s_conflict)``, m, route arcs.
         rules: clearance fields ``clear_s, clear_time_limit, clear_on_ego_stop,
-            despawn_on_clear, force_event, d_safe``.
+            despawn_on_clear, force_event`` (and ``d_safe`` where a scene overrides its
+            family's).
         extra: family-specific metadata (canonical frame; ``conflict_xy`` required).
 
     Returns:

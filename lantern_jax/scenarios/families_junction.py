@@ -59,7 +59,6 @@ from lantern_jax.scenarios.families_common import (
     with_changes,
 )
 from lantern_jax.scenarios.spec import MIN_RECOVERY_M, PARAM_RANGES
-from lantern_jax.scoring.thresholds import D_SAFE_LARGE_M
 
 TURN = {"LWW": "left", "RWW": "right", "RTY": "right"}
 EXIT_ARM = {"left": "W", "right": "E"}
@@ -364,7 +363,7 @@ def _wrong_way_actors(fam, road_map, route, s_c, v):
                       v_pre=v, v_post=v, despawn_at_end=True)  # fmt: skip
     rules = dict(
         clear_s=off, clear_time_limit=SAFETY_LIMIT_S, clear_on_ego_stop=False,
-        despawn_on_clear=True, force_event=True, d_safe=D_SAFE_LARGE_M,
+        despawn_on_clear=True, force_event=True,
     )  # fmt: skip
     return {HAZARD_SLOT: car}, {HAZARD_SLOT: legal}, rules, spawn
 
@@ -404,6 +403,6 @@ def _rty_actors(p, road_map, route, s_c, v):
     ctx = static_actor(spawn, yaw, CAR_EXTENT, KIND_VEHICLE, ROLE_CONTEXT)
     rules = dict(
         clear_s=clear, clear_time_limit=SAFETY_LIMIT_S, clear_on_ego_stop=False,
-        despawn_on_clear=True, force_event=False, d_safe=D_SAFE_LARGE_M,
+        despawn_on_clear=True, force_event=False,
     )  # fmt: skip
     return slots_a, {HAZARD_SLOT: ctx}, rules, spawn

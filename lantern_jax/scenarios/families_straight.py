@@ -57,7 +57,6 @@ from lantern_jax.scenarios.road_straight import (
     straight_road,
 )
 from lantern_jax.scenarios.spec import MIN_RECOVERY_M, PARAM_RANGES
-from lantern_jax.scoring.thresholds import D_SAFE_LARGE_M, D_SAFE_SMALL_M
 
 # --- PE geometry -------------------------------------------------------------------------------
 PE_WARN_LEAD, PE_EVENT_LEAD = 18.0, 9.0
@@ -236,7 +235,7 @@ def build_pe(p: dict):
     sections = opposing_sections(road_map, line, _pe_layout(p), -ROAD_MARGIN + 10.0, sc - 10.0)
     rules = dict(
         clear_s=PED_CROSSING, clear_time_limit=BIG, clear_on_ego_stop=False,
-        despawn_on_clear=True, force_event=True, d_safe=D_SAFE_SMALL_M,
+        despawn_on_clear=True, force_event=True,
     )  # fmt: skip
     extra = dict(
         conflict_xy=line.to_xy(sc, 0.0).tolist(), ped_xy=start.tolist(), premise_times=[0.0]
@@ -330,7 +329,7 @@ def build_vc(p: dict):
     )
     rules = dict(
         clear_s=BIG, clear_time_limit=VC_LANE_CHANGE_S, clear_on_ego_stop=False,
-        despawn_on_clear=False, force_event=True, d_safe=D_SAFE_LARGE_M,
+        despawn_on_clear=False, force_event=True,
     )  # fmt: skip
     extra = dict(conflict_xy=line.to_xy(sc, 0.0).tolist(), v_cut=v_cut)
     return finish_pair(
@@ -517,7 +516,7 @@ def build_or(p: dict):
     exclusion = [(line.to_xy(g0, 0.0), OR_VAN_ZONE)]
     rules = dict(
         clear_s=BIG, clear_time_limit=OR_STOP_LIMIT_S, clear_on_ego_stop=True,
-        despawn_on_clear=True, force_event=True, d_safe=D_SAFE_SMALL_M,
+        despawn_on_clear=True, force_event=True,
     )  # fmt: skip
     # premise: the van anywhere between touching the ego (at the warning point) and its reveal
     t_touch = (markers[0] + EGO_HALF_LENGTH + van_ext[0] - g0) / v_lead

@@ -34,14 +34,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from lantern_jax import polyline
-from lantern_jax.constants import FAMILIES, FRONT_CAMERA_FOV, MOTION_IDM
+from lantern_jax.constants import FRONT_CAMERA_FOV, MOTION_IDM
 from lantern_jax.dynamics.actors import scripted_states, start_state
+from lantern_jax.scenarios.family_registry import FAMILY_REGISTRY
 from lantern_jax.sensors.visibility import camera_pose, visible_actors
 from lantern_jax.times import NEVER
 from lantern_jax.world import Scenario
 
-PREMISE_FAMILIES = ("PE", "OR", "LWW", "RWW")
-STATIC_APPROACH_FAMILIES = ("PE", "LWW", "RWW")  # nothing moves before the event
 APPROACH_STEP_M = 2.0  # m between checked ego positions on the approach
 
 #: The premise rules a family can have: none (the hazard may be visible), hidden at the warning
@@ -51,30 +50,12 @@ PREMISE_NONE = "none"
 PREMISE_AT_WARNING = "at_warning_point"
 PREMISE_WHOLE_APPROACH = "whole_approach"
 PREMISE_RULES = (PREMISE_NONE, PREMISE_AT_WARNING, PREMISE_WHOLE_APPROACH)
-_REGISTERED_RULES: dict[str, str] = {}  # registered family code -> one of PREMISE_RULES
-
-
-def register_rule(code: str, rule: str) -> None:
-    """Set the premise rule of a registered family (called by
-    :func:`lantern_jax.scenarios.registry.register_family`).
-
-    Raises:
-        ValueError: for a built-in family or a rule outside :data:`PREMISE_RULES`.
-    """
-    if code in FAMILIES:
-        raise ValueError(f"premise: {code!r} is a built-in family; its rule is fixed")
-    if rule not in PREMISE_RULES:
-        raise ValueError(f"premise: {rule!r} not one of {{{', '.join(PREMISE_RULES)}}}")
-    _REGISTERED_RULES[code] = rule
 
 
 def premise_rule(code: str) -> str:
-    """The premise rule of a family (one of :data:`PREMISE_RULES`)."""
-    if code in STATIC_APPROACH_FAMILIES:
-        return PREMISE_WHOLE_APPROACH
-    if code in PREMISE_FAMILIES:
-        return PREMISE_AT_WARNING
-    return _REGISTERED_RULES.get(code, PREMISE_NONE)
+    """The premise rule of a family (one of :data:`PREMISE_RULES`): its registry entry's
+    (:data:`lantern_jax.scenarios.family_registry.FAMILY_REGISTRY`)."""
+    return FAMILY_REGISTRY.entry(code).premise
 
 
 def _visible_at(scenario: Scenario, arc: jax.Array, t: jax.Array) -> jax.Array:

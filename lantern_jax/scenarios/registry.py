@@ -69,12 +69,10 @@ from lantern_jax.constants import (
     TRIGGER_NEVER,
     WEATHERS,
 )
-from lantern_jax.scenarios import families as _families
-from lantern_jax.scenarios import premise as _premise
 from lantern_jax.scenarios import road_junction as junctions
 from lantern_jax.scenarios import spec as _spec
-from lantern_jax.scenarios import warnings as _warnings
 from lantern_jax.scenarios.assemble import ActorSpec
+from lantern_jax.scenarios.families import FAMILY_REGISTRY  # the registry, the six registered
 from lantern_jax.scenarios.families_common import (
     CAR_EXTENT,
     FLOW_SLOTS,
@@ -87,6 +85,7 @@ from lantern_jax.scenarios.families_common import (
     uniform,
 )
 from lantern_jax.scenarios.families_straight import opposing_sections
+from lantern_jax.scenarios.family_registry import FamilyEntry, RegistryState
 from lantern_jax.scenarios.knobs import KNOBS
 from lantern_jax.scenarios.premise import (
     PREMISE_AT_WARNING,
@@ -125,7 +124,7 @@ from lantern_jax.scenarios.spec import (
     FloatRange,
     IntRange,
 )
-from lantern_jax.scenarios.warning_texts import check_entry
+from lantern_jax.scenarios.warnings import family_texts
 from lantern_jax.scoring.thresholds import D_SAFE_LARGE_M, D_SAFE_SMALL_M
 
 __all__ = [
@@ -200,7 +199,8 @@ class Scene:
             (one, 0.0, where nothing moves before the event).
         anti_deadlock: the event is forced 2 s after the warning point when the ego has not
             reached the event point (the protocol's anti-deadlock rule).
-        d_safe: m, the clearance score's normaliser (2 m as PE and OR, 3 m for vehicles).
+        d_safe: m, this scene's clearance normaliser where it differs from the record's
+            (None: the record's :attr:`FamilyRecord.d_safe`, the family's one value).
         details: JSON-friendly extras for the pair's ``meta["canonical"]``.
     """
 
@@ -216,7 +216,7 @@ class Scene:
     exclusion: Sequence[tuple[np.ndarray, float]] = ()
     premise_times: Sequence[float] = (0.0,)
     anti_deadlock: bool = True
-    d_safe: float = D_SAFE_LARGE_M
+    d_safe: float | None = None
     details: dict = field(default_factory=dict)
 
 
@@ -250,6 +250,8 @@ class FamilyRecord:
             recovery stretch are checked for every family).
         knobs: stress-testing search space, knob -> (lo, hi) (:mod:`lantern_jax.scenarios.knobs`).
         description: one paragraph for listings.
+        d_safe: m, the clearance score's normaliser of the family's scenes
+            (``D_SAFE_SMALL_M`` = 2 m as PE and OR, ``D_SAFE_LARGE_M`` = 3 m for vehicles).
     """
 
     code: str
@@ -263,6 +265,7 @@ class FamilyRecord:
     check: Callable[[dict], None] | None = None
     knobs: Mapping[str, tuple[float, float]] = field(default_factory=dict)
     description: str = ""
+    d_safe: float = D_SAFE_LARGE_M
 
 
 def _identity(record: FamilyRecord) -> tuple:
@@ -279,16 +282,13 @@ def _identity(record: FamilyRecord) -> tuple:
         record.code, record.name, tuple(record.ranges.items()), fn(record.sample),
         fn(record.build), record.warning,
         tuple((t, tuple(v)) for t, v in record.paraphrases.items()), record.premise,
-        fn(record.check), tuple(record.knobs.items()),
+        fn(record.check), tuple(record.knobs.items()), record.d_safe,
     )  # fmt: skip
 
 
-_RECORDS: dict[str, FamilyRecord] = {}
-
-
 def registered_families() -> dict[str, FamilyRecord]:
-    """The records registered so far, by code (registration order)."""
-    return dict(_RECORDS)
+    """The records registered from user code so far, by code (registration order)."""
+    return {e.code: e.record for e in FAMILY_REGISTRY.user_entries()}
 
 
 def _range_problem(rng: Any) -> str | None:
@@ -333,6 +333,13 @@ def _check_record(record: FamilyRecord) -> None:
         raise ValueError(f"{where}: premise {record.premise!r} not one of {PREMISE_RULES}")
     if not record.paraphrases:
         raise ValueError(f"{where}: paraphrases: give at least one held-out paraphrase")
+    d_safe = record.d_safe
+    if (
+        isinstance(d_safe, bool)
+        or not isinstance(d_safe, int | float)
+        or not (math.isfinite(d_safe) and d_safe > 0)
+    ):
+        raise ValueError(f"{where}: d_safe must be a positive number of metres, got {d_safe!r}")
     for knob, (lo, hi) in record.knobs.items():
         if knob not in KNOBS:
             raise ValueError(f"{where}: knobs: {knob!r} not one of {sorted(KNOBS)}")
@@ -340,14 +347,14 @@ def _check_record(record: FamilyRecord) -> None:
             raise ValueError(f"{where}: knobs[{knob!r}]: need finite lo <= hi, got ({lo}, {hi})")
 
 
-def register_family(record: FamilyRecord) -> _families.Family:
+def register_family(record: FamilyRecord) -> FamilyEntry:
     """Register a family written outside the package (see the module docstring).
 
     Args:
         record: the family's :class:`FamilyRecord`.
 
     Returns:
-        The package's internal record of the family (its ``index`` follows the six).
+        The family registry's entry of the family (its ``index`` follows the six).
 
     Raises:
         ValueError: for a record that breaks a rule (a built-in or malformed code, missing
@@ -355,68 +362,46 @@ def register_family(record: FamilyRecord) -> _families.Family:
             or a code already registered with another record.
     """
     _check_record(record)
-    have = _RECORDS.get(record.code)
-    if have is not None:
-        if _identity(have) != _identity(record):
+    family_codes.check_new(record.code, record.name)  # not a built-in code, a well-formed one
+    if record.code in FAMILY_REGISTRY:
+        have = FAMILY_REGISTRY.entry(record.code)
+        if _identity(have.record) != _identity(record):
             raise ValueError(f"family {record.code!r}: already registered with another record")
-        return _families.family(record.code)
-    # check the texts before anything is registered (the bank's rules)
-    for tier, texts in record.paraphrases.items():
-        for text in texts:
-            check_entry("paraphrase", tier, text)
-    check_entry("canonical", "", record.warning)
-    index = family_codes.register(record.code, record.name)
-    _spec.register_ranges(record.code, {**COMMON_RANGES, **record.ranges})
-    _warnings.add_family_texts(record.code, record.warning, dict(record.paraphrases))
-    _premise.register_rule(record.code, record.premise)
-    internal = _families.Family(
-        record.code,
-        record.name,
-        lambda rng, weather: _sample(record, rng, weather),
-        lambda params: _check(record, params),
-        lambda params: _build(record, index, params),
-        "",  # no response code: the built-in policies' keyword rule knows the six only
-        dict(record.knobs),
+        return have
+    texts = family_texts(record.warning, record.paraphrases)  # checked before anything is held
+    entry = FamilyEntry(
+        code=record.code,
+        name=record.name,
+        ranges={**COMMON_RANGES, **record.ranges},
+        knobs=dict(record.knobs),
+        premise=record.premise,
+        d_safe=float(record.d_safe),
+        sample=lambda rng, weather: _sample(record, rng, weather),
+        check=lambda params: _check(record, params),
+        build=lambda params: _build(record, params),
+        response="",  # the built-in policies' keyword rule knows the six only
+        texts=texts,
+        record=record,
     )
-    _RECORDS[record.code] = record
-    return _families.add_record(internal)
+    return FAMILY_REGISTRY.register(entry)
 
 
-@dataclass(frozen=True)
-class Registrations:
-    """What :func:`snapshot` saw: the registered codes, records, ranges, premise rules and
-    warning texts."""
-
-    codes: dict
-    records: dict
-    internal: dict
-    ranges: dict
-    rules: dict
-    texts: dict
+#: What :func:`snapshot` returns (the family registry's state).
+Registrations = RegistryState
 
 
-def snapshot() -> Registrations:
+def snapshot() -> RegistryState:
     """The registrations as they are now, for :func:`restore` (tests and notebooks that define
     families for a while)."""
-    return Registrations(
-        dict(family_codes._REGISTERED), dict(_RECORDS), dict(_families.FAMILY_RECORDS),
-        dict(_spec._REGISTERED_RANGES), dict(_premise._REGISTERED_RULES),
-        dict(_warnings._FAMILY_TEXTS),
-    )  # fmt: skip
+    return FAMILY_REGISTRY.snapshot()
 
 
-def restore(state: Registrations) -> None:
+def restore(state: RegistryState) -> None:
     """Forget every family registered since ``state`` was taken (:func:`snapshot`), their texts
     included.  Scenarios built or programs compiled in between keep what they were built with;
     suites of the forgotten families no longer load.
     """
-    for target, saved in (
-        (family_codes._REGISTERED, state.codes), (_RECORDS, state.records),
-        (_families.FAMILY_RECORDS, state.internal), (_spec._REGISTERED_RANGES, state.ranges),
-        (_premise._REGISTERED_RULES, state.rules), (_warnings._FAMILY_TEXTS, state.texts),
-    ):  # fmt: skip
-        target.clear()
-        target.update(saved)
+    FAMILY_REGISTRY.restore(state)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -466,7 +451,7 @@ def _check(record: FamilyRecord, params: dict) -> None:
         raise ValueError(f"{record.code}.occluders: {msg}")
 
 
-def _build(record: FamilyRecord, index: int, params: dict):
+def _build(record: FamilyRecord, params: dict):
     """Route A, Route B and the meta of one pair, packed as the six are
     (:func:`~lantern_jax.scenarios.families_common.finish_pair`)."""
     scene = _scene(record, params)
@@ -477,7 +462,8 @@ def _build(record: FamilyRecord, index: int, params: dict):
     rules = dict(
         clear_s=float(c.path_arc), clear_time_limit=float(c.time_limit),
         clear_on_ego_stop=bool(c.on_ego_stop), despawn_on_clear=bool(c.despawn),
-        force_event=bool(scene.anti_deadlock), d_safe=float(scene.d_safe),
+        force_event=bool(scene.anti_deadlock),
+        d_safe=float(record.d_safe if scene.d_safe is None else scene.d_safe),
     )  # fmt: skip
     extra = dict(scene.details)
     extra.update(
@@ -486,6 +472,6 @@ def _build(record: FamilyRecord, index: int, params: dict):
     )
     markers = tuple(float(m) for m in scene.markers)
     return finish_pair(
-        params, index, scene.road_map, scene.route, slots_a, slots_b, list(scene.traffic),
-        markers, rules, extra, exclusion=list(scene.exclusion),
+        params, family_codes.index(record.code), scene.road_map, scene.route, slots_a, slots_b,
+        list(scene.traffic), markers, rules, extra, exclusion=list(scene.exclusion),
     )  # fmt: skip

@@ -2,8 +2,9 @@
 
 A scenario pair is fully described by a flat, JSON-friendly parameter dict (what a frozen suite
 stores); :func:`lantern_jax.scenarios.families.build_pair` turns it into the Route A / Route B
-scenarios.  Every family's admissible ranges live in :data:`PARAM_RANGES`; :func:`range_errors`
-checks a dict against them, naming each bad field, e.g. ``"PE.route_length: 150.0 outside [68,
+scenarios.  The six families' admissible ranges are written in :data:`PARAM_RANGES` and held by
+their entries of the family registry (as a registered family's are); :func:`range_errors` checks
+a dict against them, naming each bad field, e.g. ``"PE.route_length: 150.0 outside [68,
 135]"`` (:func:`lantern_jax.scenarios.families.validate_params` adds each family's cross-field
 feasibility rules).
 
@@ -20,6 +21,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -27,6 +29,7 @@ import numpy as np
 
 from lantern_jax import family_codes
 from lantern_jax.constants import FAMILIES, WEATHERS
+from lantern_jax.scenarios.family_registry import FAMILY_REGISTRY
 
 
 # ------------------------------------------------------------------------------------------------
@@ -264,40 +267,21 @@ PARAM_RANGES: dict[str, dict[str, Any]] = {
 assert tuple(PARAM_RANGES) == FAMILIES
 
 
-#: Parameter ranges of the families registered from user code (code -> the table its record
-#: holds, :func:`register_ranges`); the six built-in families' ranges are :data:`PARAM_RANGES`.
-_REGISTERED_RANGES: dict[str, dict[str, Any]] = {}
-
-
-def register_ranges(code: str, table: dict[str, Any]) -> None:
-    """Make a registered family's parameter ranges known to :func:`range_errors` (called by
-    :func:`lantern_jax.scenarios.registry.register_family`; the record keeps the table).
-
-    Raises:
-        ValueError: for a code that is not a registered family code.
-    """
-    if code not in family_codes.registered():
-        raise ValueError(f"family: {code!r} is not a registered family code")
-    _REGISTERED_RANGES[code] = table
-
-
-def param_ranges(code: str) -> dict[str, Any]:
-    """The parameter ranges of a family (built-in or registered).
+def param_ranges(code: str) -> Mapping[str, Any]:
+    """The parameter ranges of a family (built-in or registered): its registry entry's table
+    (:data:`lantern_jax.scenarios.family_registry.FAMILY_REGISTRY`; the six's entries hold
+    :data:`PARAM_RANGES`).
 
     Raises:
         ValueError: naming the known families.
     """
-    if code in PARAM_RANGES:
-        return PARAM_RANGES[code]
-    if code in _REGISTERED_RANGES:
-        return _REGISTERED_RANGES[code]
-    raise ValueError(f"family: {code!r} not one of {{{', '.join(family_codes.codes())}}}")
+    return FAMILY_REGISTRY.entry(code).ranges
 
 
 def family_of(params: dict) -> str:
     """The family abbreviation of a parameter dict, validated."""
     fam = params.get("family") if isinstance(params, dict) else None
-    if not isinstance(fam, str) or (fam not in PARAM_RANGES and fam not in _REGISTERED_RANGES):
+    if not family_codes.is_known(fam):
         raise ValueError(f"family: {fam!r} not one of {{{', '.join(family_codes.codes())}}}")
     return fam
 

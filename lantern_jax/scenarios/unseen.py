@@ -215,7 +215,6 @@ def build_cyc(p: dict) -> fam.Scene:
         clearance=fam.Clearance(path_arc=ride["length"], despawn=True),
         conflict_xy=road_path(line, [sc], [0.0])[0],
         traffic=fam.opposing_sections(road_map, line, layout, -fam.ROAD_MARGIN + 10.0, sc - 10.0),
-        d_safe=fam.D_SAFE_SMALL_M,
         details=dict(cyclist_xy=path[0].tolist(), ride_m=ride["length"], event_lead_m=lead),
     )
 
@@ -238,6 +237,7 @@ CYCLIST = fam.FamilyRecord(
     },
     premise=fam.PREMISE_WHOLE_APPROACH,
     knobs={"hazard_speed": (3.0, 6.0), "hazard_delay": (0.0, 1.5)},
+    d_safe=fam.D_SAFE_SMALL_M,
     description="a cyclist hidden behind a parked bus crosses the road at 4.5 m/s",
 )
 

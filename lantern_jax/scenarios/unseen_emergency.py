@@ -252,7 +252,6 @@ def build_emv(p: dict) -> fam.Scene:
         clearance=fam.Clearance(path_arc=d_amb + AMB_CLEAR_PAST, time_limit=EMV_SAFETY_LIMIT_S),
         conflict_xy=fam.point_at(route.xy, s_c),
         traffic=traffic,
-        d_safe=fam.D_SAFE_LARGE_M,
         details=dict(ambulance_xy=path[0].tolist(), ambulance_to_conflict_m=d_amb,
                      event_lead_m=lead, box_in_s=route.box_in_s, box_out_s=route.box_out_s),
     )  # fmt: skip
@@ -276,5 +275,6 @@ EMERGENCY = fam.FamilyRecord(
     },
     premise=fam.PREMISE_WHOLE_APPROACH,
     knobs={"hazard_speed": (9.0, 12.0), "hazard_delay": (0.0, 1.5)},
+    d_safe=fam.D_SAFE_LARGE_M,
     description="an ambulance hidden beside a waiting truck crosses the junction ahead",
 )

@@ -135,7 +135,6 @@ def build_rev(p: dict) -> fam.Scene:
         clearance=fam.Clearance(time_limit=REV_STOP_LIMIT_S, on_ego_stop=True, despawn=True),
         conflict_xy=road_path(line, [sc], [0.0])[0],
         traffic=fam.opposing_sections(road_map, line, layout, -fam.ROAD_MARGIN + 10.0, sc - 10.0),
-        d_safe=fam.D_SAFE_SMALL_M,
         details=dict(car_xy=path[0].tolist(), end_xy=path[-1].tolist(),
                      turn_deg=math.degrees(man["turn"])),
     )  # fmt: skip
@@ -158,5 +157,6 @@ REVERSING = fam.FamilyRecord(
     },
     premise=fam.PREMISE_WHOLE_APPROACH,
     knobs={"hazard_speed": (1.0, 3.0), "hazard_delay": (0.0, 1.5)},
+    d_safe=fam.D_SAFE_SMALL_M,
     description="a car parked beside the ego lane reverses out across it",
 )

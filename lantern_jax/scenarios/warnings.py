@@ -19,7 +19,7 @@ ids         entries
 60-64       the five non-actionable warnings of the paper's appendix, verbatim (no family)
 65          the empty text (:data:`EMPTY_TEXT_ID`; no words)
 66-         texts added later: every registered family's exact warning (kind ``"canonical"``)
-            and paraphrases (:func:`add_family_texts`), texts added with :func:`add_text`
+            and paraphrases (:func:`family_texts`), texts added with :func:`add_text`
 ==========  ==================================================================================
 
 Ambiguity tiers of the paraphrases (paper appendix "Additional Ablation Analysis"):
@@ -56,7 +56,7 @@ from __future__ import annotations
 
 import functools
 import hashlib
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import jax
@@ -72,6 +72,7 @@ from lantern_jax.constants import (
     OVERRIDE_FRAME_WORLD,
 )
 from lantern_jax.geometry import world_to_ego
+from lantern_jax.scenarios.family_registry import FAMILY_REGISTRY, Texts
 from lantern_jax.scenarios.warning_texts import (
     DEFAULT_BANK,
     TEMPLATES,
@@ -99,17 +100,15 @@ Array = jax.Array
 DISTANCE_POSITIONS: dict[str, tuple[float, float]] = {"near": (12.0, 0.5), "far": (100.0, 0.5)}
 
 
-#: Registered families' texts (:func:`add_family_texts`), by family index in registration order:
-#: ``(kind, tier, text)`` entries, the exact warning first.
-_FAMILY_TEXTS: dict[int, tuple[tuple[str, str, str], ...]] = {}
-
-
 def registered_bank() -> TextBank:
     """The built-in bank followed by the texts of every registered family (in registration
-    order): the bank of :func:`lantern_jax.sim.settings.default_settings`, and the one every
-    function of this module reads when given no bank.  Equal to :data:`DEFAULT_BANK` when no
-    family is registered."""
-    return _registered_bank(tuple(_FAMILY_TEXTS.items()))
+    order; each family's :attr:`~lantern_jax.scenarios.family_registry.FamilyEntry.texts`): the
+    bank of :func:`lantern_jax.sim.settings.default_settings`, and the one every function of
+    this module reads when given no bank.  Equal to :data:`DEFAULT_BANK` when no family is
+    registered."""
+    return _registered_bank(
+        tuple((e.index, e.texts) for e in FAMILY_REGISTRY.user_entries() if e.texts)
+    )
 
 
 @functools.lru_cache(maxsize=8)
@@ -139,7 +138,7 @@ def paraphrase_text_id(family: int | str, bank: TextBank | None = None) -> int:
 
 def canonical_text_id(family: int | str, bank: TextBank | None = None) -> int:
     """Text id of a family's exact warning: the family index for the six built-in families, the
-    entry :func:`add_family_texts` added for a registered one.
+    entry of a registered one's texts (:func:`family_texts`).
 
     Raises:
         ValueError: for an unknown family or a registered family without texts in the bank.
@@ -161,41 +160,29 @@ def _family_paraphrases(f: int, bank: TextBank | None = None) -> tuple[int, ...]
     return ids
 
 
-def add_family_texts(family: int | str, warning: str, paraphrases: dict[str, Sequence[str]]
-                     ) -> tuple[int, tuple[int, ...]]:  # fmt: skip
-    """Register a registered family's exact warning and paraphrases (once): they follow the
-    built-in texts in :func:`registered_bank`.
+def family_texts(warning: str, paraphrases: Mapping[str, Sequence[str]]) -> Texts:
+    """A registered family's exact warning and paraphrases as the bank's entries, checked
+    against the bank's rules; its registry entry holds them (they follow the built-in texts in
+    :func:`registered_bank`).
 
     Args:
-        family: a registered family's code or index (not one of the six built-in families,
-            whose texts are fixed).
         warning: the exact warning (kind ``"canonical"``), in the templates' style, with
             ``<FRONT_CAR_POS>`` where the grounded position goes.
         paraphrases: ambiguity tier -> held-out paraphrases (the bank's tier rules apply: low
             and medium state the position, high does not).
 
     Returns:
-        ``(warning id, paraphrase ids)`` in :func:`registered_bank`.  Adding the same texts for
-        the same family again adds nothing and returns the ids they already have.
+        ``(kind, tier, text)`` entries, the exact warning first.
 
     Raises:
-        ValueError: for a built-in family, a family that already has other texts, or a text
-            that breaks the bank's rules.
+        ValueError: for a text that breaks the bank's rules.
     """
-    f = family_index(family)
-    if f < len(FAMILIES):
-        raise ValueError(f"family: {family_codes.code(f)!r} is built in; its texts are fixed")
     entries = [("canonical", "", warning)]
     for tier, texts in paraphrases.items():
         entries += [("paraphrase", tier, t) for t in texts]
     for kind, tier, text in entries:
         check_entry(kind, tier, text)
-    have = _FAMILY_TEXTS.get(f)
-    if have is not None and list(have) != entries:
-        raise ValueError(f"family: {family_codes.code(f)!r} already has other texts")
-    _FAMILY_TEXTS[f] = tuple(entries)
-    ids = [e.text_id for e in registered_bank() if e.family == f]
-    return ids[0], tuple(ids[1:])
+    return tuple(entries)
 
 
 def tier_text_ids(family: int | str, tier: str, bank: TextBank | None = None) -> tuple[int, ...]:

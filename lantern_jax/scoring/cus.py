@@ -25,6 +25,7 @@ goes to 0.
 
 from __future__ import annotations
 
+import warnings
 from typing import Any
 
 import jax
@@ -49,11 +50,21 @@ Array = jax.Array
 
 
 def d_safe_for_family(family: Any) -> Array:
-    """Clearance normaliser in m: 2 m for PE and OR, 3 m otherwise.
+    """Clearance normaliser in m of a built-in family: 2 m for PE and OR, 3 m otherwise.
+
+    Deprecated (kept for one release): a family's ``d_safe`` lives in its entry of the family
+    registry (``lantern_jax.scenarios.families.family(code).d_safe``), and every scene carries
+    its own (``ExecutionConfig.d_safe``), which the scorer reads.
 
     Args:
         family: family index (int or int array, ``constants.FAMILIES`` order) or code string.
     """
+    warnings.warn(
+        "d_safe_for_family is deprecated: read a scene's ExecutionConfig.d_safe, or the "
+        "family's registry entry (lantern_jax.scenarios.families.family(code).d_safe)",
+        DeprecationWarning,
+        stacklevel=2,
+    )
     if isinstance(family, str):
         return jnp.asarray(thresholds.D_SAFE_BY_FAMILY[FAMILIES.index(family)], jnp.float32)
     table = jnp.asarray(thresholds.D_SAFE_BY_FAMILY, jnp.float32)
@@ -200,7 +211,7 @@ def pair_components(
     Args:
         metrics_a: Route A execution outputs (from :func:`~lantern_jax.scoring.metrics.finalize`).
         metrics_b: Route B execution outputs; only ``progress`` and ``gate_false_brake`` are used.
-        d_safe: clearance normaliser in m (see :func:`d_safe_for_family`).
+        d_safe: clearance normaliser in m (a scene's ``ExecutionConfig.d_safe``).
         settings: scoring thresholds and weights.
 
     Returns:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import warnings
 from collections.abc import Sequence
 from importlib import resources
 from pathlib import Path
@@ -27,7 +28,8 @@ from lantern_jax.constants import (
     WARNING_CONDITION,
 )
 from lantern_jax.files import atomic_write
-from lantern_jax.scoring.cus import d_safe_for_family, pair_components
+from lantern_jax.scoring import thresholds
+from lantern_jax.scoring.cus import pair_components
 from lantern_jax.scoring.metrics import ExecutionMetrics
 from lantern_jax.scoring.thresholds import DEFAULT_SCORING, ScoringSettings
 
@@ -93,11 +95,18 @@ def _batched(
 
 
 def _family_d_safe(codes: list[str]) -> np.ndarray:
-    """(n,) m, the built-in families' clearance normalisers (a registered family has none)."""
+    """(n,) m, the built-in families' clearance normalisers: the deprecated default of
+    :func:`build_route_table` (a registered family has none)."""
     other = sorted(set(codes) - set(FAMILIES))
     if other:
         raise ValueError(f"build_route_table: pass d_safe for registered families {other}")
-    return np.asarray(d_safe_for_family(np.asarray([FAMILIES.index(f) for f in codes])))
+    warnings.warn(
+        "build_route_table without d_safe is deprecated: pass the scenes' "
+        "ExecutionConfig.d_safe",
+        DeprecationWarning,
+        stacklevel=3,
+    )
+    return np.asarray([thresholds.D_SAFE_BY_FAMILY[FAMILIES.index(f)] for f in codes], np.float32)
 
 
 def _measured_columns(a: ExecutionMetrics, b: ExecutionMetrics, comps: dict) -> dict:
@@ -165,8 +174,9 @@ def build_route_table(
         pair_ids, families (codes or indices), weathers: one entry per row.
         t_warn_on: (n,) s, start of warning delivery (``NaN`` = none).  Default: ``t_ref_s`` for
             rows of the warning condition (``constants.WARNING_CONDITION``), ``NaN`` otherwise.
-        d_safe: (n,) m, clearance normalisers; default from the family (2 m PE/OR, else 3 m;
-            required for a registered family, whose record sets it per pair).
+        d_safe: (n,) m, clearance normalisers (the scenes' ``ExecutionConfig.d_safe``).  Left
+            out, the built-in families' values are used (2 m PE/OR, else 3 m; deprecated, for
+            one release; a registered family's must be given).
         warning_ticks: (n,) int, ticks at which a warning was delivered on Route A
             (default 0).
         hidden_at_warning, hidden_before_warning: (n,) bool, the Route A hazard was hidden from

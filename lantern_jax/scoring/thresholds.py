@@ -171,6 +171,8 @@ DEFAULT_SCORING = ScoringSettings()
 # validation and content hash cover it.
 D_SAFE_SMALL_M = 2.0  # m, Pedestrian Emergence and Obstacle Reveal
 D_SAFE_LARGE_M = 3.0  # m, vehicle interactions (VC, LWW, RWW, RTY)
+#: Deprecated (one release): the built-in families' values by index, read only by the deprecated
+#: ``scoring.cus.d_safe_for_family``; a family's value lives in its registry entry.
 D_SAFE_BY_FAMILY = tuple(
     D_SAFE_SMALL_M if name in ("PE", "OR") else D_SAFE_LARGE_M for name in FAMILIES
 )

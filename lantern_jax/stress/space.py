@@ -7,7 +7,8 @@ candidate is an ordinary suite pair).  A candidate is a vector ``z`` in R^K; its
 smooth (optimisers work on ``z`` without projections).  Every method of
 :mod:`lantern_jax.stress.search` sees only this interface.
 
-* :class:`SearchSpace` — the family's knobs (:data:`lantern_jax.scenarios.families.KNOB_RANGES`),
+* :class:`SearchSpace` — the family's knobs (its registry entry's ``knobs``; the six's:
+  :data:`lantern_jax.scenarios.families.KNOB_RANGES`),
   whose ranges a user may narrow; a range that excludes the frozen suite's own value is refused
   (a search space must contain the benchmark's nominal scenes).
 * :class:`AdversarySpace` — adversarial tracks (:mod:`lantern_jax.dynamics.adversary`) of one
@@ -33,7 +34,7 @@ from lantern_jax.scenarios.adversary import (
     with_tracks,
     without_effect,
 )
-from lantern_jax.scenarios.families import KNOB_RANGES, KNOBS_FIELD, build_pair, family
+from lantern_jax.scenarios.families import KNOBS_FIELD, build_pair, family
 from lantern_jax.scenarios.knobs import apply_knobs, get_knobs, knob
 from lantern_jax.scenarios.suite import Suite
 from lantern_jax.world import Scenario
@@ -275,7 +276,9 @@ def search_space(
             value (naming the pair).
     """
     rec = family(family_code)
-    table = KNOB_RANGES[rec.code]
+    table = rec.knobs
+    if not table:
+        raise ValueError(f"{rec.code}: the family has no stress-testing knobs (its record's knobs)")
     names = tuple(knobs) if knobs else tuple(table)
     unknown = [n for n in names if n not in table]
     if unknown:
