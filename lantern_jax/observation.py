@@ -8,7 +8,9 @@ simulator's, not a convention.
 All positions and vectors are in the **ego frame of the paper: x forward, y to the right**,
 metres, relative to the ego box centre.
 
-Sensors (:data:`SENSORS`; ``FRONT_CAMERA`` is every policy's and need not be named):
+Sensors (the built-in ones, :data:`SENSORS`; ``FRONT_CAMERA`` is every policy's and need not be
+named; the table of every sensor, with those registered from user code, is
+:mod:`lantern_jax.sensors.registry`):
 
 * ``"front_camera"`` — the 110 deg front camera: the actors it sees now (``visible``; their
   position, velocity, heading, extent and kind) and its range image.  The route ahead, the
@@ -24,6 +26,8 @@ Sensors (:data:`SENSORS`; ``FRONT_CAMERA`` is every policy's and need not be nam
 * ``"privileged"`` — ground truth (:class:`PrivilegedView`): every actor that exists, hidden
   or not, and its forecast from the scenario's own scripts.  Only a privileged reference (the
   ``expert``) declares it; its results are an upper reference, never a submission.
+* a sensor registered from user code (:func:`lantern_jax.sensors.registry.view_sensor`) — its
+  reading is ``views[name]``.
 
 **The sentinel.**  For an actor slot that the declared cameras do not see at this tick (hidden,
 out of range, not yet spawned, or padding), every per-actor field is exactly zero — position,
@@ -32,6 +36,8 @@ velocity, heading, extent and kind — and ``visible`` is False.  A zero kind is
 """
 
 from __future__ import annotations
+
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -47,7 +53,7 @@ FRONT_CAMERA = "front_camera"  # every policy's camera (implied)
 SURROUND_RIG = "surround_rig"  # the six-camera 360 deg rig
 WARNING = "warning"  # the delivered warning text
 PRIVILEGED = "privileged"  # ground truth and scripted forecasts (reference experts only)
-SENSORS = (FRONT_CAMERA, SURROUND_RIG, WARNING, PRIVILEGED)
+SENSORS = (FRONT_CAMERA, SURROUND_RIG, WARNING, PRIVILEGED)  # the built-in sensors
 
 NUM_ROUTE_POINTS = 24  # route points ahead in the observation
 ROUTE_STEP = 2.0  # m between observed route points
@@ -130,25 +136,8 @@ class Observation:
     #                        number tokens; 0 elsewhere
     privileged: PrivilegedView | None = None  # only with the "privileged" sensor (else None)
     surround: SurroundView | None = None  # only with the "surround_rig" sensor (else None)
-
-
-def normalize_sensors(sensors) -> tuple[str, ...]:
-    """The canonical form of a sensor declaration: a sorted tuple of names from
-    :data:`SENSORS`, always including :data:`FRONT_CAMERA`.
-
-    Raises:
-        ValueError: naming an unknown sensor, or for a bare string (write ``("warning",)``).
-    """
-    if isinstance(sensors, str):
-        raise ValueError(
-            f"sensors: expected a collection of sensor names, got the string {sensors!r} "
-            f"(write ({sensors!r},)); known: {', '.join(SENSORS)}"
-        )
-    names = set(sensors) | {FRONT_CAMERA}
-    unknown = sorted(str(n) for n in names if n not in SENSORS)
-    if unknown:
-        raise ValueError(f"sensors: unknown {', '.join(unknown)}; known: {', '.join(SENSORS)}")
-    return tuple(sorted(names))
+    views: dict[str, Any] | None = None  # the readings of the declared sensors registered from
+    #                                      user code, by name (None: the policy declares none)
 
 
 def warning_delivered(obs: Observation) -> Array:

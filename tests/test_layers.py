@@ -26,8 +26,12 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     # scenario and observation types; I/O (files, configuration files, compiled programs on
     # disk); tokens
     ("world", "observation", "files", "config_file", "program_store", "language"),
-    ("dynamics", "sensors", "scoring"),  # how things move, what is seen, how it is measured
+    # how things move, what cameras see (ray casting and the camera rigs, which the scenarios'
+    # premise check runs too), how it is measured
+    ("dynamics", "sensors.visibility", "sensors.cameras", "scoring"),
     ("scenarios",),  # roads, families, protocol, warnings, suites (NumPy builders + JAX protocol)
+    ("sensors",),  # the sensor table and the observation-level readings (the warning text reads
+    #                the protocol, so they sit above the scenarios)
     ("policies",),  # reference planners and the registry
     ("sim",),  # one tick and the rollouts
     ("report",),  # the results as data, their tables and files
@@ -83,7 +87,11 @@ def _exists(module: str) -> bool:
 
 
 def _top(module: str) -> str:
+    """The layer entry of a module: ``package.module`` where :data:`LAYERS` names it, else the
+    top-level module or package."""
     parts = module.split(".")
+    if len(parts) > 2 and ".".join(parts[1:3]) in LAYER_OF:
+        return ".".join(parts[1:3])
     return parts[1] if len(parts) > 1 else ""
 
 

@@ -22,14 +22,7 @@ from lantern_jax.constants import KIND_PEDESTRIAN, NUM_WAYPOINTS, WAYPOINT_DT
 from lantern_jax.diagnostics import language_table, run_recorded
 from lantern_jax.evaluation import build_executions, run_executions
 from lantern_jax.language import PAD_ID
-from lantern_jax.observation import (
-    PRIVILEGED,
-    SENSORS,
-    WARNING,
-    Observation,
-    normalize_sensors,
-    warning_delivered,
-)
+from lantern_jax.observation import PRIVILEGED, SENSORS, WARNING, Observation, warning_delivered
 from lantern_jax.policies.base import Policy, check_policy_output
 from lantern_jax.policies.host import host_policy
 from lantern_jax.policies.reference import (
@@ -43,6 +36,7 @@ from lantern_jax.scenarios.families import family
 from lantern_jax.scenarios.suite import build_suite_scenarios, load_suite
 from lantern_jax.scenarios.warnings import EMPTY_TEXT_ID, TEMPLATES, non_actionable_text_ids
 from lantern_jax.scenarios.warnings import token_table as bank_tokens
+from lantern_jax.sensors.registry import normalize_sensors
 from lantern_jax.sim.observe import observe
 from lantern_jax.sim.state import init_state
 

@@ -30,14 +30,8 @@ import jax
 import jax.numpy as jnp
 
 from lantern_jax.constants import NUM_WAYPOINTS
-from lantern_jax.observation import (
-    FRONT_CAMERA,
-    PRIVILEGED,
-    SURROUND_RIG,
-    WARNING,
-    Observation,
-    normalize_sensors,
-)
+from lantern_jax.observation import FRONT_CAMERA, SURROUND_RIG, WARNING, Observation
+from lantern_jax.sensors.registry import Sensor, declared, normalize_sensors
 
 InitFn = Callable[[jax.Array], Any]
 ActFn = Callable[..., Any]
@@ -54,8 +48,10 @@ class Policy:
         act: ``act(params, obs) -> (10, 2)`` waypoints, or with ``init_carry``
             ``act(params, carry, obs) -> (waypoints, carry)``.
         description: one line, shown by ``lantern-jax policies``.
-        sensors: the sensors it reads, from :data:`~lantern_jax.observation.SENSORS`
-            (``"front_camera"`` is always included); stored sorted.
+        sensors: the sensors it reads, names of the sensor table
+            (:mod:`lantern_jax.sensors.registry`: the built-in ``"front_camera"``,
+            ``"warning"``, ``"surround_rig"``, ``"privileged"`` and those registered from user
+            code; ``"front_camera"`` is always included); stored sorted.
         init_carry: ``init_carry(params) -> carry`` for a policy with memory; ``None`` for a
             stateless one.
     """
@@ -83,8 +79,9 @@ class Policy:
 
     @property
     def privileged(self) -> bool:
-        """It reads ground truth (the ``"privileged"`` sensor): an upper reference."""
-        return PRIVILEGED in self.sensors
+        """It reads ground truth (a reference-only sensor, the ``"privileged"`` one): an upper
+        reference."""
+        return any(s.reference_only for s in declared(self.sensors))
 
     @property
     def surround(self) -> bool:
@@ -97,6 +94,11 @@ class Policy:
         return WARNING in self.sensors
 
     @property
+    def user_sensors(self) -> tuple[Sensor, ...]:
+        """The sensors registered from user code that it declares (their entries)."""
+        return tuple(s for s in declared(self.sensors) if not s.builtin)
+
+    @property
     def stateful(self) -> bool:
         """It carries memory between ticks."""
         return self.init_carry is not None
@@ -104,8 +106,10 @@ class Policy:
     @property
     def program(self) -> tuple:
         """What its compiled rollout depends on besides the arguments: the act function, the
-        sensors and the carry's initialiser (policies equal here share a program)."""
-        return (self.act, self.sensors, self.init_carry)
+        sensors (with the entries of those registered from user code) and the carry's
+        initialiser (policies equal here share a program)."""
+        extra = self.user_sensors
+        return (self.act, self.sensors, self.init_carry, *((extra,) if extra else ()))
 
     def initial_carry(self, params: Any) -> Any:
         """The carry every execution starts from (``()`` for a stateless policy)."""

@@ -303,6 +303,9 @@ def split_possible(policy: Driver) -> str:
     """Why the split path cannot run ``policy`` here ("" when it can)."""
     if isinstance(policy, PolicySwitch):
         return "a policy switch is one fused program"
+    if policy.user_sensors:
+        names = ", ".join(s.name for s in policy.user_sensors)
+        return f"a sensor registered from user code ({names}) is observed in the fused program"
     if jax.process_count() > 1:
         return "several processes (the split path steps one process's devices)"
     return ""

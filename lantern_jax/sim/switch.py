@@ -38,16 +38,11 @@ import numpy as np
 from flax import struct
 
 from lantern_jax.language import PAD_ID
-from lantern_jax.observation import WARNING
+from lantern_jax.observation import FRONT_CAMERA, WARNING
 from lantern_jax.policies.base import Policy
 from lantern_jax.scenarios.warnings import DEFAULT_BANK, TextBank
-from lantern_jax.sim.observe import (
-    actors_in_ego_frame,
-    forecast_view,
-    mask_actors,
-    observe,
-    surround_view,
-)
+from lantern_jax.sensors.registry import declared
+from lantern_jax.sim.observe import observe
 from lantern_jax.sim.state import State
 from lantern_jax.world import Scenario
 
@@ -162,18 +157,9 @@ class PolicySwitch:
             def run(operands):
                 pool, carries = operands
                 o = obs
-                if lead.surround:
-                    rig = surround_view(scenario, state)
-                    truth = actors_in_ego_frame(scenario, state)
-                    seen = o.visible | rig.visible
-                    fields = {k: v for k, v in truth.items() if k != "present"}
-                    o = o.replace(surround=rig, visible=seen, **mask_actors(fields, seen))
-                if lead.privileged:
-                    o = o.replace(
-                        privileged=forecast_view(
-                            scenario, state, actors_in_ego_frame(scenario, state)
-                        )
-                    )
+                for sensor in declared(lead.sensors):  # the rig, ground truth, user sensors
+                    if sensor.name not in (FRONT_CAMERA, WARNING):  # in ``obs`` already
+                        o = sensor.add(o, scenario, state, bank)
                 # every member of this branch has the lead's act and carry; the parameters are
                 # those of the member that drives
                 ps = params.replace(pool=pool)
