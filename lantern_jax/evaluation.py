@@ -509,13 +509,18 @@ def _plan(pols: list[Policy], policy_params: list, execs: Executions, settings: 
 
 def settings_record(settings: Settings) -> dict:
     """The settings of an evaluation as the manifest records them (every value, the bank as
-    its size and content hash)."""
+    its size and content hash, the user metrics by name, unit and description)."""
     bank = settings.bank
     digest = hashlib.sha256(repr(bank.entries).encode()).hexdigest()
+    scoring = {f.name: getattr(settings.scoring, f.name)
+               for f in dataclasses.fields(settings.scoring) if f.name != "metrics"}  # fmt: skip
+    metrics = settings.scoring.metrics
     return dict(
-        scoring={k: _plain(v) for k, v in dataclasses.asdict(settings.scoring).items()},
+        scoring={k: _plain(v) for k, v in scoring.items()},
         protocol={k: _plain(v) for k, v in dataclasses.asdict(settings.protocol).items()},
         text_bank=dict(texts=len(bank), sha256=digest),
+        # the user metrics (scoring/user_metrics.py) the route table holds, when there are any
+        **({"metrics": [m.record() for m in metrics]} if metrics else {}),
     )
 
 

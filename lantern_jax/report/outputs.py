@@ -207,9 +207,11 @@ def _legend(manifest: dict, has_intervals: bool) -> str:
     )
 
 
-def _write_route_files(route_table: pd.DataFrame, path: Path) -> list[Path]:
-    """Write the route-level CSV and its schema; returns both paths."""
-    route = write_route_table(route_table, path)
+def _write_route_files(route_table: pd.DataFrame, path: Path, manifest: dict) -> list[Path]:
+    """Write the route-level CSV and its schema (with the user metrics the manifest's settings
+    name); returns both paths."""
+    metrics = manifest.get("settings", {}).get("metrics", [])
+    route = write_route_table(route_table, path, metrics)
     return [route, schema_path_for(route)]
 
 
@@ -235,7 +237,7 @@ def check_output_folder(out_dir: str | os.PathLike) -> Path:
 def _write_set(result: Evaluation, out: Path, extra_manifest: dict | None,
                run_record: dict | None) -> None:  # fmt: skip
     """Write every file of a result set into the (staging) folder ``out``."""
-    written = _write_route_files(result.route_table, out / ROUTE_CSV)
+    written = _write_route_files(result.route_table, out / ROUTE_CSV, result.manifest)
 
     fam, dec = ordered_tables(result)
     iv = result.intervals
@@ -349,7 +351,8 @@ def write_ablation_outputs(
     """
     with StagedFolder(out_dir, ABLATION_FILES) as stage:
         out = stage.path
-        written = _write_route_files(result.route_table, out / ABLATION_ROUTE_CSV)
+        written = _write_route_files(result.route_table, out / ABLATION_ROUTE_CSV,
+                                     result.manifest)
 
         keys = ("model", "condition", "variant")
         table = with_interval_columns(result.table, result.intervals, keys, ABLATION_TABLE_COLUMNS)

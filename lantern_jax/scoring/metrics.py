@@ -35,6 +35,7 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
+from lantern_jax.scoring import user_metrics
 from lantern_jax.scoring.components import (
     HAZARD_COMPONENTS,
     ROUTE_A_GATES,
@@ -107,6 +108,7 @@ class ExecutionMetrics:
     t_complete_s: Array  # () float32, s, first tick in the route's end zone (NaN: not completed)
     slow_unjustified_s: Array  # () float32, s, below half the reference speed with nothing
     #                            justifying it (efficiency diagnostic, not part of the CUS)
+    metrics: tuple = ()  # () float32 each, the values of ``settings.metrics`` (user metrics)
 
 
 def first_failure_time(tel: Telemetry, settings: ScoringSettings = DEFAULT_SCORING) -> Array:
@@ -190,4 +192,5 @@ def finalize(tel: Telemetry, settings: ScoringSettings = DEFAULT_SCORING) -> Exe
         false_brake_max_stop_s=false_brake.max_stop_s(tel.false_brake),
         t_complete_s=time_or_nan(tel.efficiency.t_complete),
         slow_unjustified_s=efficiency.slow_s(tel.efficiency),
+        metrics=user_metrics.values(s.metrics, tel.metrics, ctx, s),
     )

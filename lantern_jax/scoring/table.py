@@ -32,6 +32,7 @@ from lantern_jax.scoring import thresholds
 from lantern_jax.scoring.cus import pair_components
 from lantern_jax.scoring.metrics import ExecutionMetrics
 from lantern_jax.scoring.thresholds import DEFAULT_SCORING, ScoringSettings
+from lantern_jax.scoring.user_metrics import Metric
 
 #: The columns that identify a row (each combination exactly once).
 KEY_COLUMNS = ("model", "condition", "pair_id")
@@ -46,6 +47,38 @@ def load_schema() -> dict:
 def schema_columns() -> list[tuple[str, str]]:
     """``[(name, dtype), ...]`` in table order; dtype is ``string``, ``int64`` or ``float64``."""
     return [(c["name"], c["dtype"]) for c in load_schema()["columns"]]
+
+
+def route_schema(metrics: Sequence[dict] = ()) -> dict:
+    """The schema of a route table whose rows hold user metrics besides the schema's columns.
+
+    Args:
+        metrics: each metric as a manifest records it (``name``, ``unit``, ``description``;
+            :meth:`lantern_jax.scoring.user_metrics.Metric.record`), in column order.
+    """
+    schema = load_schema()
+    for m in metrics:
+        metric = Metric(m["name"], None, None, None, m.get("unit", "-"), m.get("description", ""))
+        schema["columns"] += metric.columns()
+    return schema
+
+
+def metric_columns(a: ExecutionMetrics, b: ExecutionMetrics, metrics: Sequence[Metric],
+                   ) -> dict[str, np.ndarray]:  # fmt: skip
+    """The route table's columns of the user metrics (``<name>`` Route A, ``B_<name>`` Route B),
+    float64, in the order of ``metrics``."""
+    taken = {c for c, _ in schema_columns()}
+    clash = sorted(taken & {c for m in metrics for c in (m.name, f"B_{m.name}")})
+    if clash:
+        raise ValueError(f"build_route_table: user metric column(s) {clash} are schema columns")
+    if len(a.metrics) != len(metrics) or len(b.metrics) != len(metrics):
+        raise ValueError(f"build_route_table: the metrics hold {len(a.metrics)} user metric "
+                         f"value(s), the settings name {len(metrics)}")  # fmt: skip
+    out = {}
+    for m, va, vb in zip(metrics, a.metrics, b.metrics, strict=True):
+        out[m.name] = np.asarray(va, np.float64)
+        out[f"B_{m.name}"] = np.asarray(vb, np.float64)
+    return out
 
 
 def _per_row(name: str, value: Any, n: int) -> list:
@@ -220,7 +253,9 @@ def build_route_table(
     for name, dtype in schema_columns():
         if dtype == "string":
             df[name] = df[name].astype(object)
-    return df[[c for c, _ in schema_columns()]]
+    df = df[[c for c, _ in schema_columns()]]
+    extra = metric_columns(a, b, settings.metrics)
+    return pd.concat([df, pd.DataFrame(extra, index=df.index)], axis=1) if extra else df
 
 
 def _dtype_ok(series: pd.Series, dtype: str) -> bool:
@@ -301,8 +336,15 @@ def schema_path_for(path: str | os.PathLike) -> Path:
     return p.with_name(p.stem + ".schema.json")
 
 
-def write_route_table(df: pd.DataFrame, path: str | os.PathLike) -> Path:
+def write_route_table(df: pd.DataFrame, path: str | os.PathLike,
+                      metrics: Sequence[dict] = ()) -> Path:  # fmt: skip
     """Validate ``df`` and write it as CSV atomically, with the schema JSON next to it.
+
+    Args:
+        df: the route table.
+        path: the CSV's path.
+        metrics: the user metrics its rows hold (as a manifest records them), described in the
+            schema after its columns (:func:`route_schema`).
 
     Returns:
         The CSV path.  The schema goes to :func:`schema_path_for` ``(path)``.
@@ -311,7 +353,7 @@ def write_route_table(df: pd.DataFrame, path: str | os.PathLike) -> Path:
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
     atomic_write(p, df.to_csv(index=False))
-    atomic_write(schema_path_for(p), json.dumps(load_schema(), indent=2) + "\n")
+    atomic_write(schema_path_for(p), json.dumps(route_schema(metrics), indent=2) + "\n")
     return p
 
 

@@ -22,6 +22,7 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
+from lantern_jax.scoring import user_metrics
 from lantern_jax.scoring.components import (
     anticipation,
     block,
@@ -58,12 +59,14 @@ class Telemetry:
     block: block.BlockState  # G_block: standstill, controller fault (timeout from the context)
     false_brake: false_brake.FalseBrakeState  # G_FB (Route B)
     efficiency: efficiency.EfficiencyState  # completion time, unjustified slow time (not CUS)
+    metrics: tuple = ()  # the accumulators of ``settings.metrics`` (user metrics, not CUS)
 
 
 def init_telemetry(settings: ScoringSettings = DEFAULT_SCORING) -> Telemetry:
     """Accumulators before the first tick (ring lengths from ``settings``)."""
     return Telemetry(context=context.init(settings),
-                     **{name: unit.init(settings) for name, unit in _UNITS.items()})  # fmt: skip
+                     **{name: unit.init(settings) for name, unit in _UNITS.items()},
+                     metrics=user_metrics.init_states(settings.metrics, settings))  # fmt: skip
 
 
 #: Every component's module by Telemetry field (``context`` apart: it runs first).
@@ -83,6 +86,7 @@ def _step(tel: Telemetry, s: TickSample, settings: ScoringSettings) -> Telemetry
             name: unit.update(getattr(tel, name), s, tick, settings)
             for name, unit in _UNITS.items()
         },
+        metrics=user_metrics.update_states(settings.metrics, tel.metrics, s, tick, settings),
     )
 
 

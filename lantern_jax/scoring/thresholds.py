@@ -20,6 +20,7 @@ import jax
 from flax import struct
 
 from lantern_jax.constants import DT, FAMILIES
+from lantern_jax.scoring.user_metrics import Metric, metric_problem
 from lantern_jax.times import ticks
 
 Array = jax.Array
@@ -94,6 +95,9 @@ class ScoringSettings:
     #                                        route centre line is in the ego's path
     justify_route_end_m: float = 10.0  # m, standing this close to the route end is justified
 
+    # --- measurements of your own (static; scoring/user_metrics.py; never in the CUS) --------
+    metrics: tuple[Metric, ...] = struct.field(pytree_node=False, default=())
+
     # --- tick counts (static) ------------------------------------------------------------------
     @property
     def react_window(self) -> int:
@@ -155,6 +159,15 @@ class ScoringSettings:
                     f"ScoringSettings.{name}: must span at least one tick ({DT} s), got "
                     f"{getattr(self, name)!r}"
                 )
+        if not isinstance(self.metrics, tuple):
+            raise ValueError(f"ScoringSettings.metrics: expected a tuple of Metric, got "
+                             f"{type(self.metrics).__name__}")  # fmt: skip
+        taken: set[str] = set()
+        for i, metric in enumerate(self.metrics):
+            problem = metric_problem(metric, taken)
+            if problem:
+                raise ValueError(f"ScoringSettings.metrics[{i}]: {problem}")
+            taken |= {metric.name, f"B_{metric.name}"}
         return self
 
 
