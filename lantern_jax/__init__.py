@@ -36,11 +36,13 @@ import importlib
 import importlib.metadata
 from typing import TYPE_CHECKING, Any
 
-from lantern_jax import jax_setup
+from lantern_jax import jax_setup, renamed
 
 # One XLA CPU device per core and the persistent compilation cache, as the command line has
 # them, when JAX is not imported yet (lantern_jax.jax_setup; LANTERN_JAX_AUTO_SETUP=0: off).
 jax_setup.auto_setup()
+# Renamed modules stay importable under their old names for one release (lantern_jax.renamed).
+renamed.install()
 
 try:
     #: The installed package's version (``pyproject.toml``); ``lantern-jax --version``.

@@ -4,7 +4,7 @@ without warning and Route B, stepped in one jitted, vmapped call per policy
 
 Route B carries no warning, so a policy sees the same Route B under both conditions: Route B
 runs once per policy and is paired with both Route A executions.  Ablations (paper §4.4) change
-only protocol data of the batch (:mod:`lantern_jax.scenarios.ablations`).
+only protocol data of the batch (:mod:`lantern_jax.scenarios.protocol_variants`).
 
 Example::
 
@@ -48,7 +48,7 @@ from lantern_jax.policies.registry import (
 from lantern_jax.report import write_outputs
 from lantern_jax.report.page import build_report
 from lantern_jax.report.results import Evaluation, PolicyRun
-from lantern_jax.scenarios.ablations import ablation_names
+from lantern_jax.scenarios.protocol_variants import ablation_names
 from lantern_jax.scenarios.suite import Suite, load_suite
 from lantern_jax.scoring.aggregate import (
     PREMISE_ROWS,

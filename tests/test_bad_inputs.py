@@ -333,8 +333,8 @@ def test_duplicate_json_key_and_broken_json(base_manifest, tmp_path, no_evaluati
 
 
 def test_a_generated_suite_claims_the_shipped_id_only_when_it_is_that_suite():
-    from lantern_jax.generate import regenerated_suite_id
     from lantern_jax.scenarios.suite import shipped_suite_hash
+    from lantern_jax.suite_generation import regenerated_suite_id
 
     shipped = load_suite()
     assert shipped_suite_hash("lantern-v3") == shipped.suite_sha256
@@ -569,7 +569,7 @@ def test_manifest_onto_a_folder(base_manifest, tmp_path, monkeypatch):
     def refuse(*a, **k):
         raise AssertionError("generated although the target is a folder")
 
-    monkeypatch.setattr("lantern_jax.generate.generate_suite", refuse)
+    monkeypatch.setattr("lantern_jax.suite_generation.generate_suite", refuse)
     res = run_cli(["suite", "--regenerate", str(folder)])
     assert res.rc == 2 and "give the path of a file" in res.err
 
@@ -963,7 +963,7 @@ TRAIN_CONFIG_CASES = [
 
 @pytest.mark.parametrize("case", TRAIN_CONFIG_CASES, ids=[c[0] for c in TRAIN_CONFIG_CASES])
 def test_bad_training_config_values(case, tmp_path, monkeypatch):
-    from lantern_jax.training import train as train_module
+    from lantern_jax.training import behaviour_cloning as train_module
 
     monkeypatch.setattr(train_module, "train", lambda *a, **k: pytest.fail("training started"))
     _, line, expected = case
@@ -978,7 +978,7 @@ def test_bad_training_config_values(case, tmp_path, monkeypatch):
 
 
 def test_a_bad_training_option_names_the_option(tmp_path, monkeypatch):
-    from lantern_jax.training import train as train_module
+    from lantern_jax.training import behaviour_cloning as train_module
 
     monkeypatch.setattr(train_module, "train", lambda *a, **k: pytest.fail("training started"))
     path = tmp_path / "t.toml"
@@ -1513,7 +1513,7 @@ def test_sigint_during_compile_exits_130(tmp_path):
 DATASET_FAKES = textwrap.dedent(
     """
     import numpy as np
-    from lantern_jax.dataset import generate as dataset_generate
+    from lantern_jax.dataset import generation as dataset_generate
     from lantern_jax.scenarios.suite import load_suite
 
     def fake_dataset(on_chunk=lambda k: None):
@@ -1579,7 +1579,7 @@ DATASET_KILL_SCRIPT = DATASET_FAKES + textwrap.dedent(
 @pytest.fixture(scope="module")
 def dataset_reference(tmp_path_factory):
     """A complete (fake) dataset of three chunks, written without interruption."""
-    from lantern_jax.dataset import generate as dataset_generate
+    from lantern_jax.dataset import generation as dataset_generate
 
     folder = tmp_path_factory.mktemp("dataset") / "ref"
     with _dataset_fakes():
@@ -1590,7 +1590,7 @@ def dataset_reference(tmp_path_factory):
 
 @contextlib.contextmanager
 def _dataset_fakes():
-    from lantern_jax.dataset import generate as dataset_generate
+    from lantern_jax.dataset import generation as dataset_generate
 
     saved = {n: getattr(dataset_generate, n)
              for n in ("plan_scenes", "batched_recorder", "_record_chunk")}  # fmt: skip
@@ -1609,7 +1609,7 @@ def test_an_interrupted_dataset_is_refused_then_resumed(point, dataset_reference
     """kill -9 between the two shards of a chunk or before its card, or Ctrl-C while a chunk is
     recorded: training refuses the part as a dataset, naming the card and the fix, and the same
     command resumes and gives the same shards as an uninterrupted run."""
-    from lantern_jax.dataset import generate as dataset_generate
+    from lantern_jax.dataset import generation as dataset_generate
     from lantern_jax.dataset.store import CARD_JSON, DatasetError, load_frames, read_card
 
     out = tmp_path / "data"
@@ -1640,7 +1640,7 @@ TRAIN_EXPORT_SCRIPT = textwrap.dedent(
     from lantern_jax.policies.learned import checkpoint
     from lantern_jax.policies.learned.checkpoint import new_model, save_model
     from lantern_jax.policies.learned.model import ModelConfig
-    from lantern_jax.training import train as train_module
+    from lantern_jax.training import behaviour_cloning as train_module
 
     point, config, out = sys.argv[1], sys.argv[2], sys.argv[3]
     small = ModelConfig(width=8, heads=2)

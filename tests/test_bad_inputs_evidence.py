@@ -360,8 +360,8 @@ def test_every_writing_command_keeps_the_user_entries_named_like_its_outputs(
     from lantern_jax.commands.unseen import unseen_files
     from lantern_jax.report.outputs import ABLATION_FILES, OUTPUT_FILES
     from lantern_jax.stress.report import RESULT_FILES
+    from lantern_jax.training.behaviour_cloning import run_files
     from lantern_jax.training.config import load_config
-    from lantern_jax.training.train import run_files
 
     train = run_files(load_config(ROOT / "configs/train_coop.toml"))
     named = {"OUTPUT_FILES": OUTPUT_FILES, "ABLATION_FILES": ABLATION_FILES,

@@ -214,7 +214,7 @@ def test_fresh_suites_evaluate_every_suite_and_report_the_spread(
     """``--fresh-suites``: generation is replaced by the two-pair suite re-labelled with the
     requested seed (the orchestration, files and records are what is tested; the generator
     has its own tests), so every suite holds the same pairs and the spread across suites is 0."""
-    import lantern_jax.generate as generate
+    import lantern_jax.suite_generation as generate
 
     base = load_suite(manifest_path)
     calls = []
@@ -321,9 +321,9 @@ def test_ablations_list_and_bad_policy(capsys):
 def test_ablations_table_command(manifest_path, tmp_path):
     """``lantern-jax ablations --policy coop`` runs the six protocol variants, prints the
     paper's table and writes it (same batch shape as ``evaluated``: one compile)."""
-    from lantern_jax.ablations import TABLE_COLUMNS
+    from lantern_jax.ablation_table import TABLE_COLUMNS
     from lantern_jax.report import ABLATION_FILES
-    from lantern_jax.scenarios.ablations import ABLATIONS
+    from lantern_jax.scenarios.protocol_variants import ABLATIONS
 
     out_dir = tmp_path / "abl"
     res = run_cli(["ablations", "--policy", "coop", "--suite", str(manifest_path),
@@ -367,7 +367,7 @@ def test_python_dash_m():
 def test_suite_regenerates(tmp_path, capsys, monkeypatch):
     """``--regenerate`` and ``--verify`` together generate the suite once: the manifest just
     written is the one compared with the shipped suite."""
-    from lantern_jax import generate
+    from lantern_jax import suite_generation as generate
 
     calls, real = [], generate.generate_suite
     monkeypatch.setattr(generate, "generate_suite",
@@ -384,7 +384,7 @@ def test_suite_regenerates(tmp_path, capsys, monkeypatch):
 
 
 def test_verify_reuses_a_generation_only_of_the_suite_s_own_seed_and_validator():
-    from lantern_jax.generate import DEFAULT_SEED, regenerates_suite, suite_validator
+    from lantern_jax.suite_generation import DEFAULT_SEED, regenerates_suite, suite_validator
 
     own = suite_validator(load_suite().report)
     assert regenerates_suite("lantern-v3", DEFAULT_SEED, own)

@@ -141,9 +141,9 @@ def test_relabel_of_an_expert_state_is_the_dataset_label():
 
 @pytest.mark.slow
 def test_one_round_trains_checkpoints_and_resumes(tmp_path):
-    from lantern_jax.dataset.generate import generate_dataset
+    from lantern_jax.dataset.generation import generate_dataset
     from lantern_jax.policies.learned.checkpoint import checkpoint_policy, read_meta
-    from lantern_jax.training.train import train
+    from lantern_jax.training.behaviour_cloning import train
 
     ds = tmp_path / "ds"
     generate_dataset(ds, pairs_per_family=1, seed=5, chunk_pairs=6, progress=False)

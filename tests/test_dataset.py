@@ -16,8 +16,8 @@ import pytest
 
 from lantern_jax.constants import FAMILIES, NUM_WAYPOINTS, WEATHERS
 from lantern_jax.dataset import frames as fr
-from lantern_jax.dataset import generate as generate_module
-from lantern_jax.dataset.generate import generate_dataset
+from lantern_jax.dataset import generation as generate_module
+from lantern_jax.dataset.generation import generate_dataset
 from lantern_jax.dataset.record import FRAME_TICKS, FRONT_SENSORS, RIG_SENSORS, record
 from lantern_jax.dataset.scenes import PLAN_JSON, build_scenes, plan_scenes, read_plan
 from lantern_jax.dataset.store import (

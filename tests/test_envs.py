@@ -194,7 +194,7 @@ def test_ppo_policy_network_matches_brax_inference():
 
 @pytest.mark.slow
 def test_a_few_ppo_iterations_write_a_loadable_policy(tmp_path, monkeypatch):
-    from lantern_jax.envs.train import train
+    from lantern_jax.envs.ppo_training import train
     from lantern_jax.policies.learned_ppo import CHECKPOINT_ENV
     from lantern_jax.policies.registry import get_policy
 

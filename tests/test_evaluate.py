@@ -449,7 +449,7 @@ def test_wording_table_of_a_template_matcher(base, ablated, suite2):
 
 def test_ablation_table_rows(base, ablated):
     """The paper's ablation columns from each variant's route rows (Event Exposure included)."""
-    from lantern_jax.ablations import TABLE_COLUMNS, ablation_rows
+    from lantern_jax.ablation_table import TABLE_COLUMNS, ablation_rows
 
     full = ablation_rows(base.route_table).set_index(["model", "condition"])
     assert list(full.columns) == list(TABLE_COLUMNS)

@@ -15,15 +15,15 @@ import pytest
 
 from lantern_jax.cli import main
 from lantern_jax.constants import FAMILIES
-from lantern_jax.dataset.generate import generate_dataset
+from lantern_jax.dataset.generation import generate_dataset
 from lantern_jax.dataset.store import load_frames, read_card
 from lantern_jax.language import PAD_ID
 from lantern_jax.policies.learned.checkpoint import checkpoint_policy, read_meta
 from lantern_jax.scenarios.suite import load_suite
 from lantern_jax.scenarios.warnings import text_tables
+from lantern_jax.training.behaviour_cloning import train
 from lantern_jax.training.config import TrainConfig
 from lantern_jax.training.data import examples_from_frames, recipe_examples, split_by_sequence
-from lantern_jax.training.train import train
 
 pytestmark = pytest.mark.slow
 

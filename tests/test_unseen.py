@@ -448,7 +448,7 @@ def test_the_unseen_command_prints_and_writes_the_tables(suite, coop_rows, tmp_p
 
 @pytest.mark.slow
 def test_the_unseen_suite_regenerates_from_its_seed(suite):
-    from lantern_jax.generate import generate_suite
+    from lantern_jax.suite_generation import generate_suite
 
     fresh = generate_suite(transfer.UNSEEN_SEED, pairs_per_slot=2, families=CODES,
                            suite_id=transfer.UNSEEN_SUITE_ID, progress=False)  # fmt: skip
@@ -458,7 +458,7 @@ def test_the_unseen_suite_regenerates_from_its_seed(suite):
 
 
 def test_the_dataset_plans_a_registered_family_on_its_own_stream():
-    from lantern_jax.dataset.generate import _plan_key
+    from lantern_jax.dataset.generation import _plan_key
     from lantern_jax.dataset.scenes import build_scenes, plan_scenes
 
     specs = plan_scenes(2, seed=5, families=["JWK"])

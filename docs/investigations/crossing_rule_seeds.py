@@ -33,7 +33,7 @@ from lantern_jax.dataset.store import load_frames
 from lantern_jax.evaluation import evaluate
 from lantern_jax.policies.learned.checkpoint import checkpoint_policy, shipped_path
 from lantern_jax.training.config import load_config
-from lantern_jax.training.train import train
+from lantern_jax.training.behaviour_cloning import train
 
 ROOT = Path(__file__).resolve().parents[2]  # the repository
 RULES = ("both", "onset")

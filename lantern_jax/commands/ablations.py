@@ -31,7 +31,7 @@ def list_ablations() -> None:
     """Print every protocol ablation with its description."""
     from tabulate import tabulate
 
-    from lantern_jax.scenarios.ablations import ABLATIONS
+    from lantern_jax.scenarios.protocol_variants import ABLATIONS
 
     rows = [[a.name, a.description] for a in ABLATIONS]
     print(tabulate(rows, headers=["ablation", "description"], disable_numparse=True))
@@ -51,10 +51,10 @@ def cmd_ablations(args: argparse.Namespace, argv: Sequence[str]) -> int:
 
     check_out(args.out, owned=ABLATION_FILES)
     suite = load_selected_suite(args)
-    from lantern_jax.ablations import run_ablations
+    from lantern_jax.ablation_table import run_ablations
     from lantern_jax.evaluation import PolicyError
     from lantern_jax.report import format_ablation_table, interval_note, write_ablation_outputs
-    from lantern_jax.scenarios.ablations import ABLATIONS
+    from lantern_jax.scenarios.protocol_variants import ABLATIONS
 
     stage(
         args,

@@ -27,7 +27,7 @@ def cmd_dataset(args: argparse.Namespace, argv: Sequence[str]) -> int:
     """Generate (or resume) the dataset and print its card summary."""
     del argv
     from lantern_jax.constants import FAMILIES
-    from lantern_jax.dataset.generate import generate_dataset
+    from lantern_jax.dataset.generation import generate_dataset
     from lantern_jax.dataset.scenes import PAIRS_PER_FAMILY, PLAN_JSON
     from lantern_jax.dataset.store import CARD_JSON, CARD_MD, DatasetError, card_markdown
 

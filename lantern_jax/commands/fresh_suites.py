@@ -2,7 +2,7 @@
 
 One suite is one sample of pairs; a conclusion that holds on it may not hold on another drawn
 the same way.  This generates ``K`` fresh suites with the suite generator
-(:func:`lantern_jax.generate.generate_suite`, the same design and the same validator as the
+(:func:`lantern_jax.suite_generation.generate_suite`, the same design and the same validator as the
 ``--suite`` they are compared with), from seeds ``S, S + 1, ..., S + K - 1``, evaluates the
 ``--suite`` and every fresh one with the same policies and ablation, and reports:
 
@@ -42,8 +42,8 @@ def fresh_suite_id(seed: int) -> str:
 
 def _fresh_suite(base, seed: int, out: Path, progress: bool):
     """Generate (or load, when written before from the same seed and validator) one suite."""
-    from lantern_jax.generate import generate_suite, suite_validator
     from lantern_jax.scenarios.suite import load_suite, write_manifest
+    from lantern_jax.suite_generation import generate_suite, suite_validator
 
     validator = suite_validator(base.report)
     sid = fresh_suite_id(seed)

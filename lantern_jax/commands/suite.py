@@ -114,8 +114,8 @@ def _check_regenerate_path(path: str) -> None:
 def _regenerate(args: argparse.Namespace) -> tuple[int, dict]:
     """Generate a fresh manifest into ``--regenerate``; returns the exit code and the
     manifest."""
-    from lantern_jax.generate import DEFAULT_SEED, generate_suite, suite_validator
     from lantern_jax.scenarios.suite import write_manifest
+    from lantern_jax.suite_generation import DEFAULT_SEED, generate_suite, suite_validator
 
     seed = DEFAULT_SEED if args.seed is None else args.seed
     validator = args.validator or suite_validator(load_selected_suite(args).report)
@@ -135,7 +135,7 @@ def _regenerate(args: argparse.Namespace) -> tuple[int, dict]:
 def cmd_suite(args: argparse.Namespace, argv: Sequence[str]) -> int:
     """``lantern-jax suite``: list, verify or regenerate a suite."""
     del argv
-    from lantern_jax.generate import (
+    from lantern_jax.suite_generation import (
         DEFAULT_SEED,
         regenerates_suite,
         suite_validator,

@@ -2,7 +2,7 @@
 and files are written from.
 
 They live here, below the code that computes them (:mod:`lantern_jax.evaluation`,
-:mod:`lantern_jax.ablations`), so that the report names them without importing its callers.
+:mod:`lantern_jax.ablation_table`), so that the report names them without importing its callers.
 :class:`lantern_jax.evaluation.EvalResult` is :class:`Evaluation` with the methods that write
 its files and its HTML report.
 """
@@ -56,12 +56,12 @@ class Evaluation:
 
 @dataclasses.dataclass
 class AblationResult:
-    """Everything :func:`lantern_jax.ablations.run_ablations` produces."""
+    """Everything :func:`lantern_jax.ablation_table.run_ablations` produces."""
 
     table: pd.DataFrame  # model, condition, variant, label, then TABLE_COLUMNS (0..100)
     route_table: pd.DataFrame  # every variant's route rows; condition "<c>" or "<c>:<variant>"
     manifest: dict
     results: dict[str, Evaluation]  # per variant
     #: model, condition, variant, then <c>_lo, <c>_hi, <c>_n per TABLE_COLUMNS
-    #: (:func:`lantern_jax.ablations.ablation_intervals`)
+    #: (:func:`lantern_jax.ablation_table.ablation_intervals`)
     intervals: pd.DataFrame | None = None

@@ -392,10 +392,10 @@ def format_ablation_table(
     """The ablation table (one row per model and variant) of one condition as text.
 
     Args:
-        df: :attr:`lantern_jax.ablations.AblationResult.table`.
+        df: :attr:`lantern_jax.ablation_table.AblationResult.table`.
         condition: the condition to show (the paper's table is the warning condition).
         tablefmt: a tabulate format.
-        intervals: :attr:`~lantern_jax.ablations.AblationResult.intervals`; each cell then
+        intervals: :attr:`~lantern_jax.ablation_table.AblationResult.intervals`; each cell then
             reads ``79.6 ±3.4`` (half the interval's width), :data:`FLAG` below ``MIN_N`` pairs,
             and a ``Pairs`` column is added.
     """

@@ -7,11 +7,12 @@ rule.  :func:`register_family` makes it known everywhere the six built-in famili
 parameter validation and suite files (:func:`lantern_jax.scenarios.suite.load_suite`), pair
 building (:func:`lantern_jax.scenarios.families.build_pair`), static validation with the premise
 rule (:func:`lantern_jax.scenarios.suite.static_check`), suite generation with the expert's
-validation and the near-duplicate rule (``lantern_jax.generate.generate_suite(families=...)``),
-evaluation and its tables (a column per registered family the results hold, after the six), and
-the dataset recorder (``lantern_jax.dataset.generate.generate_dataset(families=...)``).  On the
-command line, ``lantern-jax --families FILE.py ...`` imports a file (or module) that registers
-families before the command runs.  ``docs/families.md`` walks through a whole family;
+validation and the near-duplicate rule
+(``lantern_jax.suite_generation.generate_suite(families=...)``), evaluation and its tables (a
+column per registered family the results hold, after the six), and the dataset recorder
+(``lantern_jax.dataset.generation.generate_dataset(families=...)``). On the command line,
+``lantern-jax --families FILE.py ...`` imports a file (or module) that registers families before
+the command runs. ``docs/families.md`` walks through a whole family;
 :mod:`lantern_jax.scenarios.unseen` (the paper's three unseen hazards) is written with nothing
 but this module.
 

@@ -2,7 +2,7 @@
 
 120 matched Route A/B pairs: 20 per family, five weather profiles x 24 pairs (4 per family per
 profile), as in the paper's appendix A.  A suite is generated from a seed by
-:mod:`lantern_jax.generate` (which needs the simulator and the expert to validate candidates
+:mod:`lantern_jax.suite_generation` (which needs the simulator and the expert to validate candidates
 dynamically); this module holds what does not: the :class:`Suite` and :class:`PairSpec` types,
 **static validation** (:func:`static_check`: a candidate whose parameters are out of range or
 infeasible — occluders overlapping the route corridor included —, whose markers are out of

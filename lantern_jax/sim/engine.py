@@ -2,7 +2,7 @@
 
 * :func:`build_executions` — every pair of a suite under Route A with warning, Route A without
   warning and Route B (``[A warning | A no-warning | B] x pairs``), optionally under a protocol
-  ablation (:mod:`lantern_jax.scenarios.ablations`);
+  ablation (:mod:`lantern_jax.scenarios.protocol_variants`);
 * :func:`run_executions` — rolls a batch to its end through slots refilled inside the compiled
   program (:func:`~lantern_jax.sim.rollout.rollout_scheduled_parallel`), the batch dealt to
   every device; returns the final states;
@@ -30,7 +30,7 @@ import numpy as np
 
 from lantern_jax import family_codes, program_store
 from lantern_jax.constants import BLOCKS, CONDITIONS, EXECUTIONS_PER_PAIR, FAMILIES
-from lantern_jax.scenarios.ablations import get_ablation
+from lantern_jax.scenarios.protocol_variants import get_ablation
 from lantern_jax.scenarios.suite import Suite, build_suite_batches, load_suite
 from lantern_jax.scoring.metrics import finalize
 from lantern_jax.sim.distributed import placement

@@ -2,7 +2,7 @@
 schedule, validation, per-epoch orbax checkpoints (a rerun resumes), the exported best model and
 the learning curve.
 
-:func:`~lantern_jax.training.train.train` (the dataset recipes) and
+:func:`~lantern_jax.training.behaviour_cloning.train` (the dataset recipes) and
 :func:`~lantern_jax.training.closed_loop.train_closed_loop` (DAgger rounds) both call
 :func:`fit`.
 """

@@ -35,8 +35,8 @@ from lantern_jax.diagnostics import run_recorded
 from lantern_jax.evaluation import EvalResult, settings_record
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.registry import get_policy
-from lantern_jax.scenarios.ablations import get_ablation
 from lantern_jax.scenarios.families import build_pair
+from lantern_jax.scenarios.protocol_variants import get_ablation
 from lantern_jax.scenarios.suite import SUITE_ID, Suite, load_suite
 from lantern_jax.scoring.components import ROUTE_A_GATES
 from lantern_jax.sim.settings import Settings, default_settings

@@ -4,7 +4,7 @@ timing, event activation, localization, and wording"), one record each.
 An :class:`Ablation` changes only protocol data of a batch of executions (its
 :class:`~lantern_jax.world.ExecutionConfig`): every variant runs the same compiled program as
 the full protocol.  :data:`ABLATIONS` lists them in the paper's order; :func:`get_ablation`
-looks one up by name.  The table that evaluates them is :mod:`lantern_jax.ablations`.
+looks one up by name.  The table that evaluates them is :mod:`lantern_jax.ablation_table`.
 """
 
 from __future__ import annotations

@@ -2,8 +2,8 @@
 "Sensitivity to warning timing, event activation, localization, and wording").
 
 :func:`run_ablations` evaluates one policy under the full temporal protocol and each of its five
-variants (:data:`lantern_jax.scenarios.ablations.ABLATIONS`; every variant changes one rule of
-the protocol) on the same suite, with the same Route B control and
+variants (:data:`lantern_jax.scenarios.protocol_variants.ABLATIONS`; every variant changes one
+rule of the protocol) on the same suite, with the same Route B control and
 the same CUS, and collects one row per variant:
 
 =============  ===================================================================================
@@ -34,7 +34,7 @@ from lantern_jax.evaluation import evaluate, package_versions
 from lantern_jax.policies.base import Policy
 from lantern_jax.report.results import AblationResult  # noqa: F401  (re-exported)
 from lantern_jax.report.tables import ABLATION_TABLE_COLUMNS
-from lantern_jax.scenarios.ablations import ABLATIONS, get_ablation
+from lantern_jax.scenarios.protocol_variants import ABLATIONS, get_ablation
 from lantern_jax.scenarios.suite import Suite, load_suite
 from lantern_jax.scoring.aggregate import (
     GROUP_COLUMNS,
@@ -120,7 +120,7 @@ def run_ablations(
         suite: a :class:`Suite` or a suite id / manifest path.
         policy_params: the policy's parameters (default: its ``init``).
         variants: ablation names to run (default: every one of
-            :data:`~lantern_jax.scenarios.ablations.ABLATIONS`, in that order).
+            :data:`~lantern_jax.scenarios.protocol_variants.ABLATIONS`, in that order).
         progress: show progress bars.
         bootstrap_seed: seed of the intervals' bootstrap (recorded in the manifest).
 

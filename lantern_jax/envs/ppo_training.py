@@ -3,7 +3,7 @@
 ::
 
     lantern-jax train --config configs/train_ppo.toml      # the [ppo] table: this module's train
-    python -m lantern_jax.envs.train --minutes 28 --out runs/ppo \
+    python -m lantern_jax.envs.ppo_training --minutes 28 --out runs/ppo \
         --checkpoint runs/ppo/ppo_lantern.msgpack         # the same, with options
 
 ``brax.training.agents.ppo.train`` runs unchanged on :class:`~lantern_jax.envs.LanternEnv`,
@@ -168,7 +168,7 @@ def train(
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(
-        prog="python -m lantern_jax.envs.train",
+        prog="python -m lantern_jax.envs.ppo_training",
         allow_abbrev=False,
         description="Train the ppo policy on the lantern environment.",
     )
