@@ -238,7 +238,7 @@ CALLBACK_LOGGERS = ("jax._src.callback", "jax._src.debugging")
 def _quiet_callback_log():
     """While a command runs, JAX's own log of a failed host callback is dropped: the error
     reaches the command, which names it in one line
-    (:func:`lantern_jax.evaluation.explain_failure`)."""
+    (:func:`lantern_jax.policies.failures.explain_failure`)."""
     loggers, drop = [logging.getLogger(n) for n in CALLBACK_LOGGERS], _DropCallbackTraceback()
     for logger in loggers:
         logger.addFilter(drop)

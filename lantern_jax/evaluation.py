@@ -21,11 +21,8 @@ import hashlib
 import importlib.metadata as md
 import os
 import platform
-import re
 import sys
-import sysconfig
 import time
-import traceback
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -39,6 +36,7 @@ from lantern_jax.checks import check_seed
 from lantern_jax.constants import CONDITIONS, DT, ROUTE_B, SUITE_ID
 from lantern_jax.policies.base import Policy, check_policy_output
 from lantern_jax.policies.external import is_policy_source
+from lantern_jax.policies.failures import PolicyError, explain_failure
 from lantern_jax.policies.registry import (
     get_policy,
     policy_names,
@@ -70,7 +68,7 @@ from lantern_jax.sim.engine import (
 )
 from lantern_jax.sim.observe import observe
 from lantern_jax.sim.programs import abstract
-from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings, default_settings
+from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings, default_settings, settings_record
 from lantern_jax.sim.split import prepare
 from lantern_jax.sim.state import init_state
 from lantern_jax.sim.switch import PolicySwitch, policy_switch, switch_params
@@ -209,89 +207,6 @@ def run_policy(
         timings=timings,
         program=str(chosen[-1]),
     )
-
-
-#: Hints for errors a policy's own code commonly raises while JAX traces it.
-_HINTS = {
-    "TracerBoolConversionError": "a Python `if`/`and`/`or` on an array value: write it with "
-    "jnp.where(condition, a, b) (or jax.lax.cond), which JAX can trace",
-    "ConcretizationTypeError": "a Python value needed from an array (an `if`, `int()`, a "
-    "shape): use jnp.where / jax.lax.cond, and shapes that do not depend on array values",
-    "TracerIntegerConversionError": "an array used as a Python int (an index into a list, "
-    "range()): index arrays with jnp.take or x[i] on a jnp array",
-}
-
-
-def _is_library(filename: str) -> bool:
-    """Whether ``filename`` is this package's, an installed package's or Python's own."""
-
-    name = os.path.abspath(filename)
-    here = os.path.dirname(os.path.abspath(__file__))
-    stdlib = os.path.abspath(sysconfig.get_paths()["stdlib"])
-    return (
-        name.startswith((here + os.sep, stdlib + os.sep))
-        or f"{os.sep}site-packages{os.sep}" in name
-        or "<frozen" in name
-    )
-
-
-def _user_frame(e: BaseException) -> str:
-    """``file.py:LINE`` of the innermost frame of ``e``'s traceback outside JAX, Python's own
-    library and this package (the user's own code), or ""."""
-
-    found = ""
-    for frame in traceback.extract_tb(e.__traceback__):
-        if not _is_library(frame.filename):
-            found = f"{os.path.basename(frame.filename)}:{frame.lineno}"
-    return found
-
-
-#: ``  File "PATH", line N`` of a traceback carried as text (an error raised in a host callback
-#: reaches the caller as a runtime error whose message holds the callback's traceback)
-_TRACEBACK_FILE = re.compile(r'^\s*File "([^"]+)", line (\d+)')
-
-
-def _callback_failure(message: str) -> tuple[str, str] | None:
-    """For the message of an error raised inside a host callback (``jax.pure_callback``, as
-    :mod:`lantern_jax.policies.host` uses): the callback's own exception line and the user's
-    ``file.py:LINE`` it came from ("" if none); ``None`` for any other message."""
-    if "Traceback (most recent call last)" not in message:
-        return None
-    lines = [ln for ln in message.strip().splitlines() if ln.strip()]
-    where = ""
-    for ln in lines:
-        m = _TRACEBACK_FILE.match(ln)
-        if m and not _is_library(m.group(1)):
-            where = f"{os.path.basename(m.group(1))}:{m.group(2)}"
-    return lines[-1].strip(), where
-
-
-def explain_failure(e: BaseException) -> str:
-    """One line for a policy's failure: the error's type and first (and last) message line,
-    where in the user's code it happened, and a hint for the errors tracing commonly raises.
-    An error raised inside a host model's callback is reported as that error (its own type,
-    message and line in the user's file), not as the runtime's wrapper around it."""
-    inner = _callback_failure(str(e))
-    if inner is not None:
-        why, where = inner
-        text = f"in the host callback: {why}"
-    else:
-        lines = str(e).strip().splitlines() or [""]
-        why = lines[0] if len(lines) == 1 else f"{lines[0]} ... {lines[-1]}"
-        text = f"{type(e).__name__}: {why}"
-        where = _user_frame(e)
-    if where:
-        text += f" (at {where})"
-    hint = _HINTS.get(type(e).__name__)
-    if hint is None and isinstance(e, AttributeError) and "'NoneType'" in str(e):
-        hint = ("obs.privileged and obs.surround are None unless the policy declares the "
-                "'privileged' / 'surround_rig' sensor (Policy(..., sensors=(...)))")  # fmt: skip
-    return f"{text}; hint: {hint}" if hint else text
-
-
-class PolicyError(ValueError):
-    """A policy that cannot be evaluated: its ``act`` failed while being traced, compiled or
-    run, or returned the wrong shape; the message names the policy."""
 
 
 @dataclasses.dataclass
@@ -505,28 +420,6 @@ def _plan(pols: list[Policy], policy_params: list, execs: Executions, settings: 
         return shared, choices, prepare(split, execs.scenarios, settings)
     except Exception:  # noqa: BLE001  (a policy that fails is named when it runs on its own)
         return shared, choices, {}
-
-
-def settings_record(settings: Settings) -> dict:
-    """The settings of an evaluation as the manifest records them (every value, the bank as
-    its size and content hash, the user metrics by name, unit and description)."""
-    bank = settings.bank
-    digest = hashlib.sha256(repr(bank.entries).encode()).hexdigest()
-    scoring = {f.name: getattr(settings.scoring, f.name)
-               for f in dataclasses.fields(settings.scoring) if f.name != "metrics"}  # fmt: skip
-    metrics = settings.scoring.metrics
-    return dict(
-        scoring={k: _plain(v) for k, v in scoring.items()},
-        protocol={k: _plain(v) for k, v in dataclasses.asdict(settings.protocol).items()},
-        text_bank=dict(texts=len(bank), sha256=digest),
-        # the user metrics (scoring/user_metrics.py) the route table holds, when there are any
-        **({"metrics": [m.record() for m in metrics]} if metrics else {}),
-    )
-
-
-def _plain(v: Any) -> Any:
-    """A JSON-friendly value (a traced float leaf becomes a float)."""
-    return v if isinstance(v, int | str | bool) else float(np.asarray(v))
 
 
 def _manifest(s: Suite, ablation: str, execs: Executions, runs: list[PolicyRun],

@@ -67,8 +67,11 @@ def test_d_safe_and_premise_rules_are_the_papers_and_every_scene_carries_its_ent
 def test_a_users_family_is_an_entry_that_every_reader_reads(example):
     entry = FAMILY_REGISTRY.entry("JWK")
     record = example.RECORD
-    assert entry.record is record and not entry.builtin and entry.index == len(FAMILIES)
-    assert registry.registered_families() == {"JWK": record}
+    # the entry holds the record first registered: this one, or the same file imported under
+    # another module name by an earlier command in this process (the same family)
+    assert registry._identity(entry.record) == registry._identity(record)
+    assert not entry.builtin and entry.index == family_codes.index("JWK") >= len(FAMILIES)
+    assert registry.registered_families()["JWK"] is entry.record
     assert dict(spec.param_ranges("JWK")) == {**spec.COMMON_RANGES, **record.ranges}
     assert premise.premise_rule("JWK") == record.premise
     assert entry.template == record.warning

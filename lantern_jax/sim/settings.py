@@ -24,6 +24,10 @@ each: the dataclasses' field defaults.
 
 from __future__ import annotations
 
+import dataclasses
+import hashlib
+from typing import Any
+
 import numpy as np
 from flax import struct
 
@@ -91,3 +95,25 @@ def default_settings() -> Settings:
     when no family is registered)."""
     bank = registered_bank()
     return DEFAULT_SETTINGS if bank == DEFAULT_BANK else DEFAULT_SETTINGS.replace(bank=bank)
+
+
+def settings_record(settings: Settings) -> dict:
+    """The settings of an evaluation as the manifest records them (every value, the bank as
+    its size and content hash, the user metrics by name, unit and description)."""
+    bank = settings.bank
+    digest = hashlib.sha256(repr(bank.entries).encode()).hexdigest()
+    scoring = {f.name: getattr(settings.scoring, f.name)
+               for f in dataclasses.fields(settings.scoring) if f.name != "metrics"}  # fmt: skip
+    metrics = settings.scoring.metrics
+    return dict(
+        scoring={k: _plain(v) for k, v in scoring.items()},
+        protocol={k: _plain(v) for k, v in dataclasses.asdict(settings.protocol).items()},
+        text_bank=dict(texts=len(bank), sha256=digest),
+        # the user metrics (scoring/user_metrics.py) the route table holds, when there are any
+        **({"metrics": [m.record() for m in metrics]} if metrics else {}),
+    )
+
+
+def _plain(v: Any) -> Any:
+    """A JSON-friendly value (a traced float leaf becomes a float)."""
+    return v if isinstance(v, int | str | bool) else float(np.asarray(v))
