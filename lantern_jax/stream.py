@@ -79,6 +79,18 @@ def _finalize(states) -> Any:
     return finalize(states.telemetry)
 
 
+def _flat(out: dict[str, Any]) -> dict[str, Any]:
+    """Per-execution arrays by name: a tuple value (``ExecutionMetrics.metrics``, the user
+    metrics' values) becomes one entry per element, ``name[i]``."""
+    flat: dict[str, Any] = {}
+    for name, value in out.items():
+        if isinstance(value, tuple):
+            flat.update({f"{name}[{i}]": v for i, v in enumerate(value)})
+        else:
+            flat[name] = value
+    return flat
+
+
 @dataclasses.dataclass
 class StreamResult:
     """Per-execution outputs of a streamed workload."""
@@ -126,7 +138,7 @@ def stream_executions(
             out = (collect or _finalize)(final)
             if dataclasses.is_dataclass(out):
                 out = {f.name: getattr(out, f.name) for f in dataclasses.fields(out)}
-            for name, value in out.items():
+            for name, value in _flat(out).items():
                 col = np.asarray(value)[: len(ids)]
                 if name not in metrics:
                     metrics[name] = np.empty((count, *col.shape[1:]), col.dtype)

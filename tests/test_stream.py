@@ -48,10 +48,23 @@ def test_chunks_give_the_one_batch_result(stress):
     assert streamed.chunks == 3
     final, _ = run_executions(ego, source(np.arange(count)), params, max_ticks)
     whole = jax.tree.map(np.asarray, finalize(final.telemetry))
+    assert whole.metrics == () and not any(k.startswith("metrics") for k in streamed.metrics)
     for f in dataclasses.fields(whole):
+        if f.name == "metrics":  # the user metrics' values: none in the default settings
+            continue
         x, y = streamed.metrics[f.name], getattr(whole, f.name)
         assert x.shape == y.shape == (count,), f.name
         if np.issubdtype(y.dtype, np.floating):
             np.testing.assert_allclose(x, y, atol=REPRODUCIBLE_ATOL, rtol=0, err_msg=f.name)
         else:
             np.testing.assert_array_equal(x, y, err_msg=f.name)
+
+
+def test_a_tuple_of_values_becomes_one_column_each():
+    """ExecutionMetrics.metrics (the user metrics' values) is a tuple: one column per element."""
+    from lantern_jax.stream import _flat
+
+    a, u, v = np.zeros(3), np.ones(3), np.full(3, 2.0)
+    flat = _flat({"progress": a, "metrics": (u, v), "none": ()})
+    assert list(flat) == ["progress", "metrics[0]", "metrics[1]"]
+    assert flat["metrics[1]"] is v
