@@ -86,6 +86,7 @@ from lantern_jax.scoring.uncertainty import (
 from lantern_jax.sim.engine import Program, check_texts
 from lantern_jax.sim.rollout import rollout
 from lantern_jax.sim.settings import Settings, default_settings
+from lantern_jax.sim.switch import reference_driver, shared_program
 from lantern_jax.times import ticks, ticks_covering
 from lantern_jax.world import Scenario, tree_stack
 
@@ -247,9 +248,10 @@ def wording_table(
     s = load_suite(suite) if isinstance(suite, str) else suite
     pol, params = _policy(policy, policy_params)
     runs = {}
+    shared = shared_program([pol], [params])  # a reference policy: the evaluation's program
     for ablation in ("none", "held_out_paraphrase"):
-        execs = build_executions(s, ablation)
-        runs[ablation] = run_policy(pol, execs, params).route_table
+        execs = build_executions(s, ablation, bucket=True)
+        runs[ablation] = run_policy(pol, execs, params, shared=shared).route_table
         if ablation == "held_out_paraphrase":
             tiers = paraphrase_tiers(execs.take(execs.scenarios.config, WARNING_CONDITION))
     pair_ids = [p.pair_id for p in s.pairs]
@@ -282,14 +284,19 @@ def run_recorded(
     states, tick records, hard metrics), NumPy, leading axis = execution, over a horizon
     covering the longest route timeout, rounded up to a multiple of
     :data:`~lantern_jax.constants.RECORD_HORIZON_STEP_S` (so that pairs share a program; the
-    ticks past an execution's end repeat its final state, ``done`` set)."""
+    ticks past an execution's end repeat its final state, ``done`` set).  A reference policy
+    runs as its member of the reference switch
+    (:func:`~lantern_jax.sim.switch.reference_driver`)."""
     batch = tree_stack(scenarios)
     settings = default_settings() if settings is None else settings
     check_texts(settings, batch)
     longest = float(np.max(np.asarray(batch.config.timeout_s)))
     horizon_s = np.ceil(longest / RECORD_HORIZON_STEP_S) * RECORD_HORIZON_STEP_S
     horizon = ticks_covering(horizon_s, slack=1e-6)
-    final, rec = _recorded(batch, params, settings, program=Program(policy), horizon=horizon)
+    # a reference policy runs as its member of the reference switch: every reference policy's
+    # recorded rollouts share one program (and the evaluation's bits)
+    driver, params = reference_driver(policy, params)
+    final, rec = _recorded(batch, params, settings, program=Program(driver), horizon=horizon)
     metrics = jax.vmap(lambda t: finalize(t, settings.scoring))(final.telemetry)
     return jax.tree.map(np.asarray, (final, rec, metrics))
 
@@ -543,15 +550,16 @@ def language_table(
     """
     s = load_suite(suite) if isinstance(suite, str) else suite
     pol, params = _policy(policy, policy_params)
-    execs = build_executions(s)
+    execs = build_executions(s, bucket=True)
     fam = np.asarray(execs.scenarios.config.family).astype(int)
     other = np.asarray([OTHER_FAMILY[f] for f in fam], np.int32)  # canonical id == family
+    shared = shared_program([pol], [params])  # a reference policy: the evaluation's program
     runs = {
-        "delivered text": run_policy(pol, execs, params).route_table,
-        "other family's text": run_policy(pol, _with_text_ids(execs, other), params).route_table,
-        "empty text": run_policy(
-            pol, _with_text_ids(execs, np.full_like(other, EMPTY_TEXT_ID)), params
-        ).route_table,
+        "delivered text": run_policy(pol, execs, params, shared=shared).route_table,
+        "other family's text": run_policy(pol, _with_text_ids(execs, other), params,
+                                          shared=shared).route_table,  # fmt: skip
+        "empty text": run_policy(pol, _with_text_ids(execs, np.full_like(other, EMPTY_TEXT_ID)),
+                                 params, shared=shared).route_table,  # fmt: skip
     }
     runs["no warning"] = runs["delivered text"]
 

@@ -71,7 +71,7 @@ from lantern_jax.sim.programs import abstract
 from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings, default_settings, settings_record
 from lantern_jax.sim.split import prepare
 from lantern_jax.sim.state import init_state
-from lantern_jax.sim.switch import PolicySwitch, policy_switch, switch_params
+from lantern_jax.sim.switch import PolicySwitch, as_member, shared_program
 from lantern_jax.times import happened, time_or_nan
 
 __all__ = [
@@ -176,12 +176,7 @@ def run_policy(
     check_policy_output(pol, params, obs)
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
-    driver, run_params = pol, params
-    if shared is not None:
-        switch, members = shared
-        i = switch.index_of(pol)
-        members = (*members[:i], params, *members[i + 1 :])
-        driver, run_params = switch, switch_params(switch, i, members)
+    driver, run_params = (pol, params) if shared is None else as_member(shared, pol, params)
     chosen: list = []
     shown = stage if stage is None else lambda what: stage(f"{what}, {chosen[-1].path} path")
     final, t_compile = run_executions(
@@ -313,28 +308,6 @@ def _check_not_impostor(pol: Policy) -> None:
         )
 
 
-def shared_program(pols: list[Policy], policy_params: list) -> tuple[PolicySwitch, tuple] | None:
-    """One program for every policy of an evaluation, or ``None`` when they share one already.
-
-    Policies with the same program (:attr:`~lantern_jax.policies.base.Policy.program`: act
-    function, sensors, carry; e.g. two checkpoints of one architecture) already share a compiled
-    program; policies with different ones are joined in a
-    :class:`~lantern_jax.sim.switch.PolicySwitch` (members in order of first appearance), so
-    the simulator is compiled once for all of them.  Returns ``(switch, members' parameters)``
-    for :func:`run_policy` (each member's parameters those of its first policy; they fix the
-    program's argument shapes), or ``None`` for fewer than two distinct programs.
-    """
-    members: dict[tuple, tuple] = {}
-    for pol, par in zip(pols, policy_params, strict=True):
-        if pol.program not in members:
-            params = pol.init(jax.random.PRNGKey(0)) if par is None else par
-            members[pol.program] = (pol, params)
-    if len(members) < 2:
-        return None
-    reps, params = zip(*members.values(), strict=True)
-    return policy_switch(reps), tuple(params)
-
-
 #: The evaluation's progress bar: policies done, elapsed time and what the current policy does
 #: (``starting``, ``compiling``, ``<n> executions``, ``scoring``); no remaining-time estimate,
 #: which the first policy's compilation would make meaningless.
@@ -406,7 +379,7 @@ def _plan(pols: list[Policy], policy_params: list, execs: Executions, settings: 
     fused = [(p, par) for p, par, c in zip(pols, policy_params, choices, strict=True)
              if c.path == "fused"]  # fmt: skip
     shared = None
-    if share and len(fused) > 1:
+    if share and fused:
         shared = shared_program([p for p, _ in fused], [par for _, par in fused])
     split = [(p, p.init(jax.random.PRNGKey(0)) if par is None else par)
              for p, par, c in zip(pols, policy_params, choices, strict=True)

@@ -161,10 +161,25 @@ def test_switches_of_the_same_programs_are_one_program():
 
 def test_shared_program_joins_distinct_programs_only():
     expert, ego, coop = (get_policy(n) for n in ("expert", "ego", "coop"))
-    assert shared_program([ego, ego], [None, None]) is None  # one program
+    assert shared_program([PLAIN, PLAIN], [None, None]) is None  # one program
+    assert shared_program([PLAIN], [None]) is None
     sw, params = shared_program([expert, ego, coop], [None, None, None])
     assert [m.name for m in sw.members] == ["expert", "ego", "coop"] and len(params) == 3
     assert sw.branch_of == (0, 1, 1)  # ego and coop: one planner branch
+
+
+def test_any_reference_policies_share_the_main_commands_program():
+    """``coop`` alone, ``ego`` and ``coop`` in either order and all three run one program (the
+    reference switch, in the reference order); another policy joins it after them."""
+    expert, ego, coop = (get_policy(n) for n in ("expert", "ego", "coop"))
+    main = Program(shared_program([expert, ego, coop], [None] * 3)[0])
+    for pols in ([coop], [ego], [coop, ego], [ego, coop], [coop, expert]):
+        sw, params = shared_program(pols, [None] * len(pols))
+        assert Program(sw) == main, [p.name for p in pols]
+        assert len(params) == 3
+    sw, params = shared_program([PLAIN, coop], [jnp.float32(2.0), None])
+    assert [m.name for m in sw.members] == ["expert", "ego", "coop", PLAIN.name]
+    assert float(params[3]) == 2.0
 
 
 @pytest.mark.parametrize(

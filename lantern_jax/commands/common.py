@@ -15,9 +15,8 @@ from collections.abc import Collection, Iterable, Sequence
 
 from lantern_jax.commands import UsageError
 from lantern_jax.commands.runtime import check_interrupt
+from lantern_jax.policies.registry import REFERENCE_POLICIES  # what --policy all stands for
 
-#: The reference policies, what ``--policy all`` (and no ``--policy``) stands for.
-REFERENCE_POLICIES = ("expert", "ego", "coop")
 #: The policy ``wording`` and ``diagnostics`` run when given neither --policy nor --checkpoint.
 ONE_POLICY_DEFAULT = "coop"
 

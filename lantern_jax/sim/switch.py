@@ -40,6 +40,7 @@ from flax import struct
 from lantern_jax.language import PAD_ID
 from lantern_jax.observation import FRONT_CAMERA, WARNING
 from lantern_jax.policies.base import Policy
+from lantern_jax.policies.registry import REFERENCE_POLICIES, get_policy
 from lantern_jax.scenarios.warnings import DEFAULT_BANK, TextBank
 from lantern_jax.sensors.registry import declared
 from lantern_jax.sim.observe import observe
@@ -255,3 +256,56 @@ def switch_params(switch: PolicySwitch, index: int, members: tuple) -> SwitchPar
             places.append(where[key])
         layout.append((treedef, tuple(places)))
     return SwitchParams(index=jnp.asarray(index, jnp.int32), pool=tuple(pool), layout=tuple(layout))
+
+
+def shared_program(pols: list[Policy], policy_params: list) -> tuple[PolicySwitch, tuple] | None:
+    """One program for every policy of an evaluation, or ``None`` when they share one already.
+
+    Policies with the same program (:attr:`~lantern_jax.policies.base.Policy.program`: act
+    function, sensors, carry; e.g. two checkpoints of one architecture) already share a compiled
+    program; policies with different ones are joined in a
+    :class:`~lantern_jax.sim.switch.PolicySwitch`, so the simulator is compiled once for all of
+    them.  When any of them is a reference policy (:data:`REFERENCE_POLICIES`), every reference
+    policy is a member, first and in that order, and the others follow in order of first
+    appearance: an evaluation of any reference policies (``coop`` alone, ``ego`` and ``coop``
+    in either order, the default three) runs the one program the main command compiles, kept in
+    the program store, and gives the same bits as that command's rows.  Returns ``(switch,
+    members' parameters)`` for :func:`as_member` (each member's parameters those of its first
+    policy, or the reference policy's own; they fix the program's argument shapes), or
+    ``None`` for fewer than two distinct programs.
+    """
+    references = [get_policy(n) for n in REFERENCE_POLICIES]
+    reference_programs = {r.program for r in references}
+    members: dict[tuple, tuple] = {}
+    if any(p.program in reference_programs for p in pols):
+        for ref in references:
+            members.setdefault(ref.program, (ref, ref.init(jax.random.PRNGKey(0))))
+    for pol, par in zip(pols, policy_params, strict=True):
+        if pol.program not in members:
+            params = pol.init(jax.random.PRNGKey(0)) if par is None else par
+            members[pol.program] = (pol, params)
+    if len(members) < 2:
+        return None
+    reps, params = zip(*members.values(), strict=True)
+    return policy_switch(reps), tuple(params)
+
+
+def as_member(shared: tuple[PolicySwitch, tuple], policy: Policy,
+              params: Any) -> tuple[PolicySwitch, SwitchParams]:  # fmt: skip
+    """``(switch, switch parameters)`` that run ``policy`` with ``params`` as its member of a
+    shared program (:func:`shared_program`'s ``(switch, members' parameters)``).
+
+    Raises:
+        ValueError: when ``policy`` is not a member.
+    """
+    switch, members = shared
+    i = switch.index_of(policy)
+    return switch, switch_params(switch, i, (*members[:i], params, *members[i + 1 :]))
+
+
+def reference_driver(policy: Policy, params: Any) -> tuple[Any, Any]:
+    """``(driver, parameters)`` to roll out one policy: a reference policy (or any policy of a
+    reference policy's program) as its member of the reference switch (:func:`shared_program`,
+    the program every evaluation of reference policies runs), any other policy as itself."""
+    shared = shared_program([policy], [params])
+    return (policy, params) if shared is None else as_member(shared, policy, params)
