@@ -15,7 +15,7 @@ from collections.abc import Collection, Iterable, Sequence
 
 from lantern_jax.commands import UsageError
 from lantern_jax.commands.runtime import check_interrupt
-from lantern_jax.policies.registry import REFERENCE_POLICIES  # what --policy all stands for
+from lantern_jax.policies.names import REFERENCE_POLICIES  # what --policy all stands for
 
 #: The policy ``wording`` and ``diagnostics`` run when given neither --policy nor --checkpoint.
 ONE_POLICY_DEFAULT = "coop"

@@ -10,6 +10,11 @@ from __future__ import annotations
 
 import re
 
+#: The reference policies of the paper's protocol, in the order they are evaluated and tabled:
+#: what ``lantern-jax evaluate`` runs by default (and ``--policy all`` stands for).  They share
+#: one compiled program (:func:`lantern_jax.sim.switch.shared_program`).
+REFERENCE_POLICIES = ("expert", "ego", "coop")
+
 #: Names with a meaning of their own on the command line (``--policy all``).
 RESERVED_NAMES = ("all",)
 #: Longest policy name.

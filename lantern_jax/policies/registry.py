@@ -20,12 +20,10 @@ from lantern_jax.policies import expert, learned_ppo, reference
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.external import load_policy_source
 from lantern_jax.policies.learned.shipped import SHIPPED_MODELS
-from lantern_jax.policies.names import name_problem
-
-#: The reference policies of the paper's protocol, in the order they are evaluated and tabled:
-#: what ``lantern-jax evaluate`` runs by default (and ``--policy all`` stands for).  They share
-#: one compiled program (:func:`lantern_jax.evaluation.shared_program`).
-REFERENCE_POLICIES = ("expert", "ego", "coop")
+from lantern_jax.policies.names import (
+    REFERENCE_POLICIES,  # noqa: F401 (re-exported)
+    name_problem,
+)
 
 _REGISTRY: dict[str, Callable[[], Policy]] = {
     "expert": expert.expert_policy,
