@@ -139,9 +139,24 @@ def test_a_registry_refuses_what_is_not_an_entry_and_a_second_entry_under_a_code
     assert fresh.register(pe) is pe and fresh.register(pe) is pe and fresh.codes() == ("PE",)
     with pytest.raises(TypeError, match="FamilyEntry"):
         fresh.register({"code": "PE"})
-    with pytest.raises(ValueError, match="another entry"):
+    with pytest.raises(ValueError, match="already registered as another family"):
         fresh.register(dataclasses.replace(pe, d_safe=9.0))
     with pytest.raises(ValueError, match="not registered yet"):
         fresh.entry("VC")
     with pytest.raises(ValueError, match="not one of"):
         fresh.entry("NOPE")
+
+
+def test_the_family_and_sensor_tables_are_one_kind_of_registry():
+    """Both extension points keep their entries the same way (:mod:`lantern_jax.named_registry`):
+    an equal entry registered again is the one held, a snapshot restores what was there."""
+    from lantern_jax.named_registry import NamedRegistry
+    from lantern_jax.sensors.registry import SENSOR_REGISTRY, SensorRegistry
+
+    assert isinstance(FAMILY_REGISTRY, NamedRegistry) and isinstance(SENSOR_REGISTRY, NamedRegistry)
+    table = SensorRegistry()
+    front = SENSOR_REGISTRY.get("front_camera")
+    state = table.snapshot()
+    assert table.register(front) is front and table.names() == ("front_camera",)
+    table.restore(state)
+    assert table.names() == () and "front_camera" not in table

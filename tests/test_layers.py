@@ -21,7 +21,7 @@ PACKAGE = Path(lantern_jax.__file__).parent
 LAYERS: tuple[tuple[str, ...], ...] = (
     # values, the time sentinel, wall-clock breakdowns, the known family codes, array checks
     ("constants", "times", "timing", "family_codes", "checks", "actor_track", "jax_setup",
-     "user_code", "renamed"),  # fmt: skip
+     "user_code", "renamed", "named_registry"),  # fmt: skip
     ("geometry", "polyline", "split_map"),  # pure JAX maths and loop rewrites
     # scenario and observation types; I/O (files, configuration files, compiled programs on
     # disk); tokens

@@ -29,6 +29,7 @@ from typing import Any
 
 from lantern_jax import family_codes
 from lantern_jax.constants import FAMILIES
+from lantern_jax.named_registry import NamedRegistry
 from lantern_jax.scenarios.warning_texts import TEMPLATES
 
 #: A family's warning texts as the bank holds them: ``(kind, tier, text)``, the exact warning
@@ -100,35 +101,26 @@ class RegistryState:
     codes: tuple[tuple[str, str], ...]
 
 
-class FamilyRegistry:
+class FamilyRegistry(NamedRegistry[FamilyEntry]):
     """The ordered store of :class:`FamilyEntry` values (the six first, in the paper's order,
-    then the registered families in registration order)."""
+    then the registered families in registration order).
 
-    def __init__(self) -> None:
-        self._entries: dict[str, FamilyEntry] = {}
+    :meth:`register` adds a family's entry and returns the entry held: a built-in code takes its
+    fixed index; another code is registered in :mod:`lantern_jax.family_codes` (next free
+    index); registering an equal entry again returns the one held; it raises ``TypeError`` for
+    something that is not a :class:`FamilyEntry` and ``ValueError`` for a code already holding
+    another entry (or a malformed code)."""
 
-    def register(self, entry: FamilyEntry) -> FamilyEntry:
-        """Add a family's entry; return the entry the registry holds.
+    kind = "family"
+    entry_type = FamilyEntry
 
-        A built-in code takes its fixed index; another code is registered in
-        :mod:`lantern_jax.family_codes` (next free index).  Registering an equal entry again
-        returns the one held.
+    def key_of(self, entry: FamilyEntry) -> str:
+        return entry.code
 
-        Raises:
-            TypeError: for something that is not a :class:`FamilyEntry`.
-            ValueError: for a code already holding another entry (or a malformed code).
-        """
-        if not isinstance(entry, FamilyEntry):
-            raise TypeError(f"family registry: expected a FamilyEntry, got {type(entry).__name__}")
-        have = self._entries.get(entry.code)
-        if have is not None:
-            if have != entry:
-                raise ValueError(f"family {entry.code!r}: already registered with another entry")
-            return have
+    def added(self, entry: FamilyEntry) -> None:
+        """Give a new code its index (:mod:`lantern_jax.family_codes`; the six have theirs)."""
         if entry.code not in FAMILIES:
             family_codes.register(entry.code, entry.name)
-        self._entries[entry.code] = entry
-        return entry
 
     def entry(self, code: str) -> FamilyEntry:
         """The entry of a family code.
@@ -136,7 +128,7 @@ class FamilyRegistry:
         Raises:
             ValueError: for an unknown code, naming the known ones.
         """
-        found = self._entries.get(code) if isinstance(code, str) else None
+        found = self.held(code)
         if found is None:
             if code in FAMILIES:  # the six are registered by the families module
                 raise ValueError(f"family: {code!r} is not registered yet (import "
@@ -144,12 +136,9 @@ class FamilyRegistry:
             raise ValueError(f"family: {code!r} not one of {{{', '.join(self.codes())}}}")
         return found
 
-    def __contains__(self, code: object) -> bool:
-        return isinstance(code, str) and code in self._entries
-
     def codes(self) -> tuple[str, ...]:
         """Every registered code, in index order."""
-        return tuple(sorted(self._entries, key=family_codes.index))
+        return tuple(sorted(self.keys(), key=family_codes.index))
 
     def entries(self) -> tuple[FamilyEntry, ...]:
         """Every entry, in index order."""
@@ -159,16 +148,16 @@ class FamilyRegistry:
         """The entries registered from user code, in registration order."""
         return tuple(e for e in self.entries() if not e.builtin)
 
-    def snapshot(self) -> RegistryState:
+    def snapshot(self) -> RegistryState:  # type: ignore[override]
         """The registry as it is now, for :meth:`restore`."""
         return RegistryState(
-            tuple(self._entries.values()),
+            super().snapshot(),
             tuple((c, family_codes.name(c)) for c in family_codes.registered()),
         )
 
-    def restore(self, state: RegistryState) -> None:
+    def restore(self, state: RegistryState) -> None:  # type: ignore[override]
         """Forget every family registered since ``state`` was taken (:meth:`snapshot`)."""
-        self._entries = {e.code: e for e in state.entries}
+        super().restore(state.entries)
         family_codes.reset(dict(state.codes))
 
 

@@ -33,6 +33,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any
 
+from lantern_jax.named_registry import NamedRegistry
 from lantern_jax.observation import (
     FRONT_CAMERA,
     PRIVILEGED,
@@ -73,33 +74,21 @@ class Sensor:
     builtin: bool = False
 
 
-class SensorRegistry:
+class SensorRegistry(NamedRegistry[Sensor]):
     """The ordered table of :class:`Sensor` entries (the built-in four first)."""
 
-    def __init__(self) -> None:
-        self._sensors: dict[str, Sensor] = {}
+    kind = "sensor"
+    entry_type = Sensor
 
-    def register(self, sensor: Sensor) -> Sensor:
-        """Add a sensor; return the entry held (registering an equal sensor again is a no-op).
+    def key_of(self, sensor: Sensor) -> str:
+        return sensor.name
 
-        Raises:
-            TypeError: for something that is not a :class:`Sensor`.
-            ValueError: for an empty name, a name held by another sensor, or an ``add`` that is
-                not callable.
-        """
-        if not isinstance(sensor, Sensor):
-            raise TypeError(f"sensor registry: expected a Sensor, got {type(sensor).__name__}")
+    def check(self, sensor: Sensor) -> None:
+        """Refuse an empty name or an ``add`` that is not callable."""
         if not isinstance(sensor.name, str) or not sensor.name.strip():
             raise ValueError(f"sensor name: expected a non-empty string, got {sensor.name!r}")
         if not callable(sensor.add):
             raise ValueError(f"sensor {sensor.name!r}: add must be callable")
-        have = self._sensors.get(sensor.name)
-        if have is not None:
-            if have != sensor:
-                raise ValueError(f"sensor {sensor.name!r}: already registered as another sensor")
-            return have
-        self._sensors[sensor.name] = sensor
-        return sensor
 
     def get(self, name: str) -> Sensor:
         """The entry of a sensor name.
@@ -107,24 +96,14 @@ class SensorRegistry:
         Raises:
             ValueError: naming the known sensors.
         """
-        if name not in self._sensors:
-            raise ValueError(f"sensors: unknown {name}; known: {', '.join(self._sensors)}")
-        return self._sensors[name]
-
-    def __contains__(self, name: object) -> bool:
-        return isinstance(name, str) and name in self._sensors
+        found = self.held(name)
+        if found is None:
+            raise ValueError(f"sensors: unknown {name}; known: {', '.join(self.keys())}")
+        return found
 
     def names(self) -> tuple[str, ...]:
         """Every sensor name, in registration order (the built-in four first)."""
-        return tuple(self._sensors)
-
-    def snapshot(self) -> tuple[Sensor, ...]:
-        """The table as it is now, for :meth:`restore`."""
-        return tuple(self._sensors.values())
-
-    def restore(self, state: tuple[Sensor, ...]) -> None:
-        """Forget every sensor registered since ``state`` was taken (:meth:`snapshot`)."""
-        self._sensors = {s.name: s for s in state}
+        return self.keys()
 
 
 #: The table of every sensor the process knows.
