@@ -30,6 +30,7 @@ from lantern_jax.scenarios.suite import load_suite
 from lantern_jax.scoring.cus import soft_pair_cus
 from lantern_jax.sim.engine import build_executions, run_executions
 from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings
+from lantern_jax.sim.switch import reference_driver
 
 #: A pedestrian emergence (a warning the keyword rule does not act on), a right-turn yield (one
 #: it acts on, a light) and an Obstacle Reveal (cleared by the ego's stop): every change below
@@ -93,8 +94,12 @@ def probe(name: str | None) -> bytes:
 
 
 def _soft_cus(policy, params, suite, settings: Settings) -> bytes:
-    execs = build_executions(suite)
-    final, _ = run_executions(policy, execs.scenarios, params, execs.max_ticks, settings)
+    # the evaluation's own batch and program (the reference switch, padded to the suite's
+    # shape): the soft score reads the same rollout as the route table, compiled once
+    execs = build_executions(suite, bucket=True)
+    driver, run_params = reference_driver(policy, params)
+    final, _ = run_executions(driver, execs.scenarios, run_params, execs.max_ticks, settings,
+                              pad_to=execs.pad_to)  # fmt: skip
     tel = final.telemetry
     a = execs.take(tel, WARNING_CONDITION)  # Route A with warning
     b = execs.take(tel, ROUTE_B)
