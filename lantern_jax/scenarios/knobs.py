@@ -26,6 +26,7 @@ this module only defines what each knob means on any scenario.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -193,9 +194,28 @@ def set_knobs(scenario: Scenario, **values: Array) -> Scenario:
 
     A scenario assembled on the host (NumPy leaves, :func:`~lantern_jax.scenarios.assemble.
     host_arrays`) is taken as JAX arrays first, so the knobs' indexed updates apply to it too.
+    The writes run as one compiled program per set of knob names (:func:`_knob_setter`): a
+    suite of pairs with knobs builds in about the time of one without, instead of a few hundred
+    eager operations per pair.
     """
-    if values:
+    if not values:
+        return scenario
+    names = tuple(values)
+    for n in names:
+        knob(n)  # an unknown name is refused here, before anything is traced
+    return _knob_setter(names)(scenario, tuple(jnp.asarray(values[n], jnp.float32)
+                                               for n in names))  # fmt: skip
+
+
+@functools.cache
+def _knob_setter(names: tuple[str, ...]) -> Callable:
+    """``jit((scenario, values) -> scenario)`` writing the knobs ``names`` in order (one
+    program per name set and scenario shape; inside a trace it is inlined, so gradients flow)."""
+
+    def run(scenario: Scenario, values: tuple) -> Scenario:
         scenario = jax.tree.map(jnp.asarray, scenario)
-    for name, value in values.items():
-        scenario = knob(name).set(scenario, value)
-    return scenario
+        for name, value in zip(names, values, strict=True):
+            scenario = knob(name).set(scenario, value)
+        return scenario
+
+    return jax.jit(run)
