@@ -13,6 +13,16 @@ in the family's knobs (``--space knobs``), in adversarial tracks of its actors
 failure catalogue, and writes ``comparison.csv``, ``found.csv``, ``found_suite.json``, the
 catalogue (``catalogue.csv``, ``catalogue_suite.json`` — runnable with ``lantern-jax evaluate
 --suite`` — and ``catalogue.png``) and ``convergence.png`` (see :mod:`lantern_jax.stress.report`).
+
+::
+
+    lantern-jax stress --fragility --policy learned-closed-loop --sampling 16 --out runs/frag
+
+runs no search: every pair's fragility radius (the first-order distance to a collision over its
+family's normalised knobs) from one vmapped backward pass, verified by hard rollouts along the
+predicted direction (:mod:`lantern_jax.stress.fragility`); writes ``fragility.csv``,
+``fragility_probes.csv``, ``fragility_families.csv``, ``fragility_sampling.csv`` (with
+``--sampling``), ``fragility_suite.json`` and ``fragility.png``.
 """
 
 from __future__ import annotations
@@ -217,6 +227,12 @@ def cmd_stress(args: argparse.Namespace, argv: Sequence[str]) -> int:
     if len(policies) != 1:
         raise UsageError(f"--policy: give one policy, got {', '.join(policies)}")
     args.policy = policies[0]
+    if args.fragility:
+        return _cmd_fragility(args)
+    if args.sampling is not None:
+        raise UsageError("--sampling: only --fragility reads it")
+    if args.family is None:
+        raise UsageError("--family is required (or --fragility: every pair of the suite)")
     if args.family not in FAMILIES:
         raise UsageError(f"--family {args.family!r}: not one of {', '.join(FAMILIES)}")
     methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())
@@ -271,6 +287,59 @@ def cmd_stress(args: argparse.Namespace, argv: Sequence[str]) -> int:
     return 0
 
 
+#: Search options --fragility does not read (refused when given with another value).
+SEARCH_ONLY = ("space", "budget_s", "budget_rollouts", "knobs", "range", "restarts", "samples",
+               "popsize", "sigma", "lr", "objective", "expert_weight", "horizon_s", "methods",
+               "hybrid_draws", "hybrid_steps", *ADVERSARY_OPTIONS)  # fmt: skip
+
+
+def _cmd_fragility(args: argparse.Namespace) -> int:
+    """``stress --fragility``: the fragility radius of every pair (of ``--family``), verified."""
+    from lantern_jax.constants import FAMILIES
+    from lantern_jax.scenarios.suite import load_suite
+    from lantern_jax.stress import fragility as frag
+    from lantern_jax.viz.fragility import fragility_figure
+
+    given = [f"--{k.replace('_', '-')}" for k in SEARCH_ONLY
+             if getattr(args, k) != args.search_defaults[k]]  # fmt: skip
+    if given:
+        raise UsageError(f"{', '.join(given)}: --fragility does not read "
+                         f"{'it' if len(given) == 1 else 'them'} (it runs no search)")  # fmt: skip
+    if args.family is not None and args.family not in FAMILIES:
+        raise UsageError(f"--family {args.family!r}: not one of {', '.join(FAMILIES)}")
+    check_out(args.out, owned=frag.FRAGILITY_FILES)
+    try:
+        suite = load_suite(args.suite) if args.suite else load_suite()
+    except (OSError, ValueError) as e:
+        raise UsageError(str(e)) from None
+    ids = [p.pair_id for p in suite.pairs
+           if (args.family is None or p.family == args.family)
+           and (args.pair is None or p.pair_id == args.pair)]  # fmt: skip
+    if not ids:
+        raise UsageError(f"--pair/--family: no pair of {suite.suite_id} matches")
+    try:
+        result = frag.fragility(suite.select(ids), args.policy, args.condition,
+                                args.temperature, progress=not args.quiet,
+                                sampling=args.sampling or 0, seed=args.seed)  # fmt: skip
+    except (ValueError, KeyError) as e:
+        raise UsageError(str(e).strip("'\"")) from None
+    title = f"{args.policy}, {args.condition}, {suite.suite_id} ({len(ids)} pairs)"
+    try:
+        files = frag.write_fragility(args.out, result, fragility_figure(result.table, title))
+    except OSError as e:
+        return write_failed(args.out, e)
+    cols = ["family", "pairs", "median_radius", "bounded_radius", "bounded_radius_lo",
+            "bounded_radius_hi", "fails_on_line", "within_2r", "within_2r_lo", "within_2r_hi",
+            "within_2r_n"]  # fmt: skip
+    fmt = lambda v: f"{v:.3f}"  # noqa: E731
+    print(result.families[cols].to_string(index=False, float_format=fmt))
+    if result.sampling is not None:
+        print("\nRank correlation of the radius with the failure rate of draws around each pair:")
+        print(result.sampling.to_string(index=False, float_format=fmt))
+    print(f"Wrote {len(files)} files to {args.out}")
+    return 0
+
+
 def _add_adversary_options(st: argparse.ArgumentParser) -> None:
     """The options only an adversary space reads (:data:`ADVERSARY_OPTIONS`)."""
     st.add_argument(
@@ -311,7 +380,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         allow_abbrev=False,
     )
     st.add_argument("--policy", default="coop", metavar="NAME", help="policy under test")
-    st.add_argument("--family", required=True, metavar="F", help="PE, VC, OR, LWW, RWW or RTY")
+    st.add_argument("--family", default=None, metavar="F",
+                    help="PE, VC, OR, LWW, RWW or RTY (required, except with --fragility: "
+                    "then the pairs of that family only)")  # fmt: skip
+    st.add_argument("--fragility", action="store_true",
+                    help="no search: every pair's fragility radius from one backward pass, "
+                    "verified by hard rollouts (reads --policy, --suite, --family, --pair, "
+                    "--condition, --temperature, --sampling, --seed, --out, --quiet)")  # fmt: skip
+    st.add_argument("--sampling", type=count(4096), default=None, metavar="N",
+                    help="--fragility: also N uniform draws around every pair, and the rank "
+                    "correlation of the radius with their failure rate (default: none)")
     st.add_argument(
         "--space",
         default="knobs",
@@ -400,4 +478,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                     help="hybrid: Adam steps per descent")  # fmt: skip
     st.add_argument("--seed", type=seed(), default=0, help="seed of every method's restarts")
     st.add_argument("--quiet", action="store_true", help="no progress lines")
-    st.set_defaults(func=cmd_stress)
+    # what --fragility compares the search options with (a value other than these was given)
+    st.set_defaults(func=cmd_stress,
+                    search_defaults={k: st.get_default(k) for k in SEARCH_ONLY})  # fmt: skip

@@ -17,5 +17,7 @@
 * :mod:`~lantern_jax.stress.catalogue` — the distinct failures (the near-duplicate rule on the
   adversary's trajectory), each a suite pair with a one-line description and a view;
 * :mod:`~lantern_jax.stress.report` — the whole run, the comparison table, the result files and
-  the gradient check.
+  the gradient check;
+* :mod:`~lantern_jax.stress.fragility` — every pair's first-order distance to a collision over
+  its normalised knobs, from one vmapped backward pass over the suite, verified by hard rollouts.
 """

@@ -194,6 +194,13 @@ def _softmin(x: Array, temperature: float) -> Array:
     return -temperature * jax.nn.logsumexp(-x / temperature)
 
 
+def soft_margin(margin_lse: Array, temperature: float) -> Array:
+    """() m, the soft collision margin of a watch's accumulators ``margin_lse`` (W,): each
+    watched actor's soft minimum over ticks, capped at :data:`~lantern_jax.stress.
+    plausibility.CAP_M`, then the soft minimum over the actors."""
+    return _softmin(softmin_decode(margin_lse, temperature, cap=rules.CAP_M), temperature)
+
+
 def part_value(
     problem: Problem, z: Array, part: Array, member_params: Any, data: tuple | None = None
 ) -> Array:
@@ -216,17 +223,14 @@ def part_value(
         sc_a, problem.soft_driver, member_params, problem.horizon, settings, watched, tracked
     )
 
-    def decoded(lse):
-        return _softmin(softmin_decode(lse, temp, cap=rules.CAP_M), temp)
-
     def policy_part(ops):
         tel, w = ops
         if problem.objective == "plausible":
             stop = jnp.max(jnp.where(tracked, w.stop_soft, 0.0))
             off = jnp.max(jnp.where(tracked, w.off_road_soft, 0.0))
-            return decoded(w.margin_lse) + rules.plausibility_term(stop, off)
+            return soft_margin(w.margin_lse, temp) + rules.plausibility_term(stop, off)
         if problem.objective == "margin":
-            return decoded(w.margin_lse)
+            return soft_margin(w.margin_lse, temp)
         if problem.objective == "clearance":
             return softmin_decode(tel.clearance.lse, temp, cap=CLEARANCE_CAP_M)
         s = settings.scoring
@@ -244,7 +248,7 @@ def part_value(
         return cus_of(quality_a(t["P"], safety, temporal, s), 1.0, gates, s)
 
     def expert_part(ops):
-        return rules.expert_term(decoded(ops[1].dist_lse), problem.expert_weight)
+        return rules.expert_term(soft_margin(ops[1].dist_lse, temp), problem.expert_weight)
 
     # a branch, not a select: the other part's derivative is never formed (a select would
     # multiply its infinite partials by zero)
