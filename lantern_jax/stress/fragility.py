@@ -68,8 +68,10 @@ from lantern_jax.constants import (
     ROUTE_A_GATE_NAMES,
     WARNING_CONDITION,
 )
+from lantern_jax.evaluation import evaluate
 from lantern_jax.files import StagedFolder, atomic_write
 from lantern_jax.policies.base import Policy
+from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.families import KNOBS_FIELD, family
 from lantern_jax.scenarios.knobs import knob
 from lantern_jax.scenarios.spec import content_hash
@@ -298,8 +300,6 @@ def evaluate_pairs(
 ) -> pd.DataFrame:
     """:func:`_pair_rows` of ``pairs`` evaluated as one suite by
     :func:`lantern_jax.evaluation.evaluate` (the policy and the expert together)."""
-    from lantern_jax.evaluation import evaluate  # the application layer, above the searches
-
     members = [policy] if policy.name == "expert" else [policy, "expert"]
     res = evaluate(members, suite=_suite_of(pairs, suite_id), progress=False, settings=settings)
     return _pair_rows(res, policy.name, condition)
@@ -487,8 +487,6 @@ def fragility(
     Raises:
         ValueError: naming a bad condition or temperature, or a family without knobs.
     """
-    from lantern_jax.policies.registry import get_policy
-
     pol = get_policy(policy) if isinstance(policy, str) else policy
     bad = sorted({p.family for p in suite.pairs if not family(p.family).knobs})
     if bad:
