@@ -18,6 +18,8 @@ from lantern_jax.cli import main
 from lantern_jax.scenarios.families import KNOB_RANGES, KNOBS_FIELD
 from lantern_jax.scenarios.suite import build_suite_batches, load_suite
 from lantern_jax.stress import fragility as frag
+from lantern_jax.stress.fragility_probes import probe_pair
+from lantern_jax.stress.knob_box import knob_union
 
 
 def _radius_at(f, u0: np.ndarray, active: np.ndarray | None = None) -> tuple:
@@ -113,9 +115,9 @@ def test_knob_boxes_normalise_each_family_and_mask_the_others():
 
 def test_probe_pairs_stay_inside_the_family_ranges():
     pair = load_suite().pairs[0]
-    names = frag.knob_union([pair.family])
+    names = knob_union([pair.family])
     hi = np.array([KNOB_RANGES[pair.family][n][1] for n in names]) + 1e-6  # float rounding
-    spec = frag.probe_pair(pair, names, hi, "_p3")
+    spec = probe_pair(pair, names, hi, "_p3")
     assert spec.pair_id == pair.pair_id + "_p3"
     assert all(v <= KNOB_RANGES[pair.family][n][1] for n, v in spec.params[KNOBS_FIELD].items())
 
