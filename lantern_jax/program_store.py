@@ -275,13 +275,29 @@ def _placement_text(sharding: Any) -> str:
     return f"{sharding}@{ids}"
 
 
-def _leaf_text(x: Any) -> str:
+def _host_placement() -> str:
+    """The placement text of a value ``jit`` places itself (a NumPy array, a Python scalar, an
+    uncommitted array): the default device's, as :func:`_placement_text` writes it."""
+    return _placement_text(jax.device_put(np.zeros((), np.bool_)).sharding)
+
+
+def _leaf_text(x: Any, host: str) -> str:
+    """What of an argument leaf fixes the program: shape, dtype, weak type and placement.
+
+    A host value is written as the array ``jit`` makes of it (its dtype canonicalized, on the
+    default device ``host``; a Python ``int`` or ``float`` weakly typed), so that the same
+    program is found whether a setting arrives as ``np.float32(2.0)`` or as an array on the
+    default device -- ``jit`` itself runs one program for both.
+    """
     if isinstance(x, jax.Array):
         return f"{x.shape}{x.dtype.str}:{x.weak_type}:{_placement_text(x.sharding)}"
     if isinstance(x, np.ndarray | np.generic):
-        return f"{np.shape(x)}{x.dtype.str}:host"
-    if isinstance(x, bool | int | float):  # traced as weak-typed scalars
-        return f"{type(x).__name__}:scalar"
+        dtype = jax.dtypes.canonicalize_dtype(x.dtype)
+        return f"{np.shape(x)}{dtype.str}:False:{host}"
+    if isinstance(x, bool | int | float):
+        weak = not isinstance(x, bool)  # Python numbers are traced weakly typed, bools not
+        dtype = jax.dtypes.canonicalize_dtype(np.result_type(type(x)))
+        return f"(){dtype.str}:{weak}:{host}"
     raise Unkeyable(f"argument leaf of type {type(x).__qualname__}")
 
 
@@ -290,11 +306,12 @@ def program_key(identity: Any, args: tuple) -> str | None:
     cannot be keyed with certainty (see :func:`describe`)."""
     try:
         leaves, treedef = jax.tree.flatten(args)
+        host = _host_placement()
         text = "\n".join([
             repr(sorted(environment().items())),
             describe(identity),
             str(treedef),
-            *map(_leaf_text, leaves),
+            *(_leaf_text(x, host) for x in leaves),
         ])  # fmt: skip
     except Unkeyable as e:
         log.debug("program not stored: %s", e)

@@ -182,6 +182,30 @@ def test_everything_that_determines_a_program_changes_its_key(monkeypatch):
     assert program_store.program_key(("rollout", _coop_user_act), args) is None
 
 
+
+def test_a_value_jit_places_itself_keys_as_the_array_jit_makes_of_it():
+    """``jit`` runs one program whether a leaf is a NumPy value, a Python number or the array on
+    the default device that ``jit`` would make of it, so the store finds one entry for all of
+    them (a planner constant changed with ``np.float32`` in a notebook loads the program a run
+    with the default parameters stored); weak types, dtypes and shapes still tell programs
+    apart."""
+    ident = ("rollout", expert_act, True, 24, 20)
+
+    def key(leaf):
+        return program_store.program_key(ident, ({"v": leaf},))
+
+    same = [
+        (np.float32(2.0), jnp.float32(5.0)),
+        (np.zeros((2, 3), np.float64), jnp.zeros((2, 3), jnp.float32)),  # float64 -> float32
+        (2.5, jnp.asarray(1.0)),  # a Python float: weakly typed float32
+        (3, jnp.asarray(7)),  # a Python int: weakly typed int32
+        (True, jnp.asarray(False)),
+    ]
+    for host, device in same:
+        assert key(host) == key(device), (host, device)
+    apart = [key(jnp.float32(1.0)), key(1.0), key(jnp.int32(1)), key(np.zeros(2, np.float32))]
+    assert len(set(apart)) == len(apart)  # strong vs weak, float vs int, shape
+
 def test_an_unreadable_entry_is_deleted_and_reported_missing(store):
     (store / "deadbeef.program").write_bytes(b"not a program")
     assert program_store.load("deadbeef") is None
