@@ -412,6 +412,17 @@ def load(key: str) -> Any | None:
     return compiled
 
 
+def touch(key: str) -> None:
+    """Mark the stored program ``key`` as used now (a process that runs it from memory uses it
+    as much as one that loads it): :func:`prune` removes the least recently used entries, and a
+    program every test or notebook cell runs from memory must not age out of the store while
+    the programs of one-off runs are saved after it."""
+    folder = store_dir()
+    if folder is not None:
+        with contextlib.suppress(OSError):
+            os.utime(folder / (key + _SUFFIX))
+
+
 def save(key: str, compiled: Any) -> bool:
     """Store ``compiled`` under ``key`` (atomically); ``False`` when it cannot be serialized
     (a program with constant arrays) or written."""

@@ -223,6 +223,28 @@ def test_a_freshly_compiled_program_round_trips_through_the_store(store):
     np.testing.assert_array_equal(np.asarray(loaded(x)), np.asarray(compiled(x)))
 
 
+def test_a_program_run_from_memory_stays_recently_used_in_the_store(store):
+    """A program every evaluation of a process runs from memory (the world program, say) is
+    used as much as one loaded from disk: each use marks its entry, so pruning removes the
+    one-off programs saved after it, not it."""
+    salt = float(np.random.default_rng().uniform(1.0, 2.0))  # a program no run compiled before
+    fn = jax.jit(lambda v: jnp.cos(v) * salt)
+    x = np.linspace(0.0, 1.0, 5, dtype=np.float32)
+    ident = ("rollout", expert_act, round(salt * 1e9))
+    programs.executable(fn, x, identity=ident)
+    (entry,) = store.glob("*.program")
+    old = time.time() - 3600
+    os.utime(entry, (old, old))
+    programs.executable(fn, x, identity=ident)  # found in memory
+    assert entry.stat().st_mtime > old + 3000
+    for i in range(3):  # programs saved after it, never used again
+        p = store / f"later{i}.program"
+        p.write_bytes(b"x")
+        os.utime(p, (old + 60 + i, old + 60 + i))
+    program_store.prune(store, keep=1)
+    assert list(store.glob("*.program")) == [entry]
+
+
 def test_prune_keeps_the_most_recently_used(tmp_path):
     now = time.time()
     for i in range(5):

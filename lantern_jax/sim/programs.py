@@ -27,6 +27,8 @@ from lantern_jax import program_store
 MAX_PROGRAMS = 32  # compiled programs kept in this process (least recently used dropped)
 
 _EXECUTABLES: collections.OrderedDict[tuple, Any] = collections.OrderedDict()
+#: The program store's key of each program in :data:`_EXECUTABLES` that has one.
+_STORE_KEYS: dict[tuple, str] = {}
 _BUILT: collections.OrderedDict[tuple, Any] = collections.OrderedDict()
 
 
@@ -74,6 +76,8 @@ def executable(fn, *args, static: dict | None = None, timings: dict | None = Non
     spent = {"trace + lower": 0.0, "XLA compile": 0.0, "program load": 0.0}
     if key in _EXECUTABLES:
         _EXECUTABLES.move_to_end(key)
+        if key in _STORE_KEYS:
+            program_store.touch(_STORE_KEYS[key])  # used: it must not age out of the store
     else:
         t0 = time.perf_counter()
         stored = program_store.program_key(identity, args) if identity is not None else None
@@ -90,8 +94,10 @@ def executable(fn, *args, static: dict | None = None, timings: dict | None = Non
             if stored is not None and fresh:
                 program_store.save(stored, exe)
         _EXECUTABLES[key] = exe
+        if stored is not None:
+            _STORE_KEYS[key] = stored
         while len(_EXECUTABLES) > MAX_PROGRAMS:
-            _EXECUTABLES.popitem(last=False)
+            _STORE_KEYS.pop(_EXECUTABLES.popitem(last=False)[0], None)
     if timings is not None:
         timings.update(spent)
     return _EXECUTABLES[key]
