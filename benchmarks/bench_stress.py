@@ -89,6 +89,45 @@ def cell_rows(traces, problem) -> tuple[pd.DataFrame, dict]:
     return table, verdict
 
 
+#: The per-method columns each cell prints.
+PRINTED = ["method", "failure_rate", "failure_rate_lo", "failure_rate_hi", "median_rollouts",
+           "found_within_equal_s", "median_s_at_equal_s", "distinct_failures",
+           "policy_pass_share", "rejected_expert", "rejected_adversary", "rollouts", "search_s"]
+
+
+def run_cell(suite, name: str, fam: str, cfg: report.StressConfig):
+    """One cell: the family's first pair the expert drives with margin, every method of
+    ``cfg`` on it.  Returns ``(problem, per-method table, cell row)``, or None when no pair of
+    the family qualifies; prints the cell.  The cell row needs random search among the
+    methods (its draws give the pass share and the plausible-failure share)."""
+    policy = get_policy(name)
+    t0 = time.perf_counter()
+    pair = pick_pair(suite, fam, cfg.resolved(), policy)
+    if pair is None:
+        print(f"\n{fam} {name}: no pair whose nominal scene the expert drives with margin")
+        return None
+    problem, traces = report.stress_test(pair, policy, cfg, suite=suite, progress=True)
+    table, verdict = cell_rows(traces, problem)
+    random_row = table.set_index("method").loc["random"]
+    pass_share = float(random_row["policy_pass_share"])
+    cell = dict(
+        policy=name, family=fam, pair=pair.pair_id, dim=problem.space.dim,
+        nominal_cus=problem.info["nominal_cus"],
+        nominal_policy_failed=problem.info["nominal_policy_failed"],
+        random_draws=int(random_row["verified"]), policy_pass_share=pass_share,
+        plausible_failure_share=float(random_row["plausible_failure_share"]),
+        rare=pass_share >= RARE_PASS_SHARE, compile_s=problem.info["compile_s"],
+        load_1min=os.getloadavg()[0], **verdict,
+    )  # fmt: skip
+    print(
+        f"\n{fam} {name} {pair.pair_id}, {problem.space.dim} dimensions (pass share of random "
+        f"draws {pass_share:.3f}; {time.perf_counter() - t0:.0f} s incl. compile "
+        f"{problem.info['compile_s']:.0f} s) {verdict}"
+    )
+    print(table[PRINTED].to_string(index=False, float_format=lambda x: f"{x:.2f}"), flush=True)
+    return problem, table.assign(policy=name, family=fam, pair=pair.pair_id), cell
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--budget-rollouts", type=int, default=64)
@@ -133,56 +172,13 @@ def main() -> None:
     )
     comps, cells, quality = [], [], []
     for name in args.policies.split(","):
-        policy = get_policy(name)
         for fam in args.families.split(","):
-            t0 = time.perf_counter()
-            pair = pick_pair(suite, fam, cfg.resolved(), policy)
-            if pair is None:
-                print(f"\n{fam} {name}: no pair whose nominal scene the expert drives with margin")
+            got = run_cell(suite, name, fam, cfg)
+            if got is None:
                 continue
-            problem, traces = report.stress_test(pair, policy, cfg, suite=suite, progress=True)
-            table, verdict = cell_rows(traces, problem)
-            random_row = table.set_index("method").loc["random"]
-            pass_share = float(random_row["policy_pass_share"])
-            cells.append(
-                dict(
-                    policy=name,
-                    family=fam,
-                    pair=pair.pair_id,
-                    dim=problem.space.dim,
-                    nominal_cus=problem.info["nominal_cus"],
-                    nominal_policy_failed=problem.info["nominal_policy_failed"],
-                    random_draws=int(random_row["verified"]),
-                    policy_pass_share=pass_share,
-                    plausible_failure_share=float(random_row["plausible_failure_share"]),
-                    rare=pass_share >= RARE_PASS_SHARE,
-                    compile_s=problem.info["compile_s"],
-                    load_1min=os.getloadavg()[0],
-                    **verdict,
-                )
-            )
-            comps.append(table.assign(policy=name, family=fam, pair=pair.pair_id))
-            cols = [
-                "method",
-                "failure_rate",
-                "failure_rate_lo",
-                "failure_rate_hi",
-                "median_rollouts",
-                "found_within_equal_s",
-                "median_s_at_equal_s",
-                "distinct_failures",
-                "policy_pass_share",
-                "rejected_expert",
-                "rejected_adversary",
-                "rollouts",
-                "search_s",
-            ]
-            print(
-                f"\n{fam} {name} {pair.pair_id} (pass share of random draws {pass_share:.3f}; "
-                f"{time.perf_counter() - t0:.0f} s incl. compile {problem.info['compile_s']:.0f}"
-                f" s) {verdict}"
-            )
-            print(table[cols].to_string(index=False, float_format=lambda x: f"{x:.2f}"))
+            problem, table, cell = got
+            cells.append(cell)
+            comps.append(table)
             if args.quality_points > 0:
                 points = np.random.default_rng(7).normal(
                     0.0, 0.5, (args.quality_points, problem.space.dim)

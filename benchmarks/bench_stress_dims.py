@@ -1,0 +1,140 @@
+"""Stress testing against the dimension of the adversary space: where, if anywhere, gradients
+overtake sampling.
+
+For one policy and family (the family's first pair whose nominal scene the expert drives with
+margin), every method runs on the same budget of rollouts per restart over a series of
+adversary spaces of growing dimension (:data:`SPACES`).  The tracks of every space cover the
+same seconds after each actor's start (finer knots, more actors), so what grows is the number
+of directions, not how long the adversary acts:
+
+* ``32``: the hazard, 16 knots of 0.5 s;
+* ``128``: the hazard, 64 knots of 0.125 s;
+* ``384``: the hazard and two background vehicles, 64 knots of 0.125 s each (where the scene
+  has them; the dimension reached is the one reported).
+
+The tracks hold at most :data:`lantern_jax.constants.MAX_KNOTS` knots (64) per actor, the
+world's array shape, so a space of 2,048 dimensions (per-tick controls of several actors)
+cannot be built without widening every world's track arrays; this benchmark stops where the
+world does.
+
+Per space it reports, per method: the share of restarts with a verified plausible failure (with
+its bootstrap interval over restarts) and the median rollouts to the first; per space: random
+search's share of plausible failures among its uniform draws.  Writes ``comparison.csv`` and
+``cells.csv`` (with ``space``) and ``dims.png`` (success rate and median rollouts to the first
+failure against dimension, one line per method) into ``--out``::
+
+    python benchmarks/bench_stress_dims.py --policy learned-closed-loop --family PE \\
+        --restarts 16 --budget-rollouts 64
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from bench_stress import run_cell
+
+from lantern_jax.scenarios.suite import load_suite
+from lantern_jax.stress import report
+
+#: name -> (actor groups, knots per track, s per knot, background vehicles)
+SPACES = {
+    "32": (("hazard",), 16, 0.5, 1),
+    "128": (("hazard",), 64, 0.125, 1),
+    "384": (("hazard", "background"), 64, 0.125, 2),
+}
+
+
+def figure(comp: pd.DataFrame, path: Path) -> None:
+    """Success rate (with its interval) and median rollouts to the first plausible failure
+    against the space's dimension, one line per method."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
+    for method, g in comp.groupby("method", sort=False):
+        g = g.sort_values("dim")
+        line = ax1.plot(g["dim"], g["failure_rate"], marker="o", label=method)[0]
+        ax1.fill_between(g["dim"], g["failure_rate_lo"], g["failure_rate_hi"], alpha=0.15,
+                         color=line.get_color())  # fmt: skip
+        med = np.where(np.isfinite(g["median_rollouts"]), g["median_rollouts"], np.nan)
+        ax2.plot(g["dim"], med, marker="o", color=line.get_color(), label=method)
+    dims = sorted(comp["dim"].unique())
+    for ax in (ax1, ax2):
+        ax.set_xscale("log", base=2)
+        ax.set_xticks(dims, [str(d) for d in dims])
+        ax.set_xlim(dims[0] / 1.3, dims[-1] * 1.3)
+        ax.set_xlabel("dimension of the adversary space")
+    ax1.set_ylabel("restarts with a plausible failure")
+    ax1.set_ylim(-0.02, 1.02)
+    ax2.set_ylabel("median rollouts to the first failure")
+    ax2.set_title("(no point: under half the restarts found one)", fontsize=9)
+    ax1.legend()
+    cells = comp[["policy", "family"]].drop_duplicates().itertuples(index=False)
+    fig.suptitle(", ".join(f"{p} {f}" for p, f in cells))
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--policy", default="learned-closed-loop")
+    ap.add_argument("--family", default="PE")
+    ap.add_argument("--spaces", default=",".join(SPACES), help=f"of {', '.join(SPACES)}")
+    ap.add_argument("--methods", default="gradient,hybrid,random,cmaes")
+    ap.add_argument("--restarts", type=int, default=16)
+    ap.add_argument("--budget-rollouts", type=int, default=64)
+    ap.add_argument("--budget-s", type=float, default=1800.0)
+    ap.add_argument("--horizon-s", type=float, default=20.0)
+    ap.add_argument("--out", default="runs/bench_stress_dims")
+    args = ap.parse_args()
+    names = args.spaces.split(",")
+    bad = [n for n in names if n not in SPACES]
+    if bad:
+        ap.error(f"--spaces: {', '.join(bad)} not of {', '.join(SPACES)}")
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    suite = load_suite()
+    load0 = os.getloadavg()
+    print(f"machine: {platform.machine()}, {os.cpu_count()} cores, load {load0[0]:.1f} (1 min); "
+          f"{args.policy} {args.family}, {args.restarts} restarts, {args.budget_rollouts} "
+          f"rollouts per restart, methods {args.methods}", flush=True)  # fmt: skip
+    comps, cells = [], []
+    t_all = time.perf_counter()
+    for name in names:
+        actors, knots, knot_s, background = SPACES[name]
+        cfg = report.StressConfig(
+            space="adversary", actors=actors, knots=knots, knot_s=knot_s, background=background,
+            restarts=args.restarts, budget_s=args.budget_s, budget_rollouts=args.budget_rollouts,
+            horizon_s=args.horizon_s, methods=tuple(args.methods.split(",")),
+        )  # fmt: skip
+        got = run_cell(suite, args.policy, args.family, cfg)
+        if got is None:
+            break
+        problem, table, cell = got
+        comps.append(table.assign(space=name, dim=problem.space.dim))
+        cells.append(dict(cell, space=name))
+        pd.concat(comps).to_csv(out / "comparison.csv", index=False)
+        pd.DataFrame(cells).to_csv(out / "cells.csv", index=False)
+    if not comps:
+        return
+    comp = pd.concat(comps)
+    figure(comp, out / "dims.png")
+    cols = ["dim", "method", "failure_rate", "failure_rate_lo", "failure_rate_hi",
+            "median_rollouts", "rollouts", "search_s"]  # fmt: skip
+    print(f"\ntotal {time.perf_counter() - t_all:.0f} s; load at the end "
+          f"{os.getloadavg()[0]:.1f} (1 min)")  # fmt: skip
+    print(comp[cols].to_string(index=False, float_format=lambda x: f"{x:.2f}"))
+    print(pd.DataFrame(cells)[["space", "dim", "policy_pass_share", "plausible_failure_share",
+                               "compile_s"]].to_string(index=False))  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
