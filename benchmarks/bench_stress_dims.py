@@ -98,16 +98,15 @@ def main() -> None:
     ap.add_argument("--plot-only", action="store_true",
                     help="draw dims.png again from the CSV files in --out, run nothing")
     args = ap.parse_args()
+    out = Path(args.out)
     if args.plot_only:
-        out = Path(args.out)
-        cells = pd.read_csv(out / "cells.csv")
-        figure(pd.read_csv(out / "comparison.csv"), cells, out / "dims.png")
+        figure(pd.read_csv(out / "comparison.csv"), pd.read_csv(out / "cells.csv"),
+               out / "dims.png")  # fmt: skip
         return
     names = args.spaces.split(",")
     bad = [n for n in names if n not in SPACES]
     if bad:
         ap.error(f"--spaces: {', '.join(bad)} not of {', '.join(SPACES)}")
-    out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     suite = load_suite()
     load0 = os.getloadavg()
@@ -133,14 +132,14 @@ def main() -> None:
         pd.DataFrame(cells).to_csv(out / "cells.csv", index=False)
     if not comps:
         return
-    comp = pd.concat(comps)
-    figure(comp, pd.DataFrame(cells), out / "dims.png")
+    comp, cell_table = pd.concat(comps), pd.DataFrame(cells)
+    figure(comp, cell_table, out / "dims.png")
     cols = ["dim", "method", "failure_rate", "failure_rate_lo", "failure_rate_hi",
             "median_rollouts", "rollouts", "search_s"]  # fmt: skip
     print(f"\ntotal {time.perf_counter() - t_all:.0f} s; load at the end "
           f"{os.getloadavg()[0]:.1f} (1 min)")  # fmt: skip
     print(comp[cols].to_string(index=False, float_format=lambda x: f"{x:.2f}"))
-    print(pd.DataFrame(cells)[["space", "dim", "policy_pass_share", "plausible_failure_share",
+    print(cell_table[["space", "dim", "policy_pass_share", "plausible_failure_share",
                                "compile_s"]].to_string(index=False))  # fmt: skip
 
 
