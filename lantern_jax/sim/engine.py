@@ -481,6 +481,7 @@ class _FusedCall:
         if timings is not None:
             for k, v in init_timings.items():
                 timings[k] += v
+        self.place.align("rollout program ready")  # every process holds it before any runs it
         if stage is not None:
             stage(f"{n} executions")
         final = jax.tree.map(np.asarray, self.place.get(exe(*args)))
