@@ -90,7 +90,6 @@ def test_two_processes_give_the_single_process_rows(tmp_path):
     assert ok, "\n".join(lines)
 
 
-
 def test_one_process_has_nothing_to_wait_for():
     """Without the distributed runtime the barrier before a program returns at once, and the
     placement leaves batches as they are."""

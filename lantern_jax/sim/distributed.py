@@ -62,15 +62,11 @@ class Placement:
     get: Callable[[Any], Any]  # result -> ordinary arrays of this process (whole batch)
     multiple: int  # the batch given to ``put`` must divide by this
     processes: int
-    align: Callable[[str], None]  # wait until every process reaches this point (one: no-op)
+    align: Callable[[str], None]  # wait until every process gets here (wait_for_every_process)
 
 
 def _identity(tree: Any) -> Any:
     return tree
-
-
-def _alone(what: str) -> None:
-    """The barrier of a single process: nothing to wait for."""
 
 
 def wait_for_every_process(what: str) -> None:
@@ -116,7 +112,7 @@ def _gather(tree: Any) -> Any:
 def placement() -> Placement:
     """The placement for this run (see the module docstring)."""
     if jax.process_count() == 1:
-        return Placement(_identity, _identity, _identity, 1, 1, _alone)
+        return Placement(_identity, _identity, _identity, 1, 1, wait_for_every_process)
     return Placement(
         put=lambda tree: _global(tree, PartitionSpec(BATCH_AXIS)),
         replicate=lambda tree: _global(tree, PartitionSpec()),
