@@ -279,6 +279,24 @@ def test_autodiff_agrees_with_finite_differences_on_a_smooth_scene():
     assert np.all(np.isfinite(np.asarray(grad.first))) and float(jnp.linalg.norm(grad.first)) > 0
 
 
+@pytest.mark.slow  # compiles a soft program of its own (about 40 s)
+def test_a_candidate_s_value_and_gradient_do_not_see_the_rest_of_its_batch():
+    """The candidates of a batch are one soft rollout and one backward pass of their sum
+    (:func:`objective.part_samples`): candidate 0's value and gradient are the same bits
+    whatever candidate 1 is, and candidate 1's gradient is its own (it moves with it).  That
+    the gradients are right is the finite-difference test's above."""
+    problem = _crossing_problem()
+    rng = np.random.default_rng(1)
+    z0, z1, z2 = rng.normal(0.0, 0.3, (3, problem.space.dim)).astype(np.float32)
+    samples = objective.part_samples(problem)
+    v, g = samples(objective.POLICY, np.stack([[z0, z1]]))
+    v2, g2 = samples(objective.POLICY, np.stack([[z0, z2]]))
+    np.testing.assert_array_equal(v[0, 0], v2[0, 0])
+    np.testing.assert_array_equal(g[0, 0], g2[0, 0])
+    assert np.abs(g[0, 1] - g2[0, 1]).max() > 0 and np.isfinite(g).all()
+    assert np.linalg.norm(g[0, 0]) > 0
+
+
 # ---------------------------------------------------------------------------------------------
 # plausibility
 # ---------------------------------------------------------------------------------------------

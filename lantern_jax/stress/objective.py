@@ -61,7 +61,7 @@ from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings
 from lantern_jax.sim.switch import policy_switch, switch_params
 from lantern_jax.stress import plausibility as rules
 from lantern_jax.stress.space import Space
-from lantern_jax.stress.watch import soft_rollout
+from lantern_jax.stress.watch import soft_rollout_batch
 from lantern_jax.world import Scenario
 
 Array = jax.Array
@@ -204,7 +204,8 @@ def soft_margin(margin_lse: Array, temperature: float) -> Array:
 def part_value(
     problem: Problem, z: Array, part: Array, member_params: Any, data: tuple | None = None
 ) -> Array:
-    """() float32, one part of the surrogate at candidate ``z`` (K,) (see the module docstring).
+    """() float32, one part of the surrogate at candidate ``z`` (K,) (see the module docstring):
+    :func:`part_values` of a batch of one.
 
     Args:
         problem: the problem (its static parts; its arrays unless ``data`` is given).
@@ -214,17 +215,35 @@ def part_value(
         member_params: the driver's parameters with that part's policy driving.
         data: the problem's arrays as traced arguments (see :meth:`Problem.data`).
     """
+    return part_values(problem, z[None], part, member_params, data)[0]
+
+
+def part_values(
+    problem: Problem, z: Array, part: Array, member_params: Any, data: tuple | None = None
+) -> Array:
+    """(N,) float32, one part of the surrogate at every candidate of ``z`` (N, K), from one
+    batched soft rollout (:func:`~lantern_jax.stress.watch.soft_rollout_batch`).  Candidate
+    ``i``'s value depends on ``z[i]`` only, so the gradient of the sum is each candidate's own
+    (:func:`part_samples`).  Arguments as :func:`part_value`'s."""
     data = problem.data() if data is None else data
     sc_a, sc_b = data[0], data[1]
-    sc_a, _ = problem.space.apply(sc_a, sc_b, candidate_values(data, z))
+    scenarios = jax.vmap(lambda x: problem.space.apply(sc_a, sc_b, candidate_values(data, x))[0])(z)
     temp = problem.temperature
     watched, tracked, settings = data[4], data[5], data[6]
-    final, watch = soft_rollout(
-        sc_a, problem.soft_driver, member_params, problem.horizon, settings, watched, tracked
-    )
+    n = z.shape[0]
+    final, watch = soft_rollout_batch(
+        scenarios, problem.soft_driver, member_params, problem.horizon, settings,
+        jnp.broadcast_to(watched, (n, *watched.shape)),
+        jnp.broadcast_to(tracked, (n, *tracked.shape)),
+    )  # fmt: skip
+
+    def value(tel, w, d_safe):
+        # a branch, not a select: the other part's derivative is never formed (a select would
+        # multiply its infinite partials by zero)
+        return jax.lax.cond(part == POLICY, policy_part, expert_part, (tel, w, d_safe))
 
     def policy_part(ops):
-        tel, w = ops
+        tel, w, d_safe = ops
         if problem.objective == "plausible":
             stop = jnp.max(jnp.where(tracked, w.stop_soft, 0.0))
             off = jnp.max(jnp.where(tracked, w.off_road_soft, 0.0))
@@ -234,7 +253,7 @@ def part_value(
         if problem.objective == "clearance":
             return softmin_decode(tel.clearance.lse, temp, cap=CLEARANCE_CAP_M)
         s = settings.scoring
-        t = soft_execution_terms(tel, sc_a.config.d_safe, temp, s)
+        t = soft_execution_terms(tel, d_safe, temp, s)
         gates = (
             t["gate_collision"]
             * t["gate_route_deviation"]
@@ -250,9 +269,7 @@ def part_value(
     def expert_part(ops):
         return rules.expert_term(soft_margin(ops[1].dist_lse, temp), problem.expert_weight)
 
-    # a branch, not a select: the other part's derivative is never formed (a select would
-    # multiply its infinite partials by zero)
-    return jax.lax.cond(part == POLICY, policy_part, expert_part, (final.telemetry, watch))
+    return jax.vmap(value)(final.telemetry, watch, scenarios.config.d_safe)
 
 
 def soft_objective(problem: Problem, z: Array, data: tuple | None = None) -> Array:
@@ -321,22 +338,30 @@ def part_samples(problem: Problem, grad: bool = True) -> Callable:
     """``(part, points (R, M, K)) -> (values (R, M), grads (R, M, K))``: one part's surrogate and
     pathwise gradient at every point (``grads`` None when ``grad`` is False: no backward pass),
     compiled once per static part of the problem (both parts and every restart share the
-    program)."""
+    program).  The R x M points are one batch of :func:`part_values`; their gradients are one
+    backward pass of the batch's sum (each value depends on its own point only)."""
 
-    def one(z, data, part, mp):
-        return part_value(problem, z, part, mp, data)
+    def values(z, data, part, mp):
+        return part_values(problem, z, part, mp, data)
 
-    inner = jax.value_and_grad(one) if grad else one
-    axes = (0, None, None, None)
+    def values_and_grads(z, data, part, mp):
+        v, pull = jax.vjp(lambda x: values(x, data, part, mp), z)
+        return v, pull(jnp.ones_like(v))[0]
+
     fn = remember(
         ("part_samples", grad, problem.static()),
-        lambda: jax.jit(jax.vmap(jax.vmap(inner, in_axes=axes), in_axes=axes)),
+        lambda: jax.jit(values_and_grads if grad else values),
     )
     data = problem.data()
 
     def run(part: int, pts: Array):
-        out = fn(jnp.asarray(pts, jnp.float32), data, jnp.int32(part), problem.member(part, True))
-        return out if grad else (out, None)
+        pts = jnp.asarray(pts, jnp.float32)
+        r, m, k = pts.shape
+        out = fn(pts.reshape(r * m, k), data, jnp.int32(part), problem.member(part, True))
+        if not grad:
+            return out.reshape(r, m), None
+        v, g = out
+        return v.reshape(r, m), g.reshape(r, m, k)
 
     return run
 
