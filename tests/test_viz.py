@@ -9,15 +9,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from conftest import HORIZON, MODE_COOP, select
 from matplotlib.lines import Line2D
 from matplotlib.patches import Polygon, Rectangle
 from matplotlib.text import Text
 from PIL import Image
 
-from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.families import build_pair, sample_params
 from lantern_jax.scenarios.warnings import render_warning
-from lantern_jax.sim.rollout import rollout
 from lantern_jax.viz import (
     bev_plot,
     num_valid_ticks,
@@ -27,27 +26,24 @@ from lantern_jax.viz import (
     warning_interval,
 )
 
-NUM_TICKS = 300
+NUM_TICKS = HORIZON  # ticks of every recorded run (the shared runner's)
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
 
 @pytest.fixture(scope="module")
-def pe_runs():
-    """A PE pair rolled out with the cooperative policy in both conditions (one compilation)."""
+def pe_runs(sim):
+    """A PE pair rolled out with the cooperative policy in both conditions (the session's
+    shared batch runner: no compile of its own)."""
     world, _, _ = build_pair(sample_params("PE", np.random.default_rng(0), "clear_day"))
     world_nw = world.replace(config=world.config.replace(warning_enabled=jnp.asarray(False)))
-    pol = get_policy("coop")
-    params = pol.init(jax.random.PRNGKey(0))
-    run = jax.jit(lambda w: rollout(w, pol, params, NUM_TICKS, record=True))
-    final_w, rec_w = run(world)
-    final_nw, rec_nw = run(world_nw)
+    final, rec = sim.batch([world, world_nw], MODE_COOP)
     return types.SimpleNamespace(
         world=world,
         world_nw=world_nw,
-        rec_w=jax.device_get(rec_w),
-        rec_nw=jax.device_get(rec_nw),
-        proto_w=jax.device_get(final_w.protocol),
-        proto_nw=jax.device_get(final_nw.protocol),
+        rec_w=select(rec, 0),
+        rec_nw=select(rec, 1),
+        proto_w=select(final.protocol, 0),
+        proto_nw=select(final.protocol, 1),
     )
 
 
@@ -155,7 +151,7 @@ def test_timeline(pe_runs, tmp_path):
 
 
 def test_gif(pe_runs, tmp_path):
-    out = save_animation(pe_runs.world, pe_runs.rec_w, tmp_path / "bev.gif", fps=10, stride=15)
+    out = save_animation(pe_runs.world, pe_runs.rec_w, tmp_path / "bev.gif", fps=10, stride=30)
     assert out.exists() and out.stat().st_size > 10_000
     with Image.open(out) as im:
         assert im.format == "GIF"
