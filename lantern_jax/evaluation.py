@@ -69,7 +69,7 @@ from lantern_jax.sim.engine import (
 from lantern_jax.sim.observe import observe
 from lantern_jax.sim.programs import abstract
 from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings, default_settings, settings_record
-from lantern_jax.sim.split import prepare
+from lantern_jax.sim.split import declared_observation, prepare
 from lantern_jax.sim.state import init_state
 from lantern_jax.sim.switch import PolicySwitch, as_member, shared_program
 from lantern_jax.times import happened, time_or_nan
@@ -170,9 +170,12 @@ def run_policy(
     params = pol.init(jax.random.PRNGKey(0)) if policy_params is None else policy_params
     sc0 = jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape[1:], x.dtype), execs.scenarios)
     bank = hashlib.sha256(repr(settings.bank).encode()).hexdigest()
-    obs = abstract("observe", functools.partial(_first_observation, sensors=pol.sensors,
-                                                bank=settings.bank), sc0,
-                   parts=(repr(pol.sensors), bank))  # fmt: skip
+    if isinstance(path, PathChoice) and path.path == "split":  # the world's signature has it
+        obs = declared_observation(pol, sc0, settings)
+    else:
+        obs = abstract("observe", functools.partial(_first_observation, sensors=pol.sensors,
+                                                    bank=settings.bank), sc0,
+                       parts=(repr(pol.sensors), bank))  # fmt: skip
     check_policy_output(pol, params, obs)
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
@@ -319,6 +322,20 @@ def _show_stage(bar: Any, name: str, what: str) -> None:
     bar.set_postfix_str(f"{name}: {what}")
 
 
+def _initial_params(pol: Policy, params: Any, suite_id: str) -> Any:
+    """``params``, or the policy's ``init(PRNGKey(0))`` when None (called once per evaluation:
+    a new policy's ``init`` may compile its random draws)."""
+    if params is not None:
+        return params
+    try:
+        return pol.init(jax.random.PRNGKey(0))
+    except Exception as e:
+        raise PolicyError(
+            f"policy {pol.name!r} failed while being traced or run on suite {suite_id}: "
+            f"{explain_failure(e)}"
+        ) from e
+
+
 def _run_all(pols: list[Policy], policy_params: list, execs: Executions, suite_id: str,
              progress: bool, share: bool, settings: Settings,
              path: str = "auto") -> tuple[list[PolicyRun], float]:  # fmt: skip
@@ -333,7 +350,9 @@ def _run_all(pols: list[Policy], policy_params: list, execs: Executions, suite_i
                    bar_format=BAR_FORMAT)  # fmt: skip
     runs: list[PolicyRun] = []
     try:
-        shared, choices, prepared = _plan(pols, list(policy_params), execs, settings, share, path,
+        policy_params = [_initial_params(p, par, suite_id) for p, par in
+                         zip(pols, policy_params, strict=True)]  # fmt: skip
+        shared, choices, prepared = _plan(pols, policy_params, execs, settings, share, path,
                                           bar)  # fmt: skip
         for pol, par, choice in zip(pols, policy_params, choices, strict=True):
             stage = None if bar is None else functools.partial(_show_stage, bar, pol.name)
@@ -381,8 +400,7 @@ def _plan(pols: list[Policy], policy_params: list, execs: Executions, settings: 
     shared = None
     if share and fused:
         shared = shared_program([p for p, _ in fused], [par for _, par in fused])
-    split = [(p, p.init(jax.random.PRNGKey(0)) if par is None else par)
-             for p, par, c in zip(pols, policy_params, choices, strict=True)
+    split = [(p, par) for p, par, c in zip(pols, policy_params, choices, strict=True)
              if c.path == "split"]  # fmt: skip
     if not split:
         return shared, choices, {}

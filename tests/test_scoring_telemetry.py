@@ -12,7 +12,12 @@ import numpy as np
 import pytest
 
 from lantern_jax.constants import DT, INF_TIME
-from lantern_jax.scoring.cus import GATE_NAMES, pair_components, soft_pair_cus
+from lantern_jax.scoring.cus import (
+    GATE_NAMES,
+    compiled_pair_components,
+    pair_components,
+    soft_pair_cus,
+)
 from lantern_jax.scoring.metrics import finalize
 from lantern_jax.scoring.sample import TickSample
 from lantern_jax.scoring.telemetry import fold_telemetry, init_telemetry, update_telemetry
@@ -274,10 +279,12 @@ def test_matches_numpy_reference(seed):
             assert math.isnan(got), (name, got)
         else:
             assert got == pytest.approx(want, rel=1e-5, abs=1e-4), name
-    got_c = pair_components(ma, mb, 2.0)
-    for name, want in reference_cus(ra, rb, 2.0).items():
-        got = float(got_c[name])
-        assert (math.isnan(got) and math.isnan(want)) or got == pytest.approx(want, abs=1e-3)
+    # op by op, and as the one compiled program the route table and the verifier use
+    for components in (pair_components, compiled_pair_components):
+        got_c = components(ma, mb, 2.0)
+        for name, want in reference_cus(ra, rb, 2.0).items():
+            got = float(got_c[name])
+            assert (math.isnan(got) and math.isnan(want)) or got == pytest.approx(want, abs=1e-3)
 
 
 def test_inactive_ticks_change_nothing(base):

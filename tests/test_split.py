@@ -119,6 +119,23 @@ def test_the_observation_of_every_sensor_equals_the_declared_one(family_runs, se
                 _same(a, b)
 
 
+@pytest.mark.parametrize("sensors", [(), (WARNING,), (PRIVILEGED,), (SURROUND_RIG, WARNING),
+                                     (PRIVILEGED, SURROUND_RIG, WARNING)])  # fmt: skip
+def test_the_declared_observation_read_from_the_signature_is_observe_s(sensors):
+    """The observation a split-path policy is checked against (read from the world signature,
+    never traced again) has :func:`observe`'s structure, shapes and dtypes for its sensors."""
+    execs = engine.build_executions(load_suite(), bucket=True)
+    one = jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape[1:], x.dtype), execs.scenarios)
+    pol = Policy("probe", lambda key: (), lambda params, obs: jnp.zeros((NUM_WAYPOINTS, 2)),
+                 sensors=sensors)  # fmt: skip
+    settings_ = default_settings()
+    got = split.declared_observation(pol, one, settings_)
+    want = jax.eval_shape(lambda sc: observe(sc, init_state(sc), pol.sensors, settings_.bank), one)
+    assert jax.tree.structure(got) == jax.tree.structure(want)
+    for a, b in zip(jax.tree.leaves(got), jax.tree.leaves(want), strict=True):
+        assert (a.shape, a.dtype) == (b.shape, b.dtype)
+
+
 # ---------------------------------------------------------------------------------------------
 # equal to the fused rollout, on every family
 # ---------------------------------------------------------------------------------------------

@@ -29,7 +29,7 @@ from lantern_jax.constants import (
 )
 from lantern_jax.files import atomic_write
 from lantern_jax.scoring import thresholds
-from lantern_jax.scoring.cus import pair_components
+from lantern_jax.scoring.cus import compiled_pair_components
 from lantern_jax.scoring.metrics import ExecutionMetrics
 from lantern_jax.scoring.thresholds import DEFAULT_SCORING, ScoringSettings
 from lantern_jax.scoring.user_metrics import Metric
@@ -227,7 +227,8 @@ def build_route_table(
         d_safe = _family_d_safe(fam)
     d_safe = np.broadcast_to(np.asarray(d_safe, np.float64), (n,))
     comps = {
-        k: np.asarray(v, np.float64) for k, v in pair_components(a, b, d_safe, settings).items()
+        k: np.asarray(v, np.float64)
+        for k, v in compiled_pair_components(a, b, d_safe.astype(np.float32), settings).items()
     }
     if t_warn_on is None:
         warned = np.asarray([c == WARNING_CONDITION for c in conds])

@@ -29,9 +29,10 @@ import jax
 import numpy as np
 
 from lantern_jax import family_codes, program_store
-from lantern_jax.constants import BLOCKS, CONDITIONS, EXECUTIONS_PER_PAIR, FAMILIES
+from lantern_jax.constants import BLOCKS, CONDITIONS, EXECUTIONS_PER_PAIR, FAMILIES, ROUTE_B
 from lantern_jax.scenarios.protocol_variants import get_ablation
 from lantern_jax.scenarios.suite import Suite, build_suite_batches, load_suite
+from lantern_jax.scoring.cus import compiled_pair_components
 from lantern_jax.scoring.metrics import finalize
 from lantern_jax.sim.distributed import placement
 from lantern_jax.sim.programs import (  # noqa: F401  (MAX_PROGRAMS, remember: re-exported)
@@ -42,6 +43,7 @@ from lantern_jax.sim.programs import (  # noqa: F401  (MAX_PROGRAMS, remember: r
 from lantern_jax.sim.rollout import rollout_scheduled_parallel, with_carry
 from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings, default_settings
 from lantern_jax.sim.split import (  # noqa: F401  (initial_states: re-exported)
+    SPLIT_SLOTS,
     initial_states,
     prepare,
     run_split,
@@ -496,8 +498,10 @@ class _FusedCall:
 
 def warm_world(suite: Suite | str | None = None, settings: Settings | None = None) -> float:
     """Compile (or load) the world program of a suite's batch shape (the split path's,
-    :mod:`lantern_jax.sim.split`) and keep it in the program store for every later process;
-    returns the seconds it took.
+    :mod:`lantern_jax.sim.split`) and the scoring programs of its results (the final metrics,
+    :func:`finalize_batch`, and the pairs' components,
+    :data:`~lantern_jax.scoring.cus.compiled_pair_components`), and keep them for every later
+    process: none depends on the policy.  Returns the seconds it took.
 
     Args:
         suite: a :class:`~lantern_jax.scenarios.suite.Suite` or suite id (default: the built-in
@@ -507,7 +511,17 @@ def warm_world(suite: Suite | str | None = None, settings: Settings | None = Non
     if suite is None or isinstance(suite, str):
         suite = load_suite() if suite is None else load_suite(suite)
     execs = build_executions(suite, bucket=True)
-    return prepare([], execs.scenarios, settings or default_settings())["programs"]
+    settings = settings or default_settings()
+    t0 = time.perf_counter()
+    prepare([], execs.scenarios, settings)
+    host = jax.tree.map(np.asarray, execs.scenarios)
+    n = execs.num_executions
+    start = start_states(host, min(n, SPLIT_SLOTS), settings, {})
+    metrics = finalize_batch(jax.tree.map(lambda x: x[:n], start.telemetry), settings)
+    d_safe = np.asarray(host.config.d_safe, np.float32)[execs.block(ROUTE_B)]
+    compiled_pair_components(execs.take(metrics, CONDITIONS[0]), execs.take(metrics, ROUTE_B),
+                             d_safe, settings.scoring)  # fmt: skip
+    return time.perf_counter() - t0
 
 
 def check_texts(settings: Settings, scenarios: Scenario) -> None:

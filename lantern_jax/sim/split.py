@@ -171,7 +171,12 @@ def _tick_one(sig: WorldSignature, scp: tuple, stp: tuple, waypoints: Array, act
         (packed state, packed observation, () bool: the policy's carry is to be kept -- the
         execution has ended or its slot is idle).
     """
-    sc, st, settings = sig.scenario.unpack(scp), sig.state.unpack(stp), sig.settings.unpack(setp)
+    # The barrier materialises the unpacked leaves once: without it XLA fuses each leaf's
+    # slice of the packed buffer into every kernel that reads it (3-7 % slower per call on a
+    # 2-core CPU, ``benchmarks/bench_split_tick.py``).
+    sc, st, settings = jax.lax.optimization_barrier(
+        (sig.scenario.unpack(scp), sig.state.unpack(stp), sig.settings.unpack(setp))
+    )
     new, _ = transition(sc, st, waypoints, settings)
     new = jax.tree.map(lambda n, o: jnp.where(active, n, o), new, st)
     obs, view = observe_every_sensor(sc, new, switches[0], switches[1], settings.bank,
@@ -274,6 +279,32 @@ class _PolicyStep:
         return (self.policy.program, self.observation, self.privileged, self.params, self.carry)
 
 
+def _declared(policy: Policy, observation: Layout, privileged: Layout, op: tuple) -> Any:
+    """What ``policy`` observes of one execution's packed observation of every sensor (the
+    world program's, ``observation`` then ``privileged`` groups): the sensors it did not
+    declare dropped, as :func:`~lantern_jax.sim.observe.observe` would build it."""
+    k_obs = len(observation.groups)
+    obs = observation.unpack(op[:k_obs])
+    obs = obs.replace(privileged=privileged.unpack(op[k_obs:]) if policy.privileged else None,
+                      surround=obs.surround if policy.surround else None)  # fmt: skip
+    if WARNING not in policy.sensors:
+        obs = obs.replace(**no_warning_fields())
+    return obs
+
+
+def declared_observation(policy: Policy, scenario: Scenario, settings: Settings,
+                         slots: int = SPLIT_SLOTS) -> Any:  # fmt: skip
+    """The shapes and dtypes (``ShapeDtypeStruct``) of the observation that ``policy``'s
+    program is given on the split path, from the world signature of ``scenario`` (one
+    execution, or ShapeDtypeStructs of one): the same structure as
+    :func:`~lantern_jax.sim.observe.observe` of its sensors builds, without tracing the
+    observation again (the signature is computed once per machine)."""
+    sig = world_signature(scenario, settings, slots)
+    groups = (*sig.observation.groups, *sig.privileged.groups)
+    op = tuple(jax.ShapeDtypeStruct((size,), jnp.dtype(dt)) for dt, size in groups)
+    return jax.eval_shape(lambda o: _declared(policy, sig.observation, sig.privileged, o), op)
+
+
 def _policy_batch(parp, carryp, obp, fresh, keep, *, step):
     """``vmap`` of one slot's policy step: the observation trimmed to the policy's own sensors,
     the carry reset where the slot took a new execution (``fresh``) and kept where the
@@ -283,12 +314,7 @@ def _policy_batch(parp, carryp, obp, fresh, keep, *, step):
     start = pol.initial_carry(params)
 
     def one(cp, op, f, k):
-        k_obs = len(step.observation.groups)
-        obs = step.observation.unpack(op[:k_obs])
-        obs = obs.replace(privileged=step.privileged.unpack(op[k_obs:]) if pol.privileged else None,
-                          surround=obs.surround if pol.surround else None)  # fmt: skip
-        if WARNING not in pol.sensors:
-            obs = obs.replace(**no_warning_fields())
+        obs = _declared(pol, step.observation, step.privileged, op)
         carry = jax.tree.map(lambda c0, c: jnp.where(f, c0, c), start, step.carry.unpack(cp))
         waypoints, new = pol.step(params, carry, obs)
         new = jax.tree.map(lambda n, c: jnp.where(k, c, n), new, carry)

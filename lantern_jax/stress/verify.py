@@ -23,7 +23,7 @@ import numpy as np
 
 from lantern_jax.constants import MAX_VERIFY_S, ROUTE_A_GATE_NAMES
 from lantern_jax.dynamics.adversary import limits_of_kind
-from lantern_jax.scoring.cus import pair_components
+from lantern_jax.scoring.cus import compiled_pair_components
 from lantern_jax.sim.engine import remember
 from lantern_jax.stress import plausibility as rules
 from lantern_jax.stress.objective import EXPERT, POLICY, Problem
@@ -142,7 +142,7 @@ class Verifier:
         p = self.problem
         scs_a, scs_b = self._pairs(p.scenario_a, p.scenario_b, jnp.asarray(values, jnp.float32))
         m_a, w_a = self._run(scs_a, p.member(POLICY))
-        comps = pair_components(
+        comps = compiled_pair_components(
             m_a, self._route_b(scs_b), p.scenario_a.config.d_safe, p.settings.scoring
         )
         m_e, w_e = self._run(scs_a, p.member(EXPERT))
