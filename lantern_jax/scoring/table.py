@@ -182,6 +182,30 @@ def _measured_columns(a: ExecutionMetrics, b: ExecutionMetrics, comps: dict) -> 
     }
 
 
+#: Rows the route table's components are computed in at a time: a table is padded to a
+#: multiple (copies of its last row, dropped after; every row's components are its own), so
+#: the built-in suite (120 pairs) and every subset of it share one compiled program.
+COMPONENT_ROWS = 128
+
+
+def route_components(a: ExecutionMetrics, b: ExecutionMetrics, d_safe: np.ndarray,
+                settings: ScoringSettings) -> dict[str, np.ndarray]:  # fmt: skip
+    """The components, gates and CUS of ``n`` matched pairs, as the route table holds them
+    (float64 NumPy arrays): :data:`~lantern_jax.scoring.cus.compiled_pair_components`,
+    computed in blocks of :data:`COMPONENT_ROWS` rows.
+
+    Args:
+        a, b: Route A and Route B metrics, NumPy, leading axis ``n``.
+        d_safe: (n,) m, clearance normalisers.
+        settings: the scoring settings.
+    """
+    n = len(d_safe)
+    rows = np.resize(np.arange(n), -(-n // COMPONENT_ROWS) * COMPONENT_ROWS)
+    a, b = (jax.tree.map(lambda x: x[rows], m) for m in (a, b))
+    comps = compiled_pair_components(a, b, d_safe[rows].astype(np.float32), settings)
+    return {k: np.asarray(v, np.float64)[:n] for k, v in comps.items()}
+
+
 def build_route_table(
     metrics_a: ExecutionMetrics,
     metrics_b: ExecutionMetrics,
@@ -226,10 +250,7 @@ def build_route_table(
     if d_safe is None:
         d_safe = _family_d_safe(fam)
     d_safe = np.broadcast_to(np.asarray(d_safe, np.float64), (n,))
-    comps = {
-        k: np.asarray(v, np.float64)
-        for k, v in compiled_pair_components(a, b, d_safe.astype(np.float32), settings).items()
-    }
+    comps = route_components(a, b, d_safe, settings)
     if t_warn_on is None:
         warned = np.asarray([c == WARNING_CONDITION for c in conds])
         t_warn_on = np.where(warned, np.asarray(a.t_ref_s, np.float64), np.nan)

@@ -32,8 +32,8 @@ from lantern_jax import family_codes, program_store
 from lantern_jax.constants import BLOCKS, CONDITIONS, EXECUTIONS_PER_PAIR, FAMILIES, ROUTE_B
 from lantern_jax.scenarios.protocol_variants import get_ablation
 from lantern_jax.scenarios.suite import Suite, build_suite_batches, load_suite
-from lantern_jax.scoring.cus import compiled_pair_components
 from lantern_jax.scoring.metrics import finalize
+from lantern_jax.scoring.table import route_components
 from lantern_jax.sim.distributed import placement
 from lantern_jax.sim.programs import (  # noqa: F401  (MAX_PROGRAMS, remember: re-exported)
     MAX_PROGRAMS,
@@ -500,7 +500,7 @@ def warm_world(suite: Suite | str | None = None, settings: Settings | None = Non
     """Compile (or load) the world program of a suite's batch shape (the split path's,
     :mod:`lantern_jax.sim.split`) and the scoring programs of its results (the final metrics,
     :func:`finalize_batch`, and the pairs' components,
-    :data:`~lantern_jax.scoring.cus.compiled_pair_components`), and keep them for every later
+    :func:`~lantern_jax.scoring.table.route_components`), and keep them for every later
     process: none depends on the policy.  Returns the seconds it took.
 
     Args:
@@ -518,9 +518,9 @@ def warm_world(suite: Suite | str | None = None, settings: Settings | None = Non
     n = execs.num_executions
     start = start_states(host, min(n, SPLIT_SLOTS), settings, {})
     metrics = finalize_batch(jax.tree.map(lambda x: x[:n], start.telemetry), settings)
-    d_safe = np.asarray(host.config.d_safe, np.float32)[execs.block(ROUTE_B)]
-    compiled_pair_components(execs.take(metrics, CONDITIONS[0]), execs.take(metrics, ROUTE_B),
-                             d_safe, settings.scoring)  # fmt: skip
+    d_safe = np.asarray(host.config.d_safe, np.float64)[execs.block(ROUTE_B)]
+    route_components(execs.take(metrics, CONDITIONS[0]), execs.take(metrics, ROUTE_B), d_safe,
+                     settings.scoring)  # fmt: skip
     return time.perf_counter() - t0
 
 
@@ -534,6 +534,14 @@ def check_texts(settings: Settings, scenarios: Scenario) -> None:
 
 def finalize_batch(telemetry: Any, settings: Settings = DEFAULT_SETTINGS) -> Any:
     """Hard per-execution metrics (:class:`~lantern_jax.scoring.metrics.ExecutionMetrics`,
-    NumPy, leading batch axis) of a batch's final telemetry, through one compiled program."""
-    exe = executable(_finalize, telemetry, settings.scoring, identity=("finalize",))
-    return jax.tree.map(np.asarray, exe(telemetry, settings.scoring))
+    NumPy, leading batch axis) of a batch's final telemetry, through one compiled program.
+
+    The batch is padded to a multiple of the built-in suite's executions
+    (``SUITE_BATCH_SHAPE[0]``, copies of its last execution, dropped after; every execution's
+    metrics are its own), so the suite and every subset of it share one program, which
+    :func:`warm_world` keeps."""
+    n = len(jax.tree.leaves(telemetry)[0])
+    rows = np.resize(np.arange(n), -(-n // SUITE_BATCH_SHAPE[0]) * SUITE_BATCH_SHAPE[0])
+    padded = jax.tree.map(lambda x: np.asarray(x)[rows], telemetry)
+    exe = executable(_finalize, padded, settings.scoring, identity=("finalize",))
+    return jax.tree.map(lambda x: np.asarray(x)[:n], exe(padded, settings.scoring))
