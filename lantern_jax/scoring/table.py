@@ -183,7 +183,7 @@ def _measured_columns(a: ExecutionMetrics, b: ExecutionMetrics, comps: dict) -> 
 
 
 #: Rows the route table's components are computed in at a time: a table is padded to a
-#: multiple (copies of its last row, dropped after; every row's components are its own), so
+#: multiple (repeats of its rows, dropped after; every row's components are its own), so
 #: the built-in suite (120 pairs) and every subset of it share one compiled program.
 COMPONENT_ROWS = 128
 

@@ -537,7 +537,7 @@ def finalize_batch(telemetry: Any, settings: Settings = DEFAULT_SETTINGS) -> Any
     NumPy, leading batch axis) of a batch's final telemetry, through one compiled program.
 
     The batch is padded to a multiple of the built-in suite's executions
-    (``SUITE_BATCH_SHAPE[0]``, copies of its last execution, dropped after; every execution's
+    (``SUITE_BATCH_SHAPE[0]``, repeats of its executions, dropped after; every execution's
     metrics are its own), so the suite and every subset of it share one program, which
     :func:`warm_world` keeps."""
     n = len(jax.tree.leaves(telemetry)[0])
