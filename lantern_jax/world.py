@@ -506,6 +506,16 @@ def tree_stack(items: list) -> Any:
     return jax.device_put(jax.tree.map(lambda *xs: np.stack(xs), *items))
 
 
+def pad_rows(tree: Any, multiple: int) -> tuple[Any, int]:
+    """A batched pytree (leading axis ``n`` on every leaf) padded to the next multiple of
+    ``multiple`` rows by repeating its rows (NumPy), so that every batch size up to a multiple
+    runs one compiled program; returns it with ``n``, the rows to keep of a result computed
+    row by row."""
+    n = len(jax.tree.leaves(tree)[0])
+    rows = np.resize(np.arange(n), -(-n // multiple) * multiple)
+    return jax.tree.map(lambda x: np.asarray(x)[rows], tree), n
+
+
 def tree_index(tree: Any, i: int) -> Any:
     """Take element ``i`` of a batched pytree."""
     return jax.tree.map(lambda x: x[i], tree)

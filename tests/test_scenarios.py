@@ -52,7 +52,7 @@ from lantern_jax.scenarios.warnings import (
     ground_position,
     render_warning,
 )
-from lantern_jax.world import tree_stack
+from lantern_jax.world import pad_rows, tree_stack
 
 SEEDS = st.integers(0, 2**32 - 1)
 WEATHER = st.sampled_from(WEATHERS)
@@ -790,3 +790,19 @@ def test_host_arc_length_and_point_at_keep_numpys_values(points):
         ref = np.stack([np.interp(clipped, cs, xy[:, 0]), np.interp(clipped, cs, xy[:, 1])], -1)
         np.testing.assert_array_equal(rd.point_at(xy, s), ref)
         np.testing.assert_array_equal(rd.point_at(xy, 0.37 * cs[-1]), ref[2])
+
+
+@settings(max_examples=30, deadline=None)
+@given(n=st.integers(1, 40), multiple=st.integers(1, 16))
+def test_pad_rows_repeats_rows_up_to_a_multiple_and_keeps_the_first_n(n, multiple):
+    """Padding a batched tree: a multiple of ``multiple`` rows, the first ``n`` unchanged, every
+    padding row a copy of a real one, every leaf padded alike."""
+    tree = {"a": np.arange(n, dtype=np.float32), "b": np.arange(2 * n).reshape(n, 2)}
+    padded, kept = pad_rows(tree, multiple)
+    rows = len(padded["a"])
+    assert kept == n and rows % multiple == 0 and n <= rows < n + multiple
+    np.testing.assert_array_equal(padded["a"][:n], tree["a"])
+    np.testing.assert_array_equal(padded["b"][:n], tree["b"])
+    src = padded["a"].astype(int)  # each padded row names the real row it copies
+    assert set(src) <= set(range(n))
+    np.testing.assert_array_equal(padded["b"], tree["b"][src])

@@ -33,6 +33,7 @@ from lantern_jax.scoring.cus import compiled_pair_components
 from lantern_jax.scoring.metrics import ExecutionMetrics
 from lantern_jax.scoring.thresholds import DEFAULT_SCORING, ScoringSettings
 from lantern_jax.scoring.user_metrics import Metric
+from lantern_jax.world import pad_rows
 
 #: The columns that identify a row (each combination exactly once).
 KEY_COLUMNS = ("model", "condition", "pair_id")
@@ -199,10 +200,8 @@ def route_components(a: ExecutionMetrics, b: ExecutionMetrics, d_safe: np.ndarra
         d_safe: (n,) m, clearance normalisers.
         settings: the scoring settings.
     """
-    n = len(d_safe)
-    rows = np.resize(np.arange(n), -(-n // COMPONENT_ROWS) * COMPONENT_ROWS)
-    a, b = (jax.tree.map(lambda x: x[rows], m) for m in (a, b))
-    comps = compiled_pair_components(a, b, d_safe[rows].astype(np.float32), settings)
+    (a, b, d_safe), n = pad_rows((a, b, np.asarray(d_safe, np.float32)), COMPONENT_ROWS)
+    comps = compiled_pair_components(a, b, d_safe, settings)
     return {k: np.asarray(v, np.float64)[:n] for k, v in comps.items()}
 
 

@@ -52,7 +52,7 @@ from lantern_jax.sim.split import (  # noqa: F401  (initial_states: re-exported)
 from lantern_jax.sim.step import Driver
 from lantern_jax.sim.switch import PolicySwitch
 from lantern_jax.times import ticks_covering
-from lantern_jax.world import Scenario, trim_padding
+from lantern_jax.world import Scenario, pad_rows, trim_padding
 
 #: Slot scheduling of large batches (``compact``): each device steps a fixed number of slots
 #: ``REFILL_TICKS`` ticks at a time, and a slot whose execution has ended takes the next
@@ -540,8 +540,6 @@ def finalize_batch(telemetry: Any, settings: Settings = DEFAULT_SETTINGS) -> Any
     (``SUITE_BATCH_SHAPE[0]``, repeats of its executions, dropped after; every execution's
     metrics are its own), so the suite and every subset of it share one program, which
     :func:`warm_world` keeps."""
-    n = len(jax.tree.leaves(telemetry)[0])
-    rows = np.resize(np.arange(n), -(-n // SUITE_BATCH_SHAPE[0]) * SUITE_BATCH_SHAPE[0])
-    padded = jax.tree.map(lambda x: np.asarray(x)[rows], telemetry)
+    padded, n = pad_rows(telemetry, SUITE_BATCH_SHAPE[0])
     exe = executable(_finalize, padded, settings.scoring, identity=("finalize",))
     return jax.tree.map(lambda x: np.asarray(x)[:n], exe(padded, settings.scoring))
