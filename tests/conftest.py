@@ -19,6 +19,7 @@ function only what their own sensors would deliver (no ground truth; no text for
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 
 import jax
@@ -79,6 +80,36 @@ def pytest_configure(config) -> None:
     from lantern_jax.sim.engine import warm_world
 
     warm_world()
+
+
+#: Modules that register scenario families when imported (the unseen hazards; a user's family
+#: file loaded by the command line; the test family): :func:`registrations_stay_in_their_test`
+#: forgets them with the families they registered, so that a later import registers again.
+REGISTERING_MODULES = ("lantern_jax.transfer", "lantern_jax.scenarios.unseen", "family_example")
+USER_FAMILY_MODULE_PREFIX = "lantern_jax_user_families_"
+
+
+@pytest.fixture(autouse=True)
+def registrations_stay_in_their_test():
+    """Families a test registers (and their warning texts) are forgotten when it ends.
+
+    A registered family extends the default text bank, a static setting of every world
+    program: one left registered would make every later evaluation in the worker compile a
+    world program of its own instead of the session's stored one (:func:`pytest_configure`).
+    Registrations made before the test (a module fixture's) are kept."""
+    from lantern_jax.scenarios import registry
+
+    state, before = registry.snapshot(), set(sys.modules)
+    yield
+    if registry.snapshot() == state:
+        return
+    registry.restore(state)
+    for name in set(sys.modules) - before:
+        if name in REGISTERING_MODULES or name.startswith(USER_FAMILY_MODULE_PREFIX):
+            parent, _, child = name.rpartition(".")
+            sys.modules.pop(name)
+            if parent in sys.modules and getattr(sys.modules[parent], child, None) is not None:
+                delattr(sys.modules[parent], child)  # ``from parent import child`` imports again
 
 
 HORIZON = 600  # ticks (30 s) of the shared runners
