@@ -15,6 +15,11 @@ Usage (from the project root; every argument goes to pytest)::
 
 The tests run in this one process (``-n 0``), not in the worker processes the plain test
 command starts, so the figures add up the whole run's work rather than its wall time.
+``--workers N`` runs them as the test command does, in ``N`` pytest-xdist workers: each worker
+loads this file as a plugin and writes its figures when it ends, and they are added up here
+(the seconds are then the workers' summed test time; the run's wall time is printed apart).
+That is how a program that one worker compiles because of what an earlier test in the same
+worker left behind shows up.
 Without ``JAX_COMPILATION_CACHE_DIR`` every program is compiled afresh (a fresh clone's run);
 with it, programs compiled by an earlier run load from the cache.
 """
@@ -26,7 +31,9 @@ import collections
 import json
 import os
 import sys
+import tempfile
 import time
+from pathlib import Path
 
 import jax
 import pytest
@@ -35,6 +42,9 @@ BACKEND = "/jax/core/compile/backend_compile_duration"
 TRACE = "/jax/core/compile/jaxpr_trace_duration"
 LOWER = "/jax/core/compile/jaxpr_to_mlir_module_duration"
 BIG_PROGRAM_S = 1.0  # s, a compilation at least this long is listed by name
+
+#: Environment variable naming the folder where worker processes write their figures.
+WORKER_DIR_ENV = "LANTERN_PROFILE_TESTS_DIR"
 
 _current = ["(collection and session start)"]
 _per_test: dict[str, collections.Counter] = collections.defaultdict(collections.Counter)
@@ -66,6 +76,29 @@ def pytest_runtest_protocol(item, nextitem):
 def pytest_configure(config):
     """Start listening once pytest has loaded the plugin."""
     jax.monitoring.register_event_duration_secs_listener(_listener)
+
+
+def pytest_unconfigure(config):
+    """In a pytest-xdist worker of ``--workers``: write this worker's figures for the gathering
+    process (:func:`gather`)."""
+    worker, folder = os.environ.get("PYTEST_XDIST_WORKER"), os.environ.get(WORKER_DIR_ENV)
+    if worker and folder:
+        data = {"tests": {k: dict(v) for k, v in _per_test.items()},
+                "programs": {k: dict(v) for k, v in _programs.items()}}  # fmt: skip
+        (Path(folder) / f"{worker}.json").write_text(json.dumps(data))
+
+
+def gather(folder: str) -> int:
+    """Add the figures the workers wrote into ``folder`` to this process's; returns how many
+    workers wrote."""
+    files = sorted(Path(folder).glob("*.json"))
+    for path in files:
+        data = json.loads(path.read_text())
+        for name, values in data["tests"].items():
+            _per_test[name].update(values)
+        for name, values in data["programs"].items():
+            _programs[name].update(values)
+    return len(files)
 
 
 def report(top: int) -> dict:
@@ -103,14 +136,32 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0], add_help=False)
     ap.add_argument("--top", type=int, default=25, help="tests and files listed (default 25)")
     ap.add_argument("--json", metavar="PATH", help="also write the breakdown as JSON")
+    ap.add_argument("--workers", type=int, default=0, metavar="N",
+                    help="run the tests in N pytest-xdist workers, as the test command does, "
+                         "and gather their figures (default 0: in this process)")  # fmt: skip
     ap.add_argument("--help-profile", action="help", help="this help (other arguments: pytest)")
     args, pytest_args = ap.parse_known_args()
-    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-    import profile_tests as plugin  # this file as a module: pytest registers its hooks
+    here = os.path.dirname(os.path.abspath(__file__))
+    sys.path.insert(0, here)
 
     t0 = time.perf_counter()
-    # in this process: the listener cannot see the compilations of worker processes
-    code = pytest.main([*pytest_args, "-n", "0", "-p", "no:cacheprovider"], plugins=[plugin])
+    if args.workers > 0:
+        # every worker loads this file by name (-p) and writes its figures into the folder
+        folder = tempfile.mkdtemp(prefix="profile_tests_")
+        os.environ[WORKER_DIR_ENV] = folder
+        paths = [here, os.environ.get("PYTHONPATH", "")]
+        os.environ["PYTHONPATH"] = os.pathsep.join(p for p in paths if p)
+        code = pytest.main([*pytest_args, "-n", str(args.workers), "-p", "no:cacheprovider",
+                            "-p", "profile_tests"])  # fmt: skip
+        import profile_tests as plugin  # the module pytest loaded (-p) in this process
+
+        workers = plugin.gather(folder)
+        print(f"\ngathered the figures of {workers} worker(s); seconds below are summed over them")
+    else:
+        import profile_tests as plugin  # this file as a module: pytest registers its hooks
+
+        # in this process: the listener cannot see the compilations of worker processes
+        code = pytest.main([*pytest_args, "-n", "0", "-p", "no:cacheprovider"], plugins=[plugin])
     print(f"\npytest exited with {int(code)} after {time.perf_counter() - t0:.0f} s")
     out = plugin.report(args.top)
     if args.json:
