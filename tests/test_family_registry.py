@@ -160,3 +160,26 @@ def test_the_family_and_sensor_tables_are_one_kind_of_registry():
     assert table.register(front) is front and table.names() == ("front_camera",)
     table.restore(state)
     assert table.names() == () and "front_camera" not in table
+
+
+def test_a_registration_left_behind_by_a_test_part_one():
+    """Registers the JWK family on import and leaves it registered (no clean-up of its own):
+    the next test checks that the test session forgets it (``tests/conftest.py``)."""
+    sys.path.insert(0, str(TESTS))
+    try:
+        import family_example
+    finally:
+        sys.path.remove(str(TESTS))
+    assert family_example.FAMILY.code in FAMILY_REGISTRY.codes()
+
+
+def test_a_registration_left_behind_by_a_test_part_two():
+    """The previous test's family is forgotten: the six families, the built-in bank, and the
+    module gone so that importing it again registers again (the two run in this order in one
+    process: pytest keeps a file's order, and the test command's workers take whole files)."""
+    from lantern_jax.scenarios.warning_texts import DEFAULT_BANK
+    from lantern_jax.sim.settings import default_settings
+
+    assert list(FAMILY_REGISTRY.codes()) == list(FAMILIES)
+    assert default_settings().bank == DEFAULT_BANK
+    assert "family_example" not in sys.modules

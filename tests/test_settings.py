@@ -76,11 +76,9 @@ def _session_compilations(folder: Path) -> Path:
     traced program, hence the compilation's key, or lives in this process alone)."""
     from conftest import COMPILE_CACHE_DIR
 
-    from lantern_jax.program_store import STORE_SUBDIR
-
     folder.mkdir(parents=True)
     for entry in Path(COMPILE_CACHE_DIR).iterdir():
-        if entry.is_file() and entry.name != STORE_SUBDIR:
+        if entry.is_file():  # the program store is a folder of its own
             (folder / entry.name).symlink_to(entry)
     return folder
 
