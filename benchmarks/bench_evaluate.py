@@ -1,11 +1,11 @@
 """Whole-suite evaluation timing for one policy: compile, wall time after compile,
 scenario-ticks/s and peak memory.
 
-The timed call is exactly what ``evaluate`` runs (:func:`lantern_jax.evaluation.run_executions`):
-every pair of the suite under Route A with warning, Route A without warning and Route B
-(3 x 120 executions for ``lantern-v3``) in one jitted, vmapped rollout that stops when every
-execution has ended (large batches: a fixed number of slots, refilled with waiting executions
-as earlier ones end, all stepped by one compiled program).
+The timed call is exactly what ``evaluate`` runs
+(:func:`lantern_jax.apps.evaluation.run_executions`): every pair of the suite under Route A with
+warning, Route A without warning and Route B (3 x 120 executions for ``lantern-v3``) in one jitted,
+vmapped rollout that stops when every execution has ended (large batches: a fixed number of slots,
+refilled with waiting executions as earlier ones end, all stepped by one compiled program).
 
 Usage::
 
@@ -25,7 +25,7 @@ import resource
 import time
 
 from lantern_jax.cli import expose_cpu_cores
-from lantern_jax.constants import SUITE_ID  # noqa: E402
+from lantern_jax.core.constants import SUITE_ID  # noqa: E402
 
 expose_cpu_cores()  # one XLA CPU device per core (LANTERN_JAX_CPU_DEVICES=1 to disable)
 
@@ -55,7 +55,7 @@ def main() -> None:
         default="off",
         metavar="DIR|off",
         help="JAX's persistent compilation cache folder, which also holds the program store "
-        "(lantern_jax.program_store; run twice to see a warm start); default off: a cold "
+        "(lantern_jax.io.program_store; run twice to see a warm start); default off: a cold "
         "compile",
     )
     args = ap.parse_args()

@@ -2,7 +2,7 @@
 rollouts along the predicted direction, and its rank correlation with sampling.
 
 For each policy and suite (``lantern-v3`` and, with ``--fresh-seed``, a freshly generated suite)
-it runs :func:`lantern_jax.stress.fragility.fragility` with ``--sampling`` draws around each
+it runs :func:`lantern_jax.apps.stress.fragility.fragility` with ``--sampling`` draws around each
 pair and prints:
 
 * the time to compile the one margin-and-gradient program, and to compute every pair's radius;
@@ -29,8 +29,8 @@ from pathlib import Path
 
 import pandas as pd
 
+from lantern_jax.apps.stress.fragility import fragility
 from lantern_jax.scenarios.suite import load_suite
-from lantern_jax.stress.fragility import fragility
 
 
 def _suites(fresh_seed: int | None, out: Path, builtin: bool) -> list:
@@ -38,7 +38,7 @@ def _suites(fresh_seed: int | None, out: Path, builtin: bool) -> list:
     if fresh_seed is not None:
         import json
 
-        from lantern_jax.suite_generation import generate_suite
+        from lantern_jax.apps.suite_generation import generate_suite
 
         manifest = generate_suite(seed=fresh_seed, progress=False)
         path = out / f"fresh_{fresh_seed}.json"

@@ -54,8 +54,8 @@ def _policy(edit: str):
 
     import lantern_jax as lj
     from lantern_jax.commands.common import resolve_policies
-    from lantern_jax.observation import WARNING
     from lantern_jax.policies.registry import get_policy
+    from lantern_jax.types.observation import WARNING
 
     if edit == "coop":  # the unedited policy (what an earlier run left in the store)
         return get_policy("coop")

@@ -39,9 +39,9 @@ import numpy as np  # noqa: E402
 
 Array = jax.Array
 
-from lantern_jax import geometry  # noqa: E402
+from lantern_jax.maths import geometry  # noqa: E402
 from lantern_jax.sensors import visibility  # noqa: E402
-from lantern_jax.world import Occluders  # noqa: E402
+from lantern_jax.types.world import Occluders  # noqa: E402
 
 A, K, P = 10, 8, 9  # actor slots, static occluders, sample points per target
 
@@ -90,7 +90,7 @@ def kernels() -> dict[str, callable]:
 
 
 def segments_hit_boxes_minor(x: dict[str, Array], d: Array) -> Array:
-    """:func:`lantern_jax.geometry.segments_hit_boxes` of the ego's centre to the ``P`` ends
+    """:func:`lantern_jax.maths.geometry.segments_hit_boxes` of the ego's centre to the ``P`` ends
     against all ``N = A + K`` boxes, written for the batch on the minor axis.
 
     Args:

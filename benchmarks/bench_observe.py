@@ -21,7 +21,7 @@ from bench_rollout import sixteen_actor_scene
 
 from lantern_jax.sim.observe import observe
 from lantern_jax.sim.state import init_state
-from lantern_jax.world import tree_stack
+from lantern_jax.types.world import tree_stack
 
 
 def main() -> None:

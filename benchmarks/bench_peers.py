@@ -2,8 +2,8 @@
 whole-suite evaluation against highway-env's ``highway-v0``.
 
 Ours: every execution of the built-in suite (``lantern-v3``: 3 x 120) for one policy, exactly as
-``evaluate`` runs it (:func:`lantern_jax.evaluation.run_executions`), after compile; a tick is one
-20 Hz step of the whole world of one execution (policy, IDM and scripted actors, ray-cast
+``evaluate`` runs it (:func:`lantern_jax.apps.evaluation.run_executions`), after compile; a tick is
+one 20 Hz step of the whole world of one execution (policy, IDM and scripted actors, ray-cast
 sensing, the temporal protocol and the score accumulators).  Only the ticks an execution really
 lived count (its final ``tick``), not the ticks a finished execution is held.
 
@@ -36,14 +36,14 @@ import sys
 import time
 
 from lantern_jax.cli import expose_cpu_cores
-from lantern_jax.constants import SUITE_ID  # noqa: E402
+from lantern_jax.core.constants import SUITE_ID  # noqa: E402
 
 expose_cpu_cores()  # one XLA CPU device per core (LANTERN_JAX_CPU_DEVICES=1 to disable)
 
 import jax  # noqa: E402
 import numpy as np  # noqa: E402
 
-from lantern_jax.constants import DT  # noqa: E402
+from lantern_jax.core.constants import DT  # noqa: E402
 from lantern_jax.policies.registry import get_policy  # noqa: E402
 from lantern_jax.scenarios.suite import load_suite  # noqa: E402
 from lantern_jax.sim.engine import build_executions, run_executions  # noqa: E402

@@ -23,7 +23,7 @@ expose_cpu_cores()  # one XLA CPU device per core (LANTERN_JAX_CPU_DEVICES=1 to 
 import jax  # noqa: E402
 import numpy as np  # noqa: E402
 
-from lantern_jax.constants import (  # noqa: E402
+from lantern_jax.core.constants import (  # noqa: E402
     KIND_PEDESTRIAN,
     MOTION_IDM,
     ROLE_HAZARD,
@@ -33,7 +33,7 @@ from lantern_jax.constants import (  # noqa: E402
 from lantern_jax.policies.registry import get_policy  # noqa: E402
 from lantern_jax.scenarios.handmade import ActorSpec, straight_scene  # noqa: E402
 from lantern_jax.sim.rollout import rollout_batch_parallel  # noqa: E402
-from lantern_jax.world import tree_stack  # noqa: E402
+from lantern_jax.types.world import tree_stack  # noqa: E402
 
 
 def sixteen_actor_scene(shift: float):

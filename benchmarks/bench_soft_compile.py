@@ -3,10 +3,10 @@
 Two programs, each built from scratch in this process (JAX's persistent cache off):
 
 * the **stress cell's soft program** -- the surrogate's values and pathwise gradients at a
-  batch of candidates (:func:`lantern_jax.stress.objective.part_samples`), on the first
+  batch of candidates (:func:`lantern_jax.apps.stress.objective.part_samples`), on the first
   pair of ``--family`` under ``--policy``, in the adversary space of ``--knots`` knots;
 * the **fragility program** -- every pair's soft margin and its gradient over the knobs
-  (:func:`lantern_jax.stress.fragility.margin_program`), on every ``--every``-th pair of the
+  (:func:`lantern_jax.apps.stress.fragility.margin_program`), on every ``--every``-th pair of the
   built-in suite.
 
 Prints one line per program with the machine's load; run it once per code version, the
@@ -25,10 +25,10 @@ import time
 import jax
 import jax.numpy as jnp
 
+from lantern_jax.apps.stress import fragility, objective, report
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.suite import build_suite_batches, load_suite
 from lantern_jax.sim.settings import default_settings
-from lantern_jax.stress import fragility, objective, report
 
 
 def timed_build(fn, *args) -> dict[str, float]:

@@ -1,7 +1,7 @@
 """Scaling of streamed evaluation: executions/s and peak memory from 1k to 100k executions.
 
 Each count runs in a fresh process (so its peak RSS is its own): the ``ego`` policy on the
-stress batch of the built-in suite (:func:`lantern_jax.stream.stress_source`: the suite's 360
+stress batch of the built-in suite (:func:`lantern_jax.apps.stream.stress_source`: the suite's 360
 executions cycled, hazard speed and trigger perturbed per copy), in chunks of ``--chunk``
 executions, with the command line's device setup (one XLA CPU device per core).
 Executions/s excludes compilation (reported separately).
@@ -24,7 +24,7 @@ from lantern_jax.cli import expose_cpu_cores
 expose_cpu_cores()
 import jax
 from lantern_jax.policies.registry import get_policy
-from lantern_jax.stream import stream_executions, stress_source
+from lantern_jax.apps.stream import stream_executions, stress_source
 count, chunk = int(sys.argv[1]), int(sys.argv[2])
 source, max_ticks, _ = stress_source()
 ego = get_policy("ego")

@@ -36,11 +36,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from lantern_jax.constants import FAMILIES
+from lantern_jax.apps.stress import report
+from lantern_jax.apps.stress.verify import Verifier
+from lantern_jax.core.constants import FAMILIES
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.suite import load_suite
-from lantern_jax.stress import report
-from lantern_jax.stress.verify import Verifier
 
 RARE_PASS_SHARE = 0.9  # a cell is "rare" when the policy passes this share of random draws
 

@@ -12,7 +12,7 @@ of directions, not how long the adversary acts:
 * ``384``: the hazard and two background vehicles, 64 knots of 0.125 s each (where the scene
   has them; the dimension reached is the one reported).
 
-The tracks hold at most :data:`lantern_jax.constants.MAX_KNOTS` knots (64) per actor, the
+The tracks hold at most :data:`lantern_jax.core.constants.MAX_KNOTS` knots (64) per actor, the
 world's array shape, so a space of 2,048 dimensions (per-tick controls of several actors)
 cannot be built without widening every world's track arrays; this benchmark stops where the
 world does.
@@ -38,8 +38,8 @@ from pathlib import Path
 import pandas as pd
 from bench_stress import run_cell
 
+from lantern_jax.apps.stress import report
 from lantern_jax.scenarios.suite import load_suite
-from lantern_jax.stress import report
 
 #: name -> (actor groups, knots per track, s per knot, background vehicles)
 SPACES = {

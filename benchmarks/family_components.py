@@ -17,7 +17,7 @@ import argparse
 import numpy as np
 import pandas as pd
 
-from lantern_jax.constants import FAMILIES, GATE_NAMES
+from lantern_jax.core.constants import FAMILIES, GATE_NAMES
 from lantern_jax.scoring.table import read_route_table
 
 COMPONENTS = {"TTC": "S_ttc", "Clear.": "S_clear", "Ant.": "S_ant", "Rec.": "S_rec"}

@@ -119,7 +119,7 @@ def onnx_model(w: dict[str, np.ndarray]):
 
 
 def main() -> None:
-    from lantern_jax.evaluation import evaluate
+    from lantern_jax.apps.evaluation import evaluate
     from lantern_jax.scenarios.suite import load_suite
 
     w = make_weights()

@@ -19,9 +19,9 @@ What a policy is (:class:`lantern_jax.Policy`):
 * ``sensors`` — what ``obs`` holds.  ``"front_camera"`` (always): ego state, the route and the
   actors the front camera sees (``obs.visible``; unseen actors' fields are zero);
   ``"warning"``: the delivered warning as ``obs.warning_tokens`` (token ids, padded with
-  ``lantern_jax.language.PAD_ID``) and ``obs.warning_values`` (the numbers in the text); without
-  it every token is padding.  ``"surround_rig"`` adds the six-camera view.  The fields, their
-  shapes and units are listed in :mod:`lantern_jax.observation`;
+  ``lantern_jax.types.language.PAD_ID``) and ``obs.warning_values`` (the numbers in the text);
+  without it every token is padding.  ``"surround_rig"`` adds the six-camera view.  The fields,
+  their shapes and units are listed in :mod:`lantern_jax.types.observation`;
 * ``init_carry(params) -> carry`` (optional) — a policy with memory: ``act(params, carry,
   obs)`` then returns ``(waypoints, new_carry)``.
 
@@ -34,9 +34,9 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from lantern_jax.observation import FRONT_CAMERA, WARNING, warning_delivered
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.reference import reference_act, reference_params
+from lantern_jax.types.observation import FRONT_CAMERA, WARNING, warning_delivered
 
 #: Fraction of the planner's speed kept while a warning is delivered.
 CAUTION = 0.5

@@ -8,7 +8,7 @@ The names a user needs, importable from the package itself::
     print(result.family_table)
 
 * :func:`evaluate` — every execution of a suite for one or several policies, scored by the
-  CUS, with intervals (:mod:`lantern_jax.evaluation`);
+  CUS, with intervals (:mod:`lantern_jax.apps.evaluation`);
 * :func:`write_outputs` — an evaluation's files, as ``lantern-jax evaluate --out`` writes them
   (tables, route-level CSV and schema, reproducibility manifest, run record);
 * :func:`load_suite` — a suite of route pairs (the built-in ``lantern-v3`` by default);
@@ -22,7 +22,7 @@ The names a user needs, importable from the package itself::
   (``docs/families.md``).
 
 * :func:`setup` — JAX's CPU devices and compilation cache as the command line has them
-  (:mod:`lantern_jax.jax_setup`; done by ``import lantern_jax`` itself when JAX is not
+  (:mod:`lantern_jax.core.jax_setup`; done by ``import lantern_jax`` itself when JAX is not
   imported yet).
 
 The names are loaded on first use, so ``import lantern_jax`` stays cheap and does not import
@@ -36,12 +36,12 @@ import importlib
 import importlib.metadata
 from typing import TYPE_CHECKING, Any
 
-from lantern_jax import jax_setup, renamed
+from lantern_jax.core import jax_setup, renamed
 
 # One XLA CPU device per core and the persistent compilation cache, as the command line has
-# them, when JAX is not imported yet (lantern_jax.jax_setup; LANTERN_JAX_AUTO_SETUP=0: off).
+# them, when JAX is not imported yet (lantern_jax.core.jax_setup; LANTERN_JAX_AUTO_SETUP=0: off).
 jax_setup.auto_setup()
-# Renamed modules stay importable under their old names for one release (lantern_jax.renamed).
+# Renamed modules stay importable under their old names for one release (lantern_jax.core.renamed).
 renamed.install()
 
 try:
@@ -52,8 +52,8 @@ except importlib.metadata.PackageNotFoundError:  # a checkout on sys.path, not i
 
 #: public name -> module that defines it
 _EXPORTS = {
-    "evaluate": "lantern_jax.evaluation",
-    "EvalResult": "lantern_jax.evaluation",
+    "evaluate": "lantern_jax.apps.evaluation",
+    "EvalResult": "lantern_jax.apps.evaluation",
     "load_suite": "lantern_jax.scenarios.suite",
     "Suite": "lantern_jax.scenarios.suite",
     "Policy": "lantern_jax.policies.base",
@@ -62,7 +62,7 @@ _EXPORTS = {
     "policy_names": "lantern_jax.policies.registry",
     "rollout": "lantern_jax.sim.rollout",
     "write_outputs": "lantern_jax.report",
-    "setup": "lantern_jax.jax_setup",
+    "setup": "lantern_jax.core.jax_setup",
     "Settings": "lantern_jax.sim.settings",
     "DEFAULT_SETTINGS": "lantern_jax.sim.settings",
     "default_settings": "lantern_jax.sim.settings",
@@ -111,8 +111,8 @@ def __dir__() -> list[str]:
 
 
 if TYPE_CHECKING:  # for type checkers and IDEs: the same names, imported eagerly
-    from lantern_jax.evaluation import EvalResult, evaluate
-    from lantern_jax.jax_setup import setup
+    from lantern_jax.apps.evaluation import EvalResult, evaluate
+    from lantern_jax.core.jax_setup import setup
     from lantern_jax.policies.base import Policy
     from lantern_jax.policies.registry import get_policy, policy_names, register_policy_source
     from lantern_jax.report import write_outputs

@@ -46,7 +46,6 @@ import os
 import sys
 from collections.abc import Sequence
 
-from lantern_jax import jax_setup
 from lantern_jax.commands import (
     UsageError,
     ablations,
@@ -67,6 +66,7 @@ from lantern_jax.commands import (
     wording,
 )
 from lantern_jax.commands.runtime import EXIT_INTERRUPTED, EXIT_STDOUT_CLOSED, EXIT_USAGE
+from lantern_jax.core import jax_setup
 
 __all__ = [
     "COMMANDS",
@@ -92,7 +92,7 @@ CPU_DEVICES_ENV = jax_setup.CPU_DEVICES_ENV
 
 def expose_cpu_cores() -> None:
     """Expose one XLA CPU device per core, so that the evaluator can split its batch over them
-    (:func:`lantern_jax.jax_setup.expose_cpu_cores`: only before JAX starts, not where
+    (:func:`lantern_jax.core.jax_setup.expose_cpu_cores`: only before JAX starts, not where
     ``XLA_FLAGS`` already sets a count; ``LANTERN_JAX_CPU_DEVICES`` sets another, e.g. 1).
 
     Raises:

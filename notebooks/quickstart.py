@@ -44,7 +44,7 @@ try:
 except ImportError:  # run as a plain script (python notebooks/...py): print what a cell shows
     display = print
 
-from lantern_jax.evaluation import evaluate
+from lantern_jax.apps.evaluation import evaluate
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.report import format_decomposition, format_family_table, ordered_tables
 from lantern_jax.scenarios.families import build_pair

@@ -12,7 +12,7 @@
 # # Stress testing a driving policy with adversarial actors
 #
 # The simulator is differentiable, so we can search the **scenario** for the hazards that break
-# a policy. Two search spaces share one interface (`lantern_jax.stress.space`):
+# a policy. Two search spaces share one interface (`lantern_jax.apps.stress.space`):
 #
 # * the family's few continuous **knobs** (the pedestrian's speed, the cut-in's delay, ...;
 #   `lantern_jax.scenarios.families.KNOB_RANGES`);
@@ -23,11 +23,11 @@
 #   values; zero actions are the benchmark's own scene. With 16 knots an actor adds 32
 #   dimensions.
 #
-# A failure counts only when it is **plausible** (`lantern_jax.stress.plausibility`): the policy
-# fails a gate or scores below 50 while the privileged expert drives the same scene with margin
-# (every gate, 0.5 m from every watched actor), and no actor with a track freezes in the ego's
-# path for more than 2 s, leaves the road or exceeds its limits. Three searches run interleaved
-# at the same budget and are verified the same way:
+# A failure counts only when it is **plausible** (`lantern_jax.apps.stress.plausibility`): the
+# policy fails a gate or scores below 50 while the privileged expert drives the same scene with
+# margin (every gate, 0.5 m from every watched actor), and no actor with a track freezes in the
+# ego's path for more than 2 s, leaves the road or exceeds its limits. Three searches run
+# interleaved at the same budget and are verified the same way:
 #
 # * **gradient** — Adam on a smooth surrogate (the policy's soft collision margin, a hinge on
 #   the expert's soft distance, soft plausibility penalties) rolled out through the simulator,
@@ -50,17 +50,17 @@ try:
 except ImportError:  # run as a plain script (python notebooks/...py): print what a cell shows
     display = print
 
-from lantern_jax.dynamics.adversary import KINEMATIC_LIMITS
-from lantern_jax.scenarios.families import KNOB_RANGES
-from lantern_jax.scenarios.suite import load_suite
-from lantern_jax.stress import catalogue
-from lantern_jax.stress.report import (
+from lantern_jax.apps.stress import catalogue
+from lantern_jax.apps.stress.report import (
     SUMMARY_COLUMNS,
     StressConfig,
     comparison_table,
     gradient_quality,
     stress_test,
 )
+from lantern_jax.dynamics.adversary import KINEMATIC_LIMITS
+from lantern_jax.scenarios.families import KNOB_RANGES
+from lantern_jax.scenarios.suite import load_suite
 from lantern_jax.viz.stress import catalogue_figure, convergence_plot
 
 SMALL = os.environ.get("LANTERN_NOTEBOOK_SMALL") == "1"

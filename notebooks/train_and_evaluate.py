@@ -39,14 +39,14 @@ try:
 except ImportError:  # run as a plain script (python notebooks/...py): print what a cell shows
     display = print
 
-from lantern_jax.dataset.generation import generate_dataset
-from lantern_jax.dataset.store import card_markdown
-from lantern_jax.evaluation import evaluate
+from lantern_jax.apps.dataset.generation import generate_dataset
+from lantern_jax.apps.dataset.store import card_markdown
+from lantern_jax.apps.evaluation import evaluate
+from lantern_jax.apps.training.behaviour_cloning import train
+from lantern_jax.apps.training.config import TrainConfig
 from lantern_jax.policies.learned.checkpoint import checkpoint_policy
 from lantern_jax.report import format_family_table, order_rows
 from lantern_jax.scenarios.suite import load_suite
-from lantern_jax.training.config import TrainConfig
-from lantern_jax.training.behaviour_cloning import train
 
 SMALL = os.environ.get("LANTERN_NOTEBOOK_SMALL") == "1"
 print(f"SMALL = {SMALL}")

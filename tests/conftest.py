@@ -27,13 +27,13 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from lantern_jax.constants import NUM_WAYPOINTS, WAYPOINT_DT
-from lantern_jax.language import PAD_ID
-from lantern_jax.observation import FRONT_CAMERA, PRIVILEGED, WARNING
+from lantern_jax.core.constants import NUM_WAYPOINTS, WAYPOINT_DT
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.sim.rollout import rollout, rollout_batch
-from lantern_jax.world import tree_stack
+from lantern_jax.types.language import PAD_ID
+from lantern_jax.types.observation import FRONT_CAMERA, PRIVILEGED, WARNING
+from lantern_jax.types.world import tree_stack
 
 #: JAX's persistent compilation cache for the whole test session, from its first compile on:
 #: ``$JAX_COMPILATION_CACHE_DIR`` when set (``.ci/run`` sets it), else ``.jax_cache/`` in the
@@ -85,7 +85,11 @@ def pytest_configure(config) -> None:
 #: Modules that register scenario families when imported (the unseen hazards; a user's family
 #: file loaded by the command line; the test family): :func:`registrations_stay_in_their_test`
 #: forgets them with the families they registered, so that a later import registers again.
-REGISTERING_MODULES = ("lantern_jax.transfer", "lantern_jax.scenarios.unseen", "family_example")
+REGISTERING_MODULES = (
+    "lantern_jax.apps.transfer",
+    "lantern_jax.scenarios.unseen",
+    "family_example",
+)
 USER_FAMILY_MODULE_PREFIX = "lantern_jax_user_families_"
 
 
@@ -240,7 +244,7 @@ def select(tree, i):
 @pytest.fixture(scope="session")
 def family_pairs():
     """One (world_a, world_b, meta) pair per family, fixed seeds, varied weather."""
-    from lantern_jax.constants import FAMILIES, WEATHERS
+    from lantern_jax.core.constants import FAMILIES, WEATHERS
     from lantern_jax.scenarios.families import build_pair, sample_params
 
     out = {}
@@ -257,7 +261,7 @@ def family_pairs():
 def family_runs(sim, family_pairs):
     """The six pairs under the expert: (worlds, (final, records)); index 2 i is Route A of
     family i, 2 i + 1 its Route B."""
-    from lantern_jax.constants import FAMILIES
+    from lantern_jax.core.constants import FAMILIES
 
     worlds = [w for f in FAMILIES for w in family_pairs[f][:2]]
     return worlds, sim.batch(worlds, MODE_EXPERT)
@@ -265,9 +269,9 @@ def family_runs(sim, family_pairs):
 
 @pytest.fixture
 def shared_runner(sim, monkeypatch):
-    """Route :func:`lantern_jax.diagnostics.run_recorded` through the session's compiled batch
+    """Route :func:`lantern_jax.apps.diagnostics.run_recorded` through the session's compiled batch
     runner (no compile of its own); ``shared_runner["mode"]`` picks the reference policy."""
-    from lantern_jax import diagnostics
+    from lantern_jax.apps import diagnostics
     from lantern_jax.scoring.metrics import finalize
 
     chosen = {"mode": MODE_COOP}

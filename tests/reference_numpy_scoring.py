@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from lantern_jax.constants import DT, INF_TIME
+from lantern_jax.core.constants import DT, INF_TIME
 
 FIELDS = (
     "t", "ego_speed", "ego_accel", "progress", "route_length", "dist_to_route", "outside_lanes",

@@ -23,8 +23,8 @@ from typing import Any
 import jax
 import numpy as np
 
-from lantern_jax.constants import ROUTE_B, WARNING_CONDITION
-from lantern_jax.evaluation import evaluate
+from lantern_jax.apps.evaluation import evaluate
+from lantern_jax.core.constants import ROUTE_B, WARNING_CONDITION
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.suite import load_suite
 from lantern_jax.scoring.cus import soft_pair_cus

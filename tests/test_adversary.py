@@ -12,7 +12,7 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from lantern_jax.constants import DT, KIND_PEDESTRIAN, KIND_VEHICLE
+from lantern_jax.core.constants import DT, KIND_PEDESTRIAN, KIND_VEHICLE
 from lantern_jax.dynamics import adversary as adv
 from lantern_jax.dynamics.scripted import ScriptedMotion, scripted_arc
 from lantern_jax.scenarios import adversary as spec

@@ -106,12 +106,13 @@ import numpy as np
 import pandas as pd
 import pytest
 
-import lantern_jax.evaluation as ev
-from lantern_jax import cli, files
+import lantern_jax.apps.evaluation as ev
+from lantern_jax import cli
 from lantern_jax.commands import UsageError
 from lantern_jax.commands.common import register_checkpoints
 from lantern_jax.commands.evaluate import load_config
 from lantern_jax.commands.suite import suite_to_manifest
+from lantern_jax.io import files
 from lantern_jax.policies import registry as policy_registry
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.registry import get_policy
@@ -333,8 +334,8 @@ def test_duplicate_json_key_and_broken_json(base_manifest, tmp_path, no_evaluati
 
 
 def test_a_generated_suite_claims_the_shipped_id_only_when_it_is_that_suite():
+    from lantern_jax.apps.suite_generation import regenerated_suite_id
     from lantern_jax.scenarios.suite import shipped_suite_hash
-    from lantern_jax.suite_generation import regenerated_suite_id
 
     shipped = load_suite()
     assert shipped_suite_hash("lantern-v3") == shipped.suite_sha256
@@ -450,7 +451,7 @@ KILL_SCRIPT = textwrap.dedent(
     """
     import os, signal, sys
     from pathlib import Path
-    from lantern_jax import files
+    from lantern_jax.io import files
 
     point, target, src = sys.argv[1], Path(sys.argv[2]), Path(sys.argv[3])
     names = sys.argv[4].split(",")
@@ -569,7 +570,7 @@ def test_manifest_onto_a_folder(base_manifest, tmp_path, monkeypatch):
     def refuse(*a, **k):
         raise AssertionError("generated although the target is a folder")
 
-    monkeypatch.setattr("lantern_jax.suite_generation.generate_suite", refuse)
+    monkeypatch.setattr("lantern_jax.apps.suite_generation.generate_suite", refuse)
     res = run_cli(["suite", "--regenerate", str(folder)])
     assert res.rc == 2 and "give the path of a file" in res.err
 
@@ -615,7 +616,7 @@ WRITER_SCRIPT = textwrap.dedent(
     """
     import sys
     from pathlib import Path
-    from lantern_jax import files
+    from lantern_jax.io import files
 
     target, src, names = Path(sys.argv[1]), Path(sys.argv[2]), sys.argv[3].split(",")
     print("ready", flush=True)
@@ -902,7 +903,7 @@ def test_a_bad_value_from_the_config_names_its_key(case, tmp_path, no_evaluation
 def test_a_config_with_a_byte_order_mark_is_read(tmp_path, monkeypatch):
     """Editors that write a UTF-8 byte-order mark: both config formats read such a file as if
     it had none (it gave "Invalid statement (line 1, col 1)")."""
-    from lantern_jax.training.config import load_config as load_train_config
+    from lantern_jax.apps.training.config import load_config as load_train_config
 
     path = tmp_path / "exp.toml"
     path.write_bytes(b'\xef\xbb\xbf[evaluate]\npolicy = "coop"\npairs_per_family = 1\n')
@@ -963,7 +964,7 @@ TRAIN_CONFIG_CASES = [
 
 @pytest.mark.parametrize("case", TRAIN_CONFIG_CASES, ids=[c[0] for c in TRAIN_CONFIG_CASES])
 def test_bad_training_config_values(case, tmp_path, monkeypatch):
-    from lantern_jax.training import behaviour_cloning as train_module
+    from lantern_jax.apps.training import behaviour_cloning as train_module
 
     monkeypatch.setattr(train_module, "train", lambda *a, **k: pytest.fail("training started"))
     _, line, expected = case
@@ -978,7 +979,7 @@ def test_bad_training_config_values(case, tmp_path, monkeypatch):
 
 
 def test_a_bad_training_option_names_the_option(tmp_path, monkeypatch):
-    from lantern_jax.training import behaviour_cloning as train_module
+    from lantern_jax.apps.training import behaviour_cloning as train_module
 
     monkeypatch.setattr(train_module, "train", lambda *a, **k: pytest.fail("training started"))
     path = tmp_path / "t.toml"
@@ -1179,7 +1180,7 @@ STRESS_CASES = [
     "flags, expected", STRESS_CASES, ids=[" ".join(c[0]) for c in STRESS_CASES]
 )
 def test_bad_stress_options(flags, expected, tmp_path, monkeypatch):
-    from lantern_jax.stress import report as stress_report
+    from lantern_jax.apps.stress import report as stress_report
 
     monkeypatch.setattr(stress_report, "stress_test", lambda *a, **k: pytest.fail("it ran"))
     res = run_cli(["stress", "--family", "PE", *flags, "--out", str(tmp_path / "out")])
@@ -1210,7 +1211,7 @@ DIAGNOSTICS_CASES = [
 @pytest.mark.parametrize("argv, expected", DIAGNOSTICS_CASES,
                          ids=[" ".join(c[0]) for c in DIAGNOSTICS_CASES])  # fmt: skip
 def test_bad_diagnostics_options(argv, expected, tmp_path, monkeypatch):
-    from lantern_jax import diagnostics
+    from lantern_jax.apps import diagnostics
 
     for name in ("nonactionable_table", "distance_table", "wording_table", "language_table"):
         monkeypatch.setattr(diagnostics, name, lambda *a, **k: pytest.fail("it ran"))
@@ -1225,7 +1226,7 @@ def test_bad_diagnostics_options(argv, expected, tmp_path, monkeypatch):
 @pytest.fixture
 def store(tmp_path, monkeypatch):
     """A fresh program-store folder."""
-    from lantern_jax import program_store
+    from lantern_jax.io import program_store
 
     monkeypatch.setattr(program_store, "store_dir", lambda: tmp_path)
     return tmp_path
@@ -1236,7 +1237,7 @@ def _fresh_program(n: int, salt: float | None = None):
     for ``n`` floats: ``(salt, x, (compiled, fresh))``."""
     import jax.numpy as jnp
 
-    from lantern_jax import program_store
+    from lantern_jax.io import program_store
 
     salt = float(np.random.default_rng().uniform(1.0, 2.0)) if salt is None else salt
     x = np.linspace(0.0, 1.0, n, dtype=np.float32)
@@ -1247,7 +1248,7 @@ def _fresh_program(n: int, salt: float | None = None):
 def test_swapped_store_entries_are_deleted_and_compiled_again(store, caplog):
     """Two entries whose files were exchanged (or one copied under another's name) used to load
     and then fail every later run until deleted by hand: each now names the program it holds."""
-    from lantern_jax import program_store
+    from lantern_jax.io import program_store
 
     for key, n in (("a" * 64, 5), ("b" * 64, 7)):
         _, x, (compiled, fresh) = _fresh_program(n)
@@ -1269,7 +1270,7 @@ def test_a_broken_store_entry_is_compiled_again_from_jax_cache(damage, store, ca
     compilation (it did not miss because of the store)."""
     import pickle
 
-    from lantern_jax import program_store
+    from lantern_jax.io import program_store
 
     if not jax.config.jax_enable_compilation_cache:
         pytest.skip("needs the test session's persistent compilation cache")
@@ -1303,7 +1304,7 @@ STORE_SAVE_SCRIPT = textwrap.dedent(
     """
     import sys
     import jax, jax.numpy as jnp, numpy as np
-    from lantern_jax import program_store
+    from lantern_jax.io import program_store
     from pathlib import Path
 
     folder = Path(sys.argv[1])
@@ -1332,7 +1333,7 @@ def test_two_processes_storing_one_program_leave_one_whole_entry(store):
     for proc in procs:
         _, err = proc.communicate(timeout=120)
         assert proc.returncode == 0, err.decode()[-2000:]
-    from lantern_jax import program_store
+    from lantern_jax.io import program_store
 
     x = np.linspace(0.0, 1.0, 9, dtype=np.float32)
     assert os.listdir(store) == ["d" * 64 + ".program"]
@@ -1340,7 +1341,7 @@ def test_two_processes_storing_one_program_leave_one_whole_entry(store):
 
 
 def test_a_full_cache_disk_stores_nothing_and_changes_no_result(store, monkeypatch):
-    from lantern_jax import program_store
+    from lantern_jax.io import program_store
 
     def full(path, data):
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
@@ -1352,7 +1353,7 @@ def test_a_full_cache_disk_stores_nothing_and_changes_no_result(store, monkeypat
 
 
 def test_a_changed_xla_flags_is_another_program(monkeypatch):
-    from lantern_jax import program_store
+    from lantern_jax.io import program_store
 
     args = (np.zeros(3, np.float32),)
     identity = ("rollout", program_store.describe)  # any function of the package
@@ -1513,7 +1514,7 @@ def test_sigint_during_compile_exits_130(tmp_path):
 DATASET_FAKES = textwrap.dedent(
     """
     import numpy as np
-    from lantern_jax.dataset import generation as dataset_generate
+    from lantern_jax.apps.dataset import generation as dataset_generate
     from lantern_jax.scenarios.suite import load_suite
 
     def fake_dataset(on_chunk=lambda k: None):
@@ -1579,7 +1580,7 @@ DATASET_KILL_SCRIPT = DATASET_FAKES + textwrap.dedent(
 @pytest.fixture(scope="module")
 def dataset_reference(tmp_path_factory):
     """A complete (fake) dataset of three chunks, written without interruption."""
-    from lantern_jax.dataset import generation as dataset_generate
+    from lantern_jax.apps.dataset import generation as dataset_generate
 
     folder = tmp_path_factory.mktemp("dataset") / "ref"
     with _dataset_fakes():
@@ -1590,7 +1591,7 @@ def dataset_reference(tmp_path_factory):
 
 @contextlib.contextmanager
 def _dataset_fakes():
-    from lantern_jax.dataset import generation as dataset_generate
+    from lantern_jax.apps.dataset import generation as dataset_generate
 
     saved = {n: getattr(dataset_generate, n)
              for n in ("plan_scenes", "batched_recorder", "_record_chunk")}  # fmt: skip
@@ -1609,8 +1610,8 @@ def test_an_interrupted_dataset_is_refused_then_resumed(point, dataset_reference
     """kill -9 between the two shards of a chunk or before its card, or Ctrl-C while a chunk is
     recorded: training refuses the part as a dataset, naming the card and the fix, and the same
     command resumes and gives the same shards as an uninterrupted run."""
-    from lantern_jax.dataset import generation as dataset_generate
-    from lantern_jax.dataset.store import CARD_JSON, DatasetError, load_frames, read_card
+    from lantern_jax.apps.dataset import generation as dataset_generate
+    from lantern_jax.apps.dataset.store import CARD_JSON, DatasetError, load_frames, read_card
 
     out = tmp_path / "data"
     proc = subprocess.run([sys.executable, "-c", DATASET_KILL_SCRIPT, point, str(out)],
@@ -1640,7 +1641,7 @@ TRAIN_EXPORT_SCRIPT = textwrap.dedent(
     from lantern_jax.policies.learned import checkpoint
     from lantern_jax.policies.learned.checkpoint import new_model, save_model
     from lantern_jax.policies.learned.model import ModelConfig
-    from lantern_jax.training import behaviour_cloning as train_module
+    from lantern_jax.apps.training import behaviour_cloning as train_module
 
     point, config, out = sys.argv[1], sys.argv[2], sys.argv[3]
     small = ModelConfig(width=8, heads=2)
@@ -1691,8 +1692,9 @@ STRESS_SCRIPT = textwrap.dedent(
     """
     import os, signal, sys
     import numpy as np
-    from lantern_jax import cli, files
-    from lantern_jax.stress import report, search
+    from lantern_jax import cli
+    from lantern_jax.io import files
+    from lantern_jax.apps.stress import report, search
 
     point, out = sys.argv[1], sys.argv[2]
 
@@ -1716,7 +1718,7 @@ STRESS_SCRIPT = textwrap.dedent(
 def test_stress_interrupted_leaves_its_last_whole_set(tmp_path):
     """Ctrl-C during the search writes nothing; kill -9 while the results are written leaves
     the earlier complete set (comparison, failures, suite and plot are one set)."""
-    from lantern_jax.stress.report import RESULT_FILES
+    from lantern_jax.apps.stress.report import RESULT_FILES
 
     out = tmp_path / "stress"
 

@@ -30,7 +30,7 @@ import pytest
 
 from lantern_jax import cli
 from lantern_jax.commands import families as families_cmd
-from lantern_jax.user_code import UserCodeError, as_guest
+from lantern_jax.core.user_code import UserCodeError, as_guest
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -178,7 +178,7 @@ def test_every_numeric_option_refuses_bad_values_before_running(command, option,
 
 
 def test_a_negative_bootstrap_seed_is_refused_by_the_api_before_compiling(monkeypatch):
-    from lantern_jax import evaluation
+    from lantern_jax.apps import evaluation
     from lantern_jax.scenarios.suite import load_suite
 
     def refuse(*a, **k):
@@ -193,7 +193,7 @@ def test_a_negative_bootstrap_seed_is_refused_by_the_api_before_compiling(monkey
 
 def test_a_policy_object_cannot_take_a_registered_name(monkeypatch):
     import lantern_jax as lj
-    from lantern_jax import evaluation
+    from lantern_jax.apps import evaluation
     from lantern_jax.policies.registry import get_policy
     from lantern_jax.scenarios.suite import load_suite
 
@@ -357,11 +357,11 @@ def test_a_user_folder_named_like_a_result_file_is_never_deleted(tmp_path):
 def test_every_writing_command_keeps_the_user_entries_named_like_its_outputs(
     tmp_path, argv, names, result_set
 ):
+    from lantern_jax.apps.stress.report import RESULT_FILES
+    from lantern_jax.apps.training.behaviour_cloning import run_files
+    from lantern_jax.apps.training.config import load_config
     from lantern_jax.commands.unseen import unseen_files
     from lantern_jax.report.outputs import ABLATION_FILES, OUTPUT_FILES
-    from lantern_jax.stress.report import RESULT_FILES
-    from lantern_jax.training.behaviour_cloning import run_files
-    from lantern_jax.training.config import load_config
 
     train = run_files(load_config(ROOT / "configs/train_coop.toml"))
     named = {"OUTPUT_FILES": OUTPUT_FILES, "ABLATION_FILES": ABLATION_FILES,
@@ -412,7 +412,7 @@ def test_report_never_replaces_a_file_or_folder_it_did_not_write(tmp_path, resul
 
 def test_a_staged_set_refuses_a_user_folder_at_commit_time_too(tmp_path):
     """Writers that check no folder up front still never replace a user's entry."""
-    from lantern_jax.files import OutputFolderError, StagedFolder, atomic_write
+    from lantern_jax.io.files import OutputFolderError, StagedFolder, atomic_write
 
     out = tmp_path / "t"
     kept = _prefill(out, ["a.csv"])
@@ -427,7 +427,7 @@ def test_a_staged_set_refuses_a_user_folder_at_commit_time_too(tmp_path):
 # every field of a file is covered by a hash or checked
 # ---------------------------------------------------------------------------------------------
 def test_a_suite_with_an_edited_route_2m_is_refused_where_the_route_is_read():
-    from lantern_jax.dataset.scenes import _suite_routes
+    from lantern_jax.apps.dataset.scenes import _suite_routes
     from lantern_jax.scenarios.suite import load_suite
 
     suite = load_suite().select(["pe_0001", "vc_0001"])
@@ -515,7 +515,7 @@ def test_the_unseen_suite_without_its_families_is_refused_naming_families():
 def test_evaluate_refuses_a_suite_holding_one_pair_twice_before_building(monkeypatch):
     import dataclasses
 
-    from lantern_jax import evaluation
+    from lantern_jax.apps import evaluation
     from lantern_jax.scenarios.suite import load_suite
 
     monkeypatch.setattr(evaluation, "build_executions", lambda *a, **k: 1 / 0)
@@ -528,7 +528,7 @@ def test_evaluate_refuses_a_suite_holding_one_pair_twice_before_building(monkeyp
 def test_jax_64_bit_mode_is_refused_by_name(monkeypatch):
     import jax
 
-    from lantern_jax import evaluation
+    from lantern_jax.apps import evaluation
 
     monkeypatch.setattr(evaluation, "build_executions", lambda *a, **k: 1 / 0)
     jax.config.update("jax_enable_x64", True)
@@ -560,14 +560,14 @@ def test_a_family_with_an_empty_or_nan_range_is_refused_when_registered(rng, say
 
 def test_a_vector_environment_of_a_fractional_size_is_refused():
     pytest.importorskip("brax")
-    from lantern_jax.envs.vector import LanternVectorEnv
+    from lantern_jax.apps.envs.vector import LanternVectorEnv
 
     with pytest.raises(TypeError, match="num_envs must be a whole number, got 1.7"):
         LanternVectorEnv(num_envs=1.7)
 
 
 def test_a_temporary_file_left_by_a_killed_writer_is_removed_by_the_next_write(tmp_path):
-    from lantern_jax.files import atomic_write
+    from lantern_jax.io.files import atomic_write
 
     stale = tmp_path / ".out.csv.999999999.abcd1234.tmp"  # a process id that is not running
     stale.write_bytes(b"half")
@@ -589,14 +589,15 @@ def test_a_ppo_checkpoint_variable_naming_junk_is_one_message(tmp_path, monkeypa
 
 
 def test_the_environment_without_brax_names_the_extra(monkeypatch):
-    """``import lantern_jax.envs`` on the plain install (no brax) says which extra to install."""
-    envs = [m for m in sys.modules if m.split(".")[:2] == ["lantern_jax", "envs"]]
+    """``import lantern_jax.apps.envs`` on the plain install (no brax) says which extra to
+    install."""
+    envs = [m for m in sys.modules if m.split(".")[:3] == ["lantern_jax", "apps", "envs"]]
     for name in envs:
         monkeypatch.delitem(sys.modules, name)
     monkeypatch.setitem(sys.modules, "brax", None)
     says = r"needs the 'rl' extra: pip install -e '\.\[rl\]'"
     with pytest.raises(ModuleNotFoundError, match=says):
-        import lantern_jax.envs  # noqa: F401
+        import lantern_jax.apps.envs  # noqa: F401
 
 
 def test_a_family_code_clash_with_the_unseen_hazards_is_one_line(tmp_path):

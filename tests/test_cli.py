@@ -22,10 +22,10 @@ import pandas as pd
 import pytest
 
 from lantern_jax import cli
+from lantern_jax.apps.evaluation import ablation_names, params_hash
 from lantern_jax.commands import runtime
 from lantern_jax.commands.suite import suite_to_manifest
-from lantern_jax.constants import FAMILIES
-from lantern_jax.evaluation import ablation_names, params_hash
+from lantern_jax.core.constants import FAMILIES
 from lantern_jax.policies.registry import get_policy, policy_names
 from lantern_jax.report import OUTPUT_FILES
 from lantern_jax.scenarios.suite import load_suite, write_manifest
@@ -129,7 +129,7 @@ def test_manifest(evaluated, manifest_path):
 
 
 def _shipped_text() -> str:
-    from lantern_jax.constants import SUITE_ID
+    from lantern_jax.core.constants import SUITE_ID
     from lantern_jax.scenarios.suite import _shipped_path
 
     return _shipped_path(SUITE_ID).read_text()
@@ -214,7 +214,7 @@ def test_fresh_suites_evaluate_every_suite_and_report_the_spread(
     """``--fresh-suites``: generation is replaced by the two-pair suite re-labelled with the
     requested seed (the orchestration, files and records are what is tested; the generator
     has its own tests), so every suite holds the same pairs and the spread across suites is 0."""
-    import lantern_jax.suite_generation as generate
+    import lantern_jax.apps.suite_generation as generate
 
     base = load_suite(manifest_path)
     calls = []
@@ -321,7 +321,7 @@ def test_ablations_list_and_bad_policy(capsys):
 def test_ablations_table_command(manifest_path, tmp_path):
     """``lantern-jax ablations --policy coop`` runs the six protocol variants, prints the
     paper's table and writes it (same batch shape as ``evaluated``: one compile)."""
-    from lantern_jax.ablation_table import TABLE_COLUMNS
+    from lantern_jax.apps.ablation_table import TABLE_COLUMNS
     from lantern_jax.report import ABLATION_FILES
     from lantern_jax.scenarios.protocol_variants import ABLATIONS
 
@@ -367,7 +367,7 @@ def test_python_dash_m():
 def test_suite_regenerates(tmp_path, capsys, monkeypatch):
     """``--regenerate`` and ``--verify`` together generate the suite once: the manifest just
     written is the one compared with the shipped suite."""
-    from lantern_jax import suite_generation as generate
+    from lantern_jax.apps import suite_generation as generate
 
     calls, real = [], generate.generate_suite
     monkeypatch.setattr(generate, "generate_suite",
@@ -384,7 +384,7 @@ def test_suite_regenerates(tmp_path, capsys, monkeypatch):
 
 
 def test_verify_reuses_a_generation_only_of_the_suite_s_own_seed_and_validator():
-    from lantern_jax.suite_generation import DEFAULT_SEED, regenerates_suite, suite_validator
+    from lantern_jax.apps.suite_generation import DEFAULT_SEED, regenerates_suite, suite_validator
 
     own = suite_validator(load_suite().report)
     assert regenerates_suite("lantern-v3", DEFAULT_SEED, own)

@@ -15,14 +15,14 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from lantern_jax.constants import FAMILIES, NUM_WAYPOINTS
-from lantern_jax.dataset import frames as fr
-from lantern_jax.language import PAD_ID
-from lantern_jax.training import counterfactual as cf
-from lantern_jax.training.closed_loop import round_specs
-from lantern_jax.training.config import ConfigError, TrainConfig, load_config
-from lantern_jax.training.data import Examples
-from lantern_jax.training.relabel import ego_frame_offsets
+from lantern_jax.apps.dataset import frames as fr
+from lantern_jax.apps.training import counterfactual as cf
+from lantern_jax.apps.training.closed_loop import round_specs
+from lantern_jax.apps.training.config import ConfigError, TrainConfig, load_config
+from lantern_jax.apps.training.data import Examples
+from lantern_jax.apps.training.relabel import ego_frame_offsets
+from lantern_jax.core.constants import FAMILIES, NUM_WAYPOINTS
+from lantern_jax.types.language import PAD_ID
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -38,7 +38,7 @@ def test_relabel_offsets_are_the_dataset_labellers_waypoints():
 
 
 def _examples(n: int) -> tuple[Examples, np.ndarray, np.ndarray]:
-    from lantern_jax.language import MAX_TOKENS
+    from lantern_jax.types.language import MAX_TOKENS
 
     rng = np.random.default_rng(1)
     obs = dict(warning_tokens=np.full((n, MAX_TOKENS), PAD_ID, np.int32),
@@ -52,8 +52,8 @@ def _examples(n: int) -> tuple[Examples, np.ndarray, np.ndarray]:
 
 
 def test_counterfactual_frames_carry_the_ordinary_label_and_a_text_of_no_hazard_here():
-    from lantern_jax.observation import stated_position
     from lantern_jax.scenarios.warnings import text_tables
+    from lantern_jax.types.observation import stated_position
 
     ex, families, routes = _examples(240)
     out, variant = cf.counterfactual_examples(ex, families, routes, share=0.5, seed=0)
@@ -97,7 +97,7 @@ def test_closed_loop_config_loads_and_needs_a_model_to_start_from(tmp_path):
 
 
 def test_round_specs_spread_over_families_and_change_by_round():
-    from lantern_jax.dataset.scenes import SceneSpec
+    from lantern_jax.apps.dataset.scenes import SceneSpec
 
     specs = [SceneSpec(i, FAMILIES[i % 6], "clear", {}, f"{i:064x}") for i in range(60)]
     a, b = round_specs(specs, 12, 0, 0), round_specs(specs, 12, 0, 1)
@@ -108,11 +108,11 @@ def test_round_specs_spread_over_families_and_change_by_round():
 
 @pytest.mark.slow
 def test_relabel_of_an_expert_state_is_the_dataset_label():
-    from lantern_jax.dataset.record import batched_recorder
-    from lantern_jax.dataset.scenes import build_scenes, plan_scenes
+    from lantern_jax.apps.dataset.record import batched_recorder
+    from lantern_jax.apps.dataset.scenes import build_scenes, plan_scenes
+    from lantern_jax.apps.training.relabel import relabel_batch
     from lantern_jax.policies.registry import get_policy
-    from lantern_jax.training.relabel import relabel_batch
-    from lantern_jax.world import tree_stack
+    from lantern_jax.types.world import tree_stack
 
     specs = plan_scenes(1, 5, families=("PE",))
     a, b = build_scenes(specs)
@@ -141,9 +141,9 @@ def test_relabel_of_an_expert_state_is_the_dataset_label():
 
 @pytest.mark.slow
 def test_one_round_trains_checkpoints_and_resumes(tmp_path):
-    from lantern_jax.dataset.generation import generate_dataset
+    from lantern_jax.apps.dataset.generation import generate_dataset
+    from lantern_jax.apps.training.behaviour_cloning import train
     from lantern_jax.policies.learned.checkpoint import checkpoint_policy, read_meta
-    from lantern_jax.training.behaviour_cloning import train
 
     ds = tmp_path / "ds"
     generate_dataset(ds, pairs_per_family=1, seed=5, chunk_pairs=6, progress=False)

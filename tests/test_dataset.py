@@ -14,13 +14,12 @@ import jax
 import numpy as np
 import pytest
 
-from lantern_jax.constants import FAMILIES, NUM_WAYPOINTS, WEATHERS
-from lantern_jax.dataset import frames as fr
-from lantern_jax.dataset import generation as generate_module
-from lantern_jax.dataset.generation import generate_dataset
-from lantern_jax.dataset.record import FRAME_TICKS, FRONT_SENSORS, RIG_SENSORS, record
-from lantern_jax.dataset.scenes import PLAN_JSON, build_scenes, plan_scenes, read_plan
-from lantern_jax.dataset.store import (
+from lantern_jax.apps.dataset import frames as fr
+from lantern_jax.apps.dataset import generation as generate_module
+from lantern_jax.apps.dataset.generation import generate_dataset
+from lantern_jax.apps.dataset.record import FRAME_TICKS, FRONT_SENSORS, RIG_SENSORS, record
+from lantern_jax.apps.dataset.scenes import PLAN_JSON, build_scenes, plan_scenes, read_plan
+from lantern_jax.apps.dataset.store import (
     CARD_JSON,
     DatasetError,
     card_markdown,
@@ -29,7 +28,7 @@ from lantern_jax.dataset.store import (
     load_sequences,
     read_card,
 )
-from lantern_jax.language import PAD_ID
+from lantern_jax.core.constants import FAMILIES, NUM_WAYPOINTS, WEATHERS
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.duplicates import near_duplicate, route_samples
 from lantern_jax.scenarios.families import build_pair, sample_params
@@ -37,6 +36,7 @@ from lantern_jax.scenarios.spec import content_hash
 from lantern_jax.scenarios.suite import PairSpec, Suite, load_suite
 from lantern_jax.sim.observe import observe
 from lantern_jax.sim.rollout import rollout
+from lantern_jax.types.language import PAD_ID
 
 pytestmark = pytest.mark.slow
 

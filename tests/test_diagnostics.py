@@ -9,8 +9,8 @@ import pandas as pd
 import pytest
 from conftest import MODE_COOP, MODE_EGO
 
-from lantern_jax import diagnostics as dg
-from lantern_jax.constants import DT
+from lantern_jax.apps import diagnostics as dg
+from lantern_jax.core.constants import DT
 from lantern_jax.scenarios.suite import load_suite
 from lantern_jax.scenarios.warnings import non_actionable_text_ids
 

@@ -211,7 +211,7 @@ def browser():
 def _api_page(site: Path) -> Path:
     pages = sorted((site / "_autosummary").glob("lantern_jax.*.html"))
     assert pages, "the API reference holds no module page"
-    preferred = site / "_autosummary" / "lantern_jax.evaluation.html"
+    preferred = site / "_autosummary" / "lantern_jax.apps.evaluation.html"
     return preferred if preferred in pages else pages[0]
 
 

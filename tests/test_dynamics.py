@@ -1,4 +1,4 @@
-"""Tests of lantern_jax.polyline and lantern_jax.dynamics (bicycle, controller, lights, IDM,
+"""Tests of lantern_jax.maths.polyline and lantern_jax.dynamics (bicycle, controller, lights, IDM,
 scripted actors, actor stepping).
 
 Goldens are derived in comments; geometry and the bicycle are also compared step by step with the
@@ -16,8 +16,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from lantern_jax import polyline as pl
-from lantern_jax.constants import (
+from lantern_jax.core.constants import (
     BIG,
     DT,
     EGO_HALF_LENGTH,
@@ -49,7 +48,8 @@ from lantern_jax.dynamics.controller import track_waypoints, waypoints_fault
 from lantern_jax.dynamics.idm import IDMParams, idm_accel
 from lantern_jax.dynamics.lights import light_states
 from lantern_jax.dynamics.scripted import ScriptedMotion, scripted_pose, trigger_time
-from lantern_jax.world import (
+from lantern_jax.maths import polyline as pl
+from lantern_jax.types.world import (
     ActorScript,
     ActorState,
     EgoState,
@@ -444,7 +444,7 @@ def test_a_plan_faster_than_the_limit_is_a_fault_and_one_just_under_is_not():
     """Legs of MAX_PLAN_SPEED * WAYPOINT_DT = 25 m: a straight plan at 99 m/s is driven, one at
     101 m/s is a fault, as is a single 26 m jump between two waypoints of a slow plan (or from
     the ego to the first waypoint), whatever its direction."""
-    from lantern_jax.constants import MAX_PLAN_SPEED, WAYPOINT_DT
+    from lantern_jax.core.constants import MAX_PLAN_SPEED, WAYPOINT_DT
 
     leg = MAX_PLAN_SPEED * WAYPOINT_DT
     assert leg == 25.0

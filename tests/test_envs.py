@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from lantern_jax.constants import EGO_MAX_BRAKE, WAYPOINT_DT
+from lantern_jax.core.constants import EGO_MAX_BRAKE, WAYPOINT_DT
 from lantern_jax.policies.features import (
     ACTION_SIZE,
     ACTOR_FEATURES,
@@ -27,8 +27,8 @@ pytest.importorskip("brax")
 from brax import envs as brax_envs  # noqa: E402
 from brax.envs.wrappers import training as brax_training  # noqa: E402
 
-import lantern_jax.envs as lenvs  # noqa: E402
-from lantern_jax.envs.reward import GATE_PENALTY  # noqa: E402
+import lantern_jax.apps.envs as lenvs  # noqa: E402
+from lantern_jax.apps.envs.reward import GATE_PENALTY  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -39,7 +39,7 @@ def env():
 
 def test_importing_lantern_jax_does_not_import_brax():
     code = (
-        "import sys, lantern_jax, lantern_jax.evaluation, lantern_jax.cli, "
+        "import sys, lantern_jax, lantern_jax.apps.evaluation, lantern_jax.cli, "
         "lantern_jax.policies.registry; assert 'brax' not in sys.modules, 'brax imported'"
     )
     subprocess.run([sys.executable, "-c", code], check=True)
@@ -49,10 +49,10 @@ def test_importing_the_environment_prints_no_third_party_noise():
     """MJX's "Failed to import warp" lines (brax imports it) stay out of the terminal; a line
     printed by anything else during the import still gets through."""
     code = (
-        "from lantern_jax.envs.quiet import filtered_stdout\n"
+        "from lantern_jax.apps.envs.quiet import filtered_stdout\n"
         "with filtered_stdout():\n"
         "    print('Failed to import warp: x'); print('kept line')\n"
-        "import lantern_jax.envs"
+        "import lantern_jax.apps.envs"
     )
     done = subprocess.run([sys.executable, "-c", code], check=True, capture_output=True,
                           text=True)  # fmt: skip
@@ -194,7 +194,7 @@ def test_ppo_policy_network_matches_brax_inference():
 
 @pytest.mark.slow
 def test_a_few_ppo_iterations_write_a_loadable_policy(tmp_path, monkeypatch):
-    from lantern_jax.envs.ppo_training import train
+    from lantern_jax.apps.envs.ppo_training import train
     from lantern_jax.policies.learned_ppo import CHECKPOINT_ENV
     from lantern_jax.policies.registry import get_policy
 

@@ -19,15 +19,14 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from lantern_jax.constants import FAMILIES, KIND_PEDESTRIAN
-from lantern_jax.evaluation import (
+from lantern_jax.apps.evaluation import (
     CONDITIONS,
     ablation_names,
     build_executions,
     evaluate,
     params_hash,
 )
-from lantern_jax.observation import warning_delivered
+from lantern_jax.core.constants import FAMILIES, KIND_PEDESTRIAN
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.reference import reference_act
 from lantern_jax.policies.registry import get_policy
@@ -41,6 +40,7 @@ from lantern_jax.scoring.table import (
     validate_route_table,
 )
 from lantern_jax.sim.engine import SUITE_BATCH_SHAPE, batch_shape
+from lantern_jax.types.observation import warning_delivered
 
 PAIRS = ["pe_0001", "lww_0001"]  # v_ref 8.45 m/s and 6.29 m/s
 ALONE = "lww_0001"  # shorter timeout than pe_0001: alone it runs a shorter horizon
@@ -429,7 +429,7 @@ def test_held_out_paraphrase(ablated, suite2):
 def test_wording_table_of_a_template_matcher(base, ablated, suite2):
     """coop understands only the canonical wording: under every tier its paraphrase CUS is its
     no-warning CUS, so retention = no-warning / canonical."""
-    from lantern_jax.diagnostics import tier_rows
+    from lantern_jax.apps.diagnostics import tier_rows
 
     params, n = _route_a_params(suite2, "held_out_paraphrase")
     tiers = paraphrase_tiers(jax.tree.map(lambda x: x[:n], params))
@@ -449,7 +449,7 @@ def test_wording_table_of_a_template_matcher(base, ablated, suite2):
 
 def test_ablation_table_rows(base, ablated):
     """The paper's ablation columns from each variant's route rows (Event Exposure included)."""
-    from lantern_jax.ablation_table import TABLE_COLUMNS, ablation_rows
+    from lantern_jax.apps.ablation_table import TABLE_COLUMNS, ablation_rows
 
     full = ablation_rows(base.route_table).set_index(["model", "condition"])
     assert list(full.columns) == list(TABLE_COLUMNS)
@@ -527,7 +527,7 @@ def test_slot_scheduling_matches_one_group(shipped, monkeypatch):
 def test_trimmed_padding_changes_no_result(suite2, policy):
     """Cutting the unused actor and lane slots (the default batch) keeps every valid slot and
     every result: discrete outputs exactly, continuous ones to the reproducibility promise."""
-    from lantern_jax.evaluation import run_executions
+    from lantern_jax.apps.evaluation import run_executions
     from lantern_jax.scoring.metrics import finalize
     from lantern_jax.scoring.table import REPRODUCIBLE_ATOL, REPRODUCIBLE_RTOL
 
@@ -558,7 +558,7 @@ def test_trimmed_padding_changes_no_result(suite2, policy):
 
 def test_trim_padding_on_hand_built_slots():
     """``used_slots`` counts up to the last valid slot of any batch member (at least one)."""
-    from lantern_jax.world import used_slots
+    from lantern_jax.types.world import used_slots
 
     assert used_slots(np.array([[True, False, False, False], [False, False, True, False]])) == 3
     assert used_slots(np.zeros((2, 5), bool)) == 1
@@ -595,7 +595,7 @@ def test_batch_bucket_depends_on_the_batch_alone():
 def test_the_batch_blocks_are_read_by_name():
     """``Executions.block``/``take``: Route A with and without the warning, then Route B, each
     ``num_pairs`` long in pair order; both Route A blocks hold the same physical scene."""
-    from lantern_jax.constants import BLOCKS, EXECUTIONS_PER_PAIR, ROUTE_B
+    from lantern_jax.core.constants import BLOCKS, EXECUTIONS_PER_PAIR, ROUTE_B
     from lantern_jax.sim.engine import build_executions
 
     execs = build_executions(load_suite().select(PAIRS + ["rty_0001"]))

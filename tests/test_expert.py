@@ -11,7 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from lantern_jax.constants import (
+from lantern_jax.core.constants import (
     DT,
     KIND_PEDESTRIAN,
     MOTION_IDM,
@@ -19,17 +19,17 @@ from lantern_jax.constants import (
     TRIGGER_CLOCK,
     TRIGGER_EVENT,
 )
+from lantern_jax.core.times import NEVER
 from lantern_jax.dynamics.actors import scripted_states, step_actors
 from lantern_jax.dynamics.forecast import earliest_event_time, forecast_actors
 from lantern_jax.dynamics.lights import light_states
-from lantern_jax.observation import FORECAST_DT, FORECAST_STEPS
 from lantern_jax.policies import expert as E
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.handmade import ActorSpec, straight_scene
 from lantern_jax.sim.observe import observe, privileged_view
 from lantern_jax.sim.state import init_state
-from lantern_jax.times import NEVER
-from lantern_jax.world import present
+from lantern_jax.types.observation import FORECAST_DT, FORECAST_STEPS
+from lantern_jax.types.world import present
 
 K = FORECAST_STEPS
 

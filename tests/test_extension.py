@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 from lantern_jax import Settings, evaluate, write_outputs
-from lantern_jax.constants import EGO_HALF_LENGTH
+from lantern_jax.core.constants import EGO_HALF_LENGTH
 from lantern_jax.policies.base import Policy
 from lantern_jax.scenarios.suite import build_suite_scenarios, load_suite
 from lantern_jax.scoring.table import metric_columns, read_route_table
@@ -37,7 +37,7 @@ from lantern_jax.sim.engine import choose_path
 from lantern_jax.sim.observe import observe
 from lantern_jax.sim.rollout import rollout
 from lantern_jax.sim.state import init_state
-from lantern_jax.world import present
+from lantern_jax.types.world import present
 
 # --- user code: a rear range sensor and a policy that reads it ----------------------------------
 REAR_RAYS = 8  # rays over the rear 60 degrees

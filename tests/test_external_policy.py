@@ -153,7 +153,7 @@ def test_a_trace_error_in_a_users_act_names_its_line_and_suggests_jnp_where(tmp_
     """A Python ``if`` on an array inside ``act``: the PolicyError names the user's file and
     line and hints at ``jnp.where``."""
     import lantern_jax as lj
-    from lantern_jax.evaluation import PolicyError
+    from lantern_jax.apps.evaluation import PolicyError
 
     path = tmp_path / "iffy.py"
     path.write_text(

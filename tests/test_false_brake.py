@@ -25,13 +25,13 @@ import numpy as np
 import pytest
 from conftest import MODE_COOP, MODE_EXPERT
 
-from lantern_jax.constants import DT, EGO_HALF_LENGTH, FAMILIES, NUM_WAYPOINTS, WAYPOINT_DT
+from lantern_jax.core.constants import DT, EGO_HALF_LENGTH, FAMILIES, NUM_WAYPOINTS, WAYPOINT_DT
 from lantern_jax.dynamics.controller import K_SPEED, STOP_SPEED
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.planner import default_planner_config, plan, route_point, stop_constraint
 from lantern_jax.scoring.metrics import finalize
 from lantern_jax.sim.rollout import rollout
-from lantern_jax.world import tree_stack
+from lantern_jax.types.world import tree_stack
 
 HORIZON = 700  # ticks (35 s)
 PAST_WARNING = 1.0  # m, the ego centre comes to rest this far past the warning point
@@ -187,7 +187,7 @@ def test_crawling_at_the_warning_point_passes_the_gate_but_not_the_efficiency_di
 @pytest.mark.slow
 def test_coop_false_brake_rate_on_the_suite():
     """On the whole shipped suite the cooperative reference keeps False Brake-B <= 5 %."""
-    from lantern_jax.evaluation import evaluate
+    from lantern_jax.apps.evaluation import evaluate
 
     rt = evaluate(["coop"], progress=False).route_table
     warned = rt[rt["condition"] == "warning"]

@@ -11,13 +11,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lantern_jax import family_codes
-from lantern_jax.constants import FAMILIES, FAMILY_NAMES
+from lantern_jax.apps.stress.space import search_space
+from lantern_jax.core import family_codes
+from lantern_jax.core.constants import FAMILIES, FAMILY_NAMES
 from lantern_jax.scenarios import families, premise, registry, spec
 from lantern_jax.scenarios import warnings as w
 from lantern_jax.scenarios.family_registry import FAMILY_REGISTRY, FamilyEntry, FamilyRegistry
 from lantern_jax.scoring.thresholds import D_SAFE_LARGE_M, D_SAFE_SMALL_M
-from lantern_jax.stress.space import search_space
 
 TESTS = Path(__file__).parent
 
@@ -148,9 +148,10 @@ def test_a_registry_refuses_what_is_not_an_entry_and_a_second_entry_under_a_code
 
 
 def test_the_family_and_sensor_tables_are_one_kind_of_registry():
-    """Both extension points keep their entries the same way (:mod:`lantern_jax.named_registry`):
+    """Both extension points keep their entries the same way
+    (:mod:`lantern_jax.core.named_registry`):
     an equal entry registered again is the one held, a snapshot restores what was there."""
-    from lantern_jax.named_registry import NamedRegistry
+    from lantern_jax.core.named_registry import NamedRegistry
     from lantern_jax.sensors.registry import SENSOR_REGISTRY, SensorRegistry
 
     assert isinstance(FAMILY_REGISTRY, NamedRegistry) and isinstance(SENSOR_REGISTRY, NamedRegistry)

@@ -14,12 +14,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from lantern_jax.apps.stress import fragility as frag
+from lantern_jax.apps.stress.fragility_probes import probe_pair
+from lantern_jax.apps.stress.knob_box import knob_union
 from lantern_jax.cli import main
 from lantern_jax.scenarios.families import KNOB_RANGES, KNOBS_FIELD
 from lantern_jax.scenarios.suite import build_suite_batches, load_suite
-from lantern_jax.stress import fragility as frag
-from lantern_jax.stress.fragility_probes import probe_pair
-from lantern_jax.stress.knob_box import knob_union
 
 
 def _radius_at(f, u0: np.ndarray, active: np.ndarray | None = None) -> tuple:
@@ -163,7 +163,7 @@ def test_fragility_refusals_name_the_option(argv, message, capsys, tmp_path):
 # ---------------------------------------------------------------------------------------------
 @pytest.mark.slow
 def test_fragility_run_writes_its_files_and_failures_re_evaluate(tmp_path):
-    from lantern_jax.evaluation import evaluate
+    from lantern_jax.apps.evaluation import evaluate
 
     out = tmp_path / "frag"
     # coop at the right turns: the family where its scenes lie closest to a collision

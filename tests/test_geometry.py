@@ -1,4 +1,5 @@
-"""Tests for lantern_jax.geometry: hand-built goldens, NumPy reference parity, vmap, gradients."""
+"""Tests for lantern_jax.maths.geometry: hand-built goldens, NumPy reference parity, vmap,
+gradients."""
 
 from __future__ import annotations
 
@@ -9,8 +10,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from lantern_jax import geometry as g
-from lantern_jax.constants import BIG
+from lantern_jax.core.constants import BIG
+from lantern_jax.maths import geometry as g
 
 try:  # tests/ as a rootdir-relative folder or as a package
     import reference_numpy_geometry as ref

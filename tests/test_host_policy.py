@@ -15,7 +15,7 @@ from lantern_jax.scenarios.handmade import straight_scene
 from lantern_jax.sim.observe import observe
 from lantern_jax.sim.rollout import rollout, rollout_batch
 from lantern_jax.sim.state import init_state
-from lantern_jax.world import tree_stack
+from lantern_jax.types.world import tree_stack
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))
 import host_models  # noqa: E402

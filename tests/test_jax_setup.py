@@ -1,6 +1,6 @@
-"""JAX's set-up for the Python API (:mod:`lantern_jax.jax_setup`): ``import lantern_jax`` before
-JAX gives one XLA CPU device per core and the persistent compilation cache, as the command line
-has them; it can be turned off; JAX imported first keeps its own device count and
+"""JAX's set-up for the Python API (:mod:`lantern_jax.core.jax_setup`): ``import lantern_jax``
+before JAX gives one XLA CPU device per core and the persistent compilation cache, as the command
+line has them; it can be turned off; JAX imported first keeps its own device count and
 :func:`lantern_jax.setup` says why; a bad device count is a warning naming the variable.
 
 Each case runs in a fresh Python process (the set-up is only possible before JAX starts).
@@ -15,7 +15,7 @@ import sys
 
 import pytest
 
-from lantern_jax.jax_setup import SetupError, cpu_device_request
+from lantern_jax.core.jax_setup import SetupError, cpu_device_request
 
 PROBE = """
 import json, os, sys, warnings

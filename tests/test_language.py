@@ -10,9 +10,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from lantern_jax import language
 from lantern_jax.scenarios import warnings
 from lantern_jax.scenarios.warnings import DEFAULT_BANK, TEMPLATES, TOKEN
+from lantern_jax.types import language
 
 
 @pytest.fixture(scope="module")
@@ -265,7 +265,7 @@ def test_paraphrases_embed_closer_to_their_template_than_non_actionable_texts(ta
 def test_mentions_finds_a_word_in_any_case_and_plural_inside_jit():
     """``language.mentions`` matches the word's token ids whatever sub-words the tokenizer
     splits a spelling into (``pedestrians`` is not ``pedestrian`` + ``s``), and nothing else."""
-    from lantern_jax.language import mentions, pad, tokenize
+    from lantern_jax.types.language import mentions, pad, tokenize
 
     found = jax.jit(jax.vmap(lambda t: mentions(t, "pedestrian")))
     texts = ["A pedestrian may step out.", "PEDESTRIAN ahead", "Pedestrians near the bus stop.",

@@ -19,13 +19,9 @@ PACKAGE = Path(lantern_jax.__file__).parent
 
 #: Layers from the bottom up; each entry is a top-level module or sub-package of lantern_jax.
 LAYERS: tuple[tuple[str, ...], ...] = (
-    # values, the time sentinel, wall-clock breakdowns, the known family codes, array checks
-    ("constants", "times", "timing", "family_codes", "checks", "actor_track", "jax_setup",
-     "user_code", "renamed", "named_registry"),  # fmt: skip
-    ("geometry", "polyline", "split_map"),  # pure JAX maths and loop rewrites
-    # scenario and observation types; I/O (files, configuration files, compiled programs on
-    # disk); tokens
-    ("world", "observation", "files", "config_file", "program_store", "language"),
+    ("core",),  # values, time, wall-clock breakdowns, family codes, checks, registries, set-up
+    ("maths",),  # pure JAX maths and loop rewrites
+    ("types", "io"),  # scenario, world state, observation and token types; files on disk
     # how things move, what cameras see (ray casting and the camera rigs, which the scenarios'
     # premise check runs too), how it is measured
     ("dynamics", "sensors.visibility", "sensors.cameras", "scoring"),
@@ -34,23 +30,17 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     #                the protocol, so they sit above the scenarios)
     ("policies",),  # reference planners and the registry
     ("sim",),  # one tick and the rollouts
-    ("report",),  # the results as data, their tables and files
-    (
-        "evaluation",
-        "suite_generation",
-        "stress",
-        "dataset",
-        "diagnostics",
-        "ablation_table",
-        "envs",
-        "stream",
-        "training",
-        "transfer",
-    ),  # evaluation, suites, stress testing, data, language diagnostics, ablations,
-    #               brax env, chunks, training, transfer to unseen hazards
-    ("viz", "compare"),  # plots, differences between evaluations
+    ("report",),  # the results as data, their tables and files, comparisons of result folders
+    # evaluation, suites, stress testing, data, language diagnostics, ablations, brax env,
+    # chunks, training, transfer to unseen hazards
+    ("apps",),
+    ("viz",),  # plots
     ("cli", "commands", "__main__"),  # the command line
 )
+#: The folders of the layers: every module of the package sits in one of them, but the command
+#: line's entry points and the package's own ``__init__``.
+LAYER_FOLDERS = ("core", "maths", "types", "io", "dynamics", "sensors", "scoring", "scenarios",
+                 "policies", "sim", "report", "apps", "viz", "commands")  # fmt: skip
 LAYER_OF = {name: i for i, names in enumerate(LAYERS) for name in names}
 
 
@@ -97,6 +87,17 @@ def _top(module: str) -> str:
 
 def _graph() -> dict[str, set[str]]:
     return {_module_name(p): _imports(p) for p in sorted(PACKAGE.rglob("*.py"))}
+
+
+def test_every_module_sits_in_the_folder_of_its_layer():
+    """The package's top level holds the layer folders and the command line's entry points only,
+    so the layers show in the folders."""
+    top = {
+        p.stem if p.is_file() else p.name
+        for p in PACKAGE.iterdir()
+        if p.suffix == ".py" or (p / "__init__.py").exists()
+    }
+    assert top == {"__init__", "__main__", "cli", *LAYER_FOLDERS}, sorted(top)
 
 
 def test_every_module_has_a_layer():

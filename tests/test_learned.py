@@ -16,7 +16,8 @@ import optax
 import pytest
 from flax import nnx
 
-from lantern_jax.constants import NUM_WAYPOINTS
+from lantern_jax.apps.training.config import ConfigError, load_config
+from lantern_jax.core.constants import NUM_WAYPOINTS
 from lantern_jax.policies.learned.checkpoint import (
     CheckpointError,
     checkpoint_policy,
@@ -40,8 +41,7 @@ from lantern_jax.scenarios.handmade import straight_scene
 from lantern_jax.scenarios.warnings import text_tables, warning_language
 from lantern_jax.sim.observe import observe
 from lantern_jax.sim.state import init_state
-from lantern_jax.training.config import ConfigError, load_config
-from lantern_jax.world import present
+from lantern_jax.types.world import present
 
 SMALL = ModelConfig(width=16, heads=2)
 
@@ -55,7 +55,7 @@ def obs():
 
 @pytest.fixture(scope="module")
 def tables():
-    from lantern_jax.language import load_embedding
+    from lantern_jax.types.language import load_embedding
 
     return jnp.asarray(load_embedding(), jnp.float32), jnp.asarray(nav_token_table())
 
@@ -339,7 +339,7 @@ def test_surround_rig_reads_the_simulators_360_degree_view(tmp_path):
     """A surround-rig model's act asks for the six-camera rig: the simulator fills
     ``Observation.surround`` for it (and only for it), its features read that view, and it
     drives a closed-loop rollout to finite waypoints."""
-    from lantern_jax.constants import SURROUND_FOV
+    from lantern_jax.core.constants import SURROUND_FOV
     from lantern_jax.sim.rollout import rollout
     from lantern_jax.sim.sense import SURROUND_RAYS, camera_view
 

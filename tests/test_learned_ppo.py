@@ -6,7 +6,7 @@ import jax
 import numpy as np
 import pytest
 
-from lantern_jax.evaluation import evaluate
+from lantern_jax.apps.evaluation import evaluate
 from lantern_jax.policies import learned_ppo
 from lantern_jax.policies.base import check_policy_output
 from lantern_jax.policies.features import ACTION_SIZE, OBS_SIZE

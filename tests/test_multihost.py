@@ -20,7 +20,7 @@ from lantern_jax.scoring.table import compare_route_tables, read_route_table
 from lantern_jax.sim.distributed import placement, wait_for_every_process
 
 WORKER = (
-    "import sys, lantern_jax.evaluation as e; e.COMPACT_MIN_BATCH = 1; "
+    "import sys, lantern_jax.apps.evaluation as e; e.COMPACT_MIN_BATCH = 1; "
     "e.compact_slots = lambda backend=None: 2; "
     "from lantern_jax.cli import main; sys.exit(main(sys.argv[1:]))"
 )

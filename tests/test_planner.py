@@ -10,9 +10,9 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from lantern_jax.constants import BIG
-from lantern_jax.observation import NUM_ROUTE_POINTS, ROUTE_STEP
+from lantern_jax.core.constants import BIG
 from lantern_jax.policies.planner import curvature_speed_limit, turn_angles, turn_entry_arc
+from lantern_jax.types.observation import NUM_ROUTE_POINTS, ROUTE_STEP
 
 
 def arc_route(first_straight: int, turn_per_step: float) -> np.ndarray:

@@ -12,8 +12,8 @@ import pytest
 
 matplotlib.use("Agg")
 
-from lantern_jax.constants import DT  # noqa: E402
-from lantern_jax.evaluation import EvalResult, settings_record  # noqa: E402
+from lantern_jax.apps.evaluation import EvalResult, settings_record  # noqa: E402
+from lantern_jax.core.constants import DT  # noqa: E402
 from lantern_jax.scenarios.suite import load_suite  # noqa: E402
 from lantern_jax.sim.settings import default_settings  # noqa: E402
 from lantern_jax.viz import PairRecording, plot_pair, record_pair  # noqa: E402
@@ -137,8 +137,8 @@ def test_pairs_of_one_horizon_step_share_a_recorded_program(coop_pe):
     """Recorded rollouts run to the longest timeout rounded up to RECORD_HORIZON_STEP_S: a pair
     whose timeout falls in the first one's step (pe_0001 47.4 s, pe_0004 51.1 s: both 60 s)
     compiles nothing new, and its records end with frozen, ``done`` ticks past its end."""
-    from lantern_jax import diagnostics
-    from lantern_jax.constants import DT, RECORD_HORIZON_STEP_S
+    from lantern_jax.apps import diagnostics
+    from lantern_jax.core.constants import DT, RECORD_HORIZON_STEP_S
 
     assert coop_pe.pair_id == "pe_0001"
     before = diagnostics._recorded._cache_size()

@@ -18,11 +18,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from lantern_jax.constants import KIND_PEDESTRIAN, NUM_WAYPOINTS, WAYPOINT_DT
-from lantern_jax.diagnostics import language_table, run_recorded
-from lantern_jax.evaluation import build_executions, run_executions
-from lantern_jax.language import PAD_ID
-from lantern_jax.observation import PRIVILEGED, SENSORS, WARNING, Observation, warning_delivered
+from lantern_jax.apps.diagnostics import language_table, run_recorded
+from lantern_jax.apps.evaluation import build_executions, run_executions
+from lantern_jax.core.constants import KIND_PEDESTRIAN, NUM_WAYPOINTS, WAYPOINT_DT
 from lantern_jax.policies.base import Policy, check_policy_output
 from lantern_jax.policies.host import host_policy
 from lantern_jax.policies.reference import (
@@ -39,6 +37,14 @@ from lantern_jax.scenarios.warnings import token_table as bank_tokens
 from lantern_jax.sensors.registry import normalize_sensors
 from lantern_jax.sim.observe import observe
 from lantern_jax.sim.state import init_state
+from lantern_jax.types.language import PAD_ID
+from lantern_jax.types.observation import (
+    PRIVILEGED,
+    SENSORS,
+    WARNING,
+    Observation,
+    warning_delivered,
+)
 
 BRAKE_RANGE_M = 40.0  # m ahead: the probe brakes for any pedestrian slot this close
 
@@ -272,9 +278,9 @@ def test_an_agent_with_memory_in_the_brax_environment():
     """An agent loop over the environment keeps its own carry (ticks with the warning slot on)
     and resets it with the episode: at the end it equals the simulator's delivered ticks."""
     pytest.importorskip("brax")
-    from lantern_jax.envs.bank import ScenarioBank
-    from lantern_jax.envs.env import LanternEnv
-    from lantern_jax.world import tree_stack
+    from lantern_jax.apps.envs.bank import ScenarioBank
+    from lantern_jax.apps.envs.env import LanternEnv
+    from lantern_jax.types.world import tree_stack
 
     suite = load_suite().select(["pe_0001"])
     a, b, _ = build_suite_scenarios(suite)

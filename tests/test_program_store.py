@@ -1,4 +1,4 @@
-"""The program store (:mod:`lantern_jax.program_store`): compiled evaluation programs kept on
+"""The program store (:mod:`lantern_jax.io.program_store`): compiled evaluation programs kept on
 disk and loaded by a later process without tracing or compiling.
 
 * a new process loads a stored program instead of tracing it, with identical result files;
@@ -24,8 +24,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from lantern_jax import program_store
-from lantern_jax.evaluation import evaluate
+from lantern_jax.apps.evaluation import evaluate
+from lantern_jax.io import program_store
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.expert import expert_act
 from lantern_jax.policies.reference import reference_act

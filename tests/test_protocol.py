@@ -16,8 +16,8 @@ from conftest import (
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from lantern_jax import times
-from lantern_jax.constants import (
+from lantern_jax.core import times
+from lantern_jax.core.constants import (
     DT,
     FAMILIES,
     KIND_PEDESTRIAN,
@@ -29,8 +29,6 @@ from lantern_jax.constants import (
     TRIGGER_EVENT,
     WEATHERS,
 )
-from lantern_jax.language import PAD_ID
-from lantern_jax.observation import WARNING, stated_position
 from lantern_jax.scenarios.families import build_pair, sample_params
 from lantern_jax.scenarios.families_straight import PED_CROSSING, PED_EXTENT, PED_SPEED
 from lantern_jax.scenarios.handmade import ActorSpec, no_lights, straight_scene
@@ -38,7 +36,9 @@ from lantern_jax.scenarios.warnings import token_table
 from lantern_jax.sim.observe import delivered_warning, observe
 from lantern_jax.sim.sense import locate_on_route, sense
 from lantern_jax.sim.state import init_state
-from lantern_jax.world import ProtocolState, TrafficLights
+from lantern_jax.types.language import PAD_ID
+from lantern_jax.types.observation import WARNING, stated_position
+from lantern_jax.types.world import ProtocolState, TrafficLights
 
 HAZARD = 0  # hazard slot of every scene here
 TRUCK_EXTENT = (4.0, 1.25)  # m, half extents of the parked truck of the PE-like scene

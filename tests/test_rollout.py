@@ -17,7 +17,7 @@ from conftest import (
     select,
 )
 
-from lantern_jax.constants import (
+from lantern_jax.core.constants import (
     DT,
     FAMILIES,
     KIND_PEDESTRIAN,

@@ -12,7 +12,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from lantern_jax.constants import (
+from lantern_jax.core.constants import (
     EGO_HALF_LENGTH,
     EGO_HALF_WIDTH,
     FAMILIES,
@@ -52,7 +52,7 @@ from lantern_jax.scenarios.warnings import (
     ground_position,
     render_warning,
 )
-from lantern_jax.world import pad_rows, tree_stack
+from lantern_jax.types.world import pad_rows, tree_stack
 
 SEEDS = st.integers(0, 2**32 - 1)
 WEATHER = st.sampled_from(WEATHERS)

@@ -11,7 +11,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from lantern_jax.constants import DT
+from lantern_jax.core.constants import DT
+from lantern_jax.core.times import NEVER
 from lantern_jax.scoring.components import (
     anticipation,
     block,
@@ -28,7 +29,6 @@ from lantern_jax.scoring.components import (
 )
 from lantern_jax.scoring.sample import TickSample
 from lantern_jax.scoring.thresholds import DEFAULT_SCORING as S
-from lantern_jax.times import NEVER
 
 N = 60  # ticks of every tiny trajectory (3 s); t[k] = (k + 1) * DT
 BOOLS = ("outside_lanes", "red_light_violation", "collision", "hazard_present", "justified_stop",

@@ -8,7 +8,7 @@ import jax
 import numpy as np
 import pytest
 
-from lantern_jax.constants import FAMILIES
+from lantern_jax.core.constants import FAMILIES
 from lantern_jax.scenarios.families import family
 from lantern_jax.scoring.cus import (
     components_from_values,

@@ -13,7 +13,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from lantern_jax.constants import FAMILIES
+from lantern_jax.core.constants import FAMILIES
 from lantern_jax.scoring.aggregate import (
     DECOMPOSITION_COLUMNS,
     decomposition_table,

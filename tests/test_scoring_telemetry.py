@@ -11,7 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from lantern_jax.constants import DT, INF_TIME
+from lantern_jax.core.constants import DT, INF_TIME
 from lantern_jax.scoring.cus import (
     GATE_NAMES,
     compiled_pair_components,

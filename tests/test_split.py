@@ -19,9 +19,8 @@ from conftest import HORIZON, MODE_COOP, MODE_EXPERT, select
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from lantern_jax import program_store
-from lantern_jax.constants import FAMILIES, NUM_WAYPOINTS, WAYPOINT_DT
-from lantern_jax.observation import FRONT_CAMERA, PRIVILEGED, SURROUND_RIG, WARNING
+from lantern_jax.core.constants import FAMILIES, NUM_WAYPOINTS, WAYPOINT_DT
+from lantern_jax.io import program_store
 from lantern_jax.policies.base import Policy
 from lantern_jax.scenarios.suite import load_suite
 from lantern_jax.scoring.table import REPRODUCIBLE_ATOL
@@ -31,7 +30,8 @@ from lantern_jax.sim.observe import observe, observe_every_sensor
 from lantern_jax.sim.packing import Layout
 from lantern_jax.sim.settings import Settings, default_settings
 from lantern_jax.sim.state import init_state
-from lantern_jax.world import tree_stack, trim_padding
+from lantern_jax.types.observation import FRONT_CAMERA, PRIVILEGED, SURROUND_RIG, WARNING
+from lantern_jax.types.world import tree_stack, trim_padding
 
 SUITE_WIDTHS = SUITE_BATCH_SHAPE[1:]  # actor and lane slots of the session's world program
 
@@ -247,7 +247,7 @@ def test_the_path_depends_on_the_policy_the_batch_and_the_backend_only():
 
 
 def test_evaluate_refuses_an_unknown_path_before_compiling():
-    from lantern_jax.evaluation import evaluate
+    from lantern_jax.apps.evaluation import evaluate
 
     with pytest.raises(ValueError, match="path 'fast' is not one of auto, fused, split"):
         evaluate(["coop"], suite=load_suite().subset(1), path="fast", progress=False)

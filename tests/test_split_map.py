@@ -6,7 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from lantern_jax.split_map import STEPS, split_map
+from lantern_jax.maths.split_map import STEPS, split_map
 
 
 def _per_item(items, scale):

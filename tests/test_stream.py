@@ -8,13 +8,13 @@ import jax
 import numpy as np
 import pytest
 
-from lantern_jax.evaluation import run_executions
+from lantern_jax.apps.evaluation import run_executions
+from lantern_jax.apps.stream import STRESS_RANGES, stream_executions, stress_source
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.knobs import get_knobs
 from lantern_jax.scenarios.suite import load_suite
 from lantern_jax.scoring.metrics import finalize
 from lantern_jax.scoring.table import REPRODUCIBLE_ATOL
-from lantern_jax.stream import STRESS_RANGES, stream_executions, stress_source
 
 
 @pytest.fixture(scope="module")
@@ -62,7 +62,7 @@ def test_chunks_give_the_one_batch_result(stress):
 
 def test_a_tuple_of_values_becomes_one_column_each():
     """ExecutionMetrics.metrics (the user metrics' values) is a tuple: one column per element."""
-    from lantern_jax.stream import _flat
+    from lantern_jax.apps.stream import _flat
 
     a, u, v = np.zeros(3), np.ones(3), np.full(3, 2.0)
     flat = _flat({"progress": a, "metrics": (u, v), "none": ()})

@@ -15,16 +15,16 @@ from conftest import constant_speed_waypoints
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from lantern_jax.constants import KIND_PEDESTRIAN, ROLE_HAZARD, TRIGGER_CLOCK, TRIGGER_EVENT
+from lantern_jax.apps.stress import objective, report
+from lantern_jax.apps.stress import plausibility as rules
+from lantern_jax.apps.stress.plausibility import CAP_M
+from lantern_jax.apps.stress.space import adversary_space, search_space
+from lantern_jax.core.constants import KIND_PEDESTRIAN, ROLE_HAZARD, TRIGGER_CLOCK, TRIGGER_EVENT
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.families import KNOB_RANGES
 from lantern_jax.scenarios.handmade import ActorSpec, straight_scene
 from lantern_jax.scenarios.suite import load_suite
-from lantern_jax.stress import objective, report
-from lantern_jax.stress import plausibility as rules
-from lantern_jax.stress.plausibility import CAP_M
-from lantern_jax.stress.space import adversary_space, search_space
 
 
 @pytest.fixture(scope="module")
@@ -177,7 +177,7 @@ def test_cmaes_tells_its_own_samples_and_converges_on_a_bowl():
     import types
     import warnings
 
-    from lantern_jax.stress import search
+    from lantern_jax.apps.stress import search
 
     centre = np.array([0.7, -1.2, 0.4])
     space = types.SimpleNamespace(dim=3, values=lambda z: np.asarray(z, np.float64))
@@ -203,7 +203,7 @@ def test_hybrid_descends_from_its_best_draw_and_counts_every_rollout(monkeypatch
     restart's best draw (lowest fitness), verifies every new iterate, and counts the draws as
     hard rollouts and each step as one soft rollout per part plus two hard ones; the descent
     goes below the draws it started from."""
-    from lantern_jax.stress import search
+    from lantern_jax.apps.stress import search
 
     lo, hi, centre = -3.0, 3.0, np.array([0.7, -1.2, 0.4])
     sigmoid = lambda z: 1.0 / (1.0 + np.exp(-np.asarray(z, np.float64)))  # noqa: E731
@@ -336,7 +336,7 @@ def test_only_plausible_failures_are_reported():
     * a walker running into the side of the ego right beside it: the expert cannot avoid it
       either (its failure is shared): not reported.
     """
-    from lantern_jax.stress.verify import Verifier
+    from lantern_jax.apps.stress.verify import Verifier
 
     expert = get_policy("expert")
 
@@ -368,7 +368,7 @@ def test_only_plausible_failures_are_reported():
 def test_near_duplicates_of_a_manoeuvre_are_one_failure():
     """The paper's rule on the adversary's positions at equal times: within 3 m at 70 % of the
     samples both ways is the same manoeuvre; farther, or present in one only, is another."""
-    from lantern_jax.stress import catalogue
+    from lantern_jax.apps.stress import catalogue
 
     t = np.arange(20, dtype=np.float64)
     base = np.stack([t, np.zeros_like(t)], -1)[:, None, :]  # (K, W=1, 2)
@@ -391,7 +391,7 @@ def test_found_failures_round_trip_through_their_suite_file(suite, tmp_path):
     hybrid's draws and descent included) finds verified failures; the catalogue, written as a
     suite file, re-evaluates to the hard CUS the search verified (within the evaluation's
     reproducibility promise) with the same gates."""
-    from lantern_jax.evaluation import evaluate
+    from lantern_jax.apps.evaluation import evaluate
     from lantern_jax.scoring.table import REPRODUCIBLE_ATOL
 
     pair = next(p for p in suite.pairs if p.family == "PE")
@@ -422,7 +422,7 @@ def test_found_failures_round_trip_through_their_suite_file(suite, tmp_path):
 def test_verification_rejects_a_soft_failure_whose_hard_rollout_passes(suite):
     """At a high temperature the soft Route A score of the nominal PE pair under coop lies far
     below the failure threshold, but coop drives it cleanly: verification says no failure."""
-    from lantern_jax.stress.verify import FAIL_BELOW_CUS, Verifier
+    from lantern_jax.apps.stress.verify import FAIL_BELOW_CUS, Verifier
 
     pair = next(p for p in suite.pairs if p.family == "PE")
     cfg = report.StressConfig(temperature=1.0, objective="soft_cus", expert_weight=0.0)

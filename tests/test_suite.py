@@ -12,7 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from lantern_jax.constants import FAMILIES, WEATHERS
+from lantern_jax.core.constants import FAMILIES, WEATHERS
 from lantern_jax.scenarios.duplicates import near_duplicates, route_samples
 from lantern_jax.scenarios.families import build_pair
 from lantern_jax.scenarios.premise import PREMISE_NONE, hazard_visible_at_warning, premise_rule

@@ -9,9 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from lantern_jax.evaluation import shared_program
-from lantern_jax.language import PAD_ID
-from lantern_jax.observation import PRIVILEGED, SURROUND_RIG, WARNING
+from lantern_jax.apps.evaluation import shared_program
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.suite import build_suite_scenarios, load_suite
@@ -19,6 +17,8 @@ from lantern_jax.sim.engine import Program
 from lantern_jax.sim.state import init_state
 from lantern_jax.sim.step import policy_waypoints, step
 from lantern_jax.sim.switch import SHARE_MIN_BYTES, policy_switch, switch_params
+from lantern_jax.types.language import PAD_ID
+from lantern_jax.types.observation import PRIVILEGED, SURROUND_RIG, WARNING
 
 
 def _plan(obs):

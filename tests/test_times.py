@@ -1,11 +1,11 @@
-"""Seconds to ticks (:mod:`lantern_jax.times`): the one conversion every module uses."""
+"""Seconds to ticks (:mod:`lantern_jax.core.times`): the one conversion every module uses."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from lantern_jax.constants import DT
-from lantern_jax.times import ticks, ticks_covering
+from lantern_jax.core.constants import DT
+from lantern_jax.core.times import ticks, ticks_covering
 
 
 def test_ticks_is_the_nearest_count():

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import time
 
-from lantern_jax.timing import Breakdown, seconds_since_process_start
+from lantern_jax.core.timing import Breakdown, seconds_since_process_start
 
 
 def test_phases_in_order_with_details_and_shares():

@@ -8,7 +8,7 @@ import pytest
 
 pytest.importorskip("brax")
 
-import lantern_jax.envs.ppo_training as ppo_train  # noqa: E402
+import lantern_jax.apps.envs.ppo_training as ppo_train  # noqa: E402
 from lantern_jax.cli import main  # noqa: E402
 
 

@@ -13,17 +13,17 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from lantern_jax.apps.dataset.generation import generate_dataset
+from lantern_jax.apps.dataset.store import load_frames, read_card
+from lantern_jax.apps.training.behaviour_cloning import train
+from lantern_jax.apps.training.config import TrainConfig
+from lantern_jax.apps.training.data import examples_from_frames, recipe_examples, split_by_sequence
 from lantern_jax.cli import main
-from lantern_jax.constants import FAMILIES
-from lantern_jax.dataset.generation import generate_dataset
-from lantern_jax.dataset.store import load_frames, read_card
-from lantern_jax.language import PAD_ID
+from lantern_jax.core.constants import FAMILIES
 from lantern_jax.policies.learned.checkpoint import checkpoint_policy, read_meta
 from lantern_jax.scenarios.suite import load_suite
 from lantern_jax.scenarios.warnings import text_tables
-from lantern_jax.training.behaviour_cloning import train
-from lantern_jax.training.config import TrainConfig
-from lantern_jax.training.data import examples_from_frames, recipe_examples, split_by_sequence
+from lantern_jax.types.language import PAD_ID
 
 pytestmark = pytest.mark.slow
 
@@ -119,7 +119,7 @@ def test_train_command_names_a_bad_config(tmp_path, capsys):
 def test_surround_recipe_trains_on_the_rig_and_drives(dataset, tmp_path):
     """The surround recipe reads the dataset's six-camera columns (every frame, no language)
     and its checkpoint runs in the closed loop with the simulator's 360-degree view."""
-    from lantern_jax.evaluation import evaluate
+    from lantern_jax.apps.evaluation import evaluate
 
     cfg = tiny(dataset, tmp_path / "sur", name="learned-tiny-surround", recipe="surround")
     train(cfg, progress=False)

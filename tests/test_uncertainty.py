@@ -1,5 +1,5 @@
 """The bootstrap behind every interval (``lantern_jax.scoring.uncertainty``) and the paired
-comparison (``lantern_jax.compare``), on synthetic route tables whose answers are known."""
+comparison (``lantern_jax.report.compare``), on synthetic route tables whose answers are known."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from lantern_jax.compare import across_suites, check_shared_pairs, compare_runs
-from lantern_jax.constants import FAMILIES
+from lantern_jax.core.constants import FAMILIES
+from lantern_jax.report.compare import across_suites, check_shared_pairs, compare_runs
 from lantern_jax.scoring import uncertainty as u
 from lantern_jax.scoring.aggregate import family_scores
 

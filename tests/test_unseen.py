@@ -25,9 +25,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from lantern_jax import family_codes
+from lantern_jax.apps.diagnostics import run_recorded
+from lantern_jax.apps.evaluation import evaluate, family_table
 from lantern_jax.cli import main
-from lantern_jax.constants import (
+from lantern_jax.core import family_codes
+from lantern_jax.core.constants import (
     DT,
     EGO_MAX_BRAKE,
     FAMILIES,
@@ -35,8 +37,6 @@ from lantern_jax.constants import (
     NUM_ACTOR_KINDS,
     WAYPOINT_DT,
 )
-from lantern_jax.diagnostics import run_recorded
-from lantern_jax.evaluation import evaluate, family_table
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.planner import route_point
 from lantern_jax.scenarios import registry
@@ -59,8 +59,12 @@ TESTS = Path(__file__).parent
 CODES = ("CYC", "EMV", "REV")
 #: Modules that register families on import, set by :func:`registered` (module scope).
 transfer = unseen = family_example = None
-REGISTERING_MODULES = ("family_example", "lantern_jax.transfer", "lantern_jax.scenarios.unseen",
-                       "lantern_jax_user_families_family_example")  # fmt: skip
+REGISTERING_MODULES = (
+    "family_example",
+    "lantern_jax.apps.transfer",
+    "lantern_jax.scenarios.unseen",
+    "lantern_jax_user_families_family_example",
+)
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -72,7 +76,7 @@ def registered():
     try:
         import family_example as fe
 
-        from lantern_jax import transfer as tr
+        from lantern_jax.apps import transfer as tr
         from lantern_jax.scenarios import unseen as un
 
         transfer, unseen, family_example = tr, un, fe
@@ -448,7 +452,7 @@ def test_the_unseen_command_prints_and_writes_the_tables(suite, coop_rows, tmp_p
 
 @pytest.mark.slow
 def test_the_unseen_suite_regenerates_from_its_seed(suite):
-    from lantern_jax.suite_generation import generate_suite
+    from lantern_jax.apps.suite_generation import generate_suite
 
     fresh = generate_suite(transfer.UNSEEN_SEED, pairs_per_slot=2, families=CODES,
                            suite_id=transfer.UNSEEN_SUITE_ID, progress=False)  # fmt: skip
@@ -458,8 +462,8 @@ def test_the_unseen_suite_regenerates_from_its_seed(suite):
 
 
 def test_the_dataset_plans_a_registered_family_on_its_own_stream():
-    from lantern_jax.dataset.generation import _plan_key
-    from lantern_jax.dataset.scenes import build_scenes, plan_scenes
+    from lantern_jax.apps.dataset.generation import _plan_key
+    from lantern_jax.apps.dataset.scenes import build_scenes, plan_scenes
 
     specs = plan_scenes(2, seed=5, families=["JWK"])
     assert [(s.family, s.weather) for s in specs] == [("JWK", "clear_day"), ("JWK", "cloudy_day")]

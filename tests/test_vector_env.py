@@ -12,9 +12,9 @@ import pytest
 from lantern_jax.policies.features import ACTION_SIZE, OBS_SIZE
 
 pytest.importorskip("brax")
-import lantern_jax.envs as lenvs  # noqa: E402
-from lantern_jax.envs.reward import GATE_PENALTY  # noqa: E402
-from lantern_jax.envs.vector import LanternVectorEnv  # noqa: E402
+import lantern_jax.apps.envs as lenvs  # noqa: E402
+from lantern_jax.apps.envs.reward import GATE_PENALTY  # noqa: E402
+from lantern_jax.apps.envs.vector import LanternVectorEnv  # noqa: E402
 
 # the vector environment compiles its own step (about a minute on two cores): the slow tier
 pytestmark = pytest.mark.slow

@@ -13,7 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from lantern_jax.constants import (
+from lantern_jax.core.constants import (
     CAMERA_BACK_OFFSET,
     FRONT_CAMERA_FOV,
     OCC_BUILDING,
@@ -25,7 +25,7 @@ from lantern_jax.scenarios.road import OccluderSpec
 from lantern_jax.scoring.measure import TickEnd, measure
 from lantern_jax.scoring.thresholds import DEFAULT_SCORING
 from lantern_jax.sensors import visibility as vis
-from lantern_jax.world import Occluders, ProtocolState
+from lantern_jax.types.world import Occluders, ProtocolState
 
 try:  # tests/ as a rootdir-relative folder or as a package
     import reference_numpy_geometry as ref
@@ -376,7 +376,7 @@ def test_six_camera_rig_is_blocked_by_static_occluders():
     # of the rig looks straight back (bearing -pi): it meets the wall's face x = -9.5 at 8.0 m
     # (a wall ray, class NUM_ACTOR_KINDS + OCC_WALL), or without the wall the car's face
     # x = -17.7 at 16.2 m (class KIND_VEHICLE).
-    from lantern_jax.constants import (
+    from lantern_jax.core.constants import (
         KIND_VEHICLE,
         NUM_ACTOR_KINDS,
         RAY_CLASS_NAMES,
@@ -425,7 +425,7 @@ def test_front_camera_view_equals_the_simulators_front_camera_on_a_junction():
     np.testing.assert_array_equal(np.asarray(view.ranges), np.asarray(percept.ranges))
     np.testing.assert_array_equal(np.asarray(view.hit_class), np.asarray(percept.range_class))
     # some front rays end on a corner building (class NUM_ACTOR_KINDS + OCC_BUILDING)
-    from lantern_jax.constants import NUM_ACTOR_KINDS
+    from lantern_jax.core.constants import NUM_ACTOR_KINDS
 
     assert (np.asarray(percept.range_class) == NUM_ACTOR_KINDS + OCC_BUILDING).any()
     assert not bool(view.visible[world.config.hazard_index])  # the premise: hidden at start

@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from lantern_jax.constants import FAMILIES
+from lantern_jax.core.constants import FAMILIES
 from lantern_jax.scenarios import warnings as w
 from lantern_jax.scenarios.families import build_pair
 from lantern_jax.scenarios.suite import load_suite

@@ -12,9 +12,7 @@ import numpy as np
 import pytest
 from conftest import MODE_COOP, MODE_EXPERT, select
 
-from lantern_jax import language
-from lantern_jax.constants import DT, PE
-from lantern_jax.observation import WARNING, stated_position, warning_delivered
+from lantern_jax.core.constants import DT, PE
 from lantern_jax.scenarios.handmade import straight_scene
 from lantern_jax.scenarios.warnings import (
     get_text,
@@ -28,7 +26,9 @@ from lantern_jax.scenarios.warnings import (
 from lantern_jax.sim.observe import observe
 from lantern_jax.sim.sense import locate_on_route, sense
 from lantern_jax.sim.state import init_state
-from lantern_jax.world import NO_OVERRIDE, ProtocolState
+from lantern_jax.types import language
+from lantern_jax.types.observation import WARNING, stated_position, warning_delivered
+from lantern_jax.types.world import NO_OVERRIDE, ProtocolState
 
 HIGH_PE = tier_text_ids("PE", "high")[0]  # "Someone may cross in front of you."
 LOW_PE = tier_text_ids("PE", "low")[1]

@@ -8,7 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from lantern_jax.constants import KIND_PEDESTRIAN, OCC_WALL, ROLE_HAZARD, TRIGGER_EVENT
+from lantern_jax.core.constants import KIND_PEDESTRIAN, OCC_WALL, ROLE_HAZARD, TRIGGER_EVENT
 from lantern_jax.scenarios.assemble import execution_config
 from lantern_jax.scenarios.handmade import ActorSpec, config_fields, pack_route, straight_scene
 from lantern_jax.scenarios.road import OccluderSpec

@@ -17,7 +17,7 @@ as Right-Turn Yield's flow does, shows its speed after the start)::
     python docs/investigations/anticipation_at_onset.py      # expert, every family
     python docs/investigations/anticipation_at_onset.py --policy coop --family VC RTY
 
-The rollouts are the simulator's own (:func:`lantern_jax.diagnostics.run_recorded`); S_ant is
+The rollouts are the simulator's own (:func:`lantern_jax.apps.diagnostics.run_recorded`); S_ant is
 the scorer's.
 """
 
@@ -29,7 +29,7 @@ import numpy as np
 import pandas as pd
 from hazard_first_seen import recorded_route_a
 
-from lantern_jax.constants import DT, FAMILIES
+from lantern_jax.core.constants import DT, FAMILIES
 from lantern_jax.policies.registry import policy_names
 from lantern_jax.scenarios.suite import SUITE_ID
 from lantern_jax.scoring.components import anticipation

@@ -29,11 +29,11 @@ from pathlib import Path
 
 import pandas as pd
 
-from lantern_jax.dataset.store import load_frames
-from lantern_jax.evaluation import evaluate
+from lantern_jax.apps.dataset.store import load_frames
+from lantern_jax.apps.evaluation import evaluate
+from lantern_jax.apps.training.behaviour_cloning import train
+from lantern_jax.apps.training.config import load_config
 from lantern_jax.policies.learned.checkpoint import checkpoint_policy, shipped_path
-from lantern_jax.training.config import load_config
-from lantern_jax.training.behaviour_cloning import train
 
 ROOT = Path(__file__).resolve().parents[2]  # the repository
 RULES = ("both", "onset")

@@ -24,16 +24,16 @@ import jax
 import numpy as np
 import pandas as pd
 
-from lantern_jax.constants import FAMILIES
-from lantern_jax.diagnostics import run_recorded
+from lantern_jax.apps.diagnostics import run_recorded
+from lantern_jax.core.constants import FAMILIES
 from lantern_jax.policies.registry import get_policy, policy_names
 from lantern_jax.scenarios.suite import SUITE_ID, build_suite_scenarios, load_suite
-from lantern_jax.world import tree_stack
+from lantern_jax.types.world import tree_stack
 
 
 def recorded_route_a(family: str, policy: str, suite: str = SUITE_ID):
     """Roll out every Route A execution of ``family`` (warning condition) with full records
-    (:func:`lantern_jax.diagnostics.run_recorded`).
+    (:func:`lantern_jax.apps.diagnostics.run_recorded`).
 
     Returns:
         (suite, pair indices into ``suite.pairs``, batched scenarios, final states, tick

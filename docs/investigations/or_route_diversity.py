@@ -38,7 +38,7 @@ import time
 
 import numpy as np
 
-from lantern_jax.constants import EGO_HALF_LENGTH
+from lantern_jax.core.constants import EGO_HALF_LENGTH
 from lantern_jax.scenarios.duplicates import near_duplicate, resample_route
 from lantern_jax.scenarios.families_straight import (
     OR_WARN_LEAD,

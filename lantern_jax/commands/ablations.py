@@ -24,7 +24,7 @@ from lantern_jax.commands.common import (
     write_failed,
 )
 from lantern_jax.commands.values import count
-from lantern_jax.constants import CONDITIONS, EXECUTIONS_PER_PAIR, SUITE_ID
+from lantern_jax.core.constants import CONDITIONS, EXECUTIONS_PER_PAIR, SUITE_ID
 
 
 def list_ablations() -> None:
@@ -51,8 +51,8 @@ def cmd_ablations(args: argparse.Namespace, argv: Sequence[str]) -> int:
 
     check_out(args.out, owned=ABLATION_FILES)
     suite = load_selected_suite(args)
-    from lantern_jax.ablation_table import run_ablations
-    from lantern_jax.evaluation import PolicyError
+    from lantern_jax.apps.ablation_table import run_ablations
+    from lantern_jax.apps.evaluation import PolicyError
     from lantern_jax.report import format_ablation_table, interval_note, write_ablation_outputs
     from lantern_jax.scenarios.protocol_variants import ABLATIONS
 

@@ -234,14 +234,14 @@ def check_out(out: str, source: str = "--out", in_place: bool | None = None,
         source: where it came from (an option or a config key), for the message.
         in_place: whether the files are written into the folder itself (a dataset or a training
             run, resumed there); default: as the result set's writer decides
-            (:func:`lantern_jax.files.check_target_folder`).
+            (:func:`lantern_jax.io.files.check_target_folder`).
         owned: the names of the files the command writes there (an entry of one of those
             names that is not a regular file is refused).
 
     Raises:
         UsageError: naming the option (or config key) and why.
     """
-    from lantern_jax.files import OutputFolderError, check_target_folder
+    from lantern_jax.io.files import OutputFolderError, check_target_folder
 
     try:
         check_target_folder(out, in_place=in_place, owned=owned)

@@ -7,7 +7,7 @@
 
 Per family and overall, under every condition both sides hold and for the warning gain: the
 paired difference of mean CUS (first minus second), its bootstrap interval and a paired
-bootstrap p-value (:func:`lantern_jax.compare.compare_runs`).  A result set is a folder
+bootstrap p-value (:func:`lantern_jax.report.compare.compare_runs`).  A result set is a folder
 written by ``lantern-jax evaluate`` (or ``ablations``), or its route-level CSV, and it is read
 as evidence (:mod:`lantern_jax.report.evidence`): every file checked against its manifest's
 SHA-256, the table against its schema and the manifest's row count.  Two result sets must hold
@@ -55,9 +55,9 @@ def _rows(df, model: str, where: str):
 
 def cmd_compare(args: argparse.Namespace, argv: Sequence[str]) -> int:
     """Compare two policies of one result set, or one policy in two; returns the exit code."""
-    from lantern_jax.compare import compare_runs, format_comparison
-    from lantern_jax.files import StagedFolder, atomic_write
+    from lantern_jax.io.files import StagedFolder, atomic_write
     from lantern_jax.report import interval_note
+    from lantern_jax.report.compare import compare_runs, format_comparison
     from lantern_jax.scoring.uncertainty import SEED, settings
 
     policies = split_values(args.policy)

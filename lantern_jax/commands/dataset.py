@@ -9,7 +9,7 @@
 Expert rollouts on fresh Route A and Route B scenes of every family (disjoint from the frozen
 suite), recorded at 4 Hz with both perception formats, ten expert waypoints per frame and the
 event timeline, written as sharded Parquet with a dataset card (see
-:mod:`lantern_jax.dataset`).  Re-running the same command on the same folder resumes an
+:mod:`lantern_jax.apps.dataset`).  Re-running the same command on the same folder resumes an
 interrupted generation.
 """
 
@@ -26,10 +26,10 @@ from lantern_jax.commands.values import count, seed
 def cmd_dataset(args: argparse.Namespace, argv: Sequence[str]) -> int:
     """Generate (or resume) the dataset and print its card summary."""
     del argv
-    from lantern_jax.constants import FAMILIES
-    from lantern_jax.dataset.generation import generate_dataset
-    from lantern_jax.dataset.scenes import PAIRS_PER_FAMILY, PLAN_JSON
-    from lantern_jax.dataset.store import CARD_JSON, CARD_MD, DatasetError, card_markdown
+    from lantern_jax.apps.dataset.generation import generate_dataset
+    from lantern_jax.apps.dataset.scenes import PAIRS_PER_FAMILY, PLAN_JSON
+    from lantern_jax.apps.dataset.store import CARD_JSON, CARD_MD, DatasetError, card_markdown
+    from lantern_jax.core.constants import FAMILIES
 
     check_out(args.out, in_place=True, owned=(PLAN_JSON, CARD_JSON, CARD_MD))
     if args.sequences is not None:
@@ -53,7 +53,7 @@ def cmd_dataset(args: argparse.Namespace, argv: Sequence[str]) -> int:
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``dataset`` on the command line's sub-parsers."""
-    from lantern_jax.constants import DATASET_SEED, PAIRS_PER_FAMILY  # no JAX at start-up
+    from lantern_jax.core.constants import DATASET_SEED, PAIRS_PER_FAMILY  # no JAX at start-up
 
     ds = sub.add_parser(
         "dataset",

@@ -24,7 +24,7 @@ from lantern_jax.commands.common import (
     stage,
 )
 from lantern_jax.commands.values import count, number
-from lantern_jax.constants import FAMILIES, SUITE_ID
+from lantern_jax.core.constants import FAMILIES, SUITE_ID
 
 #: Options of ``diagnostics`` that only the distance diagnostic reads.
 DISTANCE_OPTIONS = ("suite", "family", "routes", "window")
@@ -70,7 +70,7 @@ def cmd_diagnostics(args: argparse.Namespace, argv: Sequence[str]) -> int:
 def _language(args: argparse.Namespace, policy: str) -> int:
     """The warning condition with the delivered text, another family's text, an empty text and
     no warning."""
-    from lantern_jax import diagnostics as dg
+    from lantern_jax.apps import diagnostics as dg
 
     args.suite = args.suite or SUITE_ID
     suite = load_selected_suite(args)
@@ -92,7 +92,7 @@ def _language(args: argparse.Namespace, policy: str) -> int:
 
 def _nonactionable(args: argparse.Namespace, policy: str) -> int:
     """The five non-actionable warnings on an empty road."""
-    from lantern_jax import diagnostics as dg
+    from lantern_jax.apps import diagnostics as dg
 
     stage(args, f"{policy}: non-actionable warnings on an empty road")
     table = dg.nonactionable_table(policy)
@@ -110,7 +110,7 @@ def _nonactionable(args: argparse.Namespace, policy: str) -> int:
 
 def _distance_suite(args: argparse.Namespace):
     """Fill the distance diagnostic's defaults, check them, and load its suite."""
-    from lantern_jax import diagnostics as dg
+    from lantern_jax.apps import diagnostics as dg
 
     args.suite = args.suite or SUITE_ID
     args.family = args.family or dg.DISTANCE_FAMILY
@@ -130,7 +130,7 @@ def _distance_suite(args: argparse.Namespace):
 
 def _distance(args: argparse.Namespace, policy: str) -> int:
     """A family's warning at a near vs a far ego-frame position on Route B."""
-    from lantern_jax import diagnostics as dg
+    from lantern_jax.apps import diagnostics as dg
     from lantern_jax.report import interval_display, interval_note
 
     suite = _distance_suite(args)

@@ -34,7 +34,7 @@ from lantern_jax.commands.common import (
 )
 from lantern_jax.commands.runtime import add_cache_flag, check_interrupt
 from lantern_jax.commands.values import count, seed, whole
-from lantern_jax.constants import EXECUTIONS_PER_PAIR, SUITE_ID
+from lantern_jax.core.constants import EXECUTIONS_PER_PAIR, SUITE_ID
 
 #: Defaults of the ``evaluate`` options an experiment file may set (used when neither the
 #: command line nor the file gives one).
@@ -84,9 +84,9 @@ def load_config(path: str) -> dict:
     Raises:
         UsageError: naming the file and the offending key for a key outside the table, an
             unknown key, a wrong type, an empty selection or a pair count below 1
-            (:mod:`lantern_jax.config_file` reads the file).
+            (:mod:`lantern_jax.io.config_file` reads the file).
     """
-    from lantern_jax.config_file import ConfigFileError, check_keys, read_table, typed_value
+    from lantern_jax.io.config_file import ConfigFileError, check_keys, read_table, typed_value
 
     try:
         cfg = read_table(path, CONFIG_TABLE)
@@ -149,7 +149,7 @@ def _policies(args: argparse.Namespace) -> list[str]:
 
 
 def _check_ablation(args: argparse.Namespace) -> None:
-    from lantern_jax.evaluation import ablation_names
+    from lantern_jax.apps.evaluation import ablation_names
 
     if args.ablation not in ablation_names():
         raise UsageError(
@@ -161,13 +161,13 @@ def _check_ablation(args: argparse.Namespace) -> None:
 def cmd_evaluate(args: argparse.Namespace, argv: Sequence[str]) -> int:
     """``lantern-jax evaluate``: run, print the tables, write the files (``--profile``: then
     where the time went, :func:`_evaluate_breakdown`)."""
-    from lantern_jax.timing import Breakdown
+    from lantern_jax.core.timing import Breakdown
 
     bd = Breakdown()
     bd.before_creation("start-up (Python, lantern_jax command line)")
     with bd.phase("imports (JAX, evaluator, tables)"):
         import lantern_jax.report  # noqa: F401  (used by _report; imported here to time it)
-        from lantern_jax.evaluation import PolicyError, evaluate
+        from lantern_jax.apps.evaluation import PolicyError, evaluate
     apply_config(args)
     policies = _policies(args)
     _check_ablation(args)
@@ -243,7 +243,7 @@ def _report(args: argparse.Namespace, argv: Sequence[str], bd, result, t_eval: f
 
 
 def _evaluate_breakdown(bd, result, seconds: float) -> None:
-    """Add the phases of :func:`lantern_jax.evaluation.evaluate` (``seconds`` of wall time in
+    """Add the phases of :func:`lantern_jax.apps.evaluation.evaluate` (``seconds`` of wall time in
     all) to a breakdown: world build, per policy trace + lower, XLA compile, rollout and
     scoring, then the tables; the remainder is the rest of the evaluation (checks, progress)."""
     start = len(bd.phases)

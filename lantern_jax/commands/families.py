@@ -6,7 +6,7 @@ files of those families.
 A ``.py`` path is imported as a module named after the file, its folder and its content (once
 per process: two files of one name in different folders are two modules); anything else is
 imported by module name.  Importing runs the file's code as a guest
-(:func:`lantern_jax.user_code.as_guest`): it cannot end the tool or print into its output.
+(:func:`lantern_jax.core.user_code.as_guest`): it cannot end the tool or print into its output.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from lantern_jax.commands import UsageError
-from lantern_jax.user_code import UserCodeError, as_guest
+from lantern_jax.core.user_code import UserCodeError, as_guest
 
 MODULE_PREFIX = "lantern_jax_user_families_"  # the module name of a file given by path
 

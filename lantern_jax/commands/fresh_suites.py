@@ -2,8 +2,8 @@
 
 One suite is one sample of pairs; a conclusion that holds on it may not hold on another drawn
 the same way.  This generates ``K`` fresh suites with the suite generator
-(:func:`lantern_jax.suite_generation.generate_suite`, the same design and the same validator as the
-``--suite`` they are compared with), from seeds ``S, S + 1, ..., S + K - 1``, evaluates the
+(:func:`lantern_jax.apps.suite_generation.generate_suite`, the same design and the same validator as
+the ``--suite`` they are compared with), from seeds ``S, S + 1, ..., S + K - 1``, evaluates the
 ``--suite`` and every fresh one with the same policies and ablation, and reports:
 
 * every suite's tables with their intervals (its result set in ``OUT/<suite id>/``);
@@ -35,15 +35,15 @@ def fresh_seeds(seed: int, count: int) -> list[int]:
 
 def fresh_suite_id(seed: int) -> str:
     """The id of the suite the generator draws from ``seed`` (its design is ``SUITE_ID``'s)."""
-    from lantern_jax.constants import SUITE_ID
+    from lantern_jax.core.constants import SUITE_ID
 
     return f"{SUITE_ID}-seed{seed}"
 
 
 def _fresh_suite(base, seed: int, out: Path, progress: bool):
     """Generate (or load, when written before from the same seed and validator) one suite."""
+    from lantern_jax.apps.suite_generation import generate_suite, suite_validator
     from lantern_jax.scenarios.suite import load_suite, write_manifest
-    from lantern_jax.suite_generation import generate_suite, suite_validator
 
     validator = suite_validator(base.report)
     sid = fresh_suite_id(seed)
@@ -76,7 +76,7 @@ def run_fresh_suites(
         policies: the policies to evaluate.
         base: the loaded ``--suite`` (already cut to ``--pairs-per-family``).
         stage: ``stage(message)`` prints a stage line.
-        evaluate_kwargs: further arguments of :func:`lantern_jax.evaluation.evaluate`.
+        evaluate_kwargs: further arguments of :func:`lantern_jax.apps.evaluation.evaluate`.
 
     Returns:
         The exit code.
@@ -85,7 +85,7 @@ def run_fresh_suites(
         UsageError: for a missing ``--seed``, ``--pairs`` (fresh suites have other pairs), or a
             seed that is the base suite's own.
     """
-    from lantern_jax.evaluation import evaluate
+    from lantern_jax.apps.evaluation import evaluate
     from lantern_jax.report import format_tables, write_outputs
 
     out = Path(args.out)
@@ -107,7 +107,7 @@ def run_fresh_suites(
         ))  # fmt: skip
     record = dict(command=command, suites=records, policies=policies,
                   intervals=results[0].manifest.get("intervals"))  # fmt: skip
-    from lantern_jax.compare import write_across_suites
+    from lantern_jax.report.compare import write_across_suites
 
     print(write_across_suites(results, record, out))
     return 0

@@ -17,7 +17,7 @@ from lantern_jax.commands.common import (
     stage,
     write_failed,
 )
-from lantern_jax.constants import SUITE_ID
+from lantern_jax.core.constants import SUITE_ID
 
 #: Executions ``--condition`` may name (:data:`lantern_jax.viz.pair.EXECUTIONS`).
 CONDITION_CHOICES = ("warning", "no-warning", "route-b")

@@ -92,7 +92,7 @@ def cmd_report(args: argparse.Namespace, argv: Sequence[str]) -> int:
         raise UsageError(f"--out {args.out}: the report is one HTML file (name it *.html)")
     if out.is_dir():
         raise UsageError(f"--out {args.out}: is a folder; name the HTML file to write")
-    from lantern_jax.files import OutputFolderError
+    from lantern_jax.io.files import OutputFolderError
     from lantern_jax.report.page import check_report_target
 
     try:

@@ -15,8 +15,8 @@ import sys
 import threading
 from collections.abc import Callable
 
-from lantern_jax import jax_setup
 from lantern_jax.commands import UsageError, alarms
+from lantern_jax.core import jax_setup
 
 #: Exit code of a usage error.
 EXIT_USAGE = 2
@@ -147,10 +147,11 @@ def stdout_failed(error: StdoutError) -> int:
 # ---------------------------------------------------------------------------------------------
 #: Environment variable that moves the persistent compilation cache of the command line.
 CACHE_DIR_ENV = jax_setup.CACHE_DIR_ENV
-#: Where the command line keeps compiled programs (:func:`lantern_jax.jax_setup.compile_cache_dir`).
+#: Where the command line keeps compiled programs
+#: (:func:`lantern_jax.core.jax_setup.compile_cache_dir`).
 compile_cache_dir = jax_setup.compile_cache_dir
 #: Turn the persistent compilation cache on or off
-#: (:func:`lantern_jax.jax_setup.configure_compile_cache`).
+#: (:func:`lantern_jax.core.jax_setup.configure_compile_cache`).
 configure_compile_cache = jax_setup.configure_compile_cache
 
 

@@ -12,7 +12,8 @@ in the family's knobs (``--space knobs``), in adversarial tracks of its actors
 (``--space adversary``) or in both; prints a ``compiling`` line, the comparison table and the
 failure catalogue, and writes ``comparison.csv``, ``found.csv``, ``found_suite.json``, the
 catalogue (``catalogue.csv``, ``catalogue_suite.json`` — runnable with ``lantern-jax evaluate
---suite`` — and ``catalogue.png``) and ``convergence.png`` (see :mod:`lantern_jax.stress.report`).
+--suite`` — and ``catalogue.png``) and ``convergence.png`` (see
+:mod:`lantern_jax.apps.stress.report`).
 
 ::
 
@@ -20,7 +21,7 @@ catalogue (``catalogue.csv``, ``catalogue_suite.json`` — runnable with ``lante
 
 runs no search: every pair's fragility radius (the first-order distance to a collision over its
 family's normalised knobs) from one vmapped backward pass, verified by hard rollouts along the
-predicted direction (:mod:`lantern_jax.stress.fragility`); writes ``fragility.csv``,
+predicted direction (:mod:`lantern_jax.apps.stress.fragility`); writes ``fragility.csv``,
 ``fragility_probes.csv``, ``fragility_families.csv``, ``fragility_sampling.csv`` (with
 ``--sampling``), ``fragility_suite.json`` and ``fragility.png``.
 """
@@ -34,7 +35,7 @@ from collections.abc import Sequence
 from lantern_jax.commands import UsageError
 from lantern_jax.commands.common import check_out, write_failed
 from lantern_jax.commands.values import count, number, seed, whole
-from lantern_jax.constants import (
+from lantern_jax.core.constants import (
     CONDITIONS,
     KNOT_S_RANGE,
     MAX_BACKGROUND,
@@ -155,9 +156,9 @@ def _check_space_options(args: argparse.Namespace) -> None:
 
 
 def _config(args: argparse.Namespace, methods: tuple[str, ...]):
-    """The :class:`~lantern_jax.stress.report.StressConfig` of the command's options (None for
+    """The :class:`~lantern_jax.apps.stress.report.StressConfig` of the command's options (None for
     an option not given: the space's default)."""
-    from lantern_jax.stress import report
+    from lantern_jax.apps.stress import report
 
     actors = tuple(a.strip() for a in (args.actors or "hazard").split(",") if a.strip())
     given = {
@@ -190,8 +191,8 @@ def _print_summary(args: argparse.Namespace, table, problem, title: str, files: 
     """Print the comparison table, its interval note and the head of the failure catalogue."""
     from tabulate import tabulate
 
+    from lantern_jax.apps.stress import report
     from lantern_jax.report import MISSING, interval_note, missing_shown
-    from lantern_jax.stress import report
 
     budget = f"{args.budget_s:g} s per method"
     if args.budget_rollouts is not None:
@@ -217,10 +218,10 @@ def cmd_stress(args: argparse.Namespace, argv: Sequence[str]) -> int:
     """Run the stress test and write its files; returns the exit code."""
     del argv
 
+    from lantern_jax.apps.stress import report, search
     from lantern_jax.commands.common import resolve_policies
-    from lantern_jax.constants import FAMILIES
+    from lantern_jax.core.constants import FAMILIES
     from lantern_jax.scenarios.suite import load_suite
-    from lantern_jax.stress import report, search
     from lantern_jax.viz.stress import catalogue_figure, convergence_plot
 
     policies = resolve_policies([args.policy])  # a registered name, or file.py:NAME
@@ -242,7 +243,7 @@ def cmd_stress(args: argparse.Namespace, argv: Sequence[str]) -> int:
     _check_numbers(args, methods)
     _check_space_options(args)
     ranges = _ranges(args.range)
-    from lantern_jax.stress.report import RESULT_FILES
+    from lantern_jax.apps.stress.report import RESULT_FILES
 
     check_out(args.out, owned=RESULT_FILES)
     try:
@@ -295,9 +296,9 @@ SEARCH_ONLY = ("space", "budget_s", "budget_rollouts", "knobs", "range", "restar
 
 def _cmd_fragility(args: argparse.Namespace) -> int:
     """``stress --fragility``: the fragility radius of every pair (of ``--family``), verified."""
-    from lantern_jax.constants import FAMILIES
+    from lantern_jax.apps.stress import fragility as frag
+    from lantern_jax.core.constants import FAMILIES
     from lantern_jax.scenarios.suite import load_suite
-    from lantern_jax.stress import fragility as frag
     from lantern_jax.viz.fragility import fragility_figure
 
     given = [f"--{k.replace('_', '-')}" for k in SEARCH_ONLY

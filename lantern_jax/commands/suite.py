@@ -18,7 +18,7 @@ from lantern_jax.commands import UsageError
 from lantern_jax.commands.common import load_selected_suite, resolve_policies, stage
 from lantern_jax.commands.runtime import add_cache_flag
 from lantern_jax.commands.values import seed
-from lantern_jax.constants import SUITE_ID
+from lantern_jax.core.constants import SUITE_ID
 
 
 def suite_to_manifest(suite, suite_id: str | None = None) -> dict:
@@ -51,7 +51,7 @@ def print_suite(suite) -> None:
     """Print a suite's pairs, its counts per family, hash and seed, and its generation report."""
     from tabulate import tabulate
 
-    from lantern_jax import family_codes
+    from lantern_jax.core import family_codes
 
     families = family_codes.table_codes(p.family for p in suite.pairs)  # the six, then others
     rows = [
@@ -114,8 +114,8 @@ def _check_regenerate_path(path: str) -> None:
 def _regenerate(args: argparse.Namespace) -> tuple[int, dict]:
     """Generate a fresh manifest into ``--regenerate``; returns the exit code and the
     manifest."""
+    from lantern_jax.apps.suite_generation import DEFAULT_SEED, generate_suite, suite_validator
     from lantern_jax.scenarios.suite import write_manifest
-    from lantern_jax.suite_generation import DEFAULT_SEED, generate_suite, suite_validator
 
     seed = DEFAULT_SEED if args.seed is None else args.seed
     validator = args.validator or suite_validator(load_selected_suite(args).report)
@@ -135,7 +135,7 @@ def _regenerate(args: argparse.Namespace) -> tuple[int, dict]:
 def cmd_suite(args: argparse.Namespace, argv: Sequence[str]) -> int:
     """``lantern-jax suite``: list, verify or regenerate a suite."""
     del argv
-    from lantern_jax.suite_generation import (
+    from lantern_jax.apps.suite_generation import (
         DEFAULT_SEED,
         regenerates_suite,
         suite_validator,

@@ -13,8 +13,8 @@ a rerun resumes —, ``curve.csv``, ``curve.png``) and exports the best model as
 ``lantern-jax evaluate --policy <name> --checkpoint <out>/<name>.msgpack``.
 
 A config with a ``[ppo]`` table runs brax's PPO on the benchmark environment
-(:mod:`lantern_jax.envs.ppo_training`, the ``rl`` extra): the learning curve goes to ``out``, the
-policy to ``checkpoint`` after every evaluation; evaluate it with
+(:mod:`lantern_jax.apps.envs.ppo_training`, the ``rl`` extra): the learning curve goes to ``out``,
+the policy to ``checkpoint`` after every evaluation; evaluate it with
 ``LANTERN_JAX_PPO_CHECKPOINT=<checkpoint> lantern-jax evaluate --policy ppo``.
 """
 
@@ -28,7 +28,7 @@ from lantern_jax.commands import UsageError
 from lantern_jax.commands.common import check_out
 from lantern_jax.commands.values import count, number, seed
 
-#: Keys of a ``[ppo]`` config and their types (:func:`lantern_jax.envs.ppo_training.train`'s
+#: Keys of a ``[ppo]`` config and their types (:func:`lantern_jax.apps.envs.ppo_training.train`'s
 #: arguments; every key is optional, its default that function's).
 PPO_KEYS = {
     "out": (str,),
@@ -46,7 +46,7 @@ DATASET_ONLY = ("dataset", "epochs")
 def _table_of(path: str) -> str:
     """``"ppo"`` for a config with a ``[ppo]`` table, else ``"train"`` (read and checked by the
     loader of that kind)."""
-    from lantern_jax.files import read_toml
+    from lantern_jax.io.files import read_toml
 
     try:
         raw = read_toml(path)
@@ -57,13 +57,13 @@ def _table_of(path: str) -> str:
 
 def load_ppo_config(path: str, args: argparse.Namespace) -> dict:
     """The ``[ppo]`` table of ``path`` with the command line's ``--out``, ``--seed`` and
-    ``--minutes`` applied, as keyword arguments of :func:`lantern_jax.envs.ppo_training.train`.
+    ``--minutes`` applied, as keyword arguments of :func:`lantern_jax.apps.envs.ppo_training.train`.
 
     Raises:
         UsageError: naming the file and key for an unknown key, a wrong type or a value out of
             range, and naming the option for ``--dataset`` or ``--epochs`` (dataset recipes only).
     """
-    from lantern_jax.config_file import ConfigFileError, check_keys, read_table, typed_value
+    from lantern_jax.io.config_file import ConfigFileError, check_keys, read_table, typed_value
 
     given = [f"--{o}" for o in DATASET_ONLY if getattr(args, o) is not None]
     if given:
@@ -92,7 +92,7 @@ def _train_ppo(args: argparse.Namespace) -> int:
     cfg.setdefault("checkpoint", f"{out.rstrip('/')}/ppo_lantern.msgpack")
     check_out(out, "--out" if args.out is not None else f"config {args.config}: ppo.out",
               in_place=True)  # fmt: skip
-    from lantern_jax.envs.ppo_training import train as train_ppo
+    from lantern_jax.apps.envs.ppo_training import train as train_ppo
 
     curve = train_ppo(**cfg)
     if curve:
@@ -111,18 +111,18 @@ def cmd_train(args: argparse.Namespace, argv: Sequence[str]) -> int:
     if args.minutes is not None:
         raise UsageError(f"--minutes: config {args.config} trains on the dataset; its time "
                          "budget is the config's max_minutes")  # fmt: skip
-    from lantern_jax.config_file import ConfigFileError
-    from lantern_jax.dataset.store import DatasetError
+    from lantern_jax.apps.dataset.store import DatasetError
+    from lantern_jax.apps.training.behaviour_cloning import train
+    from lantern_jax.apps.training.config import load_config
+    from lantern_jax.io.config_file import ConfigFileError
     from lantern_jax.policies.learned.checkpoint import CheckpointError
-    from lantern_jax.training.behaviour_cloning import train
-    from lantern_jax.training.config import load_config
 
     try:
         cfg = load_config(args.config, dataset=args.dataset, out=args.out, epochs=args.epochs,
                           seed=args.seed)  # fmt: skip
     except ConfigFileError as e:
         raise UsageError(str(e)) from None
-    from lantern_jax.training.behaviour_cloning import check_checkpoint_folder, run_files
+    from lantern_jax.apps.training.behaviour_cloning import check_checkpoint_folder, run_files
 
     where = "--out" if args.out is not None else f"config {args.config}: train.out"
     check_out(cfg.out, where, in_place=True, owned=run_files(cfg))

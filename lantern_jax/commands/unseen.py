@@ -7,7 +7,7 @@
     lantern-jax --families my_families.py unseen --policy coop --suite my_suite.json
 
 runs every pair of the suite under no warning, the exact (free-form) warning and the held-out
-paraphrase (:mod:`lantern_jax.transfer`), prints the paper's two tables (the occluded cyclist;
+paraphrase (:mod:`lantern_jax.apps.transfer`), prints the paper's two tables (the occluded cyclist;
 the emergency vehicle crossing and the reversing vehicle; one more for any other family of the
 suite) with the paper's figures beneath, and writes them with the per-pair rows as CSV and
 Markdown into ``--out``.
@@ -27,9 +27,9 @@ DEFAULT_OUT = "results/unseen"
 
 def unseen_files() -> tuple[str, ...]:
     """Every file ``unseen`` may write: ``unseen_<k>`` for each of the paper's tables and one
-    for other families (:func:`lantern_jax.transfer.table_groups`), and ``unseen_pairs``, each
+    for other families (:func:`lantern_jax.apps.transfer.table_groups`), and ``unseen_pairs``, each
     as ``.csv`` and ``.md``; checked up front so that no entry of the user's is in the way."""
-    from lantern_jax.transfer import PAPER_TABLES
+    from lantern_jax.apps.transfer import PAPER_TABLES
 
     stems = [f"unseen_{k + 1}" for k in range(len(PAPER_TABLES) + 1)] + ["unseen_pairs"]
     return tuple(f"{stem}{ext}" for stem in stems for ext in (".csv", ".md"))
@@ -41,7 +41,7 @@ def cmd_unseen(args: argparse.Namespace, argv: Sequence[str]) -> int:
     from tabulate import tabulate
 
     try:  # registers the shipped unseen hazards: refused if a family of yours took a code
-        from lantern_jax import transfer
+        from lantern_jax.apps import transfer
     except ValueError as e:
         raise UsageError(
             f"the unseen hazards cannot be registered: {e} (a --families file registered a "

@@ -15,7 +15,7 @@ import argparse
 import math
 from collections.abc import Callable
 
-from lantern_jax.constants import MAX_SEED
+from lantern_jax.core.constants import MAX_SEED
 
 #: Largest count (pairs, sequences, epochs, ...) any command takes.
 MAX_COUNT = 10**6

@@ -19,7 +19,7 @@ from lantern_jax.commands.common import (
     stage,
 )
 from lantern_jax.commands.values import count
-from lantern_jax.constants import SUITE_ID
+from lantern_jax.core.constants import SUITE_ID
 
 
 def cmd_wording(args: argparse.Namespace, argv: Sequence[str]) -> int:
@@ -30,7 +30,7 @@ def cmd_wording(args: argparse.Namespace, argv: Sequence[str]) -> int:
     suite = load_selected_suite(args)
     stage(args, f"{policy} on {suite.suite_id} ({len(suite)} pairs): canonical and tiered "
                 "paraphrase warnings")  # fmt: skip
-    from lantern_jax.diagnostics import WORDING_COLUMNS, wording_table
+    from lantern_jax.apps.diagnostics import WORDING_COLUMNS, wording_table
     from lantern_jax.report import interval_display, interval_note
 
     table = wording_table(policy, suite)

@@ -40,7 +40,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from lantern_jax.constants import (
+from lantern_jax.core.constants import (
     BIG,
     DT,
     EGO_HALF_LENGTH,
@@ -50,6 +50,7 @@ from lantern_jax.constants import (
     MOTION_IDM,
     MOTION_SCRIPTED,
 )
+from lantern_jax.core.times import NEVER, happened
 from lantern_jax.dynamics.adversary import commanded, track_start
 from lantern_jax.dynamics.bicycle import longitudinal_step
 from lantern_jax.dynamics.idm import (
@@ -65,9 +66,8 @@ from lantern_jax.dynamics.scripted import (
     scripted_pose,
     trigger_time,
 )
-from lantern_jax.polyline import interpolate, left_normal
-from lantern_jax.times import NEVER, happened
-from lantern_jax.world import ActorScript, ActorState, present
+from lantern_jax.maths.polyline import interpolate, left_normal
+from lantern_jax.types.world import ActorScript, ActorState, present
 
 Array = jax.Array
 

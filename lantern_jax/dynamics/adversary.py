@@ -1,6 +1,6 @@
 """Adversarial actor tracks: bounded actions per knot through a kinematic model, closed form.
 
-A track (:class:`lantern_jax.world.ActorTrack`, in the manner of KING's adversarial agents)
+A track (:class:`lantern_jax.types.world.ActorTrack`, in the manner of KING's adversarial agents)
 perturbs one actor's motion after its **start** — its trigger time, or the physical event for an
 actor that never triggers (background traffic) — knot by knot: knot ``k`` covers
 ``u in [k h, (k + 1) h)`` with ``u = t - start`` and ``h`` the knot length.  Each of the ``N``
@@ -57,7 +57,7 @@ deviation; braking 3.0 m/s^2 and the sidestep (1 m/s, 2 m/s^2) are ours. *Cyclis
 design speed 30 km/h (8.3 m/s) and design deceleration 0.35 g (3.4 m/s^2, "Guide for the
 Development of Bicycle Facilities"); the 85th-percentile start acceleration measured for
 bicycles is 1.4 m/s^2 (FHWA-HRT-04-103, table 10); heading bound and rate are ours. No actor
-kind of the simulator is a cyclist yet (:data:`lantern_jax.constants.KIND_NAMES`); the row is
+kind of the simulator is a cyclist yet (:data:`lantern_jax.core.constants.KIND_NAMES`); the row is
 what one gets. *Car*: 60 km/h (an urban 50 km/h limit + 20 %), the ego's throttle limit (3
 m/s^2, ``EGO_MAX_ACCEL``) and full braking on dry asphalt (8 m/s^2, ``EGO_MAX_BRAKE``; passenger
 cars reach 0.6-0.9 g); heading offset 0.2 rad (11 deg: a 2 m/s lateral speed at 10 m/s, an
@@ -73,8 +73,8 @@ import math
 import jax
 import jax.numpy as jnp
 
-from lantern_jax.constants import KIND_PEDESTRIAN, KIND_VEHICLE, TRIGGER_NEVER
-from lantern_jax.world import ActorTrack
+from lantern_jax.core.constants import KIND_PEDESTRIAN, KIND_VEHICLE, TRIGGER_NEVER
+from lantern_jax.types.world import ActorTrack
 
 Array = jax.Array
 

@@ -30,7 +30,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from lantern_jax.constants import (
+from lantern_jax.core.constants import (
     DT,
     EGO_MAX_ACCEL,
     EGO_MAX_BRAKE,
@@ -39,7 +39,7 @@ from lantern_jax.constants import (
     EGO_WHEELBASE,
     GRAVITY,
 )
-from lantern_jax.world import EgoState
+from lantern_jax.types.world import EgoState
 
 Array = jax.Array
 

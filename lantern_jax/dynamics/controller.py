@@ -36,7 +36,7 @@ There is no integral term: the bicycle has no drag or grade, so proportional con
 steady-state error, and a stateless controller keeps a rollout step a pure function of the world.
 
 Faults: non-finite waypoints, or a plan faster than
-:data:`~lantern_jax.constants.MAX_PLAN_SPEED` (:func:`waypoints_fault`), make both outputs NaN
+:data:`~lantern_jax.core.constants.MAX_PLAN_SPEED` (:func:`waypoints_fault`), make both outputs NaN
 (computed from zeroed waypoints, so no NaN
 reaches a gradient); :func:`lantern_jax.dynamics.bicycle.sanitize_controls` then turns them into
 full braking and reports the fault.  :func:`waypoints_fault` gives the same flag directly.
@@ -47,7 +47,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from lantern_jax.constants import (
+from lantern_jax.core.constants import (
     BIG,
     EGO_MAX_ACCEL,
     EGO_MAX_STEER,
@@ -56,9 +56,9 @@ from lantern_jax.constants import (
     WAYPOINT_DT,
 )
 from lantern_jax.dynamics.bicycle import EGO_LR, bicycle_step, brake_limit, sanitize_controls
-from lantern_jax.geometry import safe_norm
-from lantern_jax.polyline import arc_length, interpolate, safe_atan2
-from lantern_jax.world import EgoState
+from lantern_jax.maths.geometry import safe_norm
+from lantern_jax.maths.polyline import arc_length, interpolate, safe_atan2
+from lantern_jax.types.world import EgoState
 
 Array = jax.Array
 
@@ -86,7 +86,7 @@ def lookahead_distance(speed: Array) -> Array:
 def waypoints_fault(waypoints: Array) -> Array:
     """Whether a plan is unusable: any NaN or infinite coordinate, or a leg (the ego to the
     first waypoint, or one waypoint to the next) faster than
-    :data:`~lantern_jax.constants.MAX_PLAN_SPEED` (a plan in other units, or scaled).
+    :data:`~lantern_jax.core.constants.MAX_PLAN_SPEED` (a plan in other units, or scaled).
 
     Args:
         waypoints: (N, 2) float32, m, ego frame, ``WAYPOINT_DT`` apart.
@@ -170,7 +170,7 @@ def track_waypoints(ego: EgoState, waypoints: Array, friction: Array) -> tuple[A
 def follow_plan(ego: EgoState, waypoints: Array, friction: Array) -> tuple[EgoState, Array, Array]:
     """One tick of the ego driving a plan: controller, fault handling, bicycle.
 
-    An unusable plan (non-finite, or faster than :data:`~lantern_jax.constants.MAX_PLAN_SPEED`:
+    An unusable plan (non-finite, or faster than :data:`~lantern_jax.core.constants.MAX_PLAN_SPEED`:
     :func:`waypoints_fault`) or non-finite controls are a controller fault: the ego brakes fully
     (friction limited) and keeps its wheel angle; the fault is returned, never propagated as NaN.
 

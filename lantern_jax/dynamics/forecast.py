@@ -37,10 +37,10 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from lantern_jax.constants import MOTION_IDM, TRIGGER_EVENT
+from lantern_jax.core.constants import MOTION_IDM, TRIGGER_EVENT
+from lantern_jax.core.times import NEVER, happened
 from lantern_jax.dynamics.scripted import ScriptedMotion, scripted_arc, trigger_time
-from lantern_jax.times import NEVER, happened
-from lantern_jax.world import ActorScript, ActorState
+from lantern_jax.types.world import ActorScript, ActorState
 
 Array = jax.Array
 
@@ -104,7 +104,7 @@ def _places(script: ActorScript, times: Array, tau: Array) -> tuple[Array, ...]:
 
 def _segments(script: ActorScript) -> tuple[Array, ...]:
     """Per-slot path segments: start x, start y, unit x, unit y, start arc, each (A, P - 1);
-    degenerate segments point along +x (as :func:`lantern_jax.polyline.interpolate`)."""
+    degenerate segments point along +x (as :func:`lantern_jax.maths.polyline.interpolate`)."""
     p, ps, pv = script.path, script.path_s, script.path_valid
     dx, dy = p[:, 1:, 0] - p[:, :-1, 0], p[:, 1:, 1] - p[:, :-1, 1]
     n2 = dx * dx + dy * dy
@@ -117,7 +117,7 @@ def _pose(script: ActorScript, s: Array, lat: Array, v_long: Array, v_lat: Array
     """Centre x, y and unit heading x, y (each (A, K)) of every slot at arcs ``s`` (A, K).
 
     The point at arc ``s`` of a slot's path (linear extension beyond its ends, as
-    :func:`lantern_jax.polyline.interpolate`), offset ``lat`` to the left of travel; the
+    :func:`lantern_jax.maths.polyline.interpolate`), offset ``lat`` to the left of travel; the
     heading follows the velocity ``(v_long, v_lat)`` in the path frame.  Components are kept
     apart (x and y arrays) so that XLA vectorises over the (A, K) grid.
     """

@@ -5,8 +5,8 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from lantern_jax.constants import LIGHT_GREEN, LIGHT_RED, LIGHT_YELLOW
-from lantern_jax.world import TrafficLights
+from lantern_jax.core.constants import LIGHT_GREEN, LIGHT_RED, LIGHT_YELLOW
+from lantern_jax.types.world import TrafficLights
 
 Array = jax.Array
 

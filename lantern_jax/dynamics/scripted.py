@@ -1,4 +1,5 @@
-"""Scripted actors: closed-form motion along a path (see :class:`lantern_jax.world.ActorScript`).
+"""Scripted actors: closed-form motion along a path (see
+:class:`lantern_jax.types.world.ActorScript`).
 
 For one actor with trigger time ``tau``::
 
@@ -24,12 +25,12 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from lantern_jax.constants import TRIGGER_CLOCK, TRIGGER_EVENT
+from lantern_jax.core.constants import TRIGGER_CLOCK, TRIGGER_EVENT
+from lantern_jax.core.times import NEVER, happened
 from lantern_jax.dynamics.adversary import scripted_offsets
-from lantern_jax.geometry import safe_norm
-from lantern_jax.polyline import interpolate, left_normal, safe_atan2
-from lantern_jax.times import NEVER, happened
-from lantern_jax.world import ActorScript
+from lantern_jax.maths.geometry import safe_norm
+from lantern_jax.maths.polyline import interpolate, left_normal, safe_atan2
+from lantern_jax.types.world import ActorScript
 
 Array = jax.Array
 
@@ -37,7 +38,7 @@ Array = jax.Array
 @struct.dataclass
 class ScriptedMotion:
     """The closed-form motion of scripted actors: the fields of
-    :class:`~lantern_jax.world.ActorScript` that :func:`scripted_arc` reads, shaped ``()`` for
+    :class:`~lantern_jax.types.world.ActorScript` that :func:`scripted_arc` reads, shaped ``()`` for
     one actor or ``(A,)`` for every slot (:meth:`of`)."""
 
     s_init: Array  # float32, m, arc at t = 0
@@ -114,7 +115,7 @@ def scripted_arc(
         t: () float32, s, time.
         t_trigger: () float32, s, trigger time ``tau`` (``NEVER`` = not triggered).
         track: the actor's adversarial track after its trigger, ``(dv, ds, q, g, dlat,
-            knot_s)`` of :class:`lantern_jax.world.ActorTrack` for this slot
+            knot_s)`` of :class:`lantern_jax.types.world.ActorTrack` for this slot
             (:mod:`lantern_jax.dynamics.adversary`), or None for none; its deviations add to
             the arc, the speed, the lateral offset and the lateral speed (exact zeros for
             all-zero actions).

@@ -2,7 +2,7 @@
 
 A policy is a small record (:class:`Policy`): a name, ``init(key) -> params`` and an ``act``
 function, the **sensors** it reads (the simulator builds its observation from those and from
-nothing else; :mod:`lantern_jax.observation`) and, for a policy with memory, an initial carry.
+nothing else; :mod:`lantern_jax.types.observation`) and, for a policy with memory, an initial carry.
 
 Stateless (the default, as short as it can be)::
 
@@ -29,9 +29,9 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
-from lantern_jax.constants import NUM_WAYPOINTS
-from lantern_jax.observation import FRONT_CAMERA, SURROUND_RIG, WARNING, Observation
+from lantern_jax.core.constants import NUM_WAYPOINTS
 from lantern_jax.sensors.registry import Sensor, declared, normalize_sensors
+from lantern_jax.types.observation import FRONT_CAMERA, SURROUND_RIG, WARNING, Observation
 
 InitFn = Callable[[jax.Array], Any]
 ActFn = Callable[..., Any]

@@ -78,7 +78,7 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from lantern_jax.constants import (
+from lantern_jax.core.constants import (
     BIG,
     EGO_HALF_LENGTH,
     EGO_HALF_WIDTH,
@@ -90,7 +90,10 @@ from lantern_jax.constants import (
     NUM_WAYPOINTS,
     WAYPOINT_DT,
 )
-from lantern_jax.observation import (
+from lantern_jax.maths.polyline import project_uniform
+from lantern_jax.policies.base import Policy
+from lantern_jax.policies.planner import curvature_speed_limit, route_point, route_tangent
+from lantern_jax.types.observation import (
     FORECAST_DT,
     FORECAST_STEPS,
     FRONT_CAMERA,
@@ -98,9 +101,6 @@ from lantern_jax.observation import (
     ROUTE_STEP,
     Observation,
 )
-from lantern_jax.policies.base import Policy
-from lantern_jax.policies.planner import curvature_speed_limit, route_point, route_tangent
-from lantern_jax.polyline import project_uniform
 
 Array = jax.Array
 

@@ -28,8 +28,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from lantern_jax.core.user_code import UserCodeError, as_guest
 from lantern_jax.policies.base import Policy
-from lantern_jax.user_code import UserCodeError, as_guest
 
 #: ``package.module`` (dotted Python identifiers).
 _MODULE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*$")

@@ -1,7 +1,7 @@
 """A flat observation vector and a two-number action, for learned policies (and the brax env).
 
-The simulator's :class:`~lantern_jax.observation.Observation` is a structure; an MLP policy
-(e.g. one trained with PPO on :mod:`lantern_jax.envs`) reads one flat float32 vector and emits
+The simulator's :class:`~lantern_jax.types.observation.Observation` is a structure; an MLP policy
+(e.g. one trained with PPO on :mod:`lantern_jax.apps.envs`) reads one flat float32 vector and emits
 one small action.  Both mappings live here, below the policies, so that the environment that
 trains a policy and the registered policy that evaluates it use exactly the same code.
 
@@ -55,7 +55,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from lantern_jax.constants import (
+from lantern_jax.core.constants import (
     EGO_MAX_ACCEL,
     EGO_MAX_BRAKE,
     EGO_MAX_STEER,
@@ -65,8 +65,8 @@ from lantern_jax.constants import (
     NUM_WAYPOINTS,
     WAYPOINT_DT,
 )
-from lantern_jax.observation import Observation, stated_position, warning_delivered
 from lantern_jax.scenarios.warnings import token_table
+from lantern_jax.types.observation import Observation, stated_position, warning_delivered
 
 Array = jax.Array
 
@@ -87,9 +87,9 @@ OBS_ACTOR_SLOTS = MAX_ACTORS  # actor slots of the vector: the built scenarios' 
 
 def _actor_features(obs: Observation) -> Array:
     """(max(A, OBS_ACTOR_SLOTS) * 12,) float32: the camera-visible actors (zeros for unseen
-    slots).  A batch whose unused trailing slots were cut (:func:`lantern_jax.world.trim_padding`)
-    is padded back with zeros, exactly what those empty slots gave, so the vector keeps
-    ``OBS_SIZE``."""
+    slots).  A batch whose unused trailing slots were cut
+    (:func:`lantern_jax.types.world.trim_padding`) is padded back with zeros, exactly what those
+    empty slots gave, so the vector keeps ``OBS_SIZE``."""
     seen = obs.visible.astype(jnp.float32)[:, None]
     kind = jax.nn.one_hot(obs.actor_kind, NUM_ACTOR_KINDS, dtype=jnp.float32)
     xy = jnp.where(obs.visible[:, None], obs.actor_xy, 0.0) / POS_SCALE

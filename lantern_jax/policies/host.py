@@ -15,8 +15,8 @@ execution::
 
 ``preprocess`` (jittable, one observation -> one array) runs inside JAX before the call, and
 ``postprocess`` (jittable, ``(model output, observation) -> (10, 2)`` waypoints) after it;
-without them the model receives the :class:`~lantern_jax.observation.Observation` itself with a
-leading batch axis on every field and must return ``(B, 10, 2)`` waypoints.  ``sensors`` are
+without them the model receives the :class:`~lantern_jax.types.observation.Observation` itself with
+a leading batch axis on every field and must return ``(B, 10, 2)`` waypoints.  ``sensors`` are
 declared as for any policy (``("warning",)`` for a model that reads the warning text).
 
 **Memory.**  With ``carry`` (one execution's initial state: a pytree of NumPy arrays, e.g. a
@@ -38,10 +38,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from lantern_jax.constants import NUM_WAYPOINTS
-from lantern_jax.observation import FRONT_CAMERA, Observation
+from lantern_jax.core.constants import NUM_WAYPOINTS
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.features import action_to_waypoints
+from lantern_jax.types.observation import FRONT_CAMERA, Observation
 
 HostFn = Callable[[Any], np.ndarray]
 
@@ -157,7 +157,7 @@ def host_policy(
         preprocess: jittable ``observation -> model input`` for one execution.
         postprocess: jittable ``(model output, observation) -> (10, 2)`` waypoints.
         description: shown by ``lantern-jax policies``.
-        sensors: what the model reads (:data:`~lantern_jax.observation.SENSORS`).
+        sensors: what the model reads (:data:`~lantern_jax.types.observation.SENSORS`).
         carry: one execution's initial carry (pytree of arrays), for a model with memory.
     """
     act = host_act(name, fn, out_shape, preprocess, postprocess, carry)

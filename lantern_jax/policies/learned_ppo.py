@@ -1,4 +1,4 @@
-"""``ppo``: an MLP driving policy trained with brax's PPO on :mod:`lantern_jax.envs`.
+"""``ppo``: an MLP driving policy trained with brax's PPO on :mod:`lantern_jax.apps.envs`.
 
 The policy reads :func:`~lantern_jax.policies.features.observation_vector`, normalises it with
 the observation statistics gathered during training, runs brax's default PPO policy network
@@ -30,11 +30,11 @@ import jax.numpy as jnp
 import numpy as np
 from flax import serialization
 
-from lantern_jax.files import atomic_write
-from lantern_jax.observation import FRONT_CAMERA, WARNING, Observation
+from lantern_jax.io.files import atomic_write
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.features import ACTION_SIZE, OBS_SIZE, action_to_waypoints
 from lantern_jax.policies.features import observation_vector as flat
+from lantern_jax.types.observation import FRONT_CAMERA, WARNING, Observation
 
 SHIPPED_CHECKPOINT = Path(__file__).resolve().parent.parent / "data" / "ppo_lantern.msgpack"
 CHECKPOINT_ENV = "LANTERN_JAX_PPO_CHECKPOINT"

@@ -30,7 +30,7 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from lantern_jax.constants import (
+from lantern_jax.core.constants import (
     BIG,
     EGO_HALF_LENGTH,
     EGO_HALF_WIDTH,
@@ -40,8 +40,8 @@ from lantern_jax.constants import (
     NUM_WAYPOINTS,
     WAYPOINT_DT,
 )
-from lantern_jax.observation import ROUTE_STEP, Observation
-from lantern_jax.polyline import project_uniform
+from lantern_jax.maths.polyline import project_uniform
+from lantern_jax.types.observation import ROUTE_STEP, Observation
 
 Array = jax.Array
 
@@ -108,7 +108,8 @@ def default_planner_config() -> PlannerConfig:
 # route helpers (route = (N, 2) ego-frame points, ROUTE_STEP apart, arc 0 at the first point)
 # ---------------------------------------------------------------------------------------------
 def project_on_route(route: Array, q: Array) -> tuple[Array, Array]:
-    """Project one point onto the observed route (:func:`lantern_jax.polyline.project_uniform`)."""
+    """Project one point onto the observed route
+    (:func:`lantern_jax.maths.polyline.project_uniform`)."""
     arc, dist = project_uniform(route, ROUTE_STEP, q[None, :])
     return arc[0], dist[0]
 

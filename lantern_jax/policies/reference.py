@@ -41,15 +41,7 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
-from lantern_jax import language
-from lantern_jax.constants import BIG
-from lantern_jax.observation import (
-    FRONT_CAMERA,
-    PRIVILEGED,
-    WARNING,
-    Observation,
-    stated_position,
-)
+from lantern_jax.core.constants import BIG
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.planner import (
     Constraints,
@@ -60,6 +52,14 @@ from lantern_jax.policies.planner import (
     project_on_route,
     stop_constraint,
     turn_entry_arc,
+)
+from lantern_jax.types import language
+from lantern_jax.types.observation import (
+    FRONT_CAMERA,
+    PRIVILEGED,
+    WARNING,
+    Observation,
+    stated_position,
 )
 
 # What a warning text asks ``coop`` for, as integer codes for the jitted policy.

@@ -2,7 +2,7 @@
 
 * :func:`write_outputs` writes every file of an evaluation into one folder as a whole set
   (staged beside the folder and moved into place together, so a reader or a kill never sees a
-  mix of two runs' files; :mod:`lantern_jax.files`):
+  mix of two runs' files; :mod:`lantern_jax.io.files`):
 
   =================================== =========================================================
   ``route_level_results.csv``         one row per (model, condition, pair), schema order
@@ -36,8 +36,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from lantern_jax.constants import CONDITIONS
-from lantern_jax.files import StagedFolder, atomic_write, check_target_folder
+from lantern_jax.core.constants import CONDITIONS
+from lantern_jax.io.files import StagedFolder, atomic_write, check_target_folder
 from lantern_jax.report.results import AblationResult, Evaluation
 from lantern_jax.report.tables import (
     ABLATION_TABLE_COLUMNS,
@@ -173,7 +173,7 @@ def split_manifest(manifest: dict) -> tuple[dict, dict]:
 
 def _how_written(stage: StagedFolder, record: dict | None) -> dict:
     """The run record's entries, with why the set is written into its folder file by file
-    when it is (:attr:`lantern_jax.files.StagedFolder.in_place`)."""
+    when it is (:attr:`lantern_jax.io.files.StagedFolder.in_place`)."""
     return {**(record or {}), **({"written_in_place": stage.in_place} if stage.in_place else {})}
 
 
@@ -219,7 +219,7 @@ def check_output_folder(out_dir: str | os.PathLike) -> Path:
     """Check that ``out_dir`` can receive a result set, before an evaluation is started.
 
     Nothing existing is changed (a probe folder is created and removed beside it, or inside it
-    when the set will be written in place, :func:`lantern_jax.files.in_place_reason`).
+    when the set will be written in place, :func:`lantern_jax.io.files.in_place_reason`).
 
     Args:
         out_dir: the output folder (may not exist yet).
@@ -228,7 +228,7 @@ def check_output_folder(out_dir: str | os.PathLike) -> Path:
         The resolved folder path.
 
     Raises:
-        lantern_jax.files.OutputFolderError: when it is a file, lies under a file, or cannot be
+        lantern_jax.io.files.OutputFolderError: when it is a file, lies under a file, or cannot be
             written.
     """
     return check_target_folder(out_dir, owned=OUTPUT_FILES)
@@ -294,13 +294,13 @@ def write_outputs(
     """Write every file of an evaluation (see the module docstring) as one whole set.
 
     The files are written into a hidden staging folder beside ``out_dir`` and moved into place
-    together (:class:`lantern_jax.files.StagedFolder`): ``out_dir`` holds either the previous
+    together (:class:`lantern_jax.io.files.StagedFolder`): ``out_dir`` holds either the previous
     complete set or the new one, even if the process is killed.  The result files of an
     existing ``out_dir`` are replaced; its other entries (other files, sub-folders) are kept.
     Leftovers of an interrupted earlier write are cleaned first.
 
     Args:
-        result: from :func:`lantern_jax.evaluation.evaluate`.
+        result: from :func:`lantern_jax.apps.evaluation.evaluate`.
         out_dir: output folder (created if needed).
         extra_manifest: more entries for the reproducibility manifest (they must be the same
             for the same inputs).
@@ -312,7 +312,7 @@ def write_outputs(
     Raises:
         ValueError: when the route-level table does not satisfy its schema (nothing is
             written).
-        lantern_jax.files.OutputFolderError: when ``out_dir`` cannot receive the set.
+        lantern_jax.io.files.OutputFolderError: when ``out_dir`` cannot receive the set.
     """
     with StagedFolder(out_dir, OUTPUT_FILES) as stage:
         _write_set(result, stage.path, extra_manifest, _how_written(stage, run_record))
@@ -344,7 +344,7 @@ def write_ablation_outputs(
 ) -> dict[str, Path]:
     """Write the ablation table (CSV, Markdown), every variant's route-level rows (with the
     schema), a run record and a manifest as one whole set
-    (:class:`lantern_jax.files.StagedFolder`; the arguments as :func:`write_outputs`).
+    (:class:`lantern_jax.io.files.StagedFolder`; the arguments as :func:`write_outputs`).
 
     Returns:
         File name -> path, for every file of :data:`ABLATION_FILES`.
@@ -377,7 +377,7 @@ def write_ablation_outputs(
 
 def write_tables(tables: dict[str, tuple], out_dir: str | os.PathLike) -> list:
     """Write ``name.csv`` and ``name.md`` for every table as one set (other files of
-    ``out_dir`` are kept; :class:`lantern_jax.files.StagedFolder`).
+    ``out_dir`` are kept; :class:`lantern_jax.io.files.StagedFolder`).
 
     Args:
         tables: file stem -> (title, table) or (title, table, display): the CSV holds the

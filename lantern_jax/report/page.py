@@ -37,8 +37,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from lantern_jax.constants import FAMILIES, GATE_COLUMN_NAMES
-from lantern_jax.files import OutputFolderError, atomic_write
+from lantern_jax.core.constants import FAMILIES, GATE_COLUMN_NAMES
+from lantern_jax.io.files import OutputFolderError, atomic_write
 from lantern_jax.report.evidence import ResultSet, read_result_set
 from lantern_jax.report.outputs import DECOMPOSITION_CSV, FAMILY_CSV
 from lantern_jax.scoring.aggregate import premise_table
@@ -408,7 +408,7 @@ def build_report(
 
     Raises:
         lantern_jax.report.evidence.ResultSetError: for a folder that is not valid evidence.
-        lantern_jax.files.OutputFolderError: when ``out`` (or its figure folder) is something
+        lantern_jax.io.files.OutputFolderError: when ``out`` (or its figure folder) is something
             this project did not write (:func:`check_report_target`), before anything runs.
     """
     out = Path(out)

@@ -1,10 +1,10 @@
 """What an evaluation and an ablation table produce, as data: the types the report's tables
 and files are written from.
 
-They live here, below the code that computes them (:mod:`lantern_jax.evaluation`,
-:mod:`lantern_jax.ablation_table`), so that the report names them without importing its callers.
-:class:`lantern_jax.evaluation.EvalResult` is :class:`Evaluation` with the methods that write
-its files and its HTML report.
+They live here, below the code that computes them (:mod:`lantern_jax.apps.evaluation`,
+:mod:`lantern_jax.apps.ablation_table`), so that the report names them without importing its
+callers.  :class:`lantern_jax.apps.evaluation.EvalResult` is :class:`Evaluation` with the
+methods that write its files and its HTML report.
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ class PolicyRun:
 
 @dataclasses.dataclass
 class Evaluation:
-    """Everything an evaluation produces (:class:`lantern_jax.evaluation.EvalResult` adds the
+    """Everything an evaluation produces (:class:`lantern_jax.apps.evaluation.EvalResult` adds the
     methods that write it)."""
 
     route_table: pd.DataFrame
@@ -56,12 +56,12 @@ class Evaluation:
 
 @dataclasses.dataclass
 class AblationResult:
-    """Everything :func:`lantern_jax.ablation_table.run_ablations` produces."""
+    """Everything :func:`lantern_jax.apps.ablation_table.run_ablations` produces."""
 
     table: pd.DataFrame  # model, condition, variant, label, then TABLE_COLUMNS (0..100)
     route_table: pd.DataFrame  # every variant's route rows; condition "<c>" or "<c>:<variant>"
     manifest: dict
     results: dict[str, Evaluation]  # per variant
     #: model, condition, variant, then <c>_lo, <c>_hi, <c>_n per TABLE_COLUMNS
-    #: (:func:`lantern_jax.ablation_table.ablation_intervals`)
+    #: (:func:`lantern_jax.apps.ablation_table.ablation_intervals`)
     intervals: pd.DataFrame | None = None

@@ -21,8 +21,8 @@ import numpy as np
 import pandas as pd
 from tabulate import tabulate
 
-from lantern_jax import family_codes
-from lantern_jax.constants import CONDITIONS
+from lantern_jax.core import family_codes
+from lantern_jax.core.constants import CONDITIONS
 from lantern_jax.report.results import Evaluation
 from lantern_jax.scoring import uncertainty
 from lantern_jax.scoring.aggregate import DECOMPOSITION_COLUMNS
@@ -33,7 +33,7 @@ FAMILY_COLUMNS = uncertainty.FAMILY_COLUMNS
 
 def family_columns(df: pd.DataFrame) -> tuple[str, ...]:
     """The family columns of a family or premise table: the six, then the registered families
-    among its columns (:func:`lantern_jax.family_codes.table_codes`), then ``Overall``
+    among its columns (:func:`lantern_jax.core.family_codes.table_codes`), then ``Overall``
     (:data:`FAMILY_COLUMNS` for a table of the six)."""
     return (*family_codes.table_codes(df.columns), "Overall")
 
@@ -188,7 +188,7 @@ def format_family_table(
 ) -> str:  # fmt: skip
     """Per-family CUS table as text.
 
-    Given an :class:`~lantern_jax.evaluation.EvalResult`, the table as the command line prints
+    Given an :class:`~lantern_jax.apps.evaluation.EvalResult`, the table as the command line prints
     it: its title (suite, pairs, ablation), the policies in the order they were given, every
     cell with its interval and the pairs per column, and the intervals' legend.
 
@@ -297,7 +297,7 @@ def _pm_table(
 def format_premise_table(
     df: pd.DataFrame, tablefmt: str = "simple", intervals: pd.DataFrame | None = None
 ) -> str:
-    """The premise table (:func:`lantern_jax.evaluation.premise_table`) as text: one row per
+    """The premise table (:func:`lantern_jax.apps.evaluation.premise_table`) as text: one row per
     measure (% with one decimal; with ``intervals``, ``EvalResult.intervals.premise``, also
     its interval), then the execution counts and, with intervals, the pairs resampled."""
     ivs = _interval_rows(intervals, ("measure",))
@@ -392,10 +392,10 @@ def format_ablation_table(
     """The ablation table (one row per model and variant) of one condition as text.
 
     Args:
-        df: :attr:`lantern_jax.ablation_table.AblationResult.table`.
+        df: :attr:`lantern_jax.apps.ablation_table.AblationResult.table`.
         condition: the condition to show (the paper's table is the warning condition).
         tablefmt: a tabulate format.
-        intervals: :attr:`~lantern_jax.ablation_table.AblationResult.intervals`; each cell then
+        intervals: :attr:`~lantern_jax.apps.ablation_table.AblationResult.intervals`; each cell then
             reads ``79.6 ±3.4`` (half the interval's width), :data:`FLAG` below ``MIN_N`` pairs,
             and a ``Pairs`` column is added.
     """

@@ -35,10 +35,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from lantern_jax.constants import KIND_STATIC, KNOT_S_RANGE, MAX_ACTORS, MAX_KNOTS, ROLE_BACKGROUND
+from lantern_jax.core.constants import (
+    KIND_STATIC,
+    KNOT_S_RANGE,
+    MAX_ACTORS,
+    MAX_KNOTS,
+    ROLE_BACKGROUND,
+)
 from lantern_jax.dynamics.adversary import CLASS_OF_KIND, set_track, zero_track
 from lantern_jax.scenarios.families_common import SCENE_SLOT
-from lantern_jax.world import Scenario
+from lantern_jax.types.world import Scenario
 
 ADVERSARY_FIELD = "adversary"
 TRACK_KEYS = ("slot", "accel", "lateral")

@@ -1,12 +1,12 @@
-"""One assembler of :class:`~lantern_jax.world.Scenario` pytrees, shared by the family builders
-and the hand-built scenes (NumPy, build time).
+"""One assembler of :class:`~lantern_jax.types.world.Scenario` pytrees, shared by the family
+builders and the hand-built scenes (NumPy, build time).
 
 Builders describe each actor slot with an :class:`ActorSpec` in a canonical frame;
 :func:`assemble_scenario` rotates the scene, packs every piece into the fixed capacities of
-:mod:`lantern_jax.scenarios.road` and returns a :class:`~lantern_jax.world.Scenario` whose
-initial actor state is the closed form of :class:`~lantern_jax.world.ActorScript` at ``t = 0``.
-:func:`execution_config` turns a dict of :class:`~lantern_jax.world.ExecutionConfig` fields into
-the pytree with the right dtypes.
+:mod:`lantern_jax.scenarios.road` and returns a :class:`~lantern_jax.types.world.Scenario`
+whose initial actor state is the closed form of :class:`~lantern_jax.types.world.ActorScript` at
+``t = 0``.  :func:`execution_config` turns a dict of
+:class:`~lantern_jax.types.world.ExecutionConfig` fields into the pytree with the right dtypes.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import jax
 import numpy as np
 
-from lantern_jax.constants import (
+from lantern_jax.core.constants import (
     BIG,
     INF_TIME,
     MOTION_IDM,
@@ -28,7 +28,7 @@ from lantern_jax.constants import (
     TRIGGER_NEVER,
 )
 from lantern_jax.scenarios import road
-from lantern_jax.world import (
+from lantern_jax.types.world import (
     NO_OVERRIDE,
     ActorScript,
     ActorState,
@@ -44,7 +44,7 @@ from lantern_jax.world import (
 
 @dataclass
 class ActorSpec:
-    """One actor slot in the canonical frame (see :class:`~lantern_jax.world.ActorScript`)."""
+    """One actor slot in the canonical frame (see :class:`~lantern_jax.types.world.ActorScript`)."""
 
     path: np.ndarray  # (n, 2) float64, m, n >= 2
     extent: tuple[float, float]  # m, half length, half width
@@ -154,7 +154,7 @@ def execution_config(fields: dict) -> ExecutionConfig:
     """An :class:`ExecutionConfig` from a dict of Python values.
 
     Every field is required except the warning-override fields, which default to
-    :data:`~lantern_jax.world.NO_OVERRIDE` (no override).
+    :data:`~lantern_jax.types.world.NO_OVERRIDE` (no override).
 
     Raises:
         ValueError: naming missing or unknown fields.

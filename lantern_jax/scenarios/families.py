@@ -52,8 +52,8 @@ from typing import Any
 
 import numpy as np
 
-from lantern_jax import family_codes
-from lantern_jax.constants import FAMILIES, FAMILY_NAMES, WEATHERS
+from lantern_jax.core import family_codes
+from lantern_jax.core.constants import FAMILIES, FAMILY_NAMES, WEATHERS
 from lantern_jax.scenarios import families_junction as junction
 from lantern_jax.scenarios import families_straight as straight
 from lantern_jax.scenarios.adversary import (
@@ -67,7 +67,7 @@ from lantern_jax.scenarios.knobs import apply_knobs
 from lantern_jax.scenarios.premise import PREMISE_AT_WARNING, PREMISE_NONE, PREMISE_WHOLE_APPROACH
 from lantern_jax.scenarios.spec import PARAM_RANGES, content_hash, range_errors
 from lantern_jax.scoring.thresholds import D_SAFE_LARGE_M, D_SAFE_SMALL_M
-from lantern_jax.world import Scenario
+from lantern_jax.types.world import Scenario
 
 # What a family's warning asks the ego to do (read by warning-aware policies).
 RESPONSE_LANE_OBSTACLE = "lane_obstacle"  # a stopped obstacle in the ego lane at the position
@@ -273,8 +273,8 @@ def build_pair(params: dict, validate: bool = True) -> tuple[Scenario, Scenario,
             validated by the caller.
 
     Returns:
-        ``(scenario_a, scenario_b, meta)``: two :class:`~lantern_jax.world.Scenario` pytrees with
-        identical shapes (capacities of :mod:`lantern_jax.scenarios.road`) and a JSON-friendly
+        ``(scenario_a, scenario_b, meta)``: two :class:`~lantern_jax.types.world.Scenario` pytrees
+        with identical shapes (capacities of :mod:`lantern_jax.scenarios.road`) and a JSON-friendly
         dict with the family, the content hash, the markers, the conflict point (world frame),
         the lane names, the number of background vehicles and family-specific canonical-frame
         details.

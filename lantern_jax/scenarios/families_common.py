@@ -17,7 +17,7 @@ Actor slot layout (identical for every family, so Route A/B and all scenarios li
 
 Static scenery — parked trucks and vans, corner buildings, walls — is not an actor: it is part
 of the map (:class:`~lantern_jax.scenarios.road.OccluderSpec`, packed into
-:class:`~lantern_jax.world.Occluders`), identical on Route A and Route B.
+:class:`~lantern_jax.types.world.Occluders`), identical on Route A and Route B.
 """
 
 from __future__ import annotations
@@ -27,8 +27,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from lantern_jax import family_codes
-from lantern_jax.constants import (
+from lantern_jax.core import family_codes
+from lantern_jax.core.constants import (
     BACKGROUND_SLOTS,
     BIG,
     EGO_HALF_LENGTH,
@@ -49,7 +49,7 @@ from lantern_jax.scenarios.spec import (
     route_timeout_s,
 )
 from lantern_jax.scenarios.warnings import canonical_text_id
-from lantern_jax.world import Scenario
+from lantern_jax.types.world import Scenario
 
 HAZARD_SLOT = 0
 SCENE_SLOT = 1
@@ -213,7 +213,7 @@ def pair_params(
     seed: int,
     d_safe: float | None = None,
 ) -> tuple[dict, dict]:
-    """:class:`~lantern_jax.world.ExecutionConfig` field values for Route A (warning enabled)
+    """:class:`~lantern_jax.types.world.ExecutionConfig` field values for Route A (warning enabled)
     and Route B.
 
     Route B differs only in ``is_route_a`` and ``warning_enabled`` (False): the markers are kept

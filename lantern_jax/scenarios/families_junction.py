@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lantern_jax.constants import (
+from lantern_jax.core.constants import (
     EGO_HALF_LENGTH,
     FAMILIES,
     KIND_VEHICLE,

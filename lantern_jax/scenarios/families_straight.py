@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lantern_jax.constants import (
+from lantern_jax.core.constants import (
     BIG,
     EGO_HALF_LENGTH,
     EGO_HALF_WIDTH,

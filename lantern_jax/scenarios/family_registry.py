@@ -12,7 +12,7 @@ range_errors`), the premise rule (:func:`lantern_jax.scenarios.premise.premise_r
 bank (:func:`lantern_jax.scenarios.warnings.registered_bank`), the pair builder and the stress
 search spaces all read their entry here.
 
-:mod:`lantern_jax.family_codes` (below every scenario module) mirrors the codes, names and
+:mod:`lantern_jax.core.family_codes` (below every scenario module) mirrors the codes, names and
 indices for the layers that check a family code without building families (the scene types,
 the scoring tables); only this registry writes to it.
 
@@ -27,9 +27,9 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from lantern_jax import family_codes
-from lantern_jax.constants import FAMILIES
-from lantern_jax.named_registry import NamedRegistry
+from lantern_jax.core import family_codes
+from lantern_jax.core.constants import FAMILIES
+from lantern_jax.core.named_registry import NamedRegistry
 from lantern_jax.scenarios.warning_texts import TEMPLATES
 
 #: A family's warning texts as the bank holds them: ``(kind, tier, text)``, the exact warning
@@ -106,7 +106,7 @@ class FamilyRegistry(NamedRegistry[FamilyEntry]):
     then the registered families in registration order).
 
     :meth:`register` adds a family's entry and returns the entry held: a built-in code takes its
-    fixed index; another code is registered in :mod:`lantern_jax.family_codes` (next free
+    fixed index; another code is registered in :mod:`lantern_jax.core.family_codes` (next free
     index); registering an equal entry again returns the one held; it raises ``TypeError`` for
     something that is not a :class:`FamilyEntry` and ``ValueError`` for a code already holding
     another entry (or a malformed code)."""
@@ -118,7 +118,7 @@ class FamilyRegistry(NamedRegistry[FamilyEntry]):
         return entry.code
 
     def added(self, entry: FamilyEntry) -> None:
-        """Give a new code its index (:mod:`lantern_jax.family_codes`; the six have theirs)."""
+        """Give a new code its index (:mod:`lantern_jax.core.family_codes`; the six have theirs)."""
         if entry.code not in FAMILIES:
             family_codes.register(entry.code, entry.name)
 

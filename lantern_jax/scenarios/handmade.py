@@ -1,6 +1,6 @@
 """Hand-built scenes: a small constructor for tests, benchmarks and notebook experiments.
 
-:func:`straight_scene` builds a complete, valid :class:`~lantern_jax.world.Scenario` on a
+:func:`straight_scene` builds a complete, valid :class:`~lantern_jax.types.world.Scenario` on a
 straight road from a short list of actor descriptions; everything not given gets a neutral
 default (no hazard behaviour, no lights, dry weather).  It uses the same assembler as the
 scenario families (:func:`lantern_jax.scenarios.assemble.assemble_scenario`); the frozen suite
@@ -14,9 +14,9 @@ import dataclasses
 import jax.numpy as jnp
 import numpy as np
 
-from lantern_jax.constants import BIG, KIND_VEHICLE, PE, ROLE_BACKGROUND
+from lantern_jax.core.constants import BIG, KIND_VEHICLE, PE, ROLE_BACKGROUND
 from lantern_jax.scenarios import assemble, road
-from lantern_jax.world import (
+from lantern_jax.types.world import (
     NO_OVERRIDE,
     ActorScript,
     ActorState,
@@ -137,7 +137,7 @@ def straight_scene(
         speed: initial ego speed and default reference speed, m/s.
         lights: optional traffic lights.
         occluders: optional static scenery boxes (world frame, at most ``road.MAX_OCCLUDERS``).
-        **config_overrides: :class:`~lantern_jax.world.ExecutionConfig` fields to override.
+        **config_overrides: :class:`~lantern_jax.types.world.ExecutionConfig` fields to override.
     """
     lanes = make_road_map(
         [

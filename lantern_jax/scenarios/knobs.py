@@ -5,7 +5,7 @@ trigger delay, where it starts along its path, the size of its lateral manoeuvre
 actor's speed and reveal deadline, the warning and event leads.  Scene geometry (road
 curvature, junction shape, occluder set-back and size) is not a knob: it is built in NumPy
 before the rollout and does not map onto a single leaf of the scenario.  Each knob reads and
-writes leaves of the :class:`~lantern_jax.world.Scenario` pytree itself (its actor scripts and
+writes leaves of the :class:`~lantern_jax.types.world.Scenario` pytree itself (its actor scripts and
 execution config), so there is one source for every value, no parallel copy to keep in sync,
 and a gradient with respect to a knob is an ordinary JAX gradient::
 
@@ -35,7 +35,7 @@ import jax.numpy as jnp
 
 from lantern_jax.dynamics.actors import start_state
 from lantern_jax.scenarios.families_common import SCENE_SLOT
-from lantern_jax.world import Scenario
+from lantern_jax.types.world import Scenario
 
 Array = jax.Array
 

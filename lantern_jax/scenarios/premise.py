@@ -33,13 +33,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from lantern_jax import polyline
-from lantern_jax.constants import FRONT_CAMERA_FOV, MOTION_IDM
+from lantern_jax.core.constants import FRONT_CAMERA_FOV, MOTION_IDM
+from lantern_jax.core.times import NEVER
 from lantern_jax.dynamics.actors import scripted_states, start_state
+from lantern_jax.maths import polyline
 from lantern_jax.scenarios.family_registry import FAMILY_REGISTRY
 from lantern_jax.sensors.visibility import camera_pose, visible_actors
-from lantern_jax.times import NEVER
-from lantern_jax.world import Scenario
+from lantern_jax.types.world import Scenario
 
 APPROACH_STEP_M = 2.0  # m between checked ego positions on the approach
 

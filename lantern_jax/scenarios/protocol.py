@@ -39,16 +39,16 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from lantern_jax.constants import (
+from lantern_jax.core.constants import (
     BIG,
     DT,
     EGO_HALF_WIDTH,
     OVERRIDE_ANCHOR_WARN_POINT,
     ROLE_BACKGROUND,
 )
+from lantern_jax.core.times import NEVER, happened
 from lantern_jax.dynamics.lights import light_holds_ego
-from lantern_jax.times import NEVER, happened
-from lantern_jax.world import ActorState, ExecutionConfig, ProtocolState
+from lantern_jax.types.world import ActorState, ExecutionConfig, ProtocolState
 
 Array = jax.Array
 
@@ -96,7 +96,7 @@ def ego_held(
         light: () int32, LIGHT_* state of the ego's light.
         dist_to_stop_line: () float32, m, route arc of the ego's stop line minus the ego's arc.
         gap: (A,) float32, m, route gap from the ego front to each actor
-            (:func:`lantern_jax.observation.corridor_gaps`).
+            (:func:`lantern_jax.types.observation.corridor_gaps`).
         lateral: (A,) float32, m, each actor's distance from the route minus its half size.
         present: (A,) bool, actors in the world.
         role: (A,) int32, ROLE_*; only ordinary (background) traffic forms a queue.

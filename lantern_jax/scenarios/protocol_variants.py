@@ -2,9 +2,9 @@
 timing, event activation, localization, and wording"), one record each.
 
 An :class:`Ablation` changes only protocol data of a batch of executions (its
-:class:`~lantern_jax.world.ExecutionConfig`): every variant runs the same compiled program as
+:class:`~lantern_jax.types.world.ExecutionConfig`): every variant runs the same compiled program as
 the full protocol.  :data:`ABLATIONS` lists them in the paper's order; :func:`get_ablation`
-looks one up by name.  The table that evaluates them is :mod:`lantern_jax.ablation_table`.
+looks one up by name.  The table that evaluates them is :mod:`lantern_jax.apps.ablation_table`.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from collections.abc import Callable
 import jax.numpy as jnp
 
 from lantern_jax.scenarios.warnings import paraphrase_text_ids
-from lantern_jax.world import ExecutionConfig
+from lantern_jax.types.world import ExecutionConfig
 
 ConfigFn = Callable[[ExecutionConfig], ExecutionConfig]
 

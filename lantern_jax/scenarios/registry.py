@@ -8,9 +8,9 @@ parameter validation and suite files (:func:`lantern_jax.scenarios.suite.load_su
 building (:func:`lantern_jax.scenarios.families.build_pair`), static validation with the premise
 rule (:func:`lantern_jax.scenarios.suite.static_check`), suite generation with the expert's
 validation and the near-duplicate rule
-(``lantern_jax.suite_generation.generate_suite(families=...)``), evaluation and its tables (a
+(``lantern_jax.apps.suite_generation.generate_suite(families=...)``), evaluation and its tables (a
 column per registered family the results hold, after the six), and the dataset recorder
-(``lantern_jax.dataset.generation.generate_dataset(families=...)``). On the command line,
+(``lantern_jax.apps.dataset.generation.generate_dataset(families=...)``). On the command line,
 ``lantern-jax --families FILE.py ...`` imports a file (or module) that registers families before
 the command runs. ``docs/families.md`` walks through a whole family;
 :mod:`lantern_jax.scenarios.unseen` (the paper's three unseen hazards) is written with nothing
@@ -48,8 +48,8 @@ from typing import Any
 
 import numpy as np
 
-from lantern_jax import family_codes
-from lantern_jax.constants import (
+from lantern_jax.core import family_codes
+from lantern_jax.core.constants import (
     BIG,
     EGO_HALF_LENGTH,
     EGO_HALF_WIDTH,

@@ -4,7 +4,7 @@ Everything here runs once per scenario, outside ``jit``, on float64 NumPy arrays
 helpers, the map description (:class:`RoadMap` of :class:`LaneSpec` lanes, :class:`LightSpec`
 lights and :class:`OccluderSpec` static occluders), the ego :class:`RouteSpec`, the fixed
 capacities shared by every scenario, and the packing helpers that turn a map and a route into
-the fixed-capacity float32 pytrees of :mod:`lantern_jax.world` (rotation applied there).
+the fixed-capacity float32 pytrees of :mod:`lantern_jax.types.world` (rotation applied there).
 
 The roads themselves are built by :mod:`lantern_jax.scenarios.road_straight` (gently curved
 multi-lane roads) and :mod:`lantern_jax.scenarios.road_junction` (3- and 4-arm junctions with
@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from lantern_jax.constants import (  # noqa: F401  (the capacities: road.MAX_ACTORS, ...)
+from lantern_jax.core.constants import (  # noqa: F401  (the capacities: road.MAX_ACTORS, ...)
     BIG,
     EGO_HALF_WIDTH,
     LANE_POINTS,
@@ -276,7 +276,7 @@ class OccluderSpec:
     xy: np.ndarray  # (2,) float64, m, box centre
     yaw: float  # rad, direction of the long axis
     extent: tuple[float, float]  # m, half length, half width (> 0)
-    kind: int  # OCC_* of lantern_jax.constants
+    kind: int  # OCC_* of lantern_jax.core.constants
     name: str = ""  # what it is in the scene ("corner_SW", "truck", ...), for messages
 
 

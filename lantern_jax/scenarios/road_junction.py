@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from lantern_jax.constants import BIG, OCC_BUILDING, OCC_PARKED_VEHICLE, OCC_WALL
+from lantern_jax.core.constants import BIG, OCC_BUILDING, OCC_PARKED_VEHICLE, OCC_WALL
 from lantern_jax.scenarios.road import (
     LANE_CONNECTOR,
     LANE_DRIVING,

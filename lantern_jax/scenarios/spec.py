@@ -27,8 +27,8 @@ from typing import Any
 
 import numpy as np
 
-from lantern_jax import family_codes
-from lantern_jax.constants import FAMILIES, WEATHERS
+from lantern_jax.core import family_codes
+from lantern_jax.core.constants import FAMILIES, WEATHERS
 from lantern_jax.scenarios.family_registry import FAMILY_REGISTRY
 
 

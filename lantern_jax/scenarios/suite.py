@@ -2,13 +2,13 @@
 
 120 matched Route A/B pairs: 20 per family, five weather profiles x 24 pairs (4 per family per
 profile), as in the paper's appendix A.  A suite is generated from a seed by
-:mod:`lantern_jax.suite_generation` (which needs the simulator and the expert to validate candidates
-dynamically); this module holds what does not: the :class:`Suite` and :class:`PairSpec` types,
-**static validation** (:func:`static_check`: a candidate whose parameters are out of range or
-infeasible — occluders overlapping the route corridor included —, whose markers are out of
-order or off the route, whose recovery stretch is shorter than 29 m, whose junction has fewer
-than three arms or turns the wrong way, whose Route A and Route B disagree on anything they must
-share, whose hazard the front camera can see at the warning point (the premise,
+:mod:`lantern_jax.apps.suite_generation` (which needs the simulator and the expert to validate
+candidates dynamically); this module holds what does not: the :class:`Suite` and
+:class:`PairSpec` types, **static validation** (:func:`static_check`: a candidate whose parameters
+are out of range or infeasible — occluders overlapping the route corridor included —, whose markers
+are out of order or off the route, whose recovery stretch is shorter than 29 m, whose junction has
+fewer than three arms or turns the wrong way, whose Route A and Route B disagree on anything they
+must share, whose hazard the front camera can see at the warning point (the premise,
 :mod:`lantern_jax.scenarios.premise`), or whose content hash repeats, is rejected), manifest
 writing and loading.  Near duplicates within a family (:mod:`lantern_jax.scenarios.duplicates`)
 are rejected by generation, which knows the pairs already selected.
@@ -33,15 +33,15 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from lantern_jax import family_codes
-from lantern_jax.constants import SUITE_ID, WEATHERS
-from lantern_jax.files import atomic_write
+from lantern_jax.core import family_codes
+from lantern_jax.core.constants import SUITE_ID, WEATHERS
+from lantern_jax.io.files import atomic_write
 from lantern_jax.scenarios.adversary import uniform_tracks
 from lantern_jax.scenarios.assemble import host_arrays
 from lantern_jax.scenarios.families import build_pair, param_errors, validate_params
 from lantern_jax.scenarios.premise import premise_error
 from lantern_jax.scenarios.spec import MIN_RECOVERY_M, SEED_MAX, content_hash
-from lantern_jax.world import Scenario
+from lantern_jax.types.world import Scenario
 
 TURN_FAMILIES = {"LWW": 1.0, "RWW": -1.0, "RTY": -1.0}  # sign of the heading change
 
@@ -195,7 +195,7 @@ def static_check(params: dict, seen_hashes: set[str]) -> tuple[Scenario, Scenari
 
 
 def write_manifest(manifest: dict, path: str | Path) -> None:
-    """Write a manifest atomically (:func:`lantern_jax.files.atomic_write`).
+    """Write a manifest atomically (:func:`lantern_jax.io.files.atomic_write`).
 
     Raises:
         IsADirectoryError: when ``path`` is a folder (nothing is written).

@@ -14,8 +14,9 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
-from lantern_jax import family_codes, language
-from lantern_jax.constants import FAMILIES
+from lantern_jax.core import family_codes
+from lantern_jax.core.constants import FAMILIES
+from lantern_jax.types import language
 
 TOKEN = language.PLACEHOLDER  # "<FRONT_CAR_POS>"
 TEXT_KINDS = ("canonical", "paraphrase", "non_actionable", "empty")
@@ -264,7 +265,7 @@ class TextBank:
         Args:
             family: family index or code (``NO_FAMILY`` allowed for non-actionable texts).
             kind: ``"paraphrase"`` or ``"non_actionable"``.
-            text: the template (spacing rule: :func:`lantern_jax.language.check_template`).
+            text: the template (spacing rule: :func:`lantern_jax.types.language.check_template`).
             tier: the ambiguity tier of a paraphrase.
 
         Raises:

@@ -41,7 +41,7 @@ string a language model reads.
 Inside the simulator a warning is ``(active, text_id, grounded position)``; a policy never sees
 those three.  It reads only the delivered text as tokens: :func:`warning_language` looks the
 text's token ids up in :func:`text_tables` (built once, outside ``jit``) and writes the grounded
-position into the value channel at the text's two number tokens (:mod:`lantern_jax.language`,
+position into the value channel at the text's two number tokens (:mod:`lantern_jax.types.language`,
 "Numbers").  No warning, or a text the bank does not hold, reads as all padding.  Strings are
 produced outside ``jit`` by :func:`render_warning`.  A bank with more texts
 (:meth:`TextBank.with_text`) is a different value: a rollout given it in its settings
@@ -63,15 +63,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from lantern_jax import family_codes, language
-from lantern_jax.constants import (
+from lantern_jax.core import family_codes
+from lantern_jax.core.constants import (
     FAMILIES,
     OVERRIDE_ANCHOR_START,
     OVERRIDE_ANCHOR_WARN_POINT,
     OVERRIDE_FRAME_EGO,
     OVERRIDE_FRAME_WORLD,
 )
-from lantern_jax.geometry import world_to_ego
+from lantern_jax.core.times import NEVER
+from lantern_jax.maths.geometry import world_to_ego
 from lantern_jax.scenarios.family_registry import FAMILY_REGISTRY, Texts
 from lantern_jax.scenarios.warning_texts import (
     DEFAULT_BANK,
@@ -90,8 +91,8 @@ from lantern_jax.scenarios.warning_texts import NO_FAMILY as NO_FAMILY
 from lantern_jax.scenarios.warning_texts import NON_ACTIONABLE as NON_ACTIONABLE
 from lantern_jax.scenarios.warning_texts import PARAPHRASES as PARAPHRASES
 from lantern_jax.scenarios.warning_texts import TEXT_KINDS as TEXT_KINDS
-from lantern_jax.times import NEVER
-from lantern_jax.world import Scenario
+from lantern_jax.types import language
+from lantern_jax.types.world import Scenario
 
 Array = jax.Array
 
@@ -274,7 +275,7 @@ def paraphrase_text_ids(config) -> np.ndarray:
     (40 / 40 / 40 on the 120-pair suite) whatever the batch order.  Outside ``jit``.
 
     Args:
-        config: an :class:`~lantern_jax.world.ExecutionConfig` with a leading batch axis (the
+        config: an :class:`~lantern_jax.types.world.ExecutionConfig` with a leading batch axis (the
             Route A executions of a suite, one per pair).
     """
     return held_out_text_ids(*_pair_keys(config))
@@ -290,7 +291,7 @@ def paraphrase_tiers(config) -> np.ndarray:
 # rendering, grounding and the token tables
 # ---------------------------------------------------------------------------------------------
 def format_position(pos_ego_xy) -> str:
-    """``"(x, y)"`` as a warning writes it (:func:`lantern_jax.language.format_number`: one
+    """``"(x, y)"`` as a warning writes it (:func:`lantern_jax.types.language.format_number`: one
     decimal, from the float32 value the simulator holds; ``-0.0`` printed as ``0.0``)."""
     p = np.asarray(pos_ego_xy, np.float64).reshape(-1)
     if p.shape != (2,) or not np.all(np.isfinite(p)):
@@ -339,7 +340,7 @@ class TextTables:
 
     Attributes:
         tokens: (num_texts, MAX_TOKENS) int32, padded token ids of every text, a written
-            position as two number tokens (:func:`lantern_jax.language.tokenize`).
+            position as two number tokens (:func:`lantern_jax.types.language.tokenize`).
         x_slot: (num_texts,) int32, index of the number token that writes the position's x
             (-1: the text states no position).
         y_slot: (num_texts,) int32, likewise for y.
@@ -360,7 +361,7 @@ def text_tables(bank: TextBank | None = None) -> TextTables:
     bank (outside ``jit``; the arrays are read-only).
 
     Raises:
-        lantern_jax.language.LanguageAssetError: when the tokenizer file is missing.
+        lantern_jax.types.language.LanguageAssetError: when the tokenizer file is missing.
         ValueError: naming a text longer than ``MAX_TOKENS`` tokens.
     """
     return _text_tables(_bank(bank))
@@ -457,7 +458,7 @@ def set_override(
     not the protocol's times or the scoring.  A text that states no position delivers none.
 
     Args:
-        scenario: one :class:`~lantern_jax.world.Scenario` or a batch (leading axis).
+        scenario: one :class:`~lantern_jax.types.world.Scenario` or a batch (leading axis).
         text_id: id in the bank (:data:`DEFAULT_BANK` unless ``bank``).
         position: (2,) m: ego frame ``(forward, right)`` for ``frame="ego"`` (fixed relative to
             the ego, as in the paper's distance diagnostic), world ``(x, y)`` for

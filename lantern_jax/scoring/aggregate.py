@@ -7,7 +7,7 @@ Input: a route-level DataFrame (one row per (model, condition, pair); see
 
 * Family score: mean CUS over the pairs of the family.
 * Overall: equal-weight macro-average of the family scores, in ``constants.FAMILIES`` order
-  (then any registered family the rows hold, :func:`lantern_jax.family_codes.table_codes`); a
+  (then any registered family the rows hold, :func:`lantern_jax.core.family_codes.table_codes`); a
   family with no rows in a group is ``NaN`` and is left out of that group's macro-average.
 * Decomposition: pooled over all pairs of the group.  ``A-Prog.``, ``TTC``, ``Clear.``, ``Ant.``,
   ``Rec.``, ``B-Prog.`` are means x 100 of ``A_progress``, ``S_ttc``, ``S_clear``, ``S_ant``,
@@ -29,8 +29,8 @@ from collections.abc import Sequence
 import numpy as np
 import pandas as pd
 
-from lantern_jax import family_codes
-from lantern_jax.constants import CONDITIONS, GATE_COLUMN_NAMES
+from lantern_jax.core import family_codes
+from lantern_jax.core.constants import CONDITIONS, GATE_COLUMN_NAMES
 
 GROUP_COLUMNS = ("model", "condition")
 #: The family tables' column of the macro average over families.
@@ -47,7 +47,7 @@ COMPONENT_COLUMNS = {
     "B-Prog.": "B_progress",
 }
 #: Gate failure columns (% of pairs failing it) -> the route table's gate column, in
-#: :data:`~lantern_jax.constants.GATE_NAMES` order.
+#: :data:`~lantern_jax.core.constants.GATE_NAMES` order.
 FAILURE_COLUMNS = dict(
     zip(("Coll.-A", "RD-A", "LC-A", "Rule-A", "Block-A", "False Brake-B"), GATE_COLUMN_NAMES,
         strict=True)
@@ -103,7 +103,7 @@ def family_scores(df: pd.DataFrame, by: Sequence[str] = GROUP_COLUMNS) -> pd.Dat
     """Per-family mean CUS and the macro-averaged Overall score.
 
     Args:
-        df: route-level rows with ``family`` (a known code, :mod:`lantern_jax.family_codes`)
+        df: route-level rows with ``family`` (a known code, :mod:`lantern_jax.core.family_codes`)
             and ``CUS``.
         by: grouping columns.
 
@@ -182,7 +182,7 @@ def family_table(route_table: pd.DataFrame) -> pd.DataFrame:
     """Per-family CUS rows for every (model, condition) plus each model's paired warning gain.
 
     Columns: ``model, condition, PE, VC, OR, LWW, RWW, RTY``, the registered families the
-    rows hold (:func:`lantern_jax.family_codes.table_codes`), ``Overall``.
+    rows hold (:func:`lantern_jax.core.family_codes.table_codes`), ``Overall``.
     """
     fam = family_scores(route_table).reset_index()
     out = []

@@ -31,7 +31,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
-from lantern_jax.constants import FAMILIES, GATE_NAMES, ROUTE_A_GATE_NAMES
+from lantern_jax.core.constants import FAMILIES, GATE_NAMES, ROUTE_A_GATE_NAMES
 from lantern_jax.scoring import thresholds
 from lantern_jax.scoring.components import (
     ROUTE_A_GATES,

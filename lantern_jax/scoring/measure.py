@@ -29,12 +29,12 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from lantern_jax import geometry, polyline
-from lantern_jax.constants import EGO_HALF_LENGTH, EGO_HALF_WIDTH, LIGHT_RED
+from lantern_jax.core.constants import EGO_HALF_LENGTH, EGO_HALF_WIDTH, LIGHT_RED
+from lantern_jax.maths import geometry, polyline
 from lantern_jax.scoring.components.false_brake import matched_window
 from lantern_jax.scoring.sample import TickSample
 from lantern_jax.scoring.thresholds import ScoringSettings
-from lantern_jax.world import ActorState, EgoState, Lanes, ProtocolState, Scenario
+from lantern_jax.types.world import ActorState, EgoState, Lanes, ProtocolState, Scenario
 
 Array = jax.Array
 

@@ -35,6 +35,7 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
+from lantern_jax.core.times import happened, time_or_nan
 from lantern_jax.scoring import user_metrics
 from lantern_jax.scoring.components import (
     HAZARD_COMPONENTS,
@@ -54,7 +55,6 @@ from lantern_jax.scoring.components import (
 )
 from lantern_jax.scoring.telemetry import Telemetry
 from lantern_jax.scoring.thresholds import DEFAULT_SCORING, ScoringSettings
-from lantern_jax.times import happened, time_or_nan
 
 Array = jax.Array
 

@@ -6,7 +6,7 @@ condition and of the warning gain, with its bootstrap interval and a paired boot
 (:mod:`lantern_jax.scoring.uncertainty`: both sides resampled with the same draws, so a pair's
 own difficulty cancels).  :func:`check_shared_pairs` refuses two sides that do not hold the same
 pairs.  The command line's ``compare`` and the HTML report
-(:mod:`lantern_jax.report.page`) both use it; :mod:`lantern_jax.compare` formats it.
+(:mod:`lantern_jax.report.page`) both use it; :mod:`lantern_jax.report.compare` formats it.
 """
 
 from __future__ import annotations

@@ -30,11 +30,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from lantern_jax.constants import DT
+from lantern_jax.core.constants import DT
 from lantern_jax.dynamics.bicycle import brake_limit
 from lantern_jax.dynamics.controller import track_waypoints
 from lantern_jax.scoring.thresholds import RESPONSE_BRAKE, RESPONSE_STEPS
-from lantern_jax.world import EgoState
+from lantern_jax.types.world import EgoState
 
 Array = jax.Array
 

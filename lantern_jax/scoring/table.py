@@ -19,21 +19,21 @@ import jax
 import numpy as np
 import pandas as pd
 
-from lantern_jax import family_codes
-from lantern_jax.constants import (
+from lantern_jax.core import family_codes
+from lantern_jax.core.constants import (
     FAMILIES,
     GATE_COLUMN_NAMES,
     GATE_COLUMNS,
     GATE_NAMES,
     WARNING_CONDITION,
 )
-from lantern_jax.files import atomic_write
+from lantern_jax.io.files import atomic_write
 from lantern_jax.scoring import thresholds
 from lantern_jax.scoring.cus import compiled_pair_components
 from lantern_jax.scoring.metrics import ExecutionMetrics
 from lantern_jax.scoring.thresholds import DEFAULT_SCORING, ScoringSettings
 from lantern_jax.scoring.user_metrics import Metric
-from lantern_jax.world import pad_rows
+from lantern_jax.types.world import pad_rows
 
 #: The columns that identify a row (each combination exactly once).
 KEY_COLUMNS = ("model", "condition", "pair_id")

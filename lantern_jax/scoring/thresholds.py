@@ -19,9 +19,9 @@ import math
 import jax
 from flax import struct
 
-from lantern_jax.constants import DT, FAMILIES
+from lantern_jax.core.constants import DT, FAMILIES
+from lantern_jax.core.times import ticks
 from lantern_jax.scoring.user_metrics import Metric, metric_problem
-from lantern_jax.times import ticks
 
 Array = jax.Array
 

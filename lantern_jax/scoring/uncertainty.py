@@ -34,10 +34,10 @@ from collections.abc import Sequence
 import numpy as np
 import pandas as pd
 
-from lantern_jax import family_codes
-from lantern_jax.constants import FAMILIES
-from lantern_jax.constants import NO_WARNING_CONDITION as NO_WARNING
-from lantern_jax.constants import WARNING_CONDITION as WARNING
+from lantern_jax.core import family_codes
+from lantern_jax.core.constants import FAMILIES
+from lantern_jax.core.constants import NO_WARNING_CONDITION as NO_WARNING
+from lantern_jax.core.constants import WARNING_CONDITION as WARNING
 from lantern_jax.scoring.aggregate import (
     DECOMPOSITION_COLUMNS,
     GAIN,
@@ -94,7 +94,7 @@ class Resampling:
     @property
     def table_families(self) -> list[str]:
         """The family columns of the tables: the six, then the registered families drawn
-        (:func:`lantern_jax.family_codes.table_codes`)."""
+        (:func:`lantern_jax.core.family_codes.table_codes`)."""
         return family_codes.table_codes(self.families)
 
     @property

@@ -14,10 +14,10 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from lantern_jax.constants import NUM_ACTOR_KINDS, RAY_CLASS_NONE
-from lantern_jax.observation import NUM_RANGE_RAYS
+from lantern_jax.core.constants import NUM_ACTOR_KINDS, RAY_CLASS_NONE
 from lantern_jax.sensors.visibility import camera_pose, range_image, visible_actors
-from lantern_jax.world import ActorState, EgoState, Scenario, present
+from lantern_jax.types.observation import NUM_RANGE_RAYS
+from lantern_jax.types.world import ActorState, EgoState, Scenario, present
 
 Array = jax.Array
 

@@ -33,8 +33,9 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any
 
-from lantern_jax.named_registry import NamedRegistry
-from lantern_jax.observation import (
+from lantern_jax.core.named_registry import NamedRegistry
+from lantern_jax.sensors import views
+from lantern_jax.types.observation import (
     FRONT_CAMERA,
     PRIVILEGED,
     SURROUND_RIG,
@@ -43,8 +44,7 @@ from lantern_jax.observation import (
     PrivilegedView,
     SurroundView,
 )
-from lantern_jax.sensors import views
-from lantern_jax.world import Scenario
+from lantern_jax.types.world import Scenario
 
 #: ``add(obs, scenario, state, bank) -> obs``: the observation of one execution with the
 #: sensor's reading joined (``state``: the simulator's state at the start of the tick; ``bank``:
@@ -152,7 +152,7 @@ def declared(sensors: Iterable[str]) -> tuple[Sensor, ...]:
 
 def normalize_sensors(sensors: Any) -> tuple[str, ...]:
     """The canonical form of a sensor declaration: a sorted tuple of registered sensor names,
-    always including :data:`~lantern_jax.observation.FRONT_CAMERA`.
+    always including :data:`~lantern_jax.types.observation.FRONT_CAMERA`.
 
     Raises:
         ValueError: naming an unknown sensor, or for a bare string (write ``("warning",)``).

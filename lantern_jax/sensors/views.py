@@ -2,7 +2,7 @@
 its delivered text, the ground truth with its forecasts, the six-camera rig, and the actors as
 the declared cameras show them (the zero sentinel elsewhere).
 
-Each function reads the static :class:`~lantern_jax.world.Scenario` and the simulator's state
+Each function reads the static :class:`~lantern_jax.types.world.Scenario` and the simulator's state
 at the start of a tick (:class:`lantern_jax.sim.state.State`; named ``state`` here, since the
 state type is the simulator's, a layer above).  The sensor table
 (:mod:`lantern_jax.sensors.registry`) joins them to the observation;
@@ -19,14 +19,14 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
-from lantern_jax import geometry
-from lantern_jax.constants import OVERRIDE_FRAME_EGO, SURROUND_FOV
+from lantern_jax.core.constants import OVERRIDE_FRAME_EGO, SURROUND_FOV
 from lantern_jax.dynamics.forecast import earliest_event_time, forecast_actors
-from lantern_jax.language import MAX_TOKENS, PAD_ID
-from lantern_jax.observation import FORECAST_DT, FORECAST_STEPS, PrivilegedView, SurroundView
+from lantern_jax.maths import geometry
 from lantern_jax.scenarios import protocol, warnings
 from lantern_jax.sensors.cameras import SURROUND_RAYS, camera_view
-from lantern_jax.world import Scenario, present
+from lantern_jax.types.language import MAX_TOKENS, PAD_ID
+from lantern_jax.types.observation import FORECAST_DT, FORECAST_STEPS, PrivilegedView, SurroundView
+from lantern_jax.types.world import Scenario, present
 
 Array = jax.Array
 State = Any  # the simulator's state (lantern_jax.sim.state.State)

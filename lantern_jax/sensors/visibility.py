@@ -11,7 +11,7 @@ mounting point here).
 An actor is **visible** when at least one of its 9 sample points (box centre, 4 corners,
 4 edge midpoints) is inside the field of view, within ``max_range`` of the camera, and the
 sight line from the camera to the point is not blocked by *another* present actor's box or by
-a valid static occluder (:class:`~lantern_jax.world.Occluders`: buildings, walls, parked
+a valid static occluder (:class:`~lantern_jax.types.world.Occluders`: buildings, walls, parked
 vehicles): a box blocks the point when the sight line enters it more than ``OCCLUSION_EPS``
 before reaching the point.  The target's own box never blocks its own points, non-present
 actors neither block nor are visible, occluders block but are never targets, and the ego's own
@@ -19,9 +19,9 @@ box is not part of either set.  The range image sees both kinds of box.
 
 One scenario per call; batches of scenarios are made with ``jax.vmap`` outside.  Visibility
 tests one target per loop step (its 9 sight lines against all A + K boxes) and the range image
-runs its rays in two loop steps (:func:`~lantern_jax.split_map.split_map`): the loop boundaries
-make XLA compute the actor poses once instead of re-deriving the tick's actor update for every
-(point, box) or (ray, box) element.  ``fov_deg`` and ``num_rays`` are static Python numbers.
+runs its rays in two loop steps (:func:`~lantern_jax.maths.split_map.split_map`): the loop
+boundaries make XLA compute the actor poses once instead of re-deriving the tick's actor update for
+every (point, box) or (ray, box) element.  ``fov_deg`` and ``num_rays`` are static Python numbers.
 Occluders are static, so their trigonometry is loop-invariant inside a rollout's scan (the
 compiler hoists it).
 """
@@ -34,10 +34,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from lantern_jax.constants import BIG, CAMERA_BACK_OFFSET
-from lantern_jax.geometry import rays_boxes_hit, safe_norm, segments_hit_boxes
-from lantern_jax.split_map import split_map
-from lantern_jax.world import Occluders
+from lantern_jax.core.constants import BIG, CAMERA_BACK_OFFSET
+from lantern_jax.maths.geometry import rays_boxes_hit, safe_norm, segments_hit_boxes
+from lantern_jax.maths.split_map import split_map
+from lantern_jax.types.world import Occluders
 
 Array = jax.Array
 

@@ -13,7 +13,7 @@ Compiled programs are cached by what they depend on and nothing else: the policy
 shapes and dtypes, and the static part of the settings (they are an argument: a changed
 threshold runs the same program with another value, a changed tick window or text bank compiles
 another one).  The cache is bounded (:data:`MAX_PROGRAMS`), and kept on disk by the program store
-(:mod:`lantern_jax.program_store`) for a later process.
+(:mod:`lantern_jax.io.program_store`) for a later process.
 """
 
 from __future__ import annotations
@@ -28,8 +28,10 @@ from typing import Any
 import jax
 import numpy as np
 
-from lantern_jax import family_codes, program_store
-from lantern_jax.constants import BLOCKS, CONDITIONS, EXECUTIONS_PER_PAIR, FAMILIES, ROUTE_B
+from lantern_jax.core import family_codes
+from lantern_jax.core.constants import BLOCKS, CONDITIONS, EXECUTIONS_PER_PAIR, FAMILIES, ROUTE_B
+from lantern_jax.core.times import ticks_covering
+from lantern_jax.io import program_store
 from lantern_jax.scenarios.protocol_variants import get_ablation
 from lantern_jax.scenarios.suite import Suite, build_suite_batches, load_suite
 from lantern_jax.scoring.metrics import finalize
@@ -51,8 +53,7 @@ from lantern_jax.sim.split import (  # noqa: F401  (initial_states: re-exported)
 )
 from lantern_jax.sim.step import Driver
 from lantern_jax.sim.switch import PolicySwitch
-from lantern_jax.times import ticks_covering
-from lantern_jax.world import Scenario, pad_rows, trim_padding
+from lantern_jax.types.world import Scenario, pad_rows, trim_padding
 
 #: Slot scheduling of large batches (``compact``): each device steps a fixed number of slots
 #: ``REFILL_TICKS`` ticks at a time, and a slot whose execution has ended takes the next
@@ -71,7 +72,7 @@ COMPACT_MIN_BATCH = 256
 @dataclasses.dataclass
 class Executions:
     """The batched executions of a suite: ``[A warning | A no-warning | B]`` x pairs (the
-    blocks :data:`~lantern_jax.constants.BLOCKS`, each ``num_pairs`` long, in pair order).
+    blocks :data:`~lantern_jax.core.constants.BLOCKS`, each ``num_pairs`` long, in pair order).
     :meth:`block` and :meth:`take` read a block; nothing else needs the layout."""
 
     scenarios: Scenario  # leaves with leading axis EXECUTIONS_PER_PAIR * num_pairs
@@ -90,7 +91,7 @@ class Executions:
 
     def block(self, name: str) -> slice:
         """Positions of block ``name`` (``"warning"``, ``"no-warning"`` or ``"route-b"``,
-        :data:`~lantern_jax.constants.BLOCKS`) on the batch's leading axis.
+        :data:`~lantern_jax.core.constants.BLOCKS`) on the batch's leading axis.
 
         Raises:
             ValueError: for a name not in ``BLOCKS``.
@@ -144,7 +145,7 @@ def build_new_executions(
     """Build the batched scenarios of every execution of a suite under an ablation.
 
     With ``trim`` (default) the actor and lane slots past the last one any execution uses are
-    cut (:func:`~lantern_jax.world.trim_padding`: narrower per-tick work, same results to the
+    cut (:func:`~lantern_jax.types.world.trim_padding`: narrower per-tick work, same results to the
     reproducibility promise); ``trim=False`` keeps the full slot capacity, one batch shape for
     every suite of the same size.  With ``bucket`` a batch that fits in the built-in suite's
     shape takes it (:func:`batch_bucket`): slots are kept to its widths and
@@ -316,7 +317,7 @@ def split_possible(policy: Driver) -> str:
 def fused_kept(policy: Driver) -> bool:
     """Whether a fused program of ``policy`` can be kept between runs: its code is this
     package's (or of a library whose version keys the store), so the program store can describe
-    it with certainty (:func:`lantern_jax.program_store.describable`).  A policy defined outside
+    it with certainty (:func:`lantern_jax.io.program_store.describable`).  A policy defined outside
     (a file being written, a notebook cell) cannot."""
     return program_store.describable(("rollout", program_identity(policy)))
 

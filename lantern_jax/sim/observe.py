@@ -1,7 +1,7 @@
-"""The policy observation (:class:`~lantern_jax.observation.Observation`) of one scenario,
+"""The policy observation (:class:`~lantern_jax.types.observation.Observation`) of one scenario,
 built from the sensors the policy declares and from nothing else.
 
-Built from the static :class:`~lantern_jax.world.Scenario` and the dynamic
+Built from the static :class:`~lantern_jax.types.world.Scenario` and the dynamic
 :class:`~lantern_jax.sim.state.State` at the start of a tick.  The front camera's observation
 comes first (every policy's): the route ahead in the ego frame, the ego's state, light and stop
 line, the actors the camera sees now (every other slot holds the zero sentinel) and its range
@@ -24,17 +24,9 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 
-from lantern_jax import geometry, polyline
-from lantern_jax.constants import BIG
+from lantern_jax.core.constants import BIG
 from lantern_jax.dynamics.lights import ego_light_state
-from lantern_jax.observation import (
-    FRONT_CAMERA,
-    NUM_ROUTE_POINTS,
-    ROUTE_STEP,
-    WARNING,
-    Observation,
-    PrivilegedView,
-)
+from lantern_jax.maths import geometry, polyline
 from lantern_jax.scenarios import warnings
 from lantern_jax.sensors.registry import SENSOR_REGISTRY
 
@@ -50,7 +42,15 @@ from lantern_jax.sensors.views import privileged_view as privileged_view
 from lantern_jax.sensors.views import surround_view as surround_view
 from lantern_jax.sensors.views import warning_fields as warning_fields
 from lantern_jax.sim.state import State
-from lantern_jax.world import Scenario
+from lantern_jax.types.observation import (
+    FRONT_CAMERA,
+    NUM_ROUTE_POINTS,
+    ROUTE_STEP,
+    WARNING,
+    Observation,
+    PrivilegedView,
+)
+from lantern_jax.types.world import Scenario
 
 Array = jax.Array
 
@@ -170,7 +170,7 @@ def observe_every_sensor(
 
     Returns:
         (the observation with ``privileged=None``, ``privileged_as`` of the
-        :class:`~lantern_jax.observation.PrivilegedView` or zeros of its shapes).
+        :class:`~lantern_jax.types.observation.PrivilegedView` or zeros of its shapes).
     """
     obs = observe(scenario, state, (FRONT_CAMERA, WARNING), bank)
     truth = actors_in_ego_frame(scenario, state)

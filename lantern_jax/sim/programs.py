@@ -2,7 +2,7 @@
 
 * :func:`executable` — AOT-compile a jitted function for its arguments once (keyed by the
   function, its static arguments and the arguments' structure, shapes and dtypes); with an
-  identity, the program is also kept on disk by :mod:`lantern_jax.program_store` and loaded
+  identity, the program is also kept on disk by :mod:`lantern_jax.io.program_store` and loaded
   from there by a later process;
 * :func:`remember` — build a value (a jitted function, usually) once per key;
 * :func:`abstract` — ``jax.eval_shape`` of a package function once per argument structure,
@@ -22,7 +22,7 @@ from typing import Any
 import jax
 import numpy as np
 
-from lantern_jax import program_store
+from lantern_jax.io import program_store
 
 MAX_PROGRAMS = 32  # compiled programs kept in this process (least recently used dropped)
 
@@ -61,7 +61,7 @@ def executable(fn, *args, static: dict | None = None, timings: dict | None = Non
     the function, its static arguments and the arguments' structure, shapes and dtypes).
 
     With an ``identity`` (what determines the program besides the package's code and the
-    arguments, :func:`lantern_jax.program_store.program_key`) the compiled program is also kept
+    arguments, :func:`lantern_jax.io.program_store.program_key`) the compiled program is also kept
     on disk in the program store and, in a later process, loaded from there.
 
     ``timings`` (optional) receives the seconds of tracing and lowering (``"trace + lower"``),
@@ -105,11 +105,11 @@ def executable(fn, *args, static: dict | None = None, timings: dict | None = Non
 
 def abstract(name: str, fn: Callable, *args: Any, parts: tuple[str, ...] = ()) -> Any:
     """``jax.eval_shape(fn, *args)``, computed once per argument structure: in this process
-    (:func:`remember`), and through the program store (:func:`lantern_jax.program_store.kept`)
+    (:func:`remember`), and through the program store (:func:`lantern_jax.io.program_store.kept`)
     in later ones.
 
     Only for a function of this package's code (the store's key covers the code through
-    :func:`lantern_jax.program_store.environment`, not the function object): ``name`` names
+    :func:`lantern_jax.io.program_store.environment`, not the function object): ``name`` names
     it, ``parts`` whatever else it depends on besides the arguments' structure, leaf shapes
     and dtypes (a policy's sensors, say).
     """

@@ -7,7 +7,7 @@ import jax.numpy as jnp
 from flax import struct
 
 from lantern_jax.sim.state import State
-from lantern_jax.world import Scenario, present
+from lantern_jax.types.world import Scenario, present
 
 Array = jax.Array
 

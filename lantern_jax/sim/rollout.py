@@ -1,7 +1,7 @@
 """Closed-loop rollouts: one execution with ``lax.scan``, a batch with ``vmap`` outside.
 
 The scan carries only the dynamic :class:`~lantern_jax.sim.state.State`; the static
-:class:`~lantern_jax.world.Scenario` is closed over (one execution) or vmapped alongside.
+:class:`~lantern_jax.types.world.Scenario` is closed over (one execution) or vmapped alongside.
 
 Two drivers:
 
@@ -28,13 +28,13 @@ import jax
 import jax.numpy as jnp
 from jax.sharding import PartitionSpec
 
+from lantern_jax.core.times import ticks
 from lantern_jax.sim.distributed import batch_mesh
 from lantern_jax.sim.record import TickRecord
 from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings
 from lantern_jax.sim.state import State, init_state
 from lantern_jax.sim.step import Driver, step
-from lantern_jax.times import ticks
-from lantern_jax.world import Scenario
+from lantern_jax.types.world import Scenario
 
 Array = jax.Array
 
@@ -56,7 +56,7 @@ def with_carry(states: State, policy: Driver, policy_params: Any) -> State:
     )
 
 
-#: Number of 20 Hz ticks of a horizon of ``seconds`` (:func:`lantern_jax.times.ticks`; the
+#: Number of 20 Hz ticks of a horizon of ``seconds`` (:func:`lantern_jax.core.times.ticks`; the
 #: name kept for the public API).
 horizon_ticks = ticks
 

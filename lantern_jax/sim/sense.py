@@ -14,9 +14,8 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from lantern_jax import polyline
-from lantern_jax.constants import FRONT_CAMERA_FOV
-from lantern_jax.observation import NUM_RANGE_RAYS
+from lantern_jax.core.constants import FRONT_CAMERA_FOV
+from lantern_jax.maths import polyline
 
 # the camera rigs' code lives in lantern_jax.sensors.cameras; these names are kept here too
 from lantern_jax.sensors.cameras import FRONT_RAYS as FRONT_RAYS
@@ -26,7 +25,8 @@ from lantern_jax.sensors.cameras import CameraView as CameraView
 from lantern_jax.sensors.cameras import camera_view as camera_view
 from lantern_jax.sensors.cameras import ray_classes
 from lantern_jax.sensors.visibility import camera_pose, range_image, visible_actors
-from lantern_jax.world import ActorState, EgoState, Route, Scenario, present
+from lantern_jax.types.observation import NUM_RANGE_RAYS
+from lantern_jax.types.world import ActorState, EgoState, Route, Scenario, present
 
 Array = jax.Array
 

@@ -46,9 +46,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from lantern_jax import program_store
-from lantern_jax.constants import NUM_WAYPOINTS
-from lantern_jax.observation import WARNING
+from lantern_jax.core.constants import NUM_WAYPOINTS
+from lantern_jax.io import program_store
 from lantern_jax.policies.base import Policy
 from lantern_jax.sim.observe import no_warning_fields, observe_every_sensor
 from lantern_jax.sim.packing import Layout
@@ -56,7 +55,8 @@ from lantern_jax.sim.programs import executable
 from lantern_jax.sim.settings import Settings
 from lantern_jax.sim.state import State, init_state
 from lantern_jax.sim.step import transition
-from lantern_jax.world import Scenario
+from lantern_jax.types.observation import WARNING
+from lantern_jax.types.world import Scenario
 
 Array = jax.Array
 
@@ -123,7 +123,7 @@ def _stored_signature(one: Scenario, settings: Settings, slots: int) -> WorldSig
     """The signature kept in the program store by an earlier process (its abstract trace costs
     about 0.8 s on a 2-core CPU, a sixth of a new policy's first table), else computed and
     kept.  Its key names everything it depends on: the package's code and environment
-    (:func:`lantern_jax.program_store.value_key`), the scenario's and settings' structures and
+    (:func:`lantern_jax.io.program_store.value_key`), the scenario's and settings' structures and
     leaf shapes, and the slot count; a stored one is also checked against the layouts computed
     here from ``one`` and ``settings``."""
     leaves, treedef = jax.tree.flatten(one)

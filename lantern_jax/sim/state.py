@@ -1,7 +1,7 @@
 """The dynamic state of one execution — the scan carry — and how it starts.
 
-A rollout is ``State -> State`` under a fixed :class:`~lantern_jax.world.Scenario` (closed over,
-never carried).  :func:`init_state` derives the first state from the scenario's initial
+A rollout is ``State -> State`` under a fixed :class:`~lantern_jax.types.world.Scenario` (closed
+over, never carried).  :func:`init_state` derives the first state from the scenario's initial
 conditions; :func:`freeze` keeps an execution that has ended exactly as it was.
 """
 
@@ -16,7 +16,7 @@ from flax import struct
 from lantern_jax.scoring.telemetry import Telemetry, init_telemetry
 from lantern_jax.scoring.thresholds import DEFAULT_SCORING, ScoringSettings
 from lantern_jax.sim.sense import Percept, locate_on_route, sense
-from lantern_jax.world import ActorState, EgoState, ProtocolState, Scenario, present
+from lantern_jax.types.world import ActorState, EgoState, ProtocolState, Scenario, present
 
 Array = jax.Array
 

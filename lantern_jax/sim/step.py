@@ -23,7 +23,7 @@ A tick (time ``t`` -> ``t + DT``) is two functions composed by :func:`step`:
      telemetry (:mod:`lantern_jax.scoring.measure`), and whether the execution has ended.
 
 An execution that has ended is frozen: its state (the policy's carry included) no longer
-changes.  The brax environment (:mod:`lantern_jax.envs.env`) drives :func:`transition`
+changes.  The brax environment (:mod:`lantern_jax.apps.envs.env`) drives :func:`transition`
 directly with its own actions.
 """
 
@@ -35,11 +35,10 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from lantern_jax.constants import DT
+from lantern_jax.core.constants import DT
 from lantern_jax.dynamics.actors import step_actors
 from lantern_jax.dynamics.controller import follow_plan
 from lantern_jax.dynamics.lights import ego_light_state, light_states
-from lantern_jax.observation import corridor_gaps
 from lantern_jax.policies.base import Policy
 from lantern_jax.scenarios import protocol
 from lantern_jax.scoring.measure import TickEnd, execution_ended, justified_stop, measure
@@ -50,7 +49,8 @@ from lantern_jax.sim.sense import locate_on_route, sense
 from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings
 from lantern_jax.sim.state import State, freeze
 from lantern_jax.sim.switch import PolicySwitch
-from lantern_jax.world import ActorState, EgoState, ProtocolState, Scenario, present
+from lantern_jax.types.observation import corridor_gaps
+from lantern_jax.types.world import ActorState, EgoState, ProtocolState, Scenario, present
 
 Array = jax.Array
 Driver = Policy | PolicySwitch
@@ -89,7 +89,7 @@ def policy_waypoints(
     waypoints = jnp.asarray(waypoints, jnp.float32)
     if privileged:
         # Shields the expert's plan from the algebraic simplifier; on CPU the barrier is
-        # expanded before fusion (see lantern_jax.split_map).
+        # expanded before fusion (see lantern_jax.maths.split_map).
         waypoints = jax.lax.optimization_barrier(waypoints)
     return waypoints, carry
 

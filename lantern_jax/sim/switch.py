@@ -37,15 +37,15 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
-from lantern_jax.language import PAD_ID
-from lantern_jax.observation import FRONT_CAMERA, WARNING
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.registry import REFERENCE_POLICIES, get_policy
 from lantern_jax.scenarios.warnings import DEFAULT_BANK, TextBank
 from lantern_jax.sensors.registry import declared
 from lantern_jax.sim.observe import observe
 from lantern_jax.sim.state import State
-from lantern_jax.world import Scenario
+from lantern_jax.types.language import PAD_ID
+from lantern_jax.types.observation import FRONT_CAMERA, WARNING
+from lantern_jax.types.world import Scenario
 
 Array = jax.Array
 

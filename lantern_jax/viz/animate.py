@@ -10,7 +10,7 @@ from typing import Any
 
 from matplotlib import animation
 
-from lantern_jax.files import file_mode
+from lantern_jax.io.files import file_mode
 from lantern_jax.viz.common import collision_index, num_valid_ticks, to_numpy
 from lantern_jax.viz.plots import bev_figure, bev_plot
 
@@ -35,7 +35,7 @@ def save_animation(
     minus the umask, e.g. 0o644).
 
     Args:
-        scenario: the :class:`~lantern_jax.world.Scenario` of the execution.
+        scenario: the :class:`~lantern_jax.types.world.Scenario` of the execution.
         record: its ``TickRecord`` with a leading time axis.
         path: destination; ``.mp4`` is written with ffmpeg when available, otherwise (with a
             warning) a GIF is written next to it with the suffix ``.gif``; every other suffix

@@ -10,9 +10,9 @@ import jax
 import numpy as np
 from matplotlib.figure import Figure
 
-from lantern_jax import times
-from lantern_jax.constants import DT
-from lantern_jax.files import file_mode, temporary_beside
+from lantern_jax.core import times
+from lantern_jax.core.constants import DT
+from lantern_jax.io.files import file_mode, temporary_beside
 
 COLLISION_COLOR = "#e00000"  # collision markers (bird's-eye view and timeline)
 
@@ -21,7 +21,7 @@ def to_numpy(tree: Any) -> Any:
     """Convert every leaf of a pytree (JAX or NumPy arrays, scalars) to a NumPy array.
 
     Args:
-        tree: any pytree, e.g. a :class:`~lantern_jax.world.Scenario` or a ``TickRecord``.
+        tree: any pytree, e.g. a :class:`~lantern_jax.types.world.Scenario` or a ``TickRecord``.
 
     Returns:
         The same structure with ``np.ndarray`` leaves.
@@ -44,7 +44,8 @@ def num_valid_ticks(record: Any) -> int:
 
 
 def happened(t: Any) -> bool:
-    """Host-side :func:`lantern_jax.times.happened` of one concrete time (NaN: not happened)."""
+    """Host-side :func:`lantern_jax.core.times.happened` of one concrete time (NaN: not
+    happened)."""
     return bool(np.isfinite(float(t)) and times.happened(float(t)))
 
 

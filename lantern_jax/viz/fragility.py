@@ -32,7 +32,7 @@ def outcome(row: pd.Series) -> str:
 
 
 def fragility_figure(table: pd.DataFrame, title: str = "") -> Figure:
-    """Two panels from :attr:`lantern_jax.stress.fragility.Fragility.table`.
+    """Two panels from :attr:`lantern_jax.apps.stress.fragility.Fragility.table`.
 
     Left: each pair's radius (normalised knob units, log scale), by family, coloured by what the
     hard probes found (:data:`OUTCOME_STYLE`). Right: the radius against the distance of the

@@ -22,8 +22,9 @@ import jax
 import numpy as np
 from matplotlib.figure import Figure
 
-from lantern_jax import geometry
-from lantern_jax.constants import (
+from lantern_jax.apps.diagnostics import run_recorded
+from lantern_jax.apps.evaluation import EvalResult, settings_record
+from lantern_jax.core.constants import (
     CONDITIONS,
     EGO_HALF_LENGTH,
     EGO_HALF_WIDTH,
@@ -31,8 +32,7 @@ from lantern_jax.constants import (
     ROUTE_A_GATE_NAMES,
     WARNING_CONDITION,
 )
-from lantern_jax.diagnostics import run_recorded
-from lantern_jax.evaluation import EvalResult, settings_record
+from lantern_jax.maths import geometry
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.families import build_pair
@@ -62,7 +62,7 @@ __all__ = [
     "telling_tick",
 ]
 
-#: The third execution of a pair (the two Route A ones are :data:`~lantern_jax.constants.
+#: The third execution of a pair (the two Route A ones are :data:`~lantern_jax.core.constants.
 #: CONDITIONS`).
 ROUTE_B = "route-b"
 EXECUTIONS = (*CONDITIONS, ROUTE_B)
@@ -92,9 +92,9 @@ class RecordedExecution:
 
     Attributes:
         condition: ``"warning"``, ``"no-warning"`` (Route A) or ``"route-b"``.
-        scenario: its :class:`~lantern_jax.world.Scenario`.
+        scenario: its :class:`~lantern_jax.types.world.Scenario`.
         record: its ``TickRecord``, leading time axis ``N`` (the horizon, in ticks of
-            :data:`~lantern_jax.constants.DT`); entries after the execution ended repeat it.
+            :data:`~lantern_jax.core.constants.DT`); entries after the execution ended repeat it.
         final: its final :class:`~lantern_jax.sim.state.State`.
         metrics: its hard :class:`~lantern_jax.scoring.metrics.ExecutionMetrics`.
     """
@@ -188,7 +188,7 @@ def record_pair(
     The executions are built as an evaluation builds them
     (:func:`~lantern_jax.sim.engine.build_executions`): Route A with ``warning_enabled`` on and
     off (the ablation applied to both), and Route B; they run in one jitted, vmapped call
-    (:func:`~lantern_jax.diagnostics.run_recorded`) for the longest route timeout.
+    (:func:`~lantern_jax.apps.diagnostics.run_recorded`) for the longest route timeout.
 
     Args:
         policy: a registered policy name or a :class:`~lantern_jax.policies.base.Policy`.
@@ -197,8 +197,8 @@ def record_pair(
             default the built-in suite.
         settings: default :func:`~lantern_jax.sim.settings.default_settings`.
         policy_params: the policy's parameters; default its ``init`` with ``PRNGKey(0)`` (as
-            :func:`~lantern_jax.evaluation.evaluate` uses).
-        ablation: one of :func:`~lantern_jax.evaluation.ablation_names`.
+            :func:`~lantern_jax.apps.evaluation.evaluate` uses).
+        ablation: one of :func:`~lantern_jax.apps.evaluation.ablation_names`.
 
     Returns:
         :class:`PairRecording`.
@@ -247,8 +247,8 @@ def hazard_clearance(scenario: Any, record: Any) -> np.ndarray:
     """Ego-hazard box-surface distance at every recorded tick.
 
     Args:
-        scenario: the execution's :class:`~lantern_jax.world.Scenario` (``config.hazard_index``
-            names the hazard's actor slot).
+        scenario: the execution's :class:`~lantern_jax.types.world.Scenario`
+            (``config.hazard_index`` names the hazard's actor slot).
         record: its ``TickRecord`` with a leading time axis ``N``.
 
     Returns:
@@ -306,7 +306,7 @@ def first_failed_gate(execution: RecordedExecution, settings: Settings | None = 
     Route A executions are judged by the Route A gates (collision, route deviation, lane
     keeping, red light, blocked), Route B by the false-brake gate: the gates a pair's score
     reads from each.  Among several failed gates the one with the earliest failure time wins
-    (gates without a failure time come last, in :data:`~lantern_jax.constants.GATE_NAMES`
+    (gates without a failure time come last, in :data:`~lantern_jax.core.constants.GATE_NAMES`
     order).
 
     Args:
@@ -508,7 +508,7 @@ def plot_pair(
     ``gate:route-b``).
 
     Args:
-        result_or_policy: an :class:`~lantern_jax.evaluation.EvalResult` (its manifest gives
+        result_or_policy: an :class:`~lantern_jax.apps.evaluation.EvalResult` (its manifest gives
             the suite (the built-in one when it names no shipped suite), the settings and the
             ablation), a :class:`PairRecording` (drawn as is), or a policy name / object.
         policy: with a result, the policy to show (may be left out when the result holds one);

@@ -5,7 +5,7 @@ This module also re-exports :func:`~lantern_jax.viz.timeline.timeline_plot`,
 :func:`~lantern_jax.viz.common.save_figure`; animations are in :mod:`lantern_jax.viz.animate`.
 
 Everything here runs outside ``jit`` on concrete arrays: JAX inputs are converted to NumPy at
-the start of every public function.  Frames follow :mod:`lantern_jax.constants` (world frame x
+the start of every public function.  Frames follow :mod:`lantern_jax.core.constants` (world frame x
 east / y north, yaw counter-clockwise; ego frame x forward / y right).
 
 Record indexing: ``record`` is the :class:`~lantern_jax.sim.step.TickRecord` returned by
@@ -27,7 +27,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Polygon, Wedge
 
-from lantern_jax.constants import (
+from lantern_jax.core.constants import (
     CAMERA_BACK_OFFSET,
     EGO_HALF_LENGTH,
     EGO_HALF_WIDTH,
@@ -346,7 +346,7 @@ def bev_plot(
     collision's tick on a red X (``gid="collision"``) marks where the ego was when it collided.
 
     Args:
-        scenario: the :class:`~lantern_jax.world.Scenario` of the execution (static data:
+        scenario: the :class:`~lantern_jax.types.world.Scenario` of the execution (static data:
             lanes, occluders, route, lights, extents, roles, markers, text id, initial ego
             pose).
         record: its ``TickRecord`` with a leading time axis (``rollout(..., record=True)``).

@@ -9,9 +9,9 @@ import jax.numpy as jnp
 import matplotlib
 import numpy as np
 
-from lantern_jax.diagnostics import run_recorded
-from lantern_jax.stress.verify import FAIL_BELOW_CUS
-from lantern_jax.times import ticks
+from lantern_jax.apps.diagnostics import run_recorded
+from lantern_jax.apps.stress.verify import FAIL_BELOW_CUS
+from lantern_jax.core.times import ticks
 from lantern_jax.viz.plots import bev_plot
 
 matplotlib.use("Agg")
@@ -29,7 +29,7 @@ def convergence_plot(traces: list[Any], title: str = "") -> Figure:
     """Best (lowest) hard CUS found so far against rollouts and against wall-clock seconds.
 
     Args:
-        traces: :class:`lantern_jax.stress.search.Trace` objects, one per method.
+        traces: :class:`lantern_jax.apps.stress.search.Trace` objects, one per method.
         title: figure title.
 
     Returns:
@@ -69,8 +69,8 @@ def catalogue_figure(problem: Any, entries: list[dict], max_panels: int = MAX_PA
     the path of every tracked actor drawn over the whole execution.
 
     Args:
-        problem: the :class:`lantern_jax.stress.objective.Problem` searched.
-        entries: catalogue entries (:func:`lantern_jax.stress.catalogue.catalogue_entries`).
+        problem: the :class:`lantern_jax.apps.stress.objective.Problem` searched.
+        entries: catalogue entries (:func:`lantern_jax.apps.stress.catalogue.catalogue_entries`).
         max_panels: at most this many panels.
     """
 

@@ -8,7 +8,7 @@ import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
-from lantern_jax.constants import DT
+from lantern_jax.core.constants import DT
 from lantern_jax.viz.common import (
     COLLISION_COLOR,
     collision_index,

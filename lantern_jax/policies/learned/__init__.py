@@ -10,5 +10,5 @@
 * :mod:`~lantern_jax.policies.learned.checkpoint` — trained weights as an ordinary pure
   ``init/act`` policy, saved and loaded with their architecture (a mismatch is refused).
 
-Training lives in :mod:`lantern_jax.training` (it reads the open-loop dataset).
+Training lives in :mod:`lantern_jax.apps.training` (it reads the open-loop dataset).
 """

@@ -33,14 +33,14 @@ import jax.numpy as jnp
 import numpy as np
 from flax import nnx, serialization, struct
 
-from lantern_jax.files import atomic_write
-from lantern_jax.language import load_embedding
-from lantern_jax.observation import FRONT_CAMERA, SURROUND_RIG, WARNING, Observation
+from lantern_jax.io.files import atomic_write
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.learned.features import RIGS, features, nav_token_table
 from lantern_jax.policies.learned.model import DrivingModel, ModelConfig
 from lantern_jax.policies.learned.shipped import SHIPPED_MODELS
 from lantern_jax.policies.names import name_problem
+from lantern_jax.types.language import load_embedding
+from lantern_jax.types.observation import FRONT_CAMERA, SURROUND_RIG, WARNING, Observation
 
 #: Field of a description holding the SHA-256 of the rest of it.
 DESCRIPTION_HASH = "sha256"

@@ -25,10 +25,10 @@ import jax.numpy as jnp
 import numpy as np
 from flax import struct
 
-from lantern_jax.constants import NUM_ACTOR_KINDS
-from lantern_jax.language import pad, pooled_embedding, tokenize
-from lantern_jax.observation import Observation, stated_position, warning_delivered
-from lantern_jax.polyline import safe_atan2
+from lantern_jax.core.constants import NUM_ACTOR_KINDS
+from lantern_jax.maths.polyline import safe_atan2
+from lantern_jax.types.language import pad, pooled_embedding, tokenize
+from lantern_jax.types.observation import Observation, stated_position, warning_delivered
 
 Array = jax.Array
 

@@ -25,7 +25,7 @@ import jax
 import jax.numpy as jnp
 from flax import nnx
 
-from lantern_jax.constants import NUM_WAYPOINTS
+from lantern_jax.core.constants import NUM_WAYPOINTS
 from lantern_jax.policies.learned.features import Features
 
 Array = jax.Array

@@ -39,7 +39,7 @@ efficiency         route completion time and unjustified slow time: a diagnostic
 =================  ======================================================================
 """
 
-from lantern_jax.constants import ROUTE_A_GATE_FIELDS
+from lantern_jax.core.constants import ROUTE_A_GATE_FIELDS
 from lantern_jax.scoring.components import (
     anticipation,
     block,

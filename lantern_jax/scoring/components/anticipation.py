@@ -37,13 +37,13 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
+from lantern_jax.core.times import NEVER, happened, time_or_nan
 from lantern_jax.scoring import thresholds
 from lantern_jax.scoring.components.accumulate import count, expected_time, first_time, push
 from lantern_jax.scoring.components.context import Context, Tick, opened_by, ring_length
 from lantern_jax.scoring.sample import TickSample
 from lantern_jax.scoring.smooth import smooth_clip01
 from lantern_jax.scoring.thresholds import ScoringSettings
-from lantern_jax.times import NEVER, happened, time_or_nan
 
 Array = jax.Array
 

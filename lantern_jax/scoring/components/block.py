@@ -20,7 +20,8 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from lantern_jax.constants import DT
+from lantern_jax.core.constants import DT
+from lantern_jax.core.times import NEVER, happened
 from lantern_jax.scoring import thresholds
 from lantern_jax.scoring.components.accumulate import first_time, run
 from lantern_jax.scoring.components.context import Context, Tick
@@ -28,7 +29,6 @@ from lantern_jax.scoring.components.progress import is_completed
 from lantern_jax.scoring.sample import TickSample
 from lantern_jax.scoring.smooth import soft_gate
 from lantern_jax.scoring.thresholds import ScoringSettings
-from lantern_jax.times import NEVER, happened
 
 Array = jax.Array
 

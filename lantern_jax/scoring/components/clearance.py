@@ -19,7 +19,7 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from lantern_jax.constants import BIG
+from lantern_jax.core.constants import BIG
 from lantern_jax.scoring.components.context import Context, Tick, opened_by
 from lantern_jax.scoring.sample import TickSample
 from lantern_jax.scoring.smooth import LSE_EMPTY, lse_add, smooth_clip01, softmin_decode

@@ -9,7 +9,7 @@ component's ``update`` receives that :class:`Tick` instead of recomputing it.
 Conventions (paper appendix "Complete Cooperative Unified Score"):
 
 * Times are seconds from execution start; a time that has not happened is
-  :data:`lantern_jax.times.NEVER`.  ``sample.t`` is the tick's time stamp and a window "starts"
+  :data:`lantern_jax.core.times.NEVER`.  ``sample.t`` is the tick's time stamp and a window "starts"
   at the time stamp of its first tick.
 * Window membership uses the protocol times of the current sample: ``t_ref <= t`` (post
   reference), ``t_event <= t`` (post event), ``t <= t_clear`` (before clearance).
@@ -25,10 +25,10 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
+from lantern_jax.core.times import NEVER, happened
 from lantern_jax.scoring.components.accumulate import count, push
 from lantern_jax.scoring.sample import TickSample
 from lantern_jax.scoring.thresholds import ScoringSettings
-from lantern_jax.times import NEVER, happened
 
 Array = jax.Array
 

@@ -23,12 +23,12 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from lantern_jax.constants import DT
+from lantern_jax.core.constants import DT
+from lantern_jax.core.times import NEVER, happened
 from lantern_jax.scoring.components.accumulate import count, first_time
 from lantern_jax.scoring.components.context import Tick
 from lantern_jax.scoring.sample import TickSample
 from lantern_jax.scoring.thresholds import ScoringSettings
-from lantern_jax.times import NEVER, happened
 
 Array = jax.Array
 

@@ -12,14 +12,14 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from lantern_jax.constants import DT
+from lantern_jax.core.constants import DT
+from lantern_jax.core.times import NEVER, happened
 from lantern_jax.scoring import thresholds
 from lantern_jax.scoring.components.accumulate import count, first_time
 from lantern_jax.scoring.components.context import Context, Tick
 from lantern_jax.scoring.sample import TickSample
 from lantern_jax.scoring.smooth import soft_gate
 from lantern_jax.scoring.thresholds import ScoringSettings
-from lantern_jax.times import NEVER, happened
 
 Array = jax.Array
 

@@ -11,11 +11,11 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
+from lantern_jax.core.times import NEVER
 from lantern_jax.scoring.components.accumulate import first_time
 from lantern_jax.scoring.components.context import Context, Tick
 from lantern_jax.scoring.sample import TickSample
 from lantern_jax.scoring.thresholds import ScoringSettings
-from lantern_jax.times import NEVER
 
 Array = jax.Array
 

@@ -1,0 +1,402 @@
+"""Smooth failure surrogates through the differentiable simulator, and their gradients.
+
+A stress :class:`Problem` fixes one pair (its Route A under one condition), the policy under
+test, the privileged expert that guards plausibility, a search space and a surrogate.  The
+surrogate is a sum of two **parts**, each from its own soft rollout of Route A (lower = closer
+to a plausible failure):
+
+* the **policy part** (the policy drives), by ``objective``:
+
+  - ``"plausible"`` (default) — the soft collision margin to the watched actors (the minimum
+    over ticks and actors of ``max(box distance, 0.1 m/s - ego speed)``, log-sum-exp smoothed,
+    capped at :data:`~lantern_jax.apps.stress.plausibility.CAP_M`; it keeps decreasing where the
+    plain clearance saturates at 0 m against a stopped ego) plus the soft penalties on actors
+    with tracks that stop in the ego's path or leave the road
+    (:func:`~lantern_jax.apps.stress.plausibility.plausibility_term`);
+  - ``"margin"`` — the collision margin alone;
+  - ``"clearance"`` — the benchmark's soft clearance to the hazard (KING-style distance cost);
+  - ``"soft_cus"`` — the Route A part of the soft CUS (gates x quality, Route B progress 1);
+
+* the **expert part** (the expert drives the same scene): a softplus hinge on its soft distance
+  to the watched actors below the margin the verification asks of it plus a buffer, weighted by
+  ``expert_weight`` (0 = no expert rollout): the surrogate heads for scenes the policy fails and
+  the expert still drives with margin, not for collisions nobody could avoid.  It is
+  differentiated with the expert's plans held fixed (:func:`held_plans`): it moves the
+  adversary away from where the expert drives.
+
+The two parts are separable, so one compiled program (the policy and the expert as the members
+of one :class:`~lantern_jax.sim.switch.PolicySwitch`) computes either, and a gradient step costs
+one soft rollout with its backward pass per part.
+
+The closed loop is piecewise (visibility flips, event triggers, planner choices), so pathwise
+gradients can be biased (Suh et al., ICML 2022).  :func:`estimate` therefore returns, from one
+batch of ``M`` Gaussian perturbations ``z + sigma eps`` (randomized smoothing):
+
+* the **first-order** (pathwise) estimate ``mean_m grad f(z + sigma eps_m)``;
+* the **zeroth-order** estimate ``mean_m (f(z + sigma eps_m) - mean f) eps_m / sigma``;
+* their **blend**: the first-order estimate where it agrees with the zeroth-order one within
+  ``BIAS_Z`` standard errors in every coordinate (low variance, unbiased enough), else the
+  zeroth-order one (a simple form of the paper's alpha-order gradient).
+
+With ``sigma = 0`` the estimate is the plain pathwise gradient at ``z`` (one rollout per part).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from collections.abc import Callable
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from flax import struct
+
+from lantern_jax.apps.stress import plausibility as rules
+from lantern_jax.apps.stress.space import Space
+from lantern_jax.apps.stress.watch import soft_rollout_batch
+from lantern_jax.policies.base import Policy
+from lantern_jax.scoring.cus import cus_of, quality_a, soft_execution_terms
+from lantern_jax.scoring.smooth import softmin_decode
+from lantern_jax.sim.engine import remember
+from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings
+from lantern_jax.sim.switch import policy_switch, switch_params
+from lantern_jax.types.world import Scenario
+
+Array = jax.Array
+
+OBJECTIVES = ("plausible", "margin", "clearance", "soft_cus")
+CLEARANCE_CAP_M = rules.CAP_M  # m, soft clearance is capped here (a far-away hazard is "safe")
+BIAS_Z = 2.0  # standard errors within which the first-order estimate is trusted
+POLICY, EXPERT = 0, 1  # the parts (and the members of the problem's switch)
+
+
+@dataclasses.dataclass(frozen=True)
+class Problem:
+    """What is searched: one pair's Route A, the policy under test, its guard, space, surrogate.
+
+    The jitted functions built from a problem take its arrays (scenarios, parameters, ranges)
+    as arguments, so problems that differ only in those — another pair or family with the same
+    space layout, narrower ranges — reuse one compilation.
+    """
+
+    space: Space
+    scenario_a: Scenario  # Route A with the condition (warning on/off) already set
+    scenario_b: Scenario
+    policy: Policy
+    policy_params: Any
+    horizon: int  # ticks of the soft rollouts
+    temperature: float  # soft-score temperature (m, s, m/s in the relaxed quantities)
+    objective: str  # one of OBJECTIVES
+    expert: Policy | None = None  # the plausibility guard (None: no expert part)
+    expert_params: Any = None
+    watched: tuple[int, ...] = ()  # slots the watch measures (default: hazard + tracked,
+    #                                padded with the hazard to 1 + T entries)
+    expert_weight: float = rules.EXPERT_WEIGHT
+    settings: Settings = DEFAULT_SETTINGS  # scoring and protocol (its temperature replaced)
+    info: dict = dataclasses.field(default_factory=dict, compare=False, hash=False)  # notes
+    #                  of a run (the nominal scene's verdict, compile time)
+
+    def __post_init__(self) -> None:
+        if self.objective not in OBJECTIVES:
+            raise ValueError(f"objective {self.objective!r} not one of {', '.join(OBJECTIVES)}")
+        if not self.watched:
+            # the hazard and every tracked slot, padded with the hazard to 1 + T entries, so
+            # that every family's problem of one space layout shares its compiled programs
+            hazard = int(np.asarray(self.scenario_a.config.hazard_index))
+            watched = (hazard, *(s for s in self.space.tracked if s != hazard))
+            watched += (hazard,) * (1 + len(self.space.tracked) - len(watched))
+            object.__setattr__(self, "watched", watched)
+
+    @property
+    def tracked_mask(self) -> np.ndarray:
+        """(W,) bool: which watched entries are tracked slots (first occurrence)."""
+        first = [self.watched.index(s) == i for i, s in enumerate(self.watched)]
+        return np.asarray([s in self.space.tracked and f for s, f in
+                           zip(self.watched, first, strict=True)], bool)  # fmt: skip
+
+    @functools.cached_property
+    def driver(self) -> Any:
+        """The program that drives the hard rollouts: the policy and the expert as one switch
+        (or the policy alone, when it is the expert)."""
+        if self.expert is None or self.expert.program == self.policy.program:
+            return self.policy
+        return policy_switch((self.policy, self.expert))
+
+    @functools.cached_property
+    def soft_driver(self) -> Any:
+        """The program of the soft rollouts: the policy and the expert with its plans held
+        fixed (:func:`held_plans`), as one switch."""
+        if self.expert is None:
+            return self.policy
+        return policy_switch((self.policy, held_plans(self.expert)))
+
+    def member(self, part: int, soft: bool = False) -> Any:
+        """A driver's parameters with the policy (``POLICY``) or the expert driving."""
+        driver = self.soft_driver if soft else self.driver
+        if driver is self.policy:
+            return self.policy_params if part == POLICY else self.expert_params
+        return switch_params(driver, part, (self.policy_params, self.expert_params))
+
+    def data(self) -> tuple:
+        """The problem's arrays: ``(scenario_a, scenario_b, lo, hi, watched, tracked,
+        settings)`` (the settings with the surrogate's temperature)."""
+        return (
+            self.scenario_a,
+            self.scenario_b,
+            jnp.asarray(self.space.lo),
+            jnp.asarray(self.space.hi),
+            jnp.asarray(self.watched, jnp.int32),
+            jnp.asarray(self.tracked_mask),
+            self.settings.with_temperature(self.temperature),
+        )
+
+    def static(self) -> tuple:
+        """What a compilation depends on besides the arrays."""
+        return (
+            self.space.key(),
+            getattr(self.driver, "program", self.driver),
+            getattr(self.soft_driver, "program", self.soft_driver),
+            self.horizon,
+            float(self.temperature),
+            self.objective,
+            len(self.watched),
+            float(self.expert_weight),
+        )
+
+
+@functools.cache
+def held_plans(expert: Policy) -> Policy:
+    """``expert`` whose plans are constants to differentiation (``stop_gradient``): the expert
+    part of the surrogate then moves with the adversary's motion only, the expert's reaction
+    held as it is.  Its rule-based planner is a chain of decisions whose derivative is neither
+    informative nor finite everywhere (a NaN at touching boxes, measured on Vehicle Cut-In)."""
+    if expert.stateful:
+        raise ValueError(f"policy {expert.name!r}: a guard with memory is not supported")
+
+    def act(params, obs):
+        return jax.lax.stop_gradient(expert.act(params, obs))
+
+    return Policy(
+        f"{expert.name} (plans held)", expert.init, act, expert.description, sensors=expert.sensors
+    )
+
+
+def candidate_values(data: tuple, z: Array) -> Array:
+    """(..., K) parameter values of unconstrained ``z`` for the problem arrays ``data``."""
+    lo, hi = data[2], data[3]
+    return lo + (hi - lo) * jax.nn.sigmoid(z)
+
+
+def _softmin(x: Array, temperature: float) -> Array:
+    """Soft minimum of ``x`` (W,) at ``temperature``."""
+    return -temperature * jax.nn.logsumexp(-x / temperature)
+
+
+def soft_margin(margin_lse: Array, temperature: float) -> Array:
+    """() m, the soft collision margin of a watch's accumulators ``margin_lse`` (W,): each
+    watched actor's soft minimum over ticks, capped at :data:`~lantern_jax.apps.stress.
+    plausibility.CAP_M`, then the soft minimum over the actors."""
+    return _softmin(softmin_decode(margin_lse, temperature, cap=rules.CAP_M), temperature)
+
+
+def part_value(
+    problem: Problem, z: Array, part: Array, member_params: Any, data: tuple | None = None
+) -> Array:
+    """() float32, one part of the surrogate at candidate ``z`` (K,) (see the module docstring):
+    :func:`part_values` of a batch of one.
+
+    Args:
+        problem: the problem (its static parts; its arrays unless ``data`` is given).
+        z: (K,) float32, unconstrained candidate.
+        part: () int32, ``POLICY`` or ``EXPERT`` (which formula; traced, so both parts share
+            one program).
+        member_params: the driver's parameters with that part's policy driving.
+        data: the problem's arrays as traced arguments (see :meth:`Problem.data`).
+    """
+    return part_values(problem, z[None], part, member_params, data)[0]
+
+
+def part_values(
+    problem: Problem, z: Array, part: Array, member_params: Any, data: tuple | None = None
+) -> Array:
+    """(N,) float32, one part of the surrogate at every candidate of ``z`` (N, K), from one
+    batched soft rollout (:func:`~lantern_jax.apps.stress.watch.soft_rollout_batch`).  Candidate
+    ``i``'s value depends on ``z[i]`` only, so the gradient of the sum is each candidate's own
+    (:func:`part_samples`).  Arguments as :func:`part_value`'s."""
+    data = problem.data() if data is None else data
+    sc_a, sc_b = data[0], data[1]
+    scenarios = jax.vmap(lambda x: problem.space.apply(sc_a, sc_b, candidate_values(data, x))[0])(z)
+    temp = problem.temperature
+    watched, tracked, settings = data[4], data[5], data[6]
+    n = z.shape[0]
+    final, watch = soft_rollout_batch(
+        scenarios, problem.soft_driver, member_params, problem.horizon, settings,
+        jnp.broadcast_to(watched, (n, *watched.shape)),
+        jnp.broadcast_to(tracked, (n, *tracked.shape)),
+    )  # fmt: skip
+
+    def value(tel, w, d_safe):
+        # a branch, not a select: the other part's derivative is never formed (a select would
+        # multiply its infinite partials by zero)
+        return jax.lax.cond(part == POLICY, policy_part, expert_part, (tel, w, d_safe))
+
+    def policy_part(ops):
+        tel, w, d_safe = ops
+        if problem.objective == "plausible":
+            stop = jnp.max(jnp.where(tracked, w.stop_soft, 0.0))
+            off = jnp.max(jnp.where(tracked, w.off_road_soft, 0.0))
+            return soft_margin(w.margin_lse, temp) + rules.plausibility_term(stop, off)
+        if problem.objective == "margin":
+            return soft_margin(w.margin_lse, temp)
+        if problem.objective == "clearance":
+            return softmin_decode(tel.clearance.lse, temp, cap=CLEARANCE_CAP_M)
+        s = settings.scoring
+        t = soft_execution_terms(tel, d_safe, temp, s)
+        gates = (
+            t["gate_collision"]
+            * t["gate_route_deviation"]
+            * t["gate_lane"]
+            * t["gate_rule"]
+            * t["gate_block"]
+        )
+        safety = 0.5 * (t["S_ttc"] + t["S_clear"])
+        temporal = 0.5 * (t["S_ant"] + t["S_rec"])
+        # Route B is taken as fully completed: the search moves Route A only
+        return cus_of(quality_a(t["P"], safety, temporal, s), 1.0, gates, s)
+
+    def expert_part(ops):
+        return rules.expert_term(soft_margin(ops[1].dist_lse, temp), problem.expert_weight)
+
+    return jax.vmap(value)(final.telemetry, watch, scenarios.config.d_safe)
+
+
+def soft_objective(problem: Problem, z: Array, data: tuple | None = None) -> Array:
+    """() float32 surrogate of one candidate ``z`` (K,): both parts (eager convenience)."""
+    value = part_value(problem, z, jnp.int32(POLICY), problem.member(POLICY, True), data)
+    if problem.expert is not None and problem.expert_weight > 0:
+        value = value + part_value(
+            problem, z, jnp.int32(EXPERT), problem.member(EXPERT, True), data
+        )
+    return value
+
+
+@struct.dataclass
+class Estimate:
+    """Value and gradient estimates of the smoothed surrogate at one candidate."""
+
+    value: Array  # () float32, mean surrogate over the perturbations
+    first: Array  # (K,) float32, first-order (pathwise) estimate
+    zeroth: Array  # (K,) float32, zeroth-order estimate (zeros when sigma = 0)
+    blend: Array  # (K,) float32, the estimate a search follows
+    alpha: Array  # () float32, 1 where the first-order estimate was trusted, else 0
+
+
+def estimate_from_samples(values: Array, grads: Array, eps: Array, sigma: float) -> Estimate:
+    """:class:`Estimate` from the surrogate's values (M,) and gradients (M, K) at
+    ``z + sigma eps`` (M, K) (the module docstring's three estimates)."""
+    mean = jnp.mean(values)
+    first = jnp.mean(grads, axis=0)
+    if sigma == 0.0:
+        return Estimate(mean, first, jnp.zeros_like(first), first, jnp.ones((), jnp.float32))
+    terms = (values - mean)[:, None] * eps / sigma  # (M, K)
+    zeroth = jnp.mean(terms, axis=0)
+    se = jnp.std(terms, axis=0) / jnp.sqrt(eps.shape[0]) + 1e-6
+    trusted = jnp.all(jnp.abs(first - zeroth) <= BIAS_Z * se)
+    blend = jnp.where(trusted, first, zeroth)
+    return Estimate(mean, first, zeroth, blend, trusted.astype(jnp.float32))
+
+
+def smoothed_estimate(f: Callable[[Array], Array], z: Array, eps: Array, sigma: float) -> Estimate:
+    """Value and gradient estimates of ``E[f(z + sigma eps)]`` from perturbations ``eps`` (M, K).
+
+    With ``sigma == 0`` (no smoothing) the perturbations are ignored and the estimate is the
+    plain pathwise gradient at ``z``.
+
+    Args:
+        f: scalar function of one candidate (K,), differentiable almost everywhere.
+        z: (K,) float32, the candidate.
+        eps: (M, K) float32, standard-normal perturbations.
+        sigma: smoothing scale (units of ``z``).
+    """
+    if sigma == 0.0:
+        value, grad = jax.value_and_grad(f)(z)
+        return estimate_from_samples(value[None], grad[None], eps[:1], 0.0)
+    values, grads = jax.vmap(jax.value_and_grad(f))(z[None, :] + sigma * eps)
+    return estimate_from_samples(values, grads, eps, sigma)
+
+
+def estimate(
+    problem: Problem, z: Array, eps: Array, sigma: float, data: tuple | None = None
+) -> Estimate:
+    """:func:`smoothed_estimate` of the problem's whole surrogate at ``z`` (K,) (eager)."""
+    return smoothed_estimate(lambda x: soft_objective(problem, x, data), z, eps, sigma)
+
+
+def part_samples(problem: Problem, grad: bool = True) -> Callable:
+    """``(part, points (R, M, K)) -> (values (R, M), grads (R, M, K))``: one part's surrogate and
+    pathwise gradient at every point (``grads`` None when ``grad`` is False: no backward pass),
+    compiled once per static part of the problem (both parts and every restart share the
+    program).  The R x M points are one batch of :func:`part_values`; their gradients are one
+    backward pass of the batch's sum (each value depends on its own point only)."""
+
+    def values(z, data, part, mp):
+        return part_values(problem, z, part, mp, data)
+
+    def values_and_grads(z, data, part, mp):
+        v, pull = jax.vjp(lambda x: values(x, data, part, mp), z)
+        return v, pull(jnp.ones_like(v))[0]
+
+    fn = remember(
+        ("part_samples", grad, problem.static()),
+        lambda: jax.jit(values_and_grads if grad else values),
+    )
+    data = problem.data()
+
+    def run(part: int, pts: Array):
+        pts = jnp.asarray(pts, jnp.float32)
+        r, m, k = pts.shape
+        out = fn(pts.reshape(r * m, k), data, jnp.int32(part), problem.member(part, True))
+        if not grad:
+            return out.reshape(r, m), None
+        v, g = out
+        return v.reshape(r, m), g.reshape(r, m, k)
+
+    return run
+
+
+def parts_of(problem: Problem) -> tuple[int, ...]:
+    """The parts a gradient step evaluates: the policy's, and the expert's when it counts."""
+    has_expert = problem.expert is not None and problem.expert_weight > 0
+    return (POLICY, EXPERT) if has_expert else (POLICY,)
+
+
+def batched_estimator(problem: Problem, sigma: float) -> Callable:
+    """``(z (R, K), eps (R, M, K)) -> Estimate`` over restarts (the parts summed; with
+    ``sigma == 0`` only ``eps[:, :1]`` is used: one rollout per part and restart)."""
+    samples = part_samples(problem)
+
+    def run(z, eps):
+        eps = jnp.asarray(eps, jnp.float32)
+        if sigma == 0.0:
+            eps = jnp.zeros_like(eps[:, :1])
+        pts = jnp.asarray(z, jnp.float32)[:, None, :] + sigma * eps
+        values, grads = 0.0, 0.0
+        for part in parts_of(problem):
+            v, g = samples(part, pts)
+            values, grads = values + v, grads + g
+        return jax.vmap(lambda v, g, e: estimate_from_samples(v, g, e, sigma))(values, grads, eps)
+
+    return run
+
+
+def batched_objective(problem: Problem) -> Callable:
+    """``z (N, K) -> (N,)`` surrogate values (both parts; no backward pass)."""
+    samples = part_samples(problem, grad=False)
+
+    def run(z):
+        pts = jnp.asarray(z, jnp.float32)[:, None, :]
+        return sum(samples(part, pts)[0][:, 0] for part in parts_of(problem))
+
+    return run

@@ -1,0 +1,207 @@
+"""Closed-loop training (DAgger) of a learned driving model: the ``closed_loop`` recipe.
+
+Open-loop behaviour cloning only ever sees the expert's states; in closed loop the model's own
+small errors take it to states the expert never visited, where it has no label. DAgger closes
+that gap. From an open-loop model (``init_from``), each of ``rounds`` rounds:
+
+1. **collect** — the current model drives ``scenes_per_round`` training scene pairs (Route A
+   with its warning and Route B; drawn from the dataset's plan, whose scenes already pass the
+   near-duplicate rule against the suite — never the suite's pairs), the expert taking over a
+   segment with probability ``beta * beta_decay**round``; every ``visit_every_s`` the visited
+   state is kept with the model's observation;
+2. **relabel** — the privileged ``expert`` drives on from each visited state for the 2.5-s
+   label horizon; its positions are the label (:mod:`lantern_jax.apps.training.relabel`: the
+   dataset's labeller on the expert's continuation). Visits whose horizon crosses a warning
+   mark are left out as ``exclude_crossing`` says, like dataset frames;
+3. **aggregate and train** — ``epochs`` epochs on the distance recipe's examples, the
+   counterfactual warnings (:mod:`lantern_jax.apps.training.counterfactual`) and every relabelled
+   visit so far, ``closed_loop_mix`` of every batch drawn from the visits.
+
+Run folder: ``round-<r>/`` per round (``visits.npz``, the round's orbax checkpoints and exported
+model, ``done.json`` once finished), and the latest round's model exported as
+``<out>/<name>.msgpack`` + ``.json``. A rerun skips finished rounds, reuses a round's saved
+visits and resumes its training from the latest epoch.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import time
+from pathlib import Path
+
+import jax
+import numpy as np
+from tqdm.auto import tqdm
+
+from lantern_jax.apps.dataset.scenes import PLAN_JSON, SceneSpec
+from lantern_jax.apps.dataset.store import load_frames, read_card
+from lantern_jax.apps.training.config import TrainConfig
+from lantern_jax.apps.training.counterfactual import frame_counterfactuals
+from lantern_jax.apps.training.data import Examples, concat, recipe_examples, split_by_sequence
+from lantern_jax.apps.training.fit import Batches, fit, model_config
+from lantern_jax.apps.training.relabel import Visits, relabel_batch
+from lantern_jax.core.constants import FAMILIES
+from lantern_jax.io.files import atomic_write
+from lantern_jax.policies.learned.checkpoint import load_model, model_policy, save_model
+from lantern_jax.policies.registry import get_policy
+from lantern_jax.scenarios.families import build_pair
+from lantern_jax.sim.rollout import horizon_ticks
+from lantern_jax.types.language import PAD_ID
+from lantern_jax.types.world import tree_stack
+
+CHUNK_PAIRS = 24  # scene pairs per batched collection call (48 executions)
+VISITS_NPZ = "visits.npz"
+DONE_JSON = "done.json"
+
+
+def plan_specs(dataset: str | Path) -> list[SceneSpec]:
+    """The scene plan of a dataset folder (``plan.json``): its training scenes."""
+    path = Path(dataset) / PLAN_JSON
+    try:
+        body = json.loads(path.read_text())
+        return [SceneSpec(**d) for d in body["specs"]]
+    except (OSError, ValueError, TypeError, KeyError) as e:
+        raise ValueError(f"{path}: no readable scene plan ({e!r})") from None
+
+
+def round_specs(specs: list[SceneSpec], n: int, seed: int, r: int) -> list[SceneSpec]:
+    """``n`` scene pairs for round ``r``, spread evenly over the families (seeded draw)."""
+    rng = np.random.default_rng([seed, 7, r])
+    by_family = {f: [s for s in specs if s.family == f] for f in FAMILIES}
+    by_family = {f: v for f, v in by_family.items() if v}
+    out: list[SceneSpec] = []
+    for k, (_, pool) in enumerate(by_family.items()):
+        take = n // len(by_family) + (1 if k < n % len(by_family) else 0)
+        idx = rng.choice(len(pool), min(take, len(pool)), replace=False)
+        out += [pool[i] for i in sorted(idx)]
+    return out
+
+
+def _scene_batch(specs: list[SceneSpec]):
+    """Route A (warning condition) then Route B scenarios of ``specs``, stacked, as the suite
+    runs them (closed loop: the anti-deadlock event rule on)."""
+
+    pairs = [build_pair(s.params, validate=False) for s in specs]
+    return tree_stack([p[0] for p in pairs] + [p[1] for p in pairs])
+
+
+def _keep(v: Visits, exclude_crossing: str) -> np.ndarray:
+    """(B, V) bool: valid visits the exclusion rule keeps."""
+    keep = np.array(v.valid, bool)
+    if exclude_crossing in ("both", "onset"):
+        keep &= ~np.asarray(v.crosses_onset, bool)
+    if exclude_crossing == "both":
+        keep &= ~np.asarray(v.crosses_termination, bool)
+    return keep
+
+
+def visits_to_examples(v: Visits, seq_ids: list[str], like: Examples, keep: np.ndarray
+                       ) -> Examples:  # fmt: skip
+    """The kept visits (``keep``: (B, V) bool) as examples with ``like``'s observation fields
+    and dtypes; each carries its execution's sequence id (``seq_ids``: (B,))."""
+    b, vv = np.nonzero(keep)
+    obs = {k: np.asarray(getattr(v.obs, k))[b, vv].astype(a.dtype) for k, a in like.obs.items()}
+    base = np.all(obs["warning_tokens"] == PAD_ID, axis=-1)
+    targets = np.asarray(v.waypoints)[b, vv].astype(np.float32)
+    return Examples(obs, targets, np.asarray(seq_ids)[b].astype(str), base)
+
+
+def collect(cfg: TrainConfig, model, like: Examples, specs: list[SceneSpec], r: int,
+            progress: bool = False) -> tuple[Examples, dict]:  # fmt: skip
+    """Round ``r``'s visits of ``model`` on ``specs``, relabelled by the expert (a progress bar
+    over the batched calls when ``progress``); returns (examples, counts: executions, valid
+    visits, kept visits)."""
+
+    learner = model_policy(cfg.name, model)
+    lp = learner.init(jax.random.PRNGKey(0))
+    expert = get_policy("expert")
+    ep = expert.init(jax.random.PRNGKey(0))
+    every = horizon_ticks(cfg.visit_every_s)
+    phase = int(every * ((r * 0.618) % 1.0))  # a different offset every round
+    beta = cfg.beta * cfg.beta_decay**r
+    parts, counts = [], dict(executions=0, valid_visits=0, kept_visits=0)
+    starts = range(0, len(specs), CHUNK_PAIRS)
+    if progress:
+        starts = tqdm(starts, desc=f"round {r}: drive + relabel", unit="batch")
+    for k in starts:
+        chunk = specs[k : k + CHUNK_PAIRS]
+        ids = [f"{s.family.lower()}_{s.index:05d}_{rt}" for rt in "AB" for s in chunk]
+        key = jax.random.PRNGKey(hash((cfg.seed, r, k)) % (2**31))
+        v = jax.device_get(relabel_batch(
+            _scene_batch(chunk), learner, lp, expert, ep, key, beta=beta,
+            num_visits=max(1, int(cfg.max_seconds / cfg.visit_every_s)), every=every,
+            phase=phase))  # fmt: skip
+        keep = _keep(v, cfg.exclude_crossing)
+        parts.append(visits_to_examples(v, ids, like, keep))
+        counts["executions"] += len(ids)
+        counts["valid_visits"] += int(np.asarray(v.valid).sum())
+        counts["kept_visits"] += int(keep.sum())
+    return concat(parts), counts
+
+
+def _save_examples(path: Path, ex: Examples) -> None:
+    arrays = {f"obs.{k}": v for k, v in ex.obs.items()}
+    tmp = path.with_suffix(".tmp.npz")
+    np.savez(tmp, targets=ex.targets, sequence=ex.sequence, base_style=ex.base_style, **arrays)
+    tmp.replace(path)
+
+
+def _load_examples(path: Path) -> Examples:
+    with np.load(path) as z:
+        obs = {k[4:]: z[k] for k in z.files if k.startswith("obs.")}
+        return Examples(obs, z["targets"], z["sequence"], z["base_style"])
+
+
+def _dataset_examples(cfg: TrainConfig) -> Examples:
+    """The distance recipe's examples plus the counterfactual warnings."""
+    frames = load_frames(cfg.dataset, exclude_crossing=cfg.exclude_crossing)
+    card = read_card(Path(cfg.dataset))
+    ex = recipe_examples(frames, card, dataclasses.replace(cfg, recipe="distance"))
+    plain = ex.take(np.arange(len(frames)))  # the frames themselves, before the far copies
+    return concat([ex, frame_counterfactuals(plain, frames, cfg.counterfactual, cfg.seed)])
+
+
+def train_closed_loop(cfg: TrainConfig, progress: bool = True) -> dict:
+    """Run (or resume) the ``closed_loop`` recipe; returns the last round's summary with the
+    collection counts and times (s) of every round."""
+
+    out = Path(cfg.out)
+    out.mkdir(parents=True, exist_ok=True)
+    specs = plan_specs(cfg.dataset)
+    data = _dataset_examples(cfg)
+    mcfg = model_config(cfg, data.obs["range_image"].shape[1])
+    model = load_model(cfg.init_from, expect=mcfg)
+    visits: list[Examples] = []
+    rounds, summary = [], {}
+    for r in range(cfg.rounds):
+        folder = out / f"round-{r}"
+        folder.mkdir(exist_ok=True)
+        t0 = time.perf_counter()
+        if (folder / VISITS_NPZ).exists():
+            new, counts = _load_examples(folder / VISITS_NPZ), {}
+        else:
+            chosen = round_specs(specs, cfg.scenes_per_round, cfg.seed, r)
+            new, counts = collect(cfg, model, data, chosen, r, progress)
+            _save_examples(folder / VISITS_NPZ, new)
+        visits.append(new)
+        t_collect = time.perf_counter() - t0
+        done = folder / DONE_JSON
+        if done.exists():
+            summary = json.loads(done.read_text())
+        else:
+            ex = concat([data, *visits])
+            train_idx, val_idx = split_by_sequence(ex, cfg.val_fraction, cfg.seed)
+            cl = train_idx[train_idx >= len(data)]
+            batches = Batches(ex, train_idx, cfg, pools=((cl, cfg.closed_loop_mix),))
+            summary = fit(cfg, model, ex, batches, val_idx, folder, progress,
+                          info=dict(round=r, visits=int(sum(len(v) for v in visits))))  # fmt: skip
+            summary.update(round=r, visits=len(new), collect_seconds=round(t_collect, 1), **counts)
+            atomic_write(done, json.dumps(summary, indent=1, default=str) + "\n")
+        model = load_model(folder / f"{cfg.name}.msgpack", expect=mcfg)
+        rounds.append(summary)
+    save_model(model, out / cfg.name, dict(recipe=cfg.recipe, dataset=str(cfg.dataset),
+                                           train_config=dataclasses.asdict(cfg),
+                                           rounds=len(rounds)))  # fmt: skip
+    atomic_write(out / "rounds.json", json.dumps(rounds, indent=1, default=str) + "\n")
+    return dict(summary, rounds=len(rounds), model=str(out / f"{cfg.name}.msgpack"))

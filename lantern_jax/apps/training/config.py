@@ -1,0 +1,164 @@
+"""Training configuration: one ``[train]`` table of a TOML file, checked key by key.
+
+Recipes (``recipe``) choose which dataset frames a model learns from and what its text channel
+carries — the paper's three learned rows:
+
+* ``base`` (the SimLingo analogue) — ordinary driving: Route B frames and the Route A frames
+  without an active warning; the text channel always carries the navigation instruction, so
+  the model has a language interface but never sees a warning;
+* ``coop`` (the Coop-SimLingo analogue) — fine-tuned from a ``base`` checkpoint
+  (``init_from``) on the LANTERN frames (Route A with its warnings, Route B controls), mixed
+  with base-style frames (``base_mix``: their share of every batch);
+* ``surround`` (the VAD analogue) — every frame, the six-camera rig, no language;
+* ``distance`` — like ``coop``, plus far-position counterexamples: Route B frames given the
+  family's warning at a far position (``far_m`` ahead) with the ordinary expert trajectory;
+* ``closed_loop`` — DAgger from an open-loop model (``init_from``): ``rounds`` times, the
+  current model drives training scenes (the dataset's plan), the expert relabels the states it
+  visits, and the model trains ``epochs`` epochs on the distance recipe's examples plus every
+  relabelled visit so far (``closed_loop_mix`` of every batch) plus counterfactual warnings
+  (``counterfactual``: Route B frames told another family's text, a non-actionable message or
+  an empty text, with the ordinary trajectory; :mod:`lantern_jax.apps.training.counterfactual`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+from typing import Any
+
+from lantern_jax.apps.dataset.store import EXCLUDE_CROSSING
+from lantern_jax.io.config_file import ConfigFileError, check_keys, read_table, typed_value
+from lantern_jax.policies.names import name_problem
+
+RECIPES = ("base", "coop", "surround", "distance", "closed_loop")
+#: The table of a training config.
+TABLE = "train"
+
+#: A training config that cannot be used; names the file and key (the error of every
+#: configuration file, :class:`lantern_jax.io.config_file.ConfigFileError`).
+ConfigError = ConfigFileError
+
+
+@dataclasses.dataclass(frozen=True)
+class TrainConfig:
+    """Everything a training run depends on (defaults in brackets)."""
+
+    name: str  # the policy name the trained model is registered and exported under
+    recipe: str  # one of RECIPES
+    dataset: str = "data/lantern"  # dataset folder (lantern-jax dataset --out)
+    out: str = "runs/train"  # run folder: checkpoints, curves, the exported model
+    init_from: str = ""  # exported model to start from (coop, distance: the base model)
+    base_mix: float = 0.3  # coop/distance: share of base-style frames in every batch
+    far_m: float = 100.0  # distance: forward distance of the far counterexample warnings, m
+    width: int = 64
+    heads: int = 4
+    layers: int = 1
+    epochs: int = 6
+    batch_size: int = 256
+    lr: float = 1e-3  # peak learning rate (one-cycle: warm-up then cosine decay)
+    warmup: float = 0.1  # share of steps spent warming up
+    weight_decay: float = 1e-4  # AdamW
+    val_fraction: float = 0.1  # share of sequences held out for validation (split by sequence)
+    seed: int = 0
+    max_minutes: float = 30.0  # stop (after the current epoch) when exceeded
+    # frames whose 2.5-s waypoint horizon crosses a warning mark that are left out: "both" (onset
+    # or termination, the paper's rule), "onset" or "none" (dataset.store.EXCLUDE_CROSSING)
+    exclude_crossing: str = "both"
+    # closed_loop (DAgger) only:
+    rounds: int = 3  # collect-relabel-train rounds
+    scenes_per_round: int = 96  # dataset-plan scene pairs driven per round (A and B each)
+    visit_every_s: float = 2.0  # s, simulated time between two relabelled visits
+    max_seconds: float = 40.0  # s, visits are kept until this time of an execution
+    beta: float = 0.5  # round 0: probability that the expert drives a segment between visits
+    beta_decay: float = 0.5  # beta of round r: beta * beta_decay**r
+    closed_loop_mix: float = 0.3  # share of every batch drawn from the relabelled visits
+    counterfactual: float = 0.5  # counterfactual warning frames per Route B frame
+
+    @property
+    def rig(self) -> str:
+        """The camera rig the recipe uses."""
+        return "surround" if self.recipe == "surround" else "front"
+
+    @property
+    def language(self) -> bool:
+        """Whether the model conditions on the text channel."""
+        return self.recipe != "surround"
+
+
+_FIELDS = {f.name: f for f in dataclasses.fields(TrainConfig)}
+#: The accepted types of a field by its annotation.
+_TYPES = {"float": (float,), "int": (int,), "str": (str,)}
+
+
+def load_config(path: str | Path, **overrides: Any) -> TrainConfig:
+    """Read a training config (TOML, one ``[train]`` table), with optional overrides.
+
+    Raises:
+        ConfigError: naming the file and key for unreadable TOML, keys outside ``[train]``,
+            unknown keys, wrong types, missing required keys or out-of-range values.
+    """
+    path = str(path)
+    given = {k: v for k, v in overrides.items() if v is not None}
+    table = {**read_table(path, TABLE), **given}
+    check_keys(path, TABLE, table, tuple(_FIELDS))
+    values = {
+        key: typed_value(value, _TYPES[_FIELDS[key].type], _where(path, key, overrides))
+        for key, value in table.items()
+    }
+    for key in ("name", "recipe"):
+        if key not in values:
+            raise ConfigError(f"config {path}: train.{key}: missing")
+    cfg = TrainConfig(**values)
+    problem = _range_problem(cfg)
+    if problem:
+        raise ConfigError(f"{_where(path, problem[0], overrides)}: {problem[1]}")
+    return cfg
+
+
+def _where(path: str, key: str, overrides: dict[str, Any]) -> str:
+    """Where a value came from: the command line's ``--key`` or the file's ``train.key``."""
+    if overrides.get(key) is not None:
+        return f"--{key.replace('_', '-')}"
+    return f"config {path}: train.{key}"
+
+
+def _range_problem(cfg: TrainConfig) -> tuple[str, str] | None:
+    """(key, problem) of the first value out of range, or None."""
+    problems = []
+    name = name_problem(cfg.name)
+    if name:
+        problems.append(("name", f"{name} (it names the exported files and the policy)"))
+    for f in dataclasses.fields(cfg):
+        value = getattr(cfg, f.name)
+        if isinstance(value, float) and not math.isfinite(value):
+            problems.append((f.name, f"must be a finite number, got {value}"))
+    if cfg.recipe not in RECIPES:
+        problems.append(("recipe", f"{cfg.recipe!r} not one of {', '.join(RECIPES)}"))
+    if cfg.recipe in ("coop", "distance", "closed_loop") and not cfg.init_from:
+        problems.append(("init_from", f"the {cfg.recipe} recipe fine-tunes a base model; give it"))
+    for key in ("epochs", "batch_size", "width", "heads", "layers", "rounds", "scenes_per_round"):
+        if getattr(cfg, key) < 1:
+            problems.append((key, f"must be >= 1, got {getattr(cfg, key)}"))
+    for key in ("lr", "max_minutes", "far_m", "visit_every_s", "max_seconds"):
+        if not getattr(cfg, key) > 0:
+            problems.append((key, f"must be > 0, got {getattr(cfg, key)}"))
+    if not cfg.weight_decay >= 0:
+        problems.append(("weight_decay", f"must be >= 0, got {cfg.weight_decay}"))
+    for key in ("base_mix", "warmup", "closed_loop_mix"):
+        if not 0.0 <= getattr(cfg, key) < 1.0:
+            problems.append((key, f"must be in [0, 1), got {getattr(cfg, key)}"))
+    for key in ("beta", "beta_decay", "counterfactual"):
+        if not 0.0 <= getattr(cfg, key) <= 1.0:
+            problems.append((key, f"must be in [0, 1], got {getattr(cfg, key)}"))
+    if cfg.recipe == "closed_loop" and cfg.base_mix + cfg.closed_loop_mix >= 1.0:
+        problems.append(("closed_loop_mix", "base_mix + closed_loop_mix must be < 1"))
+    if not 0.0 < cfg.val_fraction < 1.0:
+        why = "the best model is chosen on the held-out sequences"
+        problems.append(("val_fraction", f"must be in (0, 1) ({why}), got {cfg.val_fraction}"))
+    if cfg.exclude_crossing not in EXCLUDE_CROSSING:
+        problems.append(("exclude_crossing", f"{cfg.exclude_crossing!r} not one of "
+                                             f"{', '.join(EXCLUDE_CROSSING)}"))  # fmt: skip
+    if cfg.width % cfg.heads:
+        problems.append(("heads", f"{cfg.heads} does not divide width {cfg.width}"))
+    return problems[0] if problems else None

@@ -1,0 +1,92 @@
+"""Counterfactual warnings: frames whose text names no hazard of their route.
+
+Beyond the paper's recipe. A model trained only on true warnings can fit "any text delivered ->
+slow down" without reading the words. Counterfactual frames break that shortcut: a Route B
+frame (the scene without its hazard) is given a text that calls for no reaction on its route,
+and keeps its label — the expert's ordinary trajectory:
+
+* **another family's text** — the canonical warning of a family of the other road type (a
+  straight-road family's frame gets a junction family's text and the other way round: PE, VC,
+  OR <-> LWW, RWW, RTY), so the hazard it names cannot be on this route; its stated position is
+  drawn near the ego (:data:`NEAR_X_M`, :data:`NEAR_Y_M`), where a true warning asks to react;
+* **a non-actionable message** — one of the bank's non-actionable texts (a hazard off the
+  route; no position).
+
+An **empty text** needs no frame of its own: the observation carries no token, which a policy
+cannot tell from no warning (:mod:`lantern_jax.scenarios.warnings`), so every ordinary frame
+is already one.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from lantern_jax.apps.training.data import Examples
+from lantern_jax.core.constants import FAMILIES
+from lantern_jax.scenarios.warnings import DEFAULT_BANK, text_tables
+from lantern_jax.types.language import round_number
+
+NEAR_X_M = (10.0, 60.0)  # m, forward range of a counterfactual's stated position
+NEAR_Y_M = (-4.0, 4.0)  # m, lateral range (right positive)
+STRAIGHT = ("PE", "VC", "OR")  # families on a straight road; the rest turn at a junction
+VARIANTS = ("other family's text", "non-actionable")
+
+
+def other_road_families(family: str) -> tuple[int, ...]:
+    """Indices (into :data:`FAMILIES`) of the families of the other road type than
+    ``family``'s: their hazards cannot be on ``family``'s route."""
+    straight = family in STRAIGHT
+    return tuple(i for i, f in enumerate(FAMILIES) if (f in STRAIGHT) != straight)
+
+
+def nonactionable_ids() -> np.ndarray:
+    """(5,) int32 text ids of the bank's non-actionable messages."""
+
+    return np.asarray([e.text_id for e in DEFAULT_BANK if e.kind == "non_actionable"], np.int32)
+
+
+def counterfactual_examples(
+    ex: Examples, families: np.ndarray, routes: np.ndarray, share: float, seed: int
+) -> tuple[Examples, np.ndarray]:
+    """Counterfactual copies of a seeded ``share`` of the Route B examples.
+
+    Args:
+        ex: examples (``n`` of them) with the dataset's ordinary labels.
+        families: (n,) str, each example's family code.
+        routes: (n,) str, ``"A"`` or ``"B"``.
+        share: counterfactual frames per Route B frame, in [0, 1].
+        seed: seed of the choice of frames, variants, texts and positions.
+
+    Returns:
+        (the counterfactual examples — text replaced, labels kept, not ordinary driving —,
+        (m,) int32 variant index into :data:`VARIANTS`).
+    """
+
+    rng = np.random.default_rng([seed, 42])
+    is_b = np.flatnonzero(np.asarray(routes) == "B")
+    pick = np.sort(rng.choice(is_b, int(round(share * len(is_b))), replace=False))
+    sel = ex.take(pick)
+    m = len(pick)
+    variant = rng.integers(0, len(VARIANTS), m).astype(np.int32)
+    tables = text_tables()
+    fam = np.asarray(families)[pick]
+    other = np.asarray([rng.choice(other_road_families(f)) for f in fam], np.int32)
+    text = np.where(variant == 0, other, rng.choice(nonactionable_ids(), m)).astype(np.int32)
+    values = np.zeros(sel.obs["warning_values"].shape, np.float32)
+    rows = np.flatnonzero(tables.x_slot[text] >= 0)
+    x = np.asarray(round_number(rng.uniform(*NEAR_X_M, len(rows))))
+    y = np.asarray(round_number(rng.uniform(*NEAR_Y_M, len(rows))))
+    values[rows, tables.x_slot[text[rows]]] = x
+    values[rows, tables.y_slot[text[rows]]] = y
+    obs = dict(sel.obs)
+    obs["warning_tokens"] = tables.tokens[text].astype(sel.obs["warning_tokens"].dtype)
+    obs["warning_values"] = values.astype(sel.obs["warning_values"].dtype)
+    return Examples(obs, sel.targets, sel.sequence, np.zeros(m, bool)), variant
+
+
+def frame_counterfactuals(ex: Examples, frames: pd.DataFrame, share: float, seed: int) -> Examples:
+    """:func:`counterfactual_examples` of dataset examples (``ex`` built from ``frames``)."""
+    return counterfactual_examples(
+        ex, frames["family"].to_numpy(str), frames["route"].to_numpy(str), share, seed
+    )[0]

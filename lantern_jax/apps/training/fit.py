@@ -1,0 +1,220 @@
+"""The training loop shared by every recipe: mini-batches, the loss, AdamW with a one-cycle
+schedule, validation, per-epoch orbax checkpoints (a rerun resumes), the exported best model and
+the learning curve.
+
+:func:`~lantern_jax.apps.training.behaviour_cloning.train` (the dataset recipes) and
+:func:`~lantern_jax.apps.training.closed_loop.train_closed_loop` (DAgger rounds) both call
+:func:`fit`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from pathlib import Path
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+import pandas as pd
+from flax import nnx
+from tqdm.auto import tqdm
+
+from lantern_jax.apps.training.config import TrainConfig
+from lantern_jax.apps.training.data import Examples
+from lantern_jax.io.files import atomic_write
+from lantern_jax.policies.learned.checkpoint import save_model
+from lantern_jax.policies.learned.features import features, nav_token_table
+from lantern_jax.policies.learned.model import ModelConfig
+from lantern_jax.types.language import load_embedding
+from lantern_jax.types.observation import Observation, SurroundView
+
+
+def model_config(cfg: TrainConfig, ranges: int) -> ModelConfig:
+    """The architecture a training config asks for."""
+    return ModelConfig(rig=cfg.rig, language=cfg.language, width=cfg.width, heads=cfg.heads,
+                       layers=cfg.layers, ranges=ranges)  # fmt: skip
+
+
+def _observation(batch: dict[str, Any]) -> Observation:
+    """An Observation from example columns (``surround_*`` columns form its six-camera view,
+    :func:`~lantern_jax.apps.training.data.observation_columns`)."""
+    names = {f.name for f in dataclasses.fields(Observation)}
+    obs = {k: v for k, v in batch.items() if k in names}
+    if "surround_visible" in batch:
+        obs["surround"] = SurroundView(
+            batch["surround_visible"], batch["surround_ranges"], batch["surround_hit_class"]
+        )
+    return Observation(**obs)
+
+
+def make_loss(graphdef: Any, rig: str):
+    """``loss(params, obs_batch, targets, embedding, nav) -> () mean L1`` over a batch."""
+
+    def loss(params, obs, targets, embedding, nav):
+        model = nnx.merge(graphdef, params)
+        pred = jax.vmap(lambda o: model(features(o, rig, embedding, nav)))(_observation(obs))
+        return jnp.mean(jnp.abs(pred - targets))
+
+    return loss
+
+
+class Batches:
+    """Seeded mini-batches of training indices: every batch draws ``base_mix`` of its rows from
+    the ordinary-driving frames (coop, distance, closed_loop) and ``pools``' shares from their
+    index pools (closed_loop: the relabelled visits), the rest in a shuffled pass."""
+
+    def __init__(self, ex: Examples, train_idx: np.ndarray, cfg: TrainConfig,
+                 pools: tuple[tuple[np.ndarray, float], ...] = ()):  # fmt: skip
+        self.train_idx, self.cfg = train_idx, cfg
+        base_idx = train_idx[ex.base_style[train_idx]]
+        mix = cfg.base_mix if cfg.recipe in ("coop", "distance", "closed_loop") else 0.0
+        self.pools = tuple((idx, share) for idx, share in ((base_idx, mix), *pools) if len(idx))
+
+    def epoch(self, e: int) -> list[np.ndarray]:
+        """The batches of epoch ``e`` (index arrays; the same for the same seed and epoch)."""
+        rng = np.random.default_rng([self.cfg.seed, e])
+        order = rng.permutation(self.train_idx)
+        bs = self.cfg.batch_size
+        n_pool = [int(round(share * bs)) for _, share in self.pools]
+        main = max(1, bs - sum(n_pool))
+        out = []
+        for k in range(len(order) // main):
+            idx = [order[k * main : (k + 1) * main]]
+            idx += [
+                rng.choice(pool, n) for (pool, _), n in zip(self.pools, n_pool, strict=True) if n
+            ]
+            out.append(np.concatenate(idx))
+        return out
+
+
+def _checkpointer(folder: Path):
+    # deferred: orbax (heavy) only when checkpoints are written
+    import orbax.checkpoint as ocp
+
+    opts = ocp.CheckpointManagerOptions(max_to_keep=2)
+    return ocp.CheckpointManager(folder.resolve() / "checkpoints", options=opts)
+
+
+def fit(cfg: TrainConfig, model: Any, ex: Examples, batches: Batches, val_idx: np.ndarray,
+        out: Path, progress: bool = True, info: dict | None = None) -> dict:  # fmt: skip
+    """``cfg.epochs`` epochs of ``model`` on the batches of ``ex``, checkpointed in ``out``
+    (a rerun resumes from the latest epoch); exports the best model (validation L1 on
+    ``val_idx``) as ``out/<name>.msgpack`` with ``info`` added to its description.
+
+    Returns:
+        The run's summary (best validation L1 in m and its epoch, examples, frames/s, path).
+    """
+    # deferred: orbax (heavy) only when checkpoints are written
+    import orbax.checkpoint as ocp
+
+
+    graphdef, params = nnx.split(model)
+    embedding = jnp.asarray(load_embedding(), jnp.float32)
+    nav = jnp.asarray(nav_token_table())
+    per_epoch = max(1, len(batches.epoch(0)))
+    steps = per_epoch * cfg.epochs
+    schedule = optax.warmup_cosine_decay_schedule(
+        0.0, cfg.lr, max(1, int(cfg.warmup * steps)), steps, cfg.lr * 0.01
+    )
+    tx = optax.adamw(schedule, weight_decay=cfg.weight_decay)
+    opt_state = tx.init(params)
+    loss_fn = make_loss(graphdef, cfg.rig)
+
+    @jax.jit
+    def step(params, opt_state, obs, targets):
+        value, grads = jax.value_and_grad(loss_fn)(params, obs, targets, embedding, nav)
+        updates, opt_state = tx.update(grads, opt_state, params)
+        return optax.apply_updates(params, updates), opt_state, value
+
+    val_loss_fn = jax.jit(lambda p, o, t: loss_fn(p, o, t, embedding, nav))
+    mngr = _checkpointer(out)
+    start, curve, best = 0, [], (np.inf, -1)
+    if mngr.latest_step() is not None:  # resume
+        last = mngr.latest_step()
+        restored = mngr.restore(last, args=ocp.args.Composite(
+            state=ocp.args.StandardRestore(dict(params=params, opt=opt_state)),
+            meta=ocp.args.JsonRestore()))  # fmt: skip
+        params, opt_state = restored.state["params"], restored.state["opt"]
+        curve, best = restored.meta["curve"], tuple(restored.meta["best"])
+        start = last + 1
+    t_start, seen = time.perf_counter(), 0
+    bar = _progress(progress, cfg, start * per_epoch, steps)
+    for e in range(start, cfg.epochs):
+        losses = []
+        for idx in batches.epoch(e):
+            b = ex.take(idx)
+            params, opt_state, value = step(params, opt_state, b.obs, jnp.asarray(b.targets))
+            losses.append(float(value))
+            seen += len(idx)
+            if bar is not None:
+                bar.set_postfix_str(f"epoch {e} loss {np.mean(losses[-50:]):.3f} m")
+                bar.update(1)
+        val = _evaluate(val_loss_fn, params, ex, val_idx, cfg.batch_size)
+        train_l1 = float(np.mean(losses)) if losses else np.nan
+        elapsed = round(time.perf_counter() - t_start, 1)
+        curve.append(dict(epoch=e, train_l1_m=train_l1, val_l1_m=val, seconds=elapsed))
+        if val < best[0]:
+            best = (val, e)
+            save_model(nnx.merge(graphdef, params), out / cfg.name,
+                       dict(recipe=cfg.recipe, dataset=str(cfg.dataset), epoch=e, val_l1_m=val,
+                            train_config=dataclasses.asdict(cfg), **(info or {})))  # fmt: skip
+        mngr.save(e, args=ocp.args.Composite(
+            state=ocp.args.StandardSave(dict(params=params, opt=opt_state)),
+            meta=ocp.args.JsonSave(dict(curve=curve, best=list(best)))))  # fmt: skip
+        mngr.wait_until_finished()
+        atomic_write(out / "curve.csv", pd.DataFrame(curve).to_csv(index=False))
+        if (time.perf_counter() - t_start) / 60.0 > cfg.max_minutes:
+            break
+    if bar is not None:
+        bar.close()
+    elapsed = time.perf_counter() - t_start
+    _plot_curve(curve, out / "curve.png", cfg.name)
+    return dict(name=cfg.name, best_val_l1_m=best[0], best_epoch=best[1], epochs=len(curve),
+                train_examples=int(len(batches.train_idx)), val_examples=int(len(val_idx)),
+                frames_per_s=seen / max(elapsed, 1e-9), seconds=elapsed,
+                model=str(out / f"{cfg.name}.msgpack"))  # fmt: skip
+
+
+def _evaluate(loss_fn, params, ex: Examples, idx: np.ndarray, batch_size: int) -> float:
+    if len(idx) == 0:
+        return float("nan")
+    total, count = 0.0, 0
+    for k in range(0, len(idx) - batch_size + 1, batch_size):  # whole batches: one compile
+        b = ex.take(idx[k : k + batch_size])
+        total += float(loss_fn(params, b.obs, jnp.asarray(b.targets))) * batch_size
+        count += batch_size
+    return total / max(count, 1) if count else float("nan")
+
+
+def _progress(on: bool, cfg: TrainConfig, done: int, total: int):
+    """A progress bar over every batch of the run (``done`` of them already, when resumed)."""
+    if not on:
+        return None
+
+    return tqdm(desc=f"train {cfg.name}", unit="batch", initial=done, total=total)
+
+
+def _plot_curve(curve: list[dict], path: Path, name: str) -> None:
+    # deferred: matplotlib only when a curve is drawn
+    import matplotlib
+
+    matplotlib.use("Agg")
+    # deferred: matplotlib only when a curve is drawn
+    from matplotlib.figure import Figure
+
+    df = pd.DataFrame(curve)
+    fig = Figure(figsize=(6, 3.5))
+    ax = fig.subplots()
+    if len(df):
+        ax.plot(df["epoch"], df["train_l1_m"], "o-", label="train")
+        ax.plot(df["epoch"], df["val_l1_m"], "s--", label="validation")
+    ax.set_xlabel("epoch")
+    ax.set_ylabel("waypoint L1 (m)")
+    ax.set_title(name)
+    ax.grid(alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
