@@ -18,8 +18,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from lantern_jax.apps.diagnostics import language_table, run_recorded
+from lantern_jax.apps.diagnostics import run_recorded
 from lantern_jax.apps.evaluation import build_executions, run_executions
+from lantern_jax.apps.language_sensitivity import LANGUAGE_VARIANTS, language_table
 from lantern_jax.core.constants import KIND_PEDESTRIAN, NUM_WAYPOINTS, WAYPOINT_DT
 from lantern_jax.policies.base import Policy, check_policy_output
 from lantern_jax.policies.host import host_policy
@@ -259,19 +260,42 @@ def test_a_host_policy_with_memory(six_pairs):
     assert int(np.asarray(final.policy_carry)[0]) > 0
 
 
+LANGUAGE_COLUMNS = ["PE", "VC", "OR", "LWW", "RWW", "RTY", "Overall"]
+
+
 def test_language_sensitivity_of_coop(six_pairs):
-    """The diagnostic's rows: the empty text is no warning (the policy cannot tell them apart),
-    and coop's PE gain goes with the pedestrian's words (another family's text keeps none)."""
-    table = language_table("coop", six_pairs).set_index("Variant")
-    cols = ["PE", "VC", "OR", "LWW", "RWW", "RTY", "Overall"]
+    """The diagnostic's rows without the probe sentences (they compile a program of their own;
+    the slow test below runs them): the empty text is no warning (the policy cannot tell them
+    apart), and coop's PE gain goes with the pedestrian's words (another family's canonical text
+    and a paraphrase of another straight-road family keep none of it)."""
+    variants = ("other family's text", "same road type, other family's paraphrase", "empty text")
+    table = language_table("coop", six_pairs, variants=variants).set_index("Variant")
+    assert list(table.index[:5]) == ["delivered text", *variants, "no warning"]
     np.testing.assert_allclose(
-        table.loc["empty text", cols].to_numpy(float),
-        table.loc["no warning", cols].to_numpy(float),
+        table.loc["empty text", LANGUAGE_COLUMNS].to_numpy(float),
+        table.loc["no warning", LANGUAGE_COLUMNS].to_numpy(float),
         atol=1e-6,
     )
     assert table.loc["delivered text", "PE"] > table.loc["no warning", "PE"] + 50.0
+    lo, est, hi = table.loc["delivered text", ["Overall_lo", "Overall", "Overall_hi"]]
+    assert lo <= est <= hi
     assert table.loc["gain kept by other family's text (%)", "PE"] < 30.0
+    same_road = "gain kept by same road type, other family's paraphrase (%)"
+    assert table.loc[same_road, "PE"] == pytest.approx(0.0, abs=1e-6)
     assert table.loc["gain kept by empty text (%)", "PE"] == pytest.approx(0.0, abs=1e-6)
+
+
+@pytest.mark.slow  # the probe sentences' bank compiles its own program
+def test_language_probes_of_coop(six_pairs):
+    """The held-out sentences that state the position: coop's keyword rule ignores the bakery
+    sentence (no gain kept) but reads "ego lane" in the negated one and keeps its PE gain --
+    the diagnostic shows that it does not understand negation."""
+    table = language_table("coop", six_pairs).set_index("Variant")
+    assert list(table.index[:7]) == list(LANGUAGE_VARIANTS)
+    irrelevant = "gain kept by irrelevant sentence with the position (%)"
+    negated = "gain kept by negated sentence with the position (%)"
+    assert table.loc[irrelevant, "PE"] == pytest.approx(0.0, abs=1e-6)
+    assert table.loc[negated, "PE"] == pytest.approx(100.0, abs=1e-3)
 
 
 def test_an_agent_with_memory_in_the_brax_environment():

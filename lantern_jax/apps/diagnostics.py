@@ -20,12 +20,9 @@
   closed loop, the lowest speed in the window, the longest standstill and route completion.
 
 * :func:`language_table` — language sensitivity (beyond the paper): the warning condition with
-  (a) the delivered text, (b) another family's canonical text at the same position
-  (:data:`OTHER_FAMILY`), (c) the empty text and (d) no warning, per family, and the share of
-  the warning gain (a - d) that (b) and (c) keep.  A policy that reads the words keeps little
-  of it; one that answers "a warning is on, here is a position" keeps most of it under (b).
-  Under the observation's information boundary a policy cannot tell (c) from (d)
-  (:mod:`lantern_jax.types.observation`), so (c) keeps nothing by construction: the row checks it.
+  the delivered text replaced by another family's text, another family's paraphrase of the same
+  road type, two held-out sentences that state the position, or the empty text, and the share of
+  the warning gain each keeps (:mod:`lantern_jax.apps.language_sensitivity`, re-exported here).
 
 The paper measures the distance diagnostic open-loop on held-out dataset frames with a
 checkpoint fine-tuned for it; here the frame is the closed-loop state at Route B's warning
@@ -44,6 +41,12 @@ import numpy as np
 import pandas as pd
 
 from lantern_jax.apps.evaluation import build_executions, run_policy
+from lantern_jax.apps.language_sensitivity import (  # noqa: F401  (re-exported)
+    LANGUAGE_VARIANTS,
+    MIN_GAIN_FOR_SHARE,
+    OTHER_FAMILY,
+    language_table,
+)
 from lantern_jax.core.constants import (
     DT,
     FAMILIES,
@@ -61,14 +64,12 @@ from lantern_jax.scenarios.spec import route_timeout_s
 from lantern_jax.scenarios.suite import Suite, build_suite_scenarios, load_suite
 from lantern_jax.scenarios.warnings import (
     DISTANCE_POSITIONS,
-    EMPTY_TEXT_ID,
     TIERS,
     get_text,
     non_actionable_text_ids,
     paraphrase_tiers,
     set_override,
 )
-from lantern_jax.scoring.aggregate import OVERALL
 from lantern_jax.scoring.metrics import finalize
 from lantern_jax.scoring.thresholds import (
     DEFAULT_SCORING,
@@ -94,12 +95,6 @@ EMPTY_ROAD_LENGTH_M = 150.0  # m, the non-actionable diagnostic's empty straight
 EMPTY_ROAD_SPEED_MPS = 8.0  # m/s, its reference (and initial) speed
 ONSET_S = 2.0  # s, non-actionable warnings are delivered from this time to the end
 DISTANCE_WINDOW_S = 5.0  # s, distance-conditioned warning window after the warning point
-#: Language sensitivity: the family whose canonical text replaces each family's (index -> index):
-#: straight-road families get a junction family's text and the other way round, so the text
-#: asks for another response (PE <-> LWW, VC <-> RWW, OR <-> RTY).
-OTHER_FAMILY = {f: (f + 3) % len(FAMILIES) for f in range(len(FAMILIES))}
-LANGUAGE_VARIANTS = ("delivered text", "other family's text", "empty text", "no warning")
-MIN_GAIN_FOR_SHARE = 1.0  # CUS points: a smaller warning gain gets no "share kept" (it is noise)
 DISTANCE_FAMILY = "PE"  # the family whose warning the distance diagnostic moves
 DISTANCE_ROUTES = 3  # Route B scenes of the distance diagnostic (the family's first pairs)
 
@@ -522,65 +517,3 @@ def distance_summary(open_loop: pd.DataFrame, seed: int = SEED) -> pd.DataFrame:
         names = interval_columns(c)
         row.update({c: float(np.nanmean(values[:, k])), names[0]: lo[k], names[1]: hi[k]})
     return pd.DataFrame([row])
-
-
-# ---------------------------------------------------------------------------------------------
-# language sensitivity
-# ---------------------------------------------------------------------------------------------
-def _with_text_ids(execs: Any, text_ids: np.ndarray) -> Any:
-    """The executions with every execution's protocol text replaced by ``text_ids`` ((n,)
-    int32, one per execution; Route B and the no-warning condition deliver no text anyway)."""
-    cfg = execs.scenarios.config
-    text_ids = jax.device_put(np.asarray(text_ids, np.int32).reshape(np.shape(cfg.text_id)))
-    return dataclasses.replace(
-        execs, scenarios=execs.scenarios.replace(config=cfg.replace(text_id=text_ids))
-    )
-
-
-def language_table(
-    policy: Policy | str, suite: Suite | str = SUITE_ID, policy_params: Any = None
-) -> pd.DataFrame:
-    """Language sensitivity of one policy on a suite (see the module docstring).
-
-    Returns:
-        One row per variant (:data:`LANGUAGE_VARIANTS`; CUS per family and Overall, the
-        warning condition's rows except "no warning"), then one row per replaced text with the
-        share (%) of the warning gain it keeps, ``(variant - no warning) / (delivered - no
-        warning)``; NaN where the gain is below :data:`MIN_GAIN_FOR_SHARE` points.
-    """
-    s = load_suite(suite) if isinstance(suite, str) else suite
-    pol, params = _policy(policy, policy_params)
-    execs = build_executions(s, bucket=True)
-    fam = np.asarray(execs.scenarios.config.family).astype(int)
-    other = np.asarray([OTHER_FAMILY[f] for f in fam], np.int32)  # canonical id == family
-    shared = shared_program([pol], [params])  # a reference policy: the evaluation's program
-    runs = {
-        "delivered text": run_policy(pol, execs, params, shared=shared).route_table,
-        "other family's text": run_policy(pol, _with_text_ids(execs, other), params,
-                                          shared=shared).route_table,  # fmt: skip
-        "empty text": run_policy(pol, _with_text_ids(execs, np.full_like(other, EMPTY_TEXT_ID)),
-                                 params, shared=shared).route_table,  # fmt: skip
-    }
-    runs["no warning"] = runs["delivered text"]
-
-    def family_means(table: pd.DataFrame, condition: str) -> dict[str, float]:
-        rows = table[table["condition"] == condition]
-        out = {f: float(rows.loc[rows["family"] == f, "CUS"].mean()) for f in FAMILIES}
-        out[OVERALL] = float(rows["CUS"].mean())
-        return out
-
-    means = {
-        v: family_means(t, NO_WARNING_CONDITION if v == "no warning" else WARNING_CONDITION)
-        for v, t in runs.items()
-    }
-    rows = [{"Variant": v, **means[v]} for v in LANGUAGE_VARIANTS]
-    base, none = means["delivered text"], means["no warning"]
-    for v in ("other family's text", "empty text"):
-        share = {}
-        for col in (*FAMILIES, OVERALL):
-            gain = base[col] - none[col]
-            share[col] = (
-                100.0 * (means[v][col] - none[col]) / gain if gain >= MIN_GAIN_FOR_SHARE else np.nan
-            )
-        rows.append({"Variant": f"gain kept by {v} (%)", **share})
-    return pd.DataFrame(rows)

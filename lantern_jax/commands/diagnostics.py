@@ -68,26 +68,33 @@ def cmd_diagnostics(args: argparse.Namespace, argv: Sequence[str]) -> int:
 
 
 def _language(args: argparse.Namespace, policy: str) -> int:
-    """The warning condition with the delivered text, another family's text, an empty text and
-    no warning."""
-    from lantern_jax.apps import diagnostics as dg
+    """The warning condition with the delivered text and with each replacement of it
+    (:data:`lantern_jax.apps.language_sensitivity.LANGUAGE_VARIANTS`)."""
+    from lantern_jax.apps import language_sensitivity as ls
+    from lantern_jax.report import interval_display, interval_note
 
     args.suite = args.suite or SUITE_ID
     suite = load_selected_suite(args)
-    stage(args, f"{policy} on {suite.suite_id} ({len(suite)} pairs): delivered text, "
-                "another family's text, empty text, no warning")  # fmt: skip
-    table = dg.language_table(policy, suite)
+    stage(args, f"{policy} on {suite.suite_id} ({len(suite)} pairs): "
+                f"{', '.join(ls.LANGUAGE_VARIANTS)}")  # fmt: skip
+    table = ls.language_table(policy, suite)
     title = (
         f"Language sensitivity  ({policy}, suite {suite.suite_id}; Route A CUS per family; "
-        "other family's text: PE<->LWW, VC<->RWW, OR<->RTY canonical texts at the same "
-        "position)"
+        "texts at the hazard's position: other family's text: PE<->LWW, VC<->RWW, OR<->RTY "
+        "canonical texts; same road type: PE->VC->OR->PE, LWW->RWW->RTY->LWW first "
+        "paraphrases; irrelevant and negated sentences: held out, see docs/language.md)"
     )
     note = (
         "gain kept = (variant - no warning) / (delivered text - no warning); a policy that "
-        "reads the words keeps little of its gain under another family's text or an empty "
-        f"one ('-' where the gain is below {dg.MIN_GAIN_FOR_SHARE:.0f} point)."
+        "reads the words keeps little of its gain under every replacement ('-' where the gain "
+        f"is below {ls.MIN_GAIN_FOR_SHARE:.0f} point). "
+        + interval_note(over="route pairs, stratified by family; gain kept paired")
+        + "."
     )
-    return print_and_write({"language": (title, table)}, args.out, note)
+    columns = [c for c in table.columns if c not in ("Variant", "n") and not c.endswith(
+        ("_lo", "_hi"))]  # fmt: skip
+    display = interval_display(table, columns, "n").drop(columns="n")
+    return print_and_write({"language": (title, table, display)}, args.out, note)
 
 
 def _nonactionable(args: argparse.Namespace, policy: str) -> int:

@@ -162,6 +162,13 @@ NON_ACTIONABLE: tuple[str, ...] = (
     "Caution: traffic is restricted on a parallel road outside the ego route.",
 )
 
+#: The held-out probes of the language diagnostic
+#: (:mod:`lantern_jax.apps.language_sensitivity`): sentences that state the hazard's position
+#: and ask for no reaction.  They are in no bank that a suite, the dataset or a training recipe
+#: reads (the diagnostic appends them to its own), so no model of the package trains on them.
+PROBE_IRRELEVANT = f"The bakery at position {TOKEN} sells fresh bread today."
+PROBE_NEGATED = f"Nothing is at position {TOKEN}; the ego lane is clear."
+
 
 @dataclass(frozen=True)
 class WarningText:
