@@ -97,10 +97,9 @@ USER_FAMILY_MODULE_PREFIX = "lantern_jax_user_families_"
 def registrations_stay_in_their_test():
     """Families a test registers (and their warning texts) are forgotten when it ends.
 
-    A registered family extends the default text bank, a static setting of every world
-    program: one left registered would make every later evaluation in the worker compile a
-    world program of its own instead of the session's stored one (:func:`pytest_configure`).
-    Registrations made before the test (a module fixture's) are kept."""
+    A family left registered would change what later tests see (the families of the
+    registry, the default text bank, suites built from the registry).  Registrations made
+    before the test (a module fixture's) are kept."""
     from lantern_jax.scenarios import registry
 
     state, before = registry.snapshot(), set(sys.modules)

@@ -3,10 +3,11 @@
 Every entry of :data:`CHANGES` changes one setting of a simulation — a scoring threshold or
 weight, a tick window, the soft temperature, a protocol threshold, a planner constant of the
 ``coop`` policy, a text of the warning bank — as a user would in a notebook: a new settings
-value (or new policy parameters) passed to the next call.  :func:`probe` evaluates ``coop`` on
-:data:`PAIRS` with it and returns what the change can alter as bytes: the route-level table
-(CSV), or for the temperature (which only the soft, differentiable score reads) the soft CUS of
-every pair.
+value (or new policy parameters) passed to the next call.  A change marked ``(static)``
+compiles another program; the others run the program already compiled.  :func:`probe`
+evaluates ``coop`` on :data:`PAIRS` with it and returns what the change can alter as bytes:
+the route-level table (CSV), or for the temperature (which only the soft, differentiable score
+reads) the soft CUS of every pair.
 
 Run as a script (``python tests/settings_probe.py NAME ...``) it prints ``NAME SHA-256`` of
 each probe, so that a fresh process can be compared with the running one.
@@ -74,7 +75,7 @@ CHANGES: dict[str, Change] = {
     "protocol.still_speed_mps": _protocol(still_speed_mps=3.0),
     "planner.idm_T": _planner(idm_T=2.0),
     "planner.max_brake": _planner(max_brake=3.0),
-    "bank.text (static)": _text(
+    "bank.text": _text(
         0, "The pedestrian at position <FRONT_CAR_POS> is about to enter the ego lane. Yield."
     ),
 }
@@ -83,10 +84,16 @@ CHANGES: dict[str, Change] = {
 def probe(name: str | None) -> bytes:
     """What ``coop`` on :data:`PAIRS` gives under change ``name`` (``None``: the defaults): the
     route-level table (CSV) and the soft CUS of every pair (float32 bytes)."""
-    coop = get_policy("coop")
-    settings, params = DEFAULT_SETTINGS, coop.init(jax.random.PRNGKey(0))
+    settings, params = DEFAULT_SETTINGS, get_policy("coop").init(jax.random.PRNGKey(0))
     if name is not None:
         settings, params = CHANGES[name](settings, params)
+    return probe_with(settings, params)
+
+
+def probe_with(settings: Settings, params: Any = None) -> bytes:
+    """:func:`probe` of ``settings`` and ``coop``'s parameters (default: its own)."""
+    coop = get_policy("coop")
+    params = coop.init(jax.random.PRNGKey(0)) if params is None else params
     suite = load_suite().select(PAIRS)
     result = evaluate([coop], [params], suite=suite, progress=False, settings=settings)
     table = result.route_table.to_csv(index=False, float_format="%.9g").encode()

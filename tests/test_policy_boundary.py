@@ -36,6 +36,7 @@ from lantern_jax.scenarios.suite import build_suite_scenarios, load_suite
 from lantern_jax.scenarios.warnings import EMPTY_TEXT_ID, TEMPLATES, non_actionable_text_ids
 from lantern_jax.scenarios.warnings import token_table as bank_tokens
 from lantern_jax.sensors.registry import normalize_sensors
+from lantern_jax.sim import programs
 from lantern_jax.sim.observe import observe
 from lantern_jax.sim.state import init_state
 from lantern_jax.types.language import PAD_ID
@@ -264,13 +265,16 @@ LANGUAGE_COLUMNS = ["PE", "VC", "OR", "LWW", "RWW", "RTY", "Overall"]
 
 
 def test_language_sensitivity_of_coop(six_pairs):
-    """The diagnostic's rows without the probe sentences (they compile a program of their own;
-    the slow test below runs them): the empty text is no warning (the policy cannot tell them
-    apart), and coop's PE gain goes with the pedestrian's words (another family's canonical text
-    and a paraphrase of another straight-road family keep none of it)."""
-    variants = ("other family's text", "same road type, other family's paraphrase", "empty text")
-    table = language_table("coop", six_pairs, variants=variants).set_index("Variant")
-    assert list(table.index[:5]) == ["delivered text", *variants, "no warning"]
+    """The diagnostic's rows, all from the evaluation's program (the probe sentences are rows of
+    the bank's tables, an argument): the empty text is no warning (the policy cannot tell them
+    apart); coop's PE gain goes with the pedestrian's words -- another family's canonical text,
+    a paraphrase of another straight-road family and the bakery sentence keep none of it -- but
+    its keyword rule reads "ego lane" in the negated sentence and keeps all of it: the
+    diagnostic shows that it does not understand negation."""
+    language_table("coop", six_pairs, variants=())  # the delivered text: compiles the program
+    before = set(programs._EXECUTABLES)
+    table = language_table("coop", six_pairs).set_index("Variant")
+    assert list(table.index[:7]) == list(LANGUAGE_VARIANTS)
     np.testing.assert_allclose(
         table.loc["empty text", LANGUAGE_COLUMNS].to_numpy(float),
         table.loc["no warning", LANGUAGE_COLUMNS].to_numpy(float),
@@ -279,23 +283,14 @@ def test_language_sensitivity_of_coop(six_pairs):
     assert table.loc["delivered text", "PE"] > table.loc["no warning", "PE"] + 50.0
     lo, est, hi = table.loc["delivered text", ["Overall_lo", "Overall", "Overall_hi"]]
     assert lo <= est <= hi
-    assert table.loc["gain kept by other family's text (%)", "PE"] < 30.0
-    same_road = "gain kept by same road type, other family's paraphrase (%)"
-    assert table.loc[same_road, "PE"] == pytest.approx(0.0, abs=1e-6)
-    assert table.loc["gain kept by empty text (%)", "PE"] == pytest.approx(0.0, abs=1e-6)
-
-
-@pytest.mark.slow  # the probe sentences' bank compiles its own program
-def test_language_probes_of_coop(six_pairs):
-    """The held-out sentences that state the position: coop's keyword rule ignores the bakery
-    sentence (no gain kept) but reads "ego lane" in the negated one and keeps its PE gain --
-    the diagnostic shows that it does not understand negation."""
-    table = language_table("coop", six_pairs).set_index("Variant")
-    assert list(table.index[:7]) == list(LANGUAGE_VARIANTS)
-    irrelevant = "gain kept by irrelevant sentence with the position (%)"
-    negated = "gain kept by negated sentence with the position (%)"
-    assert table.loc[irrelevant, "PE"] == pytest.approx(0.0, abs=1e-6)
-    assert table.loc[negated, "PE"] == pytest.approx(100.0, abs=1e-3)
+    kept = table["PE"]
+    assert kept["gain kept by other family's text (%)"] < 30.0
+    for v in ("same road type, other family's paraphrase", "irrelevant sentence with the position",
+              "empty text"):  # fmt: skip
+        assert kept[f"gain kept by {v} (%)"] == pytest.approx(0.0, abs=1e-6), v
+    negated = kept["gain kept by negated sentence with the position (%)"]
+    assert negated == pytest.approx(100.0, abs=1e-3)
+    assert set(programs._EXECUTABLES) == before, "a replaced text compiled a program"
 
 
 def test_an_agent_with_memory_in_the_brax_environment():

@@ -268,21 +268,26 @@ def test_the_store_is_off_with_the_compilation_cache():
 
 
 def test_static_settings_change_the_key_and_traced_ones_do_not():
-    """Settings are arguments: their static part (tick windows, the text bank) is in the
-    arguments' tree structure, so a change is another key; a traced value (a threshold) runs the
-    same stored program with the new value."""
+    """Settings are arguments: their static part (tick windows) is in the arguments' tree
+    structure, so a change is another key; a traced value (a threshold, a text of the bank) runs
+    the same stored program with the new value; a bank past 128 texts has tables of another
+    shape, another key."""
     args = (DEFAULT_SETTINGS,)
     base = program_store.program_key(("finalize",), args)
     window = DEFAULT_SETTINGS.replace(scoring=DEFAULT_SETTINGS.scoring.replace(react_window_s=3.0))
-    bank = DEFAULT_SETTINGS.replace(
-        bank=DEFAULT_SETTINGS.bank.with_text("PE", "non_actionable", "Road works ahead.")
-    )
+    bank = DEFAULT_SETTINGS.bank.with_text("PE", "non_actionable", "Road works ahead.")
     closing = DEFAULT_SETTINGS.replace(
         scoring=DEFAULT_SETTINGS.scoring.replace(closing_min_mps=2.0)
     )
+    large = bank
+    while len(large) <= 128:
+        large = large.with_text(-1, "non_actionable", f"Road works {len(large)} km ahead.")
     assert program_store.program_key(("finalize",), (window,)) != base
-    assert program_store.program_key(("finalize",), (bank,)) != base
+    key = program_store.program_key(("finalize",), (DEFAULT_SETTINGS.replace(bank=bank),))
+    assert key == base
     assert program_store.program_key(("finalize",), (closing,)) == base
+    key = program_store.program_key(("finalize",), (DEFAULT_SETTINGS.replace(bank=large),))
+    assert key != base
 
 
 def test_an_edited_package_file_changes_the_key(tmp_path, monkeypatch):

@@ -30,7 +30,7 @@ from lantern_jax.sim import engine, programs
 from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings
 
 PROBE = Path(__file__).with_name("settings_probe.py")
-#: Changes of a static setting (a tick window, the bank): another program, compiled again.
+#: Changes of a static setting (a tick window): another program, compiled again.
 STATIC = [n for n in sp.CHANGES if "(static)" in n]
 TRACED = [n for n in sp.CHANGES if n not in STATIC]
 
@@ -55,6 +55,18 @@ def test_a_traced_setting_changed_in_process_is_answered_without_compiling(name,
     assert changed != default_answer, name
     assert set(programs._EXECUTABLES) == before, "a traced setting compiled a new program"
     assert sp.probe(None) == default_answer
+
+
+def test_a_bank_grown_by_texts_runs_the_same_program_and_answers_the_same(default_answer):
+    """Texts added to the bank (a registered family's, the language diagnostic's probes) are
+    rows of its padded tables, an argument of the program: nothing is compiled, and executions
+    that do not read them answer as before."""
+    kid = "Mind the kid at <FRONT_CAR_POS>."
+    bank = DEFAULT_SETTINGS.bank.with_text("PE", "paraphrase", kid, "low")
+    bank = bank.with_text(-1, "non_actionable", "Hello.")
+    before = set(programs._EXECUTABLES)
+    assert sp.probe_with(DEFAULT_SETTINGS.replace(bank=bank)) == default_answer
+    assert set(programs._EXECUTABLES) == before, "a grown bank compiled a new program"
 
 
 @pytest.mark.slow

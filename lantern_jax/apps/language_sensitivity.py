@@ -27,8 +27,8 @@ tested on words it never trained on.  The "other family's text" swap is, by cont
 counterfactual texts of the closed-loop training recipe
 (:mod:`lantern_jax.apps.training.counterfactual`).
 
-The probe sentences are appended to the settings' text bank, a static setting: their two runs
-compile one program of their own; the other variants run the evaluation's program.
+The probe sentences are appended to the settings' text bank, whose tables are an argument of
+the compiled program: every variant runs the evaluation's program.
 """
 
 from __future__ import annotations
@@ -155,7 +155,7 @@ def _with_intervals(runs: dict[str, pd.DataFrame], chosen: Sequence[str], seed: 
     columns = [*res.table_families, OVERALL]
     lo, hi = interval(reps)
     share_est, share_reps = _shares(est, chosen), _shares(reps, chosen)
-    share_lo, share_hi = interval(share_reps)
+    share_lo, share_hi = interval(share_reps) if share_est.size else (share_est, share_est)
     fewest = min(int(res.family_mask(f).sum()) for f in set(res.families))
     rows = []
     for label, e, a, b in (

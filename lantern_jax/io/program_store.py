@@ -22,7 +22,8 @@ section).
   functions by module and qualified name plus everything they close over, this package's
   objects by their fields, arrays by their bytes;
 * the arguments' tree structure (the static part of the settings included: tick windows, the
-  text bank) and every leaf's shape, dtype and placement.
+  user metrics) and every leaf's shape, dtype and placement (the text bank's tables: their
+  rows, a multiple of 128 texts).
 
 Every value a user may change is an argument (:class:`lantern_jax.sim.settings.Settings`, the
 policy's parameters), never baked into the program, so the key needs no picture of the

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+from typing import Any
 
 from lantern_jax.core import family_codes
 from lantern_jax.core.constants import FAMILIES
@@ -237,14 +238,23 @@ def _initial_entries() -> tuple[WarningText, ...]:
 
 @dataclass(frozen=True)
 class TextBank:
-    """The warning texts a simulation knows: an immutable value (hashable, so it can be a
-    static part of a compiled program's settings, :class:`lantern_jax.sim.settings.Settings`).
+    """The warning texts a simulation knows: an immutable, hashable value.
+
+    In a compiled program the bank is an argument, not part of the program: it is a JAX pytree
+    whose leaves are its token tables, padded to a multiple of
+    :data:`lantern_jax.scenarios.warnings.TEXT_CAPACITY_STEP` texts
+    (:mod:`lantern_jax.scenarios.warnings` registers it), so a changed or added text runs the
+    program already compiled.  Inside a trace the bank is rebuilt from those leaves: ``tables``
+    holds them and ``entries`` is empty.
 
     Attributes:
         entries: the texts in id order (``entries[i].text_id == i``).
+        tables: ``None`` on the host; inside a trace, the padded
+            :class:`~lantern_jax.scenarios.warnings.TextTables` of traced arrays.
     """
 
     entries: tuple[WarningText, ...]
+    tables: Any = dataclasses.field(default=None, compare=False, repr=False)
 
     def __len__(self) -> int:
         return len(self.entries)

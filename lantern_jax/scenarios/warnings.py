@@ -357,14 +357,57 @@ class TextTables:
 
 
 def text_tables(bank: TextBank | None = None) -> TextTables:
-    """The per-text tables a rollout indexes by text id (:class:`TextTables`), built once per
-    bank (outside ``jit``; the arrays are read-only).
+    """The per-text tables a rollout indexes by text id (:class:`TextTables`): one row per text
+    of the bank, built once per bank (read-only NumPy arrays); inside a trace, the bank's
+    traced tables (padded to :func:`text_capacity` rows).
 
     Raises:
         lantern_jax.types.language.LanguageAssetError: when the tokenizer file is missing.
         ValueError: naming a text longer than ``MAX_TOKENS`` tokens.
     """
-    return _text_tables(_bank(bank))
+    b = _bank(bank)
+    return b.tables if b.tables is not None else _text_tables(b)
+
+
+#: The rows of a bank's tables in a compiled program are a multiple of this many texts: every
+#: bank of up to 128 texts (the built-in 66, with the three unseen families' 30 or the language
+#: diagnostic's two probes) runs the same program; a larger bank compiles another.
+TEXT_CAPACITY_STEP = 128
+
+
+def text_capacity(num_texts: int) -> int:
+    """Rows of the tables of a bank of ``num_texts`` texts in a compiled program."""
+    return -(-max(num_texts, 1) // TEXT_CAPACITY_STEP) * TEXT_CAPACITY_STEP
+
+
+@functools.lru_cache(maxsize=8)
+def _padded_tables(bank: TextBank) -> TextTables:
+    """:func:`text_tables` padded to :func:`text_capacity` rows: padding rows read as no text
+    (all ``PAD_ID``, no position), as an id beyond the bank does."""
+    t = _text_tables(bank)
+    pad = text_capacity(len(bank)) - len(bank)
+    tables = TextTables(
+        tokens=np.pad(t.tokens, ((0, pad), (0, 0)), constant_values=language.PAD_ID),
+        x_slot=np.pad(t.x_slot, (0, pad), constant_values=-1),
+        y_slot=np.pad(t.y_slot, (0, pad), constant_values=-1),
+    )
+    for a in (tables.tokens, tables.x_slot, tables.y_slot):
+        a.setflags(write=False)
+    return tables
+
+
+def _flatten_bank(bank: TextBank) -> tuple[tuple, None]:
+    t = bank.tables if bank.tables is not None else _padded_tables(bank)
+    return (t.tokens, t.x_slot, t.y_slot), None
+
+
+def _unflatten_bank(aux: None, leaves: tuple) -> TextBank:
+    del aux
+    return TextBank((), TextTables(*leaves))
+
+
+# The bank is an argument of a compiled program (its tables), never a part of it.
+jax.tree_util.register_pytree_node(TextBank, _flatten_bank, _unflatten_bank)
 
 
 @functools.lru_cache(maxsize=8)
@@ -407,8 +450,9 @@ def warning_language(
         position: (2,) float32, m, the grounded position (ego frame, x forward, y right); it
             enters the value channel rounded as the text writes it, and only for a text that
             states a position.
-        bank: static; the text bank (default: :func:`registered_bank` when traced; the
-            simulator always passes its settings' bank).
+        bank: the text bank, traced in a compiled program (default: :func:`registered_bank`,
+            whose tables are then constants of the program; the simulator always passes its
+            settings' bank).
 
     Returns:
         tokens: (MAX_TOKENS,) int32, all ``PAD_ID`` when inactive or unknown.

@@ -48,7 +48,7 @@ from lantern_jax.types.world import Scenario
 
 #: ``add(obs, scenario, state, bank) -> obs``: the observation of one execution with the
 #: sensor's reading joined (``state``: the simulator's state at the start of the tick; ``bank``:
-#: static, the warning texts, ``Settings.bank``).
+#: the warning texts, ``Settings.bank``, traced in a compiled program).
 AddFn = Callable[[Observation, Scenario, Any, Any], Observation]
 
 

@@ -120,7 +120,7 @@ def observe(
         state: the simulator state at time ``state.t`` (its percept is that of the same tick).
         sensors: static; the policy's sensor names
             (:func:`~lantern_jax.sensors.registry.normalize_sensors`; ``Policy.sensors``).
-        bank: static; the warning texts (``Settings.bank``).
+        bank: the warning texts (``Settings.bank``; traced in a compiled program).
 
     Raises:
         ValueError: naming a sensor the table does not hold.
@@ -164,7 +164,7 @@ def observe_every_sensor(
         scenario, state: as :func:`observe`.
         privileged: () bool, compute the ground truth and forecasts.
         surround: () bool, fill ``Observation.surround`` and add what the rig sees.
-        bank: static; the warning texts.
+        bank: the warning texts (traced in a compiled program).
         privileged_as: applied to the ground-truth view inside its branch (e.g. packing it,
             so that the branch that is off writes zeros of the packed shape only).
 

@@ -6,15 +6,17 @@
   (:class:`~lantern_jax.scoring.thresholds.ScoringSettings`);
 * ``protocol`` — the temporal protocol's thresholds
   (:class:`~lantern_jax.scenarios.protocol.ProtocolSettings`);
-* ``bank`` — the warning texts (:class:`~lantern_jax.scenarios.warnings.TextBank`, static).
+* ``bank`` — the warning texts (:class:`~lantern_jax.scenarios.warnings.TextBank`; its token
+  tables, padded to a multiple of 128 texts, are the program's arguments).
 
 A planner's constants are its policy's parameters (``PlannerConfig`` inside the reference
 policies' params), the other thing a rollout takes as an argument.
 
 Because settings are arguments, a changed setting is a different input: no cache — JAX's, the
 evaluator's, the program store — can answer for it with the program of another value.  Float
-fields are traced (a change runs the same compiled program and can be batched with ``vmap``);
-tick windows and the bank are static (a change compiles again).  Defaults live in one place
+fields and the texts of the bank are traced (a change runs the same compiled program; floats
+can be batched with ``vmap``); tick windows, the user metrics and a bank grown past a multiple
+of 128 texts are static (a change compiles again).  Defaults live in one place
 each: the dataclasses' field defaults.
 
     from lantern_jax import Settings, evaluate
@@ -42,7 +44,7 @@ class Settings:
 
     scoring: ScoringSettings = DEFAULT_SCORING
     protocol: ProtocolSettings = DEFAULT_PROTOCOL
-    bank: TextBank = struct.field(pytree_node=False, default=DEFAULT_BANK)
+    bank: TextBank = DEFAULT_BANK  # a pytree: its token tables (padded) are the leaves
 
     def validate(self) -> Settings:
         """Check the values outside ``jit``; returns self.

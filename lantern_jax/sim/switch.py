@@ -139,7 +139,7 @@ class PolicySwitch:
             carry: the switch's carry (:meth:`initial_carry`).
             scenario, state: the execution now; the cameras' observation is built once, and a
                 branch adds from them what only its members read.
-            bank: static; the warning texts.
+            bank: the warning texts (``Settings.bank``; traced in a compiled program).
 
         Returns:
             ((10, 2) float32 waypoints, the new carry).
