@@ -459,3 +459,42 @@ def test_soft_tends_to_hard(name):
     assert len(hard_values) == 1  # the hard value does not depend on the temperature
     assert errors[2] <= errors[1] + 1e-6 and errors[1] <= errors[0] + 1e-6, errors
     assert errors[2] < 5e-3, errors
+
+
+#: The parameters of each function a role provides (the module docstring of
+#: ``lantern_jax.scoring.components``); clearance's ``soft`` also takes the scene's ``d_safe``.
+ROLE_CONTRACT = {
+    "hazard": {"valid": ("state", "ctx", "t_fail"), "hard": ("state", "ctx", "t_fail"),
+               "soft": ("state", "ctx", "t_fail", "temperature", "settings")},
+    "route_a_gate": {"failure_times": ("state", "ctx", "settings"),
+                     "hard": ("state", "ctx", "settings"),
+                     "soft": ("state", "ctx", "temperature", "settings")},
+    "route_b_gate": {"hard": ("state", "ctx", "settings"),
+                     "soft": ("state", "ctx", "temperature", "settings")},
+    "diagnostic": {},
+}  # fmt: skip
+
+
+def test_every_component_of_the_table_keeps_its_role_s_contract_and_its_telemetry_field():
+    """One table (``COMPONENTS``): the telemetry's fields are its entries in order (between the
+    shared context and the user metrics), and every module has the functions of its role with
+    the role's parameters."""
+    import dataclasses
+    import inspect
+
+    from lantern_jax.scoring.components import COMPONENTS, ROLES
+    from lantern_jax.scoring.telemetry import Telemetry
+
+    fields = [f.name for f in dataclasses.fields(Telemetry)]
+    assert fields == ["context", *(c.field for c in COMPONENTS), "metrics"]
+    assert {c.role for c in COMPONENTS} == set(ROLES)
+    for c in COMPONENTS:
+        assert c.module.__name__.rsplit(".", 1)[1] == c.field
+        wanted = {"init": ("settings",), "update": ("state", "sample", "tick", "settings"),
+                  **ROLE_CONTRACT[c.role]}  # fmt: skip
+        for name, params in wanted.items():
+            got = tuple(inspect.signature(getattr(c.module, name)).parameters)
+            extra = ("d_safe",) if (c.field, name) == ("clearance", "soft") else ()
+            assert got == params + extra, (c.field, name, got)
+        if c.role == "hazard":
+            assert callable(c.module.score)

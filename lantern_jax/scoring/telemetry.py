@@ -24,6 +24,7 @@ from flax import struct
 
 from lantern_jax.scoring import user_metrics
 from lantern_jax.scoring.components import (
+    COMPONENTS,
     anticipation,
     block,
     clearance,
@@ -69,12 +70,9 @@ def init_telemetry(settings: ScoringSettings = DEFAULT_SCORING) -> Telemetry:
                      metrics=user_metrics.init_states(settings.metrics, settings))  # fmt: skip
 
 
-#: Every component's module by Telemetry field (``context`` apart: it runs first).
-_UNITS = {
-    "ttc": ttc, "clearance": clearance, "anticipation": anticipation, "recovery": recovery,
-    "collision": collision, "route_deviation": route_deviation, "lane": lane, "rule": rule,
-    "block": block, "false_brake": false_brake, "efficiency": efficiency,
-}  # fmt: skip
+#: Every component's module by Telemetry field, in the table's order (``context`` apart: it
+#: runs first).
+_UNITS = {c.field: c.module for c in COMPONENTS}
 
 
 def _step(tel: Telemetry, s: TickSample, settings: ScoringSettings) -> Telemetry:

@@ -1,43 +1,63 @@
 """The components of the Cooperative Unified Score, one small module each (paper appendix
-"Complete Cooperative Unified Score").
+"Complete Cooperative Unified Score"), and :data:`COMPONENTS`, the one ordered table of them.
 
-Every component measures one execution from running accumulators (no stored trajectory) and
-follows the same shape, so that :mod:`lantern_jax.scoring.telemetry` folds them side by side and
-:mod:`lantern_jax.scoring.metrics` / :mod:`lantern_jax.scoring.cus` compose their outputs:
+Every component measures one execution from running accumulators (no stored trajectory):
+:mod:`lantern_jax.scoring.telemetry` folds the table's components side by side, in its order,
+and :mod:`lantern_jax.scoring.metrics` / :mod:`lantern_jax.scoring.cus` compose their outputs.
+The functions a component module provides depend on its *role* (:data:`ROLES`); within a role
+they have one signature (``tests/test_scoring_components.py`` checks every module against it):
 
-* ``init() -> State`` -- the accumulators before the first tick;
-* ``update(state, sample, tick, temperature) -> State`` -- fold one tick; ``tick`` is the shared
+* every component: ``init(settings) -> State``, the accumulators before the first tick, and
+  ``update(state, sample, tick, settings) -> State``, one tick folded; ``tick`` is the shared
   per-tick :class:`~lantern_jax.scoring.components.context.Tick` computed once by
   :func:`context.update <lantern_jax.scoring.components.context.update>`;
-* ``hard(state, ctx[, t_fail]) -> (value, valid)`` -- the hard measurement (or gate pass flag)
-  and whether it is available;
-* ``soft(state, ctx[, t_fail], temperature) -> (value, valid)`` -- the smooth score in [0, 1]
-  that tends to the hard score as ``temperature -> 0``, with the same (hard) validity.
+* ``"hazard"`` (the four terms of ``S_A`` and ``T_A``): ``valid(state, ctx, t_fail)``, whether
+  its window opened by the first Route A gate failure ``t_fail``; ``hard(state, ctx, t_fail) ->
+  (value, valid)``, the hard measurement; ``soft(state, ctx, t_fail, temperature, settings) ->
+  (value, valid)``, the smooth score in [0, 1] that tends to the hard score as ``temperature ->
+  0`` (clearance also takes the scene's ``d_safe``); and an elementwise ``score`` that maps the
+  hard measurement to [0, 1] with what that term needs (a threshold, ``d_safe``, the protocol
+  times);
+* ``"route_a_gate"``: ``failure_times(state, ctx, settings)``, the times it failed at (its part
+  of ``t_fail``); ``hard(state, ctx, settings) -> (passed, valid)``; ``soft(state, ctx,
+  temperature, settings) -> (pass probability, valid)``;
+* ``"route_b_gate"``: ``hard`` and ``soft`` as a Route A gate (it fails no Route A execution,
+  so it has no failure times);
+* ``"diagnostic"``: ``init`` and ``update`` only; its outputs are read by name (not a term of the
+  CUS: no soft form, no weight).
 
-``ctx`` is the final shared :class:`~lantern_jax.scoring.components.context.Context` and
-``t_fail`` the first Route A gate failure (the hazard components are available only if their
-window opened by then).  The four hazard components also have an elementwise ``score`` that maps
-the hard measurement to ``[0, 1]``; progress is stateless (``hard(ctx)``, ``soft(ctx, T)``).
+``ctx`` is the final shared :class:`~lantern_jax.scoring.components.context.Context`.  Progress
+``P`` needs no accumulator of its own (the context holds the route progress): ``progress.hard(ctx,
+settings)`` and ``progress.soft(ctx, temperature, settings)``; :mod:`context` runs before every
+component.
 
-=================  ======================================================================
-module             component
-=================  ======================================================================
-context            shared per-tick context: tick counter, rings, protocol times, v_pre
-ttc                ``S_TTC``, time-to-collision over ``[t_ref, t_clear]``
-clearance          ``S_clear``, minimum distance over ``[t_event, t_clear]``
-anticipation       ``S_ant``, first sustained response (incl. the coincident-onset check)
-recovery           ``S_rec``, recovery latency after ``max(t_warn_off, t_clear)``
-progress           ``P``, route completion
-collision          ``G_coll``
-route_deviation    ``G_road``
-lane               ``G_lane``
-rule               ``G_rule``
-block              ``G_block``: 20 s standstill, timeout, controller fault
-false_brake        ``G_FB`` (Route B)
-efficiency         route completion time and unjustified slow time: a diagnostic beside the
-                   CUS, not a component of it (no soft form, no weight)
-=================  ======================================================================
+=================  =============  ==================================================================
+module             role           component
+=================  =============  ==================================================================
+ttc                hazard         ``S_TTC``, time-to-collision over ``[t_ref, t_clear]``
+clearance          hazard         ``S_clear``, minimum distance over ``[t_event, t_clear]``
+anticipation       hazard         ``S_ant``, first sustained response (incl. coincident onset)
+recovery           hazard         ``S_rec``, recovery latency after ``max(t_warn_off, t_clear)``
+collision          route_a_gate   ``G_coll``
+route_deviation    route_a_gate   ``G_road``
+lane               route_a_gate   ``G_lane``
+rule               route_a_gate   ``G_rule``
+block              route_a_gate   ``G_block``: 20 s standstill, timeout, controller fault
+false_brake        route_b_gate   ``G_FB``
+efficiency         diagnostic     route completion time and unjustified slow time
+progress           (context)      ``P``, route completion
+context            (shared)       tick counter, rings, protocol times, ``v_pre``
+=================  =============  ==================================================================
+
+A new term of the benchmark itself is a module here and one entry of :data:`COMPONENTS`; its
+state joins :class:`~lantern_jax.scoring.telemetry.Telemetry` under the entry's field name (the
+test above checks both agree), its hard value a field of
+:class:`~lantern_jax.scoring.metrics.ExecutionMetrics`.  A measurement of a user's own beside
+the CUS needs none of this: :mod:`lantern_jax.scoring.user_metrics`.
 """
+
+import dataclasses
+from types import ModuleType
 
 from lantern_jax.core.constants import ROUTE_A_GATE_FIELDS
 from lantern_jax.scoring.components import (
@@ -56,16 +76,57 @@ from lantern_jax.scoring.components import (
     ttc,
 )
 
-# hazard components by Telemetry field (and availability key)
-HAZARD_COMPONENTS = {"ttc": ttc, "clearance": clearance, "anticipation": anticipation,
-                     "recovery": recovery}  # fmt: skip
-# Route A gates by Telemetry field (the pass flag is ``"gate_" + name``), in failure-time order;
-# each gate's module is named after its field
-ROUTE_A_GATES = {name: globals()[name] for name in ROUTE_A_GATE_FIELDS}
+#: The roles of a component (what its module provides, see above).
+ROLES = ("hazard", "route_a_gate", "route_b_gate", "diagnostic")
+
+
+@dataclasses.dataclass(frozen=True)
+class Component:
+    """One entry of :data:`COMPONENTS`."""
+
+    field: str  # its Telemetry field (and its module's name)
+    module: ModuleType  # the functions of its role
+    role: str  # one of ROLES
+    symbol: str  # the paper's symbol ("" for a diagnostic)
+
+
+#: Every component with accumulators, in the order the telemetry folds them and holds them.
+COMPONENTS: tuple[Component, ...] = (
+    Component("ttc", ttc, "hazard", "S_TTC"),
+    Component("clearance", clearance, "hazard", "S_clear"),
+    Component("anticipation", anticipation, "hazard", "S_ant"),
+    Component("recovery", recovery, "hazard", "S_rec"),
+    Component("collision", collision, "route_a_gate", "G_coll"),
+    Component("route_deviation", route_deviation, "route_a_gate", "G_road"),
+    Component("lane", lane, "route_a_gate", "G_lane"),
+    Component("rule", rule, "route_a_gate", "G_rule"),
+    Component("block", block, "route_a_gate", "G_block"),
+    Component("false_brake", false_brake, "route_b_gate", "G_FB"),
+    Component("efficiency", efficiency, "diagnostic", ""),
+)
+
+
+def by_role(role: str) -> dict[str, ModuleType]:
+    """The modules of the components of ``role``, by Telemetry field, in table order."""
+    return {c.field: c.module for c in COMPONENTS if c.role == role}
+
+
+#: The hazard components by Telemetry field (and availability key).
+HAZARD_COMPONENTS = by_role("hazard")
+#: The Route A gates by Telemetry field (the pass flag is ``"gate_" + field``), in failure-time
+#: order: the order of their names in :data:`lantern_jax.core.constants.ROUTE_A_GATE_FIELDS`,
+#: which the tables read without importing JAX.
+ROUTE_A_GATES = by_role("route_a_gate")
+if tuple(ROUTE_A_GATES) != ROUTE_A_GATE_FIELDS:
+    raise AssertionError(f"Route A gates {tuple(ROUTE_A_GATES)} != {ROUTE_A_GATE_FIELDS}")
 
 __all__ = [
+    "COMPONENTS",
     "HAZARD_COMPONENTS",
+    "ROLES",
     "ROUTE_A_GATES",
+    "Component",
+    "by_role",
     "anticipation",
     "block",
     "clearance",
