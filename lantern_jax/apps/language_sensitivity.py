@@ -168,16 +168,10 @@ def _with_intervals(runs: dict[str, pd.DataFrame], chosen: Sequence[str], seed: 
             names = interval_columns(col)
             row[col], row[names[0]], row[names[1]] = float(e[j]), float(a[j]), float(b[j])
         rows.append(row)
-    table = pd.DataFrame(rows)
-    value_columns = [*FAMILIES, *(c for c in columns if c not in FAMILIES and c != OVERALL),
-                     OVERALL]  # fmt: skip
-    for col in value_columns:
-        if col not in table:  # a built-in family without pairs in the suite
-            names = interval_columns(col)
-            table[col] = table[names[0]] = table[names[1]] = np.nan
-    ordered = ["Variant", "n", *value_columns,
-               *(x for c in value_columns for x in interval_columns(c)[:2])]  # fmt: skip
-    return table[ordered]
+    # the six built-in families are always columns (NaN without pairs), registered ones follow
+    ordered = ["Variant", "n", *columns,
+               *(x for c in columns for x in interval_columns(c)[:2])]  # fmt: skip
+    return pd.DataFrame(rows)[ordered]
 
 
 def language_table(
