@@ -67,7 +67,7 @@ _EXPORTS = {
     "DEFAULT_SETTINGS": "lantern_jax.sim.settings",
     "default_settings": "lantern_jax.sim.settings",
     "ScoringSettings": "lantern_jax.scoring.thresholds",
-    "ProtocolSettings": "lantern_jax.scenarios.protocol",
+    "ProtocolSettings": "lantern_jax.sim.protocol",
     "TextBank": "lantern_jax.scenarios.warnings",
     "FamilyRecord": "lantern_jax.scenarios.registry",
     "register_family": "lantern_jax.scenarios.registry",
@@ -116,10 +116,10 @@ if TYPE_CHECKING:  # for type checkers and IDEs: the same names, imported eagerl
     from lantern_jax.policies.base import Policy
     from lantern_jax.policies.registry import get_policy, policy_names, register_policy_source
     from lantern_jax.report import write_outputs
-    from lantern_jax.scenarios.protocol import ProtocolSettings
     from lantern_jax.scenarios.registry import FamilyRecord, register_family
     from lantern_jax.scenarios.suite import Suite, load_suite
     from lantern_jax.scenarios.warnings import TextBank
     from lantern_jax.scoring.thresholds import ScoringSettings
+    from lantern_jax.sim.protocol import ProtocolSettings
     from lantern_jax.sim.rollout import rollout
     from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings, default_settings

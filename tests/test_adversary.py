@@ -292,9 +292,9 @@ def test_batches_mix_pairs_with_and_without_tracks(suite):
 # ---------------------------------------------------------------------------------------------
 def _actor_states(scenario, ticks):
     """Every tick's actor states of one execution driven by a constant-speed ego."""
+    from lantern_jax.core.times import NEVER
     from lantern_jax.dynamics.actors import step_actors
     from lantern_jax.dynamics.lights import light_states
-    from lantern_jax.scenarios.protocol import NEVER
 
     def body(actors, k):
         t = (k + 1).astype(jnp.float32) * DT

@@ -23,11 +23,12 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("maths",),  # pure JAX maths and loop rewrites
     ("types", "io"),  # scenario, world state, observation and token types; files on disk
     # how things move, what cameras see (ray casting and the camera rigs, which the scenarios'
-    # premise check runs too), how it is measured
-    ("dynamics", "sensors.visibility", "sensors.cameras", "scoring"),
-    ("scenarios",),  # roads, families, protocol, warnings, suites (NumPy builders + JAX protocol)
+    # premise check runs too), how it is measured, and what the warning channel delivers (a
+    # reading of the protocol's times)
+    ("dynamics", "sensors.visibility", "sensors.cameras", "sensors.warning_delivery", "scoring"),
+    ("scenarios",),  # roads, families, protocol variants, warnings, suites (NumPy builders)
     ("sensors",),  # the sensor table and the observation-level readings (the warning text reads
-    #                the protocol, so they sit above the scenarios)
+    #                the text bank, so they sit above the scenarios)
     ("policies",),  # reference planners and the registry
     ("sim",),  # one tick and the rollouts
     ("report",),  # the results as data, their tables and files, comparisons of result folders

@@ -31,6 +31,9 @@ RENAMED = {
     "lantern_jax.ablations": "lantern_jax.apps.ablation_table",  # runs the ablation table
     "lantern_jax.scenarios.ablations": "lantern_jax.scenarios.protocol_variants",  # the variants
     "lantern_jax.generate": "lantern_jax.apps.suite_generation",  # generates suites
+    # the per-tick protocol state machine sits next to the tick (its delivery reads, which the
+    # warning sensor takes, in lantern_jax.sensors.warning_delivery, are importable from it)
+    "lantern_jax.scenarios.protocol": "lantern_jax.sim.protocol",
     "lantern_jax.dataset.generate": "lantern_jax.apps.dataset.generation",  # the dataset
     "lantern_jax.envs.train": "lantern_jax.apps.envs.ppo_training",  # brax PPO
     "lantern_jax.training.train": "lantern_jax.apps.training.behaviour_cloning",  # the BC loop

@@ -57,7 +57,7 @@ def light_holds_ego(
 
     Used by the protocol (it pauses the anti-deadlock countdown) and by the scoring (it
     justifies a Route B stop); the distances are protocol settings
-    (:class:`lantern_jax.scenarios.protocol.ProtocolSettings`).
+    (:class:`lantern_jax.sim.protocol.ProtocolSettings`).
 
     Args:
         light: () int32, LIGHT_* state of the ego's light.

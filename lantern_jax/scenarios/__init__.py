@@ -1,1 +1,2 @@
-"""Road builder, the six LANTERN scenario families, warnings, protocol and the frozen suite."""
+"""Road builder, the six LANTERN scenario families, warnings, the protocol's variants and the frozen
+suite (the protocol's per-tick transitions are :mod:`lantern_jax.sim.protocol`)."""

@@ -498,8 +498,9 @@ def set_override(
     ``position`` while ``anchor + on_s <= t < anchor + off_s``, on any route and condition.
 
     Outside the window the protocol's own warning (if any) is delivered as usual.  The override
-    changes only what the policy reads (:func:`~lantern_jax.scenarios.protocol.delivered_warning`),
-    not the protocol's times or the scoring.  A text that states no position delivers none.
+    changes only what the policy reads
+    (:func:`~lantern_jax.sensors.warning_delivery.delivered_warning`), not the protocol's times
+    or the scoring.  A text that states no position delivers none.
 
     Args:
         scenario: one :class:`~lantern_jax.types.world.Scenario` or a batch (leading axis).

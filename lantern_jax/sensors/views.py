@@ -22,7 +22,8 @@ import jax.numpy as jnp
 from lantern_jax.core.constants import OVERRIDE_FRAME_EGO, SURROUND_FOV
 from lantern_jax.dynamics.forecast import earliest_event_time, forecast_actors
 from lantern_jax.maths import geometry
-from lantern_jax.scenarios import protocol, warnings
+from lantern_jax.scenarios import warnings
+from lantern_jax.sensors import warning_delivery
 from lantern_jax.sensors.cameras import SURROUND_RAYS, camera_view
 from lantern_jax.types.language import MAX_TOKENS, PAD_ID
 from lantern_jax.types.observation import FORECAST_DT, FORECAST_STEPS, PrivilegedView, SurroundView
@@ -73,7 +74,7 @@ def delivered_warning(
             when the text states no position).
     """
     cfg, ego = scenario.config, state.ego
-    active, text_id, overridden = protocol.delivered_warning(state.protocol, cfg, state.t)
+    active, text_id, overridden = warning_delivery.delivered_warning(state.protocol, cfg, state.t)
     fixed = jnp.stack([cfg.override_x, cfg.override_y])
     override_pos = jnp.where(
         cfg.override_frame == OVERRIDE_FRAME_EGO,

@@ -5,7 +5,7 @@
 * ``scoring`` — the CUS thresholds, weights and the soft temperature
   (:class:`~lantern_jax.scoring.thresholds.ScoringSettings`);
 * ``protocol`` — the temporal protocol's thresholds
-  (:class:`~lantern_jax.scenarios.protocol.ProtocolSettings`);
+  (:class:`~lantern_jax.sim.protocol.ProtocolSettings`);
 * ``bank`` — the warning texts (:class:`~lantern_jax.scenarios.warnings.TextBank`; its token
   tables, padded to a multiple of 128 texts, are the program's arguments).
 
@@ -33,9 +33,9 @@ from typing import Any
 import numpy as np
 from flax import struct
 
-from lantern_jax.scenarios.protocol import DEFAULT_PROTOCOL, ProtocolSettings
 from lantern_jax.scenarios.warnings import DEFAULT_BANK, TextBank, registered_bank
 from lantern_jax.scoring.thresholds import DEFAULT_SCORING, ScoringSettings
+from lantern_jax.sim.protocol import DEFAULT_PROTOCOL, ProtocolSettings
 
 
 @struct.dataclass

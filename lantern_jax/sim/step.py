@@ -13,7 +13,7 @@ A tick (time ``t`` -> ``t + DT``) is two functions composed by :func:`step`:
      (full braking, recorded), never propagated;
   2. **protocol, before the actors** — warning point, anti-deadlock countdown (paused while a
      light or a queue holds the ego) and event onset, with sub-tick times
-     (:mod:`lantern_jax.scenarios.protocol`);
+     (:mod:`lantern_jax.sim.protocol`);
   3. **actors** — scripted actors (closed form, triggered by the event), IDM traffic and lights
      (:mod:`lantern_jax.dynamics.actors`);
   4. **sensing** — front camera and route place (:mod:`lantern_jax.sim.sense`);
@@ -40,9 +40,9 @@ from lantern_jax.dynamics.actors import step_actors
 from lantern_jax.dynamics.controller import follow_plan
 from lantern_jax.dynamics.lights import ego_light_state, light_states
 from lantern_jax.policies.base import Policy
-from lantern_jax.scenarios import protocol
 from lantern_jax.scoring.measure import TickEnd, execution_ended, justified_stop, measure
 from lantern_jax.scoring.telemetry import update_telemetry
+from lantern_jax.sim import protocol
 from lantern_jax.sim.observe import actors_in_ego_frame, delivered_warning, observe, route_ahead
 from lantern_jax.sim.record import TickRecord, tick_record
 from lantern_jax.sim.sense import locate_on_route, sense

@@ -21,12 +21,14 @@ once.  Per execution:
   rather than a geometric clearance, ended the interaction, when a geometric one was defined),
   or (``clear_on_ego_stop``) the ego has stood still for 1 s after seeing the hazard.
 
-Warning delivery (what a policy reads) is a function of these times and the ablation switches:
-active on ``[t_on, t_warn_off + warn_hold_extra)`` with ``t_on = t_warn_point`` (or ``t_event``
-with the late-onset ablation), and only in the warning condition of Route A.  A warning
-override (``ExecutionConfig.override_*``, :func:`delivered_warning`) delivers a chosen text in a
-chosen window on any execution, Route B included; it changes what the policy reads, never these
-times.
+Warning delivery (what a policy reads) is a reading of these times and the ablation switches,
+:mod:`lantern_jax.sensors.warning_delivery` (the warning sensor reads it, one layer below the
+tick): active on ``[t_on, t_warn_off + warn_hold_extra)`` with ``t_on = t_warn_point`` (or
+``t_event`` with the late-onset ablation), and only in the warning condition of Route A.  A
+warning override (``ExecutionConfig.override_*``, :func:`delivered_warning`) delivers a chosen
+text in a chosen window on any execution, Route B included; it changes what the policy reads,
+never these times.  Those reads are importable from here too, so the protocol's whole interface
+reads from one module.
 
 The protocol's own thresholds (what counts as stopped, as a queue, as a light holding the ego)
 are :class:`ProtocolSettings`, a frozen pytree passed as an argument (defaults: the values
@@ -39,18 +41,24 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from lantern_jax.core.constants import (
-    BIG,
-    DT,
-    EGO_HALF_WIDTH,
-    OVERRIDE_ANCHOR_WARN_POINT,
-    ROLE_BACKGROUND,
-)
+from lantern_jax.core.constants import BIG, DT, EGO_HALF_WIDTH, ROLE_BACKGROUND
 from lantern_jax.core.times import NEVER, happened
 from lantern_jax.dynamics.lights import light_holds_ego
+from lantern_jax.sensors.warning_delivery import (
+    delivered_warning,
+    override_window,
+    warning_active,
+    warning_onset,
+)
 from lantern_jax.types.world import ActorState, ExecutionConfig, ProtocolState
 
 Array = jax.Array
+
+__all__ = [
+    "DEFAULT_PROTOCOL", "ProtocolSettings", "advance_hazard", "advance_markers", "crossing_time",
+    "delivered_warning", "despawn_cleared", "ego_held", "override_window", "record_onset",
+    "warning_active", "warning_onset",
+]  # fmt: skip
 
 
 @struct.dataclass
@@ -272,55 +280,3 @@ def despawn_cleared(
     h = config.hazard_index
     gone = happened(proto.t_clear) & config.despawn_on_clear
     return actors.replace(active=actors.active.at[h].set(actors.active[h] & ~gone))
-
-
-def warning_onset(proto: ProtocolState, config: ExecutionConfig) -> Array:
-    """() s, start of warning delivery (NEVER when no warning is delivered at all)."""
-    t_on = jnp.where(config.late_onset, proto.t_event, proto.t_warn_point)
-    delivered = config.warning_enabled & config.is_route_a
-    return jnp.where(delivered, t_on, NEVER)
-
-
-def warning_active(proto: ProtocolState, config: ExecutionConfig, t: Array) -> Array:
-    """() bool: the warning text is delivered to the policy at time ``t``.
-
-    Active on ``[t_on, t_warn_off + warn_hold_extra)``; ``t_warn_off`` is NEVER until the
-    hazard is seen, so the interval stays open until then.
-    """
-    t_on = warning_onset(proto, config)
-    t_off = jnp.where(happened(proto.t_warn_off), proto.t_warn_off + config.warn_hold_extra, NEVER)
-    return happened(t_on) & (t >= t_on) & (t < t_off)
-
-
-def override_window(proto: ProtocolState, config: ExecutionConfig, t: Array) -> Array:
-    """() bool: the warning override is open at time ``t``.
-
-    Open on ``[anchor + override_on_s, anchor + override_off_s)`` where the anchor is ``0`` or
-    the time the ego reached the warning point (``override_anchor``); never open for a negative
-    ``override_text_id``, an empty window, or an anchor that has not happened.
-    """
-    at_warn = config.override_anchor == OVERRIDE_ANCHOR_WARN_POINT
-    anchor = jnp.where(at_warn, proto.t_warn_point, 0.0)
-    return (
-        (config.override_text_id >= 0)
-        & happened(anchor)
-        & (t >= anchor + config.override_on_s)
-        & (t < anchor + config.override_off_s)
-    )
-
-
-def delivered_warning(
-    proto: ProtocolState, config: ExecutionConfig, t: Array
-) -> tuple[Array, Array, Array]:
-    """The warning the policy reads at time ``t``: the override while its window is open, else
-    the protocol's warning.
-
-    Returns:
-        active: () bool, a warning is delivered.
-        text_id: () int32, its text-bank id (-1 when inactive).
-        overridden: () bool, it is the override (its position is ``override_x/y``).
-    """
-    overridden = override_window(proto, config, t)
-    normal = warning_active(proto, config, t)
-    text_id = jnp.where(overridden, config.override_text_id, jnp.where(normal, config.text_id, -1))
-    return overridden | normal, text_id.astype(jnp.int32), overridden
