@@ -491,6 +491,7 @@ def test_every_component_of_the_table_keeps_its_role_s_contract_and_its_telemetr
     for c in COMPONENTS:
         assert c.module.__name__.rsplit(".", 1)[1] == c.field
         wanted = {"init": ("settings",), "update": ("state", "sample", "tick", "settings"),
+                  "outputs": ("state", "ctx", "t_fail", "settings"),
                   **ROLE_CONTRACT[c.role]}  # fmt: skip
         for name, params in wanted.items():
             got = tuple(inspect.signature(getattr(c.module, name)).parameters)
@@ -498,3 +499,24 @@ def test_every_component_of_the_table_keeps_its_role_s_contract_and_its_telemetr
             assert got == params + extra, (c.field, name, got)
         if c.role == "hazard":
             assert callable(c.module.score)
+
+
+def test_each_component_gives_the_metrics_fields_its_outputs_declare():
+    """``finalize`` folds the table's ``outputs``: each gives exactly the fields its module's
+    ``OUTPUTS`` names, with the dtype the metrics hold, and every field of ``ExecutionMetrics``
+    has one owner (the shared context or one component)."""
+    import dataclasses
+
+    from lantern_jax.scoring.components import COMPONENTS
+    from lantern_jax.scoring.metrics import CONTEXT_FIELDS, FIELD_OWNERS, ExecutionMetrics
+
+    tr = braking_case(14)
+    for c in COMPONENTS:
+        ctx, state = fold(c.module, tr)
+        got = c.module.outputs(state, ctx, jnp.float32(NEVER), S)
+        assert tuple(got) == c.module.OUTPUTS, c.field
+        assert all(np.ndim(v) == 0 for v in got.values()), c.field
+        assert all(FIELD_OWNERS[k] == c.field for k in got), c.field
+    fields = {f.name for f in dataclasses.fields(ExecutionMetrics)}
+    assert set(FIELD_OWNERS) == fields
+    assert {k for k, o in FIELD_OWNERS.items() if o == "context"} == set(CONTEXT_FIELDS)

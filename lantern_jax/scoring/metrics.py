@@ -31,6 +31,8 @@ Missing-value rules
 
 from __future__ import annotations
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 from flax import struct
@@ -38,20 +40,11 @@ from flax import struct
 from lantern_jax.core.times import happened, time_or_nan
 from lantern_jax.scoring import user_metrics
 from lantern_jax.scoring.components import (
+    COMPONENTS,
     HAZARD_COMPONENTS,
     ROUTE_A_GATES,
-    anticipation,
-    block,
-    clearance,
-    collision,
-    efficiency,
-    false_brake,
-    lane,
     progress,
     recovery,
-    route_deviation,
-    rule,
-    ttc,
 )
 from lantern_jax.scoring.telemetry import Telemetry
 from lantern_jax.scoring.thresholds import DEFAULT_SCORING, ScoringSettings
@@ -61,7 +54,12 @@ Array = jax.Array
 
 @struct.dataclass
 class ExecutionMetrics:
-    """Hard per-execution outputs (scalars per execution; a leading batch axis under ``vmap``)."""
+    """Hard per-execution outputs (scalars per execution; a leading batch axis under ``vmap``).
+
+    Each field comes from the shared context (:data:`CONTEXT_FIELDS`) or from exactly one
+    component of :data:`~lantern_jax.scoring.components.COMPONENTS`, whose ``outputs`` gives
+    it (:data:`FIELD_OWNERS`); a new component's outputs are declared here and in its module's
+    ``OUTPUTS``, and importing this module fails when the two disagree."""
 
     is_route_a: Array  # () bool
     coincident_onset: Array  # () bool
@@ -111,6 +109,34 @@ class ExecutionMetrics:
     metrics: tuple = ()  # () float32 each, the values of ``settings.metrics`` (user metrics)
 
 
+#: The fields :func:`finalize` reads from the shared context (and the user metrics); every other
+#: field is one component's output (its module's ``OUTPUTS``), exactly once.
+CONTEXT_FIELDS = ("is_route_a", "coincident_onset", "progress", "progress_m", "route_length_m",
+                  "completed", "t_ref_s", "t_event_s", "t_warn_off_s", "t_clear_s", "v_pre_mps",
+                  "event_exposed", "timed_out", "t_first_failure_s", "metrics")  # fmt: skip
+
+
+def _field_owners() -> dict[str, str]:
+    """Each field of :class:`ExecutionMetrics` -> ``"context"`` or the component giving it;
+    raises if a field has no owner or two."""
+    owners: dict[str, list[str]] = {f: ["context"] for f in CONTEXT_FIELDS}
+    for c in COMPONENTS:
+        for f in c.module.OUTPUTS:
+            owners.setdefault(f, []).append(c.field)
+    declared = [f.name for f in dataclasses.fields(ExecutionMetrics)]
+    twice = {f: o for f, o in owners.items() if len(o) > 1}
+    if twice or set(owners) != set(declared):
+        raise AssertionError(f"ExecutionMetrics fields {sorted(set(declared) - set(owners))} have "
+                             f"no owner, {sorted(set(owners) - set(declared))} are not fields, "
+                             f"{twice} have two")  # fmt: skip
+    return {f: o[0] for f, o in owners.items()}
+
+
+#: ExecutionMetrics field -> ``"context"`` or the :data:`COMPONENTS` field whose ``outputs``
+#: gives it (checked when this module is imported).
+FIELD_OWNERS = _field_owners()
+
+
 def first_failure_time(tel: Telemetry, settings: ScoringSettings = DEFAULT_SCORING) -> Array:
     """() float32, s: time stamp of the first Route A gate failure (``NEVER`` if none)."""
     times = []
@@ -133,12 +159,6 @@ def availability(tel: Telemetry, settings: ScoringSettings = DEFAULT_SCORING) ->
     }
 
 
-def _or_nan(value_valid: tuple[Array, Array]) -> Array:
-    """A hard ``(value, valid)`` pair as one value, ``NaN`` where unavailable."""
-    value, valid = value_valid
-    return jnp.where(valid, value, jnp.nan)
-
-
 def finalize(tel: Telemetry, settings: ScoringSettings = DEFAULT_SCORING) -> ExecutionMetrics:
     """Per-execution hard outputs from the final accumulators (jittable).
 
@@ -148,49 +168,24 @@ def finalize(tel: Telemetry, settings: ScoringSettings = DEFAULT_SCORING) -> Exe
     """
     ctx = tel.context
     t_fail = first_failure_time(tel, settings)
-    avail = availability(tel, settings)
     completed = progress.is_completed(ctx.progress_m, ctx.route_length_m, settings)
-    s = settings
-    return ExecutionMetrics(
-        is_route_a=ctx.is_route_a,
-        coincident_onset=ctx.coincident_onset,
-        progress=progress.hard(ctx, s)[0],
-        progress_m=ctx.progress_m,
-        route_length_m=ctx.route_length_m,
-        completed=completed,
-        ttc_min_s=_or_nan(ttc.hard(tel.ttc, ctx, t_fail)),
-        clearance_min_m=_or_nan(clearance.hard(tel.clearance, ctx, t_fail)),
-        t_ref_s=time_or_nan(ctx.t_warn_point),
-        t_event_s=time_or_nan(ctx.t_event),
-        t_warn_off_s=time_or_nan(ctx.t_warn_off),
-        t_clear_s=time_or_nan(ctx.t_clear),
-        t_release_s=time_or_nan(release_time(tel)),
-        t_react_s=_or_nan(anticipation.hard(tel.anticipation, ctx, t_fail)),
-        t_recover_s=_or_nan(recovery.recovered_at(tel.recovery, ctx, t_fail)),
-        recovery_latency_s=_or_nan(recovery.hard(tel.recovery, ctx, t_fail)),
-        v_pre_mps=jnp.where(ctx.v_pre_set, ctx.v_pre, jnp.nan),
-        event_exposed=happened(ctx.t_event),
-        response_at_event=tel.anticipation.response_at_event,
-        ttc_available=avail["ttc"],
-        clearance_available=avail["clearance"],
-        anticipation_available=avail["anticipation"],
-        recovery_available=avail["recovery"],
-        gate_collision=collision.hard(tel.collision, ctx, s)[0],
-        gate_route_deviation=route_deviation.hard(tel.route_deviation, ctx, s)[0],
-        gate_lane=lane.hard(tel.lane, ctx, s)[0],
-        gate_rule=rule.hard(tel.rule, ctx, s)[0],
-        gate_block=block.hard(tel.block, ctx, s)[0],
-        gate_false_brake=false_brake.hard(tel.false_brake, ctx, s)[0],
-        controller_fault=tel.block.fault,
-        t_fault_s=time_or_nan(tel.block.t_fault),
-        stalled=block.stalled(tel.block, s),
-        timed_out=~completed,
-        t_first_failure_s=time_or_nan(t_fail),
-        max_route_dist_m=tel.route_deviation.max_dist,
-        outside_lanes_s=lane.outside_s(tel.lane),
-        max_still_s=block.max_still_s(tel.block),
-        false_brake_max_stop_s=false_brake.max_stop_s(tel.false_brake),
-        t_complete_s=time_or_nan(tel.efficiency.t_complete),
-        slow_unjustified_s=efficiency.slow_s(tel.efficiency),
-        metrics=user_metrics.values(s.metrics, tel.metrics, ctx, s),
-    )
+    fields = {
+        "is_route_a": ctx.is_route_a,
+        "coincident_onset": ctx.coincident_onset,
+        "progress": progress.hard(ctx, settings)[0],
+        "progress_m": ctx.progress_m,
+        "route_length_m": ctx.route_length_m,
+        "completed": completed,
+        "t_ref_s": time_or_nan(ctx.t_warn_point),
+        "t_event_s": time_or_nan(ctx.t_event),
+        "t_warn_off_s": time_or_nan(ctx.t_warn_off),
+        "t_clear_s": time_or_nan(ctx.t_clear),
+        "v_pre_mps": jnp.where(ctx.v_pre_set, ctx.v_pre, jnp.nan),
+        "event_exposed": happened(ctx.t_event),
+        "timed_out": ~completed,
+        "t_first_failure_s": time_or_nan(t_fail),
+        "metrics": user_metrics.values(settings.metrics, tel.metrics, ctx, settings),
+    }
+    for c in COMPONENTS:
+        fields.update(c.module.outputs(getattr(tel, c.field), ctx, t_fail, settings))
+    return ExecutionMetrics(**fields)

@@ -10,7 +10,10 @@ they have one signature (``tests/test_scoring_components.py`` checks every modul
 * every component: ``init(settings) -> State``, the accumulators before the first tick, and
   ``update(state, sample, tick, settings) -> State``, one tick folded; ``tick`` is the shared
   per-tick :class:`~lantern_jax.scoring.components.context.Tick` computed once by
-  :func:`context.update <lantern_jax.scoring.components.context.update>`;
+  :func:`context.update <lantern_jax.scoring.components.context.update>`; and ``outputs(state,
+  ctx, t_fail, settings) -> dict``, its fields of the per-execution
+  :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` (the names its module's ``OUTPUTS``
+  lists; :func:`~lantern_jax.scoring.metrics.finalize` folds the table's outputs in order);
 * ``"hazard"`` (the four terms of ``S_A`` and ``T_A``): ``valid(state, ctx, t_fail)``, whether
   its window opened by the first Route A gate failure ``t_fail``; ``hard(state, ctx, t_fail) ->
   (value, valid)``, the hard measurement; ``soft(state, ctx, t_fail, temperature, settings) ->
@@ -51,8 +54,9 @@ context            (shared)       tick counter, rings, protocol times, ``v_pre``
 
 A new term of the benchmark itself is a module here and one entry of :data:`COMPONENTS`; its
 state joins :class:`~lantern_jax.scoring.telemetry.Telemetry` under the entry's field name (the
-test above checks both agree), its hard value a field of
-:class:`~lantern_jax.scoring.metrics.ExecutionMetrics`.  A measurement of a user's own beside
+test above checks both agree), its ``OUTPUTS`` fields of
+:class:`~lantern_jax.scoring.metrics.ExecutionMetrics` (checked when that module is imported:
+every field has one owner).  A measurement of a user's own beside
 the CUS needs none of this: :mod:`lantern_jax.scoring.user_metrics`.
 """
 

@@ -40,7 +40,13 @@ from flax import struct
 from lantern_jax.core.times import NEVER, happened, time_or_nan
 from lantern_jax.scoring import thresholds
 from lantern_jax.scoring.components.accumulate import count, expected_time, first_time, push
-from lantern_jax.scoring.components.context import Context, Tick, opened_by, ring_length
+from lantern_jax.scoring.components.context import (
+    Context,
+    Tick,
+    opened_by,
+    ring_length,
+    value_or_nan,
+)
 from lantern_jax.scoring.sample import TickSample
 from lantern_jax.scoring.smooth import smooth_clip01
 from lantern_jax.scoring.thresholds import ScoringSettings
@@ -264,3 +270,20 @@ def soft(
     clipped = smooth_clip01((ctx.t_event - e_react) / safe_span, temperature)
     regular = jnp.where(has, state.p * clipped, 0.0)
     return jnp.where(ctx.coincident_onset, state.soft_response_at_event, regular), ok
+
+
+#: The :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` fields :func:`outputs` gives.
+OUTPUTS = ("t_react_s", "anticipation_available", "response_at_event")
+
+
+def outputs(state: AnticipationState, ctx: Context, t_fail: Array, settings: ScoringSettings
+            ) -> dict[str, Array]:  # fmt: skip
+    """Its per-execution outputs: the :data:`OUTPUTS` fields of
+    :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` (``t_fail``: () float32, s, the
+    first Route A gate failure)."""
+    t_react, ok = hard(state, ctx, t_fail)
+    return {
+        "t_react_s": value_or_nan(t_react, ok),
+        "anticipation_available": ok,
+        "response_at_event": state.response_at_event,
+    }

@@ -21,7 +21,7 @@ import jax.numpy as jnp
 from flax import struct
 
 from lantern_jax.core.constants import DT
-from lantern_jax.core.times import NEVER, happened
+from lantern_jax.core.times import NEVER, happened, time_or_nan
 from lantern_jax.scoring import thresholds
 from lantern_jax.scoring.components.accumulate import first_time, run
 from lantern_jax.scoring.components.context import Context, Tick
@@ -139,3 +139,21 @@ def soft(
     no_fault = 1.0 - state.fault.astype(jnp.float32)
     value = soft_gate(still_margin, temperature) * soft_gate(completion_margin, temperature)
     return value * no_fault, jnp.asarray(True)
+
+
+#: The :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` fields :func:`outputs` gives.
+OUTPUTS = ("gate_block", "controller_fault", "t_fault_s", "stalled", "max_still_s")
+
+
+def outputs(state: BlockState, ctx: Context, t_fail: Array, settings: ScoringSettings
+            ) -> dict[str, Array]:  # fmt: skip
+    """Its per-execution outputs: the :data:`OUTPUTS` fields of
+    :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` (``t_fail``: () float32, s, the
+    first Route A gate failure)."""
+    return {
+        "gate_block": hard(state, ctx, settings)[0],
+        "controller_fault": state.fault,
+        "t_fault_s": time_or_nan(state.t_fault),
+        "stalled": stalled(state, settings),
+        "max_still_s": max_still_s(state),
+    }

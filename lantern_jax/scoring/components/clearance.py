@@ -20,7 +20,7 @@ import jax.numpy as jnp
 from flax import struct
 
 from lantern_jax.core.constants import BIG
-from lantern_jax.scoring.components.context import Context, Tick, opened_by
+from lantern_jax.scoring.components.context import Context, Tick, opened_by, value_or_nan
 from lantern_jax.scoring.sample import TickSample
 from lantern_jax.scoring.smooth import LSE_EMPTY, lse_add, smooth_clip01, softmin_decode
 from lantern_jax.scoring.thresholds import ScoringSettings
@@ -131,3 +131,16 @@ def soft(
     """
     d_min = softmin_decode(state.lse, ctx.temperature, cap=d_safe)
     return smooth_clip01(d_min / d_safe, temperature), valid(state, ctx, t_fail)
+
+
+#: The :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` fields :func:`outputs` gives.
+OUTPUTS = ("clearance_min_m", "clearance_available")
+
+
+def outputs(state: ClearanceState, ctx: Context, t_fail: Array, settings: ScoringSettings
+            ) -> dict[str, Array]:  # fmt: skip
+    """Its per-execution outputs: the :data:`OUTPUTS` fields of
+    :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` (``t_fail``: () float32, s, the
+    first Route A gate failure)."""
+    clearance_min_m, ok = hard(state, ctx, t_fail)
+    return {"clearance_min_m": value_or_nan(clearance_min_m, ok), "clearance_available": ok}

@@ -111,3 +111,15 @@ def soft(
     """
     no_collision = 1.0 - state.collided.astype(jnp.float32)
     return no_collision * soft_gate(state.margin, temperature), jnp.asarray(True)
+
+
+#: The :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` fields :func:`outputs` gives.
+OUTPUTS = ("gate_collision",)
+
+
+def outputs(state: CollisionState, ctx: Context, t_fail: Array, settings: ScoringSettings
+            ) -> dict[str, Array]:  # fmt: skip
+    """Its per-execution outputs: the :data:`OUTPUTS` fields of
+    :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` (``t_fail``: () float32, s, the
+    first Route A gate failure)."""
+    return {"gate_collision": hard(state, ctx, settings)[0]}

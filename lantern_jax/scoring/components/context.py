@@ -180,3 +180,8 @@ def opened_by(t_open: Array, t_fail: Array) -> Array:
     """() bool: a window opening at ``t_open`` (s) opened no later than the first Route A gate
     failure ``t_fail`` (s, ``NEVER`` if none) -- the paper's "valid hazard telemetry" rule."""
     return happened(t_open) & (t_open <= t_fail)
+
+
+def value_or_nan(value: Array, valid: Array) -> Array:
+    """``value`` where ``valid``, ``NaN`` where the measurement is unavailable (never imputed)."""
+    return jnp.where(valid, value, jnp.nan)

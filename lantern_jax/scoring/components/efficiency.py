@@ -24,9 +24,9 @@ import jax.numpy as jnp
 from flax import struct
 
 from lantern_jax.core.constants import DT
-from lantern_jax.core.times import NEVER, happened
+from lantern_jax.core.times import NEVER, happened, time_or_nan
 from lantern_jax.scoring.components.accumulate import count, first_time
-from lantern_jax.scoring.components.context import Tick
+from lantern_jax.scoring.components.context import Context, Tick
 from lantern_jax.scoring.sample import TickSample
 from lantern_jax.scoring.thresholds import ScoringSettings
 
@@ -73,3 +73,15 @@ def update(
 def slow_s(state: EfficiencyState) -> Array:
     """() float32, s: time spent below the slow speed with nothing justifying it."""
     return state.slow_ticks.astype(jnp.float32) * DT
+
+
+#: The :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` fields :func:`outputs` gives.
+OUTPUTS = ("t_complete_s", "slow_unjustified_s")
+
+
+def outputs(state: EfficiencyState, ctx: Context, t_fail: Array, settings: ScoringSettings
+            ) -> dict[str, Array]:  # fmt: skip
+    """Its per-execution outputs: the :data:`OUTPUTS` fields of
+    :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` (``t_fail``: () float32, s, the
+    first Route A gate failure)."""
+    return {"t_complete_s": time_or_nan(state.t_complete), "slow_unjustified_s": slow_s(state)}

@@ -137,3 +137,18 @@ def soft(
     """
     margin = (settings.false_brake - thresholds.COUNT_HALF - state.max_run.astype(jnp.float32)) * DT
     return soft_gate(margin, temperature), jnp.asarray(True)
+
+
+#: The :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` fields :func:`outputs` gives.
+OUTPUTS = ("gate_false_brake", "false_brake_max_stop_s")
+
+
+def outputs(state: FalseBrakeState, ctx: Context, t_fail: Array, settings: ScoringSettings
+            ) -> dict[str, Array]:  # fmt: skip
+    """Its per-execution outputs: the :data:`OUTPUTS` fields of
+    :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` (``t_fail``: () float32, s, the
+    first Route A gate failure)."""
+    return {
+        "gate_false_brake": hard(state, ctx, settings)[0],
+        "false_brake_max_stop_s": max_stop_s(state),
+    }

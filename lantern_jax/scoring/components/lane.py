@@ -108,3 +108,15 @@ def soft(
         settings.lane_debounce - thresholds.COUNT_HALF - state.n_outside.astype(jnp.float32)
     ) * DT
     return soft_gate(margin, temperature), jnp.asarray(True)
+
+
+#: The :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` fields :func:`outputs` gives.
+OUTPUTS = ("gate_lane", "outside_lanes_s")
+
+
+def outputs(state: LaneState, ctx: Context, t_fail: Array, settings: ScoringSettings
+            ) -> dict[str, Array]:  # fmt: skip
+    """Its per-execution outputs: the :data:`OUTPUTS` fields of
+    :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` (``t_fail``: () float32, s, the
+    first Route A gate failure)."""
+    return {"gate_lane": hard(state, ctx, settings)[0], "outside_lanes_s": outside_s(state)}

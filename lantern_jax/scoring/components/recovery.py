@@ -26,7 +26,13 @@ from flax import struct
 
 from lantern_jax.core.times import NEVER, happened, time_or_nan
 from lantern_jax.scoring.components.accumulate import expected_time, first_time, push, run
-from lantern_jax.scoring.components.context import Context, Tick, opened_by, ring_length
+from lantern_jax.scoring.components.context import (
+    Context,
+    Tick,
+    opened_by,
+    ring_length,
+    value_or_nan,
+)
 from lantern_jax.scoring.sample import TickSample
 from lantern_jax.scoring.smooth import smooth_clip01
 from lantern_jax.scoring.thresholds import ScoringSettings
@@ -185,3 +191,21 @@ def soft(
     t_rel = jnp.where(ok, release_time(ctx.t_warn_off, ctx.t_clear), 0.0)
     clipped = smooth_clip01(1.0 - (e_rec - t_rel) / settings.recover_cap_s, temperature)
     return jnp.where(has, state.p * clipped, 0.0), ok
+
+
+#: The :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` fields :func:`outputs` gives.
+OUTPUTS = ("t_release_s", "t_recover_s", "recovery_latency_s", "recovery_available")
+
+
+def outputs(state: RecoveryState, ctx: Context, t_fail: Array, settings: ScoringSettings
+            ) -> dict[str, Array]:  # fmt: skip
+    """Its per-execution outputs: the :data:`OUTPUTS` fields of
+    :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` (``t_fail``: () float32, s, the
+    first Route A gate failure)."""
+    latency, ok = hard(state, ctx, t_fail)
+    return {
+        "t_release_s": time_or_nan(release_time(ctx.t_warn_off, ctx.t_clear)),
+        "t_recover_s": value_or_nan(*recovered_at(state, ctx, t_fail)),
+        "recovery_latency_s": value_or_nan(latency, ok),
+        "recovery_available": ok,
+    }

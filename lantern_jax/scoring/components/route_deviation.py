@@ -103,3 +103,18 @@ def soft(
         ``(passed, valid)``: () float32 in [0, 1]; () bool (always True).
     """
     return soft_gate(settings.route_deviation_m - state.max_dist, temperature), jnp.asarray(True)
+
+
+#: The :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` fields :func:`outputs` gives.
+OUTPUTS = ("gate_route_deviation", "max_route_dist_m")
+
+
+def outputs(state: RouteDeviationState, ctx: Context, t_fail: Array, settings: ScoringSettings
+            ) -> dict[str, Array]:  # fmt: skip
+    """Its per-execution outputs: the :data:`OUTPUTS` fields of
+    :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` (``t_fail``: () float32, s, the
+    first Route A gate failure)."""
+    return {
+        "gate_route_deviation": hard(state, ctx, settings)[0],
+        "max_route_dist_m": state.max_dist,
+    }

@@ -95,3 +95,15 @@ def soft(
         ``(passed, valid)``: () float32 in {0, 1}; () bool (always True).
     """
     return 1.0 - state.red_light.astype(jnp.float32), jnp.asarray(True)
+
+
+#: The :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` fields :func:`outputs` gives.
+OUTPUTS = ("gate_rule",)
+
+
+def outputs(state: RuleState, ctx: Context, t_fail: Array, settings: ScoringSettings
+            ) -> dict[str, Array]:  # fmt: skip
+    """Its per-execution outputs: the :data:`OUTPUTS` fields of
+    :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` (``t_fail``: () float32, s, the
+    first Route A gate failure)."""
+    return {"gate_rule": hard(state, ctx, settings)[0]}

@@ -23,7 +23,7 @@ from flax import struct
 
 from lantern_jax.core.constants import BIG
 from lantern_jax.scoring import thresholds
-from lantern_jax.scoring.components.context import Context, Tick, opened_by
+from lantern_jax.scoring.components.context import Context, Tick, opened_by, value_or_nan
 from lantern_jax.scoring.sample import TickSample
 from lantern_jax.scoring.smooth import LSE_EMPTY, lse_add, smooth_clip01, softmin_decode
 from lantern_jax.scoring.thresholds import ScoringSettings
@@ -154,3 +154,16 @@ def soft(
     """
     ttc = softmin_decode(state.lse, ctx.temperature, cap=settings.ttc_norm_s)
     return smooth_clip01(ttc / settings.ttc_norm_s, temperature), valid(state, ctx, t_fail)
+
+
+#: The :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` fields :func:`outputs` gives.
+OUTPUTS = ("ttc_min_s", "ttc_available")
+
+
+def outputs(state: TTCState, ctx: Context, t_fail: Array, settings: ScoringSettings
+            ) -> dict[str, Array]:  # fmt: skip
+    """Its per-execution outputs: the :data:`OUTPUTS` fields of
+    :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` (``t_fail``: () float32, s, the
+    first Route A gate failure)."""
+    ttc_min_s, ok = hard(state, ctx, t_fail)
+    return {"ttc_min_s": value_or_nan(ttc_min_s, ok), "ttc_available": ok}
