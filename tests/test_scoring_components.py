@@ -462,10 +462,10 @@ def test_soft_tends_to_hard(name):
 
 
 #: The parameters of each function a role provides (the module docstring of
-#: ``lantern_jax.scoring.components``); clearance's ``soft`` also takes the scene's ``d_safe``.
+#: ``lantern_jax.scoring.components``): one signature per function of a role.
 ROLE_CONTRACT = {
     "hazard": {"valid": ("state", "ctx", "t_fail"), "hard": ("state", "ctx", "t_fail"),
-               "soft": ("state", "ctx", "t_fail", "temperature", "settings")},
+               "soft": ("state", "ctx", "t_fail", "temperature", "settings", "d_safe")},
     "route_a_gate": {"failure_times": ("state", "ctx", "settings"),
                      "hard": ("state", "ctx", "settings"),
                      "soft": ("state", "ctx", "temperature", "settings")},
@@ -495,8 +495,7 @@ def test_every_component_of_the_table_keeps_its_role_s_contract_and_its_telemetr
                   **ROLE_CONTRACT[c.role]}  # fmt: skip
         for name, params in wanted.items():
             got = tuple(inspect.signature(getattr(c.module, name)).parameters)
-            extra = ("d_safe",) if (c.field, name) == ("clearance", "soft") else ()
-            assert got == params + extra, (c.field, name, got)
+            assert got == params, (c.field, name, got)
         if c.role == "hazard":
             assert callable(c.module.score)
 

@@ -276,12 +276,13 @@ def soft_execution_terms(
     t = ctx.temperature if temperature is None else jnp.asarray(temperature, jnp.float32)
     s = settings
     t_fail = first_failure_time(tel, s)
+    d_safe = _f(d_safe)
     terms = {
         "P": progress.soft(ctx, t, s)[0],
-        "S_ttc": _or_zero(ttc.soft(tel.ttc, ctx, t_fail, t, s)),
-        "S_clear": _or_zero(clearance.soft(tel.clearance, ctx, t_fail, t, s, _f(d_safe))),
-        "S_ant": _or_zero(anticipation.soft(tel.anticipation, ctx, t_fail, t, s)),
-        "S_rec": _or_zero(recovery.soft(tel.recovery, ctx, t_fail, t, s)),
+        "S_ttc": _or_zero(ttc.soft(tel.ttc, ctx, t_fail, t, s, d_safe)),
+        "S_clear": _or_zero(clearance.soft(tel.clearance, ctx, t_fail, t, s, d_safe)),
+        "S_ant": _or_zero(anticipation.soft(tel.anticipation, ctx, t_fail, t, s, d_safe)),
+        "S_rec": _or_zero(recovery.soft(tel.recovery, ctx, t_fail, t, s, d_safe)),
     }
     for name, gate in ROUTE_A_GATES.items():
         terms["gate_" + name] = gate.soft(getattr(tel, name), ctx, t, s)[0]

@@ -16,9 +16,10 @@ they have one signature (``tests/test_scoring_components.py`` checks every modul
   lists; :func:`~lantern_jax.scoring.metrics.finalize` folds the table's outputs in order);
 * ``"hazard"`` (the four terms of ``S_A`` and ``T_A``): ``valid(state, ctx, t_fail)``, whether
   its window opened by the first Route A gate failure ``t_fail``; ``hard(state, ctx, t_fail) ->
-  (value, valid)``, the hard measurement; ``soft(state, ctx, t_fail, temperature, settings) ->
-  (value, valid)``, the smooth score in [0, 1] that tends to the hard score as ``temperature ->
-  0`` (clearance also takes the scene's ``d_safe``); and an elementwise ``score`` that maps the
+  (value, valid)``, the hard measurement; ``soft(state, ctx, t_fail, temperature, settings,
+  d_safe) -> (value, valid)``, the smooth score in [0, 1] that tends to the hard score as
+  ``temperature -> 0`` (every term takes the scene's clearance normaliser ``d_safe``, which
+  clearance reads); and an elementwise ``score`` that maps the
   hard measurement to [0, 1] with what that term needs (a threshold, ``d_safe``, the protocol
   times);
 * ``"route_a_gate"``: ``failure_times(state, ctx, settings)``, the times it failed at (its part
@@ -26,8 +27,8 @@ they have one signature (``tests/test_scoring_components.py`` checks every modul
   temperature, settings) -> (pass probability, valid)``;
 * ``"route_b_gate"``: ``hard`` and ``soft`` as a Route A gate (it fails no Route A execution,
   so it has no failure times);
-* ``"diagnostic"``: ``init`` and ``update`` only; its outputs are read by name (not a term of the
-  CUS: no soft form, no weight).
+* ``"diagnostic"``: ``init``, ``update`` and ``outputs`` only; its outputs are read by name (not a
+  term of the CUS: no soft form, no weight).
 
 ``ctx`` is the final shared :class:`~lantern_jax.scoring.components.context.Context`.  Progress
 ``P`` needs no accumulator of its own (the context holds the route progress): ``progress.hard(ctx,

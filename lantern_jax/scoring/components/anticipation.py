@@ -248,7 +248,7 @@ def score(
 
 def soft(
     state: AnticipationState, ctx: Context, t_fail: Array, temperature: Array,
-    settings: ScoringSettings,
+    settings: ScoringSettings, d_safe: Any = None,
 ) -> tuple[Array, Array]:  # fmt: skip
     """Smooth ``S_ant``: ``P(response) * clip((t_event - E[t_react | response]) /
     (t_event - t_ref))`` with a smooth clip; with coincident onset the soft
@@ -259,6 +259,9 @@ def soft(
         ctx: final shared context.
         t_fail: () float32, s, first Route A gate failure (``NEVER`` if none).
         temperature: () float32, temperature of the smooth clip.
+        settings: the response thresholds.
+        d_safe: () float32, m, the scene's clearance normaliser (read by clearance only; every
+            hazard term takes it: one signature per role).
 
     Returns:
         ``(s_ant, valid)``: () float32 in [0, 1]; () bool (the hard availability).

@@ -124,7 +124,8 @@ def soft(
         ctx: final shared context.
         t_fail: () float32, s, first Route A gate failure (``NEVER`` if none).
         temperature: () float32, temperature of the smooth clip.
-        d_safe: () float32, m, the family's normaliser.
+        settings: unused (one signature per role).
+        d_safe: () float32, m, the scene's clearance normaliser.
 
     Returns:
         ``(s_clear, valid)``: () float32 in [0, 1]; () bool (the hard availability).

@@ -172,7 +172,7 @@ def score(recovery_latency_s: Any, settings: ScoringSettings, available: Any = T
 
 def soft(
     state: RecoveryState, ctx: Context, t_fail: Array, temperature: Array,
-    settings: ScoringSettings,
+    settings: ScoringSettings, d_safe: Any = None,
 ) -> tuple[Array, Array]:  # fmt: skip
     """Smooth ``S_rec``: ``P(recovered) * clip(1 - (E[t_recover | recovered] - t_release) /
     8 s)`` with a smooth clip.
@@ -182,6 +182,9 @@ def soft(
         ctx: final shared context.
         t_fail: () float32, s, first Route A gate failure (``NEVER`` if none).
         temperature: () float32, temperature of the smooth clip.
+        settings: the response thresholds.
+        d_safe: () float32, m, the scene's clearance normaliser (read by clearance only; every
+            hazard term takes it: one signature per role).
 
     Returns:
         ``(s_rec, valid)``: () float32 in [0, 1]; () bool (the hard availability).

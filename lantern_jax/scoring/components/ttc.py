@@ -137,8 +137,9 @@ def score(ttc_min_s: Any, settings: ScoringSettings) -> Array:
 
 
 def soft(
-    state: TTCState, ctx: Context, t_fail: Array, temperature: Array, settings: ScoringSettings
-) -> tuple[Array, Array]:
+    state: TTCState, ctx: Context, t_fail: Array, temperature: Array, settings: ScoringSettings,
+    d_safe: Any = None,
+) -> tuple[Array, Array]:  # fmt: skip
     """Smooth ``S_TTC``: the soft minimum, decoded with the accumulator temperature
     ``ctx.temperature`` and capped at 3 s, through a smooth clip.
 
@@ -148,6 +149,8 @@ def soft(
         t_fail: () float32, s, first Route A gate failure (``NEVER`` if none).
         temperature: () float32, temperature of the smooth clip.
         settings: the normalisation (``ttc_norm_s``).
+        d_safe: () float32, m, the scene's clearance normaliser (read by clearance only; every
+            hazard term takes it: one signature per role).
 
     Returns:
         ``(s_ttc, valid)``: () float32 in [0, 1]; () bool (the hard availability).
