@@ -465,7 +465,8 @@ def test_soft_tends_to_hard(name):
 #: ``lantern_jax.scoring.components``): one signature per function of a role.
 ROLE_CONTRACT = {
     "hazard": {"valid": ("state", "ctx", "t_fail"), "hard": ("state", "ctx", "t_fail"),
-               "soft": ("state", "ctx", "t_fail", "temperature", "settings", "d_safe")},
+               "soft": ("state", "ctx", "t_fail", "temperature", "settings", "d_safe"),
+               "score_of": ("metrics", "d_safe", "settings")},
     "route_a_gate": {"failure_times": ("state", "ctx", "settings"),
                      "hard": ("state", "ctx", "settings"),
                      "soft": ("state", "ctx", "temperature", "settings")},
@@ -496,8 +497,68 @@ def test_every_component_of_the_table_keeps_its_role_s_contract_and_its_telemetr
         for name, params in wanted.items():
             got = tuple(inspect.signature(getattr(c.module, name)).parameters)
             assert got == params, (c.field, name, got)
+        assert isinstance(c.module.COLUMNS, dict), c.field
         if c.role == "hazard":
-            assert callable(c.module.score)
+            assert callable(c.module.score) and c.module.SCORE.startswith("S_")
+
+
+def test_the_route_table_s_measured_columns_come_from_the_component_table():
+    """Each measured column of the route table is declared once, by the context or by the
+    component giving its field (``COLUMNS``), or is a pair component (each hazard term's
+    ``SCORE``, the gates, ``CUS``); with the table's own argument columns they are the schema's
+    columns. The hazard scores of the table are each term's ``score_of`` of its row."""
+    from lantern_jax.core.constants import GATE_COLUMNS
+    from lantern_jax.scoring import table
+    from lantern_jax.scoring.components import COMPONENTS, HAZARD_COMPONENTS
+    from lantern_jax.scoring.metrics import FIELD_OWNERS, ROUTE_COLUMNS
+
+    schema = [c for c, _ in table.schema_columns()]
+    assert sorted(schema) == sorted([*table.ARGUMENT_COLUMNS, *table.MEASURED_COLUMNS])
+    for c in COMPONENTS:
+        for name, (route, field) in c.module.COLUMNS.items():
+            assert ROUTE_COLUMNS[name] == (route, field) and FIELD_OWNERS[field] == c.field
+    pair = {k for s, k in table.MEASURED_COLUMNS.values() if s == "pair"}
+    assert pair == {*(m.SCORE for m in HAZARD_COMPONENTS.values()), *GATE_COLUMNS, "CUS"}
+    # the scores in a table built from hand-made metrics are score_of of the rows
+    tr = braking_case(14)
+    one = _finalized(tr)
+    df = table.build_route_table(one, one, model="m", condition="warning", pair_ids=["p"],
+                                 families=["PE"], weathers=["clear"], d_safe=[2.0])  # fmt: skip
+    for m in HAZARD_COMPONENTS.values():
+        want = float(m.score_of(one, jnp.float32(2.0), S)[0])
+        got = float(df[m.SCORE].iloc[0])
+        assert (np.isnan(want) and np.isnan(got)) or abs(want - got) < 1e-6, m.SCORE
+    assert float(df["S_ant"].iloc[0]) == pytest.approx(0.9, abs=1e-5)  # as derived above
+    assert float(df["t_react_s"].iloc[0]) == pytest.approx(0.65, abs=1e-6)
+    assert df["B_time_s"].isna().all() and (df["no_collision"] == 1).all()
+
+
+def _finalized(tr):
+    """The per-execution metrics of ``tr`` folded through the whole telemetry, batch of one."""
+    from lantern_jax.scoring.metrics import finalize
+    from lantern_jax.scoring.telemetry import fold_telemetry
+
+    tel = jax.jit(fold_telemetry)(samples(tr), S.replace(temperature=jnp.float32(0.01)))
+    return jax.tree.map(lambda x: np.asarray(x)[None], finalize(tel, S))
+
+
+def test_a_column_declared_twice_or_missing_from_the_schema_is_refused(monkeypatch):
+    """The import-time checks name the column: one declared by two owners, one the schema does
+    not hold."""
+    from lantern_jax.scoring import metrics, table
+    from lantern_jax.scoring.components import efficiency
+
+    own = dict(efficiency.COLUMNS)
+    monkeypatch.setattr(efficiency, "COLUMNS", {**own, "t_ref_s": ("A", "t_ref_s")})
+    with pytest.raises(AssertionError, match="t_ref_s"):
+        metrics._route_columns()
+    monkeypatch.setattr(efficiency, "COLUMNS", {**own, "B_new_s": ("B", "slow_unjustified_s")})
+    monkeypatch.setattr(table, "ROUTE_COLUMNS", metrics._route_columns())
+    with pytest.raises(AssertionError, match="B_new_s"):
+        table._measured_column_sources()
+    monkeypatch.setattr(efficiency, "COLUMNS", {"B_bad_s": ("B", "t_ref_s")})
+    with pytest.raises(AssertionError, match="B_bad_s"):
+        metrics._route_columns()
 
 
 def test_each_component_gives_the_metrics_fields_its_outputs_declare():

@@ -17,7 +17,8 @@ batched arrays alike.
 
 The components themselves live in :mod:`lantern_jax.scoring.components` (one module each); this
 module composes them: the hard score from the per-execution outputs of
-:func:`~lantern_jax.scoring.metrics.finalize` through each component's ``score``, the soft score
+:func:`~lantern_jax.scoring.metrics.finalize` through each hazard term's ``score_of`` (named by
+its ``SCORE``, in the component table's order), the soft score
 (:func:`soft_pair_cus`) from each component's ``soft`` -- the same formula with sigmoid gates of
 signed margins, soft minima and softplus clips, converging to the hard score as the temperature
 goes to 0.
@@ -25,6 +26,7 @@ goes to 0.
 
 from __future__ import annotations
 
+import types
 import warnings
 from typing import Any
 
@@ -34,6 +36,7 @@ import jax.numpy as jnp
 from lantern_jax.core.constants import FAMILIES, GATE_NAMES, ROUTE_A_GATE_NAMES
 from lantern_jax.scoring import thresholds
 from lantern_jax.scoring.components import (
+    HAZARD_COMPONENTS,
     ROUTE_A_GATES,
     anticipation,
     clearance,
@@ -180,13 +183,17 @@ def components_from_values(
     product = jnp.ones((), jnp.float32)
     for name in GATE_NAMES:
         product = product * gates[name].astype(jnp.float32)
+    # the Route A values under the ExecutionMetrics field names the hazard terms read
+    route_a = types.SimpleNamespace(
+        ttc_min_s=ttc_min, clearance_min_m=d_min, t_ref_s=t_ref, t_event_s=t_event,
+        t_react_s=t_react, coincident_onset=coincident,
+        anticipation_available=anticipation_available, recovery_latency_s=RL,
+        recovery_available=recovery_available,
+    )  # fmt: skip
     comps = {
         "P_A": _f(P_A),
         "P_B": _f(P_B),
-        "S_ttc": ttc.score(ttc_min, settings),
-        "S_clear": s_clear(d_min, d_safe),
-        "S_ant": s_ant(t_ref, t_event, t_react, anticipation_available, coincident),
-        "S_rec": recovery.score(RL, settings, recovery_available),
+        **{m.SCORE: m.score_of(route_a, d_safe, settings) for m in HAZARD_COMPONENTS.values()},
     }
     out = combine(
         comps["P_A"], comps["P_B"], comps["S_ttc"], comps["S_clear"], comps["S_ant"],

@@ -32,6 +32,7 @@ Missing-value rules
 from __future__ import annotations
 
 import dataclasses
+import warnings
 
 import jax
 import jax.numpy as jnp
@@ -136,6 +137,42 @@ def _field_owners() -> dict[str, str]:
 #: gives it (checked when this module is imported).
 FIELD_OWNERS = _field_owners()
 
+#: The route-level table's columns read from the shared context's fields: column -> (route,
+#: ExecutionMetrics field), as a component module's ``COLUMNS``.
+CONTEXT_COLUMNS: dict[str, tuple[str, str]] = {
+    "A_progress": ("A", "progress"),
+    "B_progress": ("B", "progress"),
+    "t_ref_s": ("A", "t_ref_s"),
+    "t_event_s": ("A", "t_event_s"),
+    "t_warn_off_s": ("A", "t_warn_off_s"),
+    "t_clear_s": ("A", "t_clear_s"),
+    "coincident_onset": ("A", "coincident_onset"),
+    "t_first_failure_s": ("A", "t_first_failure_s"),
+    "event_exposed": ("A", "event_exposed"),
+}
+
+
+def _route_columns() -> dict[str, tuple[str, str]]:
+    """Every route-table column read from the per-execution metrics -> (route, field): the
+    context's and each component's ``COLUMNS``; raises if a column has two owners or reads a
+    field its owner does not give."""
+    columns, owner = dict(CONTEXT_COLUMNS), dict.fromkeys(CONTEXT_COLUMNS, "context")
+    for c in COMPONENTS:
+        for name, (route, field) in c.module.COLUMNS.items():
+            if name in columns:
+                raise AssertionError(f"route-table column {name!r}: {owner[name]} and {c.field}")
+            columns[name], owner[name] = (route, field), c.field
+    for name, (route, field) in columns.items():
+        if route not in ("A", "B") or FIELD_OWNERS.get(field) != owner[name]:
+            raise AssertionError(f"route-table column {name!r} of {owner[name]} reads {route}."
+                                 f"{field}, which {owner[name]} does not give")  # fmt: skip
+    return columns
+
+
+#: Route-table column -> (route ``"A"`` or ``"B"``, the ExecutionMetrics field it holds), from
+#: the context and the component table (checked when this module is imported).
+ROUTE_COLUMNS = _route_columns()
+
 
 def first_failure_time(tel: Telemetry, settings: ScoringSettings = DEFAULT_SCORING) -> Array:
     """() float32, s: time stamp of the first Route A gate failure (``NEVER`` if none)."""
@@ -146,12 +183,24 @@ def first_failure_time(tel: Telemetry, settings: ScoringSettings = DEFAULT_SCORI
 
 
 def release_time(tel: Telemetry) -> Array:
-    """() float32, s: ``max(t_warn_off, t_clear)`` once both happened, else ``NEVER``."""
+    """() float32, s: ``max(t_warn_off, t_clear)`` once both happened, else ``NEVER``.
+
+    Deprecated (nothing reads it; kept for one release): the recovery component computes it,
+    :func:`lantern_jax.scoring.components.recovery.release_time`, and ``finalize`` gives it as
+    ``ExecutionMetrics.t_release_s``."""
+    warnings.warn("scoring.metrics.release_time is deprecated: read ExecutionMetrics.t_release_s "
+                  "or call scoring.components.recovery.release_time",
+                  DeprecationWarning, stacklevel=2)  # fmt: skip
     return recovery.release_time(tel.context.t_warn_off, tel.context.t_clear)
 
 
 def availability(tel: Telemetry, settings: ScoringSettings = DEFAULT_SCORING) -> dict[str, Array]:
-    """Valid-hazard-telemetry masks (see the module docstring) as () bool arrays."""
+    """Valid-hazard-telemetry masks (see the module docstring) as () bool arrays.
+
+    Deprecated (nothing reads it; kept for one release): ``finalize`` gives the same masks as
+    ``ExecutionMetrics.<term>_available``."""
+    warnings.warn("scoring.metrics.availability is deprecated: read the *_available fields of "
+                  "finalize's ExecutionMetrics", DeprecationWarning, stacklevel=2)  # fmt: skip
     t_fail = first_failure_time(tel, settings)
     return {
         name: unit.valid(getattr(tel, name), tel.context, t_fail)

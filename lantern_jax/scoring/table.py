@@ -29,8 +29,9 @@ from lantern_jax.core.constants import (
 )
 from lantern_jax.io.files import atomic_write
 from lantern_jax.scoring import thresholds
+from lantern_jax.scoring.components import HAZARD_COMPONENTS
 from lantern_jax.scoring.cus import compiled_pair_components
-from lantern_jax.scoring.metrics import ExecutionMetrics
+from lantern_jax.scoring.metrics import ROUTE_COLUMNS, ExecutionMetrics
 from lantern_jax.scoring.thresholds import DEFAULT_SCORING, ScoringSettings
 from lantern_jax.scoring.user_metrics import Metric
 from lantern_jax.types.world import pad_rows
@@ -143,44 +144,52 @@ def _family_d_safe(codes: list[str]) -> np.ndarray:
     return np.asarray([thresholds.D_SAFE_BY_FAMILY[FAMILIES.index(f)] for f in codes], np.float32)
 
 
+#: The route table's columns it fills itself from its arguments (the row's identity, the
+#: warning delivery and the scene's clearance normaliser); every other column of the schema is
+#: measured: :data:`MEASURED_COLUMNS`.
+ARGUMENT_COLUMNS = ("model", "condition", "pair_id", "family", "weather", "t_warn_on_s",
+                    "d_safe_m", "hazard_hidden_at_warning", "hazard_hidden_before_warning",
+                    "warning_ticks", "warning_delivered")  # fmt: skip
+
+
+def _measured_column_sources() -> dict[str, tuple[str, str]]:
+    """Every measured column of the route table -> its source: ``("A" | "B", ExecutionMetrics
+    field)`` (:data:`~lantern_jax.scoring.metrics.ROUTE_COLUMNS`, from the context and the
+    component table), or ``("pair", key)`` for a pair component (each hazard term's ``SCORE``,
+    the gates, ``CUS``); raises unless they and :data:`ARGUMENT_COLUMNS` are the schema's
+    columns, each once."""
+    sources = dict(ROUTE_COLUMNS)
+    pair_columns = {m.SCORE: m.SCORE for m in HAZARD_COMPONENTS.values()}
+    pair_columns.update({GATE_COLUMNS[g]: g for g in GATE_NAMES}, CUS="CUS")
+    for name, key in pair_columns.items():
+        if name in sources:
+            raise AssertionError(f"route-table column {name!r} has two sources")
+        sources[name] = ("pair", key)
+    schema = [c for c, _ in schema_columns()]
+    own, measured = set(ARGUMENT_COLUMNS), set(sources)
+    if len(set(schema)) != len(schema) or set(schema) != own | measured or own & measured:
+        missing, extra = sorted(set(schema) - own - measured), sorted(measured - set(schema))
+        raise AssertionError(f"route-table schema columns {missing} have no source, {extra} are "
+                             "not in the schema")  # fmt: skip
+    return sources
+
+
+#: Measured route-table column -> ``("A" | "B", ExecutionMetrics field)`` or ``("pair", key of
+#: the pair components)``, derived from the component table (checked against the schema when
+#: this module is imported).
+MEASURED_COLUMNS = _measured_column_sources()
+
+
 def _measured_columns(a: ExecutionMetrics, b: ExecutionMetrics, comps: dict) -> dict:
-    """The columns measured by the rollouts and the scorer (NumPy metrics with leading axis n,
-    the pair components as float64)."""
-
-    def f64(x: Any) -> np.ndarray:
-        return np.asarray(x, np.float64)
-
-    def i64(x: Any) -> np.ndarray:
-        return np.asarray(x).astype(np.int64)
-
-    return {
-        "A_progress": f64(a.progress),
-        "B_progress": f64(b.progress),
-        "ttc_min_s": f64(a.ttc_min_s),
-        "clearance_min_m": f64(a.clearance_min_m),
-        "t_ref_s": f64(a.t_ref_s),
-        "t_event_s": f64(a.t_event_s),
-        "t_warn_off_s": f64(a.t_warn_off_s),
-        "t_clear_s": f64(a.t_clear_s),
-        "t_react_s": f64(a.t_react_s),
-        "recovery_latency_s": f64(a.recovery_latency_s),
-        "S_ttc": comps["S_ttc"],
-        "S_clear": comps["S_clear"],
-        "S_ant": comps["S_ant"],
-        "S_rec": comps["S_rec"],
-        **{GATE_COLUMNS[g]: comps[g].astype(np.int64) for g in GATE_NAMES},
-        "CUS": comps["CUS"],
-        "controller_fault": i64(a.controller_fault),
-        "t_fault_s": f64(a.t_fault_s),
-        "B_controller_fault": i64(b.controller_fault),
-        "B_t_fault_s": f64(b.t_fault_s),
-        "coincident_onset": i64(a.coincident_onset),
-        "t_first_failure_s": f64(a.t_first_failure_s),
-        "event_exposed": i64(a.event_exposed),
-        "B_false_brake_stop_s": f64(b.false_brake_max_stop_s),
-        "B_time_s": f64(b.t_complete_s),
-        "B_slow_s": f64(b.slow_unjustified_s),
-    }
+    """The columns measured by the rollouts and the scorer (:data:`MEASURED_COLUMNS`), as the
+    schema's dtypes (NumPy metrics with leading axis n; the pair components float64)."""
+    dtypes = dict(schema_columns())
+    routes = {"A": a, "B": b}
+    out = {}
+    for name, (source, key) in MEASURED_COLUMNS.items():
+        value = comps[key] if source == "pair" else getattr(routes[source], key)
+        out[name] = np.asarray(value).astype(np.dtype(dtypes[name]))
+    return out
 
 
 #: Rows the route table's components are computed in at a time: a table is padded to a

@@ -13,15 +13,19 @@ they have one signature (``tests/test_scoring_components.py`` checks every modul
   :func:`context.update <lantern_jax.scoring.components.context.update>`; and ``outputs(state,
   ctx, t_fail, settings) -> dict``, its fields of the per-execution
   :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` (the names its module's ``OUTPUTS``
-  lists; :func:`~lantern_jax.scoring.metrics.finalize` folds the table's outputs in order);
+  lists; :func:`~lantern_jax.scoring.metrics.finalize` folds the table's outputs in order),
+  and ``COLUMNS``, the route-table columns it measures (column -> route ``"A"``/``"B"`` and
+  metrics field; empty where its only column is a score or a gate's pass flag);
 * ``"hazard"`` (the four terms of ``S_A`` and ``T_A``): ``valid(state, ctx, t_fail)``, whether
   its window opened by the first Route A gate failure ``t_fail``; ``hard(state, ctx, t_fail) ->
   (value, valid)``, the hard measurement; ``soft(state, ctx, t_fail, temperature, settings,
   d_safe) -> (value, valid)``, the smooth score in [0, 1] that tends to the hard score as
   ``temperature -> 0`` (every term takes the scene's clearance normaliser ``d_safe``, which
-  clearance reads); and an elementwise ``score`` that maps the
-  hard measurement to [0, 1] with what that term needs (a threshold, ``d_safe``, the protocol
-  times);
+  clearance reads); ``score_of(metrics, d_safe, settings)``, its score of Route A executions
+  from their per-execution metrics (elementwise), named ``SCORE`` (``S_...``) among the pair
+  components and in the route table; and the plain formula behind it, an elementwise
+  ``score`` of the hard measurement with what that term needs (a threshold, ``d_safe``, the
+  protocol times);
 * ``"route_a_gate"``: ``failure_times(state, ctx, settings)``, the times it failed at (its part
   of ``t_fail``); ``hard(state, ctx, settings) -> (passed, valid)``; ``soft(state, ctx,
   temperature, settings) -> (pass probability, valid)``;
@@ -57,7 +61,9 @@ A new term of the benchmark itself is a module here and one entry of :data:`COMP
 state joins :class:`~lantern_jax.scoring.telemetry.Telemetry` under the entry's field name (the
 test above checks both agree), its ``OUTPUTS`` fields of
 :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` (checked when that module is imported:
-every field has one owner).  A measurement of a user's own beside
+every field has one owner), and its ``COLUMNS`` the route table's columns it measures
+(column -> route ``"A"``/``"B"`` and field; checked against the result schema when
+:mod:`lantern_jax.scoring.table` is imported).  A measurement of a user's own beside
 the CUS needs none of this: :mod:`lantern_jax.scoring.user_metrics`.
 """
 

@@ -275,6 +275,31 @@ def soft(
     return jnp.where(ctx.coincident_onset, state.soft_response_at_event, regular), ok
 
 
+#: Its columns of the route-level table: column -> (route, ExecutionMetrics field), the
+#: route ``"A"`` (the warning-side route) or ``"B"`` (the matched normal route).
+COLUMNS: dict[str, tuple[str, str]] = {"t_react_s": ("A", "t_react_s")}
+
+#: The name of its score among the pair components and in the route-level table.
+SCORE = "S_ant"
+
+
+def score_of(metrics: Any, d_safe: Any, settings: ScoringSettings) -> Array:
+    """``S_ant`` of Route A executions from their per-execution metrics, elementwise.
+
+    Args:
+        metrics: Route A :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` (any
+            batch shape), or anything with the fields this term reads.
+        d_safe: (...) float32, m, the scenes' clearance normalisers (read by clearance
+            only; every hazard term takes it: one signature per role).
+        settings: the scoring settings.
+
+    Returns:
+        (...) float32 in [0, 1]; ``NaN`` where unavailable.
+    """
+    return score(metrics.t_ref_s, metrics.t_event_s, metrics.t_react_s,
+                 metrics.anticipation_available, metrics.coincident_onset)  # fmt: skip
+
+
 #: The :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` fields :func:`outputs` gives.
 OUTPUTS = ("t_react_s", "anticipation_available", "response_at_event")
 

@@ -141,6 +141,15 @@ def soft(
     return value * no_fault, jnp.asarray(True)
 
 
+#: Its columns of the route-level table: column -> (route, ExecutionMetrics field), the
+#: route ``"A"`` (the warning-side route) or ``"B"`` (the matched normal route).
+COLUMNS: dict[str, tuple[str, str]] = {
+    "controller_fault": ("A", "controller_fault"),
+    "t_fault_s": ("A", "t_fault_s"),
+    "B_controller_fault": ("B", "controller_fault"),
+    "B_t_fault_s": ("B", "t_fault_s"),
+}
+
 #: The :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` fields :func:`outputs` gives.
 OUTPUTS = ("gate_block", "controller_fault", "t_fault_s", "stalled", "max_still_s")
 

@@ -134,6 +134,30 @@ def soft(
     return smooth_clip01(d_min / d_safe, temperature), valid(state, ctx, t_fail)
 
 
+#: Its columns of the route-level table: column -> (route, ExecutionMetrics field), the
+#: route ``"A"`` (the warning-side route) or ``"B"`` (the matched normal route).
+COLUMNS: dict[str, tuple[str, str]] = {"clearance_min_m": ("A", "clearance_min_m")}
+
+#: The name of its score among the pair components and in the route-level table.
+SCORE = "S_clear"
+
+
+def score_of(metrics: Any, d_safe: Any, settings: ScoringSettings) -> Array:
+    """``S_clear`` of Route A executions from their per-execution metrics, elementwise.
+
+    Args:
+        metrics: Route A :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` (any
+            batch shape), or anything with the fields this term reads.
+        d_safe: (...) float32, m, the scenes' clearance normalisers (read by clearance
+            only; every hazard term takes it: one signature per role).
+        settings: the scoring settings.
+
+    Returns:
+        (...) float32 in [0, 1]; ``NaN`` where unavailable.
+    """
+    return score(metrics.clearance_min_m, d_safe)
+
+
 #: The :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` fields :func:`outputs` gives.
 OUTPUTS = ("clearance_min_m", "clearance_available")
 

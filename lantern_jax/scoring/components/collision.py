@@ -113,6 +113,10 @@ def soft(
     return no_collision * soft_gate(state.margin, temperature), jnp.asarray(True)
 
 
+#: Its columns of the route-level table besides its gate's pass flag (none; see
+#: :data:`lantern_jax.core.constants.GATE_COLUMNS`): column -> (route, field).
+COLUMNS: dict[str, tuple[str, str]] = {}
+
 #: The :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` fields :func:`outputs` gives.
 OUTPUTS = ("gate_collision",)
 

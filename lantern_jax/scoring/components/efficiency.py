@@ -75,6 +75,13 @@ def slow_s(state: EfficiencyState) -> Array:
     return state.slow_ticks.astype(jnp.float32) * DT
 
 
+#: Its columns of the route-level table: column -> (route, ExecutionMetrics field), the
+#: route ``"A"`` (the warning-side route) or ``"B"`` (the matched normal route).
+COLUMNS: dict[str, tuple[str, str]] = {
+    "B_time_s": ("B", "t_complete_s"),
+    "B_slow_s": ("B", "slow_unjustified_s"),
+}
+
 #: The :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` fields :func:`outputs` gives.
 OUTPUTS = ("t_complete_s", "slow_unjustified_s")
 

@@ -139,6 +139,10 @@ def soft(
     return soft_gate(margin, temperature), jnp.asarray(True)
 
 
+#: Its columns of the route-level table: column -> (route, ExecutionMetrics field), the
+#: route ``"A"`` (the warning-side route) or ``"B"`` (the matched normal route).
+COLUMNS: dict[str, tuple[str, str]] = {"B_false_brake_stop_s": ("B", "false_brake_max_stop_s")}
+
 #: The :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` fields :func:`outputs` gives.
 OUTPUTS = ("gate_false_brake", "false_brake_max_stop_s")
 

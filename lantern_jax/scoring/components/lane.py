@@ -110,6 +110,10 @@ def soft(
     return soft_gate(margin, temperature), jnp.asarray(True)
 
 
+#: Its columns of the route-level table besides its gate's pass flag (none; see
+#: :data:`lantern_jax.core.constants.GATE_COLUMNS`): column -> (route, field).
+COLUMNS: dict[str, tuple[str, str]] = {}
+
 #: The :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` fields :func:`outputs` gives.
 OUTPUTS = ("gate_lane", "outside_lanes_s")
 

@@ -196,6 +196,30 @@ def soft(
     return jnp.where(has, state.p * clipped, 0.0), ok
 
 
+#: Its columns of the route-level table: column -> (route, ExecutionMetrics field), the
+#: route ``"A"`` (the warning-side route) or ``"B"`` (the matched normal route).
+COLUMNS: dict[str, tuple[str, str]] = {"recovery_latency_s": ("A", "recovery_latency_s")}
+
+#: The name of its score among the pair components and in the route-level table.
+SCORE = "S_rec"
+
+
+def score_of(metrics: Any, d_safe: Any, settings: ScoringSettings) -> Array:
+    """``S_rec`` of Route A executions from their per-execution metrics, elementwise.
+
+    Args:
+        metrics: Route A :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` (any
+            batch shape), or anything with the fields this term reads.
+        d_safe: (...) float32, m, the scenes' clearance normalisers (read by clearance
+            only; every hazard term takes it: one signature per role).
+        settings: the scoring settings.
+
+    Returns:
+        (...) float32 in [0, 1]; ``NaN`` where unavailable.
+    """
+    return score(metrics.recovery_latency_s, settings, metrics.recovery_available)
+
+
 #: The :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` fields :func:`outputs` gives.
 OUTPUTS = ("t_release_s", "t_recover_s", "recovery_latency_s", "recovery_available")
 

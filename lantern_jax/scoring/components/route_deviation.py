@@ -105,6 +105,10 @@ def soft(
     return soft_gate(settings.route_deviation_m - state.max_dist, temperature), jnp.asarray(True)
 
 
+#: Its columns of the route-level table besides its gate's pass flag (none; see
+#: :data:`lantern_jax.core.constants.GATE_COLUMNS`): column -> (route, field).
+COLUMNS: dict[str, tuple[str, str]] = {}
+
 #: The :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` fields :func:`outputs` gives.
 OUTPUTS = ("gate_route_deviation", "max_route_dist_m")
 

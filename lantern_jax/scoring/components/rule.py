@@ -97,6 +97,10 @@ def soft(
     return 1.0 - state.red_light.astype(jnp.float32), jnp.asarray(True)
 
 
+#: Its columns of the route-level table besides its gate's pass flag (none; see
+#: :data:`lantern_jax.core.constants.GATE_COLUMNS`): column -> (route, field).
+COLUMNS: dict[str, tuple[str, str]] = {}
+
 #: The :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` fields :func:`outputs` gives.
 OUTPUTS = ("gate_rule",)
 

@@ -159,6 +159,30 @@ def soft(
     return smooth_clip01(ttc / settings.ttc_norm_s, temperature), valid(state, ctx, t_fail)
 
 
+#: Its columns of the route-level table: column -> (route, ExecutionMetrics field), the
+#: route ``"A"`` (the warning-side route) or ``"B"`` (the matched normal route).
+COLUMNS: dict[str, tuple[str, str]] = {"ttc_min_s": ("A", "ttc_min_s")}
+
+#: The name of its score among the pair components and in the route-level table.
+SCORE = "S_ttc"
+
+
+def score_of(metrics: Any, d_safe: Any, settings: ScoringSettings) -> Array:
+    """``S_ttc`` of Route A executions from their per-execution metrics, elementwise.
+
+    Args:
+        metrics: Route A :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` (any
+            batch shape), or anything with the fields this term reads.
+        d_safe: (...) float32, m, the scenes' clearance normalisers (read by clearance
+            only; every hazard term takes it: one signature per role).
+        settings: the scoring settings.
+
+    Returns:
+        (...) float32 in [0, 1]; ``NaN`` where unavailable.
+    """
+    return score(metrics.ttc_min_s, settings)
+
+
 #: The :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` fields :func:`outputs` gives.
 OUTPUTS = ("ttc_min_s", "ttc_available")
 
