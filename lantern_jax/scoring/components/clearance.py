@@ -143,18 +143,10 @@ SCORE = "S_clear"
 
 
 def score_of(metrics: Any, d_safe: Any, settings: ScoringSettings) -> Array:
-    """``S_clear`` of Route A executions from their per-execution metrics, elementwise.
-
-    Args:
-        metrics: Route A :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` (any
-            batch shape), or anything with the fields this term reads.
-        d_safe: (...) float32, m, the scenes' clearance normalisers (read by clearance
-            only; every hazard term takes it: one signature per role).
-        settings: the scoring settings.
-
-    Returns:
-        (...) float32 in [0, 1]; ``NaN`` where unavailable.
-    """
+    """``S_clear`` of Route A executions, elementwise:
+    :func:`score` of their metrics' ``clearance_min_m`` over ``d_safe``
+    (the hazard role's ``score_of``,
+    :mod:`lantern_jax.scoring.components`)."""
     return score(metrics.clearance_min_m, d_safe)
 
 
