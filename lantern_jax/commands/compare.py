@@ -27,9 +27,6 @@ from lantern_jax.commands import UsageError
 from lantern_jax.commands.common import check_out, split_values
 from lantern_jax.commands.values import seed
 
-COMPARISON_MD = "comparison.md"
-COMPARISON_CSV = "comparison.csv"
-
 
 def _read(path: str):
     """The checked result set at ``path`` (:func:`lantern_jax.report.evidence.read_result_set`).
@@ -55,9 +52,8 @@ def _rows(df, model: str, where: str):
 
 def cmd_compare(args: argparse.Namespace, argv: Sequence[str]) -> int:
     """Compare two policies of one result set, or one policy in two; returns the exit code."""
-    from lantern_jax.io.files import StagedFolder, atomic_write
     from lantern_jax.report import interval_note
-    from lantern_jax.report.compare import compare_runs, format_comparison
+    from lantern_jax.report.compare import COMPARISON_FILES, compare_runs, write_comparison
     from lantern_jax.scoring.uncertainty import SEED, settings
 
     policies = split_values(args.policy)
@@ -85,31 +81,15 @@ def cmd_compare(args: argparse.Namespace, argv: Sequence[str]) -> int:
             f"(got {len(sets)} result set(s) and {len(policies)} policy name(s))"
         )
     seed = SEED if args.bootstrap_seed is None else args.bootstrap_seed
-    check_out(args.out, owned=(COMPARISON_MD, COMPARISON_CSV))
+    check_out(args.out, owned=COMPARISON_FILES)
     try:
         table = compare_runs(a, b, seed=seed)
     except ValueError as e:
         raise UsageError(str(e)) from None
-    title = f"Paired comparison of mean CUS: {labels[0]} - {labels[1]}"
-    note = (
-        f"{interval_note(settings(seed))}; p: two-sided paired bootstrap p-value of a zero "
-        "difference; n: pairs compared."
-    )
-    for line in notes:
-        print(line)
-    print(title)
-    print(format_comparison(table, *labels))
-    print(note)
-    head = "".join(f"> {line}\n\n" for line in notes)
-    md = (f"# {title}\n\n{head}{note}\n\n"
-          f"{format_comparison(table, *labels, tablefmt='github')}\n")  # fmt: skip
     command = shlex.join(["lantern-jax", *argv])
-    with StagedFolder(args.out, (COMPARISON_MD, COMPARISON_CSV)) as stage:
-        atomic_write(stage.path / COMPARISON_MD, f"{md}\nCommand: `{command}`\n".encode())
-        csv = table.to_csv(index=False, float_format="%.6f", lineterminator="\n")
-        atomic_write(stage.path / COMPARISON_CSV, csv.encode())
-        stage.commit()
-    print(f"Wrote {Path(args.out) / COMPARISON_MD} and {Path(args.out) / COMPARISON_CSV}")
+    print(write_comparison(table, labels, notes, interval_note(settings(seed)), command,
+                           Path(args.out)))  # fmt: skip
+    print("Wrote " + " and ".join(str(Path(args.out) / f) for f in COMPARISON_FILES))
     return 0
 
 

@@ -125,6 +125,42 @@ def format_across_suites(
     )
 
 
+#: The files of a comparison (``lantern-jax compare --out``).
+COMPARISON_MD = "comparison.md"
+COMPARISON_CSV = "comparison.csv"
+COMPARISON_FILES = (COMPARISON_MD, COMPARISON_CSV)
+
+
+def write_comparison(table: pd.DataFrame, labels: Sequence[str], notes: Sequence[str],
+                     interval: str, command: str, out: Path) -> str:  # fmt: skip
+    """A paired comparison (:func:`compare_runs`) written into ``out`` as one set
+    (:data:`COMPARISON_FILES`: the Markdown table with its notes and the command, the CSV).
+
+    Args:
+        table: the comparison, first minus second.
+        labels: the two sides' names, first then second.
+        notes: lines shown above the table (protocol or version differences).
+        interval: how the intervals were computed (``report.interval_note``).
+        command: the command line that made it, shown under the Markdown table.
+        out: the folder.
+
+    Returns:
+        The text to print: the notes, the title, the table and how to read it.
+    """
+    title = f"Paired comparison of mean CUS: {labels[0]} - {labels[1]}"
+    note = (f"{interval}; p: two-sided paired bootstrap p-value of a zero difference; n: pairs "
+            "compared.")  # fmt: skip
+    head = "".join(f"> {line}\n\n" for line in notes)
+    github = format_comparison(table, *labels, tablefmt="github")
+    md = f"# {title}\n\n{head}{note}\n\n{github}\n\nCommand: `{command}`\n"
+    with StagedFolder(out, COMPARISON_FILES) as stage:
+        atomic_write(stage.path / COMPARISON_MD, md.encode())
+        csv = table.to_csv(index=False, float_format="%.6f", lineterminator="\n")
+        atomic_write(stage.path / COMPARISON_CSV, csv.encode())
+        stage.commit()
+    return "\n".join([*notes, title, format_comparison(table, *labels), note])
+
+
 #: The files of :func:`write_across_suites` (``lantern-jax evaluate --fresh-suites``).
 ACROSS_MD = "across_suites.md"
 ACROSS_CSV = "across_suites.csv"
