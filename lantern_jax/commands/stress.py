@@ -372,58 +372,9 @@ def _add_adversary_options(st: argparse.ArgumentParser) -> None:
     )
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
-    """Register ``stress`` on the command line's sub-parsers."""
-    st = sub.add_parser(
-        "stress",
-        help="search a scenario for failures (gradient vs random search vs CMA-ES)",
-        description=__doc__.splitlines()[0],
-        allow_abbrev=False,
-    )
-    st.add_argument("--policy", default="coop", metavar="NAME", help="policy under test")
-    st.add_argument("--family", default=None, metavar="F",
-                    help="PE, VC, OR, LWW, RWW or RTY (required, except with --fragility: "
-                    "then the pairs of that family only)")  # fmt: skip
-    st.add_argument("--fragility", action="store_true",
-                    help="no search: every pair's fragility radius from one backward pass, "
-                    "verified by hard rollouts (reads --policy, --suite, --family, --pair, "
-                    "--condition, --temperature, --sampling, --seed, --out, --quiet)")  # fmt: skip
-    st.add_argument("--sampling", type=count(4096), default=None, metavar="N",
-                    help="--fragility: also N uniform draws around every pair, and the rank "
-                    "correlation of the radius with their failure rate (default: none)")
-    st.add_argument(
-        "--space",
-        default="knobs",
-        choices=("knobs", "adversary", "both"),
-        help="what is searched: the family's knobs, adversarial actor tracks, or both",
-    )
-    st.add_argument(
-        "--budget-s",
-        type=number(0.0, 10.0**6, low_open=True),
-        default=60.0,
-        metavar="S",
-        help="wall-clock seconds per method, compilation excluded",
-    )
-    st.add_argument(
-        "--budget-rollouts",
-        type=count(),
-        default=None,
-        metavar="N",
-        help="rollouts per restart and method, every kind counted (default: none)",
-    )
-    st.add_argument("--out", default="results/stress", metavar="DIR", help="output folder")
-    st.add_argument("--suite", default=None, metavar="ID|PATH", help="suite (default built-in)")
-    st.add_argument("--pair", metavar="ID", help="pair to stress (default: the family's first)")
-    st.add_argument("--knobs", metavar="K[,K...]", help="knobs to search (default: all)")
-    st.add_argument(
-        "--range",
-        action="append",
-        metavar="KNOB=LO:HI",
-        help="narrow a knob's range (may be repeated)",
-    )
-    _add_adversary_options(st)
-    st.add_argument("--restarts", type=count(4096), default=8, metavar="R",
-                    help="independent restarts of every method")  # fmt: skip
+def _add_method_options(st: argparse.ArgumentParser) -> None:
+    """The options of the search methods: draws, CMA-ES, Adam, the surrogate, the methods
+    compared and the hybrid's cycle."""
     st.add_argument(
         "--samples",
         type=count(4096),
@@ -477,6 +428,61 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                     help="hybrid: uniform draws per restart before each descent")  # fmt: skip
     st.add_argument("--hybrid-steps", type=count(4096), default=8, metavar="N",
                     help="hybrid: Adam steps per descent")  # fmt: skip
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    """Register ``stress`` on the command line's sub-parsers."""
+    st = sub.add_parser(
+        "stress",
+        help="search a scenario for failures (gradient vs random search vs CMA-ES)",
+        description=__doc__.splitlines()[0],
+        allow_abbrev=False,
+    )
+    st.add_argument("--policy", default="coop", metavar="NAME", help="policy under test")
+    st.add_argument("--family", default=None, metavar="F",
+                    help="PE, VC, OR, LWW, RWW or RTY (required, except with --fragility: "
+                    "then the pairs of that family only)")  # fmt: skip
+    st.add_argument("--fragility", action="store_true",
+                    help="no search: every pair's fragility radius from one backward pass, "
+                    "verified by hard rollouts (reads --policy, --suite, --family, --pair, "
+                    "--condition, --temperature, --sampling, --seed, --out, --quiet)")  # fmt: skip
+    st.add_argument("--sampling", type=count(4096), default=None, metavar="N",
+                    help="--fragility: also N uniform draws around every pair, and the rank "
+                    "correlation of the radius with their failure rate (default: none)")
+    st.add_argument(
+        "--space",
+        default="knobs",
+        choices=("knobs", "adversary", "both"),
+        help="what is searched: the family's knobs, adversarial actor tracks, or both",
+    )
+    st.add_argument(
+        "--budget-s",
+        type=number(0.0, 10.0**6, low_open=True),
+        default=60.0,
+        metavar="S",
+        help="wall-clock seconds per method, compilation excluded",
+    )
+    st.add_argument(
+        "--budget-rollouts",
+        type=count(),
+        default=None,
+        metavar="N",
+        help="rollouts per restart and method, every kind counted (default: none)",
+    )
+    st.add_argument("--out", default="results/stress", metavar="DIR", help="output folder")
+    st.add_argument("--suite", default=None, metavar="ID|PATH", help="suite (default built-in)")
+    st.add_argument("--pair", metavar="ID", help="pair to stress (default: the family's first)")
+    st.add_argument("--knobs", metavar="K[,K...]", help="knobs to search (default: all)")
+    st.add_argument(
+        "--range",
+        action="append",
+        metavar="KNOB=LO:HI",
+        help="narrow a knob's range (may be repeated)",
+    )
+    _add_adversary_options(st)
+    st.add_argument("--restarts", type=count(4096), default=8, metavar="R",
+                    help="independent restarts of every method")  # fmt: skip
+    _add_method_options(st)
     st.add_argument("--seed", type=seed(), default=0, help="seed of every method's restarts")
     st.add_argument("--quiet", action="store_true", help="no progress lines")
     # what --fragility compares the search options with (a value other than these was given)
