@@ -55,8 +55,10 @@ def _norm(x: np.ndarray) -> np.ndarray:
 
 
 def _cosine(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise cosine in float64; NaN where either gradient is (numerically) zero."""
+    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
     na, nb = _norm(a), _norm(b)
-    ok = (na > 0) & (nb > 0)
+    ok = (na > 1e-12) & (nb > 1e-12)
     return np.where(ok, np.sum(a * b, axis=1) / np.where(ok, na * nb, 1.0), np.nan)
 
 
