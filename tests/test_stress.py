@@ -271,15 +271,18 @@ def test_autodiff_agrees_with_finite_differences_on_a_smooth_scene():
     problem = _crossing_problem()
     rng = np.random.default_rng(0)
     z = jnp.asarray(rng.normal(0.0, 0.3, problem.space.dim), jnp.float32)
+    # batches of two candidates: the program the batch-independence test below runs too
     quality = report.gradient_quality(problem, np.asarray(z)[None], 0.0, 1, directions=8,
-                                      step=1e-2, batch=1)  # fmt: skip
+                                      step=1e-2, batch=2)  # fmt: skip
     assert np.isfinite(quality["value"][0]) and 0.0 < quality["value"][0] < CAP_M
     assert quality["cos_first"][0] > 0.99
-    grad = objective.batched_estimator(problem, 0.0)(z[None], np.zeros((1, 1, z.shape[0])))
-    assert np.all(np.isfinite(np.asarray(grad.first))) and float(jnp.linalg.norm(grad.first)) > 0
+    pair = jnp.stack([z, 0.5 * z])
+    grad = objective.batched_estimator(problem, 0.0)(pair, np.zeros((2, 1, z.shape[0])))
+    assert np.all(np.isfinite(np.asarray(grad.first)))
+    assert np.all(np.linalg.norm(np.asarray(grad.first), axis=1) > 0)
 
 
-@pytest.mark.slow  # compiles a soft program of its own (about 40 s)
+@pytest.mark.slow  # the soft program of the test above (two candidates per batch)
 def test_a_candidate_s_value_and_gradient_do_not_see_the_rest_of_its_batch():
     """The candidates of a batch are one soft rollout and one backward pass of their sum
     (:func:`objective.part_samples`): candidate 0's value and gradient are the same bits
