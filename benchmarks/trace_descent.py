@@ -16,7 +16,9 @@ restart and step, what the search itself does not keep:
 * the share of the iterate's normalised actions at their bound (``|value| > 0.99``: the squashing
   to ``[-1, 1]`` leaves them no gradient);
 * the hard verification of the iterate: the pair CUS, the policy's least margin to the watched
-  actors, the expert's least distance, whether it is a plausible failure.
+  actors, the expert's least distance and the gates it failed, the adversary's plausibility
+  (its longest stop in the ego's path, its time off the road), whether it is a plausible
+  failure.
 
 Writes ``trace.csv`` (one row per restart and step), ``knots.csv`` (the policy gradient's mass
 per knot, at the first and last step) and ``trace.png`` into ``--out``::
@@ -107,6 +109,10 @@ def trace(problem, verifier: Verifier, restarts: int, steps: int, seed: int, lr:
                 policy_failed=bool(verdict.policy_failed[r]),
                 plausible_failure=bool(verdict.failed[r]),
                 expert_ok=bool(verdict.expert_ok[r]),
+                expert_failed_gates=" ".join(verdict.expert_failed_gates[r]),
+                adversary_plausible=bool(verdict.plausible[r]),
+                adversary_stop_s=float(verdict.stop_s[r]),
+                adversary_off_road_s=float(verdict.off_road_s[r]),
                 policy_margin_m=float(verdict.margin_m[r]),
                 expert_dist_m=float(verdict.expert_dist_m[r]),
                 step_s=time.perf_counter() - t0,
@@ -224,8 +230,12 @@ def main() -> None:
               f"margin {d.policy_margin_m.median():.2f} m, expert "
               f"{d.expert_dist_m.median():.2f} m, CUS {d.hard_cus.median():.1f}")  # fmt: skip
     restarts = df.groupby("restart").plausible_failure.any().sum()
+    gates = df.expert_failed_gates.fillna("").value_counts().to_dict()
     print(f"plausible failures: {int(df.plausible_failure.sum())} of {len(df)} iterates; "
-          f"restarts with one: {restarts}/{args.restarts}")
+          f"restarts with one: {restarts}/{args.restarts}; policy failed "
+          f"{int(df.policy_failed.sum())}, expert without margin {int((~df.expert_ok).sum())} "
+          f"(its failed gates: {gates}), adversary implausible "
+          f"{int((~df.adversary_plausible).sum())}")
 
 
 if __name__ == "__main__":

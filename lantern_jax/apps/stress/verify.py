@@ -53,6 +53,7 @@ class Verdict:
     objective: np.ndarray | None = None  # (N,) the surrogate's hard expression
     failed_gates: list | None = None  # (N,) names of the policy's failed Route A gates
     t_fail_s: np.ndarray | None = None  # (N,) s, the policy's first gate failure (NaN none)
+    expert_failed_gates: list | None = None  # (N,) names of the expert's failed Route A gates
     traj: np.ndarray | None = None  # (N, K, W, 2) m, watched actors every 0.25 s (NaN absent)
 
     @property
@@ -179,10 +180,11 @@ class Verifier:
             stop = off = np.zeros(len(cus))
             plausible = np.ones(len(cus), bool)
         margin = np.min(np.asarray(w_a.margin, np.float64), axis=1)
-        failed_gates = [
-            [g for g in ROUTE_A_GATES if not bool(np.asarray(getattr(m_a, g))[i])]
-            for i in range(len(cus))
-        ]
+        failed_gates, expert_failed_gates = (
+            [[g for g in ROUTE_A_GATES if not bool(np.asarray(getattr(m, g))[i])]
+             for i in range(len(cus))]
+            for m in (m_a, m_e)
+        )  # fmt: skip
         return Verdict(
             cus=cus,
             gates_passed=passed,
@@ -197,6 +199,7 @@ class Verifier:
             off_road_s=off,
             objective=rules.hard_objective(margin, expert_dist, stop, off),
             failed_gates=failed_gates,
+            expert_failed_gates=expert_failed_gates,
             t_fail_s=np.asarray(m_a.t_first_failure_s, np.float64),
             traj=np.asarray(w_a.traj),
         )
