@@ -20,6 +20,9 @@ restart and step, what the search itself does not keep:
   (its longest stop in the ego's path, its time off the road), whether it is a plausible
   failure.
 
+With ``--draws N`` it also verifies ``N`` uniform draws of the space (``draws.csv``): the
+failures sampling finds, their gates and margins, beside the ones descent is steered toward.
+
 Writes ``trace.csv`` (one row per restart and step), ``knots.csv`` (the policy gradient's mass
 per knot, at the first and last step) and ``trace.png`` into ``--out``::
 
@@ -129,6 +132,21 @@ def trace(problem, verifier: Verifier, restarts: int, steps: int, seed: int, lr:
     return pd.DataFrame(rows), np.stack(grads)
 
 
+def draws(problem, verifier: Verifier, n: int, seed: int) -> pd.DataFrame:
+    """``n`` uniform draws of the space, verified: what the failures that sampling finds look
+    like (the gates the policy failed, its margin to the watched actors, the expert's)."""
+    rng = np.random.default_rng(seed + 1000)
+    values = problem.space.uniform(rng, n)
+    v = verifier(values)
+    return pd.DataFrame(dict(
+        draw=np.arange(n), hard_cus=v.cus, policy_failed=v.policy_failed,
+        policy_failed_gates=[" ".join(g) for g in v.failed_gates],
+        policy_margin_m=v.margin_m, expert_dist_m=v.expert_dist_m, expert_ok=v.expert_ok,
+        expert_failed_gates=[" ".join(g) for g in v.expert_failed_gates],
+        adversary_plausible=v.plausible, plausible_failure=v.failed,
+    ))  # fmt: skip
+
+
 def knot_profile(grads: np.ndarray, knot_s: float) -> pd.DataFrame:
     """The policy gradient's squared norm per knot (all slots and channels), as a share of its
     total, median over restarts, at the first and the last step."""
@@ -191,6 +209,8 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=16)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--horizon-s", type=float, default=20.0)
+    ap.add_argument("--draws", type=int, default=0,
+                    help="also verify this many uniform draws (draws.csv): what sampling finds")
     ap.add_argument("--out", default="runs/trace_descent")
     args = ap.parse_args()
     if args.space not in SPACES:
@@ -215,6 +235,18 @@ def main() -> None:
     t0 = time.perf_counter()
     df, grads = trace(problem, verifier, args.restarts, args.steps, args.seed, cfg.lr, cfg.init_z)
     print(f"{time.perf_counter() - t0:.0f} s in all (compiles included)")
+    if args.draws:
+        d = draws(problem, verifier, args.draws, args.seed)
+        d.insert(0, "pair", pair.pair_id)
+        d.to_csv(out / "draws.csv", index=False, float_format="%.6g")
+        fail = d[d.plausible_failure]
+        print(f"uniform draws: {len(d)}, policy failed {int(d.policy_failed.sum())}, plausible "
+              f"failures {len(fail)}; their failed gates "
+              f"{fail.policy_failed_gates.value_counts().to_dict()}; their margin to the watched "
+              f"actors (median, min, max) {fail.policy_margin_m.median():.2f} / "
+              f"{fail.policy_margin_m.min():.2f} / {fail.policy_margin_m.max():.2f} m; draws the "
+              f"expert fails: {int((~d.expert_ok).sum())} "
+              f"({d.expert_failed_gates.value_counts().to_dict()})")  # fmt: skip
     df.insert(0, "pair", pair.pair_id)
     df.to_csv(out / "trace.csv", index=False, float_format="%.6g")
     prof = knot_profile(grads, knot_s)
