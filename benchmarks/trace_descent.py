@@ -190,7 +190,7 @@ def figure(df: pd.DataFrame, knots: pd.DataFrame, title: str, path: Path) -> Non
     for a in ax:
         a.set_xlabel("Adam step")
         a.legend(fontsize=8)
-    inset = ax[1].inset_axes([0.55, 0.08, 0.42, 0.35])
+    inset = ax[1].inset_axes([0.5, 0.52, 0.47, 0.36])
     width = float(knots["t_s"].iloc[1]) if len(knots) > 1 else 0.5
     inset.bar(knots["t_s"], knots["first_step"], width=width, color="C0")
     inset.set_title("policy |g|² per track second (step 0)", fontsize=7)
@@ -212,7 +212,16 @@ def main() -> None:
     ap.add_argument("--draws", type=int, default=0,
                     help="also verify this many uniform draws (draws.csv): what sampling finds")
     ap.add_argument("--out", default="runs/trace_descent")
+    ap.add_argument("--plot-only", action="store_true",
+                    help="draw trace.png again from the CSV files in --out, run nothing")
     args = ap.parse_args()
+    if args.plot_only:
+        out = Path(args.out)
+        df = pd.read_csv(out / "trace.csv")
+        title = (f"{args.policy} {args.family} ({df.pair.iloc[0]}), {args.space} dimensions, "
+                 f"{df.restart.nunique()} restarts: gradient descent from the nominal scene")
+        figure(df, pd.read_csv(out / "knots.csv"), title, out / "trace.png")
+        return
     if args.space not in SPACES:
         ap.error(f"--space: {args.space} not of {', '.join(SPACES)}")
     out = Path(args.out)
