@@ -177,7 +177,7 @@ def figure(df: pd.DataFrame, knots: pd.DataFrame, title: str, path: Path) -> Non
     import matplotlib.pyplot as plt
 
     g = df.groupby("step")
-    fig, ax = plt.subplots(1, 4, figsize=(16, 3.8))
+    fig, ax = plt.subplots(1, 5, figsize=(20, 3.8))
 
     def band(a, col, label, color):
         q = g[col].quantile([0.25, 0.5, 0.75]).unstack()
@@ -188,22 +188,28 @@ def figure(df: pd.DataFrame, knots: pd.DataFrame, title: str, path: Path) -> Non
     band(ax[0], "expert_grad_norm", "expert part", "C1")
     ax[0].set_yscale("symlog", linthresh=1e-6)
     ax[0].set_ylabel("|gradient| of the surrogate part")
-    band(ax[1], "cos_policy_expert", "cos(policy, expert)", "C2")
+    if df["cos_policy_expert"].notna().any():
+        band(ax[1], "cos_policy_expert", "cos(policy, expert)", "C2")
+    else:
+        ax[1].text(0.5, 0.5, "the expert part's gradient is 0\n(its hinge is inactive)",
+                   ha="center", va="center", transform=ax[1].transAxes)  # fmt: skip
     ax[1].set_ylim(-1.05, 1.05)
     ax[1].set_ylabel("cosine of the two parts' gradients")
     band(ax[2], "policy_margin_m", "policy's least margin", "C0")
     band(ax[2], "expert_dist_m", "expert's least distance", "C1")
-    ax[2].set_ylabel("m (hard rollout)")
+    ax[2].set_ylabel("m (hard rollout, watched actors)")
     band(ax[3], "hard_cus", "pair CUS", "C3")
     ax[3].set_ylabel("hard CUS of the iterate")
-    for a in ax:
+    for a in ax[:4]:
         a.set_xlabel("Adam step")
         a.legend(fontsize=8)
-    inset = ax[1].inset_axes([0.5, 0.52, 0.47, 0.36])
     width = float(knots["t_s"].iloc[1]) if len(knots) > 1 else 0.5
-    inset.bar(knots["t_s"], knots["first_step"], width=width, color="C0")
-    inset.set_title("policy |g|² per track second (step 0)", fontsize=7)
-    inset.tick_params(labelsize=6)
+    ax[4].bar(knots["t_s"], knots["first_step"], width=width, color="C0", alpha=0.6,
+              label="first step")  # fmt: skip
+    ax[4].step(knots["t_s"], knots["last_step"], where="mid", color="C3", label="last step")
+    ax[4].set_xlabel("s of the adversary's track")
+    ax[4].set_ylabel("share of the policy part's |gradient|²")
+    ax[4].legend(fontsize=8)
     fig.suptitle(title)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
