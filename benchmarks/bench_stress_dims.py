@@ -94,6 +94,8 @@ def main() -> None:
     ap.add_argument("--budget-rollouts", type=int, default=64)
     ap.add_argument("--budget-s", type=float, default=1800.0)
     ap.add_argument("--horizon-s", type=float, default=20.0)
+    ap.add_argument("--watch", default="hazard", choices=("hazard", "all"),
+                    help="the actors the surrogate and the verification watch (docs/stress.md)")
     ap.add_argument("--out", default="runs/bench_stress_dims")
     ap.add_argument("--plot-only", action="store_true",
                     help="draw dims.png again from the CSV files in --out, run nothing")
@@ -120,7 +122,7 @@ def main() -> None:
         cfg = report.StressConfig(
             space="adversary", actors=actors, knots=knots, knot_s=knot_s, background=background,
             restarts=args.restarts, budget_s=args.budget_s, budget_rollouts=args.budget_rollouts,
-            horizon_s=args.horizon_s, methods=tuple(args.methods.split(",")),
+            horizon_s=args.horizon_s, methods=tuple(args.methods.split(",")), watch=args.watch,
         )  # fmt: skip
         got = run_cell(suite, args.policy, args.family, cfg)
         if got is None:

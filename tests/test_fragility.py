@@ -148,6 +148,7 @@ def test_family_summary_counts_and_intervals():
         (["stress", "--fragility", "--space", "adversary"], "--space: --fragility does not"),
         (["stress", "--fragility", "--budget-s", "5", "--restarts", "3"],
          "--budget-s, --restarts: --fragility does not read them"),
+        (["stress", "--fragility", "--watch", "all"], "--watch: --fragility does not read it"),
         (["stress", "--family", "PE", "--sampling", "4"], "--sampling: only --fragility"),
         (["stress", "--fragility", "--family", "PE", "--pair", "vc_0001"], "no pair of"),
     ],

@@ -88,6 +88,32 @@ def test_non_positive_budget_and_unknown_method(suite):
         report.stress_test(pair, "coop", cfg, progress=False)
 
 
+def test_watched_slots_of_the_hazard_or_of_every_actor(suite):
+    """``watch="hazard"``: the hazard and the tracked slots (1 + T entries); ``"all"``: the
+    hazard first, then every other slot with a box, padded with the hazard to ``MAX_ACTORS``
+    (one program for every family); a bad value is named, by the config check too."""
+    from lantern_jax.core.constants import MAX_ACTORS
+    from lantern_jax.scenarios.families import build_pair
+
+    pair = next(p for p in suite.pairs if p.family == "RTY")
+    a, _, _ = build_pair(pair.params)
+    space = adversary_space(a, "RTY", ("hazard",), knots=4, knot_s=0.5)
+    hazard = int(np.asarray(a.config.hazard_index))
+    boxed = {int(s) for s in np.nonzero(np.asarray(a.actors.extent)[:, 0] > 0)[0]}
+    assert space.tracked == (hazard,)  # the hazard's track: watched once, padded to 1 + T
+    assert objective.watched_slots(a, space) == (hazard, hazard)
+    every = objective.watched_slots(a, space, "all")
+    assert len(every) == MAX_ACTORS and every[0] == hazard
+    assert set(every) == boxed and len(boxed) > 1  # the hazard and the scene's other vehicles
+    assert every[len(boxed):] == (hazard,) * (MAX_ACTORS - len(boxed))
+    with pytest.raises(ValueError, match=r"watch: 'near' not one of hazard, all"):
+        objective.watched_slots(a, space, "near")
+    with pytest.raises(ValueError, match=r"watch: 'near' not one of hazard, all"):
+        report.stress_test(pair, "coop", report.StressConfig(watch="near"), progress=False)
+    problem = report.make_problem(pair, get_policy("coop"), space, report.StressConfig(watch="all"))
+    assert problem.watched == every and problem.tracked_mask.sum() == len(space.tracked)
+
+
 # ---------------------------------------------------------------------------------------------
 # gradient estimators on functions with known answers
 # ---------------------------------------------------------------------------------------------

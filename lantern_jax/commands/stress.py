@@ -183,6 +183,7 @@ def _config(args: argparse.Namespace, methods: tuple[str, ...]):
         space=args.space,
         actors=actors,
         horizon_s=args.horizon_s,
+        watch=args.watch,
         **given,
     )
 
@@ -291,7 +292,7 @@ def cmd_stress(args: argparse.Namespace, argv: Sequence[str]) -> int:
 #: Search options --fragility does not read (refused when given with another value).
 SEARCH_ONLY = ("space", "budget_s", "budget_rollouts", "knobs", "range", "restarts", "samples",
                "popsize", "sigma", "lr", "objective", "expert_weight", "horizon_s", "methods",
-               "hybrid_draws", "hybrid_steps", *ADVERSARY_OPTIONS)  # fmt: skip
+               "hybrid_draws", "hybrid_steps", "watch", *ADVERSARY_OPTIONS)  # fmt: skip
 
 
 def _cmd_fragility(args: argparse.Namespace) -> int:
@@ -407,6 +408,9 @@ def _add_method_options(st: argparse.ArgumentParser) -> None:
         choices=("plausible", "margin", "clearance", "soft_cus"),
         help="what the gradient and CMA-ES minimise (docs/stress.md)",
     )
+    st.add_argument("--watch", default="hazard", choices=("hazard", "all"),
+                    help="the actors the surrogate's margin and the verification watch: the "
+                    "hazard and the tracked ones, or every actor of the scene (docs/stress.md)")
     st.add_argument(
         "--expert-weight",
         type=number(0.0, 1000.0),

@@ -56,6 +56,7 @@ from flax import struct
 from lantern_jax.apps.stress import plausibility as rules
 from lantern_jax.apps.stress.space import Space
 from lantern_jax.apps.stress.watch import soft_rollout_batch
+from lantern_jax.core.constants import MAX_ACTORS
 from lantern_jax.policies.base import Policy
 from lantern_jax.scoring.cus import cus_of, quality_a, soft_execution_terms
 from lantern_jax.scoring.smooth import softmin_decode
@@ -70,6 +71,33 @@ OBJECTIVES = ("plausible", "margin", "clearance", "soft_cus")
 CLEARANCE_CAP_M = rules.CAP_M  # m, soft clearance is capped here (a far-away hazard is "safe")
 BIAS_Z = 2.0  # standard errors within which the first-order estimate is trusted
 POLICY, EXPERT = 0, 1  # the parts (and the members of the problem's switch)
+
+
+#: The actors a problem can watch (``StressConfig.watch``): ``"hazard"``, the hazard and every
+#: actor with a track; ``"all"``, every actor of the scene (a policy may collide with another
+#: vehicle than the hazard, and the expert must keep its margin from every one).
+WATCHES = ("hazard", "all")
+
+
+def watched_slots(scenario_a: Scenario, space: Space, watch: str = "hazard") -> tuple[int, ...]:
+    """The slots a problem watches: the hazard first, then the tracked slots (``"hazard"``,
+    padded with the hazard to 1 + T entries) or every other slot with a box (``"all"``, padded
+    with the hazard to ``MAX_ACTORS`` entries); the padding gives every family's problem of one
+    space layout one compiled program.
+
+    Raises:
+        ValueError: for a ``watch`` not in :data:`WATCHES`.
+    """
+    if watch not in WATCHES:
+        raise ValueError(f"watch: {watch!r} not one of {', '.join(WATCHES)}")
+    hazard = int(np.asarray(scenario_a.config.hazard_index))
+    if watch == "hazard":
+        slots, size = space.tracked, 1 + len(space.tracked)
+    else:
+        boxed = np.asarray(scenario_a.actors.extent)[:, 0] > 0
+        slots, size = tuple(int(s) for s in np.nonzero(boxed)[0]), MAX_ACTORS
+    watched = (hazard, *(s for s in slots if s != hazard))
+    return watched + (hazard,) * (size - len(watched))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -102,12 +130,7 @@ class Problem:
         if self.objective not in OBJECTIVES:
             raise ValueError(f"objective {self.objective!r} not one of {', '.join(OBJECTIVES)}")
         if not self.watched:
-            # the hazard and every tracked slot, padded with the hazard to 1 + T entries, so
-            # that every family's problem of one space layout shares its compiled programs
-            hazard = int(np.asarray(self.scenario_a.config.hazard_index))
-            watched = (hazard, *(s for s in self.space.tracked if s != hazard))
-            watched += (hazard,) * (1 + len(self.space.tracked) - len(watched))
-            object.__setattr__(self, "watched", watched)
+            object.__setattr__(self, "watched", watched_slots(self.scenario_a, self.space))
 
     @property
     def tracked_mask(self) -> np.ndarray:

@@ -35,7 +35,14 @@ import pandas as pd
 
 from lantern_jax.apps.stress import catalogue, search
 from lantern_jax.apps.stress import plausibility as rules
-from lantern_jax.apps.stress.objective import Problem, batched_estimator, part_samples, parts_of
+from lantern_jax.apps.stress.objective import (
+    WATCHES,
+    Problem,
+    batched_estimator,
+    part_samples,
+    parts_of,
+    watched_slots,
+)
 from lantern_jax.apps.stress.space import Space, adversary_space, product_space, search_space
 from lantern_jax.apps.stress.verify import Verifier
 from lantern_jax.core.constants import CONDITIONS, WARNING_CONDITION
@@ -91,6 +98,8 @@ class StressConfig:
     horizon_s: float | None = None  # s of soft rollout (None: from the pair, rounded up)
     expert_weight: float = rules.EXPERT_WEIGHT  # 0: no expert part in the surrogate
     init_z: float | None = None  # spread of the gradient and CMA-ES starting points
+    watch: str = "hazard"  # the actors the surrogate's margin and the verification watch:
+    #                        "hazard" (and the tracked ones) or "all" (objective.WATCHES)
 
     def resolved(self) -> StressConfig:
         """The config with every None replaced by its space's default."""
@@ -163,6 +172,7 @@ def make_problem(
         cfg.objective,
         expert,
         expert.init(key),
+        watched=watched_slots(a, space, cfg.watch),
         expert_weight=cfg.expert_weight,
     )
 
@@ -174,6 +184,8 @@ def _check(cfg: StressConfig) -> None:
             if not cfg.budget_s > 0
             else f"budget_rollouts: must be > 0, got {cfg.budget_rollouts}"
         )
+    if cfg.watch not in WATCHES:
+        raise ValueError(f"watch: {cfg.watch!r} not one of {', '.join(WATCHES)}")
     bad = [m for m in cfg.methods if m not in search.ALL_METHODS]
     if bad:
         raise ValueError(f"methods: {bad} not among {', '.join(search.ALL_METHODS)}")
