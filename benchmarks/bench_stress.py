@@ -45,10 +45,18 @@ from lantern_jax.scenarios.suite import load_suite
 RARE_PASS_SHARE = 0.9  # a cell is "rare" when the policy passes this share of random draws
 
 
-def pick_pair(suite, family: str, cfg: report.StressConfig, policy):
-    """The family's first pair whose nominal scene the expert drives with margin."""
+def pick_pair(suite, family: str, cfg: report.StressConfig, policy, pair_id: str | None = None):
+    """The family's first pair (or the pair ``pair_id``) whose nominal scene the expert drives
+    with margin and on which the configured space can be built (a space with background
+    vehicles needs one near the ego's route)."""
     for pair in (p for p in suite.pairs if p.family == family):
-        problem = report.make_problem(pair, policy, None, cfg)
+        if pair_id is not None and pair.pair_id != pair_id:
+            continue
+        try:
+            problem = report.make_problem(pair, policy, None, cfg)
+        except ValueError as e:
+            print(f"{pair.pair_id}: {e}", flush=True)
+            continue
         nominal = Verifier(problem, batch=cfg.restarts)(
             np.zeros((cfg.restarts, problem.space.dim), np.float32)
         )
@@ -95,14 +103,14 @@ PRINTED = ["method", "failure_rate", "failure_rate_lo", "failure_rate_hi", "medi
            "policy_pass_share", "rejected_expert", "rejected_adversary", "rollouts", "search_s"]
 
 
-def run_cell(suite, name: str, fam: str, cfg: report.StressConfig):
+def run_cell(suite, name: str, fam: str, cfg: report.StressConfig, pair_id: str | None = None):
     """One cell: the family's first pair the expert drives with margin, every method of
     ``cfg`` on it.  Returns ``(problem, per-method table, cell row)``, or None when no pair of
     the family qualifies; prints the cell.  The cell row needs random search among the
     methods (its draws give the pass share and the plausible-failure share)."""
     policy = get_policy(name)
     t0 = time.perf_counter()
-    pair = pick_pair(suite, fam, cfg.resolved(), policy)
+    pair = pick_pair(suite, fam, cfg.resolved(), policy, pair_id)
     if pair is None:
         print(f"\n{fam} {name}: no pair whose nominal scene the expert drives with margin")
         return None

@@ -94,6 +94,8 @@ def main() -> None:
     ap.add_argument("--budget-rollouts", type=int, default=64)
     ap.add_argument("--budget-s", type=float, default=1800.0)
     ap.add_argument("--horizon-s", type=float, default=20.0)
+    ap.add_argument("--pair", default=None, help="the pair (default: the family's first the "
+                    "expert drives with margin)")
     ap.add_argument("--watch", default="hazard", choices=("hazard", "all"),
                     help="the actors the surrogate and the verification watch (docs/stress.md)")
     ap.add_argument("--out", default="runs/bench_stress_dims")
@@ -124,7 +126,7 @@ def main() -> None:
             restarts=args.restarts, budget_s=args.budget_s, budget_rollouts=args.budget_rollouts,
             horizon_s=args.horizon_s, methods=tuple(args.methods.split(",")), watch=args.watch,
         )  # fmt: skip
-        got = run_cell(suite, args.policy, args.family, cfg)
+        got = run_cell(suite, args.policy, args.family, cfg, args.pair)
         if got is None:
             break
         problem, table, cell = got

@@ -218,6 +218,8 @@ def main() -> None:
     ap.add_argument("--draws", type=int, default=0,
                     help="also verify this many uniform draws (draws.csv): what sampling finds")
     ap.add_argument("--out", default="runs/trace_descent")
+    ap.add_argument("--pair", default=None, help="the pair (default: the family's first the "
+                    "expert drives with margin)")
     ap.add_argument("--watch", default="hazard", choices=("hazard", "all"),
                     help="the actors the surrogate's margin and the verification watch: the "
                     "hazard and the tracked ones, or every actor of the scene")
@@ -245,7 +247,7 @@ def main() -> None:
           f"{args.restarts} restarts, {args.steps} steps, lr {cfg.lr}", flush=True)  # fmt: skip
     suite = load_suite()
     policy = get_policy(args.policy)
-    pair = pick_pair(suite, args.family, cfg, policy)
+    pair = pick_pair(suite, args.family, cfg, policy, args.pair)
     if pair is None:
         raise SystemExit(f"{args.family}: no pair the expert drives with margin")
     problem = report.make_problem(pair, policy, None, cfg, suite)
