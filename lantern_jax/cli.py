@@ -46,6 +46,7 @@ import os
 import sys
 from collections.abc import Sequence
 
+from lantern_jax import __version__
 from lantern_jax.commands import (
     UsageError,
     ablations,
@@ -141,8 +142,6 @@ def build_parser() -> argparse.ArgumentParser:
         description="LANTERN cooperative-warning driving benchmark (JAX, batched).",
         allow_abbrev=False,
     )
-    from lantern_jax import __version__
-
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     families.add_option(parser)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True,
