@@ -10,7 +10,11 @@ of directions, not how long the adversary acts:
 * ``32``: the hazard, 16 knots of 0.5 s;
 * ``128``: the hazard, 64 knots of 0.125 s;
 * ``384``: the hazard and two background vehicles, 64 knots of 0.125 s each (where the scene
-  has them; the dimension reached is the one reported).
+  has them; the dimension reached is the one reported);
+* ``king``: KING's own setting (:mod:`lantern_jax.apps.stress.king`): the hazard and three
+  background vehicles (KING's four adversaries), an action every 0.25 s (its 4 Hz) for 64
+  steps (16 s) each: 512 dimensions where the scene has the vehicles.  It covers twice the
+  seconds of the others, so it is a cell of its own, not a point of the dimension series.
 
 The tracks hold at most :data:`lantern_jax.core.constants.MAX_KNOTS` knots (64) per actor, the
 world's array shape, so a space of 2,048 dimensions (per-tick controls of several actors)
@@ -39,6 +43,7 @@ import pandas as pd
 from bench_stress import run_cell
 
 from lantern_jax.apps.stress import report
+from lantern_jax.apps.stress.king import KING_KNOT_S
 from lantern_jax.scenarios.suite import load_suite
 
 #: name -> (actor groups, knots per track, s per knot, background vehicles)
@@ -46,6 +51,7 @@ SPACES = {
     "32": (("hazard",), 16, 0.5, 1),
     "128": (("hazard",), 64, 0.125, 1),
     "384": (("hazard", "background"), 64, 0.125, 2),
+    "king": (("hazard", "background"), 64, KING_KNOT_S, 3),
 }
 
 

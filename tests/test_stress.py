@@ -327,6 +327,111 @@ def test_a_candidate_s_value_and_gradient_do_not_see_the_rest_of_its_batch():
 
 
 # ---------------------------------------------------------------------------------------------
+# KING's recipe
+# ---------------------------------------------------------------------------------------------
+def test_king_cost_on_its_numbers():
+    """KING's cost from a watch: each actor's mean box distance over the time it was present,
+    the least of them, plus each tracked actor's soft off-road time as a share of the horizon;
+    an actor never present is CAP_M away; a padded duplicate of the hazard (not tracked) adds
+    no off-road time."""
+    from lantern_jax.apps.stress.king import king_cost
+
+    dist_sum = jnp.asarray([12.0, 9.0, 0.0, 12.0])  # m s
+    seen = jnp.asarray([4.0, 1.5, 0.0, 4.0])  # s: means 3 m, 6 m, never present, the hazard
+    off = jnp.asarray([0.0, 2.0, 5.0, 7.0])  # s off the road (soft)
+    tracked = jnp.asarray([False, True, True, False])
+    got = king_cost(dist_sum, seen, off, tracked, horizon_s=20.0)
+    assert float(got) == pytest.approx(3.0 + (2.0 + 5.0) / 20.0)
+    far = king_cost(jnp.zeros(2), jnp.zeros(2), jnp.zeros(2), jnp.asarray([True, True]), 20.0)
+    assert float(far) == pytest.approx(CAP_M)
+    # the minimum's derivative goes to the nearest actor only (shared between the hazard's
+    # entry and its padded duplicate, the same actor), the road's to tracked ones
+    g = jax.grad(lambda d, o: king_cost(d, seen, o, tracked, 20.0), argnums=(0, 1))(
+        dist_sum, off
+    )
+    np.testing.assert_allclose(np.asarray(g[0])[[1, 2]], 0.0)
+    assert float(g[0][0] + g[0][3]) == pytest.approx(1 / 4.0)
+    np.testing.assert_allclose(g[1], [0.0, 1 / 20.0, 1 / 20.0, 0.0])
+
+
+def test_king_problem_holds_the_policy_and_drops_the_expert_part():
+    """KING's problem descends its own cost with the ego's plans held (its detached ego) and no
+    expert part; the problem it came from is unchanged, and the two compile apart."""
+    from lantern_jax.apps.stress.king import king_problem
+
+    expert = get_policy("expert")
+    problem = _crossing_problem(expert=expert, objective_name="plausible")
+    king = king_problem(problem)
+    assert king.objective == "king" and king.expert_weight == 0.0 and king.hold_policy
+    assert objective.parts_of(king) == (objective.POLICY,)
+    assert objective.parts_of(problem) == (objective.POLICY, objective.EXPERT)
+    held = objective.held_plans(CRUISE)
+    assert king.soft_driver.members[0].program == held.program
+    assert problem.soft_driver.members[0].program == CRUISE.program
+    assert king.static() != problem.static()
+    verifying = [[m.program for m in p.driver.members] for p in (king, problem)]
+    assert verifying[0] == verifying[1]  # the hard rollouts that verify are the same
+
+
+def test_king_search_steps_with_its_adam_and_stops_where_it_found_a_failure(monkeypatch):
+    """The king method: one soft rollout (the policy's part only) and two hard ones per restart
+    and iteration; Adam with KING's step moves each iterate by about KING_LR per coordinate on
+    its first step; a restart whose iterate is a verified failure keeps it from then on."""
+    from lantern_jax.apps.stress import king as king_module
+    from lantern_jax.apps.stress import search
+
+    problem = _crossing_problem(expert=get_policy("expert"), objective_name="plausible")
+    k = problem.space.dim
+    seen_problems = []
+
+    def estimator(p, sigma):
+        seen_problems.append((p.objective, p.hold_policy, sigma))
+        return lambda z, eps: types.SimpleNamespace(blend=np.ones_like(z))  # uphill everywhere
+
+    monkeypatch.setattr(search, "batched_estimator", estimator)
+    fail_first = {"on": True}
+
+    def verifier(values):
+        n = len(values)
+        failed = np.zeros(n, bool)
+        failed[0] = fail_first["on"]  # restart 0's first iterate is a failure
+        fail_first["on"] = False
+        return search.Verdict(cus=np.where(failed, 0.0, 90.0), gates_passed=~failed,
+                              clearance_m=np.full(n, np.nan), expert_ok=np.ones(n, bool),
+                              failed=failed)  # fmt: skip
+
+    m = search.KingSearch(problem, verifier, restarts=3, seed=0)
+    assert seen_problems == [("king", True, 0.0)]
+    z0 = m.z.copy()
+    m.step()
+    assert m.trace.counts == dict(soft_policy=1, soft_expert=0, hard_policy=1, hard_expert=1)
+    np.testing.assert_array_equal(m.z[0], z0[0])  # found: kept
+    np.testing.assert_allclose(m.z[1:], z0[1:] - king_module.KING_LR, atol=1e-6)
+    m.step()
+    np.testing.assert_array_equal(m.z[0], z0[0])
+    assert m.trace.first_rollouts[0] == 3 and np.isnan(m.trace.first_rollouts[1:]).all()
+    assert k == m.z.shape[1]
+
+
+@pytest.mark.slow
+def test_king_gradient_agrees_with_finite_differences_on_a_smooth_scene():
+    """KING's cost on the crossing walker met by a cruising ego: finite, between the walker's
+    least and its farthest mean distance, and its pathwise gradient (the ego's plans held)
+    equals central finite differences of it and is not zero."""
+    from lantern_jax.apps.stress.king import king_problem
+
+    problem = king_problem(_crossing_problem())
+    rng = np.random.default_rng(0)
+    z = rng.normal(0.0, 0.3, (1, problem.space.dim)).astype(np.float32)
+    quality = report.gradient_quality(problem, z, 0.0, 1, directions=8, step=1e-2, batch=2)
+    assert np.isfinite(quality["value"][0]) and 0.0 < quality["value"][0] < CAP_M
+    assert quality["cos_first"][0] > 0.99
+    grad = objective.batched_estimator(problem, 0.0)(z, np.zeros((1, 1, z.shape[1])))
+    assert np.all(np.isfinite(np.asarray(grad.first)))
+    assert np.linalg.norm(np.asarray(grad.first)) > 0
+
+
+# ---------------------------------------------------------------------------------------------
 # plausibility
 # ---------------------------------------------------------------------------------------------
 def test_plausibility_rules_on_their_numbers():

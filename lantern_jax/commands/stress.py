@@ -427,7 +427,8 @@ def _add_method_options(st: argparse.ArgumentParser) -> None:
                     help="the Route A execution searched")  # fmt: skip
     st.add_argument("--methods", default="gradient,random,cmaes", metavar="M[,M...]",
                     help="search methods compared, of gradient, random, cmaes, hybrid "
-                    "(draws, then descent from the best: docs/stress.md)")  # fmt: skip
+                    "(draws, then descent from the best) and king (KING's recipe): "
+                    "docs/stress.md")  # fmt: skip
     st.add_argument("--hybrid-draws", type=count(4096), default=8, metavar="N",
                     help="hybrid: uniform draws per restart before each descent")  # fmt: skip
     st.add_argument("--hybrid-steps", type=count(4096), default=8, metavar="N",

@@ -22,6 +22,7 @@ METHOD_STYLE = {
     "random": dict(color="#6c757d", lw=1.6, ls="--"),
     "cmaes": dict(color="#1d3557", lw=1.6, ls="-."),
     "hybrid": dict(color="#f4a261", lw=1.8, ls=":"),
+    "king": dict(color="#2a9d8f", lw=1.8, ls=(0, (5, 1, 1, 1))),
 }
 
 

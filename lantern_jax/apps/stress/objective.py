@@ -16,6 +16,10 @@ to a plausible failure):
   - ``"margin"`` — the collision margin alone;
   - ``"clearance"`` — the benchmark's soft clearance to the hazard (KING-style distance cost);
   - ``"soft_cus"`` — the Route A part of the soft CUS (gates x quality, Route B progress 1);
+  - ``"king"`` — KING's cost: the least mean box distance of a watched actor to the ego plus
+    the tracked actors' soft share of time off the road
+    (:func:`~lantern_jax.apps.stress.king.king_cost`; the recipe's problem,
+    :func:`~lantern_jax.apps.stress.king.king_problem`, also holds the policy's plans);
 
 * the **expert part** (the expert drives the same scene): a softplus hinge on its soft distance
   to the watched actors below the margin the verification asks of it plus a buffer, weighted by
@@ -54,9 +58,10 @@ import numpy as np
 from flax import struct
 
 from lantern_jax.apps.stress import plausibility as rules
+from lantern_jax.apps.stress.king import king_cost
 from lantern_jax.apps.stress.space import Space
 from lantern_jax.apps.stress.watch import soft_rollout_batch
-from lantern_jax.core.constants import MAX_ACTORS
+from lantern_jax.core.constants import DT, MAX_ACTORS
 from lantern_jax.policies.base import Policy
 from lantern_jax.scoring.cus import cus_of, quality_a, soft_execution_terms
 from lantern_jax.scoring.smooth import softmin_decode
@@ -67,7 +72,7 @@ from lantern_jax.types.world import Scenario
 
 Array = jax.Array
 
-OBJECTIVES = ("plausible", "margin", "clearance", "soft_cus")
+OBJECTIVES = ("plausible", "margin", "clearance", "soft_cus", "king")
 CLEARANCE_CAP_M = rules.CAP_M  # m, soft clearance is capped here (a far-away hazard is "safe")
 BIAS_Z = 2.0  # standard errors within which the first-order estimate is trusted
 POLICY, EXPERT = 0, 1  # the parts (and the members of the problem's switch)
@@ -123,6 +128,8 @@ class Problem:
     #                                padded with the hazard to 1 + T entries)
     expert_weight: float = rules.EXPERT_WEIGHT
     settings: Settings = DEFAULT_SETTINGS  # scoring and protocol (its temperature replaced)
+    hold_policy: bool = False  # the soft rollouts hold the policy's plans fixed to
+    #                            differentiation (KING's detached ego, :func:`held_plans`)
     info: dict = dataclasses.field(default_factory=dict, compare=False, hash=False)  # notes
     #                  of a run (the nominal scene's verdict, compile time)
 
@@ -149,16 +156,18 @@ class Problem:
 
     @functools.cached_property
     def soft_driver(self) -> Any:
-        """The program of the soft rollouts: the policy and the expert with its plans held
-        fixed (:func:`held_plans`), as one switch."""
+        """The program of the soft rollouts: the policy (its plans held too with
+        ``hold_policy``) and the expert with its plans held fixed (:func:`held_plans`), as one
+        switch."""
+        policy = held_plans(self.policy) if self.hold_policy else self.policy
         if self.expert is None:
-            return self.policy
-        return policy_switch((self.policy, held_plans(self.expert)))
+            return policy
+        return policy_switch((policy, held_plans(self.expert)))
 
     def member(self, part: int, soft: bool = False) -> Any:
         """A driver's parameters with the policy (``POLICY``) or the expert driving."""
         driver = self.soft_driver if soft else self.driver
-        if driver is self.policy:
+        if not hasattr(driver, "members"):  # one policy drives (no switch)
             return self.policy_params if part == POLICY else self.expert_params
         return switch_params(driver, part, (self.policy_params, self.expert_params))
 
@@ -186,6 +195,7 @@ class Problem:
             self.objective,
             len(self.watched),
             float(self.expert_weight),
+            self.hold_policy,
         )
 
 
@@ -196,7 +206,9 @@ def held_plans(expert: Policy) -> Policy:
     held as it is.  Its rule-based planner is a chain of decisions whose derivative is neither
     informative nor finite everywhere (a NaN at touching boxes, measured on Vehicle Cut-In)."""
     if expert.stateful:
-        raise ValueError(f"policy {expert.name!r}: a guard with memory is not supported")
+        raise ValueError(f"policy {expert.name!r}: its plans cannot be held fixed (a policy "
+                         "with memory); the expert guard and KING's detached ego need one "
+                         "without")  # fmt: skip
 
     def act(params, obs):
         return jax.lax.stop_gradient(expert.act(params, obs))
@@ -275,6 +287,8 @@ def part_values(
             return soft_margin(w.margin_lse, temp)
         if problem.objective == "clearance":
             return softmin_decode(tel.clearance.lse, temp, cap=CLEARANCE_CAP_M)
+        if problem.objective == "king":
+            return king_cost(w.dist_sum, w.seen, w.off_road_soft, tracked, problem.horizon * DT)
         s = settings.scoring
         t = soft_execution_terms(tel, d_safe, temp, s)
         gates = (

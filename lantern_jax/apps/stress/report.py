@@ -222,6 +222,9 @@ def make_methods(problem: Problem, verifier: Verifier, cfg: StressConfig) -> lis
                     cfg.hybrid_steps,
                 )
             )
+        elif m == "king":
+            out.append(search.KingSearch(problem, verifier, cfg.restarts, cfg.seed,
+                                         init_z=cfg.init_z))  # fmt: skip
         else:
             popsize = cfg.popsize or (cfg.samples if cfg.space == "knobs" else 0)
             out.append(

@@ -16,7 +16,11 @@ expert's).  Per restart and iteration:
   from global samples: a cycle of ``draws`` uniform candidates per restart (verified), then
   ``steps`` Adam steps on the surrogate from the restart's best draw by the hard fitness (each
   new iterate verified), then the next cycle from new draws.  It asks whether
-  local descent pays once a global sample has found the right region.
+  local descent pays once a global sample has found the right region;
+* **king** (not in the default comparison) — KING's recipe (:mod:`lantern_jax.apps.stress.king`):
+  Adam with KING's step on KING's cost, the policy's plans held, no expert part (one soft
+  rollout per step), every iterate verified; a restart stops descending at its first verified
+  failure, as KING stops at its first collision.
 
 **Accounting.**  Rollouts are counted per restart and by kind (:data:`ROLLOUT_KINDS`: soft with
 a backward pass, per part; hard verification, per driver); a restart *finds* a failure the first
@@ -37,11 +41,12 @@ from collections.abc import Callable
 import numpy as np
 import optax
 
+from lantern_jax.apps.stress.king import KING_BETAS, KING_LR, king_problem
 from lantern_jax.apps.stress.objective import EXPERT, Problem, batched_estimator, parts_of
 from lantern_jax.apps.stress.verify import Verdict, Verifier
 
 METHODS = ("gradient", "random", "cmaes")  # the default comparison
-ALL_METHODS = (*METHODS, "hybrid")  # every method :func:`make_method` knows
+ALL_METHODS = (*METHODS, "hybrid", "king")  # every method the stress report can build
 ROLLOUT_KINDS = ("soft_policy", "soft_expert", "hard_policy", "hard_expert")
 INIT_Z = 0.5  # unconstrained units: spread of the restarts' starting points around 0 (nominal)
 CMA_SIGMA0 = 1.0  # unconstrained units: CMA-ES's initial step size
@@ -236,7 +241,7 @@ class GradientSearch(Method):
         self.est = batched_estimator(problem, self.sigma)
         self.rng = np.random.default_rng(seed + 1)
         self.z = initial_points(problem, restarts, seed, init_z)
-        self.opt = optax.adam(lr)
+        self.opt = self._optimizer(lr)
         self.opt_state = self.opt.init(self.z)
         self.owner = np.arange(restarts)
         parts = parts_of(problem)
@@ -246,6 +251,10 @@ class GradientSearch(Method):
             hard_policy=1,
             hard_expert=1,
         )
+
+    @staticmethod
+    def _optimizer(lr: float) -> optax.GradientTransformation:
+        return optax.adam(lr)
 
     def _eps(self) -> np.ndarray:
         shape = (self.restarts, self.samples, self.problem.space.dim)
@@ -263,6 +272,32 @@ class GradientSearch(Method):
         self._verify(values, self.owner, self.cost, 1)
         updates, self.opt_state = self.opt.update(g, self.opt_state, self.z)
         self.z = np.asarray(optax.apply_updates(self.z, updates), np.float32)
+
+
+class KingSearch(GradientSearch):
+    """KING's recipe (:mod:`lantern_jax.apps.stress.king`): Adam with KING's step and betas on
+    KING's cost (:func:`~lantern_jax.apps.stress.king.king_problem`: the policy's plans held,
+    no expert part) from every restart, each iterate verified like every other method's; a
+    restart that has found a verified failure keeps its iterate (KING stops at its first
+    collision), and its later iterations are counted as run (the batch runs whole)."""
+
+    name = "king"
+
+    def __init__(self, problem, verifier, restarts, seed, lr: float = KING_LR,
+                 init_z: float = INIT_Z):  # fmt: skip
+        super().__init__(king_problem(problem), verifier, restarts, seed, lr, 0.0, 1, init_z)
+
+    @staticmethod
+    def _optimizer(lr: float) -> optax.GradientTransformation:
+        return optax.adam(lr, b1=KING_BETAS[0], b2=KING_BETAS[1])
+
+    def iterate(self) -> None:
+        """Gradient at the iterates, their verification, an Adam step for the restarts that
+        have not found a failure yet."""
+        before = self.z
+        super().iterate()
+        found = ~np.isnan(self.trace.first_rollouts)
+        self.z = np.where(found[:, None], before, self.z).astype(np.float32)
 
 
 class RandomSearch(Method):
