@@ -241,11 +241,14 @@ def stress_test(
     knobs: tuple[str, ...] | None = None,
     ranges: dict | None = None,
     progress: bool = True,
+    extra: Callable[[Problem, Verifier], list[search.Method]] | None = None,
 ) -> tuple[Problem, list[search.Trace]]:
     """Run the configured methods on one pair at equal budget, interleaved.
 
     Prints (unless ``progress`` is False) a ``compiling`` line with the compilation time and
-    the nominal scene's verdict, then a line per method as it ends.
+    the nominal scene's verdict, then a line per method as it ends.  ``extra`` gives further
+    methods built on the same problem and verifier (a benchmark's variants of a method); they
+    run after the configured ones, interleaved with them.
 
     Raises:
         ValueError: for a non-positive budget, an unknown method or space, or a bad search
@@ -256,7 +259,7 @@ def stress_test(
     pol = get_policy(policy) if isinstance(policy, str) else policy
     problem = make_problem(pair, pol, None, cfg, suite, knobs, ranges)
     verifier = Verifier(problem, batch=cfg.restarts)
-    methods = make_methods(problem, verifier, cfg)
+    methods = make_methods(problem, verifier, cfg) + (extra(problem, verifier) if extra else [])
     say = (
         (lambda msg: print(f"[stress] {pair.pair_id} {pol.name}: {msg}", flush=True))
         if (progress)
