@@ -158,9 +158,11 @@ class Problem:
     def soft_driver(self) -> Any:
         """The program of the soft rollouts: the policy (its plans held too with
         ``hold_policy``) and the expert with its plans held fixed (:func:`held_plans`), as one
-        switch."""
+        switch; the policy alone without an expert, or with ``hold_policy`` and no expert part
+        (KING's recipe: the expert never drives a soft rollout there, and a held expert under
+        test would be the same program twice)."""
         policy = held_plans(self.policy) if self.hold_policy else self.policy
-        if self.expert is None:
+        if self.expert is None or (self.hold_policy and self.expert_weight == 0):
             return policy
         return policy_switch((policy, held_plans(self.expert)))
 
