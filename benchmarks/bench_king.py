@@ -17,7 +17,8 @@ It prints and writes (``--out``) the per-method table (``comparison.csv``: resta
 verified plausible failure and their bootstrap interval, the median rollouts to the first) and
 the differences of success rates with their bootstrap intervals over restarts
 (``differences.csv``; the gradient-based methods share their starting points, so their
-differences are paired)::
+differences are paired), and each restart's rollouts to its first failure (``restarts.csv``,
+empty where it found none)::
 
     python benchmarks/bench_king.py --policy coop --family RTY --pair rty_0002 --space 128
 """
@@ -74,6 +75,8 @@ def main() -> None:
     ap.add_argument("--pair", default=None, help="the pair (default: the family's first the "
                     "expert drives with margin)")  # fmt: skip
     ap.add_argument("--space", default="128", help=f"of {', '.join(SPACES)}")
+    ap.add_argument("--suite", default=None, help="a suite file (default: the built-in suite; "
+                    "lantern-jax suite --regenerate PATH --seed N writes a fresh one)")  # fmt: skip
     ap.add_argument("--restarts", type=int, default=16)
     ap.add_argument("--budget-rollouts", type=int, default=64)
     ap.add_argument("--budget-s", type=float, default=3600.0)
@@ -96,7 +99,8 @@ def main() -> None:
           f"{args.policy} {args.family}, space {args.space}, {args.restarts} restarts, "
           f"{args.budget_rollouts} rollouts per restart", flush=True)  # fmt: skip
     t0 = time.perf_counter()
-    suite, policy = load_suite(), get_policy(args.policy)
+    suite = load_suite() if args.suite is None else load_suite(args.suite)
+    policy = get_policy(args.policy)
     pair = pick_pair(suite, args.family, cfg, policy, args.pair)
     if pair is None:
         raise SystemExit(f"{args.family}: no pair whose nominal scene the expert drives with "
@@ -109,10 +113,14 @@ def main() -> None:
     problem, traces = report.stress_test(pair, policy, cfg, suite=suite, extra=step_variant)
     table, _ = cell_rows(traces, problem)
     table = table.assign(policy=args.policy, family=args.family, pair=pair.pair_id,
-                         space=args.space, dim=problem.space.dim)  # fmt: skip
+                         space=args.space, dim=problem.space.dim, suite=suite.suite_id)  # fmt: skip
     diffs = differences(traces).assign(pair=pair.pair_id, space=args.space)
     table.to_csv(out / "comparison.csv", index=False)
     diffs.to_csv(out / "differences.csv", index=False)
+    pd.DataFrame([dict(method=t.method, restart=r, first_rollouts=t.first_rollouts[r])
+                  for t in traces for r in range(t.restarts)]).to_csv(  # fmt: skip
+        out / "restarts.csv", index=False
+    )
     fmt = lambda x: f"{x:.2f}"  # noqa: E731
     print(f"\n{args.family} {args.policy} {pair.pair_id}, {problem.space.dim} dimensions; "
           f"{time.perf_counter() - t0:.0f} s incl. compile {problem.info['compile_s']:.0f} s")
