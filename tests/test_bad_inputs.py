@@ -1172,7 +1172,7 @@ STRESS_CASES = [
     (["--hybrid-steps", "-2"],
      "argument --hybrid-steps: expected a whole number in 1 .. 4096, got -2" + STRESS_HELP),
     (["--methods", "hybrid,annealing"],
-     "--methods: ['annealing']; valid: gradient, random, cmaes, hybrid"),
+     "--methods: ['annealing']; valid: gradient, random, cmaes, hybrid, king"),
 ]  # fmt: skip
 
 
