@@ -10,9 +10,9 @@ minimises
 
 with, per optimisation iteration (one rollout of the whole horizon):
 
-* ``ego_col`` -- for every adversary the **mean over the time steps** of the distance between
-  its box and the ego's box, then the **minimum over the adversaries** (pulls the nearest
-  adversary towards the ego over the whole episode, not only at its closest instant);
+* ``ego_col`` -- at every time step the distance between the ego's box and the **nearest**
+  adversary's box, **averaged over the time steps** (pulls whichever adversary is nearest
+  towards the ego over the whole episode, not only at its closest instant);
 * ``adv_rd`` -- the mean over the time steps of the adversaries' overlap with the non-drivable
   area (a Gaussian kernel over a rasterised road map): stay on the road;
 * ``adv_col`` -- the adversaries' least distance to each other, capped at 1.25 m (no collision
@@ -25,9 +25,10 @@ for a route stops at its first collision.  Plausibility is judged afterwards (KI
 
 What this module keeps, and what it maps onto the project's parts:
 
-* **the objective**: :func:`king_cost` -- ``ego_col`` from the watch's per-actor mean box
-  distance (:class:`~lantern_jax.apps.stress.watch.Watch` ``dist_sum`` / ``seen``: the time
-  average over the ticks the actor is present) minimised over the watched actors, plus
+* **the objective**: :func:`king_cost` -- ``ego_col`` from the watch's distance of the nearest
+  watched actor (:class:`~lantern_jax.apps.stress.watch.Watch` ``near_sum`` / ``near_seen``:
+  the time average over the ticks any of them is present; KING's adversaries are present
+  throughout), plus
   ``adv_rd`` as the tracked actors' **soft share of the soft horizon spent off the road** (the
   watch's ``off_road_soft``, the same road rule the verification applies; a share in [0, 1]
   per actor rather than KING's raster overlap, whose scale depends on its pixel grid).
@@ -79,26 +80,25 @@ W_ADV_COL = 0.0  # KING's weight on adversary-adversary distance (0: the term is
 
 
 def king_cost(
-    dist_sum: Array, seen: Array, off_road_soft: Array, tracked: Array, horizon_s: float
+    near_sum: Array, near_seen: Array, off_road_soft: Array, tracked: Array, horizon_s: float
 ) -> Array:
     """() KING's cost of one soft rollout from its watch (see the module docstring).
 
     Args:
-        dist_sum: (W,) float32, m s, each watched actor's box distance to the ego summed over
-            the ticks it was present, times the tick.
-        seen: (W,) float32, s, the time each watched actor was present.
-        off_road_soft: (W,) float32, s, the soft time each spent off the road after its
-            track's start.
+        near_sum: () float32, m s, the box distance of the nearest watched actor present,
+            integrated over the ticks any is present.
+        near_seen: () float32, s, the time any watched actor was present.
+        off_road_soft: (W,) float32, s, the soft time each watched actor spent off the road
+            after its track's start.
         tracked: (W,) bool, which watched entries are tracked actors (each counted once).
         horizon_s: s, the soft rollout's horizon (the off-road time's denominator).
 
     Returns:
-        ``W_EGO_COL * min_w mean distance_w + W_ADV_RD * sum_tracked off-road share``; an
-        actor never present counts as :data:`~lantern_jax.apps.stress.plausibility.CAP_M`
-        away.
+        ``W_EGO_COL * mean nearest distance + W_ADV_RD * sum_tracked off-road share``; with no
+        watched actor ever present the distance counts as
+        :data:`~lantern_jax.apps.stress.plausibility.CAP_M`.
     """
-    mean = jnp.where(seen > 0.0, dist_sum / jnp.maximum(seen, DT), CAP_M)
-    ego_col = jnp.min(mean)
+    ego_col = jnp.where(near_seen > 0.0, near_sum / jnp.maximum(near_seen, DT), CAP_M)
     adv_rd = jnp.sum(jnp.where(tracked, off_road_soft, 0.0)) / horizon_s
     return W_EGO_COL * ego_col + W_ADV_RD * adv_rd
 

@@ -16,8 +16,8 @@ to a plausible failure):
   - ``"margin"`` — the collision margin alone;
   - ``"clearance"`` — the benchmark's soft clearance to the hazard (KING-style distance cost);
   - ``"soft_cus"`` — the Route A part of the soft CUS (gates x quality, Route B progress 1);
-  - ``"king"`` — KING's cost: the least mean box distance of a watched actor to the ego plus
-    the tracked actors' soft share of time off the road
+  - ``"king"`` — KING's cost: the nearest watched actor's box distance to the ego averaged
+    over time, plus the tracked actors' soft share of time off the road
     (:func:`~lantern_jax.apps.stress.king.king_cost`; the recipe's problem,
     :func:`~lantern_jax.apps.stress.king.king_problem`, also holds the policy's plans);
 
@@ -290,7 +290,8 @@ def part_values(
         if problem.objective == "clearance":
             return softmin_decode(tel.clearance.lse, temp, cap=CLEARANCE_CAP_M)
         if problem.objective == "king":
-            return king_cost(w.dist_sum, w.seen, w.off_road_soft, tracked, problem.horizon * DT)
+            return king_cost(w.near_sum, w.near_seen, w.off_road_soft, tracked,
+                             problem.horizon * DT)  # fmt: skip
         s = settings.scoring
         t = soft_execution_terms(tel, d_safe, temp, s)
         gates = (

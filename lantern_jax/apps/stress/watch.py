@@ -7,9 +7,10 @@ simulator's state, tick by tick, for ``W`` **watched** slots (static indices: th
 every slot with a track; ``tracked`` marks the latter):
 
 * the collision margin ``max(box distance, 0.1 m/s - ego speed)`` and the box distance to the
-  ego, as hard minima and log-sum-exp soft minima over the ticks the actor is present, and the
-  box distance's time integral and the time present (their ratio is the mean distance KING's
-  objective uses, :mod:`lantern_jax.apps.stress.king`);
+  ego, as hard minima and log-sum-exp soft minima over the ticks the actor is present;
+* the distance of the nearest watched actor present, integrated over the ticks any is
+  present, and that time (their ratio is the mean distance KING's objective uses,
+  :mod:`lantern_jax.apps.stress.king`);
 * for tracked actors after their track has started: the longest stop in the ego's path (hard
   run length) and its soft count, the time off the road (hard and soft), the highest speed;
 * every ``traj_every`` ticks, the watched actors' positions (the near-duplicate rule compares
@@ -58,9 +59,9 @@ class Watch:
     margin_lse: Array  # (W,) float32, soft-min accumulator of the same
     dist: Array  # (W,) float32, m, hard min box distance to the ego
     dist_lse: Array  # (W,) float32, soft-min accumulator of the same
-    dist_sum: Array  # (W,) float32, m s, box distance to the ego integrated over the ticks
-    #                  the actor is present
-    seen: Array  # (W,) float32, s, time the actor was present
+    near_sum: Array  # () float32, m s, box distance of the nearest watched actor present,
+    #                  integrated over the ticks any is present
+    near_seen: Array  # () float32, s, time any watched actor was present
     stop_run: Array  # (W,) float32, s, current stop in the ego's path (tracked actors)
     stop_max: Array  # (W,) float32, s, longest such stop
     stop_soft: Array  # (W,) float32, s, soft time stopped in the ego's path
@@ -76,8 +77,9 @@ def init_watch(num: int, records: int) -> Watch:
     empty = jnp.full((num,), LSE_EMPTY, jnp.float32)
     zero = jnp.zeros((num,), jnp.float32)
     traj = jnp.full((records, num, 2), jnp.nan, jnp.float32)
-    return Watch(margin=big, margin_lse=empty, dist=big, dist_lse=empty, dist_sum=zero,
-                 seen=zero, stop_run=zero, stop_max=zero, stop_soft=zero, off_road=zero,
+    none = jnp.zeros((), jnp.float32)
+    return Watch(margin=big, margin_lse=empty, dist=big, dist_lse=empty, near_sum=none,
+                 near_seen=none, stop_run=zero, stop_max=zero, stop_soft=zero, off_road=zero,
                  off_road_soft=zero, max_speed=zero, traj=traj)  # fmt: skip
 
 
@@ -164,8 +166,8 @@ def update_watch(
         margin_lse=jnp.where(here, lse_add(w.margin_lse, m, temperature), w.margin_lse),
         dist=jnp.where(here, jnp.minimum(w.dist, d), w.dist),
         dist_lse=jnp.where(here, lse_add(w.dist_lse, d, temperature), w.dist_lse),
-        dist_sum=w.dist_sum + jnp.where(here, DT * d, 0.0),
-        seen=w.seen + jnp.where(here, DT, 0.0),
+        near_sum=w.near_sum + jnp.where(jnp.any(here), DT * jnp.min(jnp.where(here, d, BIG)), 0.0),
+        near_seen=w.near_seen + jnp.where(jnp.any(here), DT, 0.0),
         stop_run=run,
         stop_max=jnp.maximum(w.stop_max, run),
         stop_soft=w.stop_soft + jnp.where(on, DT * soft_stop, 0.0),
