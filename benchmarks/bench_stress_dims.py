@@ -9,17 +9,20 @@ of directions, not how long the adversary acts:
 
 * ``32``: the hazard, 16 knots of 0.5 s;
 * ``128``: the hazard, 64 knots of 0.125 s;
+* ``320``: the hazard, an action per tick (160 knots of ``DT`` = 0.05 s);
 * ``384``: the hazard and two background vehicles, 64 knots of 0.125 s each (where the scene
   has them; the dimension reached is the one reported);
+* ``960``: the hazard and two background vehicles, an action per tick each (where the scene has
+  them: 640 with one);
 * ``king``: KING's own setting (:mod:`lantern_jax.apps.stress.king`): the hazard and three
   background vehicles (KING's four adversaries), an action every 0.25 s (its 4 Hz) for 64
   steps (16 s) each: 512 dimensions where the scene has the vehicles.  It covers twice the
   seconds of the others, so it is a cell of its own, not a point of the dimension series.
 
-The tracks hold at most :data:`lantern_jax.core.constants.MAX_KNOTS` knots (64) per actor, the
-world's array shape, so a space of 2,048 dimensions (per-tick controls of several actors)
-cannot be built without widening every world's track arrays; this benchmark stops where the
-world does.
+Per-tick controls are the finest a track takes (a knot of one tick), so over the series' 8 s
+the dimension grows further only with more actors: 2,048 dimensions would need four tracked
+actors with per-tick controls over 12.8 s (:data:`lantern_jax.core.constants.MAX_KNOTS` = 256
+knots), more actors than the families' scenes hold near the ego's route.
 
 Per space it reports, per method: the share of restarts with a verified plausible failure (with
 its bootstrap interval over restarts) and the median rollouts to the first; per space: random
@@ -44,13 +47,16 @@ from bench_stress import run_cell
 
 from lantern_jax.apps.stress import report
 from lantern_jax.apps.stress.king import KING_KNOT_S
+from lantern_jax.core.constants import DT
 from lantern_jax.scenarios.suite import load_suite
 
 #: name -> (actor groups, knots per track, s per knot, background vehicles)
 SPACES = {
     "32": (("hazard",), 16, 0.5, 1),
     "128": (("hazard",), 64, 0.125, 1),
+    "320": (("hazard",), 160, DT, 1),
     "384": (("hazard", "background"), 64, 0.125, 2),
+    "960": (("hazard", "background"), 160, DT, 2),
     "king": (("hazard", "background"), 64, KING_KNOT_S, 3),
 }
 

@@ -144,8 +144,11 @@ BIG = 1.0e6  # finite stand-in for "infinitely far" distances (keeps gradients f
 INF_TIME = 1.0e9  # s, stand-in for "not yet happened" times
 
 # --- stress testing: adversary tracks, background traffic, verification horizon -----------------
-MAX_KNOTS = 64  # knots per adversary track
-KNOT_S_RANGE = (0.1, 2.0)  # s, an adversary track's knot length
+#: knots per adversary track: a validation bound, not a shape of the worlds (a batch's tracks
+#: are as long as its longest one); 256 per-tick knots cover 12.8 s
+MAX_KNOTS = 256
+#: s, an adversary track's knot length: one tick (per-tick controls) to 2 s
+KNOT_S_RANGE = (DT, 2.0)
 BACKGROUND_SLOTS = range(2, 7)  # actor slots of a scene's background traffic
 MAX_BACKGROUND = len(BACKGROUND_SLOTS)  # background vehicles a scene holds at most
 #: s, the longest verified rollout: >= the longest route timeout (20 s + 164 m / 3 m/s); each

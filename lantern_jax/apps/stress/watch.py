@@ -154,6 +154,7 @@ def update_watch(
     slow_soft = jax.nn.sigmoid((rules.STOP_SPEED_MPS - speed) / rules.SOFT_SPEED_MPS)
     soft_stop = in_path_soft * ahead_soft * slow_soft
     excess = _off_road(scenario, idx, xy, scoring.lane_margin_m)
+    seen = jnp.any(here)  # some watched actor is present at this tick
 
     traj = w.traj
     if traj.shape[0] > 0:
@@ -166,8 +167,8 @@ def update_watch(
         margin_lse=jnp.where(here, lse_add(w.margin_lse, m, temperature), w.margin_lse),
         dist=jnp.where(here, jnp.minimum(w.dist, d), w.dist),
         dist_lse=jnp.where(here, lse_add(w.dist_lse, d, temperature), w.dist_lse),
-        near_sum=w.near_sum + jnp.where(jnp.any(here), DT * jnp.min(jnp.where(here, d, BIG)), 0.0),
-        near_seen=w.near_seen + jnp.where(jnp.any(here), DT, 0.0),
+        near_sum=w.near_sum + jnp.where(seen, DT * jnp.min(jnp.where(here, d, BIG)), 0.0),
+        near_seen=w.near_seen + jnp.where(seen, DT, 0.0),
         stop_run=run,
         stop_max=jnp.maximum(w.stop_max, run),
         stop_soft=w.stop_soft + jnp.where(on, DT * soft_stop, 0.0),
