@@ -87,11 +87,39 @@ def test_manifest_structure_errors(raw, tmp_path):
 
 def test_every_shipped_pair_passes_static_validation(suite):
     seen: set[str] = set()
-    for p in suite.pairs[::7]:  # a spread of pairs over every family (keeps the test short)
+    for p in suite.pairs:
         _, _, meta = static_check(p.params, seen)
         seen.add(meta["content_hash"])
     with pytest.raises(ValueError, match="duplicate content hash"):
         static_check(suite.pairs[0].params, {suite.pairs[0].sha256})
+
+
+def test_slot_comparison_equals_the_slot_by_slot_reference(suite):
+    """Route A and Route B's actor slots compared all at once equal the comparison of each slot
+    alone (every leaf of the script and the start state); a changed value, or a NaN, in one
+    leaf of one slot makes that slot, and only it, differ."""
+    from lantern_jax.scenarios.suite import _slots_equal, _tree_equal
+
+    def reference(x, y):
+        return np.array([_tree_equal(jax.tree.map(lambda v, i=i: np.asarray(v)[i], x),
+                                     jax.tree.map(lambda v, i=i: np.asarray(v)[i], y))
+                         for i in range(x[0].num)])  # fmt: skip
+
+    for p in (next(q for q in suite.pairs if q.family == f) for f in ("PE", "LWW")):
+        a, b, meta = build_pair(p.params)
+        x, y = (a.actors, a.actors0), (b.actors, b.actors0)
+        got = _slots_equal(x, y)
+        np.testing.assert_array_equal(got, reference(x, y))
+        assert not got[meta["scenario_slots"][0]]  # the hazard's script differs
+        other = next(i for i in range(a.actors.num) if i not in meta["scenario_slots"])
+        assert got[other]
+        for value in (123.0, np.nan):
+            xy = np.asarray(b.actors0.xy).copy()
+            xy[other, 0] = value
+            y2 = (b.actors, b.actors0.replace(xy=xy))
+            got2 = _slots_equal(x, y2)
+            np.testing.assert_array_equal(got2, reference(x, y2))
+            assert not got2[other] and np.array_equal(np.delete(got2, other), np.delete(got, other))
 
 
 def test_static_validation_rejects_a_short_recovery(suite):
