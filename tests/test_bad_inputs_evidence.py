@@ -210,10 +210,12 @@ def test_a_policy_object_cannot_take_a_registered_name(monkeypatch):
 # ---------------------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def result_set(tmp_path_factory):
-    """A real result set of two policies on one pair (written by ``evaluate``)."""
+    """A real result set of two policies on one pair (written by ``evaluate``; on the split
+    path, whose world program the session holds, so that only the two policies' own programs
+    are compiled: what is checked here is the result folder, not the rollout)."""
     out = tmp_path_factory.mktemp("evidence") / "r"
     r = run_cli(["evaluate", "--policy", "ego,coop", "--pairs", "pe_0001", "--out", str(out),
-                 "--quiet"])  # fmt: skip
+                 "--rollout", "split", "--quiet"])  # fmt: skip
     assert r.rc == 0, r.err
     return out
 
