@@ -103,11 +103,14 @@ PRINTED = ["method", "failure_rate", "failure_rate_lo", "failure_rate_hi", "medi
            "policy_pass_share", "rejected_expert", "rejected_adversary", "rollouts", "search_s"]
 
 
-def run_cell(suite, name: str, fam: str, cfg: report.StressConfig, pair_id: str | None = None):
+def run_cell(suite, name: str, fam: str, cfg: report.StressConfig, pair_id: str | None = None,
+             restarts: list | None = None):  # fmt: skip
     """One cell: the family's first pair the expert drives with margin, every method of
     ``cfg`` on it.  Returns ``(problem, per-method table, cell row)``, or None when no pair of
     the family qualifies; prints the cell.  The cell row needs random search among the
-    methods (its draws give the pass share and the plausible-failure share)."""
+    methods (its draws give the pass share and the plausible-failure share).  ``restarts``,
+    when given, receives a row per method and restart: the rollouts to its first plausible
+    failure (NaN where it found none)."""
     policy = get_policy(name)
     t0 = time.perf_counter()
     pair = pick_pair(suite, fam, cfg.resolved(), policy, pair_id)
@@ -116,6 +119,9 @@ def run_cell(suite, name: str, fam: str, cfg: report.StressConfig, pair_id: str 
         return None
     problem, traces = report.stress_test(pair, policy, cfg, suite=suite, progress=True)
     table, verdict = cell_rows(traces, problem)
+    if restarts is not None:
+        restarts += [dict(method=t.method, restart=r, first_rollouts=t.first_rollouts[r])
+                     for t in traces for r in range(t.restarts)]  # fmt: skip
     random_row = table.set_index("method").loc["random"]
     pass_share = float(random_row["policy_pass_share"])
     cell = dict(

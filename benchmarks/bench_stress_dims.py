@@ -27,8 +27,10 @@ knots), more actors than the families' scenes hold near the ego's route.
 Per space it reports, per method: the share of restarts with a verified plausible failure (with
 its bootstrap interval over restarts) and the median rollouts to the first; per space: random
 search's share of plausible failures among its uniform draws.  Writes ``comparison.csv`` and
-``cells.csv`` (with ``space``) and ``dims.png`` (success rate against dimension, one line per
-method, and random search's plausible-failure share of its draws) into ``--out``::
+``cells.csv`` (with ``space``), ``restarts.csv`` (each method's and restart's rollouts to its
+first plausible failure, empty where it found none: what intervals of differences and of medians
+resample) and ``dims.png`` (success rate against dimension, one line per method, and random
+search's plausible-failure share of its draws) into ``--out``::
 
     python benchmarks/bench_stress_dims.py --policy learned-closed-loop --family PE \\
         --restarts 16 --budget-rollouts 64
@@ -129,7 +131,7 @@ def main() -> None:
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, load {load0[0]:.1f} (1 min); "
           f"{args.policy} {args.family}, {args.restarts} restarts, {args.budget_rollouts} "
           f"rollouts per restart, methods {args.methods}", flush=True)  # fmt: skip
-    comps, cells = [], []
+    comps, cells, per_restart = [], [], []
     t_all = time.perf_counter()
     for name in names:
         actors, knots, knot_s, background = SPACES[name]
@@ -138,14 +140,17 @@ def main() -> None:
             restarts=args.restarts, budget_s=args.budget_s, budget_rollouts=args.budget_rollouts,
             horizon_s=args.horizon_s, methods=tuple(args.methods.split(",")), watch=args.watch,
         )  # fmt: skip
-        got = run_cell(suite, args.policy, args.family, cfg, args.pair)
+        rows: list[dict] = []
+        got = run_cell(suite, args.policy, args.family, cfg, args.pair, restarts=rows)
         if got is None:
             break
         problem, table, cell = got
         comps.append(table.assign(space=name, dim=problem.space.dim))
         cells.append(dict(cell, space=name))
+        per_restart += [dict(r, space=name, dim=problem.space.dim) for r in rows]
         pd.concat(comps).to_csv(out / "comparison.csv", index=False)
         pd.DataFrame(cells).to_csv(out / "cells.csv", index=False)
+        pd.DataFrame(per_restart).to_csv(out / "restarts.csv", index=False)
     if not comps:
         return
     comp, cell_table = pd.concat(comps), pd.DataFrame(cells)
