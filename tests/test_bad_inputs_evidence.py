@@ -276,7 +276,7 @@ def test_compare_refuses_two_protocols_unless_accepted(result_set, tmp_path):
     difference: refused, or compared with the difference named above the table."""
     b = tmp_path / "late"
     r = run_cli(["evaluate", "--policy", "coop", "--pairs", "pe_0001", "--ablation",
-                 "late_onset", "--out", str(b), "--quiet"])  # fmt: skip
+                 "late_onset", "--out", str(b), "--rollout", "split", "--quiet"])  # fmt: skip
     assert r.rc == 0, r.err
     r = run_cli(["compare", str(result_set), str(b), "--policy", "coop", "--out",
                  str(tmp_path / "c")])  # fmt: skip
