@@ -104,11 +104,11 @@ PRINTED = ["method", "failure_rate", "failure_rate_lo", "failure_rate_hi", "medi
 
 
 def run_cell(suite, name: str, fam: str, cfg: report.StressConfig, pair_id: str | None = None,
-             restarts: list | None = None):  # fmt: skip
+             per_restart: list | None = None):  # fmt: skip
     """One cell: the family's first pair the expert drives with margin, every method of
     ``cfg`` on it.  Returns ``(problem, per-method table, cell row)``, or None when no pair of
     the family qualifies; prints the cell.  The cell row needs random search among the
-    methods (its draws give the pass share and the plausible-failure share).  ``restarts``,
+    methods (its draws give the pass share and the plausible-failure share).  ``per_restart``,
     when given, receives a row per method and restart: the rollouts to its first plausible
     failure (NaN where it found none)."""
     policy = get_policy(name)
@@ -119,8 +119,8 @@ def run_cell(suite, name: str, fam: str, cfg: report.StressConfig, pair_id: str 
         return None
     problem, traces = report.stress_test(pair, policy, cfg, suite=suite, progress=True)
     table, verdict = cell_rows(traces, problem)
-    if restarts is not None:
-        restarts += [dict(method=t.method, restart=r, first_rollouts=t.first_rollouts[r])
+    if per_restart is not None:
+        per_restart += [dict(method=t.method, restart=r, first_rollouts=t.first_rollouts[r])
                      for t in traces for r in range(t.restarts)]  # fmt: skip
     random_row = table.set_index("method").loc["random"]
     pass_share = float(random_row["policy_pass_share"])

@@ -141,7 +141,7 @@ def main() -> None:
             horizon_s=args.horizon_s, methods=tuple(args.methods.split(",")), watch=args.watch,
         )  # fmt: skip
         rows: list[dict] = []
-        got = run_cell(suite, args.policy, args.family, cfg, args.pair, restarts=rows)
+        got = run_cell(suite, args.policy, args.family, cfg, args.pair, per_restart=rows)
         if got is None:
             break
         problem, table, cell = got

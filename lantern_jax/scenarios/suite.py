@@ -135,11 +135,12 @@ def _slots_equal(a, b) -> np.ndarray:
     la = [np.asarray(x) for x in jax.tree.leaves(a)]
     lb = [np.asarray(y) for y in jax.tree.leaves(b)]
     n = len(la[0]) if la else 0
-    same = np.full(n, len(la) == len(lb))
-    for x, y in zip(la, lb, strict=False):
-        if x.shape != y.shape:
-            return np.zeros(n, bool)
-        same &= (x == y).reshape(len(x), -1).all(axis=1) if x.size else True
+    if len(la) != len(lb) or any(x.shape != y.shape for x, y in zip(la, lb, strict=True)):
+        return np.zeros(n, bool)
+    same = np.ones(n, bool)
+    for x, y in zip(la, lb, strict=True):
+        if x.size:  # a leaf of no values per slot compares equal
+            same &= (x == y).reshape(n, -1).all(axis=1)
     return same
 
 
