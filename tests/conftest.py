@@ -22,7 +22,20 @@ import os
 import sys
 from pathlib import Path
 
-import jax
+#: XLA flags of every test process (and of the processes the tests start, which inherit them):
+#: XLA's CPU backend with its earlier fusion emitters.  They compile the world's programs in
+#: about 30 % less time (the split path's world tick 6.3-8.1 s against 9.2-10.1 s on a 2-core
+#: CPU) for a rollout up to about 20 % slower, and the tests' time is mostly compiling
+#: (docs/reproducibility.md).  Results agree with the default emitters' within float rounding
+#: (``REPRODUCIBLE_ATOL``); the tests that start processes with ``XLA_FLAGS`` of their own
+#: (one device against two, the program store in a new process, the written promise across
+#: devices) run the default emitters.  An ``XLA_FLAGS`` that names the flag wins, e.g.
+#: ``XLA_FLAGS=--xla_cpu_use_fusion_emitters=true`` runs the tests as a user's process compiles.
+TEST_XLA_FLAGS = "--xla_cpu_use_fusion_emitters=false"
+if "xla_cpu_use_fusion_emitters" not in os.environ.get("XLA_FLAGS", ""):
+    os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {TEST_XLA_FLAGS}".strip()
+
+import jax  # XLA reads its flags when JAX starts its backend
 import jax.numpy as jnp
 import numpy as np
 import pytest
