@@ -34,6 +34,9 @@ search's plausible-failure share of its draws) into ``--out``::
 
     python benchmarks/bench_stress_dims.py --policy learned-closed-loop --family PE \\
         --restarts 16 --budget-rollouts 64
+
+``--suite FILE`` runs the cells on another suite (a fresh one: ``lantern-jax suite --regenerate
+FILE --seed N``).
 """
 
 from __future__ import annotations
@@ -112,6 +115,8 @@ def main() -> None:
                     "expert drives with margin)")
     ap.add_argument("--watch", default="hazard", choices=("hazard", "all"),
                     help="the actors the surrogate and the verification watch (docs/stress.md)")
+    ap.add_argument("--suite", default=None, help="a suite file (default: the built-in suite; "
+                    "lantern-jax suite --regenerate PATH --seed N writes a fresh one)")  # fmt: skip
     ap.add_argument("--out", default="runs/bench_stress_dims")
     ap.add_argument("--plot-only", action="store_true",
                     help="draw dims.png again from the CSV files in --out, run nothing")
@@ -126,11 +131,12 @@ def main() -> None:
     if bad:
         ap.error(f"--spaces: {', '.join(bad)} not of {', '.join(SPACES)}")
     out.mkdir(parents=True, exist_ok=True)
-    suite = load_suite()
+    suite = load_suite() if args.suite is None else load_suite(args.suite)
     load0 = os.getloadavg()
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, load {load0[0]:.1f} (1 min); "
           f"{args.policy} {args.family}, {args.restarts} restarts, {args.budget_rollouts} "
-          f"rollouts per restart, methods {args.methods}", flush=True)  # fmt: skip
+          f"rollouts per restart, methods {args.methods}, suite {suite.suite_id}",
+          flush=True)  # fmt: skip
     comps, cells, per_restart = [], [], []
     t_all = time.perf_counter()
     for name in names:
