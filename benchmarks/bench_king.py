@@ -33,12 +33,11 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from bench_stress import PRINTED, cell_rows, pick_pair
+from bench_stress import PRINTED, add_suite_argument, cell_rows, chosen_suite, pick_pair
 from bench_stress_dims import SPACES
 
 from lantern_jax.apps.stress import report, search
 from lantern_jax.policies.registry import get_policy
-from lantern_jax.scenarios.suite import load_suite
 
 BOOTSTRAP = 4000  # resamples of the restarts for the differences' intervals
 PAIRS = (("king", "gradient"), ("king", "random"), ("king_step", "king"),
@@ -75,8 +74,7 @@ def main() -> None:
     ap.add_argument("--pair", default=None, help="the pair (default: the family's first the "
                     "expert drives with margin)")  # fmt: skip
     ap.add_argument("--space", default="128", help=f"of {', '.join(SPACES)}")
-    ap.add_argument("--suite", default=None, help="a suite file (default: the built-in suite; "
-                    "lantern-jax suite --regenerate PATH --seed N writes a fresh one)")  # fmt: skip
+    add_suite_argument(ap)
     ap.add_argument("--restarts", type=int, default=16)
     ap.add_argument("--budget-rollouts", type=int, default=64)
     ap.add_argument("--budget-s", type=float, default=3600.0)
@@ -99,7 +97,7 @@ def main() -> None:
           f"{args.policy} {args.family}, space {args.space}, {args.restarts} restarts, "
           f"{args.budget_rollouts} rollouts per restart", flush=True)  # fmt: skip
     t0 = time.perf_counter()
-    suite = load_suite() if args.suite is None else load_suite(args.suite)
+    suite = chosen_suite(args)
     policy = get_policy(args.policy)
     pair = pick_pair(suite, args.family, cfg, policy, args.pair)
     if pair is None:

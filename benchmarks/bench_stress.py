@@ -45,6 +45,17 @@ from lantern_jax.scenarios.suite import load_suite
 RARE_PASS_SHARE = 0.9  # a cell is "rare" when the policy passes this share of random draws
 
 
+def add_suite_argument(ap: argparse.ArgumentParser) -> None:
+    """``--suite FILE``: run on another suite than the built-in one (see :func:`chosen_suite`)."""
+    ap.add_argument("--suite", default=None, help="a suite file (default: the built-in suite; "
+                    "lantern-jax suite --regenerate PATH --seed N writes a fresh one)")  # fmt: skip
+
+
+def chosen_suite(args: argparse.Namespace):
+    """The suite ``--suite`` names (:func:`add_suite_argument`), else the built-in one."""
+    return load_suite() if args.suite is None else load_suite(args.suite)
+
+
 def pick_pair(suite, family: str, cfg: report.StressConfig, policy, pair_id: str | None = None):
     """The family's first pair (or the pair ``pair_id``) whose nominal scene the expert drives
     with margin and on which the configured space can be built (a space with background

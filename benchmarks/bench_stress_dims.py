@@ -48,12 +48,11 @@ import time
 from pathlib import Path
 
 import pandas as pd
-from bench_stress import run_cell
+from bench_stress import add_suite_argument, chosen_suite, run_cell
 
 from lantern_jax.apps.stress import report
 from lantern_jax.apps.stress.king import KING_KNOT_S
 from lantern_jax.core.constants import DT
-from lantern_jax.scenarios.suite import load_suite
 
 #: name -> (actor groups, knots per track, s per knot, background vehicles)
 SPACES = {
@@ -115,8 +114,7 @@ def main() -> None:
                     "expert drives with margin)")
     ap.add_argument("--watch", default="hazard", choices=("hazard", "all"),
                     help="the actors the surrogate and the verification watch (docs/stress.md)")
-    ap.add_argument("--suite", default=None, help="a suite file (default: the built-in suite; "
-                    "lantern-jax suite --regenerate PATH --seed N writes a fresh one)")  # fmt: skip
+    add_suite_argument(ap)
     ap.add_argument("--out", default="runs/bench_stress_dims")
     ap.add_argument("--plot-only", action="store_true",
                     help="draw dims.png again from the CSV files in --out, run nothing")
@@ -131,7 +129,7 @@ def main() -> None:
     if bad:
         ap.error(f"--spaces: {', '.join(bad)} not of {', '.join(SPACES)}")
     out.mkdir(parents=True, exist_ok=True)
-    suite = load_suite() if args.suite is None else load_suite(args.suite)
+    suite = chosen_suite(args)
     load0 = os.getloadavg()
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, load {load0[0]:.1f} (1 min); "
           f"{args.policy} {args.family}, {args.restarts} restarts, {args.budget_rollouts} "

@@ -32,7 +32,7 @@ from pathlib import Path
 #: devices) run the default emitters.  An ``XLA_FLAGS`` that names the flag wins, e.g.
 #: ``XLA_FLAGS=--xla_cpu_use_fusion_emitters=true`` runs the tests as a user's process compiles.
 TEST_XLA_FLAGS = "--xla_cpu_use_fusion_emitters=false"
-if "xla_cpu_use_fusion_emitters" not in os.environ.get("XLA_FLAGS", ""):
+if TEST_XLA_FLAGS.split("=")[0] not in os.environ.get("XLA_FLAGS", ""):
     os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {TEST_XLA_FLAGS}".strip()
 
 import jax  # XLA reads its flags when JAX starts its backend
