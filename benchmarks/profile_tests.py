@@ -12,6 +12,7 @@ Usage (from the project root; every argument goes to pytest)::
     python benchmarks/profile_tests.py                  # the default test run
     python benchmarks/profile_tests.py -m slow          # the slow tests
     python benchmarks/profile_tests.py tests/test_evaluate.py --top 10 --json times.json
+    python benchmarks/profile_tests.py --workers 2 --cold   # as a fresh clone's test command
 
 The tests run in this one process (``-n 0``), not in the worker processes the plain test
 command starts, so the figures add up the whole run's work rather than its wall time.
@@ -20,8 +21,10 @@ loads this file as a plugin and writes its figures when it ends, and they are ad
 (the seconds are then the workers' summed test time; the run's wall time is printed apart).
 That is how a program that one worker compiles because of what an earlier test in the same
 worker left behind shows up.
-Without ``JAX_COMPILATION_CACHE_DIR`` every program is compiled afresh (a fresh clone's run);
-with it, programs compiled by an earlier run load from the cache.
+The tests keep every compiled program in JAX's persistent cache, ``$JAX_COMPILATION_CACHE_DIR``
+(``.jax_cache/`` in the project when unset, ``tests/conftest.py``; the program store lives inside
+it), so a second run loads what the first compiled.  ``--cold`` gives the run an empty cache
+folder of its own, removed afterwards: every program compiled afresh, as in a fresh clone.
 """
 
 from __future__ import annotations
@@ -139,8 +142,13 @@ def main() -> int:
     ap.add_argument("--workers", type=int, default=0, metavar="N",
                     help="run the tests in N pytest-xdist workers, as the test command does, "
                          "and gather their figures (default 0: in this process)")  # fmt: skip
+    ap.add_argument("--cold", action="store_true",
+                    help="an empty compile cache for this run (a fresh clone's compile)")
     ap.add_argument("--help-profile", action="help", help="this help (other arguments: pytest)")
     args, pytest_args = ap.parse_known_args()
+    if args.cold:  # read by tests/conftest.py when pytest imports it, and by every worker
+        cold = tempfile.TemporaryDirectory(prefix="profile_tests_cache_")
+        os.environ["JAX_COMPILATION_CACHE_DIR"] = cold.name
     here = os.path.dirname(os.path.abspath(__file__))
     sys.path.insert(0, here)
 
