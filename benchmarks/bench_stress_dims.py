@@ -114,6 +114,9 @@ def main() -> None:
                     "expert drives with margin)")
     ap.add_argument("--watch", default="hazard", choices=("hazard", "all"),
                     help="the actors the surrogate and the verification watch (docs/stress.md)")
+    ap.add_argument("--actor-temperature", type=float, default=None, metavar="M",
+                    help="m, the surrogate's soft minimum over the watched actors (default: "
+                    "the surrogate's temperature; docs/stress.md)")  # fmt: skip
     add_suite_argument(ap)
     ap.add_argument("--out", default="runs/bench_stress_dims")
     ap.add_argument("--plot-only", action="store_true",
@@ -133,7 +136,8 @@ def main() -> None:
     load0 = os.getloadavg()
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, load {load0[0]:.1f} (1 min); "
           f"{args.policy} {args.family}, {args.restarts} restarts, {args.budget_rollouts} "
-          f"rollouts per restart, methods {args.methods}, suite {suite.suite_id}",
+          f"rollouts per restart, methods {args.methods}, suite {suite.suite_id}, "
+          f"actor temperature {args.actor_temperature or 'default'}",
           flush=True)  # fmt: skip
     comps, cells, per_restart = [], [], []
     t_all = time.perf_counter()
@@ -143,6 +147,7 @@ def main() -> None:
             space="adversary", actors=actors, knots=knots, knot_s=knot_s, background=background,
             restarts=args.restarts, budget_s=args.budget_s, budget_rollouts=args.budget_rollouts,
             horizon_s=args.horizon_s, methods=tuple(args.methods.split(",")), watch=args.watch,
+            actor_temperature=args.actor_temperature,
         )  # fmt: skip
         rows: list[dict] = []
         got = run_cell(suite, args.policy, args.family, cfg, args.pair, per_restart=rows)

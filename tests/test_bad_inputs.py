@@ -53,9 +53,10 @@ Catalogue (190 bad inputs and faults, in 13 categories):
   named ``coop`` or ``learned-coop`` does not replace the registered policy; the same
   checkpoint registers twice, another under the same name is refused, ``NAME=PATH`` names one,
   an unselectable given name is refused; infinite weights are refused naming the parameter;
-* stress and diagnostics options (16): ``--restarts 0``, ``--samples 0`` and ``1`` (CMA-ES),
+* stress and diagnostics options (17): ``--restarts 0``, ``--samples 0`` and ``1`` (CMA-ES),
   ``--samples 0`` (gradient only), ``--sigma -1``, ``--temperature 0`` and ``nan``,
-  ``--budget-s inf``, ``--range`` with an infinite bound, ``--window inf``, ``--routes 100000``,
+  ``--actor-temperature 0``, ``--budget-s inf``, ``--range`` with an infinite bound,
+  ``--window inf``, ``--routes 100000``,
   distance-only options given to ``nonactionable`` (one, two), ``wording`` with ``--policy`` and
   ``--checkpoint``, an empty ``--checkpoint`` (``wording``, ``diagnostics``) — exit 2 before
   anything runs;
@@ -1164,6 +1165,8 @@ STRESS_CASES = [
      "argument --temperature: expected a finite number in (0, 10], got 0" + STRESS_HELP),
     (["--temperature", "nan"],
      "argument --temperature: expected a finite number in (0, 10], got nan" + STRESS_HELP),
+    (["--actor-temperature", "0"],
+     "argument --actor-temperature: expected a finite number in (0, 100], got 0" + STRESS_HELP),
     (["--budget-s", "inf"],
      "argument --budget-s: expected a finite number in (0, 1e+06], got inf" + STRESS_HELP),
     (["--range", "v_ref=0:inf"], "--range 'v_ref=0:inf': LO and HI must be finite numbers"),

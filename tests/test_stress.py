@@ -330,6 +330,36 @@ def test_a_candidate_s_value_and_gradient_do_not_see_the_rest_of_its_batch():
 # ---------------------------------------------------------------------------------------------
 # KING's recipe
 # ---------------------------------------------------------------------------------------------
+def test_the_margin_over_actors_is_the_nearest_s_unless_its_temperature_shares_it():
+    """Two watched actors 1 m and 3 m from a collision.  At the surrogate's 0.1 m the margin is
+    the nearest's, 1 m, and the farther actor's share of the gradient is exp(-20) (nothing for
+    a descent to follow); at an actor temperature of 2 m the margin is
+    -2 log(exp(-1/2) + exp(-3/2)) = 0.3735 m and the gradient's shares are
+    softmax(-(1, 3) / 2) = (0.7311, 0.2689)."""
+    t = 0.1
+    margins = jnp.asarray([1.0, 3.0], jnp.float32)
+
+    def margin(m, actor_temperature=None):  # the watch's accumulator of each actor's margin
+        return objective.soft_margin(-m / t, t, actor_temperature)
+
+    np.testing.assert_allclose(float(margin(margins)), 1.0, atol=1e-6)
+    assert float(margin(margins)) == float(margin(margins, t))  # None is the surrogate's
+    g = np.asarray(jax.grad(margin)(margins))
+    np.testing.assert_allclose(g[0], 1.0, atol=1e-6)
+    assert 0.0 <= g[1] < 1e-8
+    np.testing.assert_allclose(float(margin(margins, 2.0)), 0.37346, atol=1e-4)
+    shared = np.asarray(jax.grad(margin)(margins, 2.0))
+    np.testing.assert_allclose(shared, [0.73106, 0.26894], atol=1e-5)
+
+
+@pytest.mark.parametrize("bad", [0.0, -1.0, float("nan"), float("inf")])
+def test_a_bad_actor_temperature_is_refused_naming_it(suite, bad):
+    pair = next(p for p in suite.pairs if p.family == "PE")
+    cfg = report.StressConfig(actor_temperature=bad)
+    with pytest.raises(ValueError, match="actor_temperature: expected metres > 0"):
+        report.make_problem(pair, get_policy("coop"), search_space("PE"), cfg)
+
+
 def test_king_cost_on_its_numbers():
     """KING's cost from a watch: the nearest watched actor's distance averaged over the time any
     was present, plus each tracked actor's soft off-road time as a share of the horizon; with

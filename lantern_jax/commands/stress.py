@@ -184,6 +184,7 @@ def _config(args: argparse.Namespace, methods: tuple[str, ...]):
         actors=actors,
         horizon_s=args.horizon_s,
         watch=args.watch,
+        actor_temperature=args.actor_temperature,
         **given,
     )
 
@@ -408,6 +409,10 @@ def _add_method_options(st: argparse.ArgumentParser) -> None:
         choices=("plausible", "margin", "clearance", "soft_cus"),
         help="what the gradient and CMA-ES minimise (docs/stress.md)",
     )
+    st.add_argument("--actor-temperature", type=number(0.0, 100.0, low_open=True), default=None,
+                    metavar="M", help="temperature (m) of the surrogate's soft minimum over the "
+                    "watched actors (default: --temperature, in effect the nearest actor's "
+                    "margin; docs/stress.md)")  # fmt: skip
     st.add_argument("--watch", default="hazard", choices=("hazard", "all"),
                     help="the actors the surrogate's margin and the verification watch: the "
                     "hazard and the tracked ones, or every actor of the scene (docs/stress.md)")

@@ -130,12 +130,21 @@ class Problem:
     settings: Settings = DEFAULT_SETTINGS  # scoring and protocol (its temperature replaced)
     hold_policy: bool = False  # the soft rollouts hold the policy's plans fixed to
     #                            differentiation (KING's detached ego, :func:`held_plans`)
+    actor_temperature: float | None = None  # m, of the margins' soft minimum over the
+    #                watched actors (None: ``temperature``, in effect the nearest actor's
+    #                margin; larger: the actors near the nearest share the gradient,
+    #                :func:`soft_margin`)
     info: dict = dataclasses.field(default_factory=dict, compare=False, hash=False)  # notes
     #                  of a run (the nominal scene's verdict, compile time)
 
     def __post_init__(self) -> None:
         if self.objective not in OBJECTIVES:
             raise ValueError(f"objective {self.objective!r} not one of {', '.join(OBJECTIVES)}")
+        if self.actor_temperature is not None and not (
+            np.isfinite(self.actor_temperature) and self.actor_temperature > 0
+        ):
+            raise ValueError(f"actor_temperature: expected metres > 0 (or None), got "
+                             f"{self.actor_temperature!r}")  # fmt: skip
         if not self.watched:
             object.__setattr__(self, "watched", watched_slots(self.scenario_a, self.space))
 
@@ -198,6 +207,7 @@ class Problem:
             len(self.watched),
             float(self.expert_weight),
             self.hold_policy,
+            self.actor_temperature,
         )
 
 
@@ -231,11 +241,21 @@ def _softmin(x: Array, temperature: float) -> Array:
     return -temperature * jax.nn.logsumexp(-x / temperature)
 
 
-def soft_margin(margin_lse: Array, temperature: float) -> Array:
+def soft_margin(margin_lse: Array, temperature: float,
+                actor_temperature: float | None = None) -> Array:  # fmt: skip
     """() m, the soft collision margin of a watch's accumulators ``margin_lse`` (W,): each
-    watched actor's soft minimum over ticks, capped at :data:`~lantern_jax.apps.stress.
-    plausibility.CAP_M`, then the soft minimum over the actors."""
-    return _softmin(softmin_decode(margin_lse, temperature, cap=rules.CAP_M), temperature)
+    watched actor's soft minimum over ticks at ``temperature``, capped at
+    :data:`~lantern_jax.apps.stress.plausibility.CAP_M`, then the soft minimum over the actors
+    at ``actor_temperature`` (m; None: ``temperature``).
+
+    At the surrogate's 0.1 m the minimum over the actors is in effect the nearest one's, and so
+    is its gradient: an actor a metre farther gets ``exp(-10)`` of it.  A larger
+    ``actor_temperature`` shares the gradient among the actors within a few of it of the
+    nearest (weights ``softmax(-margin / actor_temperature)``), so a descent moves each of
+    them toward the ego, not only the nearest (``docs/stress.md``: why plain descent falls
+    when a background vehicle nearer the ego joins the space)."""
+    per_actor = softmin_decode(margin_lse, temperature, cap=rules.CAP_M)
+    return _softmin(per_actor, temperature if actor_temperature is None else actor_temperature)
 
 
 def part_value(
@@ -265,7 +285,7 @@ def part_values(
     data = problem.data() if data is None else data
     sc_a, sc_b = data[0], data[1]
     scenarios = jax.vmap(lambda x: problem.space.apply(sc_a, sc_b, candidate_values(data, x))[0])(z)
-    temp = problem.temperature
+    temp, actor_temp = problem.temperature, problem.actor_temperature
     watched, tracked, settings = data[4], data[5], data[6]
     n = z.shape[0]
     final, watch = soft_rollout_batch(
@@ -284,9 +304,9 @@ def part_values(
         if problem.objective == "plausible":
             stop = jnp.max(jnp.where(tracked, w.stop_soft, 0.0))
             off = jnp.max(jnp.where(tracked, w.off_road_soft, 0.0))
-            return soft_margin(w.margin_lse, temp) + rules.plausibility_term(stop, off)
+            return soft_margin(w.margin_lse, temp, actor_temp) + rules.plausibility_term(stop, off)
         if problem.objective == "margin":
-            return soft_margin(w.margin_lse, temp)
+            return soft_margin(w.margin_lse, temp, actor_temp)
         if problem.objective == "clearance":
             return softmin_decode(tel.clearance.lse, temp, cap=CLEARANCE_CAP_M)
         if problem.objective == "king":
@@ -307,7 +327,8 @@ def part_values(
         return cus_of(quality_a(t["P"], safety, temporal, s), 1.0, gates, s)
 
     def expert_part(ops):
-        return rules.expert_term(soft_margin(ops[1].dist_lse, temp), problem.expert_weight)
+        return rules.expert_term(soft_margin(ops[1].dist_lse, temp, actor_temp),
+                                 problem.expert_weight)
 
     return jax.vmap(value)(final.telemetry, watch, scenarios.config.d_safe)
 

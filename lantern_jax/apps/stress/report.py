@@ -100,6 +100,8 @@ class StressConfig:
     init_z: float | None = None  # spread of the gradient and CMA-ES starting points
     watch: str = "hazard"  # the actors the surrogate's margin and the verification watch:
     #                        "hazard" (and the tracked ones) or "all" (objective.WATCHES)
+    actor_temperature: float | None = None  # m, the soft minimum over the watched actors
+    #                        (None: ``temperature``; objective.soft_margin)
 
     def resolved(self) -> StressConfig:
         """The config with every None replaced by its space's default."""
@@ -174,6 +176,7 @@ def make_problem(
         expert.init(key),
         watched=watched_slots(a, space, cfg.watch),
         expert_weight=cfg.expert_weight,
+        actor_temperature=cfg.actor_temperature,
     )
 
 
