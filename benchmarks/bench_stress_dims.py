@@ -128,6 +128,9 @@ def main() -> None:
                out / "dims.png")  # fmt: skip
         return
     names = args.spaces.split(",")
+    if "random" not in args.methods.split(","):  # run_cell's cell row reads its draws
+        ap.error("--methods: must include random (the cell's pass share and plausible-failure "
+                 "share are random search's draws)")  # fmt: skip
     bad = [n for n in names if n not in SPACES]
     if bad:
         ap.error(f"--spaces: {', '.join(bad)} not of {', '.join(SPACES)}")
