@@ -47,13 +47,17 @@ LEVEL = 0.95
 
 
 class Descent(search.GradientSearch):
-    """Plain descent that records each iteration; the dimensions ``held`` (a boolean mask) keep
-    their start (``start="random"``: the draw every restart makes; ``"zero"``: 0) and neither
-    move nor enter the smoothing noise."""
+    """Plain descent that records each iteration into ``rows``.  ``background`` (a boolean
+    mask) marks the background vehicles' dimensions; with ``hold`` they keep their start
+    (``start="random"``: the draw every restart makes; ``"zero"``: 0) and neither move nor
+    enter the smoothing noise."""
 
-    def __init__(self, name: str, held: np.ndarray, start: str, rows: list, *args, **kwargs):
+    def __init__(self, name: str, background: np.ndarray, hold: bool, start: str, rows: list,
+                 *args, **kwargs):  # fmt: skip
         super().__init__(*args, **kwargs)
-        self.name, self.held, self.rows = name, np.asarray(held, bool), rows
+        self.name, self.rows = name, rows
+        self.background = np.asarray(background, bool)
+        self.held = self.background if hold else np.zeros_like(self.background)
         self.trace = search.Trace(name, self.restarts)
         if start == "zero":
             self.z[:, self.held] = 0.0
@@ -74,8 +78,7 @@ class Descent(search.GradientSearch):
 
     def _verify(self, values, owner, cost, per_restart):
         verdict = super()._verify(values, owner, cost, per_restart)
-        bg = self.held if self.held.any() else self._bg
-        g = self._g
+        bg, g = self.background, self._g
         norm = np.linalg.norm(g, axis=1)
         moved = self.z - self.z0
         policy_failed = verdict.failed if verdict.policy_failed is None else verdict.policy_failed
@@ -138,10 +141,9 @@ def main() -> None:
         bg = np.arange(dim) >= hazard_dims
         common = (problem, verifier, cfg.restarts, cfg.seed, cfg.lr, cfg.sigma, cfg.samples,
                   cfg.init_z)  # fmt: skip
-        plain = Descent("gradient", np.zeros(dim, bool), "random", rows, *common)
-        plain._bg = bg
-        return [plain, Descent("held-random", bg, "random", rows, *common),
-                Descent("held-zero", bg, "zero", rows, *common)]  # fmt: skip
+        return [Descent("gradient", bg, False, "random", rows, *common),
+                Descent("held-random", bg, True, "random", rows, *common),
+                Descent("held-zero", bg, True, "zero", rows, *common)]  # fmt: skip
 
     cfg_none = dataclasses.replace(cfg, methods=())
     t0 = time.perf_counter()
