@@ -41,6 +41,7 @@ import jax  # noqa: E402
 import numpy as np  # noqa: E402
 from bench_iterate import _policy  # noqa: E402  (this folder's inner-loop benchmark)
 
+from lantern_jax.core.constants import NUM_WAYPOINTS  # noqa: E402
 from lantern_jax.scenarios.suite import load_suite  # noqa: E402
 from lantern_jax.sim import engine, split  # noqa: E402
 from lantern_jax.sim.settings import default_settings  # noqa: E402
@@ -80,7 +81,7 @@ def stepper(policy, params, host, settings, sig, device, own: bool):
     switches = jax.device_put(split.sensor_switches(policy), device)
     active = jax.device_put(np.ones(s, bool), device)
     no = jax.device_put(np.zeros(s, bool), device)
-    still = jax.device_put(np.zeros((s, 10, 2), np.float32), device)
+    still = jax.device_put(np.zeros((s, NUM_WAYPOINTS, 2), np.float32), device)
     first = tuple(jax.device_put(b, device) for b in states)
     _, obs0, _ = world(scp, first, still, no, switches, setp)
     carry0 = split._blank(carry_layout, s, device)
