@@ -31,6 +31,7 @@ from pathlib import Path
 #: (one device against two, the program store in a new process, the written promise across
 #: devices) run the default emitters.  An ``XLA_FLAGS`` that names the flag wins, e.g.
 #: ``XLA_FLAGS=--xla_cpu_use_fusion_emitters=true`` runs the tests as a user's process compiles.
+#: ``.ci/run`` reads this line to give the documentation build's notebook kernels the same flags.
 TEST_XLA_FLAGS = "--xla_cpu_use_fusion_emitters=false"
 if TEST_XLA_FLAGS.split("=")[0] not in os.environ.get("XLA_FLAGS", ""):
     os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {TEST_XLA_FLAGS}".strip()
