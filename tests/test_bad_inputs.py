@@ -1102,6 +1102,7 @@ def test_a_checkpoint_cannot_take_a_registered_name(saved_models, tmp_path, regi
         res = run_cli(["evaluate", "--policy", "coop", "--checkpoint", str(path),
                        "--pairs", "pe_0001", "--out", str(tmp_path / "out")])  # fmt: skip
         assert res.rc == 2 and f"name '{name}' is already registered ({what})" in res.err
+        assert f"--checkpoint OTHER_NAME={path}" in res.err  # how to name it instead
     assert get_policy("coop").act is builtin.act
     assert "learned" not in get_policy("coop").description
 

@@ -145,7 +145,10 @@ def register_checkpoints(paths: Sequence[str] | None, source: str = "--checkpoin
         try:
             names.append(register_checkpoint(path, name))
         except CheckpointError as e:
-            raise UsageError(f"{source}: {e}") from None
+            hint = ""
+            if name is None and "is already registered" in str(e):
+                hint = f" (name it where you give it: {source} OTHER_NAME={path})"
+            raise UsageError(f"{source}: {e}{hint}") from None
     if paths is not None and not names:
         raise UsageError(f"{source}: no checkpoint given (leave the option out for none)")
     return names
