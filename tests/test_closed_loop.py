@@ -22,6 +22,7 @@ from lantern_jax.apps.training.config import ConfigError, TrainConfig, load_conf
 from lantern_jax.apps.training.data import Examples
 from lantern_jax.apps.training.relabel import ego_frame_offsets
 from lantern_jax.core.constants import FAMILIES, NUM_WAYPOINTS
+from lantern_jax.core.times import NEVER
 from lantern_jax.types.language import PAD_ID
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -79,6 +80,76 @@ def test_counterfactual_frames_carry_the_ordinary_label_and_a_text_of_no_hazard_
         assert bool(stated) and cf.NEAR_X_M[0] <= float(pos[0]) <= cf.NEAR_X_M[1]
 
 
+def test_distractor_sentences_replace_a_share_of_the_counterfactual_texts_only():
+    from lantern_jax.scenarios.warnings import text_tables
+    from lantern_jax.types.observation import stated_position
+
+    ex, families, routes = _examples(240)
+    plain, v0 = cf.counterfactual_examples(ex, families, routes, share=0.5, seed=0)
+    out, variant = cf.counterfactual_examples(ex, families, routes, 0.5, 0, distractors=0.5)
+    # the same frames and labels; off the distractor stream, the same texts and positions
+    np.testing.assert_array_equal(out.sequence, plain.sequence)
+    np.testing.assert_array_equal(out.targets, plain.targets)
+    kept = variant != 2
+    assert 0.3 < 1 - kept.mean() < 0.7 and np.array_equal(variant[kept], v0[kept])
+    for key in ("warning_tokens", "warning_values"):
+        np.testing.assert_array_equal(out.obs[key][kept], plain.obs[key][kept])
+    bank, ids = cf.distractor_bank()
+    rows = {tuple(t): i for i, t in enumerate(text_tables(bank).tokens)}
+    told = [rows[tuple(t)] for t in out.obs["warning_tokens"][~kept]]
+    assert set(told) <= set(ids.tolist()) and len(set(told)) > 6
+    for i in np.flatnonzero(~kept)[:5]:  # each states a near position in the value channel
+        text_obs = SimpleNamespace(warning_tokens=out.obs["warning_tokens"][i],
+                                   warning_values=out.obs["warning_values"][i])  # fmt: skip
+        pos, stated = stated_position(text_obs)
+        assert bool(stated) and cf.NEAR_X_M[0] <= float(pos[0]) <= cf.NEAR_X_M[1]
+
+
+def test_training_distractors_are_not_the_language_probes():
+    from lantern_jax.scenarios.warning_texts import (
+        DEFAULT_BANK,
+        PROBE_IRRELEVANT,
+        PROBE_NEGATED,
+        TRAINING_DISTRACTORS,
+    )
+
+    bank_texts = {e.text for e in DEFAULT_BANK}
+    for text in TRAINING_DISTRACTORS:
+        assert text not in bank_texts and text not in (PROBE_IRRELEVANT, PROBE_NEGATED)
+        lower = text.lower()
+        assert not any(w in lower for w in ("nothing", "clear", "ego lane", "bakery", "bread"))
+
+
+def test_failure_visits_are_the_grid_and_the_seconds_before_a_collision():
+    from lantern_jax.apps.training.closed_loop import _chosen
+
+    t = np.tile(0.5 * np.arange(12, dtype=np.float32), (2, 1))  # s, visits every 0.5 s
+    t_coll = np.stack([np.full(12, 4.2, np.float32), np.full(12, NEVER, np.float32)])
+    v = SimpleNamespace(t=t, t_collision=t_coll)
+    grid = np.arange(12) % 4 == 0
+    np.testing.assert_array_equal(_chosen(v, 4, 0.0), np.stack([grid, grid]))
+    near = (t[0] >= 4.2 - 1.5) & (t[0] < 4.2)  # 3.0, 3.5, 4.0 s
+    np.testing.assert_array_equal(_chosen(v, 4, 1.5)[0], grid | near)
+    np.testing.assert_array_equal(_chosen(v, 4, 1.5)[1], grid)  # no collision: the grid only
+    np.testing.assert_array_equal(_chosen(v, 1, 0.0), np.ones((2, 12), bool))
+
+
+def test_failure_visit_settings_are_checked(tmp_path):
+    bad = tmp_path / "bad.toml"
+    base = '[train]\nname = "x"\nrecipe = "closed_loop"\ninit_from = "m"\n'
+    bad.write_text(base + "failure_window_s = 3.0\nfailure_every_s = 0.75\n")
+    with pytest.raises(ConfigError, match="failure_every_s.*divide"):
+        load_config(bad)
+    bad.write_text(base + "failure_window_s = -1.0\n")
+    with pytest.raises(ConfigError, match="failure_window_s"):
+        load_config(bad)
+    bad.write_text(base + "distractors = 1.5\n")
+    with pytest.raises(ConfigError, match="distractors"):
+        load_config(bad)
+    bad.write_text(base + "failure_window_s = 3.0\nfailure_every_s = 0.5\n")
+    assert load_config(bad).failure_window_s == 3.0
+
+
 def test_other_road_families_split_straight_and_junction():
     assert [FAMILIES[i] for i in cf.other_road_families("PE")] == ["LWW", "RWW", "RTY"]
     assert [FAMILIES[i] for i in cf.other_road_families("RTY")] == ["PE", "VC", "OR"]
@@ -120,8 +191,13 @@ def test_relabel_of_an_expert_state_is_the_dataset_label():
     expert = get_policy("expert")
     ep = expert.init(jax.random.PRNGKey(0))
     recs = jax.device_get(batched_recorder(expert, 30)(batch, ep)[0])
-    v = jax.device_get(relabel_batch(batch, expert, ep, expert, ep, jax.random.PRNGKey(0),
-                                     num_visits=3, every=40, phase=5))  # fmt: skip
+    # a grid four times finer (as failure visits use it): every fourth visit is the 40-tick one
+    dense = jax.device_get(relabel_batch(batch, expert, ep, expert, ep, jax.random.PRNGKey(0),
+                                         num_visits=12, every=10, phase=5, segment=4))  # fmt: skip
+    v = jax.tree.map(lambda x: x[:, ::4], dense)
+    ticks = np.broadcast_to(5 + 10 * np.arange(5), (2, 5))
+    np.testing.assert_allclose(np.asarray(dense.t)[:, :5], 0.05 * ticks, atol=1e-4)
+    assert np.all(np.asarray(dense.t_collision) == NEVER)  # the expert does not collide here
     valid = np.asarray(v.valid)
     assert valid.sum() >= 3, valid
     for j in range(2):
@@ -153,10 +229,12 @@ def test_one_round_trains_checkpoints_and_resumes(tmp_path):
           progress=False)  # fmt: skip
     cl = dict(common, name="learned-tiny-cl", recipe="closed_loop", out=str(tmp_path / "c"),
               init_from=str(tmp_path / "b" / "learned-tiny.msgpack"), rounds=1,
-              scenes_per_round=2, max_seconds=6.0, exclude_crossing="onset")  # fmt: skip
+              scenes_per_round=2, max_seconds=6.0, exclude_crossing="onset",
+              failure_window_s=2.0, failure_every_s=1.0)  # fmt: skip
     s = train(TrainConfig(**cl), progress=False)
     r0 = tmp_path / "c" / "round-0"
     assert s["rounds"] == 1 and s["kept_visits"] > 0 and s["executions"] == 4
+    assert 0 <= s["failure_visits"] <= s["kept_visits"]
     assert (r0 / "visits.npz").exists() and (r0 / "done.json").exists()
     assert checkpoint_policy(tmp_path / "c" / "learned-tiny-cl.msgpack").name == "learned-tiny-cl"
     # an interrupted round resumes its training from the latest epoch (visits kept)

@@ -170,6 +170,26 @@ NON_ACTIONABLE: tuple[str, ...] = (
 PROBE_IRRELEVANT = f"The bakery at position {TOKEN} sells fresh bread today."
 PROBE_NEGATED = f"Nothing is at position {TOKEN}; the ego lane is clear."
 
+#: Sentences that state a position and ask for no reaction, for **training only**
+#: (:mod:`lantern_jax.apps.training.counterfactual`, the ``distractors`` setting): six negations
+#: and six irrelevant statements.  None is a probe above, none shares a probe's wording beyond
+#: "at position" (no "Nothing", "clear", "ego lane", "bakery"), and no suite or dataset bank
+#: holds them, so the language diagnostic's probes stay unseen by a model trained with them.
+TRAINING_DISTRACTORS: tuple[str, ...] = (
+    f"No pedestrian is at position {TOKEN}; the crossing is empty.",
+    f"There is no stopped vehicle at position {TOKEN}.",
+    f"No obstacle was found at position {TOKEN}; drive on normally.",
+    f"The road at position {TOKEN} is free of hazards.",
+    f"No oncoming car is at position {TOKEN}; the junction is free.",
+    f"The earlier alert about position {TOKEN} is cancelled; no hazard remains.",
+    f"The cafe at position {TOKEN} opens at nine in the morning.",
+    f"A billboard at position {TOKEN} advertises a summer concert.",
+    f"The parking garage at position {TOKEN} has free spaces tonight.",
+    f"A street festival took place at position {TOKEN} last weekend.",
+    f"The weather station at position {TOKEN} reports a light breeze.",
+    f"The museum at position {TOKEN} is closed on Mondays.",
+)
+
 
 @dataclass(frozen=True)
 class WarningText:

@@ -96,6 +96,14 @@ def _keep(v: Visits, exclude_crossing: str) -> np.ndarray:
     return keep
 
 
+def _chosen(v: Visits, ratio: int, window_s: float) -> np.ndarray:
+    """(B, V) bool: the visits of the ordinary grid (every ``ratio``-th) and those within
+    ``window_s`` before their execution's first collision."""
+    t, t_coll = np.asarray(v.t), np.asarray(v.t_collision)
+    grid = (np.arange(t.shape[-1]) % ratio == 0)[None, :]
+    return grid | ((t >= t_coll - window_s) & (t < t_coll))
+
+
 def visits_to_examples(v: Visits, seq_ids: list[str], like: Examples, keep: np.ndarray
                        ) -> Examples:  # fmt: skip
     """The kept visits (``keep``: (B, V) bool) as examples with ``like``'s observation fields
@@ -111,7 +119,7 @@ def collect(cfg: TrainConfig, model, like: Examples, specs: list[SceneSpec], r: 
             progress: bool = False) -> tuple[Examples, dict]:  # fmt: skip
     """Round ``r``'s visits of ``model`` on ``specs``, relabelled by the expert (a progress bar
     over the batched calls when ``progress``); returns (examples, counts: executions, valid
-    visits, kept visits)."""
+    visits, kept visits, kept visits off the ordinary grid -- those before a collision)."""
 
     learner = model_policy(cfg.name, model)
     lp = learner.init(jax.random.PRNGKey(0))
@@ -120,7 +128,13 @@ def collect(cfg: TrainConfig, model, like: Examples, specs: list[SceneSpec], r: 
     every = horizon_ticks(cfg.visit_every_s)
     phase = int(every * ((r * 0.618) % 1.0))  # a different offset every round
     beta = cfg.beta * cfg.beta_decay**r
-    parts, counts = [], dict(executions=0, valid_visits=0, kept_visits=0)
+    # with failure visits the grid is finer (ratio visits per ordinary one, the beta segments
+    # as long as before, so the driven executions are the same); the host keeps the
+    # ordinary grid and the visits just before each collision
+    ratio = round(cfg.visit_every_s / cfg.failure_every_s) if cfg.failure_window_s > 0 else 1
+    num_visits = max(1, int(cfg.max_seconds / cfg.visit_every_s)) * ratio
+    parts = []
+    counts = dict(executions=0, valid_visits=0, kept_visits=0, failure_visits=0)
     starts = range(0, len(specs), CHUNK_PAIRS)
     if progress:
         starts = tqdm(starts, desc=f"round {r}: drive + relabel", unit="batch")
@@ -130,13 +144,15 @@ def collect(cfg: TrainConfig, model, like: Examples, specs: list[SceneSpec], r: 
         key = jax.random.PRNGKey(hash((cfg.seed, r, k)) % (2**31))
         v = jax.device_get(relabel_batch(
             _scene_batch(chunk), learner, lp, expert, ep, key, beta=beta,
-            num_visits=max(1, int(cfg.max_seconds / cfg.visit_every_s)), every=every,
-            phase=phase))  # fmt: skip
-        keep = _keep(v, cfg.exclude_crossing)
+            num_visits=num_visits, every=every // ratio, phase=phase,
+            segment=ratio))  # fmt: skip
+        chosen = _chosen(v, ratio, cfg.failure_window_s)
+        keep = _keep(v, cfg.exclude_crossing) & chosen
         parts.append(visits_to_examples(v, ids, like, keep))
         counts["executions"] += len(ids)
-        counts["valid_visits"] += int(np.asarray(v.valid).sum())
+        counts["valid_visits"] += int((np.asarray(v.valid) & chosen).sum())
         counts["kept_visits"] += int(keep.sum())
+        counts["failure_visits"] += int((keep & ~_chosen(v, ratio, 0.0)).sum())
     return concat(parts), counts
 
 
@@ -159,7 +175,8 @@ def _dataset_examples(cfg: TrainConfig) -> Examples:
     card = read_card(Path(cfg.dataset))
     ex = recipe_examples(frames, card, dataclasses.replace(cfg, recipe="distance"))
     plain = ex.take(np.arange(len(frames)))  # the frames themselves, before the far copies
-    return concat([ex, frame_counterfactuals(plain, frames, cfg.counterfactual, cfg.seed)])
+    cf = frame_counterfactuals(plain, frames, cfg.counterfactual, cfg.seed, cfg.distractors)
+    return concat([ex, cf])
 
 
 def train_closed_loop(cfg: TrainConfig, progress: bool = True) -> dict:

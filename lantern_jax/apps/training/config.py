@@ -17,7 +17,11 @@ carries — the paper's three learned rows:
   visits, and the model trains ``epochs`` epochs on the distance recipe's examples plus every
   relabelled visit so far (``closed_loop_mix`` of every batch) plus counterfactual warnings
   (``counterfactual``: Route B frames told another family's text, a non-actionable message or
-  an empty text, with the ordinary trajectory; :mod:`lantern_jax.apps.training.counterfactual`).
+  an empty text, with the ordinary trajectory; ``distractors`` of them a training-only negated
+  or irrelevant sentence that states a position instead;
+  :mod:`lantern_jax.apps.training.counterfactual`).
+  With ``failure_window_s > 0`` each round also keeps the visits of the last seconds before
+  every collision of the driven executions, every ``failure_every_s`` (recovery states).
 """
 
 from __future__ import annotations
@@ -74,6 +78,11 @@ class TrainConfig:
     beta_decay: float = 0.5  # beta of round r: beta * beta_decay**r
     closed_loop_mix: float = 0.3  # share of every batch drawn from the relabelled visits
     counterfactual: float = 0.5  # counterfactual warning frames per Route B frame
+    distractors: float = 0.0  # share of those told a training distractor sentence instead
+    # s: also keep the visits this long before each driven execution's first collision, every
+    # failure_every_s (the states that lead the learner into a failure); 0 keeps none
+    failure_window_s: float = 0.0
+    failure_every_s: float = 0.5  # s, spacing of those visits; divides visit_every_s
 
     @property
     def rig(self) -> str:
@@ -140,15 +149,21 @@ def _range_problem(cfg: TrainConfig) -> tuple[str, str] | None:
     for key in ("epochs", "batch_size", "width", "heads", "layers", "rounds", "scenes_per_round"):
         if getattr(cfg, key) < 1:
             problems.append((key, f"must be >= 1, got {getattr(cfg, key)}"))
-    for key in ("lr", "max_minutes", "far_m", "visit_every_s", "max_seconds"):
+    for key in ("lr", "max_minutes", "far_m", "visit_every_s", "max_seconds", "failure_every_s"):
         if not getattr(cfg, key) > 0:
             problems.append((key, f"must be > 0, got {getattr(cfg, key)}"))
+    if not cfg.failure_window_s >= 0:
+        problems.append(("failure_window_s", f"must be >= 0, got {cfg.failure_window_s}"))
+    ratio = cfg.visit_every_s / cfg.failure_every_s if cfg.failure_every_s > 0 else 0.0
+    if cfg.failure_window_s > 0 and (ratio < 1 or abs(ratio - round(ratio)) > 1e-6):
+        problems.append(("failure_every_s", f"must divide visit_every_s {cfg.visit_every_s}, "
+                                            f"got {cfg.failure_every_s}"))  # fmt: skip
     if not cfg.weight_decay >= 0:
         problems.append(("weight_decay", f"must be >= 0, got {cfg.weight_decay}"))
     for key in ("base_mix", "warmup", "closed_loop_mix"):
         if not 0.0 <= getattr(cfg, key) < 1.0:
             problems.append((key, f"must be in [0, 1), got {getattr(cfg, key)}"))
-    for key in ("beta", "beta_decay", "counterfactual"):
+    for key in ("beta", "beta_decay", "counterfactual", "distractors"):
         if not 0.0 <= getattr(cfg, key) <= 1.0:
             problems.append((key, f"must be in [0, 1], got {getattr(cfg, key)}"))
     if cfg.recipe == "closed_loop" and cfg.base_mix + cfg.closed_loop_mix >= 1.0:

@@ -10,7 +10,13 @@ and keeps its label — the expert's ordinary trajectory:
   OR <-> LWW, RWW, RTY), so the hazard it names cannot be on this route; its stated position is
   drawn near the ego (:data:`NEAR_X_M`, :data:`NEAR_Y_M`), where a true warning asks to react;
 * **a non-actionable message** — one of the bank's non-actionable texts (a hazard off the
-  route; no position).
+  route; no position);
+* **a distractor sentence** (only with ``distractors > 0``) — one of
+  :data:`~lantern_jax.scenarios.warning_texts.TRAINING_DISTRACTORS`, a negation ("There is no
+  stopped vehicle at position (x, y).") or an irrelevant statement ("The cafe at position
+  (x, y) opens at nine ..."), its position drawn near the ego as above.  These teach that a
+  stated position alone is no reason to react; the language diagnostic's probes are other
+  sentences, so they stay unseen.
 
 An **empty text** needs no frame of its own: the observation carries no token, which a policy
 cannot tell from no warning (:mod:`lantern_jax.scenarios.warnings`), so every ordinary frame
@@ -24,13 +30,14 @@ import pandas as pd
 
 from lantern_jax.apps.training.data import Examples
 from lantern_jax.core.constants import FAMILIES
-from lantern_jax.scenarios.warnings import DEFAULT_BANK, text_tables
+from lantern_jax.scenarios.warning_texts import NO_FAMILY, TRAINING_DISTRACTORS
+from lantern_jax.scenarios.warnings import DEFAULT_BANK, TextBank, text_tables
 from lantern_jax.types.language import round_number
 
 NEAR_X_M = (10.0, 60.0)  # m, forward range of a counterfactual's stated position
 NEAR_Y_M = (-4.0, 4.0)  # m, lateral range (right positive)
 STRAIGHT = ("PE", "VC", "OR")  # families on a straight road; the rest turn at a junction
-VARIANTS = ("other family's text", "non-actionable")
+VARIANTS = ("other family's text", "non-actionable", "distractor sentence")
 
 
 def other_road_families(family: str) -> tuple[int, ...]:
@@ -46,8 +53,20 @@ def nonactionable_ids() -> np.ndarray:
     return np.asarray([e.text_id for e in DEFAULT_BANK if e.kind == "non_actionable"], np.int32)
 
 
+def distractor_bank() -> tuple[TextBank, np.ndarray]:
+    """The built-in bank with :data:`TRAINING_DISTRACTORS` appended (as non-actionable texts),
+    and their (12,) int32 text ids in it.  The built-in ids keep their rows, so a table of this
+    bank gives every other counterfactual text the tokens of the built-in bank's."""
+    bank, ids = DEFAULT_BANK, []
+    for text in TRAINING_DISTRACTORS:
+        ids.append(len(bank))
+        bank = bank.with_text(NO_FAMILY, "non_actionable", text)
+    return bank, np.asarray(ids, np.int32)
+
+
 def counterfactual_examples(
-    ex: Examples, families: np.ndarray, routes: np.ndarray, share: float, seed: int
+    ex: Examples, families: np.ndarray, routes: np.ndarray, share: float, seed: int,
+    distractors: float = 0.0,
 ) -> tuple[Examples, np.ndarray]:
     """Counterfactual copies of a seeded ``share`` of the Route B examples.
 
@@ -57,6 +76,9 @@ def counterfactual_examples(
         routes: (n,) str, ``"A"`` or ``"B"``.
         share: counterfactual frames per Route B frame, in [0, 1].
         seed: seed of the choice of frames, variants, texts and positions.
+        distractors: share of the counterfactual frames, in [0, 1], told a distractor sentence
+            instead (drawn from a stream of their own: with 0 the frames are exactly those of
+            a run without the setting).
 
     Returns:
         (the counterfactual examples — text replaced, labels kept, not ordinary driving —,
@@ -68,25 +90,39 @@ def counterfactual_examples(
     pick = np.sort(rng.choice(is_b, int(round(share * len(is_b))), replace=False))
     sel = ex.take(pick)
     m = len(pick)
-    variant = rng.integers(0, len(VARIANTS), m).astype(np.int32)
-    tables = text_tables()
+    variant = rng.integers(0, 2, m).astype(np.int32)
     fam = np.asarray(families)[pick]
     other = np.asarray([rng.choice(other_road_families(f)) for f in fam], np.int32)
     text = np.where(variant == 0, other, rng.choice(nonactionable_ids(), m)).astype(np.int32)
+    tables = text_tables()
+    rows = np.flatnonzero(tables.x_slot[text] >= 0)
+    x, y = np.zeros(m, np.float32), np.zeros(m, np.float32)  # m, the stated position
+    x[rows] = round_number(rng.uniform(*NEAR_X_M, len(rows)))
+    y[rows] = round_number(rng.uniform(*NEAR_Y_M, len(rows)))
+    if distractors > 0.0:
+        bank, distractor_ids = distractor_bank()
+        tables = text_tables(bank)  # the built-in rows unchanged
+        rng_d = np.random.default_rng([seed, 43])
+        told = rng_d.random(m) < distractors
+        variant = np.where(told, 2, variant).astype(np.int32)
+        text = np.where(told, rng_d.choice(distractor_ids, m), text).astype(np.int32)
+        x[told] = round_number(rng_d.uniform(*NEAR_X_M, int(told.sum())))
+        y[told] = round_number(rng_d.uniform(*NEAR_Y_M, int(told.sum())))
     values = np.zeros(sel.obs["warning_values"].shape, np.float32)
     rows = np.flatnonzero(tables.x_slot[text] >= 0)
-    x = np.asarray(round_number(rng.uniform(*NEAR_X_M, len(rows))))
-    y = np.asarray(round_number(rng.uniform(*NEAR_Y_M, len(rows))))
-    values[rows, tables.x_slot[text[rows]]] = x
-    values[rows, tables.y_slot[text[rows]]] = y
+    values[rows, tables.x_slot[text[rows]]] = x[rows]
+    values[rows, tables.y_slot[text[rows]]] = y[rows]
     obs = dict(sel.obs)
     obs["warning_tokens"] = tables.tokens[text].astype(sel.obs["warning_tokens"].dtype)
     obs["warning_values"] = values.astype(sel.obs["warning_values"].dtype)
     return Examples(obs, sel.targets, sel.sequence, np.zeros(m, bool)), variant
 
 
-def frame_counterfactuals(ex: Examples, frames: pd.DataFrame, share: float, seed: int) -> Examples:
+def frame_counterfactuals(
+    ex: Examples, frames: pd.DataFrame, share: float, seed: int, distractors: float = 0.0
+) -> Examples:
     """:func:`counterfactual_examples` of dataset examples (``ex`` built from ``frames``)."""
     return counterfactual_examples(
-        ex, frames["family"].to_numpy(str), frames["route"].to_numpy(str), share, seed
+        ex, frames["family"].to_numpy(str), frames["route"].to_numpy(str), share, seed,
+        distractors,
     )[0]

@@ -10,8 +10,10 @@ visit is valid when the execution is live there and for the whole horizon (the d
 :func:`~lantern_jax.apps.dataset.frames.frame_indices`), and flags whether the horizon crosses
 warning onset or termination (the dataset's ``horizon_crossing``).
 
-With ``beta > 0`` the expert drives a segment between two visits instead of the learner with
-probability ``beta`` (each segment and execution drawn on its own): the DAgger mixture.
+With ``beta > 0`` the expert drives a segment (``segment`` visits long, one by default)
+instead of the learner with probability ``beta`` (each segment and execution drawn on its own):
+the DAgger mixture.  Every visit also carries its execution's first collision time, so that
+host code can keep the visits just before a failure (``closed_loop``'s ``failure_window_s``).
 
 Everything here is jitted and batched (``vmap`` over scenes); host code reads the result.
 """
@@ -51,6 +53,7 @@ class Visits:
     t: Array  # (V,) float32, s, simulation time of the visit
     crosses_onset: Array  # (V,) bool, warning onset happens within the horizon
     crosses_termination: Array  # (V,) bool, warning termination happens within the horizon
+    t_collision: Array  # (V,) float32, s, the execution's first collision (NEVER: none), per visit
 
 
 def ego_frame_offsets(xy0: Array, yaw0: Array, xy: Array) -> Array:
@@ -100,11 +103,13 @@ def _mixed_tick(learner, lp, expert, ep, scenario, settings, s: State, use_exper
 def visit_and_relabel(
     scenario: Scenario, learner: Policy, learner_params: Any, expert: Policy, expert_params: Any,
     key: Array, beta: Array, phase: Array, *, num_visits: int, every: int, settings: Settings,
+    segment: int = 1,
 ) -> Visits:  # fmt: skip
-    """Roll one execution with the learner (the expert w.p. ``beta`` per segment), keeping a
-    visit every ``every`` ticks from tick ``phase`` until it ends or ``num_visits`` are kept;
-    each visit is relabelled by :func:`expert_label`. Visits after the end are invalid.
-    ``phase`` (() int32, ticks) is an argument, not part of the compiled program."""
+    """Roll one execution with the learner (the expert w.p. ``beta`` per segment of
+    ``segment`` visits), keeping a visit every ``every`` ticks from tick ``phase`` until it
+    ends or ``num_visits`` are kept; each visit is relabelled by :func:`expert_label`. Visits
+    after the end are invalid. ``phase`` (() int32, ticks) is an argument, not part of the
+    compiled program."""
     if learner.stateful or expert.stateful:
         raise ValueError("visit_and_relabel: stateful policies are not supported")
 
@@ -121,7 +126,7 @@ def visit_and_relabel(
     def visit(s: State) -> Visits:
         wps, live, on, off = expert_label(scenario, s, expert, expert_params, settings)
         obs = observe(scenario, s, FRONT_SENSORS, settings.bank)
-        return Visits(obs, wps, live, s.t, on, off)
+        return Visits(obs, wps, live, s.t, on, off, s.telemetry.collision.t_collision)
 
     shapes = jax.eval_shape(visit, state0)
     empty = jax.tree.map(lambda x: jnp.zeros((num_visits, *x.shape), x.dtype), shapes)
@@ -129,25 +134,28 @@ def visit_and_relabel(
     def body(carry):
         i, s, buf = carry
         buf = jax.tree.map(lambda b, x: b.at[i].set(x), buf, visit(s))
-        use_expert = jax.random.bernoulli(jax.random.fold_in(key, i), beta)
+        use_expert = jax.random.bernoulli(jax.random.fold_in(key, i // segment), beta)
         return i + 1, run(s, use_expert), buf
 
     def cond(carry):
         i, s, _ = carry
         return (i < num_visits) & ~s.done
 
-    return jax.lax.while_loop(cond, body, (jnp.asarray(0), state0, empty))[2]
+    _, final, buf = jax.lax.while_loop(cond, body, (jnp.asarray(0), state0, empty))
+    # the loop stops at the end or after num_visits visits: a collision later is not seen
+    t_coll = jnp.broadcast_to(final.telemetry.collision.t_collision, buf.t_collision.shape)
+    return buf.replace(t_collision=t_coll)
 
 
 @functools.partial(
-    jax.jit, static_argnames=("learner", "expert", "num_visits", "every", "settings")
+    jax.jit, static_argnames=("learner", "expert", "num_visits", "every", "settings", "segment")
 )
 def _batch(scenarios, lp, ep, keys, beta, phase, *, learner, expert, num_visits, every,
-           settings):  # fmt: skip
+           settings, segment):  # fmt: skip
     def one(sc, k):
         return visit_and_relabel(sc, learner.driver, lp, expert.driver, ep, k, beta, phase,
-                                 num_visits=num_visits, every=every,
-                                 settings=settings)  # fmt: skip
+                                 num_visits=num_visits, every=every, settings=settings,
+                                 segment=segment)  # fmt: skip
 
     return jax.vmap(one)(scenarios, keys)
 
@@ -155,7 +163,7 @@ def _batch(scenarios, lp, ep, keys, beta, phase, *, learner, expert, num_visits,
 def relabel_batch(
     scenarios: Scenario, learner: Policy, learner_params: Any, expert: Policy, expert_params: Any,
     key: Array, beta: float = 0.0, num_visits: int = 40, every: int = 40, phase: int = 0,
-    settings: Settings | None = None,
+    settings: Settings | None = None, segment: int = 1,
 ) -> Visits:  # fmt: skip
     """:func:`visit_and_relabel` of a batch of scenarios (leading axis ``B``); one compiled
     program per (learner program, expert program, visit layout).
@@ -168,6 +176,8 @@ def relabel_batch(
         key: PRNG key of the beta draws.
         beta: probability that the expert drives a segment.
         num_visits, every, phase: visits kept, ticks between visits, ticks before the first.
+        segment: visits per segment of the beta mixture (a segment is ``segment * every``
+            ticks).
         settings: default :func:`~lantern_jax.sim.settings.default_settings`.
 
     Returns:
@@ -178,4 +188,5 @@ def relabel_batch(
     keys = jax.random.split(key, scenarios.config.family.shape[0])
     return _batch(scenarios, learner_params, expert_params, keys, jnp.float32(beta),
                   jnp.int32(phase), learner=Program(learner), expert=Program(expert),
-                  num_visits=num_visits, every=every, settings=settings)  # fmt: skip
+                  num_visits=num_visits, every=every, settings=settings,
+                  segment=segment)  # fmt: skip
