@@ -47,7 +47,6 @@ from lantern_jax.policies.base import Policy
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.suite import Suite, load_suite
 from lantern_jax.scenarios.warning_texts import (
-    NO_FAMILY,
     PROBE_IRRELEVANT,
     PROBE_NEGATED,
     TextBank,
@@ -87,11 +86,8 @@ MIN_GAIN_FOR_SHARE = 1.0  # CUS points: a smaller warning gain gets no "share ke
 def probe_bank(bank: TextBank) -> tuple[TextBank, dict[str, int]]:
     """``bank`` with the probe sentences appended (as non-actionable texts: they name no hazard
     of the route), and each probe variant's text id in it."""
-    ids = {}
-    for variant, text in PROBE_VARIANTS.items():
-        ids[variant] = len(bank)
-        bank = bank.with_text(NO_FAMILY, "non_actionable", text)
-    return bank, ids
+    bank, ids = bank.with_unrelated_texts(tuple(PROBE_VARIANTS.values()))
+    return bank, dict(zip(PROBE_VARIANTS, ids, strict=True))
 
 
 def with_text_ids(execs: Any, text_ids: np.ndarray) -> Any:

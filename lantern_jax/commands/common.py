@@ -136,7 +136,7 @@ def register_checkpoints(paths: Sequence[str] | None, source: str = "--checkpoin
             name is already registered for another policy, or when values were given but
             name no checkpoint.
     """
-    from lantern_jax.policies.learned.checkpoint import CheckpointError
+    from lantern_jax.policies.learned.checkpoint import CheckpointError, CheckpointNameTaken
     from lantern_jax.policies.registry import register_checkpoint
 
     names = []
@@ -146,7 +146,7 @@ def register_checkpoints(paths: Sequence[str] | None, source: str = "--checkpoin
             names.append(register_checkpoint(path, name))
         except CheckpointError as e:
             hint = ""
-            if name is None and "is already registered" in str(e):
+            if name is None and isinstance(e, CheckpointNameTaken):
                 hint = f" (name it where you give it: {source} OTHER_NAME={path})"
             raise UsageError(f"{source}: {e}{hint}") from None
     if paths is not None and not names:

@@ -104,14 +104,14 @@ def register_checkpoint(path: str, name: str | None = None) -> str:
     allowed and changes nothing.
 
     Raises:
-        CheckpointError: for a missing or invalid checkpoint, or a name that is already
-            registered for another policy (a built-in one, a shipped model or another
-            checkpoint).
+        CheckpointError: for a missing or invalid checkpoint; its subclass
+            CheckpointNameTaken for a name that is already registered for another policy (a
+            built-in one, a shipped model or another checkpoint).
     """
     # deferred: flax.nnx and the model code load only when a learned model is asked for
     from lantern_jax.policies.learned.checkpoint import (
         DESCRIPTION_HASH,
-        CheckpointError,
+        CheckpointNameTaken,
         checkpoint_policy,
         read_meta,
     )
@@ -125,7 +125,7 @@ def register_checkpoint(path: str, name: str | None = None) -> str:
             what = "a shipped model"
         else:
             what = "another checkpoint" if policy.name in _CHECKPOINT_HASHES else "built in"
-        raise CheckpointError(
+        raise CheckpointNameTaken(
             f"{path}: name {policy.name!r} is already registered ({what}); the rows of a name "
             "must come from one policy: register it under another name"
         )  # fmt: skip

@@ -320,6 +320,19 @@ class TextBank:
         entry = WarningText(len(self.entries), f, kind, text, tier)
         return TextBank((*self.entries, entry))
 
+    def with_unrelated_texts(self, texts: tuple[str, ...]) -> tuple[TextBank, tuple[int, ...]]:
+        """A new bank with ``texts`` appended as non-actionable texts of no family (sentences
+        that name no hazard of the route), and their ids in it, in order.
+
+        Raises:
+            ValueError: as :meth:`with_text`, for a text that breaks the spacing rule.
+        """
+        bank, ids = self, []
+        for text in texts:
+            ids.append(len(bank))
+            bank = bank.with_text(NO_FAMILY, "non_actionable", text)
+        return bank, tuple(ids)
+
     def with_replaced_text(self, text_id: int, text: str) -> TextBank:
         """A new bank in which entry ``text_id`` reads ``text`` (same id, family, kind and
         tier): a wording experiment on one warning, e.g. the exact warning of a family.

@@ -30,7 +30,7 @@ import pandas as pd
 
 from lantern_jax.apps.training.data import Examples
 from lantern_jax.core.constants import FAMILIES
-from lantern_jax.scenarios.warning_texts import NO_FAMILY, TRAINING_DISTRACTORS
+from lantern_jax.scenarios.warning_texts import TRAINING_DISTRACTORS
 from lantern_jax.scenarios.warnings import DEFAULT_BANK, TextBank, text_tables
 from lantern_jax.types.language import round_number
 
@@ -57,10 +57,7 @@ def distractor_bank() -> tuple[TextBank, np.ndarray]:
     """The built-in bank with :data:`TRAINING_DISTRACTORS` appended (as non-actionable texts),
     and their (12,) int32 text ids in it.  The built-in ids keep their rows, so a table of this
     bank gives every other counterfactual text the tokens of the built-in bank's."""
-    bank, ids = DEFAULT_BANK, []
-    for text in TRAINING_DISTRACTORS:
-        ids.append(len(bank))
-        bank = bank.with_text(NO_FAMILY, "non_actionable", text)
+    bank, ids = DEFAULT_BANK.with_unrelated_texts(TRAINING_DISTRACTORS)
     return bank, np.asarray(ids, np.int32)
 
 

@@ -52,6 +52,10 @@ class CheckpointError(ValueError):
     """A checkpoint that does not fit the model it is loaded into; names the file and field."""
 
 
+class CheckpointNameTaken(CheckpointError):
+    """A checkpoint whose name is already registered for another policy."""
+
+
 @struct.dataclass
 class LearnedParams:
     """Parameters of a learned policy: trained weights plus the frozen text inputs.
