@@ -15,7 +15,12 @@ import sys
 
 import pytest
 
-from lantern_jax.core.jax_setup import SetupError, cpu_device_request
+from lantern_jax.core.jax_setup import (
+    XLA_CACHES_CPU,
+    XLA_CACHES_ENV,
+    SetupError,
+    cpu_device_request,
+)
 
 PROBE = """
 import json, os, sys, warnings
@@ -24,7 +29,8 @@ warnings.simplefilter("always")
 import jax
 out = {{"devices": jax.device_count(), "xla_flags": os.environ.get("XLA_FLAGS", ""),
         "cache": jax.config.jax_compilation_cache_dir,
-        "cache_on": bool(jax.config.jax_enable_compilation_cache)}}
+        "cache_on": bool(jax.config.jax_enable_compilation_cache),
+        "xla_caches": jax.config.jax_persistent_cache_enable_xla_caches}}
 {after}
 print(json.dumps(out))
 """
@@ -33,7 +39,8 @@ print(json.dumps(out))
 def _probe(tmp_path, first: str, after: str = "", **env: str) -> dict:
     base = {k: v for k, v in os.environ.items()
             if k not in ("XLA_FLAGS", "JAX_COMPILATION_CACHE_DIR", "LANTERN_JAX_CACHE_DIR",
-                         "LANTERN_JAX_CPU_DEVICES", "LANTERN_JAX_AUTO_SETUP")}  # fmt: skip
+                         "LANTERN_JAX_CPU_DEVICES", "LANTERN_JAX_AUTO_SETUP",
+                         XLA_CACHES_ENV)}  # fmt: skip
     base.update(XDG_CACHE_HOME=str(tmp_path / "xdg"), JAX_PLATFORMS="cpu", **env)
     code = PROBE.format(first=first, after=after)
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
@@ -85,3 +92,53 @@ def test_bad_device_count_is_refused_by_name(monkeypatch, value):
     monkeypatch.setenv("LANTERN_JAX_CPU_DEVICES", value)
     with pytest.raises(SetupError, match="LANTERN_JAX_CPU_DEVICES"):
         cpu_device_request()
+
+
+#: Compiles one small program with the persistent cache in ``sys.argv[1]`` and prints how many
+#: of its compilations JAX's persistent cache served.
+CACHED = """
+import sys
+import lantern_jax
+import jax, jax.numpy as jnp
+from jax import monitoring
+hits = []
+monitoring.register_event_listener(
+    lambda e, **k: hits.append(e) if e == "/jax/compilation_cache/cache_hits" else None)
+jax.config.update("jax_compilation_cache_dir", sys.argv[1])
+print(float(jax.jit(lambda x: jnp.sin(x) * 3.0 + x)(jnp.float32(0.5))), len(hits))
+"""
+
+
+def test_a_cache_folder_moved_elsewhere_still_serves_its_programs(tmp_path):
+    """On a CPU-only install the cache folder's path is not part of a program's key (JAX's GPU
+    autotuning cache, which puts it there, is off): a folder copied to another path serves the
+    programs compiled into the first."""
+    import shutil
+
+    env = {k: v for k, v in os.environ.items() if k != XLA_CACHES_ENV}
+    env.update(JAX_PLATFORMS="cpu", JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS="0")
+
+    def run(folder):
+        out = subprocess.run([sys.executable, "-c", CACHED, str(folder)], capture_output=True,
+                             text=True, env=env, timeout=120, check=True)  # fmt: skip
+        value, hits = out.stdout.split()
+        return value, int(hits)
+
+    first = run(tmp_path / "a")
+    shutil.copytree(tmp_path / "a", tmp_path / "b")
+    again = run(tmp_path / "b")
+    assert first[1] == 0 and again[1] >= 1 and again[0] == first[0]
+
+
+def test_the_xla_caches_are_off_on_the_cpu_unless_set(tmp_path):
+    out = _probe(tmp_path, "import lantern_jax")
+    assert out["xla_caches"] == XLA_CACHES_CPU
+    mine = _probe(tmp_path, "import lantern_jax", **{XLA_CACHES_ENV: "all"})
+    assert mine["xla_caches"] == "all"
+
+
+def test_the_test_session_sets_what_the_package_sets():
+    """``tests/conftest.py`` sets the XLA caches itself (it imports JAX before the package)."""
+    from conftest import TEST_XLA_CACHES
+
+    assert TEST_XLA_CACHES == XLA_CACHES_CPU == os.environ[XLA_CACHES_ENV]

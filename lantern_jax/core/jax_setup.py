@@ -35,6 +35,16 @@ CACHE_MIN_COMPILE_ENV = "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"
 #: (20-400 ms each to compile, about 1 s together on a 2-core CPU, every process); loading
 #: them back costs milliseconds (docs/performance.md, the inner loop).
 CACHE_MIN_COMPILE_S = 0.0
+#: JAX's variable naming the XLA caches it keeps inside the persistent cache folder.  JAX's
+#: default enables the GPU autotuning cache there, whose path (the cache folder's) then becomes
+#: part of every program's cache key -- on the CPU too, where it does nothing else: a cache
+#: folder copied or moved elsewhere (a CI cache restored at another path, a test's own folder
+#: linked to the session's entries) compiles every program again.
+XLA_CACHES_ENV = "JAX_PERSISTENT_CACHE_ENABLE_XLA_CACHES"
+#: What lantern_jax sets it to unless it is set, where no GPU plugin of JAX is installed
+#: (:func:`xla_caches_default`): none (the name matches no cache), so a program's key depends
+#: on the program and the compiler only.
+XLA_CACHES_CPU = "none"
 
 _PENDING = ""  # a set-up problem found at import, reported on first use
 
@@ -115,11 +125,25 @@ def compile_cache_dir() -> str:
     return os.path.join(base, "lantern-jax", "jax")
 
 
+def xla_caches_default() -> str | None:
+    """The value lantern_jax gives ``$JAX_PERSISTENT_CACHE_ENABLE_XLA_CACHES`` (JAX's
+    ``jax_persistent_cache_enable_xla_caches``): :data:`XLA_CACHES_CPU` when the variable is
+    unset and no GPU plugin of JAX (the ``jax_plugins`` namespace) is installed, else ``None``
+    (JAX's own choice stands: on a GPU its autotuning cache saves compile time)."""
+    import importlib.util
+
+    if XLA_CACHES_ENV in os.environ or importlib.util.find_spec("jax_plugins") is not None:
+        return None
+    return XLA_CACHES_CPU
+
+
 def configure_compile_cache(enabled: bool) -> str | None:
     """Turn JAX's persistent compilation cache on (in :func:`compile_cache_dir`) or off.
 
     A second run of the same evaluation then loads its compiled programs instead of compiling
-    them again.  Must run before the first compile.
+    them again, also from a cache folder copied or moved elsewhere (no folder path in the
+    programs' keys on a CPU-only install, :func:`xla_caches_default`).  Must run before the
+    first compile.
 
     Returns:
         The cache folder, or None when disabled.
@@ -134,6 +158,9 @@ def configure_compile_cache(enabled: bool) -> str | None:
     jax.config.update("jax_compilation_cache_dir", path)
     if CACHE_MIN_COMPILE_ENV not in os.environ:
         jax.config.update("jax_persistent_cache_min_compile_time_secs", CACHE_MIN_COMPILE_S)
+    caches = xla_caches_default()
+    if caches is not None:
+        jax.config.update("jax_persistent_cache_enable_xla_caches", caches)
     return path
 
 
@@ -177,7 +204,8 @@ def auto_setup() -> None:
     """The set-up at ``import lantern_jax``, without importing JAX: when JAX is not imported
     yet and ``LANTERN_JAX_AUTO_SETUP`` is not ``0``, one XLA CPU device per core
     (:func:`expose_cpu_cores`) and ``$JAX_COMPILATION_CACHE_DIR`` set to
-    :func:`compile_cache_dir` unless already set (JAX reads it when it starts).  A bad
+    :func:`compile_cache_dir` unless already set (JAX reads it when it starts), and JAX's XLA
+    caches as :func:`xla_caches_default` says.  A bad
     ``LANTERN_JAX_CPU_DEVICES`` changes nothing here; it is reported, as a warning, on the
     first use of a name of the package (:func:`warn_pending`)."""
     global _PENDING
@@ -189,6 +217,9 @@ def auto_setup() -> None:
         _PENDING = f"{e}; lantern_jax leaves JAX's CPU device count as it is"
     os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", compile_cache_dir())
     os.environ.setdefault(CACHE_MIN_COMPILE_ENV, str(CACHE_MIN_COMPILE_S))
+    caches = xla_caches_default()
+    if caches is not None:
+        os.environ[XLA_CACHES_ENV] = caches
 
 
 def warn_pending() -> None:
