@@ -179,6 +179,7 @@ def test_round_specs_spread_over_families_and_change_by_round():
 
 @pytest.mark.slow
 def test_relabel_of_an_expert_state_is_the_dataset_label():
+    from lantern_jax.apps.dataset.generation import NUM_FRAMES
     from lantern_jax.apps.dataset.record import batched_recorder
     from lantern_jax.apps.dataset.scenes import build_scenes, plan_scenes
     from lantern_jax.apps.training.relabel import relabel_batch
@@ -190,7 +191,10 @@ def test_relabel_of_an_expert_state_is_the_dataset_label():
     batch = tree_stack(a + b)
     expert = get_policy("expert")
     ep = expert.init(jax.random.PRNGKey(0))
-    recs = jax.device_get(batched_recorder(expert, 30)(batch, ep)[0])
+    # recorded as the dataset records a chunk of three pairs (six executions, NUM_FRAMES frames):
+    # the program tests/test_dataset.py compiles; the two scenes repeated three times
+    six = tree_stack(3 * (a + b))
+    recs = jax.device_get(batched_recorder(expert, NUM_FRAMES)(six, ep)[0])
     # a grid four times finer (as failure visits use it): every fourth visit is the 40-tick one
     dense = jax.device_get(relabel_batch(batch, expert, ep, expert, ep, jax.random.PRNGKey(0),
                                          num_visits=12, every=10, phase=5, segment=4))  # fmt: skip
@@ -222,7 +226,8 @@ def test_one_round_trains_checkpoints_and_resumes(tmp_path):
     from lantern_jax.policies.learned.checkpoint import checkpoint_policy, read_meta
 
     ds = tmp_path / "ds"
-    generate_dataset(ds, pairs_per_family=1, seed=5, chunk_pairs=6, progress=False)
+    # chunks of three pairs: the recording program of tests/test_dataset.py's chunks
+    generate_dataset(ds, pairs_per_family=1, seed=5, chunk_pairs=3, progress=False)
     common = dict(dataset=str(ds), width=16, heads=2, epochs=1, batch_size=32,
                   val_fraction=0.2, seed=3)  # fmt: skip
     train(TrainConfig(name="learned-tiny", recipe="base", out=str(tmp_path / "b"), **common),

@@ -42,7 +42,7 @@ pytestmark = pytest.mark.slow
 
 SEED = 11
 PAIRS = 1  # per family
-CHUNK = 3  # pairs per chunk: two chunks
+CHUNK = 3  # pairs per chunk: two chunks (tests/test_training.py's and test_closed_loop.py's too)
 
 
 @pytest.fixture(scope="module")

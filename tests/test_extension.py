@@ -159,7 +159,8 @@ COMPLETION = Metric(
 def test_a_users_metric_is_a_route_table_column_in_the_schema_and_the_manifest(tmp_path):
     settings = Settings(scoring=ScoringSettings(metrics=(HARDEST_BRAKE, COMPLETION)))
     suite = load_suite().select(["pe_0001", "vc_0002"])
-    result = evaluate(["ego"], suite=suite, settings=settings, progress=False)
+    # the split path: a world program of these settings, ``ego``'s small program beside it
+    result = evaluate(["ego"], suite=suite, settings=settings, progress=False, path="split")
     table = result.route_table
     names = ["hardest_brake_mps2", "B_hardest_brake_mps2", "completion_again",
              "B_completion_again"]  # fmt: skip

@@ -63,7 +63,8 @@ def test_checkpoint_round_trip_and_bad_files(tmp_path, monkeypatch):
 
 @pytest.mark.slow
 def test_ppo_evaluates_like_any_policy(monkeypatch):
+    """On the split path: the test session's world program, only the policy's own compiled."""
     monkeypatch.delenv(learned_ppo.CHECKPOINT_ENV, raising=False)
-    result = evaluate(["ppo"], suite=load_suite().subset(1), progress=False)
+    result = evaluate(["ppo"], suite=load_suite().subset(1), progress=False, path="split")
     assert len(result.route_table) == 12 and set(result.route_table["model"]) == {"ppo"}
     assert np.all(np.isfinite(result.family_table.drop(columns=["model", "condition"])))

@@ -570,7 +570,7 @@ def test_found_failures_round_trip_through_their_suite_file(suite, tmp_path):
     assert len(entries) >= 1 and entries["description"].str.contains("pedestrian").all()
     found = load_suite(files["catalogue_suite.json"])
     assert all("adversary" in p.params for p in found.pairs)
-    result = evaluate(["ego"], suite=found, progress=False)
+    result = evaluate(["ego"], suite=found, progress=False, path="split")  # the stored world
     got = result.route_table[result.route_table["condition"] == "warning"].set_index("pair_id")
     for _, e in entries.iterrows():
         assert abs(got.loc[e["pair_id"], "CUS"] - e["hard_cus"]) <= REPRODUCIBLE_ATOL, e["pair_id"]

@@ -31,7 +31,9 @@ pytestmark = pytest.mark.slow
 @pytest.fixture(scope="module")
 def dataset(tmp_path_factory):
     folder = tmp_path_factory.mktemp("ds") / "tiny"
-    generate_dataset(folder, pairs_per_family=1, seed=5, chunk_pairs=6, progress=False)
+    # chunks of three pairs: the recording program of tests/test_dataset.py's chunks (one
+    # compilation for the session)
+    generate_dataset(folder, pairs_per_family=1, seed=5, chunk_pairs=3, progress=False)
     return folder
 
 
@@ -101,7 +103,8 @@ def test_coop_fine_tunes_the_base_and_runs_in_the_closed_loop(dataset, tmp_path,
     pol = checkpoint_policy(tmp_path / "coop" / "learned-tiny-coop.msgpack")
     assert pol.name == "learned-tiny-coop" and pol.reads_warning
     rc = main(["evaluate", "--checkpoint", str(tmp_path / "coop" / "learned-tiny-coop.msgpack"),
-               "--pairs-per-family", "1", "--out", str(tmp_path / "res"), "--quiet"])  # fmt: skip
+               "--pairs-per-family", "1", "--out", str(tmp_path / "res"), "--rollout", "split",
+               "--quiet"])  # fmt: skip
     assert rc == 0
     route = pd.read_csv(tmp_path / "res" / "route_level_results.csv")
     assert set(route["model"]) == {"learned-tiny-coop"} and len(route) == 12
@@ -125,5 +128,7 @@ def test_surround_recipe_trains_on_the_rig_and_drives(dataset, tmp_path):
     train(cfg, progress=False)
     pol = checkpoint_policy(tmp_path / "sur" / "learned-tiny-surround.msgpack")
     assert pol.surround and not pol.reads_warning
-    res = evaluate([pol], suite=load_suite().select(["pe_0001", "vc_0001"]), progress=False)
+    # the split path: the session's world program, only the policy's own is compiled
+    pairs = load_suite().select(["pe_0001", "vc_0001"])
+    res = evaluate([pol], suite=pairs, progress=False, path="split")
     assert np.isfinite(res.route_table["CUS"]).all() and len(res.route_table) == 4

@@ -403,14 +403,16 @@ def test_a_user_family_evaluates_end_to_end_through_the_api_and_the_command_line
 ):
     s = load_suite(str(user_suite_file))
     assert [p.family for p in s.pairs] == ["JWK", "JWK"] and len(s.subset(1)) == 1
-    result = evaluate(["coop"], suite=s, progress=False)
+    # the split path: the session's world program (a registered family is data to it)
+    result = evaluate(["coop"], suite=s, progress=False, path="split")
     fam = result.family_table
     assert list(fam.columns) == ["model", "condition", *FAMILIES, "JWK", "Overall"]
     assert fam[list(FAMILIES)].isna().all().all()
     np.testing.assert_allclose(fam["Overall"], fam["JWK"])  # the only family with pairs
     assert result.premise.iloc[-1]["JWK"] == 4.0  # Route A executions: 2 pairs x 2 conditions
     argv = ["--families", str(TESTS / "family_example.py"), "evaluate", "--policy", "coop",
-            "--suite", str(user_suite_file), "--quiet", "--out", str(tmp_path)]  # fmt: skip
+            "--suite", str(user_suite_file), "--rollout", "split", "--quiet",
+            "--out", str(tmp_path)]  # fmt: skip
     code = main(argv)
     out = capsys.readouterr().out
     assert code == 0, out

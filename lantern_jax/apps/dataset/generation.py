@@ -55,6 +55,8 @@ from lantern_jax.types.world import tree_stack
 
 CHUNK_PAIRS = 96  # pairs per chunk: 192 recorded sequences per batched call
 MAX_SECONDS = 80.0  # s, recording cap (>= the longest route timeout, 20 s + 164 m / 3 m/s)
+#: Frames of a recorded execution: :data:`MAX_SECONDS` at one frame per ``FRAME_TICKS`` ticks.
+NUM_FRAMES = int(np.ceil(MAX_SECONDS / (FRAME_TICKS * DT)))
 
 
 def _plan_key(seed: int, pairs_per_family: int, chunk_pairs: int,
@@ -215,7 +217,7 @@ def generate_dataset(
     card["chunks"] = len(chunks)
     expert = get_policy("expert")
     params = expert.init(jax.random.PRNGKey(0))
-    recorder = batched_recorder(expert, int(np.ceil(MAX_SECONDS / (FRAME_TICKS * DT))))
+    recorder = batched_recorder(expert, NUM_FRAMES)
     bar = None
     if progress:
         bar = tqdm(total=len(chunks), initial=card["chunks_done"], desc="dataset", unit="chunk")
