@@ -39,9 +39,9 @@ if TEST_XLA_FLAGS.split("=")[0] not in os.environ.get("XLA_FLAGS", ""):
 #: No cache folder path in the programs' cache keys, as ``import lantern_jax`` sets it on a
 #: CPU-only install where JAX is not imported first (here it is, so this file does it;
 #: ``lantern_jax.core.jax_setup.xla_caches_default``, checked in ``tests/test_jax_setup.py``):
-#: the tests that start a process with a cache folder of their own, linked to this session's
-#: entries, then load those entries instead of compiling them again.  Exported, so the
-#: processes the tests start (and the notebooks' kernels) share it.
+#: the tests then compile the programs a user's process compiles, whose keys do not depend on
+#: the cache folder.  Exported, so the processes the tests start (and the notebooks' kernels)
+#: share it.
 TEST_XLA_CACHES = "none"
 os.environ.setdefault("JAX_PERSISTENT_CACHE_ENABLE_XLA_CACHES", TEST_XLA_CACHES)
 

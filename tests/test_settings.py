@@ -78,23 +78,6 @@ def test_a_static_setting_changed_in_process_compiles_its_own_program(name, defa
     assert sp.probe(None) == default_answer
 
 
-def _session_compilations(folder: Path) -> Path:
-    """A new cache folder holding (as links) the XLA compilations of this test session's
-    persistent cache, without its program store.
-
-    A fresh process with it compiles nothing XLA compiled here for the same program text, but
-    traces, lowers and stores every program itself: what it answers depends on its own Python
-    state only (an answer that leaked from an earlier evaluation in this process changes the
-    traced program, hence the compilation's key, or lives in this process alone)."""
-    from conftest import COMPILE_CACHE_DIR
-
-    folder.mkdir(parents=True)
-    for entry in Path(COMPILE_CACHE_DIR).iterdir():
-        if entry.is_file():  # the program store is a folder of its own
-            (folder / entry.name).symlink_to(entry)
-    return folder
-
-
 def _run_probe(names: list[str], cache: Path) -> dict[str, str]:
     """``settings_probe.py NAMES`` in a new process with its own persistent cache folder."""
     env = dict(os.environ, JAX_COMPILATION_CACHE_DIR=str(cache), LANTERN_JAX_CACHE_DIR=str(cache))
@@ -115,9 +98,10 @@ def test_in_process_changes_equal_fresh_processes_and_the_persistent_cache(tmp_p
     in the opposite order and never evaluates the default, so that every change there follows
     another predecessor than here (an answer that leaked from the evaluation before it would
     differ); a second process, served by the program store the first one filled, gives the
-    same answers in this process's order.  The first process starts from this session's XLA
-    compilations (:func:`_session_compilations`) and an empty program store."""
-    cache = _session_compilations(tmp_path / "cache")
+    same answers in this process's order.  The first process starts from an empty cache folder,
+    so it compiles every program itself and keeps each in the store (a program that JAX's
+    persistent cache served is not stored: :func:`lantern_jax.io.program_store.compile_lowered`)."""
+    cache = tmp_path / "cache"
     in_process = {n: sp.digest(sp.probe(n)) for n in sp.CHANGES}
     default = sp.digest(sp.probe(None))
     assert default not in in_process.values()
