@@ -49,22 +49,25 @@ class Browser:
     def __init__(self, exe: str, profile: Path):
         to_chrome_r, self._w = os.pipe()
         self._r, from_chrome_w = os.pipe()
-
-        def _pipes() -> None:  # in the child: the pipe ends become fds 3 and 4 (no import
-            # here: another thread of the parent may hold the import lock at the fork)
-            a = fcntl.fcntl(to_chrome_r, fcntl.F_DUPFD, 10)
-            b = fcntl.fcntl(from_chrome_w, fcntl.F_DUPFD, 10)
-            os.dup2(a, 3)
-            os.dup2(b, 4)
-            os.setsid()  # its own process group: close() ends its helpers with it
-
+        # The child's ends become its fds 3 and 4 in a small single-threaded Python process
+        # that then becomes Chromium (exec), not in a ``preexec_fn``: Python code between fork
+        # and exec can deadlock in a process with other threads (JAX's), leaving a child that
+        # never starts Chromium.  They are first moved to 10 and above, so that neither dup2
+        # overwrites the other end.
+        a = fcntl.fcntl(to_chrome_r, fcntl.F_DUPFD, 10)
+        b = fcntl.fcntl(from_chrome_w, fcntl.F_DUPFD, 10)
+        for fd in (to_chrome_r, from_chrome_w):
+            os.close(fd)
+        argv = [exe, *CHROMIUM_FLAGS, f"--user-data-dir={profile}", "about:blank"]
+        trampoline = (f"import os; os.dup2({a}, 3); os.dup2({b}, 4); os.close({a}); "
+                      f"os.close({b}); os.execv({exe!r}, {argv!r})")  # fmt: skip
         self.proc = subprocess.Popen(
-            [exe, *CHROMIUM_FLAGS, f"--user-data-dir={profile}", "about:blank"],
+            [sys.executable, "-S", "-c", trampoline],
             stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-            preexec_fn=_pipes, close_fds=False,
+            pass_fds=(a, b), start_new_session=True,  # its own group: close() ends its helpers
         )  # fmt: skip
-        os.close(to_chrome_r)
-        os.close(from_chrome_w)
+        os.close(a)
+        os.close(b)
         self._buf, self._id, self.events = b"", 0, []
 
     def _read(self, timeout: float) -> list[dict]:
