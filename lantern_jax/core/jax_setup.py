@@ -38,8 +38,8 @@ CACHE_MIN_COMPILE_S = 0.0
 #: JAX's variable naming the XLA caches it keeps inside the persistent cache folder.  JAX's
 #: default enables the GPU autotuning cache there, whose path (the cache folder's) then becomes
 #: part of every program's cache key -- on the CPU too, where it does nothing else: a cache
-#: folder copied or moved elsewhere (a CI cache restored at another path, a test's own folder
-#: linked to the session's entries) compiles every program again.
+#: folder copied or moved elsewhere (a CI cache restored at another path, a folder linked to
+#: another's entries) compiles every program again.
 XLA_CACHES_ENV = "JAX_PERSISTENT_CACHE_ENABLE_XLA_CACHES"
 #: What lantern_jax sets it to unless it is set, where no GPU plugin of JAX is installed
 #: (:func:`xla_caches_default`): none (the name matches no cache), so a program's key depends
