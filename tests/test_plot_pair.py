@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import types
 
+import jax
 import matplotlib
 import numpy as np
 import pandas as pd
@@ -14,6 +15,7 @@ matplotlib.use("Agg")
 
 from lantern_jax.apps.evaluation import EvalResult, settings_record  # noqa: E402
 from lantern_jax.core.constants import DT  # noqa: E402
+from lantern_jax.policies.registry import get_policy  # noqa: E402
 from lantern_jax.scenarios.suite import load_suite  # noqa: E402
 from lantern_jax.sim.settings import default_settings  # noqa: E402
 from lantern_jax.viz import PairRecording, plot_pair, record_pair  # noqa: E402
@@ -133,19 +135,39 @@ def test_the_plot_command_writes_the_figure_and_names_a_bad_pair(tmp_path, capsy
     assert "zz_9999" in capsys.readouterr().err
 
 
-def test_pairs_of_one_horizon_step_share_a_recorded_program(coop_pe):
-    """Recorded rollouts run to the longest timeout rounded up to RECORD_HORIZON_STEP_S: a pair
-    whose timeout falls in the first one's step (pe_0001 47.4 s, pe_0004 51.1 s: both 60 s)
-    compiles nothing new, and its records end with frozen, ``done`` ticks past its end."""
+def test_pairs_and_batches_of_the_suite_share_one_recorded_program(coop_pe):
+    """Recorded rollouts run to the longest timeout rounded up to RECORD_HORIZON_STEP_S and at
+    least RECORD_MIN_HORIZON_S, the batch padded to RECORD_BATCH_STEP executions: another pair
+    (pe_0001 47.4 s, rty_0002 longer) and a dozen executions of several families compile nothing
+    new, every result is its own execution's (the padding's copies are dropped), and records end
+    with frozen, ``done`` ticks past an execution's end."""
     from lantern_jax.apps import diagnostics
-    from lantern_jax.core.constants import DT, RECORD_HORIZON_STEP_S
+    from lantern_jax.core.constants import DT, RECORD_BATCH_STEP, RECORD_MIN_HORIZON_S
+    from lantern_jax.scenarios.families import build_pair
+    from lantern_jax.scenarios.suite import load_suite
 
     assert coop_pe.pair_id == "pe_0001"
     before = diagnostics._recorded._cache_size()
-    other = record_pair("coop", "pe_0004")
-    assert diagnostics._recorded._cache_size() == before
+    other = record_pair("coop", "rty_0002")
     ticks = len(other.warning.record.t)
-    assert ticks == len(coop_pe.warning.record.t) == round(60.0 / DT)
-    assert 60.0 % RECORD_HORIZON_STEP_S == 0
+    assert ticks == len(coop_pe.warning.record.t) == round(RECORD_MIN_HORIZON_S / DT)
     done = np.asarray(other.route_b.record.done, bool)
     assert done[-1] and not done[0]
+    pairs = [p for p in load_suite().pairs if p.pair_id.endswith(("_0001", "_0002"))]
+    scenes = [build_pair(p.params)[0] for p in pairs]
+    assert 3 < len(scenes) <= RECORD_BATCH_STEP and len(scenes) % RECORD_BATCH_STEP
+    coop = get_policy("coop")
+    params = coop.init(jax.random.PRNGKey(0))
+    _, rec, metrics = diagnostics.run_recorded(coop, params, scenes)
+    assert diagnostics._recorded._cache_size() == before
+    assert np.asarray(rec.t).shape == (len(scenes), ticks)
+    assert np.asarray(metrics.progress_m).shape == (len(scenes),)
+    # every row is its own scenario's: the batch's second execution run alone (padded with its
+    # own copies, the same program) gives its row, bit for bit
+    _, rec_1, metrics_1 = diagnostics.run_recorded(coop, params, scenes[1:2])
+    assert diagnostics._recorded._cache_size() == before
+    np.testing.assert_array_equal(np.asarray(rec.ego_xy)[1], np.asarray(rec_1.ego_xy)[0])
+    np.testing.assert_array_equal(
+        np.asarray(metrics.progress_m)[1], np.asarray(metrics_1.progress_m)[0]
+    )
+    assert not np.array_equal(np.asarray(rec.ego_xy)[0], np.asarray(rec.ego_xy)[1])

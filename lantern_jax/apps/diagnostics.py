@@ -51,7 +51,9 @@ from lantern_jax.core.constants import (
     DT,
     FAMILIES,
     NO_WARNING_CONDITION,
+    RECORD_BATCH_STEP,
     RECORD_HORIZON_STEP_S,
+    RECORD_MIN_HORIZON_S,
     SUITE_ID,
     WARNING_CONDITION,
 )
@@ -276,24 +278,32 @@ def run_recorded(
 ) -> tuple[Any, Any, Any]:
     """Roll out a few executions with full records (one jitted, vmapped call) under
     ``settings`` (default :func:`~lantern_jax.sim.settings.default_settings`); returns (final
-    states, tick records, hard metrics), NumPy, leading axis = execution, over a horizon
-    covering the longest route timeout, rounded up to a multiple of
-    :data:`~lantern_jax.core.constants.RECORD_HORIZON_STEP_S` (so that pairs share a program; the
-    ticks past an execution's end repeat its final state, ``done`` set).  A reference policy
-    runs as its member of the reference switch
+    states, tick records, hard metrics), NumPy, leading axis = execution (one per scenario, in
+    order), over a horizon covering the longest route timeout, rounded up to a multiple of
+    :data:`~lantern_jax.core.constants.RECORD_HORIZON_STEP_S` and at least
+    :data:`~lantern_jax.core.constants.RECORD_MIN_HORIZON_S` (the ticks past an execution's end
+    repeat its final state, ``done`` set).  The batch runs padded to a multiple of
+    :data:`~lantern_jax.core.constants.RECORD_BATCH_STEP` executions (copies of the last one,
+    dropped here), so that a pair's figure and a family's diagnostics share one program.  A
+    reference policy runs as its member of the reference switch
     (:func:`~lantern_jax.sim.switch.reference_driver`)."""
-    batch = tree_stack(scenarios)
+    n = len(scenarios)
+    if n == 0:
+        raise ValueError("run_recorded: no scenarios to roll out")
+    n_run = -(-n // RECORD_BATCH_STEP) * RECORD_BATCH_STEP
+    batch = tree_stack(list(scenarios) + [scenarios[-1]] * (n_run - n))
     settings = default_settings() if settings is None else settings
     check_texts(settings, batch)
     longest = float(np.max(np.asarray(batch.config.timeout_s)))
-    horizon_s = np.ceil(longest / RECORD_HORIZON_STEP_S) * RECORD_HORIZON_STEP_S
+    horizon_s = max(np.ceil(longest / RECORD_HORIZON_STEP_S) * RECORD_HORIZON_STEP_S,
+                    RECORD_MIN_HORIZON_S)  # fmt: skip
     horizon = ticks_covering(horizon_s, slack=1e-6)
     # a reference policy runs as its member of the reference switch: every reference policy's
     # recorded rollouts share one program (and the evaluation's bits)
     driver, params = reference_driver(policy, params)
     final, rec = _recorded(batch, params, settings, program=Program(driver), horizon=horizon)
     metrics = jax.vmap(lambda t: finalize(t, settings.scoring))(final.telemetry)
-    return jax.tree.map(np.asarray, (final, rec, metrics))
+    return jax.tree.map(lambda x: np.asarray(x)[:n], (final, rec, metrics))
 
 
 def live_mask(rec: Any) -> np.ndarray:

@@ -17,6 +17,14 @@ DT = 0.05  # s, simulation tick (20 Hz, CARLA leaderboard)
 #: multiple of this, so the pairs of a suite share a few compiled programs instead of one each
 #: (the ticks past an execution's end are frozen and trimmed by every reader)
 RECORD_HORIZON_STEP_S = 15.0
+#: s, the shortest horizon of a recorded rollout: the built-in suite's longest route timeout
+#: (74.5 s) rounded up to RECORD_HORIZON_STEP_S, so that every pair of the built-in suite, and a
+#: figure of one pair with a diagnostic of a dozen, run one compiled program
+RECORD_MIN_HORIZON_S = 75.0
+#: executions, a recorded rollout's batch is padded to a multiple of this (copies of its last
+#: execution, dropped from the result) for the same reason: a pair's three executions and a
+#: family's twelve share the program of sixteen
+RECORD_BATCH_STEP = 16
 WAYPOINT_DT = 0.25  # s, spacing of policy waypoints
 NUM_WAYPOINTS = 10  # policy output horizon: 10 x 0.25 s = 2.5 s
 # m/s, fastest plan a vehicle is asked to drive: a leg of a plan (ego to its first waypoint, or
