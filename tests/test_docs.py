@@ -201,3 +201,28 @@ def test_the_stress_page_shows_the_recorded_cells():
     table = module.markdown(*module.load(folders))
     assert table.count("\n") > 40  # a row per policy, family and method
     assert table in (ROOT / "docs" / "stress.md").read_text()
+
+
+def test_the_stress_page_shows_every_method_at_the_largest_dimension():
+    """The stress page's table of every method at the largest dimension (256 rollouts per
+    restart) is what ``benchmarks/plot_stress_dims.py`` computes from the recorded folders, and
+    the page shows its figure."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(
+        "plot_stress_dims", ROOT / "benchmarks" / "plot_stress_dims.py"
+    )
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    page = (ROOT / "docs" / "stress.md").read_text()
+    assert "](_static/stress_dims.png)" in page
+    assert (ROOT / "docs" / "_static" / "stress_dims.png").is_file()
+    for cell, folders in module.DOCUMENTED.items():
+        policy, family = cell.split()
+        rows = [line for line in page.splitlines()
+                if line.startswith(f"| `{policy}` {family} ") and "/16, " in line]  # fmt: skip
+        assert len(rows) == 1, cell
+        got = module.largest(module.load([module.RESULTS / f for f in folders]))
+        assert set(got) == {"gradient", "hybrid", "random", "cmaes"}, cell
+        for method, text in got.items():
+            assert text in rows[0], (cell, method, text)
