@@ -105,6 +105,68 @@ def pytest_configure(config) -> None:
     warm_world()
 
 
+#: s, each test file's share of a tier's test time, from ``benchmarks/profile_tests.py --workers
+#: 2 --cold`` on the 2-core CPU (the default tier's and the slow tier's profiles of 2026-12-03,
+#: files over 3 s).  pytest-xdist hands whole files to its workers in the order of the
+#: collection (``--no-loadscope-reorder`` in pyproject.toml; its own order is by the number of
+#: tests in a file), so :func:`pytest_collection_modifyitems` puts the longest files first and
+#: the short ones fill in at the end, rather than a long file starting last while the other
+#: worker idles.  A file not listed runs after these, in its usual order: the table orders the
+#: files, never selects tests, and a stale entry costs only balance.
+FILE_SECONDS = {
+    "default": {
+        "tests/test_bad_inputs.py": 172, "tests/test_unseen.py": 127, "tests/test_split.py": 101,
+        "tests/test_evaluate.py": 96, "tests/test_rollout.py": 90, "tests/test_settings.py": 76,
+        "tests/test_learned.py": 66, "tests/test_policy_boundary.py": 64,
+        "tests/test_plot_pair.py": 57, "tests/test_extension.py": 56,
+        "tests/test_bad_inputs_evidence.py": 53, "tests/test_protocol.py": 52,
+        "tests/test_dynamics.py": 45, "tests/test_cli.py": 41, "tests/test_adversary.py": 36,
+        "tests/test_expert.py": 35, "tests/test_scenarios.py": 34, "tests/test_false_brake.py": 27,
+        "tests/test_diagnostics.py": 24, "tests/test_envs.py": 24, "tests/test_report_page.py": 22,
+        "tests/test_switch.py": 22, "tests/test_host_policy.py": 21,
+        "tests/test_visibility.py": 18, "tests/test_jax_setup.py": 18, "tests/test_stream.py": 17,
+        "tests/test_stress.py": 17, "tests/test_scoring_telemetry.py": 14,
+        "tests/test_suite.py": 13, "tests/test_geometry.py": 9, "tests/test_schedule.py": 8,
+        "tests/test_scoring_components.py": 8, "tests/test_viz.py": 8,
+        "tests/test_warning_bank.py": 6, "tests/test_external_policy.py": 6,
+        "tests/test_warning_override.py": 6, "tests/test_language.py": 6,
+        "tests/test_fragility.py": 4, "tests/test_program_store.py": 4, "tests/test_layers.py": 4,
+        "tests/test_scoring_table.py": 3,
+    },
+    "slow": {
+        "tests/test_evaluate.py": 262, "tests/test_stress.py": 255, "tests/test_settings.py": 201,
+        "tests/test_cli.py": 167, "tests/test_closed_loop.py": 160, "tests/test_training.py": 144,
+        "tests/test_envs.py": 128, "tests/test_dataset.py": 121,
+        "tests/test_policy_boundary.py": 75, "tests/test_rollout.py": 73,
+        "tests/test_multihost.py": 69, "tests/test_unseen.py": 62, "tests/test_fragility.py": 56,
+        "tests/test_stream.py": 45, "tests/test_program_store.py": 44,
+        "tests/test_bad_inputs.py": 33, "tests/test_host_policy.py": 31, "tests/test_suite.py": 29,
+        "tests/test_learned_ppo.py": 22, "tests/test_vector_env.py": 21,
+        "tests/test_learned.py": 12, "tests/test_false_brake.py": 5, "tests/test_docs.py": 5,
+    },
+}  # fmt: skip
+
+
+def file_seconds(markexpr: str) -> dict[str, float]:
+    """:data:`FILE_SECONDS` of the tier a ``-m`` expression selects: the default tier's for one
+    that leaves out ``slow``, the slow tier's for one that asks for it, both added otherwise."""
+    if "not slow" in markexpr:
+        return FILE_SECONDS["default"]
+    if "slow" in markexpr:
+        return FILE_SECONDS["slow"]
+    both = dict(FILE_SECONDS["default"])
+    for name, seconds in FILE_SECONDS["slow"].items():
+        both[name] = both.get(name, 0) + seconds
+    return both
+
+
+def pytest_collection_modifyitems(config, items) -> None:
+    """Longest test files first (:data:`FILE_SECONDS`); a stable sort, so the tests of a file
+    keep their order and unlisted files theirs."""
+    seconds = file_seconds(config.getoption("markexpr", "") or "")
+    items.sort(key=lambda item: -seconds.get(item.nodeid.split("::")[0], 0))
+
+
 #: Modules that register scenario families when imported (the unseen hazards; a user's family
 #: file loaded by the command line; the test family): :func:`registrations_stay_in_their_test`
 #: forgets them with the families they registered, so that a later import registers again.
