@@ -172,3 +172,11 @@ def test_write_tables(tmp_path):
     pd.testing.assert_frame_equal(pd.read_csv(tmp_path / "t.csv"), df)
     assert (tmp_path / "t.md").read_text().startswith("# Title\n")
     assert (tmp_path / "keep.txt").read_text() == "other"
+
+
+def test_a_recorded_rollout_of_nothing_is_refused():
+    """No scenarios: named before anything is traced (there is no batch to pad)."""
+    from lantern_jax.policies.registry import get_policy
+
+    with pytest.raises(ValueError, match="no scenarios"):
+        dg.run_recorded(get_policy("coop"), None, [])

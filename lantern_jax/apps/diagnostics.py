@@ -286,7 +286,11 @@ def run_recorded(
     :data:`~lantern_jax.core.constants.RECORD_BATCH_STEP` executions (copies of the last one,
     dropped here), so that a pair's figure and a family's diagnostics share one program.  A
     reference policy runs as its member of the reference switch
-    (:func:`~lantern_jax.sim.switch.reference_driver`)."""
+    (:func:`~lantern_jax.sim.switch.reference_driver`).
+
+    Raises:
+        ValueError: for an empty list of scenarios.
+    """
     n = len(scenarios)
     if n == 0:
         raise ValueError("run_recorded: no scenarios to roll out")
