@@ -105,14 +105,16 @@ def pytest_configure(config) -> None:
     warm_world()
 
 
-#: s, each test file's share of a tier's test time, from ``benchmarks/profile_tests.py --workers
-#: 2 --cold`` on the 2-core CPU (the default tier's and the slow tier's profiles of 2026-12-03,
-#: files over 3 s).  pytest-xdist hands whole files to its workers in the order of the
-#: collection (``--no-loadscope-reorder`` in pyproject.toml; its own order is by the number of
-#: tests in a file), so :func:`pytest_collection_modifyitems` puts the longest files first and
-#: the short ones fill in at the end, rather than a long file starting last while the other
-#: worker idles.  A file not listed runs after these, in its usual order: the table orders the
-#: files, never selects tests, and a stale entry costs only balance.
+#: s, each test file's share of a tier's test time on the 2-core CPU, files over 3 s: the
+#: default tier's from ``benchmarks/profile_tests.py --workers 2 --cold`` (2026-12-03), the slow
+#: tier's from the ``--durations`` of a fresh-clone ``.ci/run`` that day (its 40 slowest tests,
+#: which hold nearly all of the tier's time; smaller files from the profile).  pytest-xdist
+#: hands whole files to its workers in the order of the collection (``--no-loadscope-reorder``
+#: in pyproject.toml; its own order is by the number of tests in a file), so
+#: :func:`pytest_collection_modifyitems` puts the longest files first and the short ones fill
+#: in at the end, rather than a long file starting last while the other worker idles.  A file
+#: not listed runs after these, in its usual order: the table orders the files, never selects
+#: tests, and a stale entry costs only balance.
 FILE_SECONDS = {
     "default": {
         "tests/test_bad_inputs.py": 172, "tests/test_unseen.py": 127, "tests/test_split.py": 101,
@@ -134,15 +136,16 @@ FILE_SECONDS = {
         "tests/test_scoring_table.py": 3,
     },
     "slow": {
-        "tests/test_evaluate.py": 262, "tests/test_stress.py": 255, "tests/test_settings.py": 201,
-        "tests/test_cli.py": 167, "tests/test_closed_loop.py": 160, "tests/test_training.py": 144,
-        "tests/test_envs.py": 128, "tests/test_dataset.py": 121,
-        "tests/test_policy_boundary.py": 75, "tests/test_rollout.py": 73,
-        "tests/test_multihost.py": 69, "tests/test_unseen.py": 62, "tests/test_fragility.py": 56,
-        "tests/test_stream.py": 45, "tests/test_program_store.py": 44,
-        "tests/test_bad_inputs.py": 33, "tests/test_host_policy.py": 31, "tests/test_suite.py": 29,
-        "tests/test_learned_ppo.py": 22, "tests/test_vector_env.py": 21,
-        "tests/test_learned.py": 12, "tests/test_false_brake.py": 5, "tests/test_docs.py": 5,
+        "tests/test_stress.py": 444, "tests/test_cli.py": 264, "tests/test_settings.py": 258,
+        "tests/test_evaluate.py": 249, "tests/test_closed_loop.py": 201, "tests/test_envs.py": 180,
+        "tests/test_training.py": 127, "tests/test_dataset.py": 125,
+        "tests/test_multihost.py": 98, "tests/test_suite.py": 80, "tests/test_fragility.py": 75,
+        "tests/test_rollout.py": 70, "tests/test_policy_boundary.py": 62,
+        "tests/test_program_store.py": 61, "tests/test_host_policy.py": 58,
+        "tests/test_vector_env.py": 49, "tests/test_stream.py": 35,
+        "tests/test_bad_inputs.py": 35, "tests/test_unseen.py": 34,
+        "tests/test_learned_ppo.py": 22, "tests/test_learned.py": 12,
+        "tests/test_false_brake.py": 5, "tests/test_docs.py": 5,
     },
 }  # fmt: skip
 
