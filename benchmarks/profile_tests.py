@@ -4,8 +4,11 @@ Runs pytest with this file as a plugin.  JAX reports every compilation through
 ``jax.monitoring`` (tracing to a jaxpr, lowering to StableHLO, XLA's backend compile, or the
 load from the persistent cache); the plugin adds those durations up per test (fixture set-up
 included) and prints, after the run, the totals, the slowest tests with their compile share and
-their largest programs, and the seconds per test file.  Subprocesses (the command-line tests,
-notebook kernels) are not seen: their time counts as the test's wall time only.
+their largest programs, the largest programs over the whole run, and the seconds per test
+file; and the CPU time the run used against its wall time (how many cores were busy: a run
+that keeps every core busy is shortened only by less work, not by more workers).
+Subprocesses (the command-line tests, notebook kernels) are not seen by the plugin: their time
+counts as the test's wall time only (their CPU time is in the run's).
 
 Usage (from the project root; every argument goes to pytest)::
 
@@ -123,6 +126,16 @@ def report(top: int) -> dict:
         tl = v.get(TRACE, 0.0) + v.get(LOWER, 0.0)
         print(f"{v.get('wall', 0.0):7.1f} {v.get(BACKEND, 0.0):6.1f} {v.get('compiles', 0):4.0f} "
               f"{tl:13.1f}  {name}" + (f"  [{progs}]" if progs else ""))  # fmt: skip
+    by_name: collections.Counter = collections.Counter()
+    times: collections.Counter = collections.Counter()
+    for per_test in _programs.values():
+        for prog, seconds in per_test.items():
+            by_name[prog] += seconds
+            times[prog] += 1
+    print(f"\n{'XLA s':>7} {'tests':>5}  program (compilations >= {BIG_PROGRAM_S:.0f} s, "
+          "whole run)")  # fmt: skip
+    for prog, s in by_name.most_common(top):
+        print(f"{s:7.1f} {times[prog]:5d}  {prog}")
     files: collections.Counter = collections.Counter()
     compile_files: collections.Counter = collections.Counter()
     for name, v in tests.items():
@@ -153,6 +166,8 @@ def main() -> int:
     sys.path.insert(0, here)
 
     t0 = time.perf_counter()
+    start = os.times()
+    cpu0 = start.user + start.system + start.children_user + start.children_system
     if args.workers > 0:
         # every worker loads this file by name (-p) and writes its figures into the folder
         folder = tempfile.mkdtemp(prefix="profile_tests_")
@@ -170,7 +185,11 @@ def main() -> int:
 
         # in this process: the listener cannot see the compilations of worker processes
         code = pytest.main([*pytest_args, "-n", "0", "-p", "no:cacheprovider"], plugins=[plugin])
-    print(f"\npytest exited with {int(code)} after {time.perf_counter() - t0:.0f} s")
+    wall = time.perf_counter() - t0
+    used = os.times()
+    cpu = used.user + used.system + used.children_user + used.children_system - cpu0
+    print(f"\npytest exited with {int(code)} after {wall:.0f} s; CPU time {cpu:.0f} s (this "
+          f"process, its workers and subprocesses: {cpu / wall:.2f} cores busy on average)")
     out = plugin.report(args.top)
     if args.json:
         with open(args.json, "w") as fh:
