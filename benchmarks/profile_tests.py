@@ -127,15 +127,15 @@ def report(top: int) -> dict:
         print(f"{v.get('wall', 0.0):7.1f} {v.get(BACKEND, 0.0):6.1f} {v.get('compiles', 0):4.0f} "
               f"{tl:13.1f}  {name}" + (f"  [{progs}]" if progs else ""))  # fmt: skip
     by_name: collections.Counter = collections.Counter()
-    times: collections.Counter = collections.Counter()
+    compiled_in: collections.Counter = collections.Counter()  # tests compiling each program
     for per_test in _programs.values():
         for prog, seconds in per_test.items():
             by_name[prog] += seconds
-            times[prog] += 1
+            compiled_in[prog] += 1
     print(f"\n{'XLA s':>7} {'tests':>5}  program (compilations >= {BIG_PROGRAM_S:.0f} s, "
           "whole run)")  # fmt: skip
     for prog, s in by_name.most_common(top):
-        print(f"{s:7.1f} {times[prog]:5d}  {prog}")
+        print(f"{s:7.1f} {compiled_in[prog]:5d}  {prog}")
     files: collections.Counter = collections.Counter()
     compile_files: collections.Counter = collections.Counter()
     for name, v in tests.items():
@@ -146,6 +146,13 @@ def report(top: int) -> dict:
         print(f"{s:7.1f} {compile_files[f]:6.1f}  {f}")
     return {"total": total, "tests": tests,
             "programs": {k: dict(v) for k, v in _programs.items()}}  # fmt: skip
+
+
+def _cpu_seconds() -> float:
+    """CPU seconds (user and system) of this process and of its ended child processes (the
+    workers, the tests' subprocesses) so far."""
+    t = os.times()
+    return t.user + t.system + t.children_user + t.children_system
 
 
 def main() -> int:
@@ -165,9 +172,7 @@ def main() -> int:
     here = os.path.dirname(os.path.abspath(__file__))
     sys.path.insert(0, here)
 
-    t0 = time.perf_counter()
-    start = os.times()
-    cpu0 = start.user + start.system + start.children_user + start.children_system
+    t0, cpu0 = time.perf_counter(), _cpu_seconds()
     if args.workers > 0:
         # every worker loads this file by name (-p) and writes its figures into the folder
         folder = tempfile.mkdtemp(prefix="profile_tests_")
@@ -185,9 +190,7 @@ def main() -> int:
 
         # in this process: the listener cannot see the compilations of worker processes
         code = pytest.main([*pytest_args, "-n", "0", "-p", "no:cacheprovider"], plugins=[plugin])
-    wall = time.perf_counter() - t0
-    used = os.times()
-    cpu = used.user + used.system + used.children_user + used.children_system - cpu0
+    wall, cpu = time.perf_counter() - t0, _cpu_seconds() - cpu0
     print(f"\npytest exited with {int(code)} after {wall:.0f} s; CPU time {cpu:.0f} s (this "
           f"process, its workers and subprocesses: {cpu / wall:.2f} cores busy on average)")
     out = plugin.report(args.top)
