@@ -150,6 +150,78 @@ def test_failure_visit_settings_are_checked(tmp_path):
     assert load_config(bad).failure_window_s == 3.0
 
 
+def test_a_language_recipe_may_read_the_six_camera_rig(tmp_path):
+    """``rig`` is the recipe's own unless given (the surround recipe's is the rig, every other
+    recipe's the front camera); a language recipe may take the rig, the surround recipe keeps
+    it, and a rig that does not exist is refused naming the key."""
+    cfg = tmp_path / "c.toml"
+    base = '[train]\nname = "x"\nrecipe = "closed_loop"\ninit_from = "m"\n'
+    cfg.write_text(base)
+    assert load_config(cfg).rig == "front"
+    cfg.write_text(base + 'rig = "surround"\n')
+    assert load_config(cfg).rig == "surround" and load_config(cfg).language
+    assert TrainConfig(name="x", recipe="surround").rig == "surround"
+    assert TrainConfig(name="x", recipe="distance", rig="surround").rig == "surround"
+    cfg.write_text(base + 'rig = "fisheye"\n')
+    with pytest.raises(ConfigError, match=r"train\.rig.*'fisheye' not one of front, surround"):
+        load_config(cfg)
+    cfg.write_text('[train]\nname = "x"\nrecipe = "surround"\nrig = "front"\n')
+    with pytest.raises(ConfigError, match=r"train\.rig.*six-camera"):
+        load_config(cfg)
+
+
+@pytest.mark.parametrize("rig", ["front", "surround"])
+def test_visits_become_examples_with_the_rigs_columns(rig):
+    """A visit's observation (as the relabelling program returns it for a learner of ``rig``)
+    becomes an example with the dataset's columns for that rig: the six-camera view's
+    ``surround_*`` columns from ``Observation.surround``, every other column from its field."""
+    from lantern_jax.apps.dataset.record import FRONT_SENSORS, RIG_SENSORS
+    from lantern_jax.apps.training.closed_loop import visits_to_examples
+    from lantern_jax.apps.training.data import SURROUND_COLUMNS, ranges_width
+    from lantern_jax.apps.training.relabel import Visits
+    from lantern_jax.policies.registry import get_policy
+    from lantern_jax.scenarios.suite import load_suite
+    from lantern_jax.sim.engine import build_executions
+    from lantern_jax.sim.observe import observe
+    from lantern_jax.sim.rollout import start_state
+    from lantern_jax.sim.settings import DEFAULT_SETTINGS
+
+    scenario = jax.tree.map(
+        lambda x: x[0], build_executions(load_suite().select(["pe_0001"])).scenarios
+    )
+    sensors = RIG_SENSORS if rig == "surround" else FRONT_SENSORS
+    expert = get_policy("expert")
+
+    def obs_of():
+        s = start_state(scenario, expert, expert.init(jax.random.PRNGKey(0)), DEFAULT_SETTINGS)
+        return observe(scenario, s, sensors, DEFAULT_SETTINGS.bank)
+
+    shapes = jax.eval_shape(obs_of)  # traced, not compiled
+    rng = np.random.default_rng(0)
+    # a batch of one execution with three visits; every array distinct
+    obs = jax.tree.map(lambda x: rng.integers(0, 100, (1, 3, *x.shape)).astype(x.dtype), shapes)
+    zeros = np.zeros((1, 3), np.float32)
+    v = Visits(obs, np.ones((1, 3, NUM_WAYPOINTS, 2), np.float32), np.ones((1, 3), bool), zeros,
+               zeros.astype(bool), zeros.astype(bool), zeros)  # fmt: skip
+    names = ["visible", "actor_xy", "range_image", "warning_tokens"]
+    if rig == "surround":
+        names += [c.replace(".", "_") for c in SURROUND_COLUMNS]
+    like = Examples({n: np.zeros((0,), np.float32) for n in names}, np.zeros((0, 10, 2)),
+                    np.zeros((0,), str), np.zeros((0,), bool))  # fmt: skip
+    keep = np.asarray([[True, False, True]])
+    ex = visits_to_examples(v, ["pe_00001_A"], like, keep)
+    assert sorted(ex.obs) == sorted(names) and len(ex) == 2
+    np.testing.assert_array_equal(ex.obs["actor_xy"], np.asarray(obs.actor_xy)[0, [0, 2]])
+    if rig == "surround":
+        for name in ("visible", "ranges", "hit_class"):
+            got = ex.obs[f"surround_{name}"]
+            np.testing.assert_array_equal(got, getattr(obs.surround, name)[0, [0, 2]])
+        assert ranges_width(ex, rig) == np.asarray(obs.surround.ranges).shape[-1]
+    else:
+        assert obs.surround is None
+        assert ranges_width(ex, rig) == np.asarray(obs.range_image).shape[-1]
+
+
 def test_other_road_families_split_straight_and_junction():
     assert [FAMILIES[i] for i in cf.other_road_families("PE")] == ["LWW", "RWW", "RTY"]
     assert [FAMILIES[i] for i in cf.other_road_families("RTY")] == ["PE", "VC", "OR"]

@@ -27,7 +27,7 @@ from pathlib import Path
 from lantern_jax.apps.dataset.store import load_frames, read_card
 from lantern_jax.apps.training.closed_loop import train_closed_loop
 from lantern_jax.apps.training.config import TrainConfig
-from lantern_jax.apps.training.data import recipe_examples, split_by_sequence
+from lantern_jax.apps.training.data import ranges_width, recipe_examples, split_by_sequence
 from lantern_jax.apps.training.fit import Batches, fit, model_config
 from lantern_jax.policies.learned.checkpoint import load_model, new_model
 
@@ -75,8 +75,7 @@ def train(cfg: TrainConfig, progress: bool = True) -> dict:
     frames = load_frames(cfg.dataset, exclude_crossing=cfg.exclude_crossing)
     ex = recipe_examples(frames, card, cfg)
     train_idx, val_idx = split_by_sequence(ex, cfg.val_fraction, cfg.seed)
-    ranges = ex.obs["surround_ranges" if cfg.rig == "surround" else "range_image"].shape[1]
-    mcfg = model_config(cfg, ranges)
+    mcfg = model_config(cfg, ranges_width(ex, cfg.rig))
     model = load_model(cfg.init_from, expect=mcfg) if cfg.init_from else new_model(mcfg, cfg.seed)
     batches = Batches(ex, train_idx, cfg)
     return fit(cfg, model, ex, batches, val_idx, out, progress)

@@ -38,7 +38,14 @@ from lantern_jax.apps.dataset.scenes import PLAN_JSON, SceneSpec
 from lantern_jax.apps.dataset.store import load_frames, read_card
 from lantern_jax.apps.training.config import TrainConfig
 from lantern_jax.apps.training.counterfactual import frame_counterfactuals
-from lantern_jax.apps.training.data import Examples, concat, recipe_examples, split_by_sequence
+from lantern_jax.apps.training.data import (
+    Examples,
+    concat,
+    observation_field,
+    ranges_width,
+    recipe_examples,
+    split_by_sequence,
+)
 from lantern_jax.apps.training.fit import Batches, fit, model_config
 from lantern_jax.apps.training.relabel import Visits, relabel_batch
 from lantern_jax.core.constants import FAMILIES
@@ -109,7 +116,8 @@ def visits_to_examples(v: Visits, seq_ids: list[str], like: Examples, keep: np.n
     """The kept visits (``keep``: (B, V) bool) as examples with ``like``'s observation fields
     and dtypes; each carries its execution's sequence id (``seq_ids``: (B,))."""
     b, vv = np.nonzero(keep)
-    obs = {k: np.asarray(getattr(v.obs, k))[b, vv].astype(a.dtype) for k, a in like.obs.items()}
+    obs = {k: np.asarray(observation_field(v.obs, k))[b, vv].astype(a.dtype)
+           for k, a in like.obs.items()}  # fmt: skip
     base = np.all(obs["warning_tokens"] == PAD_ID, axis=-1)
     targets = np.asarray(v.waypoints)[b, vv].astype(np.float32)
     return Examples(obs, targets, np.asarray(seq_ids)[b].astype(str), base)
@@ -187,7 +195,7 @@ def train_closed_loop(cfg: TrainConfig, progress: bool = True) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     specs = plan_specs(cfg.dataset)
     data = _dataset_examples(cfg)
-    mcfg = model_config(cfg, data.obs["range_image"].shape[1])
+    mcfg = model_config(cfg, ranges_width(data, cfg.rig))
     model = load_model(cfg.init_from, expect=mcfg)
     visits: list[Examples] = []
     rounds, summary = [], {}

@@ -22,6 +22,11 @@ carries — the paper's three learned rows:
   :mod:`lantern_jax.apps.training.counterfactual`).
   With ``failure_window_s > 0`` each round also keeps the visits of the last seconds before
   every collision of the driven executions, every ``failure_every_s`` (recovery states).
+
+The camera rig (``rig``) is the recipe's own unless given: the six-camera rig for ``surround``,
+the front camera for the others.  A language recipe may take ``rig = "surround"``: its model
+then reads the six-camera rig's view (the dataset's ``rig.*`` and ``surround.*`` columns in
+training, the ``surround_rig`` sensor in the simulator) beside the warning text.
 """
 
 from __future__ import annotations
@@ -33,6 +38,7 @@ from typing import Any
 
 from lantern_jax.apps.dataset.store import EXCLUDE_CROSSING
 from lantern_jax.io.config_file import ConfigFileError, check_keys, read_table, typed_value
+from lantern_jax.policies.learned.features import RIGS
 from lantern_jax.policies.names import name_problem
 
 RECIPES = ("base", "coop", "surround", "distance", "closed_loop")
@@ -83,11 +89,13 @@ class TrainConfig:
     # failure_every_s (the states that lead the learner into a failure); 0 keeps none
     failure_window_s: float = 0.0
     failure_every_s: float = 0.5  # s, spacing of those visits; divides visit_every_s
+    # the camera rig the model reads (features.RIGS); "" is the recipe's own: "surround" for
+    # the surround recipe, "front" for the others
+    rig: str = ""
 
-    @property
-    def rig(self) -> str:
-        """The camera rig the recipe uses."""
-        return "surround" if self.recipe == "surround" else "front"
+    def __post_init__(self) -> None:
+        if self.rig == "":
+            object.__setattr__(self, "rig", "surround" if self.recipe == "surround" else "front")
 
     @property
     def language(self) -> bool:
@@ -174,6 +182,10 @@ def _range_problem(cfg: TrainConfig) -> tuple[str, str] | None:
     if cfg.exclude_crossing not in EXCLUDE_CROSSING:
         problems.append(("exclude_crossing", f"{cfg.exclude_crossing!r} not one of "
                                              f"{', '.join(EXCLUDE_CROSSING)}"))  # fmt: skip
+    if cfg.rig not in RIGS:
+        problems.append(("rig", f"{cfg.rig!r} not one of {', '.join(RIGS)}"))
+    elif cfg.recipe == "surround" and cfg.rig != "surround":
+        problems.append(("rig", "the surround recipe is the six-camera rig's; leave rig out"))
     if cfg.width % cfg.heads:
         problems.append(("heads", f"{cfg.heads} does not divide width {cfg.width}"))
     return problems[0] if problems else None

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -77,6 +78,19 @@ def observation_columns(
             value = column_array(frames, name, shapes[name])
             out[name[len("rig.") :] if name.startswith("rig.") else name.replace(".", "_")] = value
     return out
+
+
+def ranges_width(ex: Examples, rig: str) -> int:
+    """N, the width of the range image a model of ``rig`` reads in these examples."""
+    return ex.obs["surround_ranges" if rig == "surround" else "range_image"].shape[1]
+
+
+def observation_field(obs: Observation, name: str) -> Any:
+    """An example column's values from a (batched) observation: ``surround_<field>`` from its
+    six-camera view, any other name from the field itself."""
+    if name.startswith("surround_"):
+        return getattr(obs.surround, name[len("surround_") :])
+    return getattr(obs, name)
 
 
 def examples_from_frames(frames: pd.DataFrame, card: dict, rig: str = "front") -> Examples:

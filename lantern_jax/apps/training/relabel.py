@@ -2,7 +2,9 @@
 
 The learner drives a batch of training scenes in the simulator; every ``every`` ticks the
 visited state is kept with the observation the learner had there (the dataset's observation,
-:data:`~lantern_jax.apps.dataset.record.FRONT_SENSORS`), and the privileged expert relabels it: it
+:data:`~lantern_jax.apps.dataset.record.FRONT_SENSORS`, or for a learner with the six-camera rig
+the observation under :data:`~lantern_jax.apps.dataset.record.RIG_SENSORS`, the dataset's
+``rig.*`` and ``surround.*`` columns), and the privileged expert relabels it: it
 drives on from that very state (ego, actors, protocol, telemetry) for the label horizon, and
 the label is its positions 0.25 ... 2.5 s later in the ego frame of the visited state — exactly
 what :func:`lantern_jax.apps.dataset.frames.future_waypoints` computes from an expert recording. A
@@ -27,7 +29,7 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from lantern_jax.apps.dataset.record import FRAME_TICKS, FRONT_SENSORS
+from lantern_jax.apps.dataset.record import FRAME_TICKS, FRONT_SENSORS, RIG_SENSORS
 from lantern_jax.core.constants import NUM_WAYPOINTS
 from lantern_jax.core.times import happened
 from lantern_jax.policies.base import Policy
@@ -47,7 +49,8 @@ Array = jax.Array
 class Visits:
     """Visited states of one execution (leading axis: visit; a batch adds one in front)."""
 
-    obs: Observation  # the learner's observation at the visit (FRONT_SENSORS)
+    obs: Observation  # the learner's observation at the visit (FRONT_SENSORS; RIG_SENSORS
+    #                   for a learner with the six-camera rig)
     waypoints: Array  # (V, 10, 2) float32, m, ego frame: the expert's plan from the visit
     valid: Array  # (V,) bool, live at the visit and for the whole 2.5-s horizon
     t: Array  # (V,) float32, s, simulation time of the visit
@@ -120,12 +123,13 @@ def visit_and_relabel(
     def run(s: State, use_expert: Array) -> State:
         return jax.lax.scan(lambda st, _: (tick(st, use_expert), None), s, None, length=every)[0]
 
+    sensors = RIG_SENSORS if learner.surround else FRONT_SENSORS
     state0 = start_state(scenario, learner, learner_params, settings)
     state0 = jax.lax.fori_loop(0, phase, lambda _, st: tick(st, jnp.asarray(False)), state0)
 
     def visit(s: State) -> Visits:
         wps, live, on, off = expert_label(scenario, s, expert, expert_params, settings)
-        obs = observe(scenario, s, FRONT_SENSORS, settings.bank)
+        obs = observe(scenario, s, sensors, settings.bank)
         return Visits(obs, wps, live, s.t, on, off, s.telemetry.collision.t_collision)
 
     shapes = jax.eval_shape(visit, state0)
