@@ -6,7 +6,7 @@ from __future__ import annotations
 #: "Learned warning-conditioned models"), with their descriptions: the paper's three learned
 #: rows, ``learned-coop`` fine-tuned with onset-only horizon exclusion, the
 #: distance-conditioned models of the paper's language diagnostics (both exclusion rules), and
-#: the closed-loop model (beyond the paper's recipe).
+#: the closed-loop models (beyond the paper's recipe): front camera, and the six-camera rig.
 SHIPPED_MODELS = {
     "learned-base": "language interface trained on ordinary driving, never on warnings "
                     "(the SimLingo analogue)",
@@ -23,4 +23,7 @@ SHIPPED_MODELS = {
     "learned-closed-loop": "learned-distance-onset-only trained closed loop (DAgger: the expert "
                            "relabels the states the model visits) with counterfactual warnings "
                            "(configs/train_closed_loop.toml)",
+    "learned-closed-loop-rig": "the six-camera rig and the warning: nine closed-loop rounds "
+                               "with distractor sentences from learned-distance-onset-only-rig "
+                               "(configs/train_closed_loop_rig.toml)",
 }  # fmt: skip
