@@ -101,18 +101,22 @@ def probe_with(settings: Settings, params: Any = None) -> bytes:
 
 
 def _soft_cus(policy, params, suite, settings: Settings) -> bytes:
-    # the evaluation's own batch and program (the reference switch, padded to the suite's
-    # shape): the soft score reads the same rollout as the route table, compiled once
+    a, b, d_safe = route_telemetry(policy, params, suite, settings)
+    soft = jax.vmap(lambda ta, tb, d: soft_pair_cus(ta, tb, d, settings=settings.scoring))
+    return np.asarray(soft(a, b, d_safe), np.float32).tobytes()
+
+
+def route_telemetry(policy, params, suite, settings: Settings) -> tuple[Any, Any, Any]:
+    """Every pair's final telemetry of Route A with the warning and of Route B, and its
+    ``d_safe``, from the evaluation's own batch and program (the reference switch, padded to
+    the suite's shape): what the route table reads, compiled once for every probe."""
     execs = build_executions(suite, bucket=True)
     driver, run_params = reference_driver(policy, params)
     final, _ = run_executions(driver, execs.scenarios, run_params, execs.max_ticks, settings,
                               pad_to=execs.pad_to)  # fmt: skip
     tel = final.telemetry
-    a = execs.take(tel, WARNING_CONDITION)  # Route A with warning
-    b = execs.take(tel, ROUTE_B)
     d_safe = execs.take(execs.scenarios.config.d_safe, WARNING_CONDITION)
-    soft = jax.vmap(lambda ta, tb, d: soft_pair_cus(ta, tb, d, settings=settings.scoring))
-    return np.asarray(soft(a, b, d_safe), np.float32).tobytes()
+    return execs.take(tel, WARNING_CONDITION), execs.take(tel, ROUTE_B), d_safe
 
 
 def digest(data: bytes) -> str:

@@ -26,7 +26,7 @@ from lantern_jax.scenarios.suite import load_suite
 from lantern_jax.scoring.cus import pair_components
 from lantern_jax.scoring.metrics import finalize
 from lantern_jax.scoring.thresholds import DEFAULT_SCORING, ScoringSettings
-from lantern_jax.sim import engine, programs
+from lantern_jax.sim import programs
 from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings
 
 PROBE = Path(__file__).with_name("settings_probe.py")
@@ -112,17 +112,16 @@ def test_in_process_changes_equal_fresh_processes_and_the_persistent_cache(tmp_p
     assert _run_probe(list(sp.CHANGES), cache) == in_process
 
 
-@pytest.mark.slow  # compiles its own programs; run by the slow tier
 def test_settings_batch_with_vmap():
     """Traced settings are pytree leaves: one pair's final telemetry scored under four TTC
-    normalisers and recovery caps in one ``vmap`` equals four separate calls."""
-    execs = engine.build_executions(load_suite().select(["rty_0001"]))
+    normalisers and recovery caps in one ``vmap`` equals four separate calls.  (The rollout is
+    the probes' program, compiled once for the file.)"""
     coop = get_policy("coop")
-    final, _ = engine.run_executions(
-        coop, execs.scenarios, coop.init(jax.random.PRNGKey(0)), execs.max_ticks
+    tel_a, tel_b, d_safe = sp.route_telemetry(
+        coop, coop.init(jax.random.PRNGKey(0)), load_suite().select(["rty_0001"]), DEFAULT_SETTINGS
     )
-    tel_a, tel_b = (jax.tree.map(lambda x, i=i: x[i], final.telemetry) for i in (0, 2))
-    d_safe = execs.scenarios.config.d_safe[0]
+    tel_a, tel_b = (jax.tree.map(lambda x: x[0], t) for t in (tel_a, tel_b))
+    d_safe = d_safe[0]
 
     def cus(s: ScoringSettings):
         return pair_components(finalize(tel_a, s), finalize(tel_b, s), d_safe, s)["CUS"]
