@@ -28,8 +28,8 @@ from pathlib import Path
 #: CPU) for a rollout up to about 20 % slower, and the tests' time is mostly compiling
 #: (docs/reproducibility.md).  Results agree with the default emitters' within float rounding
 #: (``REPRODUCIBLE_ATOL``); the tests that start processes with ``XLA_FLAGS`` of their own
-#: (one device against two, the program store in a new process, the written promise across
-#: devices) run the default emitters.  An ``XLA_FLAGS`` that names the flag wins, e.g.
+#: (the program store in a new process, the written promise across devices and batches, the
+#: processes of JAX's distributed runtime) run the default emitters.  An ``XLA_FLAGS`` that names the flag wins, e.g.
 #: ``XLA_FLAGS=--xla_cpu_use_fusion_emitters=true`` runs the tests as a user's process compiles.
 #: ``.ci/run`` reads this line to give the documentation build's notebook kernels the same flags.
 TEST_XLA_FLAGS = "--xla_cpu_use_fusion_emitters=false"

@@ -1463,13 +1463,15 @@ def test_plans_a_vehicle_cannot_drive_have_a_defined_outcome():
 @pytest.mark.slow
 def test_the_written_promise_across_devices_and_batches(tmp_path):
     """What the README promises, through the command line: the same batch on the same machine
-    gives the same files (the run record aside); a pair evaluated alone on one CPU device and
-    inside a two-pair batch split over two devices keeps ids, gates and discrete columns and
-    stays within the stated tolerance elsewhere."""
+    gives the same files (the run record aside); the two-pair batch on one CPU device and split
+    over two, and a pair evaluated alone on one device, keep ids, gates and discrete columns and
+    stay within the stated tolerance elsewhere.  (The processes run XLA's default flags, as a
+    user's do, not the tests' own.)"""
     from lantern_jax.scoring.table import compare_route_tables, read_route_table
 
-    runs = {"two-devices": ("2", "pe_0001,lww_0001"), "again": ("2", "pe_0001,lww_0001"),
-            "alone-one-device": ("1", "lww_0001")}  # fmt: skip
+    both_pairs = "pe_0001,lww_0001"
+    runs = {"two-devices": ("2", both_pairs), "again": ("2", both_pairs),
+            "one-device": ("1", both_pairs), "alone-one-device": ("1", "lww_0001")}  # fmt: skip
     for name, (devices, pairs) in runs.items():
         res = run_program(["evaluate", "--policy", "coop", "--pairs", pairs, "--quiet",
                            "--out", str(tmp_path / name)],
@@ -1479,6 +1481,9 @@ def test_the_written_promise_across_devices_and_batches(tmp_path):
         same = (tmp_path / "two-devices" / n).read_bytes() == (tmp_path / "again" / n).read_bytes()
         assert same == (n != RUN_RECORD_JSON), n
     both = read_route_table(tmp_path / "two-devices" / "route_level_results.csv")
+    one = read_route_table(tmp_path / "one-device" / "route_level_results.csv")
+    ok, report = compare_route_tables(both, one)
+    assert ok, report
     alone = read_route_table(tmp_path / "alone-one-device" / "route_level_results.csv")
     ok, report = compare_route_tables(both[both["pair_id"] == "lww_0001"].reset_index(drop=True),
                                       alone)  # fmt: skip

@@ -11,7 +11,6 @@ runs.
 from __future__ import annotations
 
 import dataclasses
-import os
 
 import jax
 import jax.numpy as jnp
@@ -35,7 +34,6 @@ from lantern_jax.scenarios.suite import load_suite
 from lantern_jax.scenarios.warnings import TIERS, get_text, paraphrase_tiers
 from lantern_jax.scoring.table import (
     compare_route_tables,
-    read_route_table,
     schema_columns,
     validate_route_table,
 )
@@ -151,27 +149,6 @@ def test_batches_of_different_sizes_share_one_program(base, shipped):
     assert len(one.route_table) == 2 and len(three.route_table) == 6
     spent = three.runs[0].timings
     assert spent["trace + lower"] == spent["XLA compile"] == spent["program load"] == 0.0
-
-
-@pytest.mark.slow
-def test_one_device_equals_two(tmp_path):
-    """The same suite evaluated on one XLA CPU device and split over two keeps the promise."""
-    import subprocess
-    import sys
-
-    out = {}
-    for n in (1, 2):
-        env = dict(os.environ, LANTERN_JAX_CPU_DEVICES=str(n), XLA_FLAGS="")
-        folder = tmp_path / f"dev{n}"
-        res = subprocess.run(
-            [sys.executable, "-m", "lantern_jax", "evaluate", "--policy", "coop", "--pairs",
-             ",".join(PAIRS), "--out", str(folder), "--quiet"],
-            env=env, capture_output=True, text=True, timeout=600,
-        )  # fmt: skip
-        assert res.returncode == 0, res.stderr[-2000:]
-        out[n] = read_route_table(folder / "route_level_results.csv")
-    ok, report = compare_route_tables(out[1], out[2])
-    assert ok, report
 
 
 @pytest.mark.slow  # compiles its own programs; run by the slow tier

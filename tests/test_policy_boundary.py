@@ -139,8 +139,11 @@ def test_hidden_actors_are_the_sentinel_at_every_tick():
     suite = load_suite()
     pairs = [p.pair_id for f in ("PE", "VC", "OR", "LWW", "RWW", "RTY") for p in
              [q for q in suite.pairs if q.family == f][:2]]  # fmt: skip
-    execs = build_executions(suite.select(pairs))
-    final, _ = run_executions(_spy_policy(), execs.scenarios, None, execs.max_ticks)
+    # the split path: the session's stored world program and the spy's own small program (its
+    # observations are observe()'s, tests/test_split.py)
+    execs = build_executions(suite.select(pairs), bucket=True)
+    final, _ = run_executions(_spy_policy(), execs.scenarios, None, execs.max_ticks,
+                              path="split")  # fmt: skip
     bad, seen = (np.asarray(x) for x in final.policy_carry)
     assert (bad == 0).all(), bad
     assert (seen > 0).sum() >= len(seen) // 2  # most executions see some actor

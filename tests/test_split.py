@@ -184,7 +184,8 @@ def _counter_policy() -> Policy:
 def test_a_refilled_slot_starts_its_policy_carry_afresh():
     """60 executions through one worker's 48 slots: 12 start in a slot refilled after another
     execution ended.  With a carry that stops the ego after 100 ticks, every execution ends
-    where it ends with two workers (30 executions each, no refill)."""
+    where it ends with two workers (30 executions each, no refill); and the final carry that
+    comes back is each execution's own: the ticks it was stepped."""
     suite = load_suite()
     execs = engine.build_executions(suite.select([p.pair_id for p in suite.pairs[:20]]),
                                     bucket=True)  # fmt: skip
@@ -195,6 +196,8 @@ def test_a_refilled_slot_starts_its_policy_carry_afresh():
     moved = np.linalg.norm(refilled.ego.xy - np.asarray(execs.scenarios.ego0.xy), axis=-1)
     assert (moved > 5.0).all()  # every execution drove before it stopped
     assert np.allclose(refilled.ego.speed, 0.0, atol=0.5)  # and stopped: its carry counted
+    for run in (refilled, fresh):
+        np.testing.assert_array_equal(run.policy_carry, run.tick)
 
 
 def test_two_runs_give_the_same_bits():

@@ -397,6 +397,7 @@ class _Run:
     starts: tuple  # (n, size) packed start states
     first_obs: tuple  # (n, size) packed first observations
     final: list  # (n, size) packed final states, written by the workers (disjoint rows)
+    final_carry: list  # (n, size) packed final policy carries, written likewise
     max_ticks: int
     device: Any
     done: tuple  # (group, offset) of the state's ``done`` leaf
@@ -411,7 +412,8 @@ def _field(layout: Layout, path: str) -> tuple[int, int]:
 
 def _worker(run: _Run, mine: np.ndarray) -> int:
     """Step the executions ``mine`` (in order) through this worker's slots to their ends;
-    writes their final states into ``run.final``; returns the ticks stepped."""
+    writes their final states into ``run.final`` and their policy's final carries into
+    ``run.final_carry``; returns the ticks stepped."""
     s, put = run.world.sig.slots, lambda x: jax.device_put(x, run.device)
     queue = list(mine)
     slot_of = np.full(s, -1)
@@ -452,8 +454,12 @@ def _worker(run: _Run, mine: np.ndarray) -> int:
         ended = h_st[run.done[0]][:, run.done[1]].astype(bool)
         ended |= h_st[run.tick[0]][:, run.tick[1]] >= run.max_ticks
         free = np.flatnonzero(active & ended)
+        # an ended execution's carry is kept until its slot takes the next one (``keep``)
+        h_carry = [np.array(x) for x in carry] if len(free) else []
         for k in free:
             for f, x in zip(run.final, h_st, strict=True):
+                f[slot_of[k]] = x[k]
+            for f, x in zip(run.final_carry, h_carry, strict=True):
                 f[slot_of[k]] = x[k]
             slot_of[k] = -1
         fill(free)
@@ -489,8 +495,8 @@ def run_split(
             executions).
 
     Returns:
-        (final states as NumPy arrays with leading axis ``n`` -- ``policy_carry`` is ``()``:
-        the carry lives in the policy program --, seconds spent compiling or loading
+        (final states as NumPy arrays with leading axis ``n``, the policy's final carry in
+        ``policy_carry`` as the fused path gives it; seconds spent compiling or loading
         programs).
     """
     host = jax.tree.map(np.asarray, scenarios)
@@ -516,7 +522,8 @@ def run_split(
     first_obs = _first_observations(world, scp, starts, switches, setp, device)
     run = _Run(
         world, pol_exe, parp, carry, setp, switches, scp, starts, first_obs,
-        [b.copy() for b in starts], int(max_ticks), device, _field(sig.state, ".done"),
+        [b.copy() for b in starts], [np.zeros((n, size), dt) for dt, size in carry.groups],
+        int(max_ticks), device, _field(sig.state, ".done"),
         _field(sig.state, ".tick"), threading.Event(),
     )  # fmt: skip
     if stage is not None:
@@ -530,7 +537,9 @@ def run_split(
         except BaseException:
             run.stop.set()
             raise
-    final = sig.state.unpack_host(run.final)
+    final = sig.state.unpack_host(run.final).replace(
+        policy_carry=carry.unpack_host(tuple(run.final_carry))
+    )
     if timings is not None:
         for k in ("trace + lower", "XLA compile", "program load"):
             timings[k] = tw.get(k, 0.0) + tp.get(k, 0.0) + ts.get(k, 0.0)
