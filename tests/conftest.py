@@ -29,8 +29,9 @@ from pathlib import Path
 #: (docs/reproducibility.md).  Results agree with the default emitters' within float rounding
 #: (``REPRODUCIBLE_ATOL``); the tests that start processes with ``XLA_FLAGS`` of their own
 #: (the program store in a new process, the written promise across devices and batches, the
-#: processes of JAX's distributed runtime) run the default emitters.  An ``XLA_FLAGS`` that names the flag wins, e.g.
-#: ``XLA_FLAGS=--xla_cpu_use_fusion_emitters=true`` runs the tests as a user's process compiles.
+#: processes of JAX's distributed runtime) run the default emitters.  An ``XLA_FLAGS`` that
+#: names the flag wins, e.g. ``XLA_FLAGS=--xla_cpu_use_fusion_emitters=true`` runs the tests as
+#: a user's process compiles.
 #: ``.ci/run`` reads this line to give the documentation build's notebook kernels the same flags.
 TEST_XLA_FLAGS = "--xla_cpu_use_fusion_emitters=false"
 if TEST_XLA_FLAGS.split("=")[0] not in os.environ.get("XLA_FLAGS", ""):
@@ -76,6 +77,16 @@ jax.config.update(
     "jax_persistent_cache_min_compile_time_secs",
     float(os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"]),
 )
+
+#: Bytes of constants one compiled program of the tests may capture: past it JAX warns, and
+#: the warning fails the test (pyproject.toml's ``filterwarnings``).  A captured array is copied
+#: into the program, which the persistent cache then serialises and writes: the training
+#: programs, when they captured the 33 MB embedding table, took 6.7-8.1 s to compile against
+#: 0.7-1.9 s with it an argument (``benchmarks/bench_fit_compile.py``).  The package's programs
+#: take such tables as arguments; a brax environment's programs capture its scene bank
+#: (0.4 MB for the tests' bank), which brax's interface leaves no other way to pass.
+CAPTURED_CONSTANTS_LIMIT_BYTES = 1_000_000
+jax.config.update("jax_captured_constants_warn_bytes", CAPTURED_CONSTANTS_LIMIT_BYTES)
 
 #: Most worker processes ``-n auto`` starts (pyproject's pytest options).  Every worker compiles
 #: its own programs and holds 1-2 GB; past one worker per core they only compete for it.

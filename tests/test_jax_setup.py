@@ -142,3 +142,23 @@ def test_the_test_session_sets_what_the_package_sets():
     from conftest import TEST_XLA_CACHES
 
     assert TEST_XLA_CACHES == XLA_CACHES_CPU == os.environ[XLA_CACHES_ENV]
+
+
+def test_a_program_that_captures_a_large_constant_is_flagged():
+    """The test session's limit on the constants one program captures (``tests/conftest.py``):
+    an array past it, closed over by a jitted function, draws JAX's warning (which fails any
+    other test, pyproject.toml); one within it does not."""
+    import warnings
+
+    import jax
+    import jax.numpy as jnp
+    from conftest import CAPTURED_CONSTANTS_LIMIT_BYTES
+
+    assert jax.config.jax_captured_constants_warn_bytes == CAPTURED_CONSTANTS_LIMIT_BYTES
+    big = jnp.ones(CAPTURED_CONSTANTS_LIMIT_BYTES // 4 + 1, jnp.float32)
+    with pytest.warns(UserWarning, match="constants were captured"):
+        jax.jit(lambda x: x + big.sum()).lower(1.0)
+    small = jnp.ones(CAPTURED_CONSTANTS_LIMIT_BYTES // 8, jnp.float32)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        jax.jit(lambda x: x + small.sum()).lower(1.0)
