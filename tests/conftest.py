@@ -27,11 +27,10 @@ from pathlib import Path
 #: about 30 % less time (the split path's world tick 6.3-8.1 s against 9.2-10.1 s on a 2-core
 #: CPU) for a rollout up to about 20 % slower, and the tests' time is mostly compiling
 #: (docs/reproducibility.md).  Results agree with the default emitters' within float rounding
-#: (``REPRODUCIBLE_ATOL``); the tests that start processes with ``XLA_FLAGS`` of their own
-#: (the program store in a new process, the written promise across devices and batches, the
-#: processes of JAX's distributed runtime) run the default emitters.  An ``XLA_FLAGS`` that
-#: names the flag wins, e.g. ``XLA_FLAGS=--xla_cpu_use_fusion_emitters=true`` runs the tests as
-#: a user's process compiles.
+#: (``REPRODUCIBLE_ATOL``); the test that starts processes with ``XLA_FLAGS`` of their own
+#: (the written promise across devices and batches) runs the default emitters, as a user's
+#: process does.  An ``XLA_FLAGS`` that names the flag wins, e.g.
+#: ``XLA_FLAGS=--xla_cpu_use_fusion_emitters=true`` runs the tests as a user's process compiles.
 #: ``.ci/run`` reads this line to give the documentation build's notebook kernels the same flags.
 TEST_XLA_FLAGS = "--xla_cpu_use_fusion_emitters=false"
 if TEST_XLA_FLAGS.split("=")[0] not in os.environ.get("XLA_FLAGS", ""):

@@ -34,8 +34,12 @@ def _free_port() -> int:
 
 
 def _env(devices: int) -> dict[str, str]:
+    """The processes' environment: ``devices`` CPU devices, the tests' XLA flags (the earlier
+    fusion emitters compile the three processes' programs in less time)."""
+    from conftest import TEST_XLA_FLAGS
+
     env = dict(os.environ)
-    env["XLA_FLAGS"] = f"--xla_force_host_platform_device_count={devices}"
+    env["XLA_FLAGS"] = f"{TEST_XLA_FLAGS} --xla_force_host_platform_device_count={devices}"
     return env
 
 

@@ -54,8 +54,10 @@ def _coop_user_act(params, obs):
 def _evaluate_in_new_process(cache: Path, out: Path) -> float:
     """``lantern-jax evaluate`` of ``coop`` on one pair in a fresh process with its own cache
     folder; returns the seconds its profile gives to loads from the program store."""
+    from conftest import TEST_XLA_FLAGS  # the tests' flags, no device count of their own
+
     env = dict(os.environ, LANTERN_JAX_CACHE_DIR=str(cache), LANTERN_JAX_CPU_DEVICES="1",
-               XLA_FLAGS="")  # fmt: skip
+               XLA_FLAGS=TEST_XLA_FLAGS)  # fmt: skip
     env.pop("JAX_COMPILATION_CACHE_DIR", None)
     res = subprocess.run(
         [sys.executable, "-m", "lantern_jax", "evaluate", "--policy", "coop", "--pairs",
