@@ -105,18 +105,33 @@ class Browser:
         want = self._id
         return self.wait(lambda m: m.get("id") == want).get("result", {})
 
-    def navigate(self, url: str, sid: str) -> None:
+    def navigate(self, url: str, sid: str, timeout: float = 60.0) -> None:
         """Navigate the session's tab to ``url`` and wait for its load event.  The event can
         arrive before Chromium answers ``Page.navigate`` (a small local page under load): then
-        :meth:`send` has already stored it among the events, and it is taken from there."""
-        first = len(self.events)
+        :meth:`send` has already stored it among the events, and it is taken from there.  A tab
+        that sends no load event within ``timeout`` (seen once in a fresh-clone run, with both
+        cores busy; not reproduced) is navigated once more; a second silence, or a navigation
+        Chromium refuses, is an error naming the URL and the events the tab did send."""
+        for attempt in (1, 2):
+            first = len(self.events)
+            result = self.send("Page.navigate", {"url": url}, session=sid)
+            if result.get("errorText"):
+                raise RuntimeError(f"Chromium could not open {url}: {result['errorText']}")
 
-        def loaded(m: dict) -> bool:
-            return m.get("method") == "Page.loadEventFired" and m.get("sessionId") == sid
+            def loaded(m: dict) -> bool:
+                return m.get("method") == "Page.loadEventFired" and m.get("sessionId") == sid
 
-        self.send("Page.navigate", {"url": url}, session=sid)
-        if not any(loaded(m) for m in self.events[first:]):
-            self.wait(loaded)
+            if any(loaded(m) for m in self.events[first:]):
+                return
+            try:
+                self.wait(loaded, timeout)
+                return
+            except TimeoutError:
+                seen = sorted({str(m.get("method")) for m in self.events[first:]
+                               if m.get("sessionId") == sid})  # fmt: skip
+                if attempt == 2:
+                    raise TimeoutError(f"{url} did not load in {timeout:.0f} s, twice; the tab "
+                                       f"reported {seen or 'nothing'}") from None  # fmt: skip
 
     def open(self, url: str) -> tuple[list[str], dict]:
         """Load ``url`` in a new tab; returns (problems reported while it loaded, facts about
