@@ -112,24 +112,24 @@ class Browser:
         that sends no load event within ``timeout`` (seen once in a fresh-clone run, with both
         cores busy; not reproduced) is navigated once more; a second silence, or a navigation
         Chromium refuses, is an error naming the URL and the events the tab did send."""
+
+        def loaded(m: dict) -> bool:
+            return m.get("method") == "Page.loadEventFired" and m.get("sessionId") == sid
+
         for attempt in (1, 2):
             first = len(self.events)
             result = self.send("Page.navigate", {"url": url}, session=sid)
             if result.get("errorText"):
                 raise RuntimeError(f"Chromium could not open {url}: {result['errorText']}")
-
-            def loaded(m: dict) -> bool:
-                return m.get("method") == "Page.loadEventFired" and m.get("sessionId") == sid
-
             if any(loaded(m) for m in self.events[first:]):
                 return
             try:
                 self.wait(loaded, timeout)
                 return
             except TimeoutError:
-                seen = sorted({str(m.get("method")) for m in self.events[first:]
-                               if m.get("sessionId") == sid})  # fmt: skip
                 if attempt == 2:
+                    seen = sorted({str(m.get("method")) for m in self.events[first:]
+                                   if m.get("sessionId") == sid})  # fmt: skip
                     raise TimeoutError(f"{url} did not load in {timeout:.0f} s, twice; the tab "
                                        f"reported {seen or 'nothing'}") from None  # fmt: skip
 

@@ -141,3 +141,22 @@ def test_a_report_of_two_result_folders_compares_them(folder, tmp_path):
     assert page.count("<dt>folder</dt>") == 2
     assert "coop (rerun) - ego (results)" in page
     assert page.count('<div class="fail"') == 2 * len(failures(read_result_set(folder).table))
+
+
+def test_a_page_chromium_cannot_open_is_named(tmp_path):
+    """The browser helper names a URL that Chromium refuses to load, with Chromium's error,
+    instead of waiting for a load event that never comes."""
+    from test_docs_site import Browser, _chromium
+
+    exe = _chromium()
+    if exe is None:
+        pytest.skip("Chromium is not installed (apt-get install chromium, or set LANTERN_CHROMIUM)")
+    browser = Browser(exe, tmp_path / "profile")
+    try:
+        target = browser.send("Target.createTarget", {"url": "about:blank"})["targetId"]
+        sid = browser.send("Target.attachToTarget", {"targetId": target, "flatten": True})
+        missing = (tmp_path / "missing.html").as_uri()
+        with pytest.raises(RuntimeError, match=r"could not open .*missing\.html: net::ERR_FILE"):
+            browser.navigate(missing, sid["sessionId"])
+    finally:
+        browser.close()
