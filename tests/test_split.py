@@ -93,6 +93,14 @@ def _same(a, b) -> None:
         np.testing.assert_array_equal(a, b)
 
 
+#: Compiled as the simulator compiles them (one program per sensor declaration for ``observe``,
+#: one for every declaration for ``observe_every_sensor``), rather than run op by op: the worlds
+#: share one shape, so the cases below reuse these programs.
+_observe = jax.jit(observe, static_argnums=2)
+_observe_every_sensor = jax.jit(observe_every_sensor)
+_init_state = jax.jit(init_state)
+
+
 @pytest.mark.parametrize("sensors", [(), (WARNING,), (PRIVILEGED,), (SURROUND_RIG, WARNING),
                                      (PRIVILEGED, SURROUND_RIG)])  # fmt: skip
 def test_the_observation_of_every_sensor_equals_the_declared_one(family_runs, sensors):
@@ -103,10 +111,11 @@ def test_the_observation_of_every_sensor_equals_the_declared_one(family_runs, se
     declared = tuple(sorted({FRONT_CAMERA, *sensors}))
     for i in (0, 5, 8):  # PE Route A, VC Route B, LWW Route A
         world = worlds[i]
-        for state in (init_state(world), select(final, i)):
-            want = observe(world, state, declared, bank)
+        for state in (_init_state(world), select(final, i)):
+            want = _observe(world, state, declared, bank)
             on = {s: jnp.asarray(s in sensors) for s in (PRIVILEGED, SURROUND_RIG)}
-            got, view = observe_every_sensor(world, state, on[PRIVILEGED], on[SURROUND_RIG], bank)
+            got, view = _observe_every_sensor(world, state, on[PRIVILEGED], on[SURROUND_RIG],
+                                              bank)  # fmt: skip
             got = got.replace(
                 privileged=view if PRIVILEGED in sensors else None,
                 surround=got.surround if SURROUND_RIG in sensors else None,
