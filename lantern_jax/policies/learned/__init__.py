@@ -9,6 +9,9 @@
   embedding (FiLM) and the stated position, ten waypoints out;
 * :mod:`~lantern_jax.policies.learned.checkpoint` — trained weights as an ordinary pure
   ``init/act`` policy, saved and loaded with their architecture (a mismatch is refused).
+* :mod:`~lantern_jax.policies.learned.ensemble` — several models of one architecture as one
+  policy that drives with the mean of their plans (:func:`~lantern_jax.policies.learned.
+  ensemble.ensemble_policy`).
 
 Training lives in :mod:`lantern_jax.apps.training` (it reads the open-loop dataset).
 """

@@ -1,0 +1,153 @@
+"""Ensembles of learned models (``lantern_jax.policies.learned.ensemble``): the mean plan of the
+members, one compiled act for every ensemble of an architecture, differentiable in every
+member's weights, and members that cannot be averaged refused by name."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from lantern_jax.apps.evaluation import evaluate
+from lantern_jax.policies.learned.checkpoint import (
+    CheckpointError,
+    model_policy,
+    new_model,
+    save_model,
+)
+from lantern_jax.policies.learned.ensemble import ensemble_act, ensemble_policy
+from lantern_jax.policies.learned.model import ModelConfig
+from lantern_jax.policies.registry import get_policy
+from lantern_jax.scenarios.handmade import straight_scene
+from lantern_jax.scenarios.suite import load_suite
+from lantern_jax.sim.observe import observe
+from lantern_jax.sim.state import init_state
+
+SMALL = ModelConfig(width=16, heads=2)
+
+
+@pytest.fixture(scope="module")
+def embedding():
+    from lantern_jax.types.language import load_embedding
+
+    return jnp.asarray(load_embedding(), jnp.float32)
+
+
+@pytest.fixture(scope="module")
+def obs():
+    world = straight_scene([], length=120.0, speed=8.0, s_warn=22.0, s_event=31.0,
+                           s_conflict=40.0, hazard_index=0, clear_s=22.0)  # fmt: skip
+    return jax.jit(lambda w: observe(w, init_state(w), ("warning",)))(world)
+
+
+def tiny(name: str, seed: int, embedding, config: ModelConfig = SMALL):
+    return model_policy(name, new_model(config, seed=seed), embedding=embedding)
+
+
+def plan(policy, obs) -> np.ndarray:
+    return np.asarray(jax.jit(policy.act)(policy.init(jax.random.PRNGKey(0)), obs))
+
+
+def test_the_plan_is_the_mean_of_the_members_plans(obs, embedding):
+    members = [tiny(f"m{i}", i, embedding) for i in range(3)]
+    ens = ensemble_policy("ens", members)
+    plans = [plan(m, obs) for m in members]
+    assert not np.allclose(plans[0], plans[1])  # the members differ, so the mean is a test
+    np.testing.assert_allclose(plan(ens, obs), np.mean(plans, axis=0), rtol=1e-5, atol=1e-5)
+    assert ens.sensors == members[0].sensors and not ens.stateful
+    assert "m0, m1, m2" in ens.description
+
+
+def test_one_member_is_that_member(obs, embedding):
+    member = tiny("m", 4, embedding)
+    np.testing.assert_allclose(plan(ensemble_policy("one", [member]), obs), plan(member, obs),
+                               rtol=1e-6, atol=1e-6)  # fmt: skip
+
+
+def test_a_batch_is_each_observation_alone(obs, embedding):
+    ens = ensemble_policy("ens", [tiny("a", 0, embedding), tiny("b", 1, embedding)])
+    params = ens.init(jax.random.PRNGKey(0))
+    moved = obs.replace(ego_speed=obs.ego_speed + 3.0)
+    batch = jax.tree.map(lambda a, b: jnp.stack([a, b]), obs, moved)
+    together = np.asarray(jax.jit(jax.vmap(ens.act, (None, 0)))(params, batch))
+    np.testing.assert_allclose(together[1], plan(ens, moved), rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(together[0], plan(ens, obs), rtol=1e-5, atol=1e-5)
+
+
+def test_ensembles_of_one_architecture_share_one_program(obs, embedding):
+    """The act is one function and the weights are arguments: other members, same program."""
+    a = ensemble_policy("a", [tiny("a0", 0, embedding), tiny("a1", 1, embedding)])
+    b = ensemble_policy("b", [tiny("b0", 5, embedding), tiny("b1", 6, embedding)])
+    assert a.program == b.program and a.act is ensemble_act
+    act = jax.jit(ensemble_act)
+    assert act.lower(a.init(None), obs).as_text() == act.lower(b.init(None), obs).as_text()
+
+
+def test_gradient_reaches_every_member(obs, embedding):
+    ens = ensemble_policy("ens", [tiny("a", 0, embedding), tiny("b", 1, embedding)])
+    params = ens.init(jax.random.PRNGKey(0))
+    grads = jax.grad(lambda w: jnp.sum(ensemble_act(params.replace(model=w), obs)))(params.model)
+    for g in jax.tree.leaves(grads):
+        assert np.all(np.isfinite(np.asarray(g)))
+    per_member = sum(np.abs(np.asarray(g)).reshape(2, -1).sum(1) for g in jax.tree.leaves(grads))
+    assert np.all(per_member > 0), per_member
+
+
+def test_members_from_checkpoint_files(tmp_path, obs, embedding):
+    paths = []
+    for i in range(2):
+        save_model(new_model(SMALL, seed=i), tmp_path / f"m{i}", dict(note="test"))
+        paths.append(tmp_path / f"m{i}.msgpack")
+    ens = ensemble_policy("from-files", paths)
+    mine = [model_policy(f"m{i}", new_model(SMALL, seed=i)) for i in range(2)]
+    np.testing.assert_allclose(plan(ens, obs), np.mean([plan(m, obs) for m in mine], 0),
+                               rtol=1e-5, atol=1e-5)  # fmt: skip
+    with pytest.raises(CheckpointError, match="no such checkpoint"):
+        ensemble_policy("missing", [paths[0], tmp_path / "nowhere.msgpack"])
+
+
+def test_an_ensemble_of_copies_drives_as_its_member(embedding):
+    """In the closed loop (the split path: the session's world program, the ensemble's own
+    small program), two copies of a model score every pair as the model does."""
+    member = tiny("copied", 3, embedding)
+    suite = load_suite().select(["pe_0001", "lww_0001"])
+    one = evaluate([member], suite=suite, progress=False, path="split").route_table
+    two = evaluate([ensemble_policy("two-copies", [member, member])], suite=suite,
+                   progress=False, path="split").route_table  # fmt: skip
+    cols = [c for c in one.columns if c.startswith("CUS")]
+    assert cols
+    np.testing.assert_allclose(two[cols].to_numpy(float), one[cols].to_numpy(float), atol=1e-3)
+
+
+@pytest.mark.parametrize("case, error, match", [
+    ("empty", ValueError, "at least one"),
+    ("a string", ValueError, "sequence"),
+    ("not learned", TypeError, "'coop': not a learned model"),
+    ("other width", ValueError, "'wide': architecture"),
+    ("other sensors", ValueError, "'rig': sensors"),
+    ("other tables", ValueError, "'shifted': its token-embedding table"),
+])  # fmt: skip
+def test_members_that_cannot_be_averaged_are_named(case, error, match, embedding):
+    base = tiny("base", 0, embedding)
+    members = {
+        "empty": [],
+        "a string": "learned-coop",
+        "not learned": [get_policy("coop")],
+        "other width": [base, tiny("wide", 1, embedding, ModelConfig(width=8, heads=2))],
+        "other sensors": [base, tiny("rig", 1, embedding, ModelConfig(width=16, heads=2,
+                                                                       rig="surround"))],
+        "other tables": [base, model_policy("shifted", new_model(SMALL, seed=1),
+                                            embedding=embedding + 1.0)],
+    }[case]  # fmt: skip
+    with pytest.raises(error, match=match):
+        ensemble_policy("bad", members)
+
+
+def test_stacked_weights_keep_the_members_in_order(embedding):
+    members = [tiny(f"m{i}", i, embedding) for i in range(3)]
+    stacked = ensemble_policy("ens", members).init(None).model
+    for i, m in enumerate(members):
+        own = m.init(None).model
+        for s, w in zip(jax.tree.leaves(stacked), jax.tree.leaves(own), strict=True):
+            np.testing.assert_array_equal(np.asarray(s)[i], np.asarray(w))
