@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import collections
 import copy
+import importlib
 import json
 
 import jax
@@ -19,6 +20,7 @@ from lantern_jax.scenarios.premise import PREMISE_NONE, hazard_visible_at_warnin
 from lantern_jax.scenarios.spec import content_hash
 from lantern_jax.scenarios.suite import (
     SUITE_ID,
+    SuiteError,
     _shipped_path,
     load_suite,
     static_check,
@@ -203,3 +205,42 @@ def test_soft_safety_and_cus_gradients_through_whole_routes(suite):
     assert 0.0 < s_a < 1.0 and 0.0 < cus <= 100.0
     assert np.isfinite(d_s_a) and abs(d_s_a) > 1e-4
     assert np.isfinite(d_cus) and abs(d_cus) > 1e-3
+
+
+def test_a_suite_loaded_again_is_equal_and_the_callers_own():
+    """A process validates a manifest once (by its text and the registered families) and hands
+    every caller a copy: equal, but changing one does not change the next load."""
+    a, b = load_suite(), load_suite()
+    assert a == b and a is not b
+    a.pairs[0].params["route_length"] = -1.0
+    a.report["changed"] = True
+    c = load_suite()
+    assert c == b and "changed" not in c.report
+
+
+def test_an_edited_manifest_is_validated_again(tmp_path, raw):
+    path = tmp_path / "mine.json"
+    raw = copy.deepcopy(raw)
+    raw["suite_id"] = "mine"
+    path.write_text(json.dumps(raw), encoding="utf-8")
+    assert len(load_suite(path)) == 120
+    raw["pairs"][0]["params"]["route_length"] = 1e6  # out of range: the file must fail now
+    path.write_text(json.dumps(raw), encoding="utf-8")
+    with pytest.raises(SuiteError, match="route_length"):
+        load_suite(path)
+
+
+def test_a_suite_whose_families_are_no_longer_registered_is_refused_again():
+    """The registered families are part of what a validation read: once the unseen hazards
+    are forgotten, their suite is refused as it would be in a new process."""
+    from lantern_jax.scenarios import registry
+
+    state = registry.snapshot()  # before anything registers the unseen hazards
+    transfer = importlib.import_module("lantern_jax.apps.transfer")
+    unseen = importlib.import_module("lantern_jax.scenarios.unseen")
+    for record in (unseen.CYCLIST, unseen.EMERGENCY, unseen.REVERSING):
+        registry.register_family(record)  # the held entry again if the import registered it
+    assert len(load_suite(transfer.UNSEEN_SUITE_ID)) > 0
+    registry.restore(state)
+    with pytest.raises(SuiteError, match="register"):
+        load_suite(transfer.UNSEEN_SUITE_ID)

@@ -23,6 +23,8 @@ before anything is built, and names the file, the pair and the field of every pr
 
 from __future__ import annotations
 
+import collections
+import copy
 import dataclasses
 import hashlib
 import json
@@ -39,6 +41,7 @@ from lantern_jax.io.files import atomic_write
 from lantern_jax.scenarios.adversary import uniform_tracks
 from lantern_jax.scenarios.assemble import host_arrays
 from lantern_jax.scenarios.families import build_pair, param_errors, validate_params
+from lantern_jax.scenarios.family_registry import FAMILY_REGISTRY
 from lantern_jax.scenarios.premise import premise_error
 from lantern_jax.scenarios.spec import MIN_RECOVERY_M, SEED_MAX, content_hash
 from lantern_jax.types.world import Scenario
@@ -473,6 +476,24 @@ def _manifest_errors(raw: object) -> tuple[list[str], Suite | None]:
     return [], Suite(sid, tuple(pairs), got, int(seed), dict(report))
 
 
+#: Suites this process has validated, by what their validation read: the manifest's text (its
+#: SHA-256) and the registered families (their entries, held here so that their ids stay
+#: theirs).  Validating the built-in suite's 120 pairs takes about 0.4 s on a 2-core CPU (each
+#: family's feasibility rules), and a process loads a suite many times (every evaluation that
+#: names it, every subset); an edited file or another set of families is another key.  At most
+#: :data:`VALIDATED_SUITES_KEPT` are kept, the least recently loaded dropped first.
+_VALIDATED: collections.OrderedDict[tuple, tuple[tuple, Suite]] = collections.OrderedDict()
+VALIDATED_SUITES_KEPT = 8
+
+
+def _validation_key(text: str) -> tuple[tuple, tuple]:
+    """``(key, entries)``: the cache key of a manifest's validation and the family entries it
+    names by id."""
+    entries = FAMILY_REGISTRY.entries()
+    digest = hashlib.sha256(text.encode("utf-8")).hexdigest()
+    return (digest, tuple(map(id, entries)), family_codes.registered()), entries
+
+
 def load_suite(name_or_path: str | Path = SUITE_ID) -> Suite:
     """Load a suite manifest (a shipped suite id or a JSON path) and validate all of it.
 
@@ -511,16 +532,24 @@ def load_suite(name_or_path: str | Path = SUITE_ID) -> Suite:
         if isinstance(e, FileNotFoundError):
             raise
         raise SuiteError(source, [f"suite {source}: cannot read ({e})"]) from None
-    try:
-        raw = json.loads(text, object_pairs_hook=_json_object)
-    except json.JSONDecodeError as e:
-        raise SuiteError(source, [f"suite {source}: not valid JSON ({e})"]) from None
-    unregistered = _unregistered_families(raw)
-    if unregistered:
-        raise SuiteError(source, [f"suite {source}: {unregistered}"])
-    errs, suite = _manifest_errors(raw)
-    if errs:
-        raise SuiteError(source, [f"suite {source}: {m}" for m in errs])
+    key, entries = _validation_key(text)
+    if key in _VALIDATED:
+        _VALIDATED.move_to_end(key)
+        suite = copy.deepcopy(_VALIDATED[key][1])  # the caller's own, as a fresh load gives
+    else:
+        try:
+            raw = json.loads(text, object_pairs_hook=_json_object)
+        except json.JSONDecodeError as e:
+            raise SuiteError(source, [f"suite {source}: not valid JSON ({e})"]) from None
+        unregistered = _unregistered_families(raw)
+        if unregistered:
+            raise SuiteError(source, [f"suite {source}: {unregistered}"])
+        errs, suite = _manifest_errors(raw)
+        if errs:
+            raise SuiteError(source, [f"suite {source}: {m}" for m in errs])
+        _VALIDATED[key] = (entries, copy.deepcopy(suite))
+        while len(_VALIDATED) > VALIDATED_SUITES_KEPT:
+            _VALIDATED.popitem(last=False)
     shipped = shipped_suite_hash(suite.suite_id) if looks_like_path else None
     if shipped is not None and suite.suite_sha256 != shipped:
         raise SuiteError(source, [
