@@ -314,14 +314,16 @@ def test_every_shipped_model_is_registered_and_loads():
     from lantern_jax.sim.engine import Program
 
     world = straight_scene([], length=120.0, speed=8.0)
+    state = jax.jit(init_state)(world)
+    see = jax.jit(observe, static_argnums=2)  # one program per sensor declaration
     assert set(SHIPPED_MODELS) <= set(policy_names())
     for name, desc in SHIPPED_MODELS.items():
         pol = get_policy(name)
         assert Program(get_policy(name)) == Program(pol)
         assert pol.name == name and pol.description == desc
         assert read_meta(shipped_path(name))["train_config"]["name"] == name
-        obs = observe(world, init_state(world), pol.sensors)
-        plan = pol.act(pol.init(jax.random.PRNGKey(0)), obs)
+        obs = see(world, state, pol.sensors)
+        plan = jax.jit(pol.act)(pol.init(jax.random.PRNGKey(0)), obs)
         assert plan.shape == (NUM_WAYPOINTS, 2) and bool(jnp.all(jnp.isfinite(plan)))
 
 
