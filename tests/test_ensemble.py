@@ -50,13 +50,13 @@ def plan(policy, obs) -> np.ndarray:
 
 
 def test_the_plan_is_the_mean_of_the_members_plans(obs, embedding):
-    members = [tiny(f"m{i}", i, embedding) for i in range(3)]
+    members = [tiny(f"m{i}", i, embedding) for i in range(2)]
     ens = ensemble_policy("ens", members)
     plans = [plan(m, obs) for m in members]
     assert not np.allclose(plans[0], plans[1])  # the members differ, so the mean is a test
-    np.testing.assert_allclose(plan(ens, obs), np.mean(plans, axis=0), rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(plan(ens, obs), (plans[0] + plans[1]) / 2, rtol=1e-5, atol=1e-5)
     assert ens.sensors == members[0].sensors and not ens.stateful
-    assert "m0, m1, m2" in ens.description
+    assert "m0, m1" in ens.description
 
 
 def test_one_member_is_that_member(obs, embedding):
@@ -87,7 +87,9 @@ def test_ensembles_of_one_architecture_share_one_program(obs, embedding):
 def test_gradient_reaches_every_member(obs, embedding):
     ens = ensemble_policy("ens", [tiny("a", 0, embedding), tiny("b", 1, embedding)])
     params = ens.init(jax.random.PRNGKey(0))
-    grads = jax.grad(lambda w: jnp.sum(ensemble_act(params.replace(model=w), obs)))(params.model)
+    # the parameters an argument (their 33 MB text table is no constant of the program)
+    grad = jax.jit(jax.grad(lambda w, p, o: jnp.sum(ensemble_act(p.replace(model=w), o))))
+    grads = grad(params.model, params, obs)
     for g in jax.tree.leaves(grads):
         assert np.all(np.isfinite(np.asarray(g)))
     per_member = sum(np.abs(np.asarray(g)).reshape(2, -1).sum(1) for g in jax.tree.leaves(grads))
@@ -109,9 +111,9 @@ def test_members_from_checkpoint_files(tmp_path, obs, embedding):
 
 def test_an_ensemble_of_copies_drives_as_its_member(embedding):
     """In the closed loop (the split path: the session's world program, the ensemble's own
-    small program), two copies of a model score every pair as the model does."""
+    small program), two copies of a model score the pair as the model does."""
     member = tiny("copied", 3, embedding)
-    suite = load_suite().select(["pe_0001", "lww_0001"])
+    suite = load_suite().select(["lww_0001"])
     one = evaluate([member], suite=suite, progress=False, path="split").route_table
     two = evaluate([ensemble_policy("two-copies", [member, member])], suite=suite,
                    progress=False, path="split").route_table  # fmt: skip
@@ -129,17 +131,17 @@ def test_an_ensemble_of_copies_drives_as_its_member(embedding):
     ("other tables", ValueError, "'shifted': its token-embedding table"),
 ])  # fmt: skip
 def test_members_that_cannot_be_averaged_are_named(case, error, match, embedding):
-    base = tiny("base", 0, embedding)
+    base = lambda: tiny("base", 0, embedding)  # noqa: E731
     members = {
-        "empty": [],
-        "a string": "learned-coop",
-        "not learned": [get_policy("coop")],
-        "other width": [base, tiny("wide", 1, embedding, ModelConfig(width=8, heads=2))],
-        "other sensors": [base, tiny("rig", 1, embedding, ModelConfig(width=16, heads=2,
-                                                                       rig="surround"))],
-        "other tables": [base, model_policy("shifted", new_model(SMALL, seed=1),
-                                            embedding=embedding + 1.0)],
-    }[case]  # fmt: skip
+        "empty": lambda: [],
+        "a string": lambda: "learned-coop",
+        "not learned": lambda: [get_policy("coop")],
+        "other width": lambda: [base(), tiny("wide", 1, embedding, ModelConfig(width=8, heads=2))],
+        "other sensors": lambda: [base(), tiny("rig", 1, embedding,
+                                               ModelConfig(width=16, heads=2, rig="surround"))],
+        "other tables": lambda: [base(), model_policy("shifted", new_model(SMALL, seed=1),
+                                                      embedding=embedding + 1.0)],
+    }[case]()  # fmt: skip
     with pytest.raises(error, match=match):
         ensemble_policy("bad", members)
 
