@@ -339,6 +339,27 @@ def select(tree, i):
 
 
 @pytest.fixture(scope="session")
+def obs():
+    """The observation of a policy reading the warning, at the start of a straight 120-m road
+    with a pedestrian emergence's markers (the learned models' and ensembles' tests)."""
+    from lantern_jax.scenarios.handmade import straight_scene
+    from lantern_jax.sim.observe import observe
+    from lantern_jax.sim.state import init_state
+
+    world = straight_scene([], length=120.0, speed=8.0, s_warn=22.0, s_event=31.0,
+                           s_conflict=40.0, hazard_index=0, clear_s=22.0)  # fmt: skip
+    return jax.jit(lambda w: observe(w, init_state(w), (WARNING,)))(world)
+
+
+@pytest.fixture(scope="session")
+def embedding():
+    """(V, D) float32, the shipped token-embedding table as a device array."""
+    from lantern_jax.types.language import load_embedding
+
+    return jnp.asarray(load_embedding(), jnp.float32)
+
+
+@pytest.fixture(scope="session")
 def family_pairs():
     """One (world_a, world_b, meta) pair per family, fixed seeds, varied weather."""
     from lantern_jax.core.constants import FAMILIES, WEATHERS

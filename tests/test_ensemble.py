@@ -19,26 +19,9 @@ from lantern_jax.policies.learned.checkpoint import (
 from lantern_jax.policies.learned.ensemble import ensemble_act, ensemble_policy
 from lantern_jax.policies.learned.model import ModelConfig
 from lantern_jax.policies.registry import get_policy
-from lantern_jax.scenarios.handmade import straight_scene
 from lantern_jax.scenarios.suite import load_suite
-from lantern_jax.sim.observe import observe
-from lantern_jax.sim.state import init_state
 
 SMALL = ModelConfig(width=16, heads=2)
-
-
-@pytest.fixture(scope="module")
-def embedding():
-    from lantern_jax.types.language import load_embedding
-
-    return jnp.asarray(load_embedding(), jnp.float32)
-
-
-@pytest.fixture(scope="module")
-def obs():
-    world = straight_scene([], length=120.0, speed=8.0, s_warn=22.0, s_event=31.0,
-                           s_conflict=40.0, hazard_index=0, clear_s=22.0)  # fmt: skip
-    return jax.jit(lambda w: observe(w, init_state(w), ("warning",)))(world)
 
 
 def tiny(name: str, seed: int, embedding, config: ModelConfig = SMALL):

@@ -47,17 +47,8 @@ SMALL = ModelConfig(width=16, heads=2)
 
 
 @pytest.fixture(scope="module")
-def obs():
-    world = straight_scene([], length=120.0, speed=8.0, s_warn=22.0, s_event=31.0,
-                           s_conflict=40.0, hazard_index=0, clear_s=22.0)  # fmt: skip
-    return jax.jit(lambda w: observe(w, init_state(w), ("warning",)))(world)
-
-
-@pytest.fixture(scope="module")
-def tables():
-    from lantern_jax.types.language import load_embedding
-
-    return jnp.asarray(load_embedding(), jnp.float32), jnp.asarray(nav_token_table())
+def tables(embedding):
+    return embedding, jnp.asarray(nav_token_table())
 
 
 def warned(obs, text_id: int, pos=(30.0, 0.0)):
