@@ -108,16 +108,42 @@ def test_distractor_sentences_replace_a_share_of_the_counterfactual_texts_only()
 def test_training_distractors_are_not_the_language_probes():
     from lantern_jax.scenarios.warning_texts import (
         DEFAULT_BANK,
+        DISTRACTOR_SETS,
         PROBE_IRRELEVANT,
         PROBE_NEGATED,
         TRAINING_DISTRACTORS,
+        TRAINING_LANE_DISTRACTORS,
     )
 
     bank_texts = {e.text for e in DEFAULT_BANK}
-    for text in TRAINING_DISTRACTORS:
+    for text in TRAINING_DISTRACTORS + TRAINING_LANE_DISTRACTORS:
         assert text not in bank_texts and text not in (PROBE_IRRELEVANT, PROBE_NEGATED)
         lower = text.lower()
-        assert not any(w in lower for w in ("nothing", "clear", "ego lane", "bakery", "bread"))
+        assert not any(w in lower for w in ("nothing", "clear", "bakery", "bread"))
+        assert "<FRONT_CAR_POS>" in text  # each states a position
+    # the position statements avoid the templates' phrase too; the lane set is made of it
+    assert not any("ego lane" in t.lower() for t in TRAINING_DISTRACTORS)
+    assert all(("ego lane" in t) or ("turn path" in t) for t in TRAINING_LANE_DISTRACTORS)
+    assert DISTRACTOR_SETS["position"] == TRAINING_DISTRACTORS
+    assert DISTRACTOR_SETS["position_and_lane"] == TRAINING_DISTRACTORS + TRAINING_LANE_DISTRACTORS
+
+
+def test_the_lane_distractor_set_extends_the_position_set():
+    small, small_ids = cf.distractor_bank("position")
+    large, large_ids = cf.distractor_bank("position_and_lane")
+    assert len(large_ids) == len(small_ids) + 8
+    np.testing.assert_array_equal(large_ids[: len(small_ids)], small_ids)
+    assert [large[int(i)].text for i in small_ids] == [small[int(i)].text for i in small_ids]
+    with pytest.raises(ValueError, match="distractor_texts: 'lanes' not one of"):
+        cf.distractor_bank("lanes")
+    ex, families, routes = _examples(240)
+    out, variant = cf.counterfactual_examples(ex, families, routes, 0.5, 0, distractors=1.0,
+                                              distractor_texts="position_and_lane")  # fmt: skip
+    from lantern_jax.scenarios.warnings import text_tables
+
+    rows = {tuple(t): i for i, t in enumerate(text_tables(large).tokens)}
+    told = {rows[tuple(t)] for t in out.obs["warning_tokens"][variant == 2]}
+    assert told <= set(large_ids.tolist()) and told & set(large_ids[len(small_ids):].tolist())
 
 
 def test_failure_visits_are_the_grid_and_the_seconds_before_a_collision():

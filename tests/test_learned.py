@@ -276,6 +276,10 @@ def write(tmp_path, text: str):
             "[train]\nname = 'x'\nrecipe = 'base'\nexclude_crossing = 1\n",
             r"train\.exclude_crossing must be str",
         ),
+        (
+            "[train]\nname = 'x'\nrecipe = 'base'\ndistractor_texts = 'lanes'\n",
+            r"train\.distractor_texts: 'lanes' not one of position, position_and_lane",
+        ),
         ("[evaluate]\nname = 'x'\n", r"\[train\]"),
         ("[train\nname = 'x'\n", "not valid TOML"),
     ],

@@ -190,6 +190,31 @@ TRAINING_DISTRACTORS: tuple[str, ...] = (
     f"The museum at position {TOKEN} is closed on Mondays.",
 )
 
+#: More training-only distractors (the ``distractor_texts = "position_and_lane"`` setting of the
+#: closed-loop recipe): negations and irrelevant statements that use the actionable templates'
+#: own phrases ("the ego lane", "the ego left-turn path", "cut into", "cross").  Every
+#: actionable template and most paraphrases say "the ego lane" or "your lane", so a model that
+#: never sees the phrase in a sentence asking for no reaction can take the phrase alone as the
+#: hazard cue.  These still are not the probes and use none of their own words ("Nothing",
+#: "clear", "bakery", "bread"): the held-out negated probe shares with them only the phrases
+#: every actionable template has, and its negation words stay unseen.
+TRAINING_LANE_DISTRACTORS: tuple[str, ...] = (
+    f"No vehicle at position {TOKEN} will cut into the ego lane.",
+    f"No pedestrian at position {TOKEN} is about to enter the ego lane.",
+    f"The ego lane at position {TOKEN} is open; no object is blocking it.",
+    f"No wrong-way vehicle at position {TOKEN} will cross the ego left-turn path.",
+    f"The ego right-turn path at position {TOKEN} has no crossing traffic.",
+    f"The flower shop at position {TOKEN} is beside the ego lane.",
+    f"A mural at position {TOKEN} faces the ego lane.",
+    f"The ego lane passes a library at position {TOKEN}.",
+)
+
+#: The distractor sets a closed-loop recipe may draw from (``distractor_texts``).
+DISTRACTOR_SETS: dict[str, tuple[str, ...]] = {
+    "position": TRAINING_DISTRACTORS,
+    "position_and_lane": TRAINING_DISTRACTORS + TRAINING_LANE_DISTRACTORS,
+}
+
 
 @dataclass(frozen=True)
 class WarningText:

@@ -18,8 +18,8 @@ carries — the paper's three learned rows:
   relabelled visit so far (``closed_loop_mix`` of every batch) plus counterfactual warnings
   (``counterfactual``: Route B frames told another family's text, a non-actionable message or
   an empty text, with the ordinary trajectory; ``distractors`` of them a training-only negated
-  or irrelevant sentence that states a position instead;
-  :mod:`lantern_jax.apps.training.counterfactual`).
+  or irrelevant sentence that states a position instead, drawn from the set
+  ``distractor_texts`` names; :mod:`lantern_jax.apps.training.counterfactual`).
   With ``failure_window_s > 0`` each round also keeps the visits of the last seconds before
   every collision of the driven executions, every ``failure_every_s`` (recovery states).
 
@@ -40,6 +40,7 @@ from lantern_jax.apps.dataset.store import EXCLUDE_CROSSING
 from lantern_jax.io.config_file import ConfigFileError, check_keys, read_table, typed_value
 from lantern_jax.policies.learned.features import RIGS
 from lantern_jax.policies.names import name_problem
+from lantern_jax.scenarios.warning_texts import DISTRACTOR_SETS
 
 RECIPES = ("base", "coop", "surround", "distance", "closed_loop")
 #: The table of a training config.
@@ -85,6 +86,9 @@ class TrainConfig:
     closed_loop_mix: float = 0.3  # share of every batch drawn from the relabelled visits
     counterfactual: float = 0.5  # counterfactual warning frames per Route B frame
     distractors: float = 0.0  # share of those told a training distractor sentence instead
+    # which sentences: a key of scenarios.warning_texts.DISTRACTOR_SETS ("position": the twelve
+    # position statements; "position_and_lane": those and eight in the templates' own phrases)
+    distractor_texts: str = "position"
     # s: also keep the visits this long before each driven execution's first collision, every
     # failure_every_s (the states that lead the learner into a failure); 0 keeps none
     failure_window_s: float = 0.0
@@ -182,6 +186,9 @@ def _range_problem(cfg: TrainConfig) -> tuple[str, str] | None:
     if cfg.exclude_crossing not in EXCLUDE_CROSSING:
         problems.append(("exclude_crossing", f"{cfg.exclude_crossing!r} not one of "
                                              f"{', '.join(EXCLUDE_CROSSING)}"))  # fmt: skip
+    if cfg.distractor_texts not in DISTRACTOR_SETS:
+        problems.append(("distractor_texts", f"{cfg.distractor_texts!r} not one of "
+                                             f"{', '.join(DISTRACTOR_SETS)}"))  # fmt: skip
     if cfg.rig not in RIGS:
         problems.append(("rig", f"{cfg.rig!r} not one of {', '.join(RIGS)}"))
     elif cfg.recipe == "surround" and cfg.rig != "surround":

@@ -11,12 +11,15 @@ and keeps its label — the expert's ordinary trajectory:
   drawn near the ego (:data:`NEAR_X_M`, :data:`NEAR_Y_M`), where a true warning asks to react;
 * **a non-actionable message** — one of the bank's non-actionable texts (a hazard off the
   route; no position);
-* **a distractor sentence** (only with ``distractors > 0``) — one of
-  :data:`~lantern_jax.scenarios.warning_texts.TRAINING_DISTRACTORS`, a negation ("There is no
+* **a distractor sentence** (only with ``distractors > 0``) — one of the set
+  ``distractor_texts`` names in
+  :data:`~lantern_jax.scenarios.warning_texts.DISTRACTOR_SETS`: a negation ("There is no
   stopped vehicle at position (x, y).") or an irrelevant statement ("The cafe at position
-  (x, y) opens at nine ..."), its position drawn near the ego as above.  These teach that a
-  stated position alone is no reason to react; the language diagnostic's probes are other
-  sentences, so they stay unseen.
+  (x, y) opens at nine ..."), its position drawn near the ego as above; the
+  ``"position_and_lane"`` set adds ones in the templates' own phrases ("No vehicle at
+  position (x, y) will cut into the ego lane.").  These teach that a stated position (or the
+  phrase "the ego lane") alone is no reason to react; the language diagnostic's probes are
+  other sentences, so they stay unseen.
 
 An **empty text** needs no frame of its own: the observation carries no token, which a policy
 cannot tell from no warning (:mod:`lantern_jax.scenarios.warnings`), so every ordinary frame
@@ -30,7 +33,7 @@ import pandas as pd
 
 from lantern_jax.apps.training.data import Examples
 from lantern_jax.core.constants import FAMILIES
-from lantern_jax.scenarios.warning_texts import TRAINING_DISTRACTORS
+from lantern_jax.scenarios.warning_texts import DISTRACTOR_SETS
 from lantern_jax.scenarios.warnings import DEFAULT_BANK, TextBank, text_tables
 from lantern_jax.types.language import round_number
 
@@ -53,17 +56,25 @@ def nonactionable_ids() -> np.ndarray:
     return np.asarray([e.text_id for e in DEFAULT_BANK if e.kind == "non_actionable"], np.int32)
 
 
-def distractor_bank() -> tuple[TextBank, np.ndarray]:
-    """The built-in bank with :data:`TRAINING_DISTRACTORS` appended (as non-actionable texts),
-    and their (12,) int32 text ids in it.  The built-in ids keep their rows, so a table of this
-    bank gives every other counterfactual text the tokens of the built-in bank's."""
-    bank, ids = DEFAULT_BANK.with_unrelated_texts(TRAINING_DISTRACTORS)
+def distractor_bank(texts: str = "position") -> tuple[TextBank, np.ndarray]:
+    """The built-in bank with the distractor set ``texts`` (a key of
+    :data:`~lantern_jax.scenarios.warning_texts.DISTRACTOR_SETS`) appended as non-actionable
+    texts, and their (K,) int32 text ids in it.  The built-in ids keep their rows, so a table
+    of this bank gives every other counterfactual text the tokens of the built-in bank's.
+
+    Raises:
+        ValueError: for a set name not in ``DISTRACTOR_SETS``.
+    """
+    if texts not in DISTRACTOR_SETS:
+        raise ValueError(f"distractor_texts: {texts!r} not one of {', '.join(DISTRACTOR_SETS)}")
+    bank, ids = DEFAULT_BANK.with_unrelated_texts(DISTRACTOR_SETS[texts])
     return bank, np.asarray(ids, np.int32)
 
 
 def counterfactual_examples(
     ex: Examples, families: np.ndarray, routes: np.ndarray, share: float, seed: int,
     distractors: float = 0.0,
+    distractor_texts: str = "position",
 ) -> tuple[Examples, np.ndarray]:
     """Counterfactual copies of a seeded ``share`` of the Route B examples.
 
@@ -76,6 +87,8 @@ def counterfactual_examples(
         distractors: share of the counterfactual frames, in [0, 1], told a distractor sentence
             instead (drawn from a stream of their own: with 0 the frames are exactly those of
             a run without the setting).
+        distractor_texts: which distractor set they are drawn from (a key of
+            :data:`~lantern_jax.scenarios.warning_texts.DISTRACTOR_SETS`).
 
     Returns:
         (the counterfactual examples — text replaced, labels kept, not ordinary driving —,
@@ -97,7 +110,7 @@ def counterfactual_examples(
     x[rows] = round_number(rng.uniform(*NEAR_X_M, len(rows)))
     y[rows] = round_number(rng.uniform(*NEAR_Y_M, len(rows)))
     if distractors > 0.0:
-        bank, distractor_ids = distractor_bank()
+        bank, distractor_ids = distractor_bank(distractor_texts)
         tables = text_tables(bank)  # the built-in rows unchanged
         rng_d = np.random.default_rng([seed, 43])
         told = rng_d.random(m) < distractors
@@ -116,10 +129,11 @@ def counterfactual_examples(
 
 
 def frame_counterfactuals(
-    ex: Examples, frames: pd.DataFrame, share: float, seed: int, distractors: float = 0.0
+    ex: Examples, frames: pd.DataFrame, share: float, seed: int, distractors: float = 0.0,
+    distractor_texts: str = "position",
 ) -> Examples:
     """:func:`counterfactual_examples` of dataset examples (``ex`` built from ``frames``)."""
     return counterfactual_examples(
         ex, frames["family"].to_numpy(str), frames["route"].to_numpy(str), share, seed,
-        distractors,
+        distractors, distractor_texts,
     )[0]
