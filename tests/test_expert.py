@@ -215,7 +215,9 @@ def test_expert_does_not_brake_for_a_vehicle_that_braking_cannot_avoid():
     behind = ActorSpec(path=np.array([[-7.0, 0.0], [200.0, 0.0]]), v_pre=12.0)
     expert = get_policy("expert")
     pp = expert.init(jax.random.PRNGKey(0))
-    wps = np.asarray(expert.act(pp, _expert_observation(straight_scene([behind], speed=8.0))))
+    wps = np.asarray(
+        jax.jit(expert.act)(pp, _expert_observation(straight_scene([behind], speed=8.0)))
+    )
     assert wps[-1, 0] > 19.0
 
 
@@ -230,7 +232,7 @@ def test_expert_waits_for_a_vehicle_that_driving_on_cannot_escape_either():
     expert = get_policy("expert")
     pp = expert.init(jax.random.PRNGKey(0))
     obs = _expert_observation(scene)
-    _, stop, go_tight = E.overlaps(pp, obs, jnp.float32(8.0))
+    _, stop, go_tight = jax.jit(E.overlaps)(pp, obs, jnp.float32(8.0))
     assert bool(stop[0]) and bool(go_tight[0])  # neither stopping nor driving on escapes
-    wps = np.asarray(expert.act(pp, obs))
+    wps = np.asarray(jax.jit(expert.act)(pp, obs))
     assert wps[-1, 0] < 0.5
