@@ -118,6 +118,11 @@ def fit(cfg: TrainConfig, model: Any, ex: Examples, batches: Batches, val_idx: n
     schedule = optax.warmup_cosine_decay_schedule(
         0.0, cfg.lr, max(1, int(cfg.warmup * steps)), steps, cfg.lr * 0.01
     )
+    # The schedule stays inside the compiled step, although its step counts then make every
+    # run's step (and every closed-loop round's, whose example count grows) a program of its
+    # own: learning rates computed apart and passed in (compiled alone or op by op) differ from
+    # the in-step values in the last bits on about half the steps, so the same config would no
+    # longer retrain the shipped weights bit for bit.
     tx = optax.adamw(schedule, weight_decay=cfg.weight_decay)
     opt_state = tx.init(params)
     loss_fn = make_loss(graphdef, cfg.rig)
