@@ -143,7 +143,7 @@ def test_the_lane_distractor_set_extends_the_position_set():
 
     rows = {tuple(t): i for i, t in enumerate(text_tables(large).tokens)}
     told = {rows[tuple(t)] for t in out.obs["warning_tokens"][variant == 2]}
-    assert told <= set(large_ids.tolist()) and told & set(large_ids[len(small_ids):].tolist())
+    assert told <= set(large_ids.tolist()) and told & set(large_ids[len(small_ids) :].tolist())
 
 
 def test_failure_visits_are_the_grid_and_the_seconds_before_a_collision():

@@ -183,8 +183,9 @@ def _dataset_examples(cfg: TrainConfig) -> Examples:
     card = read_card(Path(cfg.dataset))
     ex = recipe_examples(frames, card, dataclasses.replace(cfg, recipe="distance"))
     plain = ex.take(np.arange(len(frames)))  # the frames themselves, before the far copies
-    cf = frame_counterfactuals(plain, frames, cfg.counterfactual, cfg.seed, cfg.distractors,
-                              cfg.distractor_texts)
+    cf = frame_counterfactuals(
+        plain, frames, cfg.counterfactual, cfg.seed, cfg.distractors, cfg.distractor_texts
+    )
     return concat([ex, cf])
 
 
