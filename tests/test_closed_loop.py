@@ -129,6 +129,8 @@ def test_training_distractors_are_not_the_language_probes():
 
 
 def test_the_lane_distractor_set_extends_the_position_set():
+    from lantern_jax.scenarios.warnings import text_tables
+
     small, small_ids = cf.distractor_bank("position")
     large, large_ids = cf.distractor_bank("position_and_lane")
     assert len(large_ids) == len(small_ids) + 8
@@ -139,8 +141,6 @@ def test_the_lane_distractor_set_extends_the_position_set():
     ex, families, routes = _examples(240)
     out, variant = cf.counterfactual_examples(ex, families, routes, 0.5, 0, distractors=1.0,
                                               distractor_texts="position_and_lane")  # fmt: skip
-    from lantern_jax.scenarios.warnings import text_tables
-
     rows = {tuple(t): i for i, t in enumerate(text_tables(large).tokens)}
     told = {rows[tuple(t)] for t in out.obs["warning_tokens"][variant == 2]}
     assert told <= set(large_ids.tolist()) and told & set(large_ids[len(small_ids) :].tolist())
