@@ -80,7 +80,7 @@ def _variants(sig, switches):
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--slots", type=int, default=split.SPLIT_SLOTS)
+    ap.add_argument("--slots", type=int, default=split.split_slots())
     ap.add_argument("--rounds", type=int, default=7)
     ap.add_argument("--calls", type=int, default=50)
     args = ap.parse_args()

@@ -112,7 +112,7 @@ def threads(fns, ticks: int) -> tuple[float, float]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--slots", type=int, default=split.SPLIT_SLOTS)
+    ap.add_argument("--slots", type=int, default=split.split_slots())
     ap.add_argument("--ticks", type=int, default=400)
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--cases", default="2x48,1x48,1x96,2x24",

@@ -10,6 +10,7 @@ compiles only its policy's own small program.
 from __future__ import annotations
 
 import dataclasses
+import os
 
 import jax
 import jax.numpy as jnp
@@ -221,6 +222,24 @@ def test_two_runs_give_the_same_bits():
     jax.tree.map(np.testing.assert_array_equal, one, two)
 
 
+def test_the_layout_is_the_backends(monkeypatch):
+    """On the CPU one worker per core steps SPLIT_SLOTS executions each; on another backend (a
+    GPU, whose one device runs the threads' calls one after another) one worker steps the
+    accelerator layout's slots.  The environment variable sets the workers on either, and a
+    bad value is refused naming it."""
+    monkeypatch.delenv(split.WORKERS_ENV, raising=False)
+    assert split.split_slots("cpu") == split.SPLIT_SLOTS
+    assert split.worker_count("cpu") == len(os.sched_getaffinity(0))
+    workers, slots = split.SPLIT_LAYOUT_ACCELERATOR
+    assert (split.worker_count("gpu"), split.split_slots("gpu")) == (workers, slots)
+    assert slots >= SUITE_BATCH_SHAPE[0]  # the built-in suite in one call per tick
+    monkeypatch.setenv(split.WORKERS_ENV, "3")
+    assert split.worker_count("gpu") == split.worker_count("cpu") == 3
+    monkeypatch.setenv(split.WORKERS_ENV, "0")
+    with pytest.raises(ValueError, match=split.WORKERS_ENV):
+        split.worker_count("gpu")
+
+
 def test_executions_are_dealt_longest_first_round_robin():
     timeout = np.asarray([10.0, 40.0, 20.0, 40.0, 30.0])
     dealt = split.deal(timeout, 2)
@@ -231,21 +250,21 @@ def test_executions_are_dealt_longest_first_round_robin():
 # ---------------------------------------------------------------------------------------------
 # the path's choice
 # ---------------------------------------------------------------------------------------------
-def test_the_path_depends_on_the_policy_the_batch_and_the_backend_only():
+def test_the_path_depends_on_the_policy_and_the_batch_only():
     """The package's policies run fused (their programs are kept), a policy from outside the
-    package split; GPUs and bulk batches fused; an explicit request wins.  Nothing cached
-    enters the choice, so a run gives the same bits whatever ran before it."""
+    package split; bulk batches fused; an explicit request wins.  Nothing cached and not the
+    backend enters the choice, so a run gives the same bits whatever ran before it."""
     from lantern_jax.policies.registry import get_policy
     from lantern_jax.sim.switch import policy_switch
 
     mine = Policy("p", lambda k: None, lambda p, o: jnp.zeros((NUM_WAYPOINTS, 2)))
     coop = get_policy("coop")
     n = 360
-    assert choose_path(mine, n, backend="cpu").path == "split"
-    kept = choose_path(coop, n, backend="cpu")
+    assert choose_path(mine, n).path == "split"
+    kept = choose_path(coop, n)
     assert kept.path == "fused" and "compiled once and kept" in kept.reason
-    assert choose_path(mine, n, backend="gpu").path == "fused"
-    bulk = choose_path(mine, engine.SPLIT_MAX_EXECUTIONS + 1, backend="cpu")
+    assert choose_path(mine, engine.SPLIT_MAX_EXECUTIONS).path == "split"
+    bulk = choose_path(mine, engine.SPLIT_MAX_EXECUTIONS + 1)
     assert bulk.path == "fused" and "bulk" in bulk.reason
     assert choose_path(coop, n, "split").path == "split"
     assert choose_path(mine, n, "fused").path == "fused"

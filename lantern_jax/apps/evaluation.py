@@ -477,7 +477,7 @@ def evaluate(
             :func:`~lantern_jax.sim.settings.default_settings`, the paper's).
         path: how each policy is rolled out: ``"fused"`` (world and policy one compiled
             program), ``"split"`` (the world program shared by every policy, the policy's own
-            small program) or ``"auto"`` (the package's policies, GPUs and bulk batches fused, a
+            small program) or ``"auto"`` (the package's policies and bulk batches fused, a
             policy from outside the package split: :func:`~lantern_jax.sim.engine.choose_path`,
             which never depends on what is cached); recorded per policy in the run record.
             The two paths' results agree to float32 rounding.

@@ -45,10 +45,10 @@ from lantern_jax.sim.programs import (  # noqa: F401  (MAX_PROGRAMS, remember: r
 from lantern_jax.sim.rollout import rollout_scheduled_parallel, with_carry
 from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings, default_settings
 from lantern_jax.sim.split import (  # noqa: F401  (initial_states: re-exported)
-    SPLIT_SLOTS,
     initial_states,
     prepare,
     run_split,
+    split_slots,
     start_states,
 )
 from lantern_jax.sim.step import Driver
@@ -322,20 +322,23 @@ def fused_kept(policy: Driver) -> bool:
     return program_store.describable(("rollout", program_identity(policy)))
 
 
-def choose_path(policy: Driver, n: int, requested: str = "auto",
-                backend: str | None = None) -> PathChoice:  # fmt: skip
+def choose_path(policy: Driver, n: int, requested: str = "auto") -> PathChoice:
     """The rollout :func:`run_executions` takes for ``n`` executions of ``policy``.
 
-    ``"auto"`` depends on the policy, the batch and the backend only -- never on what is
+    ``"auto"`` depends on the policy and the batch only -- never on the backend or on what is
     compiled or cached -- so the same run gives the same bits whatever ran before it:
 
-    * the fused program when the split path cannot run the driver (:func:`split_possible`), on
-      a backend other than the CPU (a dispatch per tick costs more there than a compile), for a
-      bulk batch (over :data:`SPLIT_MAX_EXECUTIONS`: the split rollout's extra time exceeds the
+    * the fused program when the split path cannot run the driver (:func:`split_possible`), for
+      a bulk batch (over :data:`SPLIT_MAX_EXECUTIONS`: the split rollout's extra time exceeds the
       compile), or for a policy whose fused program is kept between runs (:func:`fused_kept`:
       the package's own policies, compiled once per machine);
     * else the split path: a policy defined outside the package -- the one being written --
       compiles only its own program beside the world program, which is compiled once and kept.
+      This holds on a GPU too: there a tick of the split path costs more than on the CPU
+      relative to the fused loop (the suite's split rollout 3.0 s against 0.49 s fused on an
+      H200), but the fused compile it saves costs more still (8 s; a new policy's whole-suite
+      table 7.1 s split against 12.0 s fused with the world program stored,
+      ``benchmarks/results/gpu_h200.md``).
 
     Raises:
         ValueError: for a path not in :data:`PATHS`, or ``"split"`` where it cannot run.
@@ -349,11 +352,8 @@ def choose_path(policy: Driver, n: int, requested: str = "auto",
         return PathChoice("split", "asked for")
     if requested == "fused":
         return PathChoice("fused", "asked for")
-    backend = backend or jax.default_backend()
     if why_not:
         return PathChoice("fused", why_not)
-    if backend != "cpu":
-        return PathChoice("fused", f"{backend} backend")
     if n > SPLIT_MAX_EXECUTIONS:
         return PathChoice("fused", f"bulk batch of {n} executions")
     if fused_kept(policy):
@@ -517,7 +517,7 @@ def warm_world(suite: Suite | str | None = None, settings: Settings | None = Non
     prepare([], execs.scenarios, settings)
     host = jax.tree.map(np.asarray, execs.scenarios)
     n = execs.num_executions
-    start = start_states(host, min(n, SPLIT_SLOTS), settings, {})
+    start = start_states(host, min(n, split_slots()), settings, {})
     metrics = finalize_batch(jax.tree.map(lambda x: x[:n], start.telemetry), settings)
     d_safe = np.asarray(host.config.d_safe, np.float64)[execs.block(ROUTE_B)]
     route_components(execs.take(metrics, CONDITIONS[0]), execs.take(metrics, ROUTE_B), d_safe,

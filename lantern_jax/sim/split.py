@@ -21,7 +21,8 @@ back, stores the states of the executions that ended and gives their slots the n
 ones (the same slot scheduling as the fused program's, longest timeout first).  One worker
 thread per CPU core steps its own slots (its own share of the executions, dealt before the run
 so that every execution always runs in the same slot of the same worker: the results do not
-depend on timing).  States, scenarios and observations cross the program boundary packed
+depend on timing); on a GPU one worker steps 360 slots (:data:`SPLIT_LAYOUT_ACCELERATOR`).
+States, scenarios and observations cross the program boundary packed
 (:mod:`lantern_jax.sim.packing`), so a call costs microseconds, not one per leaf.
 
 Results equal the fused rollout's to float32 rounding (the two programs are fused differently
@@ -60,10 +61,17 @@ from lantern_jax.types.world import Scenario
 
 Array = jax.Array
 
-#: Executions one worker steps together.  On a 2-core CPU 48 stepped the suite fastest of
-#: 24, 48 and 90 (``benchmarks/bench_iterate.py --slots``): the per-call overhead favours many
-#: slots, the tail of long executions few.
+#: Executions one worker steps together on the CPU.  On a 2-core CPU 48 stepped the suite
+#: fastest of 24, 48 and 90 (``benchmarks/bench_iterate.py --slots``): the per-call overhead
+#: favours many slots, the tail of long executions few.
 SPLIT_SLOTS = 48
+#: The split path's layout on a backend other than the CPU (a GPU): ``(worker threads, slots
+#: each steps together)``.  One device there runs the calls of every thread one after another,
+#: so one thread stepping the built-in suite's 360 executions at once wastes the least: on an
+#: H200 the suite's split rollout took 1.55 / 1.61 s as 1 x 360, 2.11 / 2.34 s as 2 x 180 and
+#: 5.67 / 6.12 s as one thread per core (8 x 48), the fused rollout 0.60 s (two interleaved
+#: rounds, ``benchmarks/bench_split_workers.py``, ``benchmarks/results/gpu_h200.md``).
+SPLIT_LAYOUT_ACCELERATOR = (1, 360)
 #: ``jit(vmap(init_state))``: the executions' states at ``t = 0`` (ego, actors, the first
 #: sensing, empty telemetry of the scoring settings' ring lengths).  It depends on neither the
 #: policy nor the path, so every policy, ablation and rollout path of a batch shape reuses one
@@ -71,8 +79,17 @@ SPLIT_SLOTS = 48
 initial_states = jax.jit(jax.vmap(init_state, in_axes=(0, None, None)))
 #: Ticks between two refills of ended slots (as the fused program's ``REFILL_TICKS``).
 SPLIT_REFILL_TICKS = 20
-#: Environment variable that sets the number of worker threads (default: one per core).
+#: Environment variable that sets the number of worker threads (default: one per core on the
+#: CPU, :data:`SPLIT_LAYOUT_ACCELERATOR`'s elsewhere).
 WORKERS_ENV = "LANTERN_JAX_SPLIT_WORKERS"
+
+
+def split_slots(backend: str | None = None) -> int:
+    """Executions one worker steps together on ``backend`` (default: JAX's default backend):
+    :data:`SPLIT_SLOTS` on the CPU, :data:`SPLIT_LAYOUT_ACCELERATOR`'s elsewhere.  The world
+    program's shape has it, so one backend compiles one world program per batch shape."""
+    return SPLIT_SLOTS if (backend or jax.default_backend()) == "cpu" else (
+        SPLIT_LAYOUT_ACCELERATOR[1])  # fmt: skip
 
 
 @dataclasses.dataclass(frozen=True)
@@ -293,13 +310,14 @@ def _declared(policy: Policy, observation: Layout, privileged: Layout, op: tuple
 
 
 def declared_observation(policy: Policy, scenario: Scenario, settings: Settings,
-                         slots: int = SPLIT_SLOTS) -> Any:  # fmt: skip
+                         slots: int | None = None) -> Any:  # fmt: skip
     """The shapes and dtypes (``ShapeDtypeStruct``) of the observation that ``policy``'s
     program is given on the split path, from the world signature of ``scenario`` (one
     execution, or ShapeDtypeStructs of one): the same structure as
     :func:`~lantern_jax.sim.observe.observe` of its sensors builds, without tracing the
-    observation again (the signature is computed once per machine)."""
-    sig = world_signature(scenario, settings, slots)
+    observation again (the signature is computed once per machine).  ``slots``: default
+    :func:`split_slots`."""
+    sig = world_signature(scenario, settings, slots or split_slots())
     groups = (*sig.observation.groups, *sig.privileged.groups)
     op = tuple(jax.ShapeDtypeStruct((size,), jnp.dtype(dt)) for dt, size in groups)
     return jax.eval_shape(lambda o: _declared(policy, sig.observation, sig.privileged, o), op)
@@ -360,9 +378,10 @@ def _pack_one(layout: Layout, tree: Any) -> tuple[np.ndarray, ...]:
     return tuple(b[0] for b in layout.pack_host(jax.tree.map(lambda x: np.asarray(x)[None], tree)))
 
 
-def worker_count() -> int:
-    """Worker threads of :func:`run_split`: ``$LANTERN_JAX_SPLIT_WORKERS``, else one per core
-    this process may run on.
+def worker_count(backend: str | None = None) -> int:
+    """Worker threads of :func:`run_split`: ``$LANTERN_JAX_SPLIT_WORKERS``, else on the CPU one
+    per core this process may run on, on another ``backend`` (default: JAX's default)
+    :data:`SPLIT_LAYOUT_ACCELERATOR`'s.
 
     Raises:
         ValueError: naming the variable when it is not a whole number >= 1.
@@ -373,6 +392,8 @@ def worker_count() -> int:
             raise ValueError(f"environment variable {WORKERS_ENV}: expected a whole number "
                              f">= 1, got {given!r}")  # fmt: skip
         return int(given)
+    if (backend or jax.default_backend()) != "cpu":
+        return SPLIT_LAYOUT_ACCELERATOR[0]
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
 
 
@@ -474,7 +495,7 @@ def run_split(
     settings: Settings,
     timings: dict | None = None,
     stage: Callable[[str], None] | None = None,
-    slots: int = SPLIT_SLOTS,
+    slots: int | None = None,
     workers: int | None = None,
 ) -> tuple[State, float]:
     """Roll out a batch with the world and the policy as two programs (module docstring).
@@ -490,7 +511,7 @@ def run_split(
             policy programs together) and ``"rollout"`` seconds.
         stage: called with ``"compiling"`` (only when a program must be compiled) and
             ``"<n> executions"``, for a progress display.
-        slots: executions per worker stepped together (:data:`SPLIT_SLOTS`).
+        slots: executions per worker stepped together (default :func:`split_slots`).
         workers: worker threads (default :func:`worker_count`; at most one per ``slots``
             executions).
 
@@ -501,6 +522,7 @@ def run_split(
     """
     host = jax.tree.map(np.asarray, scenarios)
     n = int(host.config.timeout_s.shape[0])
+    slots = slots or split_slots()
     workers = max(1, min(worker_count() if workers is None else workers, -(-n // slots)))
     device = jax.local_devices()[0]
     one = jax.tree.map(lambda x: x[0], host)
@@ -548,7 +570,7 @@ def run_split(
 
 
 def prepare(policies: list[tuple[Policy, Any]], scenarios: Scenario, settings: Settings,
-            slots: int = SPLIT_SLOTS) -> dict[str, float]:  # fmt: skip
+            slots: int | None = None) -> dict[str, float]:  # fmt: skip
     """Compile (or load) every program that :func:`run_split` needs for several policies on
     one batch: the world program, one program per policy and the start states' program, side
     by side in threads (a policy's tracing overlaps the world's compilation).  A later
@@ -558,7 +580,7 @@ def prepare(policies: list[tuple[Policy, Any]], scenarios: Scenario, settings: S
         policies: ``(policy, parameters)`` pairs.
         scenarios: the batch (only its shapes matter).
         settings: as :func:`run_split` will be given them.
-        slots: as :func:`run_split` will be given them.
+        slots: as :func:`run_split` will be given them (default :func:`split_slots`).
 
     Returns:
         Wall seconds of the whole preparation under ``"programs"``, and per policy name the
@@ -566,6 +588,7 @@ def prepare(policies: list[tuple[Policy, Any]], scenarios: Scenario, settings: S
     """
     host = jax.tree.map(np.asarray, scenarios)
     one = jax.tree.map(lambda x: x[0], host)
+    slots = slots or split_slots()
     device = jax.local_devices()[0]
     setp = tuple(jax.device_put(b, device) for b in _pack_one(Layout.of(settings), settings))
     sig = world_signature(one, settings, slots)
