@@ -2,7 +2,8 @@
 # The benchmarks that belong on a GPU, in one run, most wanted first: the whole suite's compile
 # and time, the edit-to-table loop on both rollout paths, throughput against batch size, a
 # 16k-execution chunk of suite-like executions, one stress cell, the split path's layout (workers
-# x slots) and the edit-to-table loop on the path "auto" takes.  Each step has its own time
+# x slots), the edit-to-table loop on the path "auto" takes, and the fused path's slots per
+# device (the whole suite and 16k executions at 96 to 16,384 slots).  Each step has its own time
 # limit, so one slow step cannot take the others with it; each writes its output to
 # OUTDIR/<step>.txt as it goes.
 #
@@ -14,7 +15,7 @@ out=${1:?usage: gpu_benchmarks.sh OUTDIR [STEP ...]}
 shift
 py=${PYTHON:-python3}
 all="machine evaluate_coop iterate rollout_coop stream_16k stress_pe split_layout iterate_auto
-rollout_expert"
+rollout_expert compact_slots"
 steps=${*:-$all}
 mkdir -p "$out"
 export PYTHONUNBUFFERED=1
@@ -52,6 +53,10 @@ print(jax.devices()); import lantern_jax; print(\"lantern_jax\", lantern_jax.__v
       --batches subset,suite --stores stored --paths auto,fused ;;
     rollout_expert) step "$s" 150 "$py" benchmarks/bench_rollout.py --policy expert --ticks 200 \
       --repeats 2 --batches 360 4096 16384 65536 ;;
+    compact_slots) for n in 96 1024 4096 16384; do
+        LANTERN_JAX_COMPACT_SLOTS=$n step "${s}_$n" 150 bash -c "$py benchmarks/bench_evaluate.py \
+          --policy coop --repeats 3 && $py benchmarks/bench_stream.py --counts 16384 --chunk 16384"
+      done ;;
     *) echo "unknown step $s (one of: $all)"; exit 2 ;;
   esac
 done

@@ -76,6 +76,24 @@ def rows(df: pd.DataFrame, model: str | None = None, condition: str | None = Non
 # ---------------------------------------------------------------------------------------------
 # basic shape of the result
 # ---------------------------------------------------------------------------------------------
+def test_slots_per_device_are_the_backends_or_the_variables(monkeypatch):
+    """24 slots per CPU device, the accelerator's count elsewhere; the environment variable
+    sets them on any backend, and a value that is not a whole number >= 1 is refused naming
+    it."""
+    from lantern_jax.sim import engine
+
+    monkeypatch.delenv(engine.COMPACT_SLOTS_ENV, raising=False)
+    assert engine.compact_slots("cpu") == engine.COMPACT_SLOTS["cpu"] == 24
+    assert engine.compact_slots("gpu") == engine.COMPACT_SLOTS_OTHER
+    assert engine.COMPACT_SLOTS_OTHER >= SUITE_BATCH_SHAPE[0]  # the suite in one wave there
+    monkeypatch.setenv(engine.COMPACT_SLOTS_ENV, "12")
+    assert engine.compact_slots("cpu") == engine.compact_slots("gpu") == 12
+    for bad in ("0", "-3", "many", "2.5"):
+        monkeypatch.setenv(engine.COMPACT_SLOTS_ENV, bad)
+        with pytest.raises(ValueError, match=engine.COMPACT_SLOTS_ENV):
+            engine.compact_slots()
+
+
 def test_result_tables(base, suite2):
     rt = base.route_table
     validate_route_table(rt)

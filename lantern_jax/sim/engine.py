@@ -21,6 +21,7 @@ from __future__ import annotations
 import collections
 import dataclasses
 import functools
+import os
 import time
 from collections.abc import Callable
 from typing import Any
@@ -61,10 +62,18 @@ from lantern_jax.types.world import Scenario, pad_rows, trim_padding
 #: (:func:`~lantern_jax.sim.rollout.rollout_scheduled`), so that no slot idles behind a few
 #: long executions.  Batches smaller than ``COMPACT_MIN_BATCH`` step every execution at once.
 #: Slots per device by JAX backend (:func:`compact_slots`): on CPU (one device per core) 24
-#: stepped the suite fastest of 16-64 per device (``benchmarks/bench_evaluate.py``); other
-#: backends keep 96.
+#: stepped the suite fastest of 16-64 per device (``benchmarks/bench_evaluate.py``).  A GPU
+#: steps 4,096: a tick of the fused rollout on an H200 takes little longer for 4,096
+#: executions than for 360 (0.69 against 0.43 ms, 16-actor scenes, ``bench_rollout.py``,
+#: ``benchmarks/results/gpu_h200.md``), so few slots leave the card idle -- with the 96 kept
+#: until 2026-12-04, 16,384 suite-like executions took 22.2 s there, stepped as about 171
+#: waves of 96 slots.  The 4,096 is chosen from that throughput curve; the evaluations with
+#: it have not been timed on a GPU (``benchmarks/gpu_benchmarks.sh``, step ``compact_slots``).
 COMPACT_SLOTS = {"cpu": 24}
-COMPACT_SLOTS_OTHER = 96
+COMPACT_SLOTS_OTHER = 4096
+#: Environment variable that sets the slots per device on any backend (a whole number >= 1),
+#: for measuring them (``benchmarks/gpu_benchmarks.sh``) or fitting a card's memory.
+COMPACT_SLOTS_ENV = "LANTERN_JAX_COMPACT_SLOTS"
 REFILL_TICKS = 20
 COMPACT_MIN_BATCH = 256
 
@@ -212,7 +221,20 @@ def batch_bucket(shape: tuple[int, int, int]) -> tuple[int, int, int]:
 
 
 def compact_slots(backend: str | None = None) -> int:
-    """Slots per device of the slot scheduling on ``backend`` (default: JAX's default)."""
+    """Slots per device of the slot scheduling on ``backend`` (default: JAX's default):
+    ``$LANTERN_JAX_COMPACT_SLOTS`` if set, else :data:`COMPACT_SLOTS`'s entry for the backend,
+    else :data:`COMPACT_SLOTS_OTHER`.  The slots are part of the program's identity, so a
+    changed value compiles its own program; results agree to float rounding.
+
+    Raises:
+        ValueError: naming the variable when it is not a whole number >= 1.
+    """
+    given = os.environ.get(COMPACT_SLOTS_ENV)
+    if given is not None:
+        if not (given.strip().isdigit() and int(given) >= 1):
+            raise ValueError(f"environment variable {COMPACT_SLOTS_ENV}: expected a whole "
+                             f"number >= 1, got {given!r}")  # fmt: skip
+        return int(given)
     return COMPACT_SLOTS.get(backend or jax.default_backend(), COMPACT_SLOTS_OTHER)
 
 
