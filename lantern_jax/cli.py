@@ -96,11 +96,15 @@ def expose_cpu_cores() -> None:
     (:func:`lantern_jax.core.jax_setup.expose_cpu_cores`: only before JAX starts, not where
     ``XLA_FLAGS`` already sets a count; ``LANTERN_JAX_CPU_DEVICES`` sets another, e.g. 1).
 
+    The other count variables (:data:`lantern_jax.core.jax_setup.COUNT_ENVS`) are checked
+    here too, so a bad one is refused before any work.
+
     Raises:
-        UsageError: when ``LANTERN_JAX_CPU_DEVICES`` is not a whole number >= 1.
+        UsageError: when one of those variables is not a whole number >= 1.
     """
     try:
         jax_setup.expose_cpu_cores()
+        jax_setup.check_counts()
     except jax_setup.SetupError as e:
         raise UsageError(str(e)) from None
 

@@ -35,14 +35,15 @@ Catalogue (190 bad inputs and faults, in 13 categories):
   place, saying so; ``--out .`` keeps the working folder and the user's files; a 250-character
   folder name; root writing into a user's folder keeps its owner, group and mode; ``dataset``,
   ``train``, ``stress`` and ``unseen`` with ``--out`` a file;
-* configs, flags and environment (35): keys beside ``[evaluate]``, keys without it, another
+* configs, flags and environment (37): keys beside ``[evaluate]``, keys without it, another
   table, an unknown key, a nested table, ``pairs = []``, ``policy = []``, ``policy = ""``, an
   empty file, ``pairs_per_family = 0`` and ``-2``, ``--pol``, ``--pairs-per``, ``--abl``,
   ``--pairs ""``, ``--pairs ","``, ``--policy ""``, a pair given twice, ``--checkpoint ""`` and
   ``","``, ``--pairs-per-family 0`` — exit 2; a bad policy, ablation, pair list, suite,
   checkpoint or output folder from the file, named by file and key; a UTF-8 byte-order mark in
   both config formats (read), UTF-16 (refused); ``LANTERN_JAX_CPU_DEVICES`` ``abc``, ``0``,
-  ``-2``, empty; explicit flags (even with their default value) win over the file;
+  ``-2``, empty, ``LANTERN_JAX_SPLIT_WORKERS=0``, ``LANTERN_JAX_COMPACT_SLOTS=many``; explicit
+  flags (even with their default value) win over the file;
 * training configs (8): ``lr = inf`` and ``nan``, ``weight_decay = -1``, ``val_fraction = 0``,
   a name that is a path or ``all``, ``max_minutes = inf``, ``--epochs 0`` (named as the flag);
 * checkpoints (24): 17 descriptions (``CHECKPOINT_CASES``: a name edited without its hash, a
@@ -941,11 +942,15 @@ def test_explicit_flags_win_over_the_config(tmp_path, monkeypatch):
     assert seen == dict(policies=["ego"], pairs=12, ablation="late_onset", one=False)
 
 
-@pytest.mark.parametrize("value", ["abc", "0", "-2", ""])
-def test_a_bad_cpu_device_count_is_named(value):
-    res = run_program(["policies"], env={"LANTERN_JAX_CPU_DEVICES": value})
+@pytest.mark.parametrize(("name", "value"), [
+    ("LANTERN_JAX_CPU_DEVICES", "abc"), ("LANTERN_JAX_CPU_DEVICES", "0"),
+    ("LANTERN_JAX_CPU_DEVICES", "-2"), ("LANTERN_JAX_CPU_DEVICES", ""),
+    ("LANTERN_JAX_SPLIT_WORKERS", "0"), ("LANTERN_JAX_COMPACT_SLOTS", "many"),
+])  # fmt: skip
+def test_a_bad_count_variable_is_named_before_any_work(name, value):
+    res = run_program(["policies"], env={name: value})
     assert res.returncode == 2 and res.stdout == ""
-    assert res.stderr == ("lantern-jax: error: environment variable LANTERN_JAX_CPU_DEVICES: "
+    assert res.stderr == (f"lantern-jax: error: environment variable {name}: "
                           f"expected a whole number >= 1, got {value!r}\n")  # fmt: skip
 
 

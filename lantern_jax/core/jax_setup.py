@@ -24,6 +24,15 @@ import warnings
 
 #: Environment variable that sets the number of XLA CPU devices (default: one per core).
 CPU_DEVICES_ENV = "LANTERN_JAX_CPU_DEVICES"
+#: Environment variable that sets the split path's worker threads
+#: (:func:`lantern_jax.sim.split.worker_count`).
+SPLIT_WORKERS_ENV = "LANTERN_JAX_SPLIT_WORKERS"
+#: Environment variable that sets the fused path's slots per device
+#: (:func:`lantern_jax.sim.engine.compact_slots`).
+COMPACT_SLOTS_ENV = "LANTERN_JAX_COMPACT_SLOTS"
+#: The variables that hold a count (a whole number >= 1), checked together by
+#: :func:`check_counts` before a command runs.
+COUNT_ENVS = (CPU_DEVICES_ENV, SPLIT_WORKERS_ENV, COMPACT_SLOTS_ENV)
 #: Environment variable that moves the persistent compilation cache.
 CACHE_DIR_ENV = "LANTERN_JAX_CACHE_DIR"
 #: Environment variable that turns the automatic set-up on first use off (``0``).
@@ -66,6 +75,31 @@ class SetupReport:
     compile_cache: str | None
 
 
+def env_count(name: str) -> int | None:
+    """The count in environment variable ``name``: a whole number >= 1, or None when unset.
+
+    Raises:
+        SetupError: naming the variable when it holds anything else.
+    """
+    given = os.environ.get(name)
+    if given is not None and not (given.strip().isdigit() and int(given) >= 1):
+        raise SetupError(f"environment variable {name}: expected a whole number >= 1, got "
+                         f"{given!r}")  # fmt: skip
+    return None if given is None else int(given)
+
+
+def check_counts() -> None:
+    """Check every count variable (:data:`COUNT_ENVS`) at once, so a bad one is refused before
+    any work, not when the code that reads it first runs.
+
+    Raises:
+        SetupError: naming the first variable that is set to something other than a whole
+            number >= 1.
+    """
+    for name in COUNT_ENVS:
+        env_count(name)
+
+
 def cpu_device_request() -> int | None:
     """The CPU device count to ask XLA for: ``$LANTERN_JAX_CPU_DEVICES``, else one per core
     this process may run on; None when ``XLA_FLAGS`` already sets one.
@@ -73,14 +107,11 @@ def cpu_device_request() -> int | None:
     Raises:
         SetupError: when ``LANTERN_JAX_CPU_DEVICES`` is not a whole number >= 1.
     """
-    given = os.environ.get(CPU_DEVICES_ENV)
-    if given is not None and not (given.strip().isdigit() and int(given) >= 1):
-        raise SetupError(f"environment variable {CPU_DEVICES_ENV}: expected a whole number "
-                         f">= 1, got {given!r}")  # fmt: skip
+    given = env_count(CPU_DEVICES_ENV)
     if "xla_force_host_platform_device_count" in os.environ.get("XLA_FLAGS", ""):
         return None
     if given is not None:
-        return int(given)
+        return given
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
 
 

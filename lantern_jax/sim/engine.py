@@ -21,7 +21,6 @@ from __future__ import annotations
 import collections
 import dataclasses
 import functools
-import os
 import time
 from collections.abc import Callable
 from typing import Any
@@ -29,7 +28,7 @@ from typing import Any
 import jax
 import numpy as np
 
-from lantern_jax.core import family_codes
+from lantern_jax.core import family_codes, jax_setup
 from lantern_jax.core.constants import BLOCKS, CONDITIONS, EXECUTIONS_PER_PAIR, FAMILIES, ROUTE_B
 from lantern_jax.core.times import ticks_covering
 from lantern_jax.io import program_store
@@ -73,7 +72,7 @@ COMPACT_SLOTS = {"cpu": 24}
 COMPACT_SLOTS_OTHER = 4096
 #: Environment variable that sets the slots per device on any backend (a whole number >= 1),
 #: for measuring them (``benchmarks/gpu_benchmarks.sh``) or fitting a card's memory.
-COMPACT_SLOTS_ENV = "LANTERN_JAX_COMPACT_SLOTS"
+COMPACT_SLOTS_ENV = jax_setup.COMPACT_SLOTS_ENV
 REFILL_TICKS = 20
 COMPACT_MIN_BATCH = 256
 
@@ -229,12 +228,9 @@ def compact_slots(backend: str | None = None) -> int:
     Raises:
         ValueError: naming the variable when it is not a whole number >= 1.
     """
-    given = os.environ.get(COMPACT_SLOTS_ENV)
+    given = jax_setup.env_count(COMPACT_SLOTS_ENV)
     if given is not None:
-        if not (given.strip().isdigit() and int(given) >= 1):
-            raise ValueError(f"environment variable {COMPACT_SLOTS_ENV}: expected a whole "
-                             f"number >= 1, got {given!r}")  # fmt: skip
-        return int(given)
+        return given
     return COMPACT_SLOTS.get(backend or jax.default_backend(), COMPACT_SLOTS_OTHER)
 
 

@@ -47,6 +47,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from lantern_jax.core import jax_setup
 from lantern_jax.core.constants import NUM_WAYPOINTS
 from lantern_jax.io import program_store
 from lantern_jax.policies.base import Policy
@@ -81,7 +82,7 @@ initial_states = jax.jit(jax.vmap(init_state, in_axes=(0, None, None)))
 SPLIT_REFILL_TICKS = 20
 #: Environment variable that sets the number of worker threads (default: one per core on the
 #: CPU, :data:`SPLIT_LAYOUT_ACCELERATOR`'s elsewhere).
-WORKERS_ENV = "LANTERN_JAX_SPLIT_WORKERS"
+WORKERS_ENV = jax_setup.SPLIT_WORKERS_ENV
 
 
 def split_slots(backend: str | None = None) -> int:
@@ -386,12 +387,9 @@ def worker_count(backend: str | None = None) -> int:
     Raises:
         ValueError: naming the variable when it is not a whole number >= 1.
     """
-    given = os.environ.get(WORKERS_ENV)
+    given = jax_setup.env_count(WORKERS_ENV)
     if given is not None:
-        if not (given.strip().isdigit() and int(given) >= 1):
-            raise ValueError(f"environment variable {WORKERS_ENV}: expected a whole number "
-                             f">= 1, got {given!r}")  # fmt: skip
-        return int(given)
+        return given
     if (backend or jax.default_backend()) != "cpu":
         return SPLIT_LAYOUT_ACCELERATOR[0]
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
