@@ -22,18 +22,17 @@ import os
 import sys
 from pathlib import Path
 
+from xla_flags import xla_flags_for_tests
+
 #: XLA flags of every test process (and of the processes the tests start, which inherit them):
-#: XLA's CPU backend with its earlier fusion emitters.  They compile the world's programs in
-#: about 30 % less time (the split path's world tick 6.3-8.1 s against 9.2-10.1 s on a 2-core
-#: CPU) for a rollout up to about 20 % slower, and the tests' time is mostly compiling
-#: (docs/reproducibility.md).  Results agree with the default emitters' within float rounding
-#: (``REPRODUCIBLE_ATOL``); the test that starts processes with ``XLA_FLAGS`` of their own
-#: (the written promise across devices and batches) runs the default emitters, as a user's
-#: process does.  An ``XLA_FLAGS`` that names the flag wins, e.g.
+#: XLA's CPU backend with its earlier fusion emitters, where the installed jaxlib has them
+#: (``tests/xla_flags.py`` says why and where not).  The test that starts processes with
+#: ``XLA_FLAGS`` of their own (the written promise across devices and batches) runs the default
+#: emitters, as a user's process does.  An ``XLA_FLAGS`` that names the flag wins, e.g.
 #: ``XLA_FLAGS=--xla_cpu_use_fusion_emitters=true`` runs the tests as a user's process compiles.
-#: ``.ci/run`` reads this line to give the documentation build's notebook kernels the same flags.
-TEST_XLA_FLAGS = "--xla_cpu_use_fusion_emitters=false"
-if TEST_XLA_FLAGS.split("=")[0] not in os.environ.get("XLA_FLAGS", ""):
+#: ``.ci/run`` gives the documentation build's notebook kernels the same flags.
+TEST_XLA_FLAGS = xla_flags_for_tests()
+if TEST_XLA_FLAGS and TEST_XLA_FLAGS.split("=")[0] not in os.environ.get("XLA_FLAGS", ""):
     os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {TEST_XLA_FLAGS}".strip()
 
 #: No cache folder path in the programs' cache keys, as ``import lantern_jax`` sets it on a
