@@ -113,10 +113,13 @@ def test_training_distractors_are_not_the_language_probes():
         PROBE_NEGATED,
         TRAINING_DISTRACTORS,
         TRAINING_LANE_DISTRACTORS,
+        TRAINING_NEGATION_DISTRACTORS,
     )
 
     bank_texts = {e.text for e in DEFAULT_BANK}
-    for text in TRAINING_DISTRACTORS + TRAINING_LANE_DISTRACTORS:
+    every = TRAINING_DISTRACTORS + TRAINING_LANE_DISTRACTORS + TRAINING_NEGATION_DISTRACTORS
+    assert len(set(every)) == len(every)
+    for text in every:
         assert text not in bank_texts and text not in (PROBE_IRRELEVANT, PROBE_NEGATED)
         lower = text.lower()
         assert not any(w in lower for w in ("nothing", "clear", "bakery", "bread"))
@@ -126,6 +129,12 @@ def test_training_distractors_are_not_the_language_probes():
     assert all(("ego lane" in t) or ("turn path" in t) for t in TRAINING_LANE_DISTRACTORS)
     assert DISTRACTOR_SETS["position"] == TRAINING_DISTRACTORS
     assert DISTRACTOR_SETS["position_and_lane"] == TRAINING_DISTRACTORS + TRAINING_LANE_DISTRACTORS
+    assert DISTRACTOR_SETS["position_lane_negations"] == every
+    # the negations in other words: each negates, none with the word "no" the other sets use
+    for text in TRAINING_NEGATION_DISTRACTORS:
+        words = text.lower().replace(";", " ").replace(".", " ").split()
+        assert "no" not in words and {"not", "never", "isn't", "won't", "none", "neither"} & set(
+            words), text  # fmt: skip
 
 
 def test_the_lane_distractor_set_extends_the_position_set():
@@ -138,6 +147,9 @@ def test_the_lane_distractor_set_extends_the_position_set():
     assert [large[int(i)].text for i in small_ids] == [small[int(i)].text for i in small_ids]
     with pytest.raises(ValueError, match="distractor_texts: 'lanes' not one of"):
         cf.distractor_bank("lanes")
+    largest, largest_ids = cf.distractor_bank("position_lane_negations")
+    assert len(largest_ids) == len(large_ids) + 7
+    np.testing.assert_array_equal(largest_ids[: len(large_ids)], large_ids)
     ex, families, routes = _examples(240)
     out, variant = cf.counterfactual_examples(ex, families, routes, 0.5, 0, distractors=1.0,
                                               distractor_texts="position_and_lane")  # fmt: skip

@@ -209,10 +209,31 @@ TRAINING_LANE_DISTRACTORS: tuple[str, ...] = (
     f"The ego lane passes a library at position {TOKEN}.",
 )
 
-#: The distractor sets a closed-loop recipe may draw from (``distractor_texts``).
+#: Training-only negations in other forms than "no" (the ``distractor_texts =
+#: "position_lane_negations"`` setting): the actionable templates with "not", "never",
+#: "isn't", "won't", "none of" or "neither ... nor" in them.  Every negation of the two sets
+#: above starts with or turns on "no", so a model can learn that one word as the cue and still
+#: react to a negation without it (the held-out probe negates with "Nothing" and "clear").
+#: These keep the templates' words and change only the negation, and still use none of the
+#: probes' own words.
+TRAINING_NEGATION_DISTRACTORS: tuple[str, ...] = (
+    f"The vehicle at position {TOKEN} will not cut into the ego lane.",
+    f"The pedestrian at position {TOKEN} is not going to enter the ego lane.",
+    f"The static object at position {TOKEN} isn't blocking the ego lane.",
+    f"A wrong-way vehicle at position {TOKEN} will never cross the ego left-turn path.",
+    f"The vehicle at position {TOKEN} won't cross the ego right-turn path; do not yield.",
+    f"None of the cars at position {TOKEN} will move into the ego lane.",
+    f"Neither a person nor a car at position {TOKEN} is near the ego lane.",
+)
+
+#: The distractor sets a closed-loop recipe may draw from (``distractor_texts``); each extends
+#: the one before it, id for id.
 DISTRACTOR_SETS: dict[str, tuple[str, ...]] = {
     "position": TRAINING_DISTRACTORS,
     "position_and_lane": TRAINING_DISTRACTORS + TRAINING_LANE_DISTRACTORS,
+    "position_lane_negations": (
+        TRAINING_DISTRACTORS + TRAINING_LANE_DISTRACTORS + TRAINING_NEGATION_DISTRACTORS
+    ),
 }
 
 

@@ -87,7 +87,8 @@ class TrainConfig:
     counterfactual: float = 0.5  # counterfactual warning frames per Route B frame
     distractors: float = 0.0  # share of those told a training distractor sentence instead
     # which sentences: a key of scenarios.warning_texts.DISTRACTOR_SETS ("position": the twelve
-    # position statements; "position_and_lane": those and eight in the templates' own phrases)
+    # position statements; "position_and_lane": those and eight in the templates' own phrases;
+    # "position_lane_negations": those and seven negations in other words than "no")
     distractor_texts: str = "position"
     # s: also keep the visits this long before each driven execution's first collision, every
     # failure_every_s (the states that lead the learner into a failure); 0 keeps none
