@@ -353,10 +353,10 @@ def choose_path(policy: Driver, n: int, requested: str = "auto") -> PathChoice:
     * else the split path: a policy defined outside the package -- the one being written --
       compiles only its own program beside the world program, which is compiled once and kept.
       This holds on a GPU too: there a tick of the split path costs more than on the CPU
-      relative to the fused loop (the suite's split rollout 3.0 s against 0.49 s fused on an
-      H200), but the fused compile it saves costs more still (8 s; a new policy's whole-suite
-      table 7.1 s split against 12.0 s fused with the world program stored,
-      ``benchmarks/results/gpu_h200.md``).
+      relative to the fused loop (the suite's split rollout 3.0 s with one worker per core,
+      1.6 s with the GPU's layout, against 0.49-0.60 s fused on an H200), but the fused compile
+      it saves costs more still (8 s; a new policy's whole-suite table 7.1 s split against
+      12.0 s fused with the world program stored, ``benchmarks/results/gpu_h200.md``).
 
     Raises:
         ValueError: for a path not in :data:`PATHS`, or ``"split"`` where it cannot run.

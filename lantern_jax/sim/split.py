@@ -85,12 +85,16 @@ SPLIT_REFILL_TICKS = 20
 WORKERS_ENV = jax_setup.SPLIT_WORKERS_ENV
 
 
+def _on_cpu(backend: str | None) -> bool:
+    """Whether ``backend`` (default: JAX's default backend) is the CPU."""
+    return (backend or jax.default_backend()) == "cpu"
+
+
 def split_slots(backend: str | None = None) -> int:
     """Executions one worker steps together on ``backend`` (default: JAX's default backend):
     :data:`SPLIT_SLOTS` on the CPU, :data:`SPLIT_LAYOUT_ACCELERATOR`'s elsewhere.  The world
     program's shape has it, so one backend compiles one world program per batch shape."""
-    return SPLIT_SLOTS if (backend or jax.default_backend()) == "cpu" else (
-        SPLIT_LAYOUT_ACCELERATOR[1])  # fmt: skip
+    return SPLIT_SLOTS if _on_cpu(backend) else SPLIT_LAYOUT_ACCELERATOR[1]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -390,7 +394,7 @@ def worker_count(backend: str | None = None) -> int:
     given = jax_setup.env_count(WORKERS_ENV)
     if given is not None:
         return given
-    if (backend or jax.default_backend()) != "cpu":
+    if not _on_cpu(backend):
         return SPLIT_LAYOUT_ACCELERATOR[0]
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
 
