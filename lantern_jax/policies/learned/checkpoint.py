@@ -272,8 +272,10 @@ def load_model(path: str | Path, expect: ModelConfig | None = None) -> DrivingMo
     data = weights.read_bytes()
     if hashlib.sha256(data).hexdigest() != meta.get("params_sha256"):
         raise CheckpointError(f"{weights}: content does not match params_sha256 of its .json")
-    model = new_model(config)
-    graphdef, state = nnx.split(model)
+    # The architecture's shapes only: a random initialisation would compile and run every
+    # initialiser op by op, to be overwritten (0.4 s a model with JAX's cache, 2 s without, on
+    # a 2-core CPU; ``benchmarks/bench_model_load.py``).
+    graphdef, state = nnx.split(nnx.eval_shape(lambda: new_model(config)))
     template = state.to_pure_dict()
     try:
         loaded = serialization.from_bytes(template, data)
@@ -281,7 +283,7 @@ def load_model(path: str | Path, expect: ModelConfig | None = None) -> DrivingMo
         raise CheckpointError(f"{weights}: does not fit the architecture ({e})") from None
     bad = [jax.tree_util.keystr(p) for (p, a), (_, b) in zip(
         jax.tree_util.tree_leaves_with_path(template), jax.tree_util.tree_leaves_with_path(loaded),
-        strict=True) if jnp.shape(a) != jnp.shape(b)]  # fmt: skip
+        strict=True) if tuple(a.shape) != np.shape(b)]  # fmt: skip
     if bad:
         raise CheckpointError(f"{weights}: parameter {bad[0]} has another shape")
     bad = [jax.tree_util.keystr(p) for p, a in jax.tree_util.tree_leaves_with_path(loaded)
