@@ -18,7 +18,7 @@ stepping), and the largest difference of the final states from the in-process sp
 
 Usage::
 
-    python benchmarks/bench_split_processes.py [--rounds 3] [--workers 2] [--no-pin]
+    python benchmarks/bench_split_processes.py [--rounds 3] [--workers 2] [--slots 48] [--no-pin]
 """
 
 from __future__ import annotations
@@ -78,6 +78,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--slots", type=int, default=None,
+                    help="executions each worker steps together (default: the split path's)")
     ap.add_argument("--no-pin", action="store_true",
                     help="leave the worker processes free to run on every core")
     ap.add_argument("--worker", nargs=3, help=argparse.SUPPRESS)
@@ -113,7 +115,7 @@ def main() -> None:
     settings = default_settings()
     host = jax.tree.map(np.asarray, execs.scenarios)
     n = int(host.config.timeout_s.shape[0])
-    slots = split.split_slots()
+    slots = args.slots or split.split_slots()
     device = jax.local_devices()[0]
     sig = split.world_signature(jax.tree.map(lambda x: x[0], host), settings, slots)
     setp = tuple(jax.device_put(b, device) for b in split._pack_one(sig.settings, settings))
@@ -151,7 +153,7 @@ def main() -> None:
         for r in range(args.rounds):
             t: dict = {}
             threads_final, _ = split.run_split(policy, execs.scenarios, params, execs.max_ticks,
-                                               settings, timings=t)  # fmt: skip
+                                               settings, timings=t, slots=slots)  # fmt: skip
             t_threads = t["rollout"]
             t = {}
             engine.run_executions(policy, execs.scenarios, params, execs.max_ticks, settings,
