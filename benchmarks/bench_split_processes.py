@@ -57,7 +57,8 @@ def worker_main(core: int, job_file: str, out_file: str) -> None:
     n = job["scenarios"][0].shape[0]
     run = split._Run(
         split.WorldPrograms(job["sig"], world), policy, put(job["params"]), job["carry"],
-        put(job["settings"]), jax.device_put(job["switches"], device), job["scenarios"],
+        put(job["settings"]), jax.device_put(job["switches"], device),
+        lambda sc, st: (sc, st) if job["privileged"] else (), job["scenarios"],
         job["starts"], job["first_obs"], [b.copy() for b in job["starts"]],
         [np.zeros((n, size), dt) for dt, size in job["carry"].groups], job["max_ticks"], device,
         job["done"], job["tick"], threading.Event(),
@@ -123,12 +124,15 @@ def main() -> None:
                                  signed=split._Signed(sig)).compile()  # fmt: skip
     world = split.WorldPrograms(sig, tick)
     carry = split.Layout.of(jax.eval_shape(policy.initial_carry, params))
-    step = split._PolicyStep(policy, sig.observation, sig.privileged, split.Layout.of(params),
-                             carry)  # fmt: skip
+    step = split._PolicyStep(policy, sig.observation, sig.scenario, sig.state,
+                             split.Layout.of(params), carry)  # fmt: skip
     parp = tuple(jax.device_put(b, device) for b in split._pack_one(step.params, params))
     flags = jax.device_put(np.zeros(slots, bool), device)
     pol_exe = split._policy_jit.lower(parp, split._blank(carry, slots, device),
                                       sig.observations(slots, device), flags, flags,
+                                      split.ground_truth_inputs(
+                                          policy, split._blank(sig.scenario, slots, device),
+                                          split._blank(sig.state, slots, device)),
                                       step=step).compile()  # fmt: skip
     start = split.start_states(host, slots, settings, {})
     scp = sig.scenario.pack_host(host)
@@ -137,6 +141,7 @@ def main() -> None:
     first_obs = split._first_observations(world, scp, starts, switches, setp, device)
     job = dict(
         world=se.serialize(world.tick), policy=se.serialize(pol_exe), sig=sig,
+        privileged=policy.privileged,
         params=[np.asarray(b) for b in parp], carry=carry,
         settings=[np.asarray(b) for b in setp], switches=np.asarray(switches), scenarios=scp,
         starts=starts, first_obs=first_obs, max_ticks=int(execs.max_ticks),

@@ -56,9 +56,9 @@ def _variants(sig, switches):
             sc, st, settings = unpack(scp, stp, setp, barrier)
             new, _ = transition(sc, st, wp, settings)
             new = jax.tree.map(lambda n, o: jnp.where(on, n, o), new, st)
-            obs, view = observe_every_sensor(sc, new, switches[0], switches[1], settings.bank,
-                                             privileged_as=sig.privileged.pack)  # fmt: skip
-            return sig.state.pack(new), (*sig.observation.pack(obs), *view), new.done | ~on
+            obs, _ = observe_every_sensor(sc, new, jnp.asarray(False), switches[0],
+                                          settings.bank)  # fmt: skip
+            return sig.state.pack(new), sig.observation.pack(obs), new.done | ~on
 
         return one
 
@@ -97,7 +97,7 @@ def main() -> None:
     ahead = np.linspace(0.5, 5.0, 10, dtype=np.float32)
     wp = put(np.stack([np.tile(ahead, (b, 1)), np.zeros((b, 10), np.float32)], -1))
     on = put(np.ones(b, bool))
-    switches = put(np.zeros(2, bool))
+    switches = put(np.zeros(1, bool))
     mlp = _policy("mlp")
     params = mlp.init(jax.random.PRNGKey(0))
     calls = {name: (fn.lower(scp, stp, wp, on, setp).compile(), (scp, stp, wp, on, setp))

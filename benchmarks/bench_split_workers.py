@@ -64,12 +64,15 @@ def stepper(policy, params, host, settings, sig, device, own: bool):
     if own:
         world = split._tick_jit.lower(*split._tick_args(sig, setp, device),
                                       signed=split._Signed(sig)).compile()  # fmt: skip
-        step = split._PolicyStep(policy, sig.observation, sig.privileged,
+        step = split._PolicyStep(policy, sig.observation, sig.scenario, sig.state,
                                  split.Layout.of(params), carry_layout)  # fmt: skip
         parp = tuple(jax.device_put(b, device) for b in split._pack_one(step.params, params))
         flags = jax.device_put(np.zeros(s, bool), device)
         pol = split._policy_jit.lower(parp, split._blank(carry_layout, s, device),
                                       sig.observations(s, device), flags, flags,
+                                      split.ground_truth_inputs(
+                                          policy, split._blank(sig.scenario, s, device),
+                                          split._blank(sig.state, s, device)),
                                       step=step).compile()  # fmt: skip
     else:
         world = split.world_programs(sig, setp, device).tick
@@ -90,7 +93,8 @@ def stepper(policy, params, host, settings, sig, device, own: bool):
         carry, obs = carry0, obs0
         st = tuple(jax.device_put(b, device) for b in states)
         for _ in range(ticks):
-            waypoints, carry = pol(parp, carry, obs, no, no)
+            waypoints, carry = pol(parp, carry, obs, no, no,
+                                   split.ground_truth_inputs(policy, scp, st))
             st, obs, _ = world(scp, st, waypoints, active, switches, setp)
         jax.block_until_ready(st)
 

@@ -155,7 +155,8 @@ def observe_every_sensor(
     One program for every sensor declaration: :func:`observe` with the same sensors equals it
     field by field once the undeclared views are dropped (``surround=None``, the ground truth
     left out, the warning fields blanked for a policy without the warning sensor).  The
-    simulator's world program (:mod:`lantern_jax.sim.split`) builds this; the policy's own
+    simulator's world program (:mod:`lantern_jax.sim.split`) builds this with the ground truth
+    off (a privileged policy's own program computes that from the state); the policy's own
     program drops what its policy did not declare, so the boundary holds.  It observes the
     built-in sensors only: a policy that declares a sensor registered from user code is run by
     the fused program (:func:`lantern_jax.sim.engine.split_possible`).

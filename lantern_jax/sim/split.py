@@ -9,12 +9,15 @@ the policy's ``act``, so a changed policy pays for compiling the world again (ab
 * the **world program** (:func:`world_programs`) advances ``slots`` executions by one tick
   under given waypoints and returns their new states and the observations of the new tick (a
   slot marked inactive keeps its state and is only observed: that gives the first
-  observations).  It depends only on the :class:`WorldSignature` (slot count, scenario shapes,
-  the sensors observed, the static settings), never on the policy, and is kept in the program
-  store: every policy -- and every later process -- reuses it.  The start states come from
+  observations): every sensor's but the ground truth, which only a privileged policy reads and
+  its own program computes from the state (:func:`policy_program`).  It depends only on the
+  :class:`WorldSignature` (slot count, scenario shapes, the sensors observed, the static
+  settings), never on the policy, and is kept in the program store: every policy -- and every
+  later process -- reuses it.  The start states come from
   :data:`initial_states`, which the fused path shares;
 * the **policy program** (:func:`policy_program`) is ``vmap(policy.step)`` over the slots'
-  observations: the only thing compiled for a new policy (1-2 s).
+  observations (with the ground-truth view computed there for a privileged policy): the only
+  thing compiled for a new policy (1-2 s).
 
 :func:`run_split` steps a batch from the host: every ``REFILL_TICKS`` ticks it reads the slots
 back, stores the states of the executions that ended and gives their slots the next waiting
@@ -51,7 +54,7 @@ from lantern_jax.core import jax_setup
 from lantern_jax.core.constants import NUM_WAYPOINTS
 from lantern_jax.io import program_store
 from lantern_jax.policies.base import Policy
-from lantern_jax.sim.observe import no_warning_fields, observe_every_sensor
+from lantern_jax.sim.observe import no_warning_fields, observe_every_sensor, privileged_view
 from lantern_jax.sim.packing import Layout
 from lantern_jax.sim.programs import executable
 from lantern_jax.sim.settings import Settings
@@ -118,8 +121,9 @@ class WorldSignature:
     settings: Layout
 
     def observations(self, slots: int, device: Any) -> tuple:
-        """Zero packed observations (ground truth included) of ``slots`` executions."""
-        return (*_blank(self.observation, slots, device), *_blank(self.privileged, slots, device))
+        """Zero packed observations (the world program's: no ground truth) of ``slots``
+        executions."""
+        return _blank(self.observation, slots, device)
 
     def identity(self) -> tuple:
         """The program store's identity of its programs (plain values only: the layouts are
@@ -178,16 +182,20 @@ def _new_signature(one: Scenario, settings: Settings, slots: int) -> WorldSignat
 
 
 def sensor_switches(policy: Policy) -> np.ndarray:
-    """(2,) bool: the world program observes the ground truth, the six-camera rig (the
-    :func:`~lantern_jax.sim.observe.observe_every_sensor` switches of ``policy``'s sensors)."""
-    return np.asarray([policy.privileged, policy.surround])
+    """(1,) bool: the world program observes the six-camera rig (the
+    :func:`~lantern_jax.sim.observe.observe_every_sensor` switch of ``policy``'s sensors; the
+    ground truth is the policy program's own, :func:`policy_program`)."""
+    return np.asarray([policy.surround])
 
 
 def _tick_one(sig: WorldSignature, scp: tuple, stp: tuple, waypoints: Array, active: Array,
               switches: Array, setp: tuple) -> tuple:  # fmt: skip
     """One execution's tick under ``waypoints`` (:func:`~lantern_jax.sim.step.transition`;
     a slot that is not ``active`` keeps its state), and the next tick's observation with the
-    heavy sensors ``switches`` (:func:`sensor_switches`) on.
+    rig on where ``switches`` (:func:`sensor_switches`) say so.  The ground truth is not
+    observed here: most policies do not read it, and writing its 3,300 numbers per execution
+    every tick cost the split rollout about a tenth of its time on a 2-core CPU
+    (``docs/performance.md``); a privileged policy's program computes it.
 
     Returns:
         (packed state, packed observation, () bool: the policy's carry is to be kept -- the
@@ -201,9 +209,8 @@ def _tick_one(sig: WorldSignature, scp: tuple, stp: tuple, waypoints: Array, act
     )
     new, _ = transition(sc, st, waypoints, settings)
     new = jax.tree.map(lambda n, o: jnp.where(active, n, o), new, st)
-    obs, view = observe_every_sensor(sc, new, switches[0], switches[1], settings.bank,
-                                     privileged_as=sig.privileged.pack)  # fmt: skip
-    return sig.state.pack(new), (*sig.observation.pack(obs), *view), new.done | ~active
+    obs, _ = observe_every_sensor(sc, new, jnp.asarray(False), switches[0], settings.bank)
+    return sig.state.pack(new), sig.observation.pack(obs), new.done | ~active
 
 
 @dataclasses.dataclass(frozen=True)
@@ -254,7 +261,7 @@ def _tick_args(sig: WorldSignature, setp: tuple, device: Any) -> tuple:
     return (
         _blank(sig.scenario, s, device), _blank(sig.state, s, device),
         jax.device_put(np.zeros((s, NUM_WAYPOINTS, 2), np.float32), device),
-        jax.device_put(np.zeros(s, bool), device), jax.device_put(np.zeros(2, bool), device),
+        jax.device_put(np.zeros(s, bool), device), jax.device_put(np.zeros(1, bool), device),
         setp,
     )  # fmt: skip
 
@@ -287,7 +294,8 @@ class _PolicyStep:
 
     policy: Policy
     observation: Layout
-    privileged: Layout
+    scenario: Layout
+    state: Layout
     params: Layout
     carry: Layout
 
@@ -298,16 +306,16 @@ class _PolicyStep:
         return hash(self.key())
 
     def key(self) -> tuple:
-        return (self.policy.program, self.observation, self.privileged, self.params, self.carry)
+        return (self.policy.program, self.observation, self.scenario, self.state, self.params,
+                self.carry)  # fmt: skip
 
 
-def _declared(policy: Policy, observation: Layout, privileged: Layout, op: tuple) -> Any:
-    """What ``policy`` observes of one execution's packed observation of every sensor (the
-    world program's, ``observation`` then ``privileged`` groups): the sensors it did not
-    declare dropped, as :func:`~lantern_jax.sim.observe.observe` would build it."""
-    k_obs = len(observation.groups)
-    obs = observation.unpack(op[:k_obs])
-    obs = obs.replace(privileged=privileged.unpack(op[k_obs:]) if policy.privileged else None,
+def _declared(policy: Policy, observation: Layout, op: tuple, truth: Callable[[], Any]) -> Any:
+    """What ``policy`` observes of one execution's packed observation (the world program's):
+    the sensors it did not declare dropped, and the ground truth ``truth()`` added for a
+    privileged policy, as :func:`~lantern_jax.sim.observe.observe` would build it."""
+    obs = observation.unpack(op)
+    obs = obs.replace(privileged=truth() if policy.privileged else None,
                       surround=obs.surround if policy.surround else None)  # fmt: skip
     if WARNING not in policy.sensors:
         obs = obs.replace(**no_warning_fields())
@@ -323,27 +331,35 @@ def declared_observation(policy: Policy, scenario: Scenario, settings: Settings,
     observation again (the signature is computed once per machine).  ``slots``: default
     :func:`split_slots`."""
     sig = world_signature(scenario, settings, slots or split_slots())
-    groups = (*sig.observation.groups, *sig.privileged.groups)
-    op = tuple(jax.ShapeDtypeStruct((size,), jnp.dtype(dt)) for dt, size in groups)
-    return jax.eval_shape(lambda o: _declared(policy, sig.observation, sig.privileged, o), op)
+    op = tuple(jax.ShapeDtypeStruct((size,), jnp.dtype(dt)) for dt, size in sig.observation.groups)
+    view = tuple(jax.ShapeDtypeStruct((size,), jnp.dtype(dt)) for dt, size in sig.privileged.groups)
+    return jax.eval_shape(
+        lambda o, v: _declared(policy, sig.observation, o, lambda: sig.privileged.unpack(v)),
+        op, view,
+    )  # fmt: skip
 
 
-def _policy_batch(parp, carryp, obp, fresh, keep, *, step):
+def _policy_batch(parp, carryp, obp, fresh, keep, world, *, step):
     """``vmap`` of one slot's policy step: the observation trimmed to the policy's own sensors,
     the carry reset where the slot took a new execution (``fresh``) and kept where the
-    execution has ended (``keep``)."""
+    execution has ended (``keep``).  ``world``: for a privileged policy the packed scenarios and
+    states of the slots, whose ground truth it observes
+    (:func:`~lantern_jax.sensors.views.privileged_view`), else ``()``."""
     pol = step.policy
     params = step.params.unpack(parp)
     start = pol.initial_carry(params)
 
-    def one(cp, op, f, k):
-        obs = _declared(pol, step.observation, step.privileged, op)
+    def one(cp, op, f, k, w):
+        def truth():
+            return privileged_view(step.scenario.unpack(w[0]), step.state.unpack(w[1]))
+
+        obs = _declared(pol, step.observation, op, truth)
         carry = jax.tree.map(lambda c0, c: jnp.where(f, c0, c), start, step.carry.unpack(cp))
         waypoints, new = pol.step(params, carry, obs)
         new = jax.tree.map(lambda n, c: jnp.where(k, c, n), new, carry)
         return jnp.asarray(waypoints, jnp.float32), step.carry.pack(new)
 
-    return jax.vmap(one)(carryp, obp, fresh, keep)
+    return jax.vmap(one)(carryp, obp, fresh, keep, world)
 
 
 _policy_jit = jax.jit(_policy_batch, static_argnames=("step",))
@@ -360,22 +376,31 @@ def policy_program(
     """The compiled per-slot step of ``policy`` for world ``sig`` and its packed parameters.
 
     Returns:
-        (the program ``(params, carry, obs, fresh, keep) -> (waypoints, carry)``, the packed
-        parameters on ``device``, the carry's layout).
+        (the program ``(params, carry, obs, fresh, keep, world) -> (waypoints, carry)``, the
+        packed parameters on ``device``, the carry's layout), where ``world`` is
+        :func:`ground_truth_inputs` of the slots' scenarios and states.
     """
     carry = jax.eval_shape(policy.initial_carry, params)
-    step = _PolicyStep(policy, sig.observation, sig.privileged, Layout.of(params),
+    step = _PolicyStep(policy, sig.observation, sig.scenario, sig.state, Layout.of(params),
                        Layout.of(carry))  # fmt: skip
     parp = tuple(jax.device_put(b, device) for b in _pack_one(step.params, params))
     s = sig.slots
     args = (
         parp, _blank(step.carry, s, device), sig.observations(s, device),
         jax.device_put(np.zeros(s, bool), device), jax.device_put(np.zeros(s, bool), device),
+        ground_truth_inputs(policy, _blank(sig.scenario, s, device), _blank(sig.state, s, device)),
     )  # fmt: skip
     identity = ("policy-step", policy.program, sig.identity())
     exe = executable(_policy_jit, *args, static=dict(step=step), timings=timings,
                      identity=identity, stage=stage)  # fmt: skip
     return exe, parp, step.carry
+
+
+def ground_truth_inputs(policy: Policy, scenarios: tuple, states: tuple) -> tuple:
+    """The policy program's ``world`` argument: the slots' packed scenarios and states for a
+    privileged policy (its program computes their ground truth), ``()`` for any other (nothing
+    more crosses the boundary)."""
+    return (scenarios, states) if policy.privileged else ()
 
 
 def _pack_one(layout: Layout, tree: Any) -> tuple[np.ndarray, ...]:
@@ -415,7 +440,8 @@ class _Run:
     params: tuple
     carry: Layout
     settings: tuple
-    switches: Array  # (2,) bool, :func:`sensor_switches` of the policy, on the device
+    switches: Array  # (1,) bool, :func:`sensor_switches` of the policy, on the device
+    truth: Callable[[tuple, tuple], tuple]  # :func:`ground_truth_inputs` of the policy
     scenarios: tuple  # (n, size) NumPy buffers
     starts: tuple  # (n, size) packed start states
     first_obs: tuple  # (n, size) packed first observations
@@ -468,7 +494,7 @@ def _worker(run: _Run, mine: np.ndarray) -> int:
         d_fresh = put(fresh.copy())
         for k in range(SPLIT_REFILL_TICKS):
             waypoints, carry = run.policy(run.params, carry, d_ob, d_fresh if k == 0 else no_fresh,
-                                          keep)  # fmt: skip
+                                          keep, run.truth(d_sc, d_st))  # fmt: skip
             d_st, d_ob, keep = run.world.tick(d_sc, d_st, waypoints, d_active, run.switches,
                                               run.settings)  # fmt: skip
         ticks += SPLIT_REFILL_TICKS
@@ -545,7 +571,8 @@ def run_split(
     switches = jax.device_put(sensor_switches(policy), device)
     first_obs = _first_observations(world, scp, starts, switches, setp, device)
     run = _Run(
-        world, pol_exe, parp, carry, setp, switches, scp, starts, first_obs,
+        world, pol_exe, parp, carry, setp, switches,
+        lambda sc, st: ground_truth_inputs(policy, sc, st), scp, starts, first_obs,
         [b.copy() for b in starts], [np.zeros((n, size), dt) for dt, size in carry.groups],
         int(max_ticks), device, _field(sig.state, ".done"),
         _field(sig.state, ".tick"), threading.Event(),
