@@ -146,6 +146,32 @@ def test_the_declared_observation_read_from_the_signature_is_observe_s(sensors):
         assert (a.shape, a.dtype) == (b.shape, b.dtype)
 
 
+def test_the_world_program_leaves_the_ground_truth_to_a_privileged_policy_s_program():
+    """The world program's observation outputs are its observation layout's groups alone (no
+    ground truth written every tick); only a policy that declares the ground truth is given
+    the slots' packed scenarios and states to compute it from, every other one ``()``."""
+    execs = engine.build_executions(load_suite().select(["pe_0001"]), bucket=True)
+    settings_ = default_settings()
+    one = jax.tree.map(lambda x: np.asarray(x)[0], execs.scenarios)
+    sig = split.world_signature(one, settings_, split.split_slots())
+    device = jax.local_devices()[0]
+    setp = tuple(jax.device_put(b, device) for b in split._pack_one(sig.settings, settings_))
+    _, obs, _ = jax.eval_shape(
+        lambda *a: split._tick_batch(*a, signed=split._Signed(sig)),
+        *split._tick_args(sig, setp, device),
+    )  # fmt: skip
+    want = [((sig.slots, size), np.dtype(dt)) for dt, size in sig.observation.groups]
+    assert [(o.shape, o.dtype) for o in obs] == want
+    assert [(o.shape[1:], o.dtype) for o in sig.observations(4, device)] == [
+        ((size,), np.dtype(dt)) for dt, size in sig.observation.groups
+    ]
+    act = lambda params, obs: jnp.zeros((NUM_WAYPOINTS, 2))  # noqa: E731
+    sees_all = Policy("sees all", lambda key: (), act, sensors=(PRIVILEGED,))
+    camera = Policy("camera", lambda key: (), act, sensors=(WARNING,))
+    assert split.ground_truth_inputs(sees_all, ("sc",), ("st",)) == (("sc",), ("st",))
+    assert split.ground_truth_inputs(camera, ("sc",), ("st",)) == ()
+
+
 # ---------------------------------------------------------------------------------------------
 # equal to the fused rollout, on every family
 # ---------------------------------------------------------------------------------------------
