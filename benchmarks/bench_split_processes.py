@@ -102,6 +102,7 @@ def main() -> None:
     import jax
     import numpy as np
     from bench_iterate import _policy  # this folder's inner-loop benchmark
+    from bench_split_workers import fresh_programs
     from jax.experimental import serialize_executable as se
 
     from lantern_jax.scenarios.suite import load_suite
@@ -120,20 +121,8 @@ def main() -> None:
     device = jax.local_devices()[0]
     sig = split.world_signature(jax.tree.map(lambda x: x[0], host), settings, slots)
     setp = tuple(jax.device_put(b, device) for b in split._pack_one(sig.settings, settings))
-    tick = split._tick_jit.lower(*split._tick_args(sig, setp, device),
-                                 signed=split._Signed(sig)).compile()  # fmt: skip
+    tick, pol_exe, parp, carry = fresh_programs(policy, params, sig, setp, device)
     world = split.WorldPrograms(sig, tick)
-    carry = split.Layout.of(jax.eval_shape(policy.initial_carry, params))
-    step = split._PolicyStep(policy, sig.observation, sig.scenario, sig.state,
-                             split.Layout.of(params), carry)  # fmt: skip
-    parp = tuple(jax.device_put(b, device) for b in split._pack_one(step.params, params))
-    flags = jax.device_put(np.zeros(slots, bool), device)
-    pol_exe = split._policy_jit.lower(parp, split._blank(carry, slots, device),
-                                      sig.observations(slots, device), flags, flags,
-                                      split.ground_truth_inputs(
-                                          policy, split._blank(sig.scenario, slots, device),
-                                          split._blank(sig.state, slots, device)),
-                                      step=step).compile()  # fmt: skip
     start = split.start_states(host, slots, settings, {})
     scp = sig.scenario.pack_host(host)
     starts = sig.state.pack_host(start)

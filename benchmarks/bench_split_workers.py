@@ -53,6 +53,30 @@ def _cpu_s() -> float:
     return r.ru_utime + r.ru_stime
 
 
+def fresh_programs(policy, params, sig, setp, device) -> tuple:
+    """The world program and ``policy``'s program of ``sig`` compiled here, afresh (neither from
+    this process's programs nor from the program store, as
+    :func:`~lantern_jax.sim.split.world_programs` and
+    :func:`~lantern_jax.sim.split.policy_program` would give them).
+
+    Returns:
+        (world tick, policy program, packed parameters on ``device``, the carry's layout).
+    """
+    s = sig.slots
+    world = split._tick_jit.lower(*split._tick_args(sig, setp, device),
+                                  signed=split._Signed(sig)).compile()  # fmt: skip
+    carry = split.Layout.of(jax.eval_shape(policy.initial_carry, params))
+    step = split._PolicyStep(policy, sig.observation, sig.scenario, sig.state,
+                             split.Layout.of(params), carry)  # fmt: skip
+    parp = tuple(jax.device_put(b, device) for b in split._pack_one(step.params, params))
+    flags = jax.device_put(np.zeros(s, bool), device)
+    truth = split.ground_truth_inputs(policy, split._blank(sig.scenario, s, device),
+                                      split._blank(sig.state, s, device))  # fmt: skip
+    pol = split._policy_jit.lower(parp, split._blank(carry, s, device), sig.observations(s, device),
+                                  flags, flags, truth, step=step).compile()  # fmt: skip
+    return world, pol, parp, carry
+
+
 def stepper(policy, params, host, settings, sig, device, own: bool):
     """A function ``run(ticks)`` that steps ``sig.slots`` executions (the suite's first) from
     their start states on ``device``, a policy call and a world call per tick, and waits for
@@ -60,23 +84,11 @@ def stepper(policy, params, host, settings, sig, device, own: bool):
     as :func:`~lantern_jax.sim.split.run_split` uses them)."""
     s = sig.slots
     setp = tuple(jax.device_put(b, device) for b in split._pack_one(sig.settings, settings))
-    carry_layout = split.Layout.of(jax.eval_shape(policy.initial_carry, params))
     if own:
-        world = split._tick_jit.lower(*split._tick_args(sig, setp, device),
-                                      signed=split._Signed(sig)).compile()  # fmt: skip
-        step = split._PolicyStep(policy, sig.observation, sig.scenario, sig.state,
-                                 split.Layout.of(params), carry_layout)  # fmt: skip
-        parp = tuple(jax.device_put(b, device) for b in split._pack_one(step.params, params))
-        flags = jax.device_put(np.zeros(s, bool), device)
-        pol = split._policy_jit.lower(parp, split._blank(carry_layout, s, device),
-                                      sig.observations(s, device), flags, flags,
-                                      split.ground_truth_inputs(
-                                          policy, split._blank(sig.scenario, s, device),
-                                          split._blank(sig.state, s, device)),
-                                      step=step).compile()  # fmt: skip
+        world, pol, parp, carry_layout = fresh_programs(policy, params, sig, setp, device)
     else:
         world = split.world_programs(sig, setp, device).tick
-        pol, parp, _ = split.policy_program(policy, params, sig, device)
+        pol, parp, carry_layout = split.policy_program(policy, params, sig, device)
     rows = np.arange(s)
     laid = jax.tree.map(lambda x: x[rows], host)
     scp = tuple(jax.device_put(b, device) for b in sig.scenario.pack_host(laid))
