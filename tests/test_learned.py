@@ -32,6 +32,7 @@ from lantern_jax.policies.learned.checkpoint import (
 )
 from lantern_jax.policies.learned.features import (
     NAV_TEXTS,
+    WORD_DIM,
     features,
     nav_token_table,
     navigation_instruction,
@@ -41,6 +42,7 @@ from lantern_jax.scenarios.handmade import straight_scene
 from lantern_jax.scenarios.warnings import text_tables, warning_language
 from lantern_jax.sim.observe import observe
 from lantern_jax.sim.state import init_state
+from lantern_jax.types.language import MAX_TOKENS, NUMBER_ID, PAD_ID
 from lantern_jax.types.world import present
 
 SMALL = ModelConfig(width=16, heads=2)
@@ -118,6 +120,96 @@ def test_text_gradient_is_finite_and_nonzero(obs, tables):
     f = features(warned(obs, 0), "front", *tables)
     g = jax.grad(lambda t: jnp.sum(model(f.replace(text=t))))(f.text)
     assert np.all(np.isfinite(np.asarray(g))) and float(jnp.max(jnp.abs(g))) > 0.0
+
+
+READER = ModelConfig(width=16, heads=2, text_encoder="attention")
+
+
+def reordered(obs, text_id: int):
+    """The warning ``text_id`` with its other tokens in reverse order; the numbers keep their
+    places (so the stated position is the same) and the padding stays at the end."""
+    o = warned(obs, text_id)
+    tok = np.asarray(o.warning_tokens).copy()
+    slots = np.flatnonzero((tok != PAD_ID) & (tok != NUMBER_ID))
+    tok[slots] = tok[slots][::-1]
+    return o.replace(warning_tokens=jnp.asarray(tok))
+
+
+def test_features_give_the_text_s_words_in_order(obs, tables):
+    """``words`` are the leading columns of the table's rows of the delivered tokens in order,
+    zero at padding; the mask is the text's tokens."""
+    o = warned(obs, 2)
+    f = features(o, "front", *tables)
+    tok = np.asarray(o.warning_tokens)
+    assert f.words.shape == (MAX_TOKENS, WORD_DIM) and f.words.dtype == jnp.float32
+    np.testing.assert_array_equal(np.asarray(f.word_mask), tok != PAD_ID)
+    want = np.asarray(tables[0])[tok, :WORD_DIM] * (tok != PAD_ID)[:, None]
+    np.testing.assert_array_equal(np.asarray(f.words), want)
+
+
+def test_only_the_attention_encoder_reads_word_order(obs, tables):
+    """The pooled text is a bag of words: reversing the words leaves a pooled model's plan as
+    it was (to float rounding), and changes the plan of a model that reads them in order."""
+    a, b = warned(obs, 0), reordered(obs, 0)
+    fa, fb = features(a, "front", *tables), features(b, "front", *tables)
+    pooled, reader = new_model(SMALL, seed=1), new_model(READER, seed=1)
+    np.testing.assert_allclose(np.asarray(pooled(fa)), np.asarray(pooled(fb)), atol=1e-5)
+    assert float(jnp.max(jnp.abs(reader(fa) - reader(fb)))) > 1e-4
+
+
+def test_attention_encoder_ignores_padding(obs, tables):
+    """Whatever the padded rows hold, the reading of the text is the same (masked attention and
+    pooling)."""
+    f = features(warned(obs, 1), "front", *tables)
+    model = new_model(READER, seed=2)
+    noise = jax.random.normal(jax.random.PRNGKey(0), f.words.shape)
+    g = f.replace(words=jnp.where(f.word_mask[:, None], f.words, noise))
+    np.testing.assert_allclose(np.asarray(model(f)), np.asarray(model(g)), atol=1e-5)
+
+
+def test_word_gradient_is_finite_and_nonzero(obs, tables):
+    """d(plan)/d(word embeddings) of the attention encoder: nonzero on the text's tokens, zero
+    on padding."""
+    model = new_model(READER, seed=3)
+    f = features(warned(obs, 0), "front", *tables)
+    g = jax.grad(lambda w: jnp.sum(model(f.replace(words=w))))(f.words)
+    g = np.asarray(g)
+    mask = np.asarray(f.word_mask)
+    assert np.all(np.isfinite(g))
+    assert np.all(np.abs(g[mask]).max(axis=1) > 0.0) and np.all(g[~mask] == 0.0)
+
+
+def test_attention_model_saves_loads_and_refuses_the_pooled_architecture(obs, tables, tmp_path):
+    model = new_model(READER, seed=4)
+    save_model(model, tmp_path / "r")
+    back = load_model(tmp_path / "r", expect=READER)
+    f = features(warned(obs, 1), "front", *tables)
+    np.testing.assert_array_equal(np.asarray(model(f)), np.asarray(back(f)))
+    with pytest.raises(CheckpointError, match=r"config\.text_encoder"):
+        load_model(tmp_path / "r", expect=SMALL)
+
+
+def test_a_description_written_before_the_text_encoder_loads_as_pooled(saved):
+    """Checkpoints written before ``text_encoder`` and ``text_layers`` existed describe the
+    pooled architecture of that time."""
+    from lantern_jax.policies.learned.checkpoint import description_hash
+
+    meta = json.loads(saved.with_suffix(".json").read_text())
+    del meta["config"]["text_encoder"], meta["config"]["text_layers"]
+    meta["sha256"] = description_hash(meta)
+    saved.with_suffix(".json").write_text(json.dumps(meta))
+    assert load_model(saved, expect=SMALL).config == SMALL
+
+
+def test_an_unknown_text_encoder_is_refused(saved):
+    from lantern_jax.policies.learned.checkpoint import description_hash
+
+    meta = json.loads(saved.with_suffix(".json").read_text())
+    meta["config"]["text_encoder"] = "lstm"
+    meta["sha256"] = description_hash(meta)
+    saved.with_suffix(".json").write_text(json.dumps(meta))
+    with pytest.raises(CheckpointError, match=r"config\.text_encoder: 'lstm' not one of"):
+        load_model(saved)
 
 
 def test_policy_act_is_pure_and_batchable(obs, tables):
@@ -281,6 +373,15 @@ def write(tmp_path, text: str):
             "[train]\nname = 'x'\nrecipe = 'base'\ndistractor_texts = 'lanes'\n",
             r"train\.distractor_texts: 'lanes' not one of position, position_and_lane",
         ),
+        (
+            "[train]\nname = 'x'\nrecipe = 'base'\ntext_encoder = 'lstm'\n",
+            r"train\.text_encoder: 'lstm' not one of pooled, attention",
+        ),
+        (
+            "[train]\nname = 'x'\nrecipe = 'surround'\ntext_encoder = 'attention'\n",
+            r"train\.text_encoder: the surround recipe reads no text",
+        ),
+        ("[train]\nname = 'x'\nrecipe = 'base'\ntext_layers = 0\n", r"train\.text_layers"),
         ("[evaluate]\nname = 'x'\n", r"\[train\]"),
         ("[train\nname = 'x'\n", "not valid TOML"),
     ],

@@ -23,6 +23,10 @@ carries — the paper's three learned rows:
   With ``failure_window_s > 0`` each round also keeps the visits of the last seconds before
   every collision of the driven executions, every ``failure_every_s`` (recovery states).
 
+The text encoder (``text_encoder``) is the pooled bag of words unless given; ``"attention"``
+reads the words in order (:mod:`lantern_jax.policies.learned.model`).  A model fine-tuned from
+``init_from`` must have the architecture of that checkpoint.
+
 The camera rig (``rig``) is the recipe's own unless given: the six-camera rig for ``surround``,
 the front camera for the others.  A language recipe may take ``rig = "surround"``: its model
 then reads the six-camera rig's view (the dataset's ``rig.*`` and ``surround.*`` columns in
@@ -39,6 +43,7 @@ from typing import Any
 from lantern_jax.apps.dataset.store import EXCLUDE_CROSSING
 from lantern_jax.io.config_file import ConfigFileError, check_keys, read_table, typed_value
 from lantern_jax.policies.learned.features import RIGS
+from lantern_jax.policies.learned.model import TEXT_ENCODERS
 from lantern_jax.policies.names import name_problem
 from lantern_jax.scenarios.warning_texts import DISTRACTOR_SETS
 
@@ -65,6 +70,10 @@ class TrainConfig:
     width: int = 64
     heads: int = 4
     layers: int = 1
+    # how the model reads the text (policies.learned.model.TEXT_ENCODERS): "pooled" (the mean
+    # of the words' embeddings) or "attention" (the words in order, text_layers attention layers)
+    text_encoder: str = "pooled"
+    text_layers: int = 1
     epochs: int = 6
     batch_size: int = 256
     lr: float = 1e-3  # peak learning rate (one-cycle: warm-up then cosine decay)
@@ -159,7 +168,16 @@ def _range_problem(cfg: TrainConfig) -> tuple[str, str] | None:
         problems.append(("recipe", f"{cfg.recipe!r} not one of {', '.join(RECIPES)}"))
     if cfg.recipe in ("coop", "distance", "closed_loop") and not cfg.init_from:
         problems.append(("init_from", f"the {cfg.recipe} recipe fine-tunes a base model; give it"))
-    for key in ("epochs", "batch_size", "width", "heads", "layers", "rounds", "scenes_per_round"):
+    for key in (
+        "epochs",
+        "batch_size",
+        "width",
+        "heads",
+        "layers",
+        "text_layers",
+        "rounds",
+        "scenes_per_round",
+    ):
         if getattr(cfg, key) < 1:
             problems.append((key, f"must be >= 1, got {getattr(cfg, key)}"))
     for key in ("lr", "max_minutes", "far_m", "visit_every_s", "max_seconds", "failure_every_s"):
@@ -194,6 +212,11 @@ def _range_problem(cfg: TrainConfig) -> tuple[str, str] | None:
         problems.append(("rig", f"{cfg.rig!r} not one of {', '.join(RIGS)}"))
     elif cfg.recipe == "surround" and cfg.rig != "surround":
         problems.append(("rig", "the surround recipe is the six-camera rig's; leave rig out"))
+    if cfg.text_encoder not in TEXT_ENCODERS:
+        problems.append(("text_encoder", f"{cfg.text_encoder!r} not one of "
+                                         f"{', '.join(TEXT_ENCODERS)}"))  # fmt: skip
+    elif cfg.text_encoder != "pooled" and not cfg.language:
+        problems.append(("text_encoder", f"the {cfg.recipe} recipe reads no text; leave it out"))
     if cfg.width % cfg.heads:
         problems.append(("heads", f"{cfg.heads} does not divide width {cfg.width}"))
     return problems[0] if problems else None

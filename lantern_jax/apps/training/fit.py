@@ -35,7 +35,8 @@ from lantern_jax.types.observation import Observation, SurroundView
 def model_config(cfg: TrainConfig, ranges: int) -> ModelConfig:
     """The architecture a training config asks for."""
     return ModelConfig(rig=cfg.rig, language=cfg.language, width=cfg.width, heads=cfg.heads,
-                       layers=cfg.layers, ranges=ranges)  # fmt: skip
+                       layers=cfg.layers, ranges=ranges, text_encoder=cfg.text_encoder,
+                       text_layers=cfg.text_layers)  # fmt: skip
 
 
 def _observation(batch: dict[str, Any]) -> Observation:

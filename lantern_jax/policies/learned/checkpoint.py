@@ -36,7 +36,7 @@ from flax import nnx, serialization, struct
 from lantern_jax.io.files import atomic_write
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.learned.features import RIGS, features, nav_token_table
-from lantern_jax.policies.learned.model import DrivingModel, ModelConfig
+from lantern_jax.policies.learned.model import TEXT_ENCODERS, DrivingModel, ModelConfig
 from lantern_jax.policies.learned.shipped import SHIPPED_MODELS
 from lantern_jax.policies.names import name_problem
 from lantern_jax.types.language import load_embedding
@@ -167,6 +167,13 @@ def _is_sha256(v: object) -> bool:
     return isinstance(v, str) and len(v) == 64 and set(v) <= set("0123456789abcdef")
 
 
+#: ModelConfig fields added after checkpoints were first written: a description without one
+#: describes a model built with the field's default (the architecture of that time).
+LATER_CONFIG_FIELDS = ("text_encoder", "text_layers")
+#: The accepted values of a ModelConfig field of type str.
+_CHOICES = {"rig": RIGS, "text_encoder": TEXT_ENCODERS}
+
+
 def _config_problem(raw: object) -> tuple[str, str] | None:
     """(field, problem) of a description's ``config`` object, or None when it is valid."""
     if not isinstance(raw, dict):
@@ -177,10 +184,13 @@ def _config_problem(raw: object) -> tuple[str, str] | None:
             return f"config.{key}", f"unknown field (known: {', '.join(fields)})"
     for key, f in fields.items():
         if key not in raw:
+            if key in LATER_CONFIG_FIELDS:
+                continue
             return f"config.{key}", "missing"
         v = raw[key]
-        if f.type == "str" and v not in RIGS:
-            return f"config.{key}", f"{v!r} not one of {', '.join(RIGS)}"
+        choices = _CHOICES.get(key)
+        if choices is not None and v not in choices:
+            return f"config.{key}", f"{v!r} not one of {', '.join(choices)}"
         if f.type == "bool" and not isinstance(v, bool):
             return f"config.{key}", f"expected true or false, got {v!r}"
         if f.type == "int" and (isinstance(v, bool) or not isinstance(v, int) or v < 1):

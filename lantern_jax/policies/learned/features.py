@@ -14,6 +14,12 @@ loop (the simulator's observation), so a trained model sees identical inputs in 
   when no text is delivered; plus the position the text writes (its first two numbers, ego
   frame, scaled) and whether it writes one.  Everything here comes from the text itself:
   whether a warning is on is whether any token is delivered.  Language-free models ignore it.
+  The same text also comes as its tokens' embeddings in order (``words``, ``word_mask``), for
+  a model that reads the words in sequence (``ModelConfig.text_encoder = "attention"``): the
+  first :data:`WORD_DIM` columns of each token's row (WordLlama's embeddings are trained as
+  Matryoshka representations, so a leading slice is itself an embedding; its loader truncates
+  them the same way).  The full rows would make the per-token projection the largest cost of a
+  training step.
 """
 
 from __future__ import annotations
@@ -27,7 +33,7 @@ from flax import struct
 
 from lantern_jax.core.constants import NUM_ACTOR_KINDS
 from lantern_jax.maths.polyline import safe_atan2
-from lantern_jax.types.language import pad, pooled_embedding, tokenize
+from lantern_jax.types.language import PAD_ID, pad, pooled_embedding, tokenize
 from lantern_jax.types.observation import Observation, stated_position, warning_delivered
 
 Array = jax.Array
@@ -35,6 +41,7 @@ Array = jax.Array
 POS_SCALE_M = 50.0  # m, positions are divided by this
 SPEED_SCALE_MPS = 10.0  # m/s
 DIST_CLIP_M = 100.0  # m, distances are clipped here before scaling
+WORD_DIM = 64  # leading embedding columns of each word token in ``Features.words``
 RANGE_SCALE_M = 120.0  # m, the longest camera range of any weather profile
 TURN_THRESHOLD_RAD = 0.5  # rad, route heading change that makes the instruction a turn
 NAV_TEXTS = (
@@ -56,6 +63,8 @@ class Features:
     mask: Array  # (A,) bool, the rig sees the actor
     ranges: Array  # (N,) float32 in [0, 1]
     text: Array  # (D,) float32, pooled embedding of the warning or the navigation instruction
+    words: Array  # (L, WORD_DIM) float32, that text's token embeddings in order (0 at padding)
+    word_mask: Array  # (L,) bool, the text's tokens (words, numbers, punctuation; not padding)
     position: Array  # (2,) float32, stated position (ego frame, scaled; zeros when none)
     has_position: Array  # () float32, 1 when the delivered text writes a position
     warning: Array  # () float32, 1 while a text is delivered
@@ -118,6 +127,9 @@ def features(obs: Observation, rig: str, embedding: Array, nav_tokens: Array) ->
     nav = nav_tokens[navigation_instruction(obs.route)]
     tokens = jnp.where(active, obs.warning_tokens, nav)
     text = pooled_embedding(embedding, tokens)
+    word_mask = tokens != PAD_ID
+    table = jnp.asarray(embedding, jnp.float32)[:, :WORD_DIM]
+    words = table[jnp.clip(tokens, 0, table.shape[0] - 1)] * word_mask[:, None]
     pos, has_pos = stated_position(obs)
     has_pos = active & has_pos
     return Features(
@@ -127,6 +139,8 @@ def features(obs: Observation, rig: str, embedding: Array, nav_tokens: Array) ->
         mask=mask,
         ranges=jnp.clip(ranges / RANGE_SCALE_M, 0.0, 1.0).astype(jnp.float32),
         text=text,
+        words=words,
+        word_mask=word_mask,
         position=jnp.where(has_pos, pos / POS_SCALE_M, 0.0).astype(jnp.float32),
         has_position=has_pos.astype(jnp.float32),
         warning=active.astype(jnp.float32),

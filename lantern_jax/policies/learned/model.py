@@ -6,15 +6,27 @@
     range image (N,)     --MLP-----> (W,)
     ego + route          --MLP-----> (W,)
     trunk = MLP([objects, ranges, ego])                               (W,)
-    language (only when ``ModelConfig.language``):
-        gamma, beta = Linear([text embedding, stated position, has_position, warning])
+    language (only when ``ModelConfig.language``), by ``ModelConfig.text_encoder``:
+      "pooled":    gamma, beta = Linear([pooled text embedding, stated position,
+                                         has_position, warning])
+      "attention": word tokens (L, WORD_DIM) --Linear + learned position (L, W)--> self-attention
+                   (masked to the text's tokens) x text_layers --> mean over the tokens (W,);
+                   gamma, beta = MLP([pooled text embedding, that (W,), stated position,
+                                      has_position, warning])
         trunk = trunk * (1 + gamma) + beta                            (FiLM)
     head: MLP(trunk) -> (10, 2) increments, summed along the horizon  (ego frame, metres)
 
 The head predicts per-step displacements and accumulates them, so the waypoints are ordered
 along the plan; their scale is set by :data:`STEP_SCALE_M` (a 10 m/s plan moves 2.5 m a step).
-The token-embedding table is not part of the model: the pooled embedding is an input
-(:mod:`lantern_jax.policies.learned.features`), so checkpoints hold only trained weights.
+The token-embedding table is not part of the model: the pooled embedding and the word tokens'
+embeddings are inputs (:mod:`lantern_jax.policies.learned.features`), so checkpoints hold only
+trained weights.
+
+The pooled text is a bag of words: the mean of the tokens' embeddings cannot tell "The vehicle
+at position (x, y) will cut into the ego lane." from a sentence that uses the same words to
+negate it, and a linear FiLM of that mean weighs each word on its own.  The ``attention``
+encoder reads the words in order (learned position embeddings, self-attention over the text's
+tokens) and its FiLM is an MLP, so words can change one another's meaning.
 """
 
 from __future__ import annotations
@@ -26,11 +38,15 @@ import jax.numpy as jnp
 from flax import nnx
 
 from lantern_jax.core.constants import NUM_WAYPOINTS
-from lantern_jax.policies.learned.features import Features
+from lantern_jax.policies.learned.features import WORD_DIM, Features
+from lantern_jax.types.language import MAX_TOKENS
 
 Array = jax.Array
 
 STEP_SCALE_M = 2.5  # m, scale of one predicted waypoint increment
+#: How the text channel is read (``ModelConfig.text_encoder``; see the module docstring).
+TEXT_ENCODERS = ("pooled", "attention")
+WORD_POSITION_INIT_STD = 0.02  # standard deviation of the learned word-position embeddings
 
 
 @dataclasses.dataclass(frozen=True)
@@ -45,6 +61,8 @@ class ModelConfig:
     object_features: int = 13  # F (features.Features.objects' last axis)
     ranges: int = 32  # N, rays of the rig's range image
     text_dim: int = 256  # D, embedding width
+    text_encoder: str = "pooled"  # one of TEXT_ENCODERS
+    text_layers: int = 1  # self-attention layers over the words (text_encoder "attention")
 
 
 class _MLP(nnx.Module):
@@ -77,7 +95,21 @@ class DrivingModel(nnx.Module):
         self.ranges = _MLP((config.ranges, w, w), rngs)
         self.ego = _MLP((9 + 52, w, w), rngs)
         self.trunk = _MLP((3 * w, 2 * w, w), rngs)
-        if config.language:
+        if config.language and config.text_encoder == "attention":
+            self.embed_words = nnx.Linear(WORD_DIM, w, rngs=rngs)
+            self.word_position = nnx.Param(
+                WORD_POSITION_INIT_STD * jax.random.normal(rngs.params(), (MAX_TOKENS, w))
+            )
+            self.text_attention = nnx.List([
+                nnx.MultiHeadAttention(num_heads=config.heads, in_features=w, qkv_features=w,
+                                       out_features=w, decode=False, rngs=rngs)
+                for _ in range(config.text_layers)
+            ])  # fmt: skip
+            self.text_norms = nnx.List(
+                [nnx.LayerNorm(w, rngs=rngs) for _ in range(config.text_layers)]
+            )
+            self.film = _MLP((config.text_dim + w + 4, 2 * w, 2 * w), rngs)
+        elif config.language:
             self.film = nnx.Linear(config.text_dim + 4, 2 * w, rngs=rngs)
         self.head = _MLP((w, w, 2 * NUM_WAYPOINTS), rngs)
 
@@ -93,8 +125,21 @@ class DrivingModel(nnx.Module):
                              self.ego(jnp.concatenate([f.ego, f.route]))])  # fmt: skip
         h = self.trunk(h)
         if self.config.language:
-            cond = jnp.concatenate([f.text, f.position, f.has_position[None], f.warning[None]])
+            parts = [f.text]
+            if self.config.text_encoder == "attention":
+                parts.append(self._read_words(f.words, f.word_mask))
+            cond = jnp.concatenate([*parts, f.position, f.has_position[None], f.warning[None]])
             gamma, beta = jnp.split(self.film(cond), 2)
             h = h * (1.0 + gamma) + beta
         steps = self.head(nnx.gelu(h)).reshape(NUM_WAYPOINTS, 2) * STEP_SCALE_M
         return jnp.cumsum(steps, axis=0)
+
+    def _read_words(self, words: Array, mask: Array) -> Array:
+        """(W,) order-aware summary of the text: ``words`` (L, WORD_DIM) float32 embeddings,
+        ``mask`` (L,) bool, the text's tokens (not padding)."""
+        x = self.embed_words(words) + self.word_position[...]  # (L, W)
+        pair_mask = (mask[:, None] & mask[None, :])[None]  # (1, L, L)
+        for att, norm in zip(self.text_attention, self.text_norms, strict=True):
+            x = norm(x + att(x, mask=pair_mask))
+        seen = mask.astype(jnp.float32)[:, None]
+        return jnp.sum(x * seen, axis=0) / jnp.maximum(jnp.sum(seen), 1.0)
