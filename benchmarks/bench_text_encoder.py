@@ -2,11 +2,13 @@
 
 One jitted training step as ``lantern_jax.apps.training.fit`` compiles it (the loss over a batch
 of observations, its gradient, an AdamW update), for a model of each text encoder
-(``ModelConfig.text_encoder``): ``pooled`` and ``attention``.  The batch is the observation of a
-straight road with a pedestrian emergence's markers (front camera), repeated with the bank's
-warning texts; the same batch and targets for every model.  Each round times ``--steps`` steps
-of every model after its compile, the models interleaved; prints ms per step and steps per
-second with the machine's load::
+(``ModelConfig.text_encoder``): ``pooled`` and ``attention``, and the attention encoder
+without its attention layers (``text_layers=0``: the projection, the word positions and the
+MLP FiLM; a ``ModelConfig`` only, which no training config accepts), to split its cost.
+The batch is the observation of a straight road with a pedestrian emergence's markers (front
+camera), repeated with the bank's warning texts; the same batch and targets for every model.
+Each round times ``--steps`` steps of every model after its compile, the models interleaved;
+prints ms per step and steps per second with the machine's load::
 
     python benchmarks/bench_text_encoder.py --rounds 3 --steps 50
 """
@@ -27,7 +29,7 @@ from flax import nnx
 from lantern_jax.core.constants import NUM_WAYPOINTS
 from lantern_jax.policies.learned.checkpoint import new_model
 from lantern_jax.policies.learned.features import features, nav_token_table
-from lantern_jax.policies.learned.model import TEXT_ENCODERS, ModelConfig
+from lantern_jax.policies.learned.model import ModelConfig
 from lantern_jax.scenarios.handmade import straight_scene
 from lantern_jax.scenarios.warnings import text_tables
 from lantern_jax.sim.observe import observe
@@ -77,9 +79,14 @@ def main() -> None:
     emb = jnp.asarray(load_embedding(), jnp.float32)
     nav = jnp.asarray(nav_token_table())
     obs, targets = batch_of(args.batch)
+    configs = {
+        "pooled": ModelConfig(text_encoder="pooled"),
+        "attention": ModelConfig(text_encoder="attention"),
+        "attention, 0 layers": ModelConfig(text_encoder="attention", text_layers=0),
+    }
     models = {}
-    for enc in TEXT_ENCODERS:
-        step, p, s = make_step(ModelConfig(text_encoder=enc))
+    for enc, config in configs.items():
+        step, p, s = make_step(config)
         t = time.perf_counter()
         p, s, v = step(p, s, obs, targets, emb, nav)
         v.block_until_ready()
@@ -97,7 +104,7 @@ def main() -> None:
             dt = (time.perf_counter() - t) / args.steps
             m[1], m[2] = p, s
             load = os.getloadavg()[0]
-            print(f"round {r} {enc:>9}: {1e3 * dt:6.1f} ms/step  {1 / dt:5.1f} steps/s  "
+            print(f"round {r} {enc:>19}: {1e3 * dt:6.1f} ms/step  {1 / dt:5.1f} steps/s  "
                   f"(load {load:.1f})")  # fmt: skip
 
 
