@@ -387,6 +387,12 @@ def word_mask(tokens: Array) -> Array:
     return (tokens != PAD_ID) & (tokens != NUMBER_ID)
 
 
+def token_embeddings(table: Array, tokens: Array) -> Array:
+    """(..., L, D') rows of ``table`` (V, D') for padded token rows ``tokens`` (..., L) int32;
+    ids outside the table are clipped to it (padding and numbers are rows like any other)."""
+    return table[jnp.clip(tokens, 0, table.shape[0] - 1)]
+
+
 def pooled_embedding(table: Array, tokens: Array, normalize: bool = True) -> Array:
     """Sentence embedding of padded token rows: the mean of the word-token embeddings.
 
@@ -405,7 +411,7 @@ def pooled_embedding(table: Array, tokens: Array, normalize: bool = True) -> Arr
     table = jnp.asarray(table, jnp.float32)
     tokens = jnp.asarray(tokens, jnp.int32)
     mask = word_mask(tokens).astype(jnp.float32)
-    emb = table[jnp.clip(tokens, 0, table.shape[0] - 1)]  # (..., L, D)
+    emb = token_embeddings(table, tokens)  # (..., L, D)
     total = jnp.sum(emb * mask[..., None], axis=-2)
     count = jnp.sum(mask, axis=-1, keepdims=True)
     mean = total / jnp.maximum(count, 1.0)

@@ -168,16 +168,8 @@ def _range_problem(cfg: TrainConfig) -> tuple[str, str] | None:
         problems.append(("recipe", f"{cfg.recipe!r} not one of {', '.join(RECIPES)}"))
     if cfg.recipe in ("coop", "distance", "closed_loop") and not cfg.init_from:
         problems.append(("init_from", f"the {cfg.recipe} recipe fine-tunes a base model; give it"))
-    for key in (
-        "epochs",
-        "batch_size",
-        "width",
-        "heads",
-        "layers",
-        "text_layers",
-        "rounds",
-        "scenes_per_round",
-    ):
+    for key in ("epochs", "batch_size", "width", "heads", "layers", "text_layers", "rounds",
+                "scenes_per_round"):  # fmt: skip
         if getattr(cfg, key) < 1:
             problems.append((key, f"must be >= 1, got {getattr(cfg, key)}"))
     for key in ("lr", "max_minutes", "far_m", "visit_every_s", "max_seconds", "failure_every_s"):

@@ -33,7 +33,13 @@ from flax import struct
 
 from lantern_jax.core.constants import NUM_ACTOR_KINDS
 from lantern_jax.maths.polyline import safe_atan2
-from lantern_jax.types.language import PAD_ID, pad, pooled_embedding, tokenize
+from lantern_jax.types.language import (
+    PAD_ID,
+    pad,
+    pooled_embedding,
+    token_embeddings,
+    tokenize,
+)
 from lantern_jax.types.observation import Observation, stated_position, warning_delivered
 
 Array = jax.Array
@@ -128,8 +134,8 @@ def features(obs: Observation, rig: str, embedding: Array, nav_tokens: Array) ->
     tokens = jnp.where(active, obs.warning_tokens, nav)
     text = pooled_embedding(embedding, tokens)
     word_mask = tokens != PAD_ID
-    table = jnp.asarray(embedding, jnp.float32)[:, :WORD_DIM]
-    words = table[jnp.clip(tokens, 0, table.shape[0] - 1)] * word_mask[:, None]
+    leading = jnp.asarray(embedding, jnp.float32)[:, :WORD_DIM]
+    words = token_embeddings(leading, tokens) * word_mask[:, None]
     pos, has_pos = stated_position(obs)
     has_pos = active & has_pos
     return Features(

@@ -115,12 +115,8 @@ class DrivingModel(nnx.Module):
 
     def __call__(self, f: Features) -> Array:
         """(10, 2) float32 waypoints, ego frame (x forward, y right), metres."""
-        tokens = self.embed_objects(f.objects)  # (A, W)
-        pair_mask = (f.mask[:, None] & f.mask[None, :])[None]  # (1, A, A)
-        for att, norm in zip(self.attention, self.norms, strict=True):
-            tokens = norm(tokens + att(tokens, mask=pair_mask))
-        seen = f.mask.astype(jnp.float32)[:, None]
-        pooled = jnp.sum(tokens * seen, axis=0) / jnp.maximum(jnp.sum(seen), 1.0)
+        pooled = _attend_and_pool(self.embed_objects(f.objects), f.mask,  # (A, W) tokens
+                                  self.attention, self.norms)  # fmt: skip
         h = jnp.concatenate([pooled, self.ranges(f.ranges),
                              self.ego(jnp.concatenate([f.ego, f.route]))])  # fmt: skip
         h = self.trunk(h)
@@ -138,8 +134,14 @@ class DrivingModel(nnx.Module):
         """(W,) order-aware summary of the text: ``words`` (L, WORD_DIM) float32 embeddings,
         ``mask`` (L,) bool, the text's tokens (not padding)."""
         x = self.embed_words(words) + self.word_position[...]  # (L, W)
-        pair_mask = (mask[:, None] & mask[None, :])[None]  # (1, L, L)
-        for att, norm in zip(self.text_attention, self.text_norms, strict=True):
-            x = norm(x + att(x, mask=pair_mask))
-        seen = mask.astype(jnp.float32)[:, None]
-        return jnp.sum(x * seen, axis=0) / jnp.maximum(jnp.sum(seen), 1.0)
+        return _attend_and_pool(x, mask, self.text_attention, self.text_norms)
+
+
+def _attend_and_pool(tokens: Array, mask: Array, attention, norms) -> Array:
+    """(W,) mean over the masked tokens after residual self-attention layers among them:
+    ``tokens`` (T, W) float32, ``mask`` (T,) bool (an empty mask pools to zeros)."""
+    pair_mask = (mask[:, None] & mask[None, :])[None]  # (1, T, T)
+    for att, norm in zip(attention, norms, strict=True):
+        tokens = norm(tokens + att(tokens, mask=pair_mask))
+    seen = mask.astype(jnp.float32)[:, None]
+    return jnp.sum(tokens * seen, axis=0) / jnp.maximum(jnp.sum(seen), 1.0)
