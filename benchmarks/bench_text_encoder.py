@@ -2,7 +2,7 @@
 
 One jitted training step as ``lantern_jax.apps.training.fit`` compiles it (the loss over a batch
 of observations, its gradient, an AdamW update), for a model of each text encoder
-(``ModelConfig.text_encoder``): ``pooled`` and ``attention``, and the attention encoder
+(``ModelConfig.text_encoder``): ``pooled``, ``attention`` and ``bigram``, and the attention encoder
 without its attention layers (``text_layers=0``: the projection, the word positions and the
 MLP FiLM; a ``ModelConfig`` only, which no training config accepts), to split its cost.
 The batch is the observation of a straight road with a pedestrian emergence's markers (front
@@ -83,6 +83,7 @@ def main() -> None:
         "pooled": ModelConfig(text_encoder="pooled"),
         "attention": ModelConfig(text_encoder="attention"),
         "attention, 0 layers": ModelConfig(text_encoder="attention", text_layers=0),
+        "bigram": ModelConfig(text_encoder="bigram"),
     }
     models = {}
     for enc, config in configs.items():

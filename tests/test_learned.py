@@ -123,6 +123,9 @@ def test_text_gradient_is_finite_and_nonzero(obs, tables):
 
 
 READER = ModelConfig(width=16, heads=2, text_encoder="attention")
+BIGRAM = ModelConfig(width=16, heads=2, text_encoder="bigram")
+#: Every text encoder that reads the words in order.
+ORDERED = pytest.mark.parametrize("config", [READER, BIGRAM], ids=["attention", "bigram"])
 
 
 def reordered(obs, text_id: int):
@@ -147,30 +150,33 @@ def test_features_give_the_text_s_words_in_order(obs, tables):
     np.testing.assert_array_equal(np.asarray(f.words), want)
 
 
-def test_only_the_attention_encoder_reads_word_order(obs, tables):
+@ORDERED
+def test_only_the_ordered_encoders_read_word_order(obs, tables, config):
     """The pooled text is a bag of words: reversing the words leaves a pooled model's plan as
     it was (to float rounding), and changes the plan of a model that reads them in order."""
     a, b = warned(obs, 0), reordered(obs, 0)
     fa, fb = features(a, "front", *tables), features(b, "front", *tables)
-    pooled, reader = new_model(SMALL, seed=1), new_model(READER, seed=1)
+    pooled, reader = new_model(SMALL, seed=1), new_model(config, seed=1)
     np.testing.assert_allclose(np.asarray(pooled(fa)), np.asarray(pooled(fb)), atol=1e-5)
     assert float(jnp.max(jnp.abs(reader(fa) - reader(fb)))) > 1e-4
 
 
-def test_attention_encoder_ignores_padding(obs, tables):
-    """Whatever the padded rows hold, the reading of the text is the same (masked attention and
-    pooling)."""
+@ORDERED
+def test_ordered_encoders_ignore_padding(obs, tables, config):
+    """Whatever the padded rows hold, the reading of the text is the same (masked attention,
+    masked pairs and pooling)."""
     f = features(warned(obs, 1), "front", *tables)
-    model = new_model(READER, seed=2)
+    model = new_model(config, seed=2)
     noise = jax.random.normal(jax.random.PRNGKey(0), f.words.shape)
     g = f.replace(words=jnp.where(f.word_mask[:, None], f.words, noise))
     np.testing.assert_allclose(np.asarray(model(f)), np.asarray(model(g)), atol=1e-5)
 
 
-def test_word_gradient_is_finite_and_nonzero(obs, tables):
-    """d(plan)/d(word embeddings) of the attention encoder: nonzero on the text's tokens, zero
+@ORDERED
+def test_word_gradient_is_finite_and_nonzero(obs, tables, config):
+    """d(plan)/d(word embeddings) of an ordered encoder: nonzero on the text's tokens, zero
     on padding."""
-    model = new_model(READER, seed=3)
+    model = new_model(config, seed=3)
     f = features(warned(obs, 0), "front", *tables)
     g = jax.grad(lambda w: jnp.sum(model(f.replace(words=w))))(f.words)
     g = np.asarray(g)
@@ -179,14 +185,44 @@ def test_word_gradient_is_finite_and_nonzero(obs, tables):
     assert np.all(np.abs(g[mask]).max(axis=1) > 0.0) and np.all(g[~mask] == 0.0)
 
 
-def test_attention_model_saves_loads_and_refuses_the_pooled_architecture(obs, tables, tmp_path):
-    model = new_model(READER, seed=4)
+@ORDERED
+def test_ordered_model_saves_loads_and_refuses_the_pooled_architecture(obs, tables, tmp_path,
+                                                                       config):  # fmt: skip
+    model = new_model(config, seed=4)
     save_model(model, tmp_path / "r")
-    back = load_model(tmp_path / "r", expect=READER)
+    back = load_model(tmp_path / "r", expect=config)
     f = features(warned(obs, 1), "front", *tables)
     np.testing.assert_array_equal(np.asarray(model(f)), np.asarray(back(f)))
     with pytest.raises(CheckpointError, match=r"config\.text_encoder"):
         load_model(tmp_path / "r", expect=SMALL)
+
+
+def test_bigram_reading_matches_a_numpy_reference(obs, tables):
+    """The bigram encoder's summary, written out in NumPy: the mean over the text's adjacent
+    token pairs of (first word's projection) * (second word's other projection)."""
+    model = new_model(BIGRAM, seed=5)
+    f = features(warned(obs, 2), "front", *tables)
+    words, mask = np.asarray(f.words, np.float64), np.asarray(f.word_mask)
+    w1, b1 = (np.asarray(v[...], np.float64) for v in (model.embed_words.kernel,
+                                                       model.embed_words.bias))  # fmt: skip
+    w2, b2 = (np.asarray(v[...], np.float64) for v in (model.embed_next.kernel,
+                                                       model.embed_next.bias))  # fmt: skip
+    n = int(mask.sum())
+    want = np.mean([(words[i] @ w1 + b1) * (words[i + 1] @ w2 + b2) for i in range(n - 1)], 0)
+    got = np.asarray(model._read_words(f.words, f.word_mask))
+    assert n > 5 and got.shape == (BIGRAM.width,)
+    np.testing.assert_allclose(got, want, rtol=1e-4, atol=1e-6)
+
+
+def test_bigram_encoder_tells_a_swapped_pair_apart(obs, tables):
+    """Two adjacent words swapped: the bag of words is the same, the ordered pairs are not
+    (the pair's two words go through different projections)."""
+    f = features(warned(obs, 0), "front", *tables)
+    model = new_model(BIGRAM, seed=6)
+    swapped = f.words.at[0].set(f.words[1]).at[1].set(f.words[0])
+    g = f.replace(words=swapped)
+    before, after = model._read_words(f.words, f.word_mask), model._read_words(g.words, g.word_mask)
+    assert float(jnp.max(jnp.abs(before - after))) > 1e-4
 
 
 def test_a_description_written_before_the_text_encoder_loads_as_pooled(saved):
@@ -375,7 +411,7 @@ def write(tmp_path, text: str):
         ),
         (
             "[train]\nname = 'x'\nrecipe = 'base'\ntext_encoder = 'lstm'\n",
-            r"train\.text_encoder: 'lstm' not one of pooled, attention",
+            r"train\.text_encoder: 'lstm' not one of pooled, attention, bigram",
         ),
         (
             "[train]\nname = 'x'\nrecipe = 'surround'\ntext_encoder = 'attention'\n",

@@ -52,6 +52,7 @@ def test_command_line_overrides_the_ppo_config(tmp_path, calls):
     [
         ("[ppo]\n", ["--epochs", "2"], "--epochs: config"),
         ("[ppo]\n", ["--dataset", "data/x"], "--dataset: config"),
+        ("[ppo]\n", ["--init-from", "a.msgpack"], "--init-from: config"),
         ("[ppo]\nminutes = 0\n", [], "minutes must be > 0"),
         ("[ppo]\nminutes = 'x'\n", [], "minutes must be int or float"),
         ("[ppo]\nlearning_rate = 1.0\n", [], "unknown key 'learning_rate' in [ppo]"),
@@ -73,3 +74,14 @@ def test_minutes_is_refused_for_a_dataset_recipe(capsys, calls):
 def test_the_shipped_ppo_config_is_valid(calls, tmp_path):
     assert main(["train", "--config", "configs/train_ppo.toml", "--out", str(tmp_path)]) == 0
     assert calls[0]["num_timesteps"] == 200_000_000 and calls[0]["pairs_per_family"] == 16
+
+
+def test_init_from_overrides_a_dataset_config_and_is_named_when_wrong(tmp_path):
+    """``--init-from`` replaces the config's checkpoint (a chain's later stage from another
+    seed's earlier one), and a bad value is named as the option, not the file's key."""
+    from lantern_jax.apps.training.config import ConfigError, load_config
+
+    cfg = load_config("configs/train_closed_loop_rig_bigram.toml", init_from="runs/s1.msgpack")
+    assert cfg.init_from == "runs/s1.msgpack" and cfg.text_encoder == "bigram"
+    with pytest.raises(ConfigError, match=r"^--init-from must be str"):
+        load_config("configs/train_closed_loop_rig_bigram.toml", init_from=3)

@@ -40,7 +40,7 @@ PPO_KEYS = {
     "seed": (int,),
 }
 #: Options of the dataset recipes that a ``[ppo]`` config cannot take.
-DATASET_ONLY = ("dataset", "epochs")
+DATASET_ONLY = ("dataset", "epochs", "init_from")
 
 
 def _table_of(path: str) -> str:
@@ -65,10 +65,11 @@ def load_ppo_config(path: str, args: argparse.Namespace) -> dict:
     """
     from lantern_jax.io.config_file import ConfigFileError, check_keys, read_table, typed_value
 
-    given = [f"--{o}" for o in DATASET_ONLY if getattr(args, o) is not None]
+    given = [f"--{o.replace('_', '-')}" for o in DATASET_ONLY if getattr(args, o) is not None]
     if given:
         raise UsageError(f"{', '.join(given)}: config {path} trains with PPO on the "
-                         "environment, which reads no dataset and counts no epochs")  # fmt: skip
+                         "environment, which reads no dataset, counts no epochs and fine-tunes "
+                         "no checkpoint")  # fmt: skip
     try:
         cfg = read_table(path, "ppo")
         check_keys(path, "ppo", list(cfg), tuple(PPO_KEYS))
@@ -119,7 +120,7 @@ def cmd_train(args: argparse.Namespace, argv: Sequence[str]) -> int:
 
     try:
         cfg = load_config(args.config, dataset=args.dataset, out=args.out, epochs=args.epochs,
-                          seed=args.seed)  # fmt: skip
+                          seed=args.seed, init_from=args.init_from)  # fmt: skip
     except ConfigFileError as e:
         raise UsageError(str(e)) from None
     from lantern_jax.apps.training.behaviour_cloning import check_checkpoint_folder, run_files
@@ -156,5 +157,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     tr.add_argument("--minutes", type=number(0.0, 10**6, low_open=True), metavar="M",
                     help="wall-clock budget (overrides the config; [ppo] only)")  # fmt: skip
     tr.add_argument("--seed", type=seed(), help="seed (overrides the config)")
+    tr.add_argument("--init-from", metavar="MSGPACK",
+                    help="checkpoint to fine-tune from (overrides the config; [train] "
+                         "only): a later stage from another seed's earlier one")  # fmt: skip
     tr.add_argument("--quiet", action="store_true", help="no progress bar")
     tr.set_defaults(func=cmd_train)

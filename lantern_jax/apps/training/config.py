@@ -24,7 +24,8 @@ carries — the paper's three learned rows:
   every collision of the driven executions, every ``failure_every_s`` (recovery states).
 
 The text encoder (``text_encoder``) is the pooled bag of words unless given; ``"attention"``
-reads the words in order (:mod:`lantern_jax.policies.learned.model`).  A model fine-tuned from
+reads the words in order, ``"bigram"`` which word follows which
+(:mod:`lantern_jax.policies.learned.model`).  A model fine-tuned from
 ``init_from`` must have the architecture of that checkpoint.
 
 The camera rig (``rig``) is the recipe's own unless given: the six-camera rig for ``surround``,
@@ -71,7 +72,8 @@ class TrainConfig:
     heads: int = 4
     layers: int = 1
     # how the model reads the text (policies.learned.model.TEXT_ENCODERS): "pooled" (the mean
-    # of the words' embeddings) or "attention" (the words in order, text_layers attention layers)
+    # of the words' embeddings), "attention" (the words in order, text_layers attention layers)
+    # or "bigram" (every ordered pair of adjacent words)
     text_encoder: str = "pooled"
     text_layers: int = 1
     epochs: int = 6

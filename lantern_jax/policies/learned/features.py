@@ -15,11 +15,11 @@ loop (the simulator's observation), so a trained model sees identical inputs in 
   frame, scaled) and whether it writes one.  Everything here comes from the text itself:
   whether a warning is on is whether any token is delivered.  Language-free models ignore it.
   The same text also comes as its tokens' embeddings in order (``words``, ``word_mask``), for
-  a model that reads the words in sequence (``ModelConfig.text_encoder = "attention"``): the
-  first :data:`WORD_DIM` columns of each token's row (WordLlama's embeddings are trained as
-  Matryoshka representations, so a leading slice is itself an embedding; its loader truncates
-  them the same way).  The full rows would make the per-token projection the largest cost of a
-  training step.
+  a model that reads the words in sequence (``ModelConfig.text_encoder``, ``"attention"`` or
+  ``"bigram"``): the first :data:`WORD_DIM` columns of each token's row (WordLlama's
+  embeddings are trained as Matryoshka representations, so a leading slice is itself an
+  embedding; its loader truncates them the same way).  The full rows would make the per-token
+  projection the largest cost of a training step.
 """
 
 from __future__ import annotations

@@ -13,6 +13,9 @@
                    (masked to the text's tokens) x text_layers --> mean over the tokens (W,);
                    gamma, beta = MLP([pooled text embedding, that (W,), stated position,
                                       has_position, warning])
+      "bigram":    word tokens (L, WORD_DIM) --Linear--> (L, W) --each word times the next one's
+                   second Linear (L-1, W)--> mean over the text's adjacent pairs (W,);
+                   gamma, beta = the same MLP as "attention"
         trunk = trunk * (1 + gamma) + beta                            (FiLM)
     head: MLP(trunk) -> (10, 2) increments, summed along the horizon  (ego frame, metres)
 
@@ -26,7 +29,11 @@ The pooled text is a bag of words: the mean of the tokens' embeddings cannot tel
 at position (x, y) will cut into the ego lane." from a sentence that uses the same words to
 negate it, and a linear FiLM of that mean weighs each word on its own.  The ``attention``
 encoder reads the words in order (learned position embeddings, self-attention over the text's
-tokens) and its FiLM is an MLP, so words can change one another's meaning.
+tokens) and its FiLM is an MLP, so words can change one another's meaning.  The ``bigram``
+encoder reads which word follows which: the mean over adjacent pairs of the first word's
+projection times the second's (another projection, so "is nothing" and "nothing is" differ),
+a factorised bilinear feature of every ordered word pair.  It sees no order beyond a pair and
+costs a quarter of the attention layer's training step (``benchmarks/bench_text_encoder.py``).
 """
 
 from __future__ import annotations
@@ -45,7 +52,7 @@ Array = jax.Array
 
 STEP_SCALE_M = 2.5  # m, scale of one predicted waypoint increment
 #: How the text channel is read (``ModelConfig.text_encoder``; see the module docstring).
-TEXT_ENCODERS = ("pooled", "attention")
+TEXT_ENCODERS = ("pooled", "attention", "bigram")
 WORD_POSITION_INIT_STD = 0.02  # standard deviation of the learned word-position embeddings
 
 
@@ -95,7 +102,11 @@ class DrivingModel(nnx.Module):
         self.ranges = _MLP((config.ranges, w, w), rngs)
         self.ego = _MLP((9 + 52, w, w), rngs)
         self.trunk = _MLP((3 * w, 2 * w, w), rngs)
-        if config.language and config.text_encoder == "attention":
+        if config.language and config.text_encoder == "bigram":
+            self.embed_words = nnx.Linear(WORD_DIM, w, rngs=rngs)
+            self.embed_next = nnx.Linear(WORD_DIM, w, rngs=rngs)  # the pair's second word
+            self.film = _MLP((config.text_dim + w + 4, 2 * w, 2 * w), rngs)
+        elif config.language and config.text_encoder == "attention":
             self.embed_words = nnx.Linear(WORD_DIM, w, rngs=rngs)
             self.word_position = nnx.Param(
                 WORD_POSITION_INIT_STD * jax.random.normal(rngs.params(), (MAX_TOKENS, w))
@@ -122,7 +133,7 @@ class DrivingModel(nnx.Module):
         h = self.trunk(h)
         if self.config.language:
             parts = [f.text]
-            if self.config.text_encoder == "attention":
+            if self.config.text_encoder != "pooled":
                 parts.append(self._read_words(f.words, f.word_mask))
             cond = jnp.concatenate([*parts, f.position, f.has_position[None], f.warning[None]])
             gamma, beta = jnp.split(self.film(cond), 2)
@@ -133,6 +144,9 @@ class DrivingModel(nnx.Module):
     def _read_words(self, words: Array, mask: Array) -> Array:
         """(W,) order-aware summary of the text: ``words`` (L, WORD_DIM) float32 embeddings,
         ``mask`` (L,) bool, the text's tokens (not padding)."""
+        if self.config.text_encoder == "bigram":
+            pairs = self.embed_words(words[:-1]) * self.embed_next(words[1:])  # (L-1, W)
+            return _masked_mean(pairs, mask[:-1] & mask[1:])
         x = self.embed_words(words) + self.word_position[...]  # (L, W)
         return _attend_and_pool(x, mask, self.text_attention, self.text_norms)
 
@@ -143,5 +157,10 @@ def _attend_and_pool(tokens: Array, mask: Array, attention, norms) -> Array:
     pair_mask = (mask[:, None] & mask[None, :])[None]  # (1, T, T)
     for att, norm in zip(attention, norms, strict=True):
         tokens = norm(tokens + att(tokens, mask=pair_mask))
+    return _masked_mean(tokens, mask)
+
+
+def _masked_mean(tokens: Array, mask: Array) -> Array:
+    """(W,) mean of ``tokens`` (T, W) over ``mask`` (T,) bool; zeros for an empty mask."""
     seen = mask.astype(jnp.float32)[:, None]
     return jnp.sum(tokens * seen, axis=0) / jnp.maximum(jnp.sum(seen), 1.0)
