@@ -33,7 +33,8 @@ tokens) and its FiLM is an MLP, so words can change one another's meaning.  The 
 encoder reads which word follows which: the mean over adjacent pairs of the first word's
 projection times the second's (another projection, so "is nothing" and "nothing is" differ),
 a factorised bilinear feature of every ordered word pair.  It sees no order beyond a pair and
-costs a quarter of the attention layer's training step (``benchmarks/bench_text_encoder.py``).
+costs about a third of the attention reader's training step
+(``benchmarks/bench_text_encoder.py``).
 """
 
 from __future__ import annotations
