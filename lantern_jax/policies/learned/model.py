@@ -103,23 +103,23 @@ class DrivingModel(nnx.Module):
         self.ranges = _MLP((config.ranges, w, w), rngs)
         self.ego = _MLP((9 + 52, w, w), rngs)
         self.trunk = _MLP((3 * w, 2 * w, w), rngs)
-        if config.language and config.text_encoder == "bigram":
+        if config.language and config.text_encoder != "pooled":  # a reader of the words
             self.embed_words = nnx.Linear(WORD_DIM, w, rngs=rngs)
-            self.embed_next = nnx.Linear(WORD_DIM, w, rngs=rngs)  # the pair's second word
-            self.film = _MLP((config.text_dim + w + 4, 2 * w, 2 * w), rngs)
-        elif config.language and config.text_encoder == "attention":
-            self.embed_words = nnx.Linear(WORD_DIM, w, rngs=rngs)
-            self.word_position = nnx.Param(
-                WORD_POSITION_INIT_STD * jax.random.normal(rngs.params(), (MAX_TOKENS, w))
-            )
-            self.text_attention = nnx.List([
-                nnx.MultiHeadAttention(num_heads=config.heads, in_features=w, qkv_features=w,
-                                       out_features=w, decode=False, rngs=rngs)
-                for _ in range(config.text_layers)
-            ])  # fmt: skip
-            self.text_norms = nnx.List(
-                [nnx.LayerNorm(w, rngs=rngs) for _ in range(config.text_layers)]
-            )
+            if config.text_encoder == "bigram":
+                self.embed_next = nnx.Linear(WORD_DIM, w, rngs=rngs)  # the pair's second word
+            else:
+                self.word_position = nnx.Param(
+                    WORD_POSITION_INIT_STD * jax.random.normal(rngs.params(), (MAX_TOKENS, w))
+                )
+                self.text_attention = nnx.List([
+                    nnx.MultiHeadAttention(num_heads=config.heads, in_features=w,
+                                           qkv_features=w, out_features=w, decode=False,
+                                           rngs=rngs)
+                    for _ in range(config.text_layers)
+                ])  # fmt: skip
+                self.text_norms = nnx.List(
+                    [nnx.LayerNorm(w, rngs=rngs) for _ in range(config.text_layers)]
+                )
             self.film = _MLP((config.text_dim + w + 4, 2 * w, 2 * w), rngs)
         elif config.language:
             self.film = nnx.Linear(config.text_dim + 4, 2 * w, rngs=rngs)
