@@ -358,3 +358,75 @@ def test_one_round_trains_checkpoints_and_resumes(tmp_path):
     assert list(pd.read_csv(r0 / "curve.csv")["epoch"]) == [0, 1] and again["epochs"] == 2
     assert json.loads((r0 / "done.json").read_text())["visits"] == s["visits"]
     assert read_meta(tmp_path / "c" / "learned-tiny-cl")["recipe"] == "closed_loop"
+
+
+def test_no_warning_visits_drive_route_a_unwarned_and_keep_the_hazard_in_view(monkeypatch):
+    """With ``no_warning`` a share of the round's pairs (spread over the families) drives Route
+    A a second time with the warning off, the learner alone (beta 0) on the finer grid of
+    ``no_warning_every_s``; of those executions only the visits at which *the hazard actor*
+    is in the learner's view are kept (another actor in view does not count), under their own
+    sequence ids."""
+    from lantern_jax.apps.dataset.scenes import SceneSpec
+    from lantern_jax.apps.training import closed_loop as cl
+    from lantern_jax.scenarios.families import sample_params
+    from lantern_jax.sim.rollout import horizon_ticks
+
+    rng = np.random.default_rng(0)
+    specs = [SceneSpec(i, f, "clear_day", sample_params(f, rng), "") for i, f in
+             enumerate(["PE", "PE", "VC", "VC"])]  # fmt: skip
+    calls = []
+
+    def fake_relabel(scenarios, learner, lp, expert, ep, key, beta=0.0, num_visits=40, every=40,
+                     phase=0, settings=None, segment=1):  # fmt: skip
+        cfg_ = scenarios.config
+        b, a = cfg_.family.shape[0], scenarios.actors0.xy.shape[1]
+        calls.append(dict(warned=np.asarray(cfg_.warning_enabled), route_a=np.asarray(
+            cfg_.is_route_a), beta=beta, num_visits=num_visits, every=every))  # fmt: skip
+        h = np.asarray(cfg_.hazard_index)
+        visible = np.zeros((b, num_visits, a), bool)
+        visible[np.arange(b), num_visits // 2 :, h] = True  # the hazard: the later half
+        visible[np.arange(b), :, (h + 1) % a] = True  # another actor: always
+        obs = SimpleNamespace(visible=visible,
+                              warning_tokens=np.full((b, num_visits, 4), PAD_ID, np.int32))
+        z = np.zeros((b, num_visits), np.float32)
+        return SimpleNamespace(obs=obs, waypoints=np.zeros((b, num_visits, NUM_WAYPOINTS, 2)),
+                               valid=np.ones((b, num_visits), bool), t=z,
+                               crosses_onset=z.astype(bool), crosses_termination=z.astype(bool),
+                               t_collision=z + NEVER)  # fmt: skip
+
+    monkeypatch.setattr(cl, "relabel_batch", fake_relabel)
+    monkeypatch.setattr(cl, "model_policy", lambda name, model: SimpleNamespace(
+        init=lambda key: None))  # fmt: skip
+    like = Examples({"visible": np.zeros((0, 1), bool),
+                     "warning_tokens": np.zeros((0, 4), np.int32)},
+                    np.zeros((0, NUM_WAYPOINTS, 2)), np.zeros((0,), str), np.zeros((0,), bool))
+    cfg = TrainConfig(name="x", recipe="closed_loop", init_from="m", no_warning=0.5,
+                      max_seconds=6.0, beta=0.5)  # fmt: skip
+    ex, counts = cl.collect(cfg, None, like, specs, r=0)
+
+    assert len(calls) == 2
+    ab, quiet = calls
+    assert ab["beta"] == 0.5 and ab["warned"].tolist() == [True] * 4 + [False] * 4
+    assert quiet["beta"] == 0.0 and quiet["route_a"].all() and not quiet["warned"].any()
+    assert quiet["every"] == horizon_ticks(0.5) and quiet["num_visits"] == 12
+    n_quiet = 2 * (12 - 6)  # specs 0 (PE) and 2 (VC), the later half of their visits
+    assert counts["no_warning_visits"] == n_quiet and counts["executions"] == 8 + 2
+    assert counts["kept_visits"] == 8 * 3 + n_quiet  # the A/B grid keeps every valid visit
+    seq = ex.sequence[-n_quiet:]
+    assert set(seq) == {"pe_00000_A-no-warning", "vc_00002_A-no-warning"}
+    none = TrainConfig(name="x", recipe="closed_loop", init_from="m", max_seconds=6.0)
+    calls.clear()
+    assert cl.collect(none, None, like, specs, r=0)[1]["no_warning_visits"] == 0
+    assert len(calls) == 1
+
+
+def test_no_warning_visit_settings_are_checked(tmp_path):
+    bad = tmp_path / "bad.toml"
+    base = '[train]\nname = "x"\nrecipe = "closed_loop"\ninit_from = "m"\n'
+    for line, key in (("no_warning = 1.5", "no_warning"), ("no_warning = -0.1", "no_warning"),
+                      ("no_warning_every_s = 0.0", "no_warning_every_s")):  # fmt: skip
+        bad.write_text(base + line + "\n")
+        with pytest.raises(ConfigError, match=rf"train\.{key}:"):
+            load_config(bad)
+    bad.write_text(base + "no_warning = 1.0\nno_warning_every_s = 0.25\n")
+    assert load_config(bad).no_warning == 1.0 and load_config(bad).no_warning_every_s == 0.25

@@ -8,7 +8,15 @@ that gap. From an open-loop model (``init_from``), each of ``rounds`` rounds:
    with its warning and Route B; drawn from the dataset's plan, whose scenes already pass the
    near-duplicate rule against the suite — never the suite's pairs), the expert taking over a
    segment with probability ``beta * beta_decay**round``; every ``visit_every_s`` the visited
-   state is kept with the model's observation;
+   state is kept with the model's observation. With ``no_warning > 0``, that share of the
+   pairs also drives Route A *without* its warning, the model alone (``beta`` 0: the
+   privileged expert would anticipate the hazard it cannot see), with a visit every
+   ``no_warning_every_s``; of those only the visits at which the hazard actor is in the
+   model's view are kept (:func:`hazard_in_view`). They are the states of its own reaction to
+   the camera, which the warning executions never reach (they brake earlier) and where the
+   expert's label is one the observation can explain; before the hazard is seen the
+   privileged expert anticipates it from the warning point on, a label no camera could
+   justify;
 2. **relabel** — the privileged ``expert`` drives on from each visited state for the 2.5-s
    label horizon; its positions are the label (:mod:`lantern_jax.apps.training.relabel`: the
    dataset's labeller on the expert's continuation). Visits whose horizon crosses a warning
@@ -93,6 +101,26 @@ def _scene_batch(specs: list[SceneSpec]):
     return tree_stack([p[0] for p in pairs] + [p[1] for p in pairs])
 
 
+def _no_warning_batch(specs: list[SceneSpec]):
+    """Route A of ``specs`` in the no-warning condition, stacked (the evaluator's flip of
+    ``warning_enabled``)."""
+
+    routes = [build_pair(s.params, validate=False)[0] for s in specs]
+    off = np.asarray(False)
+    return tree_stack([a.replace(config=a.config.replace(warning_enabled=off)) for a in routes])
+
+
+def hazard_in_view(v: Visits, hazard_index: np.ndarray) -> np.ndarray:
+    """(B, V) bool: the visits at which each execution's hazard actor (``hazard_index``: (B,)
+    int, actor slot) is in the learner's view (``obs.visible``: the front camera, with the rig
+    for a rig learner)."""
+    visible = np.asarray(v.obs.visible, bool)  # (B, V, A)
+    idx = np.asarray(hazard_index, np.int64)[:, None, None]
+    return np.take_along_axis(visible, np.broadcast_to(idx, (*visible.shape[:2], 1)), axis=2)[
+        ..., 0
+    ]
+
+
 def _keep(v: Visits, exclude_crossing: str) -> np.ndarray:
     """(B, V) bool: valid visits the exclusion rule keeps."""
     keep = np.array(v.valid, bool)
@@ -127,7 +155,8 @@ def collect(cfg: TrainConfig, model, like: Examples, specs: list[SceneSpec], r: 
             progress: bool = False) -> tuple[Examples, dict]:  # fmt: skip
     """Round ``r``'s visits of ``model`` on ``specs``, relabelled by the expert (a progress bar
     over the batched calls when ``progress``); returns (examples, counts: executions, valid
-    visits, kept visits, kept visits off the ordinary grid -- those before a collision)."""
+    visits, kept visits, kept visits off the ordinary grid -- those before a collision -- and
+    kept visits of the no-warning executions)."""
 
     learner = model_policy(cfg.name, model)
     lp = learner.init(jax.random.PRNGKey(0))
@@ -142,7 +171,8 @@ def collect(cfg: TrainConfig, model, like: Examples, specs: list[SceneSpec], r: 
     ratio = round(cfg.visit_every_s / cfg.failure_every_s) if cfg.failure_window_s > 0 else 1
     num_visits = max(1, int(cfg.max_seconds / cfg.visit_every_s)) * ratio
     parts = []
-    counts = dict(executions=0, valid_visits=0, kept_visits=0, failure_visits=0)
+    counts = dict(executions=0, valid_visits=0, kept_visits=0, failure_visits=0,
+                  no_warning_visits=0)  # fmt: skip
     starts = range(0, len(specs), CHUNK_PAIRS)
     if progress:
         starts = tqdm(starts, desc=f"round {r}: drive + relabel", unit="batch")
@@ -161,6 +191,27 @@ def collect(cfg: TrainConfig, model, like: Examples, specs: list[SceneSpec], r: 
         counts["valid_visits"] += int((np.asarray(v.valid) & chosen).sum())
         counts["kept_visits"] += int(keep.sum())
         counts["failure_visits"] += int((keep & ~_chosen(v, ratio, 0.0)).sum())
+    n_quiet = round(cfg.no_warning * len(specs))  # spread evenly: specs come family by family
+    quiet = [specs[int(i * len(specs) / n_quiet)] for i in range(n_quiet)]
+    nw_every = horizon_ticks(cfg.no_warning_every_s)
+    nw_visits = max(1, int(cfg.max_seconds / cfg.no_warning_every_s))
+    starts = range(0, len(quiet), 2 * CHUNK_PAIRS)  # as many executions as a pair chunk
+    if progress and quiet:
+        starts = tqdm(starts, desc=f"round {r}: no warning", unit="batch")
+    for k in starts:
+        chunk = quiet[k : k + 2 * CHUNK_PAIRS]
+        scenarios = _no_warning_batch(chunk)
+        key = jax.random.PRNGKey(0)  # no draw: beta is 0
+        v = jax.device_get(relabel_batch(
+            scenarios, learner, lp, expert, ep, key, beta=0.0, num_visits=nw_visits,
+            every=nw_every, phase=int(nw_every * ((r * 0.618) % 1.0))))  # fmt: skip
+        keep = _keep(v, cfg.exclude_crossing) & hazard_in_view(v, scenarios.config.hazard_index)
+        ids = [f"{s.family.lower()}_{s.index:05d}_A-no-warning" for s in chunk]
+        parts.append(visits_to_examples(v, ids, like, keep))
+        counts["executions"] += len(ids)
+        counts["valid_visits"] += int(np.asarray(v.valid).sum())
+        counts["kept_visits"] += int(keep.sum())
+        counts["no_warning_visits"] += int(keep.sum())
     return concat(parts), counts
 
 

@@ -22,6 +22,9 @@ carries — the paper's three learned rows:
   ``distractor_texts`` names; :mod:`lantern_jax.apps.training.counterfactual`).
   With ``failure_window_s > 0`` each round also keeps the visits of the last seconds before
   every collision of the driven executions, every ``failure_every_s`` (recovery states).
+  With ``no_warning > 0`` that share of each round's pairs also drives Route A without its
+  warning, and the visits at which the hazard is in the learner's view join the others (the
+  reaction to the camera alone; :func:`lantern_jax.apps.training.closed_loop.collect`).
 
 The text encoder (``text_encoder``) is the pooled bag of words unless given; ``"attention"``
 reads the words in order, ``"bigram"`` which word follows which
@@ -105,6 +108,11 @@ class TrainConfig:
     # failure_every_s (the states that lead the learner into a failure); 0 keeps none
     failure_window_s: float = 0.0
     failure_every_s: float = 0.5  # s, spacing of those visits; divides visit_every_s
+    # share of each round's scene pairs whose Route A is also driven without its warning (the
+    # learner alone); of those executions only the visits at which the hazard actor is in the
+    # learner's view are kept, every no_warning_every_s (the camera's own reaction); 0: none
+    no_warning: float = 0.0
+    no_warning_every_s: float = 0.5  # s, spacing of those visits
     # the camera rig the model reads (features.RIGS); "" is the recipe's own: "surround" for
     # the surround recipe, "front" for the others
     rig: str = ""
@@ -174,7 +182,8 @@ def _range_problem(cfg: TrainConfig) -> tuple[str, str] | None:
                 "scenes_per_round"):  # fmt: skip
         if getattr(cfg, key) < 1:
             problems.append((key, f"must be >= 1, got {getattr(cfg, key)}"))
-    for key in ("lr", "max_minutes", "far_m", "visit_every_s", "max_seconds", "failure_every_s"):
+    for key in ("lr", "max_minutes", "far_m", "visit_every_s", "max_seconds", "failure_every_s",
+                "no_warning_every_s"):  # fmt: skip
         if not getattr(cfg, key) > 0:
             problems.append((key, f"must be > 0, got {getattr(cfg, key)}"))
     if not cfg.failure_window_s >= 0:
@@ -188,7 +197,7 @@ def _range_problem(cfg: TrainConfig) -> tuple[str, str] | None:
     for key in ("base_mix", "warmup", "closed_loop_mix"):
         if not 0.0 <= getattr(cfg, key) < 1.0:
             problems.append((key, f"must be in [0, 1), got {getattr(cfg, key)}"))
-    for key in ("beta", "beta_decay", "counterfactual", "distractors"):
+    for key in ("beta", "beta_decay", "counterfactual", "distractors", "no_warning"):
         if not 0.0 <= getattr(cfg, key) <= 1.0:
             problems.append((key, f"must be in [0, 1], got {getattr(cfg, key)}"))
     if cfg.recipe == "closed_loop" and cfg.base_mix + cfg.closed_loop_mix >= 1.0:
