@@ -105,20 +105,16 @@ def _no_warning_batch(specs: list[SceneSpec]):
     """Route A of ``specs`` in the no-warning condition, stacked (the evaluator's flip of
     ``warning_enabled``)."""
 
-    routes = [build_pair(s.params, validate=False)[0] for s in specs]
-    off = np.asarray(False)
-    return tree_stack([a.replace(config=a.config.replace(warning_enabled=off)) for a in routes])
+    a = tree_stack([build_pair(s.params, validate=False)[0] for s in specs])
+    return a.replace(config=a.config.replace(warning_enabled=np.zeros_like(a.config.is_route_a)))
 
 
 def hazard_in_view(v: Visits, hazard_index: np.ndarray) -> np.ndarray:
     """(B, V) bool: the visits at which each execution's hazard actor (``hazard_index``: (B,)
     int, actor slot) is in the learner's view (``obs.visible``: the front camera, with the rig
     for a rig learner)."""
-    visible = np.asarray(v.obs.visible, bool)  # (B, V, A)
-    idx = np.asarray(hazard_index, np.int64)[:, None, None]
-    return np.take_along_axis(visible, np.broadcast_to(idx, (*visible.shape[:2], 1)), axis=2)[
-        ..., 0
-    ]
+    h = np.asarray(hazard_index, np.int64)
+    return np.asarray(v.obs.visible, bool)[np.arange(len(h)), :, h]  # (B, V, A) -> (B, V)
 
 
 def _keep(v: Visits, exclude_crossing: str) -> np.ndarray:
