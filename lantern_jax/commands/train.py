@@ -27,6 +27,7 @@ from pathlib import Path
 from lantern_jax.commands import UsageError
 from lantern_jax.commands.common import check_out
 from lantern_jax.commands.values import count, number, seed
+from lantern_jax.core import allocator
 
 #: Keys of a ``[ppo]`` config and their types (:func:`lantern_jax.apps.envs.ppo_training.train`'s
 #: arguments; every key is optional, its default that function's).
@@ -112,6 +113,10 @@ def cmd_train(args: argparse.Namespace, argv: Sequence[str]) -> int:
     if args.minutes is not None:
         raise UsageError(f"--minutes: config {args.config} trains on the dataset; its time "
                          "budget is the config's max_minutes")  # fmt: skip
+    try:  # a bad LANTERN_JAX_MALLOC is refused before any work
+        allocator.malloc_choice()
+    except allocator.AllocatorError as e:
+        raise UsageError(str(e)) from None
     from lantern_jax.apps.dataset.store import DatasetError
     from lantern_jax.apps.training.behaviour_cloning import train
     from lantern_jax.apps.training.config import load_config
