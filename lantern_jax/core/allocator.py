@@ -33,6 +33,7 @@ when they name one of these parameters: the user's choice wins).
 from __future__ import annotations
 
 import ctypes
+import functools
 import os
 import platform
 
@@ -59,9 +60,6 @@ GLIBC_VARIABLES = ("MALLOC_MMAP_MAX_", "MALLOC_TOP_PAD_", "MALLOC_TRIM_THRESHOLD
                    "MALLOC_MMAP_THRESHOLD_")  # fmt: skip
 GLIBC_TUNABLE_NAMES = ("glibc.malloc.mmap_max", "glibc.malloc.top_pad",
                        "glibc.malloc.trim_threshold", "glibc.malloc.mmap_threshold")  # fmt: skip
-
-_done: list[str] = []  # what the first call did (the call is made once per process)
-
 
 class AllocatorError(ValueError):
     """``$LANTERN_JAX_MALLOC`` holds a value other than ``keep`` or ``system``."""
@@ -92,6 +90,7 @@ def _user_set() -> str | None:
     return None
 
 
+@functools.cache  # once per process (a raised AllocatorError is not cached)
 def keep_freed_memory() -> str:
     """Set glibc's allocator to keep freed memory for reuse (the module's docstring says why);
     once per process: later calls return what the first did.
@@ -103,18 +102,13 @@ def keep_freed_memory() -> str:
     Raises:
         AllocatorError: ``$LANTERN_JAX_MALLOC`` holds another value than ``keep`` or ``system``.
     """
-    if _done:
-        return _done[0]
     if malloc_choice() == "system":
-        outcome = f"left to the system ({MALLOC_ENV}=system)"
-    elif (name := _user_set()) is not None:
-        outcome = f"left as {name} sets it"
-    elif platform.system() != "Linux" or platform.libc_ver()[0] != "glibc":
-        outcome = "left to the system (not glibc)"
-    else:
-        outcome = _mallopt()
-    _done.append(outcome)
-    return outcome
+        return f"left to the system ({MALLOC_ENV}=system)"
+    if (name := _user_set()) is not None:
+        return f"left as {name} sets it"
+    if platform.system() != "Linux" or platform.libc_ver()[0] != "glibc":
+        return "left to the system (not glibc)"
+    return _mallopt()
 
 
 def _mallopt() -> str:
