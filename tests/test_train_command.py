@@ -45,6 +45,19 @@ def test_command_line_overrides_the_ppo_config(tmp_path, calls):
     assert main(argv) == 0
     assert calls[0]["out"] == str(tmp_path / "b") and calls[0]["seed"] == 7
     assert calls[0]["minutes"] == 0.5
+    assert calls[0]["checkpoint"] == f"{tmp_path / 'b'}/ppo_lantern.msgpack"
+
+
+def test_out_on_the_command_line_moves_the_configs_checkpoint_too(tmp_path, calls, capsys):
+    """A run moved with ``--out`` keeps nothing at the config's paths: the checkpoint the
+    config names keeps its file name and is written under the new folder."""
+    cfg = _config(tmp_path, f'[ppo]\nout = "{tmp_path}/a"\n'
+                            f'checkpoint = "{tmp_path}/a/mine.msgpack"\n')  # fmt: skip
+    assert main(["train", "--config", cfg, "--out", str(tmp_path / "b")]) == 0
+    assert calls[0]["checkpoint"] == str(tmp_path / "b" / "mine.msgpack")
+    assert f"checkpoint: {tmp_path / 'b' / 'mine.msgpack'}" in capsys.readouterr().out
+    assert main(["train", "--config", cfg]) == 0  # without --out, the config's own path
+    assert calls[1]["checkpoint"] == f"{tmp_path}/a/mine.msgpack"
 
 
 @pytest.mark.parametrize(
@@ -74,6 +87,7 @@ def test_minutes_is_refused_for_a_dataset_recipe(capsys, calls):
 def test_the_shipped_ppo_config_is_valid(calls, tmp_path):
     assert main(["train", "--config", "configs/train_ppo.toml", "--out", str(tmp_path)]) == 0
     assert calls[0]["num_timesteps"] == 200_000_000 and calls[0]["pairs_per_family"] == 16
+    assert calls[0]["checkpoint"] == str(tmp_path / "ppo_lantern.msgpack")
 
 
 def test_init_from_overrides_a_dataset_config_and_is_named_when_wrong(tmp_path):

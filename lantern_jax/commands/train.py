@@ -14,8 +14,8 @@ a rerun resumes —, ``curve.csv``, ``curve.png``) and exports the best model as
 
 A config with a ``[ppo]`` table runs brax's PPO on the benchmark environment
 (:mod:`lantern_jax.apps.envs.ppo_training`, the ``rl`` extra): the learning curve goes to ``out``,
-the policy to ``checkpoint`` after every evaluation; evaluate it with
-``LANTERN_JAX_PPO_CHECKPOINT=<checkpoint> lantern-jax evaluate --policy ppo``.
+the policy to ``checkpoint`` after every evaluation (under ``--out`` when that is given);
+evaluate it with ``LANTERN_JAX_PPO_CHECKPOINT=<checkpoint> lantern-jax evaluate --policy ppo``.
 """
 
 from __future__ import annotations
@@ -59,6 +59,8 @@ def _table_of(path: str) -> str:
 def load_ppo_config(path: str, args: argparse.Namespace) -> dict:
     """The ``[ppo]`` table of ``path`` with the command line's ``--out``, ``--seed`` and
     ``--minutes`` applied, as keyword arguments of :func:`lantern_jax.apps.envs.ppo_training.train`.
+    ``--out DIR`` moves the whole run: the config's ``checkpoint`` file keeps its name and is
+    written under ``DIR``.
 
     Raises:
         UsageError: naming the file and key for an unknown key, a wrong type or a value out of
@@ -81,6 +83,8 @@ def load_ppo_config(path: str, args: argparse.Namespace) -> dict:
     for option in ("out", "seed", "minutes"):
         if getattr(args, option, None) is not None:
             cfg[option] = getattr(args, option)
+    if args.out is not None and "checkpoint" in cfg:  # --out moves the whole run
+        cfg["checkpoint"] = str(Path(args.out) / Path(cfg["checkpoint"]).name)
     for key in ("minutes", "num_timesteps", "num_evals", "pairs_per_family"):
         if key in cfg and not cfg[key] > 0:
             raise UsageError(f"config {path}: {key} must be > 0 (got {cfg[key]})")
@@ -156,7 +160,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                     "configs/train_*.toml) or a [ppo] table (configs/train_ppo.toml)")  # fmt: skip
     tr.add_argument("--dataset", metavar="DIR",
                     help="dataset folder (overrides the config; [train] only)")  # fmt: skip
-    tr.add_argument("--out", metavar="DIR", help="run folder (overrides the config)")
+    tr.add_argument("--out", metavar="DIR",
+                    help="run folder (overrides the config; a [ppo] run's checkpoint is "
+                         "written there too)")  # fmt: skip
     tr.add_argument("--epochs", type=count(), metavar="N",
                     help="epochs (overrides the config; [train] only)")  # fmt: skip
     tr.add_argument("--minutes", type=number(0.0, 10**6, low_open=True), metavar="M",
