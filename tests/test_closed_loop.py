@@ -332,6 +332,7 @@ def test_relabel_of_an_expert_state_is_the_dataset_label():
 @pytest.mark.slow
 def test_one_round_trains_checkpoints_and_resumes(tmp_path):
     from lantern_jax.apps.dataset.generation import generate_dataset
+    from lantern_jax.apps.dataset.store import dataset_sha256, read_card
     from lantern_jax.apps.training.behaviour_cloning import train
     from lantern_jax.policies.learned.checkpoint import checkpoint_policy, read_meta
 
@@ -357,7 +358,10 @@ def test_one_round_trains_checkpoints_and_resumes(tmp_path):
     again = train(TrainConfig(**dict(cl, epochs=2)), progress=False)
     assert list(pd.read_csv(r0 / "curve.csv")["epoch"]) == [0, 1] and again["epochs"] == 2
     assert json.loads((r0 / "done.json").read_text())["visits"] == s["visits"]
-    assert read_meta(tmp_path / "c" / "learned-tiny-cl")["recipe"] == "closed_loop"
+    meta = read_meta(tmp_path / "c" / "learned-tiny-cl")
+    assert meta["recipe"] == "closed_loop"
+    assert meta["dataset_sha256"] == again["dataset_sha256"] == dataset_sha256(read_card(ds))
+    assert read_meta(r0 / "learned-tiny-cl")["dataset_frames"] == read_card(ds)["frames"]
 
 
 def test_no_warning_visits_drive_route_a_unwarned_and_keep_the_hazard_in_view(monkeypatch):

@@ -24,6 +24,8 @@ from lantern_jax.apps.dataset.store import (
     DatasetError,
     card_markdown,
     column_array,
+    dataset_provenance,
+    dataset_sha256,
     load_frames,
     load_sequences,
     read_card,
@@ -176,6 +178,26 @@ def test_same_seed_gives_identical_shards_and_resume_finishes_the_same(made, tmp
     assert [s["frames_sha256"] for s in resumed["shards"]] == [
         s["frames_sha256"] for s in card["shards"]
     ]
+    assert dataset_sha256(resumed) == dataset_sha256(card)  # same content, another folder
+
+
+def test_the_dataset_digest_is_the_shards_digests_in_order():
+    """``dataset_sha256`` hashes the card's shard digests, frames and sequences, in order:
+    derived by hand here, and any one shard's change, or a swap, changes it."""
+    import hashlib
+
+    card = {"frames": 7, "shards": [
+        {"frames_sha256": "a" * 64, "sequences_sha256": "b" * 64},
+        {"frames_sha256": "c" * 64, "sequences_sha256": "d" * 64},
+    ]}  # fmt: skip
+    text = f"{'a' * 64}:{'b' * 64}\n{'c' * 64}:{'d' * 64}"
+    assert dataset_sha256(card) == hashlib.sha256(text.encode()).hexdigest()
+    assert dataset_provenance(card) == {"dataset_sha256": dataset_sha256(card),
+                                        "dataset_frames": 7}  # fmt: skip
+    one = json.loads(json.dumps(card))
+    one["shards"][1]["sequences_sha256"] = "e" * 64
+    swapped = dict(card, shards=card["shards"][::-1])
+    assert len({dataset_sha256(c) for c in (card, one, swapped)}) == 3
 
 
 def test_resume_records_from_the_kept_plan(made, tmp_path, monkeypatch):

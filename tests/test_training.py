@@ -14,7 +14,7 @@ import pandas as pd
 import pytest
 
 from lantern_jax.apps.dataset.generation import generate_dataset
-from lantern_jax.apps.dataset.store import load_frames, read_card
+from lantern_jax.apps.dataset.store import dataset_sha256, load_frames, read_card
 from lantern_jax.apps.training.behaviour_cloning import train
 from lantern_jax.apps.training.config import TrainConfig
 from lantern_jax.apps.training.data import examples_from_frames, recipe_examples, split_by_sequence
@@ -83,6 +83,10 @@ def test_same_seed_same_checkpoint_and_resume(dataset, tmp_path):
     b = train(tiny(dataset, tmp_path / "b"), progress=False)
     sha = [read_meta(tmp_path / d / "learned-tiny")["params_sha256"] for d in "ab"]
     assert sha[0] == sha[1]
+    # the description names the data it was trained on: the dataset's content digest
+    meta = read_meta(tmp_path / "a" / "learned-tiny")
+    assert meta["dataset_sha256"] == dataset_sha256(read_card(dataset)) == a["dataset_sha256"]
+    assert meta["dataset_frames"] == read_card(dataset)["frames"] == a["dataset_frames"]
     assert a["best_val_l1_m"] == b["best_val_l1_m"] and np.isfinite(a["best_val_l1_m"])
     # a rerun with more epochs resumes from the orbax checkpoint instead of starting over
     more = train(tiny(dataset, tmp_path / "a", epochs=2), progress=False)

@@ -64,6 +64,22 @@ def file_sha256(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
+def dataset_sha256(card: dict) -> str:
+    """SHA-256 hex digest naming a dataset's content: over the SHA-256 of every frame and
+    sequence shard the card lists, in its order.  Two folders with the same digest hold the
+    same recorded frames, whatever their path; a rebuild that records one frame more or less
+    (another simulator version) has another.  Training writes it into every exported model's
+    description (``dataset_sha256``), so a result names the data it was trained on."""
+    parts = [f"{shard['frames_sha256']}:{shard['sequences_sha256']}" for shard in card["shards"]]
+    return hashlib.sha256("\n".join(parts).encode()).hexdigest()
+
+
+def dataset_provenance(card: dict) -> dict:
+    """What a trained model's description records of its dataset: ``dataset_sha256``
+    (:func:`dataset_sha256`) and ``dataset_frames`` (the card's frame count)."""
+    return dict(dataset_sha256=dataset_sha256(card), dataset_frames=int(card["frames"]))
+
+
 def to_table(columns: dict[str, np.ndarray]) -> tuple[Any, dict[str, list[int]]]:
     """A pyarrow table of the columns (arrays with more than one axis become fixed-size lists
     of their flattened trailing axes) and each column's per-row shape."""

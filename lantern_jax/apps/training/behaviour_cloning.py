@@ -24,7 +24,7 @@ import os
 import re
 from pathlib import Path
 
-from lantern_jax.apps.dataset.store import load_frames, read_card
+from lantern_jax.apps.dataset.store import dataset_provenance, load_frames, read_card
 from lantern_jax.apps.training.closed_loop import train_closed_loop
 from lantern_jax.apps.training.config import TrainConfig
 from lantern_jax.apps.training.data import ranges_width, recipe_examples, split_by_sequence
@@ -88,4 +88,5 @@ def train(cfg: TrainConfig, progress: bool = True) -> dict:
     mcfg = model_config(cfg, ranges_width(ex, cfg.rig))
     model = load_model(cfg.init_from, expect=mcfg) if cfg.init_from else new_model(mcfg, cfg.seed)
     batches = Batches(ex, train_idx, cfg)
-    return fit(cfg, model, ex, batches, val_idx, out, progress)
+    data = dataset_provenance(card)
+    return dict(fit(cfg, model, ex, batches, val_idx, out, progress, info=data), **data)

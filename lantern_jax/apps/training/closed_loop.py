@@ -43,7 +43,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from lantern_jax.apps.dataset.scenes import PLAN_JSON, SceneSpec
-from lantern_jax.apps.dataset.store import load_frames, read_card
+from lantern_jax.apps.dataset.store import dataset_provenance, load_frames, read_card
 from lantern_jax.apps.training.config import TrainConfig
 from lantern_jax.apps.training.counterfactual import frame_counterfactuals
 from lantern_jax.apps.training.data import (
@@ -244,6 +244,7 @@ def train_closed_loop(cfg: TrainConfig, progress: bool = True) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     specs = plan_specs(cfg.dataset)
     data = _dataset_examples(cfg)
+    provenance = dataset_provenance(read_card(Path(cfg.dataset)))
     mcfg = model_config(cfg, ranges_width(data, cfg.rig))
     model = load_model(cfg.init_from, expect=mcfg)
     visits: list[Examples] = []
@@ -269,13 +270,15 @@ def train_closed_loop(cfg: TrainConfig, progress: bool = True) -> dict:
             cl = train_idx[train_idx >= len(data)]
             batches = Batches(ex, train_idx, cfg, pools=((cl, cfg.closed_loop_mix),))
             summary = fit(cfg, model, ex, batches, val_idx, folder, progress,
-                          info=dict(round=r, visits=int(sum(len(v) for v in visits))))  # fmt: skip
+                          info=dict(round=r, visits=int(sum(len(v) for v in visits)),
+                                    **provenance))  # fmt: skip
             summary.update(round=r, visits=len(new), collect_seconds=round(t_collect, 1), **counts)
             atomic_write(done, json.dumps(summary, indent=1, default=str) + "\n")
         model = load_model(folder / f"{cfg.name}.msgpack", expect=mcfg)
         rounds.append(summary)
     save_model(model, out / cfg.name, dict(recipe=cfg.recipe, dataset=str(cfg.dataset),
                                            train_config=dataclasses.asdict(cfg),
-                                           rounds=len(rounds)))  # fmt: skip
+                                           rounds=len(rounds), **provenance))  # fmt: skip
     atomic_write(out / "rounds.json", json.dumps(rounds, indent=1, default=str) + "\n")
-    return dict(summary, rounds=len(rounds), model=str(out / f"{cfg.name}.msgpack"))
+    return dict(summary, rounds=len(rounds), model=str(out / f"{cfg.name}.msgpack"),
+                **provenance)  # fmt: skip
