@@ -7,6 +7,8 @@ without its attention layers (``text_layers=0``: the projection, the word positi
 MLP FiLM; a ``ModelConfig`` only, which no training config accepts), to split its cost.
 The batch is the observation of a straight road with a pedestrian emergence's markers (front
 camera), repeated with the bank's warning texts; the same batch and targets for every model.
+The bigram reader twice: slot by slot, and through the projected rows of the batch's
+vocabulary (``DrivingModel.word_tables``), which is how training reads it.
 Each round times ``--steps`` steps of every model after its compile, the models interleaved;
 prints ms per step and steps per second with the machine's load::
 
@@ -26,9 +28,10 @@ import numpy as np
 import optax
 from flax import nnx
 
+from lantern_jax.apps.training.fit import make_loss, text_vocabulary
 from lantern_jax.core.constants import NUM_WAYPOINTS
 from lantern_jax.policies.learned.checkpoint import new_model
-from lantern_jax.policies.learned.features import features, nav_token_table
+from lantern_jax.policies.learned.features import nav_token_table
 from lantern_jax.policies.learned.model import ModelConfig
 from lantern_jax.scenarios.handmade import straight_scene
 from lantern_jax.scenarios.warnings import text_tables
@@ -51,19 +54,18 @@ def batch_of(n: int):
     return batch, jnp.asarray(targets)
 
 
-def make_step(config: ModelConfig):
-    """(step, params, opt_state) of one model: ``step(params, opt, obs, targets, emb, nav)``."""
+def make_step(config: ModelConfig, vocabulary=None):
+    """(step, params, opt_state) of one model: ``step(params, opt, obs, targets, emb, nav)``,
+    the loss training compiles (``fit.make_loss``); a bigram model given ``vocabulary`` reads
+    its words through the projected vocabulary, as training does, else slot by slot."""
     graphdef, params = nnx.split(new_model(config, seed=0))
     tx = optax.adamw(3e-4, weight_decay=1e-4)
-
-    def loss(p, obs, targets, emb, nav):
-        m = nnx.merge(graphdef, p)
-        pred = jax.vmap(lambda o: m(features(o, config.rig, emb, nav)))(obs)
-        return jnp.mean(jnp.abs(pred - targets))
+    loss = make_loss(graphdef, config.rig)
 
     @jax.jit
     def step(p, s, obs, targets, emb, nav):
-        v, g = jax.value_and_grad(loss)(p, obs, targets, emb, nav)
+        columns = {k: v for k, v in vars(obs).items() if v is not None}
+        v, g = jax.value_and_grad(loss)(p, columns, targets, emb, nav, vocabulary)
         u, s = tx.update(g, s, p)
         return optax.apply_updates(p, u), s, v
 
@@ -83,11 +85,13 @@ def main() -> None:
         "pooled": ModelConfig(text_encoder="pooled"),
         "attention": ModelConfig(text_encoder="attention"),
         "attention, 0 layers": ModelConfig(text_encoder="attention", text_layers=0),
+        "bigram, per slot": ModelConfig(text_encoder="bigram"),
         "bigram": ModelConfig(text_encoder="bigram"),
     }
+    vocabulary = jnp.asarray(text_vocabulary(np.asarray(obs.warning_tokens), np.asarray(nav)))
     models = {}
     for enc, config in configs.items():
-        step, p, s = make_step(config)
+        step, p, s = make_step(config, vocabulary if enc == "bigram" else None)
         t = time.perf_counter()
         p, s, v = step(p, s, obs, targets, emb, nav)
         v.block_until_ready()

@@ -225,6 +225,43 @@ def test_bigram_encoder_tells_a_swapped_pair_apart(obs, tables):
     assert float(jnp.max(jnp.abs(before - after))) > 1e-4
 
 
+def test_bigram_word_tables_read_what_the_slots_read(obs, tables):
+    """Training's reading through the projected vocabulary (``word_tables``, with
+    ``text_vocabulary`` of the batch) gives a bigram model the plans and the loss gradient of
+    the per-slot reading, to float32 rounding, on a batch of every bank text and the
+    navigation instructions; the other encoders have no tables."""
+    from lantern_jax.apps.training.fit import make_loss, text_vocabulary
+
+    tokens = np.array(text_tables().tokens)
+    tokens[::3] = PAD_ID  # no text delivered: these read the navigation instruction
+    n = len(tokens)
+    batch = jax.tree.map(lambda x: jnp.stack([x] * n), obs)
+    batch = batch.replace(warning_tokens=jnp.asarray(tokens))
+    emb, nav = tables
+    vocab = text_vocabulary(tokens, np.asarray(nav))
+    assert np.all(np.diff(vocab) > 0) and set(np.unique(tokens)) <= set(vocab.tolist())
+    model = new_model(BIGRAM, seed=7)
+    word_tables = model.word_tables(emb, jnp.asarray(vocab))
+    assert word_tables.first.shape == (len(vocab), BIGRAM.width)
+    f = jax.vmap(lambda o: features(o, "front", emb, nav))(batch)
+    assert not np.all(np.asarray(f.warning))  # some examples read the navigation text
+    slots = jax.vmap(model)(f)
+    read = jax.vmap(lambda g: model(g, word_tables))(f)
+    np.testing.assert_allclose(np.asarray(read), np.asarray(slots), rtol=1e-5, atol=1e-5)
+    graphdef, params = nnx.split(model)
+    targets = jnp.zeros((n, NUM_WAYPOINTS, 2))
+    loss = jax.value_and_grad(make_loss(graphdef, "front"))
+    columns = {k: v for k, v in vars(batch).items() if v is not None}  # training's example columns
+    (v0, g0), (v1, g1) = loss(params, columns, targets, emb, nav), loss(
+        params, columns, targets, emb, nav, jnp.asarray(vocab))
+    np.testing.assert_allclose(float(v1), float(v0), rtol=1e-6)
+    for a, b in zip(jax.tree.leaves(g0), jax.tree.leaves(g1), strict=True):
+        np.testing.assert_allclose(np.asarray(b), np.asarray(a), rtol=1e-4, atol=1e-6)
+    assert float(jnp.max(jnp.abs(g1["embed_words"]["kernel"][...]))) > 0.0
+    for config in (SMALL, READER):
+        assert new_model(config, seed=7).word_tables(emb, jnp.asarray(vocab)) is None
+
+
 def test_a_description_written_before_the_text_encoder_loads_as_pooled(saved):
     """Checkpoints written before ``text_encoder`` and ``text_layers`` existed describe the
     pooled architecture of that time."""

@@ -51,12 +51,28 @@ def _observation(batch: dict[str, Any]) -> Observation:
     return Observation(**obs)
 
 
-def make_loss(graphdef: Any, rig: str):
-    """``loss(params, obs_batch, targets, embedding, nav) -> () mean L1`` over a batch."""
+def text_vocabulary(warning_tokens: np.ndarray, nav_tokens: np.ndarray) -> np.ndarray:
+    """(U,) int32 sorted ids of every token a model can read in these examples: their warning
+    texts' (``warning_tokens``, (n, L) int32) and the navigation instructions' (``nav_tokens``,
+    (3, L) int32), padding included (the vocabulary a bigram reader's
+    :meth:`~lantern_jax.policies.learned.model.DrivingModel.word_tables` projects)."""
+    ids = np.concatenate([np.asarray(warning_tokens).ravel(), np.asarray(nav_tokens).ravel()])
+    return np.unique(ids).astype(np.int32)
 
-    def loss(params, obs, targets, embedding, nav):
+
+def make_loss(graphdef: Any, rig: str):
+    """``loss(params, obs_batch, targets, embedding, nav, vocabulary=None) -> () mean L1`` over
+    a batch.  With ``vocabulary`` ((U,) int32, :func:`text_vocabulary` of the examples) a
+    bigram reader projects the vocabulary's rows once for the batch instead of every token
+    slot of every example (:class:`~lantern_jax.policies.learned.model.WordTables`); other
+    models ignore it."""
+
+    def loss(params, obs, targets, embedding, nav, vocabulary=None):
         model = nnx.merge(graphdef, params)
-        pred = jax.vmap(lambda o: model(features(o, rig, embedding, nav)))(_observation(obs))
+        tables = None if vocabulary is None else model.word_tables(embedding, vocabulary)
+        pred = jax.vmap(lambda o: model(features(o, rig, embedding, nav), tables))(
+            _observation(obs)
+        )
         return jnp.mean(jnp.abs(pred - targets))
 
     return loss
@@ -133,19 +149,27 @@ def fit(cfg: TrainConfig, model: Any, ex: Examples, batches: Batches, val_idx: n
     # compiled program, which JAX's persistent cache then serialises, compresses and writes.
     # Each of the two programs took 6.7-8.1 s to compile that way against 0.7-1.9 s now (2-core
     # CPU, ``benchmarks/bench_fit_compile.py``); the weights are the same bits.
+    # A bigram reader reads its words through the projected rows of the examples' vocabulary
+    # (a few hundred ids) instead of projecting all B x 48 token slots of every batch
+    # (docs/learned.md, "The bigram reader's vocabulary").
+    bigram = model.config.language and model.config.text_encoder == "bigram"
+    vocab = None
+    if bigram:
+        vocab = jnp.asarray(text_vocabulary(ex.obs["warning_tokens"], np.asarray(nav)))
+
     @jax.jit
-    def step_with(params, opt_state, obs, targets, embedding, nav):
-        value, grads = jax.value_and_grad(loss_fn)(params, obs, targets, embedding, nav)
+    def step_with(params, opt_state, obs, targets, embedding, nav, vocab):
+        value, grads = jax.value_and_grad(loss_fn)(params, obs, targets, embedding, nav, vocab)
         updates, opt_state = tx.update(grads, opt_state, params)
         return optax.apply_updates(params, updates), opt_state, value
 
     def step(params, opt_state, obs, targets):
-        return step_with(params, opt_state, obs, targets, embedding, nav)
+        return step_with(params, opt_state, obs, targets, embedding, nav, vocab)
 
     val_loss_with = jax.jit(loss_fn)
 
     def val_loss_fn(p, o, t):
-        return val_loss_with(p, o, t, embedding, nav)
+        return val_loss_with(p, o, t, embedding, nav, vocab)
 
     mngr = _checkpointer(out)
     start, curve, best = 0, [], (np.inf, -1)

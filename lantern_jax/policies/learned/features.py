@@ -71,6 +71,7 @@ class Features:
     text: Array  # (D,) float32, pooled embedding of the warning or the navigation instruction
     words: Array  # (L, WORD_DIM) float32, that text's token embeddings in order (0 at padding)
     word_mask: Array  # (L,) bool, the text's tokens (words, numbers, punctuation; not padding)
+    tokens: Array  # (L,) int32, that text's token ids (the rows of ``words``; PAD_ID at padding)
     position: Array  # (2,) float32, stated position (ego frame, scaled; zeros when none)
     has_position: Array  # () float32, 1 when the delivered text writes a position
     warning: Array  # () float32, 1 while a text is delivered
@@ -147,6 +148,7 @@ def features(obs: Observation, rig: str, embedding: Array, nav_tokens: Array) ->
         text=text,
         words=words,
         word_mask=word_mask,
+        tokens=tokens.astype(jnp.int32),
         position=jnp.where(has_pos, pos / POS_SCALE_M, 0.0).astype(jnp.float32),
         has_position=has_pos.astype(jnp.float32),
         warning=active.astype(jnp.float32),

@@ -35,11 +35,19 @@ projection times the second's (another projection, so "is nothing" and "nothing 
 a factorised bilinear feature of every ordered word pair.  It sees no order beyond a pair and
 costs about a third of the attention reader's training step
 (``benchmarks/bench_text_encoder.py``).
+
+Its two projections are linear in a token's embedding row, so a batch whose texts draw on a few
+hundred distinct tokens need not project every one of its B x L token slots: training
+(:func:`lantern_jax.apps.training.fit.make_loss`) projects the rows of the run's vocabulary once
+per step (:meth:`DrivingModel.word_tables`) and each slot reads its token's projected row
+(:class:`WordTables`).  The function is the same; the float32 sums of the gradient run in
+another order, so the weights are not the bits of the per-slot form.
 """
 
 from __future__ import annotations
 
 import dataclasses
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -55,6 +63,15 @@ STEP_SCALE_M = 2.5  # m, scale of one predicted waypoint increment
 #: How the text channel is read (``ModelConfig.text_encoder``; see the module docstring).
 TEXT_ENCODERS = ("pooled", "attention", "bigram")
 WORD_POSITION_INIT_STD = 0.02  # standard deviation of the learned word-position embeddings
+
+
+class WordTables(NamedTuple):
+    """The bigram reader's two projections of a vocabulary's embedding rows, computed once for
+    a batch (:meth:`DrivingModel.word_tables`) and read by every example's token slots."""
+
+    row: Array  # (V,) int32, each token id's row in first / second (0 outside the vocabulary)
+    first: Array  # (U, W) float32, embed_words of the vocabulary's rows (a pair's first word)
+    second: Array  # (U, W) float32, embed_next of them (a pair's second word)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -125,8 +142,22 @@ class DrivingModel(nnx.Module):
             self.film = nnx.Linear(config.text_dim + 4, 2 * w, rngs=rngs)
         self.head = _MLP((w, w, 2 * NUM_WAYPOINTS), rngs)
 
-    def __call__(self, f: Features) -> Array:
-        """(10, 2) float32 waypoints, ego frame (x forward, y right), metres."""
+    def word_tables(self, embedding: Array, vocabulary: Array) -> WordTables | None:
+        """The bigram reader's projections of ``vocabulary`` ((U,) int32 sorted token ids, every
+        id the batch's texts use): ``embedding`` is the (V, D) float32 token table; None for
+        the other encoders, which read every slot."""
+        if not (self.config.language and self.config.text_encoder == "bigram"):
+            return None
+        rows = jnp.asarray(embedding, jnp.float32)[vocabulary, :WORD_DIM]  # (U, WORD_DIM)
+        row = jnp.zeros(embedding.shape[0], jnp.int32).at[vocabulary].set(
+            jnp.arange(vocabulary.shape[0], dtype=jnp.int32)
+        )
+        return WordTables(row, self.embed_words(rows), self.embed_next(rows))
+
+    def __call__(self, f: Features, tables: WordTables | None = None) -> Array:
+        """(10, 2) float32 waypoints, ego frame (x forward, y right), metres.  ``tables``
+        (bigram reader only; :meth:`word_tables`) must project every token id of ``f.tokens``:
+        the result is the per-slot reading's within float32 rounding."""
         pooled = _attend_and_pool(self.embed_objects(f.objects), f.mask,  # (A, W) tokens
                                   self.attention, self.norms)  # fmt: skip
         h = jnp.concatenate([pooled, self.ranges(f.ranges),
@@ -135,18 +166,24 @@ class DrivingModel(nnx.Module):
         if self.config.language:
             parts = [f.text]
             if self.config.text_encoder != "pooled":
-                parts.append(self._read_words(f.words, f.word_mask))
+                parts.append(self._read_words(f.words, f.word_mask, f.tokens, tables))
             cond = jnp.concatenate([*parts, f.position, f.has_position[None], f.warning[None]])
             gamma, beta = jnp.split(self.film(cond), 2)
             h = h * (1.0 + gamma) + beta
         steps = self.head(nnx.gelu(h)).reshape(NUM_WAYPOINTS, 2) * STEP_SCALE_M
         return jnp.cumsum(steps, axis=0)
 
-    def _read_words(self, words: Array, mask: Array) -> Array:
+    def _read_words(self, words: Array, mask: Array, tokens: Array | None = None,
+                    tables: WordTables | None = None) -> Array:  # fmt: skip
         """(W,) order-aware summary of the text: ``words`` (L, WORD_DIM) float32 embeddings,
-        ``mask`` (L,) bool, the text's tokens (not padding)."""
+        ``mask`` (L,) bool, the text's tokens (not padding), ``tokens`` (L,) int32 their ids
+        (read through ``tables`` when given)."""
         if self.config.text_encoder == "bigram":
-            pairs = self.embed_words(words[:-1]) * self.embed_next(words[1:])  # (L-1, W)
+            if tables is None:
+                pairs = self.embed_words(words[:-1]) * self.embed_next(words[1:])  # (L-1, W)
+            else:
+                row = tables.row[tokens]  # (L,) rows of the projected vocabulary
+                pairs = tables.first[row[:-1]] * tables.second[row[1:]]  # (L-1, W)
             return _masked_mean(pairs, mask[:-1] & mask[1:])
         x = self.embed_words(words) + self.word_position[...]  # (L, W)
         return _attend_and_pool(x, mask, self.text_attention, self.text_norms)
