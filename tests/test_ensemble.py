@@ -4,6 +4,8 @@ member's weights, and members that cannot be averaged refused by name."""
 
 from __future__ import annotations
 
+import re
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -136,3 +138,37 @@ def test_stacked_weights_keep_the_members_in_order(embedding):
         own = m.init(None).model
         for s, w in zip(jax.tree.leaves(stacked), jax.tree.leaves(own), strict=True):
             np.testing.assert_array_equal(np.asarray(s)[i], np.asarray(w))
+
+
+def test_the_example_ensemble_file_averages_the_three_chains_it_names(tmp_path, obs, embedding,
+                                                                       monkeypatch):  # fmt: skip
+    """``examples/bigram_ensemble.py`` loads through ``--policy FILE:NAME`` from the folder the
+    training script writes (run from the project's folder): three bigram checkpoints in its
+    layout drive as their mean; a missing chain is named.  The script itself is valid bash and
+    trains with configs that exist."""
+    import subprocess
+    from pathlib import Path
+
+    from lantern_jax.policies.external import load_policy_source
+
+    root = Path(__file__).resolve().parents[1]
+    bigram = ModelConfig(width=16, heads=2, text_encoder="bigram")
+    monkeypatch.chdir(tmp_path)
+    members = []
+    for seed in (0, 1, 2):
+        where = tmp_path / "runs/train/bigram_ensemble" / f"bigram_s{seed}" / "closed"
+        where.mkdir(parents=True)
+        save_model(new_model(bigram, seed=seed), where / "learned-closed-loop-rig-bigram")
+        members.append(tiny(f"s{seed}", seed, embedding, bigram))
+    ens, source = load_policy_source(f"{root}/examples/bigram_ensemble.py:bigram_ensemble")
+    assert ens.name == "bigram-ensemble" and source["file"] == "bigram_ensemble.py"
+    want = np.mean([plan(m, obs) for m in members], axis=0)
+    np.testing.assert_allclose(plan(ens, obs), want, rtol=1e-5, atol=1e-5)
+    (tmp_path / "runs/train/bigram_ensemble/bigram_s1/closed/"
+     "learned-closed-loop-rig-bigram.msgpack").unlink()  # fmt: skip
+    with pytest.raises(ValueError, match=r"bigram_s1/closed/learned-closed-loop-rig-bigram"):
+        load_policy_source(f"{root}/examples/bigram_ensemble.py:bigram_ensemble")
+    script = root / "examples" / "train_bigram_ensemble.sh"
+    assert subprocess.run(["bash", "-n", str(script)], check=False).returncode == 0
+    configs = set(re.findall(r"configs/\S+\.toml", script.read_text()))
+    assert len(configs) == 3 and all((root / c).is_file() for c in configs), configs

@@ -1,0 +1,39 @@
+"""The bigram reader's three seeds as one policy: the mean of their plans.
+
+Evaluate the checkpoints ``examples/train_bigram_ensemble.sh`` leaves (run from the project's
+folder)::
+
+    .venv/bin/lantern-jax evaluate --policy examples/bigram_ensemble.py:bigram_ensemble
+
+The ensemble declares its members' sensors (the six-camera rig and the warning text) and sees
+nothing more; ``lantern_jax.policies.learned.ensemble`` says how the plans are averaged, and
+``docs/learned.md`` what the three seeds score alone and together.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from lantern_jax.policies.base import Policy
+from lantern_jax.policies.learned.ensemble import ensemble_policy
+
+#: Where ``examples/train_bigram_ensemble.sh`` writes the chains by default.
+RUNS = Path("runs/train/bigram_ensemble")
+SEEDS = (0, 1, 2)
+MODEL = "closed/learned-closed-loop-rig-bigram.msgpack"  # each chain's last stage
+
+
+def member_paths(runs: str | Path = RUNS) -> list[Path]:
+    """The three chains' closed-loop checkpoints under ``runs``, seeds 0, 1, 2."""
+    return [Path(runs) / f"bigram_s{seed}" / MODEL for seed in SEEDS]
+
+
+def bigram_ensemble(runs: str | Path = RUNS) -> Policy:
+    """The ``bigram-ensemble`` policy of the chains under ``runs``.
+
+    Raises:
+        lantern_jax.policies.learned.checkpoint.CheckpointError: naming a member's checkpoint
+            that is missing or not valid (a chain not run, or not finished).
+    """
+    return ensemble_policy("bigram-ensemble", member_paths(runs),
+                           "mean plan of the bigram reader's three seeds")  # fmt: skip

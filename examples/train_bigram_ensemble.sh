@@ -1,0 +1,47 @@
+#!/usr/bin/env bash
+# The bigram reader's three training chains, seeds 0, 1 and 2, all three at once:
+#
+#   bash examples/train_bigram_ensemble.sh [OUT]      # OUT: runs/train/bigram_ensemble
+#
+# Each seed's chain is the configs' own (docs/learned.md, "Reading which word follows which"):
+# base -> distance (onset only) -> nine closed-loop rounds, each stage from the same seed's
+# previous checkpoint, written to OUT/bigram_s<seed>/{base,distance,closed}, its output to
+# OUT/bigram_s<seed>.log. Then evaluate the three as one ensemble (the mean of their plans):
+#
+#   .venv/bin/lantern-jax evaluate --policy examples/bigram_ensemble.py:bigram_ensemble
+#
+# On a 2-core CPU the three chains take about 41 min and 14 GB together (docs/learned.md,
+# "The bigram reader's vocabulary"); one chain alone about half the two cores' time.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+OUT=${1:-runs/train/bigram_ensemble}
+mkdir -p "$OUT"
+
+chain() {  # one seed's three stages, each from the previous one's exported model
+  local seed=$1 d="$OUT/bigram_s$1"
+  .venv/bin/lantern-jax train --config configs/train_base_rig_bigram.toml --seed "$seed" \
+      --out "$d/base" --quiet &&
+  .venv/bin/lantern-jax train --config configs/train_distance_onset_only_rig_bigram.toml \
+      --seed "$seed" --out "$d/distance" \
+      --init-from "$d/base/learned-base-rig-bigram.msgpack" --quiet &&
+  .venv/bin/lantern-jax train --config configs/train_closed_loop_rig_bigram.toml \
+      --seed "$seed" --out "$d/closed" \
+      --init-from "$d/distance/learned-distance-onset-only-rig-bigram.msgpack" --quiet
+}
+
+pids=()
+for seed in 0 1 2; do
+  chain "$seed" > "$OUT/bigram_s$seed.log" 2>&1 &
+  pids+=("$!")
+done
+failed=0
+for seed in 0 1 2; do
+  if ! wait "${pids[$seed]}"; then
+    echo "train_bigram_ensemble: seed $seed failed; see $OUT/bigram_s$seed.log" >&2
+    failed=1
+  fi
+done
+[ "$failed" = 0 ] || exit 1
+for seed in 0 1 2; do
+  echo "$OUT/bigram_s$seed/closed/learned-closed-loop-rig-bigram.msgpack"
+done
