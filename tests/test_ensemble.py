@@ -4,6 +4,7 @@ member's weights, and members that cannot be averaged refused by name."""
 
 from __future__ import annotations
 
+import os
 import re
 
 import jax
@@ -172,3 +173,47 @@ def test_the_example_ensemble_file_averages_the_three_chains_it_names(tmp_path, 
     assert subprocess.run(["bash", "-n", str(script)], check=False).returncode == 0
     configs = set(re.findall(r"configs/\S+\.toml", script.read_text()))
     assert len(configs) == 3 and all((root / c).is_file() for c in configs), configs
+
+
+def test_the_training_script_runs_each_seeds_stages_in_order_and_names_a_failed_seed(tmp_path):
+    """``examples/train_bigram_ensemble.sh`` with a stand-in ``lantern-jax`` that records its
+    arguments: each seed's three stages run in order, each from the previous stage's export in
+    that seed's folder; the last line names every ensemble member; a failing seed is named and
+    the script exits 1."""
+    import shutil
+    import subprocess
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    (tmp_path / "examples").mkdir()
+    shutil.copy(root / "examples" / "train_bigram_ensemble.sh", tmp_path / "examples")
+    fake = tmp_path / ".venv" / "bin" / "lantern-jax"
+    fake.parent.mkdir(parents=True)
+    # argv: train --config CONFIG --seed SEED ...; one log per config and seed
+    fake.write_text('#!/usr/bin/env bash\necho "$*" >> "$OUT_LOG.$(basename "$3").$5"\n'
+                    '[ "$5" != "$FAIL_SEED" ]\n')  # fmt: skip
+    fake.chmod(0o755)
+    script = tmp_path / "examples" / "train_bigram_ensemble.sh"
+
+    def run(fail: str):
+        env = dict(os.environ, OUT_LOG=str(tmp_path / "calls"), FAIL_SEED=fail)
+        return subprocess.run(["bash", str(script), "out"], env=env, capture_output=True,
+                              text=True, timeout=60, check=False)  # fmt: skip
+
+    done = run("none")
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == [
+        f"out/bigram_s{s}/closed/learned-closed-loop-rig-bigram.msgpack" for s in (0, 1, 2)]
+    for s in (0, 1, 2):
+        calls = [(tmp_path / f"calls.{c}.{s}").read_text().split()
+                 for c in ("train_base_rig_bigram.toml",
+                           "train_distance_onset_only_rig_bigram.toml",
+                           "train_closed_loop_rig_bigram.toml")]  # fmt: skip
+        assert [c[c.index("--out") + 1] for c in calls] == [
+            f"out/bigram_s{s}/{stage}" for stage in ("base", "distance", "closed")]
+        assert [c[c.index("--init-from") + 1] for c in calls[1:]] == [
+            f"out/bigram_s{s}/base/learned-base-rig-bigram.msgpack",
+            f"out/bigram_s{s}/distance/learned-distance-onset-only-rig-bigram.msgpack"]
+    failed = run("1")
+    assert failed.returncode == 1 and "seed 1 failed; see out/bigram_s1.log" in failed.stderr
+    assert "seed 0" not in failed.stderr and "seed 2" not in failed.stderr
