@@ -5,8 +5,8 @@
 #
 # Each seed's chain is the configs' own (docs/learned.md, "Reading which word follows which"):
 # base -> distance (onset only) -> nine closed-loop rounds, each stage from the same seed's
-# previous checkpoint, written to OUT/bigram_s<seed>/{base,distance,closed}, its output to
-# OUT/bigram_s<seed>.log. Then evaluate the three as one ensemble (the mean of their plans):
+# previous checkpoint, written to OUT/bigram_s<seed>/{base,distance,closed}, its output appended
+# to OUT/bigram_s<seed>.log. Then evaluate the three as one ensemble (the mean of their plans):
 #
 #   .venv/bin/lantern-jax evaluate --policy examples/bigram_ensemble.py:bigram_ensemble
 #
@@ -31,7 +31,7 @@ chain() {  # one seed's three stages, each from the previous one's exported mode
 
 pids=()
 for seed in 0 1 2; do
-  chain "$seed" > "$OUT/bigram_s$seed.log" 2>&1 &
+  chain "$seed" >> "$OUT/bigram_s$seed.log" 2>&1 &  # appended: a rerun keeps the earlier log
   pids+=("$!")
 done
 failed=0

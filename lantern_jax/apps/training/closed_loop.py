@@ -224,10 +224,10 @@ def _load_examples(path: Path) -> Examples:
         return Examples(obs, z["targets"], z["sequence"], z["base_style"])
 
 
-def _dataset_examples(cfg: TrainConfig) -> Examples:
-    """The distance recipe's examples plus the counterfactual warnings."""
+def _dataset_examples(cfg: TrainConfig, card: dict) -> Examples:
+    """The distance recipe's examples plus the counterfactual warnings (``card``: the
+    dataset's card)."""
     frames = load_frames(cfg.dataset, exclude_crossing=cfg.exclude_crossing)
-    card = read_card(Path(cfg.dataset))
     ex = recipe_examples(frames, card, dataclasses.replace(cfg, recipe="distance"))
     plain = ex.take(np.arange(len(frames)))  # the frames themselves, before the far copies
     cf = frame_counterfactuals(
@@ -243,8 +243,9 @@ def train_closed_loop(cfg: TrainConfig, progress: bool = True) -> dict:
     out = Path(cfg.out)
     out.mkdir(parents=True, exist_ok=True)
     specs = plan_specs(cfg.dataset)
-    data = _dataset_examples(cfg)
-    provenance = dataset_provenance(read_card(Path(cfg.dataset)))
+    card = read_card(Path(cfg.dataset))
+    data = _dataset_examples(cfg, card)  # (load_frames refuses a folder without a whole card)
+    provenance = dataset_provenance(card)
     mcfg = model_config(cfg, ranges_width(data, cfg.rig))
     model = load_model(cfg.init_from, expect=mcfg)
     visits: list[Examples] = []

@@ -27,7 +27,7 @@ from lantern_jax.apps.training.data import Examples
 from lantern_jax.io.files import atomic_write
 from lantern_jax.policies.learned.checkpoint import save_model
 from lantern_jax.policies.learned.features import features, nav_token_table
-from lantern_jax.policies.learned.model import ModelConfig
+from lantern_jax.policies.learned.model import ModelConfig, reads_word_pairs
 from lantern_jax.types.language import load_embedding
 from lantern_jax.types.observation import Observation, SurroundView
 
@@ -152,9 +152,8 @@ def fit(cfg: TrainConfig, model: Any, ex: Examples, batches: Batches, val_idx: n
     # A bigram reader reads its words through the projected rows of the examples' vocabulary
     # (a few hundred ids) instead of projecting all B x 48 token slots of every batch
     # (docs/learned.md, "The bigram reader's vocabulary").
-    bigram = model.config.language and model.config.text_encoder == "bigram"
     vocab = None
-    if bigram:
+    if reads_word_pairs(model.config):
         vocab = jnp.asarray(text_vocabulary(ex.obs["warning_tokens"], np.asarray(nav)))
 
     @jax.jit

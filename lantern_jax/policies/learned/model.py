@@ -74,6 +74,11 @@ class WordTables(NamedTuple):
     second: Array  # (U, W) float32, embed_next of them (a pair's second word)
 
 
+def reads_word_pairs(config: ModelConfig) -> bool:
+    """The model reads its text with the bigram encoder (the one with :class:`WordTables`)."""
+    return config.language and config.text_encoder == "bigram"
+
+
 @dataclasses.dataclass(frozen=True)
 class ModelConfig:
     """Architecture of a driving model (part of its checkpoint; a mismatch is refused)."""
@@ -146,7 +151,7 @@ class DrivingModel(nnx.Module):
         """The bigram reader's projections of ``vocabulary`` ((U,) int32 sorted token ids, every
         id the batch's texts use): ``embedding`` is the (V, D) float32 token table; None for
         the other encoders, which read every slot."""
-        if not (self.config.language and self.config.text_encoder == "bigram"):
+        if not reads_word_pairs(self.config):
             return None
         rows = jnp.asarray(embedding, jnp.float32)[vocabulary, :WORD_DIM]  # (U, WORD_DIM)
         row = jnp.zeros(embedding.shape[0], jnp.int32).at[vocabulary].set(
