@@ -19,7 +19,7 @@ GLIBC = platform.system() == "Linux" and platform.libc_ver()[0] == "glibc"
 #: A process that runs one jitted program repeatedly, first as glibc leaves it, then after
 #: keep_freed_memory(), dropping each result: a 42.3 MB block per call (its output), past
 #: glibc's 32 MB mmap ceiling and within a thread heap's 64 MB, as a training step's temporary
-#: buffer is.  Prints the minor page faults of each phase's last six calls and the last
+#: buffer is.  Prints the minor page faults of each of a phase's last ten calls and the last
 #: result's bytes in hex.
 PROBE = r"""
 import hashlib, json, resource, sys
@@ -32,14 +32,17 @@ def f(a, b):
 
 a = jax.random.normal(jax.random.key(0), (2300, 128), jnp.float32)
 b = jax.random.normal(jax.random.key(1), (128, 4600), jnp.float32)
+def faults():
+    return resource.getrusage(resource.RUSAGE_SELF).ru_minflt
 def phase():
-    for _ in range(8):  # every XLA thread that runs it has allocated once
+    for _ in range(8):  # most XLA threads that run it have allocated once
         out = f(a, b).block_until_ready()
-    before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
-    for _ in range(6):
+    per_call = []
+    for _ in range(10):
+        before = faults()
         out = f(a, b).block_until_ready()
-    faults = resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before
-    return faults, hashlib.sha256(jax.device_get(out).tobytes()).hexdigest()
+        per_call.append(faults() - before)
+    return per_call, hashlib.sha256(jax.device_get(out).tobytes()).hexdigest()
 
 faults_system, bits_system = phase()
 outcome = keep_freed_memory()
@@ -63,11 +66,15 @@ def test_freed_memory_is_reused_and_the_bits_are_the_same():
     assert r["outcome"] == "kept"
     assert r["bits_kept"] == r["bits_system"]
     # glibc's default maps the block afresh on every call: 42.3 MB of new pages, about 10,300
-    # faults of 4 KiB per call; kept, a call reuses the pages of the ones before (a thread of
-    # XLA's pool that had not run the program yet may still fault once: at most two calls'
-    # worth of the six).
-    assert r["faults_system"] > 6 * 8_000
-    assert r["faults_kept"] <= r["faults_system"] / 3
+    # faults of 4 KiB each.  Kept, a call reuses the pages of the calls before it.  The thread
+    # of XLA's pool that runs a call is the pool's choice, and one that has not run the program
+    # yet still faults once (a CI run saw three such calls of six on a busy 2-core machine), so
+    # the test counts calls: every call faults afresh as the system leaves it, and most calls
+    # reuse their pages once kept.
+    fresh = 8_000  # faults of a call that writes most of the 42.3 MB block to new pages
+    assert all(n > fresh for n in r["faults_system"]), r["faults_system"]
+    reused = [n for n in r["faults_kept"] if n < fresh // 8]
+    assert len(reused) >= len(r["faults_kept"]) // 2, r["faults_kept"]
 
 
 def test_the_choice_is_read_and_a_bad_one_names_the_variable(monkeypatch):
