@@ -16,7 +16,11 @@ that gap. From an open-loop model (``init_from``), each of ``rounds`` rounds:
    the camera, which the warning executions never reach (they brake earlier) and where the
    expert's label is one the observation can explain; before the hazard is seen the
    privileged expert anticipates it from the warning point on, a label no camera could
-   justify;
+   justify. With ``distractor_drives > 0``, that share of the pairs also drives Route A told
+   a training distractor sentence in place of its warning, the model alone, a visit every
+   ``distractor_drive_every_s`` while the sentence is in its observation, each labelled with
+   the model's own plan without the sentence
+   (:mod:`lantern_jax.apps.training.distractor_drives`);
 2. **relabel** — the privileged ``expert`` drives on from each visited state for the 2.5-s
    label horizon; its positions are the label (:mod:`lantern_jax.apps.training.relabel`: the
    dataset's labeller on the expert's continuation). Visits whose horizon crosses a warning
@@ -53,6 +57,12 @@ from lantern_jax.apps.training.data import (
     ranges_width,
     recipe_examples,
     split_by_sequence,
+)
+from lantern_jax.apps.training.distractor_drives import (
+    SEQUENCE_SUFFIX,
+    distractor_scenarios,
+    own_plans,
+    text_in_view,
 )
 from lantern_jax.apps.training.fit import Batches, fit, model_config
 from lantern_jax.apps.training.relabel import Visits, relabel_batch
@@ -151,8 +161,9 @@ def collect(cfg: TrainConfig, model, like: Examples, specs: list[SceneSpec], r: 
             progress: bool = False) -> tuple[Examples, dict]:  # fmt: skip
     """Round ``r``'s visits of ``model`` on ``specs``, relabelled by the expert (a progress bar
     over the batched calls when ``progress``); returns (examples, counts: executions, valid
-    visits, kept visits, kept visits off the ordinary grid -- those before a collision -- and
-    kept visits of the no-warning executions)."""
+    visits, kept visits, kept visits off the ordinary grid -- those before a collision --, kept
+    visits of the no-warning executions and of the distractor drives, the latter labelled with
+    the learner's own plan)."""
 
     learner = model_policy(cfg.name, model)
     lp = learner.init(jax.random.PRNGKey(0))
@@ -168,7 +179,7 @@ def collect(cfg: TrainConfig, model, like: Examples, specs: list[SceneSpec], r: 
     num_visits = max(1, int(cfg.max_seconds / cfg.visit_every_s)) * ratio
     parts = []
     counts = dict(executions=0, valid_visits=0, kept_visits=0, failure_visits=0,
-                  no_warning_visits=0)  # fmt: skip
+                  no_warning_visits=0, distractor_drive_visits=0)  # fmt: skip
     starts = range(0, len(specs), CHUNK_PAIRS)
     if progress:
         starts = tqdm(starts, desc=f"round {r}: drive + relabel", unit="batch")
@@ -208,7 +219,41 @@ def collect(cfg: TrainConfig, model, like: Examples, specs: list[SceneSpec], r: 
         counts["valid_visits"] += int(np.asarray(v.valid).sum())
         counts["kept_visits"] += int(keep.sum())
         counts["no_warning_visits"] += int(keep.sum())
+    parts += _distractor_drives(cfg, learner, lp, expert, ep, like, specs, r, counts, progress)
     return concat(parts), counts
+
+
+def _distractor_drives(cfg: TrainConfig, learner, lp, expert, ep, like: Examples,
+                       specs: list[SceneSpec], r: int, counts: dict, progress: bool
+                       ) -> list[Examples]:  # fmt: skip
+    """The kept visits of round ``r``'s distractor drives (:mod:`~lantern_jax.apps.training.
+    distractor_drives`), each labelled with the learner's own plan without the sentence;
+    adds them to ``counts``."""
+    n_told = round(cfg.distractor_drives * len(specs))  # spread evenly, as the quiet ones
+    told = [specs[int(i * len(specs) / n_told)] for i in range(n_told)]
+    every = horizon_ticks(cfg.distractor_drive_every_s)
+    num_visits = max(1, int(cfg.max_seconds / cfg.distractor_drive_every_s))
+    starts = range(0, len(told), 2 * CHUNK_PAIRS)
+    if progress and told:
+        starts = tqdm(starts, desc=f"round {r}: distractor drives", unit="batch")
+    parts = []
+    for k in starts:
+        chunk = told[k : k + 2 * CHUNK_PAIRS]
+        scenarios, settings, _ = distractor_scenarios(chunk, cfg.distractor_texts, cfg.seed,
+                                                      r * 1000 + k)  # fmt: skip
+        v = jax.device_get(relabel_batch(
+            scenarios, learner, lp, expert, ep, jax.random.PRNGKey(0), beta=0.0,
+            num_visits=num_visits, every=every, phase=int(every * ((r * 0.618) % 1.0)),
+            settings=settings))  # fmt: skip
+        keep = _keep(v, cfg.exclude_crossing) & text_in_view(v.obs)
+        v = v.replace(waypoints=np.asarray(jax.device_get(own_plans(lp, v.obs))))
+        ids = [f"{s.family.lower()}_{s.index:05d}{SEQUENCE_SUFFIX}" for s in chunk]
+        parts.append(visits_to_examples(v, ids, like, keep))
+        counts["executions"] += len(ids)
+        counts["valid_visits"] += int(np.asarray(v.valid).sum())
+        counts["kept_visits"] += int(keep.sum())
+        counts["distractor_drive_visits"] += int(keep.sum())
+    return parts
 
 
 def _save_examples(path: Path, ex: Examples) -> None:

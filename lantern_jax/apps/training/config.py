@@ -25,6 +25,9 @@ carries — the paper's three learned rows:
   With ``no_warning > 0`` that share of each round's pairs also drives Route A without its
   warning, and the visits at which the hazard is in the learner's view join the others (the
   reaction to the camera alone; :func:`lantern_jax.apps.training.closed_loop.collect`).
+  With ``distractor_drives > 0`` that share also drives Route A told a training distractor
+  sentence in place of its warning, each visit labelled with the learner's own plan without
+  the sentence (:mod:`lantern_jax.apps.training.distractor_drives`).
 
 The text encoder (``text_encoder``) is the pooled bag of words unless given; ``"attention"``
 reads the words in order, ``"bigram"`` which word follows which
@@ -113,6 +116,13 @@ class TrainConfig:
     # learner's view are kept, every no_warning_every_s (the camera's own reaction); 0: none
     no_warning: float = 0.0
     no_warning_every_s: float = 0.5  # s, spacing of those visits
+    # share of each round's scene pairs whose Route A is also driven told a training distractor
+    # sentence (distractor_texts) in place of its warning, the learner alone; the visits at
+    # which the sentence is in the learner's observation, every distractor_drive_every_s, are
+    # labelled with the learner's own plan without the sentence (training.distractor_drives);
+    # 0: none
+    distractor_drives: float = 0.0
+    distractor_drive_every_s: float = 0.5  # s, spacing of those visits
     # the camera rig the model reads (features.RIGS); "" is the recipe's own: "surround" for
     # the surround recipe, "front" for the others
     rig: str = ""
@@ -183,7 +193,7 @@ def _range_problem(cfg: TrainConfig) -> tuple[str, str] | None:
         if getattr(cfg, key) < 1:
             problems.append((key, f"must be >= 1, got {getattr(cfg, key)}"))
     for key in ("lr", "max_minutes", "far_m", "visit_every_s", "max_seconds", "failure_every_s",
-                "no_warning_every_s"):  # fmt: skip
+                "no_warning_every_s", "distractor_drive_every_s"):  # fmt: skip
         if not getattr(cfg, key) > 0:
             problems.append((key, f"must be > 0, got {getattr(cfg, key)}"))
     if not cfg.failure_window_s >= 0:
@@ -197,7 +207,8 @@ def _range_problem(cfg: TrainConfig) -> tuple[str, str] | None:
     for key in ("base_mix", "warmup", "closed_loop_mix"):
         if not 0.0 <= getattr(cfg, key) < 1.0:
             problems.append((key, f"must be in [0, 1), got {getattr(cfg, key)}"))
-    for key in ("beta", "beta_decay", "counterfactual", "distractors", "no_warning"):
+    for key in ("beta", "beta_decay", "counterfactual", "distractors", "no_warning",
+                "distractor_drives"):
         if not 0.0 <= getattr(cfg, key) <= 1.0:
             problems.append((key, f"must be in [0, 1], got {getattr(cfg, key)}"))
     if cfg.recipe == "closed_loop" and cfg.base_mix + cfg.closed_loop_mix >= 1.0:

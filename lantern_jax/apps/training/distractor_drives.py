@@ -1,0 +1,79 @@
+"""Distractor drives: Route A told a distractor sentence in place of its warning, each visit
+labelled with the learner's own plan for the same observation without the sentence.
+
+The counterfactual frames (:mod:`lantern_jax.apps.training.counterfactual`) tell Route B frames
+a distractor sentence ("The cafe at position (x, y) opens at nine ...") with the ordinary
+label: a stated position alone is no reason to react.  But Route B holds no hazard actor, so
+they never show the model a sentence that names the position of a car it can see waiting to
+cut in, and that is where the language check's irrelevant sentence moved the word readers
+(``docs/learned.md``, "Visits without the warning"): their VC drives kept up to 40 % of the
+warning's gain under a sentence about a bakery.
+
+A distractor drive is the closed-loop round's Route A of a pair, its protocol delivering one of
+the training distractor sentences (the set ``distractor_texts`` names, never the language
+check's probes) where the warning would be, at the warning's own stated position; the learner
+drives alone (beta 0).  Every visit at which the sentence is in the learner's observation is
+kept, and its label is what the learner itself plans for the same observation *without* the
+sentence (:func:`own_plans`: the warning tokens all padding, which is how no warning reads).
+The label asks for one thing: that the sentence change nothing.  It teaches no driving (the
+learner's no-text plan is whatever it is, late reaction included), so it leaves the no-warning
+condition's driving, and with it the warning gain, to the other examples.  The expert is not
+asked: without the warning the privileged expert still anticipates the hazard it cannot see.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from lantern_jax.apps.dataset.scenes import SceneSpec
+from lantern_jax.apps.training.counterfactual import distractor_bank
+from lantern_jax.policies.learned.checkpoint import LearnedParams, learned_act
+from lantern_jax.scenarios.families import build_pair
+from lantern_jax.sim.settings import Settings, default_settings
+from lantern_jax.types.language import PAD_ID
+from lantern_jax.types.observation import Observation
+from lantern_jax.types.world import tree_stack
+
+#: Sequence-id suffix of a distractor drive's visits (``<family>_<index>_A-distractor``).
+SEQUENCE_SUFFIX = "_A-distractor"
+
+
+def distractor_scenarios(specs: list[SceneSpec], texts: str, seed: int, r: int
+                         ) -> tuple[object, Settings, np.ndarray]:  # fmt: skip
+    """Route A of ``specs`` in the warning condition, each told a distractor sentence of the
+    set ``texts`` in place of its warning (drawn per pair, seeded by ``seed`` and round ``r``).
+
+    Returns:
+        the stacked scenarios, the settings whose bank holds the distractor sentences, and the
+        (n,) int32 text ids told.
+    """
+    bank, ids = distractor_bank(texts)
+    told = np.random.default_rng([seed, 44, r]).choice(ids, len(specs)).astype(np.int32)
+    a = tree_stack([build_pair(s.params, validate=False)[0] for s in specs])
+    text_id = jnp.asarray(told).reshape(np.shape(a.config.text_id))
+    return a.replace(config=a.config.replace(text_id=text_id)), \
+        default_settings().replace(bank=bank), told  # fmt: skip
+
+
+def text_in_view(obs: Observation) -> np.ndarray:
+    """(..., ) bool: the observations that hold a text (any warning token not padding), over
+    ``obs.warning_tokens`` (..., L)."""
+    return np.any(np.asarray(obs.warning_tokens) != PAD_ID, axis=-1)
+
+
+def without_text(obs: Observation) -> Observation:
+    """``obs`` as it reads with no warning: every warning token padding, every value 0."""
+    return obs.replace(warning_tokens=jnp.full_like(obs.warning_tokens, PAD_ID),
+                       warning_values=jnp.zeros_like(obs.warning_values))  # fmt: skip
+
+
+@functools.partial(jax.jit)
+def own_plans(params: LearnedParams, obs: Observation) -> jax.Array:
+    """(B, V, 10, 2) float32, m, ego frame: the learner's plan for each observation of ``obs``
+    (leading axes (B, V)) read without its text."""
+    plan = jax.vmap(jax.vmap(learned_act, (None, 0)), (None, 0))
+    return plan(params, without_text(obs))
