@@ -15,10 +15,15 @@ check's probes) where the warning would be, at the warning's own stated position
 drives alone (beta 0).  Every visit at which the sentence is in the learner's observation is
 kept, and its label is what the learner itself plans for the same observation *without* the
 sentence (:func:`own_plans`: the warning tokens all padding, which is how no warning reads).
-The label asks for one thing: that the sentence change nothing.  It teaches no driving (the
-learner's no-text plan is whatever it is, late reaction included), so it leaves the no-warning
-condition's driving, and with it the warning gain, to the other examples.  The expert is not
-asked: without the warning the privileged expert still anticipates the hazard it cannot see.
+The label asks for one thing: that the sentence change nothing.  The expert is not asked:
+without the warning the privileged expert still anticipates the hazard it cannot see.
+
+What it does, measured (``docs/learned.md``, "Distractor drives"): the sentence's effect on VC
+shrinks a little, but the label is the learner's own unwarned plan, late reaction included,
+in Route A states that no expert label reaches, so each round copies that reaction back and it
+can drift: in two of three seeds VC's unwarned driving got markedly worse, which is what made
+the VC warning gain (and the language check's shares) larger.  Pairing these drives with
+expert-labelled no-warning visits (``no_warning``) would anchor those states; it was not tried.
 """
 
 from __future__ import annotations
