@@ -38,6 +38,7 @@ visits and resumes its training from the latest epoch.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import time
 from pathlib import Path
@@ -198,61 +199,56 @@ def collect(cfg: TrainConfig, model, like: Examples, specs: list[SceneSpec], r: 
         counts["valid_visits"] += int((np.asarray(v.valid) & chosen).sum())
         counts["kept_visits"] += int(keep.sum())
         counts["failure_visits"] += int((keep & ~_chosen(v, ratio, 0.0)).sum())
-    n_quiet = round(cfg.no_warning * len(specs))  # spread evenly: specs come family by family
-    quiet = [specs[int(i * len(specs) / n_quiet)] for i in range(n_quiet)]
-    nw_every = horizon_ticks(cfg.no_warning_every_s)
-    nw_visits = max(1, int(cfg.max_seconds / cfg.no_warning_every_s))
-    starts = range(0, len(quiet), 2 * CHUNK_PAIRS)  # as many executions as a pair chunk
-    if progress and quiet:
-        starts = tqdm(starts, desc=f"round {r}: no warning", unit="batch")
-    for k in starts:
-        chunk = quiet[k : k + 2 * CHUNK_PAIRS]
-        scenarios = _no_warning_batch(chunk)
-        key = jax.random.PRNGKey(0)  # no draw: beta is 0
-        v = jax.device_get(relabel_batch(
-            scenarios, learner, lp, expert, ep, key, beta=0.0, num_visits=nw_visits,
-            every=nw_every, phase=int(nw_every * ((r * 0.618) % 1.0))))  # fmt: skip
-        keep = _keep(v, cfg.exclude_crossing) & hazard_in_view(v, scenarios.config.hazard_index)
-        ids = [f"{s.family.lower()}_{s.index:05d}_A-no-warning" for s in chunk]
-        parts.append(visits_to_examples(v, ids, like, keep))
-        counts["executions"] += len(ids)
-        counts["valid_visits"] += int(np.asarray(v.valid).sum())
-        counts["kept_visits"] += int(keep.sum())
-        counts["no_warning_visits"] += int(keep.sum())
-    parts += _distractor_drives(cfg, learner, lp, expert, ep, like, specs, r, counts, progress)
+    drive = functools.partial(_second_drives, cfg, learner, lp, expert, ep, like, specs, r,
+                              counts, progress)  # fmt: skip
+    parts += drive(cfg.no_warning, cfg.no_warning_every_s, "no warning", "_A-no-warning",
+                   "no_warning_visits", lambda chunk, k: (_no_warning_batch(chunk), None),
+                   keep=lambda v, sc: hazard_in_view(v, sc.config.hazard_index))  # fmt: skip
+    parts += drive(cfg.distractor_drives, cfg.distractor_drive_every_s, "distractor drives",
+                   SEQUENCE_SUFFIX, "distractor_drive_visits",
+                   lambda chunk, k: distractor_scenarios(chunk, cfg.distractor_texts, cfg.seed,
+                                                         r * 1000 + k)[:2],
+                   keep=lambda v, sc: text_in_view(v.obs),
+                   label=lambda v: v.replace(waypoints=np.asarray(jax.device_get(
+                       own_plans(lp, v.obs)))))  # fmt: skip
     return concat(parts), counts
 
 
-def _distractor_drives(cfg: TrainConfig, learner, lp, expert, ep, like: Examples,
-                       specs: list[SceneSpec], r: int, counts: dict, progress: bool
-                       ) -> list[Examples]:  # fmt: skip
-    """The kept visits of round ``r``'s distractor drives (:mod:`~lantern_jax.apps.training.
-    distractor_drives`), each labelled with the learner's own plan without the sentence;
-    adds them to ``counts``."""
-    n_told = round(cfg.distractor_drives * len(specs))  # spread evenly, as the quiet ones
-    told = [specs[int(i * len(specs) / n_told)] for i in range(n_told)]
-    every = horizon_ticks(cfg.distractor_drive_every_s)
-    num_visits = max(1, int(cfg.max_seconds / cfg.distractor_drive_every_s))
-    starts = range(0, len(told), 2 * CHUNK_PAIRS)
-    if progress and told:
-        starts = tqdm(starts, desc=f"round {r}: distractor drives", unit="batch")
+def _second_drives(cfg: TrainConfig, learner, lp, expert, ep, like: Examples,
+                   specs: list[SceneSpec], r: int, counts: dict, progress: bool, share: float,
+                   every_s: float, desc: str, suffix: str, count: str, build, keep,
+                   label=None) -> list[Examples]:  # fmt: skip
+    """Round ``r``'s second drives of Route A: ``share`` of ``specs`` (spread evenly: specs come
+    family by family), the learner alone (beta 0), a visit every ``every_s``.
+
+    ``build(chunk, k)`` gives a chunk's scenarios and settings (None: the defaults), ``keep(v,
+    scenarios)`` the (B, V) visits kept beside the exclusion rule, ``label(v)`` the visits
+    relabelled (default: the expert's label). The kept visits carry the sequence ids
+    ``<family>_<index><suffix>`` and are added to ``counts`` (``count`` among them).
+    """
+    n = round(share * len(specs))
+    chosen = [specs[int(i * len(specs) / n)] for i in range(n)]
+    every = horizon_ticks(every_s)
+    num_visits = max(1, int(cfg.max_seconds / every_s))
+    starts = range(0, len(chosen), 2 * CHUNK_PAIRS)  # as many executions as a pair chunk
+    if progress and chosen:
+        starts = tqdm(starts, desc=f"round {r}: {desc}", unit="batch")
     parts = []
     for k in starts:
-        chunk = told[k : k + 2 * CHUNK_PAIRS]
-        scenarios, settings, _ = distractor_scenarios(chunk, cfg.distractor_texts, cfg.seed,
-                                                      r * 1000 + k)  # fmt: skip
+        chunk = chosen[k : k + 2 * CHUNK_PAIRS]
+        scenarios, settings = build(chunk, k)
+        key = jax.random.PRNGKey(0)  # no draw: beta is 0
         v = jax.device_get(relabel_batch(
-            scenarios, learner, lp, expert, ep, jax.random.PRNGKey(0), beta=0.0,
-            num_visits=num_visits, every=every, phase=int(every * ((r * 0.618) % 1.0)),
-            settings=settings))  # fmt: skip
-        keep = _keep(v, cfg.exclude_crossing) & text_in_view(v.obs)
-        v = v.replace(waypoints=np.asarray(jax.device_get(own_plans(lp, v.obs))))
-        ids = [f"{s.family.lower()}_{s.index:05d}{SEQUENCE_SUFFIX}" for s in chunk]
-        parts.append(visits_to_examples(v, ids, like, keep))
+            scenarios, learner, lp, expert, ep, key, beta=0.0, num_visits=num_visits,
+            every=every, phase=int(every * ((r * 0.618) % 1.0)), settings=settings))  # fmt: skip
+        kept = _keep(v, cfg.exclude_crossing) & keep(v, scenarios)
+        v = v if label is None else label(v)
+        ids = [f"{s.family.lower()}_{s.index:05d}{suffix}" for s in chunk]
+        parts.append(visits_to_examples(v, ids, like, kept))
         counts["executions"] += len(ids)
         counts["valid_visits"] += int(np.asarray(v.valid).sum())
-        counts["kept_visits"] += int(keep.sum())
-        counts["distractor_drive_visits"] += int(keep.sum())
+        counts["kept_visits"] += int(kept.sum())
+        counts[count] += int(kept.sum())
     return parts
 
 
