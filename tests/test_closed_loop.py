@@ -364,20 +364,40 @@ def test_one_round_trains_checkpoints_and_resumes(tmp_path):
     assert read_meta(r0 / "learned-tiny-cl")["dataset_frames"] == read_card(ds)["frames"]
 
 
+def _two_pe_two_vc():
+    """Four scene specs of a seeded draw: PE, PE, VC, VC (indices 0-3)."""
+    from lantern_jax.apps.dataset.scenes import SceneSpec
+    from lantern_jax.scenarios.families import sample_params
+
+    rng = np.random.default_rng(0)
+    return [SceneSpec(i, f, "clear_day", sample_params(f, rng), "") for i, f in
+            enumerate(["PE", "PE", "VC", "VC"])]  # fmt: skip
+
+
+def _stub_collection(monkeypatch, fake_relabel, *fields: str) -> Examples:
+    """``closed_loop.collect`` with the relabelling program replaced by ``fake_relabel`` and a
+    learner that needs no model; returns an empty ``like`` with the observation ``fields``
+    (``visible`` bool (A,), ``warning_tokens`` int32 (4,))."""
+    from lantern_jax.apps.training import closed_loop as cl
+
+    monkeypatch.setattr(cl, "relabel_batch", fake_relabel)
+    monkeypatch.setattr(cl, "model_policy", lambda name, model: SimpleNamespace(
+        init=lambda key: None))  # fmt: skip
+    empty = {"visible": np.zeros((0, 1), bool), "warning_tokens": np.zeros((0, 4), np.int32)}
+    return Examples({f: empty[f] for f in fields}, np.zeros((0, NUM_WAYPOINTS, 2)),
+                    np.zeros((0,), str), np.zeros((0,), bool))  # fmt: skip
+
+
 def test_no_warning_visits_drive_route_a_unwarned_and_keep_the_hazard_in_view(monkeypatch):
     """With ``no_warning`` a share of the round's pairs (spread over the families) drives Route
     A a second time with the warning off, the learner alone (beta 0) on the finer grid of
     ``no_warning_every_s``; of those executions only the visits at which *the hazard actor*
     is in the learner's view are kept (another actor in view does not count), under their own
     sequence ids."""
-    from lantern_jax.apps.dataset.scenes import SceneSpec
     from lantern_jax.apps.training import closed_loop as cl
-    from lantern_jax.scenarios.families import sample_params
     from lantern_jax.sim.rollout import horizon_ticks
 
-    rng = np.random.default_rng(0)
-    specs = [SceneSpec(i, f, "clear_day", sample_params(f, rng), "") for i, f in
-             enumerate(["PE", "PE", "VC", "VC"])]  # fmt: skip
+    specs = _two_pe_two_vc()
     calls = []
 
     def fake_relabel(scenarios, learner, lp, expert, ep, key, beta=0.0, num_visits=40, every=40,
@@ -398,12 +418,7 @@ def test_no_warning_visits_drive_route_a_unwarned_and_keep_the_hazard_in_view(mo
                                crosses_onset=z.astype(bool), crosses_termination=z.astype(bool),
                                t_collision=z + NEVER)  # fmt: skip
 
-    monkeypatch.setattr(cl, "relabel_batch", fake_relabel)
-    monkeypatch.setattr(cl, "model_policy", lambda name, model: SimpleNamespace(
-        init=lambda key: None))  # fmt: skip
-    like = Examples({"visible": np.zeros((0, 1), bool),
-                     "warning_tokens": np.zeros((0, 4), np.int32)},
-                    np.zeros((0, NUM_WAYPOINTS, 2)), np.zeros((0,), str), np.zeros((0,), bool))
+    like = _stub_collection(monkeypatch, fake_relabel, "visible", "warning_tokens")
     cfg = TrainConfig(name="x", recipe="closed_loop", init_from="m", no_warning=0.5,
                       max_seconds=6.0, beta=0.5)  # fmt: skip
     ex, counts = cl.collect(cfg, None, like, specs, r=0)
@@ -422,6 +437,76 @@ def test_no_warning_visits_drive_route_a_unwarned_and_keep_the_hazard_in_view(mo
     calls.clear()
     assert cl.collect(none, None, like, specs, r=0)[1]["no_warning_visits"] == 0
     assert len(calls) == 1
+
+
+def test_collect_keeps_the_told_visits_with_the_learners_own_plan(monkeypatch):
+    """With ``distractor_drives`` a share of the round's pairs (spread over the families) is
+    driven once more on Route A, the learner alone (beta 0) on the grid of
+    ``distractor_drive_every_s``, with the distractor bank; only the visits whose observation
+    holds the sentence are kept, under their own sequence ids, and their targets are what
+    ``own_plans`` returns, not the expert's."""
+    from lantern_jax.apps.training import closed_loop as cl
+    from lantern_jax.apps.training.counterfactual import distractor_bank
+    from lantern_jax.sim.rollout import horizon_ticks
+
+    specs = _two_pe_two_vc()
+    calls = []
+
+    def fake_relabel(scenarios, learner, lp, expert, ep, key, beta=0.0, num_visits=40, every=40,
+                     phase=0, settings=None, segment=1):  # fmt: skip
+        c = scenarios.config
+        b = c.family.shape[0]
+        calls.append(dict(beta=beta, every=every, num_visits=num_visits, settings=settings,
+                          route_a=np.asarray(c.is_route_a), warned=np.asarray(c.warning_enabled),
+                          text_id=np.asarray(c.text_id).reshape(-1)))  # fmt: skip
+        tokens = np.full((b, num_visits, 4), PAD_ID, np.int32)
+        tokens[:, 2:5, 0] = 7  # a text from the third visit to the fifth
+        obs = SimpleNamespace(warning_tokens=tokens, visible=np.zeros((b, num_visits, 1), bool))
+        z = np.zeros((b, num_visits), np.float32)
+        return _Visits(obs, np.zeros((b, num_visits, NUM_WAYPOINTS, 2), np.float32),
+                       np.ones((b, num_visits), bool), z, z.astype(bool), z.astype(bool),
+                       z + NEVER)  # fmt: skip
+
+    like = _stub_collection(monkeypatch, fake_relabel, "warning_tokens")
+    monkeypatch.setattr(cl, "own_plans", lambda params, obs: np.full(
+        (*np.shape(obs.warning_tokens)[:2], NUM_WAYPOINTS, 2), 7.0, np.float32))  # fmt: skip
+    cfg = TrainConfig(name="x", recipe="closed_loop", init_from="m", distractor_drives=0.5,
+                      max_seconds=6.0, beta=0.5)  # fmt: skip
+    ex, counts = cl.collect(cfg, None, like, specs, r=0)
+
+    assert len(calls) == 2
+    pairs, told = calls
+    assert pairs["beta"] == 0.5 and pairs["settings"] is None
+    assert told["beta"] == 0.0 and told["route_a"].all() and told["warned"].all()
+    assert told["every"] == horizon_ticks(0.5) and told["num_visits"] == 12
+    assert set(told["text_id"]) <= set(distractor_bank("position")[1].tolist())
+    assert told["settings"].bank == distractor_bank("position")[0]
+    n_told = 2 * 3  # specs 0 (PE) and 2 (VC), visits 2, 3 and 4
+    assert counts["distractor_drive_visits"] == n_told and counts["executions"] == 8 + 2
+    assert counts["no_warning_visits"] == 0
+    seq = ex.sequence[-n_told:]
+    assert set(seq) == {"pe_00000_A-distractor", "vc_00002_A-distractor"}
+    assert (ex.targets[-n_told:] == 7.0).all() and (ex.targets[:-n_told] == 0.0).all()
+    assert not ex.base_style[-n_told:].any()
+
+    calls.clear()
+    none = TrainConfig(name="x", recipe="closed_loop", init_from="m", max_seconds=6.0)
+    assert cl.collect(none, None, like, specs, r=0)[1]["distractor_drive_visits"] == 0
+    assert len(calls) == 1
+
+
+class _Visits(SimpleNamespace):
+    """A stand-in for :class:`~lantern_jax.apps.training.relabel.Visits` (positional fields,
+    ``replace``)."""
+
+    def __init__(self, obs, waypoints, valid, t, crosses_onset, crosses_termination,
+                 t_collision):  # fmt: skip
+        super().__init__(obs=obs, waypoints=waypoints, valid=valid, t=t,
+                         crosses_onset=crosses_onset, crosses_termination=crosses_termination,
+                         t_collision=t_collision)  # fmt: skip
+
+    def replace(self, **kw):
+        return _Visits(**{**vars(self), **kw})
 
 
 def test_no_warning_visit_settings_are_checked(tmp_path):

@@ -4,8 +4,6 @@ the learner's own plan without the sentence."""
 
 from __future__ import annotations
 
-from types import SimpleNamespace
-
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -13,16 +11,13 @@ import pytest
 
 from lantern_jax.apps.training import closed_loop as cl
 from lantern_jax.apps.training import distractor_drives as dd
-from lantern_jax.apps.training.config import ConfigError, TrainConfig, load_config
+from lantern_jax.apps.training.config import ConfigError, load_config
 from lantern_jax.apps.training.counterfactual import distractor_bank
-from lantern_jax.apps.training.data import Examples
 from lantern_jax.core.constants import NUM_WAYPOINTS
-from lantern_jax.core.times import NEVER
 from lantern_jax.policies.learned.checkpoint import learned_act, learned_params, new_model
 from lantern_jax.policies.learned.model import ModelConfig
 from lantern_jax.scenarios.warning_texts import DISTRACTOR_SETS, PROBE_IRRELEVANT, PROBE_NEGATED
 from lantern_jax.scenarios.warnings import warning_language
-from lantern_jax.types.language import PAD_ID
 
 BIGRAM = ModelConfig(width=16, heads=2, text_encoder="bigram")  # the recipe's word reader
 
@@ -65,8 +60,8 @@ def test_a_drive_tells_a_training_distractor_where_its_warning_would_be():
     """Route A in the warning condition, each pair told a sentence of the chosen distractor set
     (never a language-check probe), from a bank that holds it; the draw is the seed's and the
     round's."""
-    specs = _specs(["PE", "VC", "LWW", "RTY"])
-    scenarios, settings, told = dd.distractor_scenarios(specs, "position", seed=0, r=0)
+    route_a = cl._route_a_batch(_specs(["PE", "VC", "LWW", "RTY"]))
+    scenarios, settings, told = dd.distractor_scenarios(route_a, "position", seed=0, r=0)
     cfg = scenarios.config
     assert np.asarray(cfg.is_route_a).all() and np.asarray(cfg.warning_enabled).all()
     np.testing.assert_array_equal(np.asarray(cfg.text_id).reshape(-1), told)
@@ -76,82 +71,10 @@ def test_a_drive_tells_a_training_distractor_where_its_warning_would_be():
     texts = [settings.bank.entries[i].text for i in told]
     assert all(t in DISTRACTOR_SETS["position"] for t in texts)
     assert PROBE_IRRELEVANT not in texts and PROBE_NEGATED not in texts
-    again = dd.distractor_scenarios(specs, "position", seed=0, r=0)[2]
+    again = dd.distractor_scenarios(route_a, "position", seed=0, r=0)[2]
     np.testing.assert_array_equal(again, told)
-    rounds = {tuple(dd.distractor_scenarios(specs, "position", seed=0, r=r)[2]) for r in range(4)}
+    rounds = {tuple(dd.distractor_scenarios(route_a, "position", seed=0, r=r)[2]) for r in range(4)}
     assert len(rounds) > 1
-
-
-def test_collect_keeps_the_told_visits_with_the_learners_own_plan(monkeypatch):
-    """With ``distractor_drives`` a share of the round's pairs (spread over the families) is
-    driven once more on Route A, the learner alone (beta 0) on the grid of
-    ``distractor_drive_every_s``, with the distractor bank; only the visits whose observation
-    holds the sentence are kept, under their own sequence ids, and their targets are what
-    ``own_plans`` returns, not the expert's."""
-    from lantern_jax.sim.rollout import horizon_ticks
-
-    specs = _specs(["PE", "PE", "VC", "VC"])
-    calls = []
-
-    def fake_relabel(scenarios, learner, lp, expert, ep, key, beta=0.0, num_visits=40, every=40,
-                     phase=0, settings=None, segment=1):  # fmt: skip
-        c = scenarios.config
-        b = c.family.shape[0]
-        calls.append(dict(beta=beta, every=every, num_visits=num_visits, settings=settings,
-                          route_a=np.asarray(c.is_route_a), warned=np.asarray(c.warning_enabled),
-                          text_id=np.asarray(c.text_id).reshape(-1)))  # fmt: skip
-        tokens = np.full((b, num_visits, 4), PAD_ID, np.int32)
-        tokens[:, 2:5, 0] = 7  # a text from the third visit to the fifth
-        obs = SimpleNamespace(warning_tokens=tokens, visible=np.zeros((b, num_visits, 1), bool))
-        z = np.zeros((b, num_visits), np.float32)
-        return _Visits(obs, np.zeros((b, num_visits, NUM_WAYPOINTS, 2), np.float32),
-                       np.ones((b, num_visits), bool), z, z.astype(bool), z.astype(bool),
-                       z + NEVER)  # fmt: skip
-
-    monkeypatch.setattr(cl, "relabel_batch", fake_relabel)
-    monkeypatch.setattr(cl, "model_policy", lambda name, model: SimpleNamespace(
-        init=lambda key: None))  # fmt: skip
-    monkeypatch.setattr(cl, "own_plans", lambda params, obs: np.full(
-        (*np.shape(obs.warning_tokens)[:2], NUM_WAYPOINTS, 2), 7.0, np.float32))  # fmt: skip
-    like = Examples({"warning_tokens": np.zeros((0, 4), np.int32)},
-                    np.zeros((0, NUM_WAYPOINTS, 2)), np.zeros((0,), str), np.zeros((0,), bool))
-    cfg = TrainConfig(name="x", recipe="closed_loop", init_from="m", distractor_drives=0.5,
-                      max_seconds=6.0, beta=0.5)  # fmt: skip
-    ex, counts = cl.collect(cfg, None, like, specs, r=0)
-
-    assert len(calls) == 2
-    pairs, told = calls
-    assert pairs["beta"] == 0.5 and pairs["settings"] is None
-    assert told["beta"] == 0.0 and told["route_a"].all() and told["warned"].all()
-    assert told["every"] == horizon_ticks(0.5) and told["num_visits"] == 12
-    assert set(told["text_id"]) <= set(distractor_bank("position")[1].tolist())
-    assert told["settings"].bank == distractor_bank("position")[0]
-    n_told = 2 * 3  # specs 0 (PE) and 2 (VC), visits 2, 3 and 4
-    assert counts["distractor_drive_visits"] == n_told and counts["executions"] == 8 + 2
-    assert counts["no_warning_visits"] == 0
-    seq = ex.sequence[-n_told:]
-    assert set(seq) == {"pe_00000_A-distractor", "vc_00002_A-distractor"}
-    assert (ex.targets[-n_told:] == 7.0).all() and (ex.targets[:-n_told] == 0.0).all()
-    assert not ex.base_style[-n_told:].any()
-
-    calls.clear()
-    none = TrainConfig(name="x", recipe="closed_loop", init_from="m", max_seconds=6.0)
-    assert cl.collect(none, None, like, specs, r=0)[1]["distractor_drive_visits"] == 0
-    assert len(calls) == 1
-
-
-class _Visits(SimpleNamespace):
-    """A stand-in for :class:`~lantern_jax.apps.training.relabel.Visits` (positional fields,
-    ``replace``)."""
-
-    def __init__(self, obs, waypoints, valid, t, crosses_onset, crosses_termination,
-                 t_collision):  # fmt: skip
-        super().__init__(obs=obs, waypoints=waypoints, valid=valid, t=t,
-                         crosses_onset=crosses_onset, crosses_termination=crosses_termination,
-                         t_collision=t_collision)  # fmt: skip
-
-    def replace(self, **kw):
-        return _Visits(**{**vars(self), **kw})
 
 
 @pytest.mark.parametrize(("line", "key"), [

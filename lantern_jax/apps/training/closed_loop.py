@@ -112,11 +112,17 @@ def _scene_batch(specs: list[SceneSpec]):
     return tree_stack([p[0] for p in pairs] + [p[1] for p in pairs])
 
 
+def _route_a_batch(specs: list[SceneSpec]):
+    """Route A of ``specs``, stacked, in the warning condition (as the suite runs it)."""
+
+    return tree_stack([build_pair(s.params, validate=False)[0] for s in specs])
+
+
 def _no_warning_batch(specs: list[SceneSpec]):
     """Route A of ``specs`` in the no-warning condition, stacked (the evaluator's flip of
     ``warning_enabled``)."""
 
-    a = tree_stack([build_pair(s.params, validate=False)[0] for s in specs])
+    a = _route_a_batch(specs)
     return a.replace(config=a.config.replace(warning_enabled=np.zeros_like(a.config.is_route_a)))
 
 
@@ -206,7 +212,8 @@ def collect(cfg: TrainConfig, model, like: Examples, specs: list[SceneSpec], r: 
                    keep=lambda v, sc: hazard_in_view(v, sc.config.hazard_index))  # fmt: skip
     parts += drive(cfg.distractor_drives, cfg.distractor_drive_every_s, "distractor drives",
                    SEQUENCE_SUFFIX, "distractor_drive_visits",
-                   lambda chunk, k: distractor_scenarios(chunk, cfg.distractor_texts, cfg.seed,
+                   lambda chunk, k: distractor_scenarios(_route_a_batch(chunk),
+                                                         cfg.distractor_texts, cfg.seed,
                                                          r * 1000 + k)[:2],
                    keep=lambda v, sc: text_in_view(v.obs),
                    label=lambda v: v.replace(waypoints=np.asarray(jax.device_get(

@@ -28,40 +28,37 @@ expert-labelled no-warning visits (``no_warning``) would anchor those states; it
 
 from __future__ import annotations
 
-import functools
-
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from lantern_jax.apps.dataset.scenes import SceneSpec
 from lantern_jax.apps.training.counterfactual import distractor_bank
 from lantern_jax.policies.learned.checkpoint import LearnedParams, learned_act
-from lantern_jax.scenarios.families import build_pair
 from lantern_jax.sim.settings import Settings, default_settings
 from lantern_jax.types.language import PAD_ID
 from lantern_jax.types.observation import Observation
-from lantern_jax.types.world import tree_stack
+from lantern_jax.types.world import Scenario
 
 #: Sequence-id suffix of a distractor drive's visits (``<family>_<index>_A-distractor``).
 SEQUENCE_SUFFIX = "_A-distractor"
 
 
-def distractor_scenarios(specs: list[SceneSpec], texts: str, seed: int, r: int
-                         ) -> tuple[object, Settings, np.ndarray]:  # fmt: skip
-    """Route A of ``specs`` in the warning condition, each told a distractor sentence of the
-    set ``texts`` in place of its warning (drawn per pair, seeded by ``seed`` and round ``r``).
+def distractor_scenarios(route_a: Scenario, texts: str, seed: int, r: int
+                         ) -> tuple[Scenario, Settings, np.ndarray]:  # fmt: skip
+    """``route_a`` (stacked Route A scenarios, leading axis n) in the warning condition, each
+    told a distractor sentence of the set ``texts`` in place of its warning (drawn per
+    scenario, seeded by ``seed`` and round ``r``).
 
     Returns:
-        the stacked scenarios, the settings whose bank holds the distractor sentences, and the
-        (n,) int32 text ids told.
+        the scenarios, the settings whose bank holds the distractor sentences, and the (n,)
+        int32 text ids told.
     """
     bank, ids = distractor_bank(texts)
-    told = np.random.default_rng([seed, 44, r]).choice(ids, len(specs)).astype(np.int32)
-    a = tree_stack([build_pair(s.params, validate=False)[0] for s in specs])
-    text_id = jnp.asarray(told).reshape(np.shape(a.config.text_id))
-    return a.replace(config=a.config.replace(text_id=text_id)), \
-        default_settings().replace(bank=bank), told  # fmt: skip
+    cfg = route_a.config
+    told = np.random.default_rng([seed, 44, r]).choice(ids, cfg.family.shape[0]).astype(np.int32)
+    text_id = jnp.asarray(told).reshape(np.shape(cfg.text_id))
+    warned = cfg.replace(text_id=text_id, warning_enabled=jnp.ones_like(cfg.warning_enabled))
+    return route_a.replace(config=warned), default_settings().replace(bank=bank), told
 
 
 def text_in_view(obs: Observation) -> np.ndarray:
@@ -76,7 +73,7 @@ def without_text(obs: Observation) -> Observation:
                        warning_values=jnp.zeros_like(obs.warning_values))  # fmt: skip
 
 
-@functools.partial(jax.jit)
+@jax.jit
 def own_plans(params: LearnedParams, obs: Observation) -> jax.Array:
     """(B, V, 10, 2) float32, m, ego frame: the learner's plan for each observation of ``obs``
     (leading axes (B, V)) read without its text."""
