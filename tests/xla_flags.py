@@ -8,28 +8,32 @@ rollout up to about 20 % slower, and the tests' time is mostly compiling
 (``REPRODUCIBLE_ATOL``).  The XLA of jaxlib 0.11 (the first jaxlib for Python 3.12 only) no
 longer has the flag, and an unknown flag in ``XLA_FLAGS`` ends the process when JAX starts its
 backend (seen with jaxlib 0.11.2): there the tests run XLA's default emitters.
+
+The option's name and the jaxlib that dropped it have one home,
+:mod:`lantern_jax.core.xla_options` (which the package's stress programs also compile with); it
+is loaded here from its file, since importing the package would set JAX up before the tests'
+flags are in place.
 """
 
 from __future__ import annotations
 
-import importlib.metadata
+import importlib.util
+from pathlib import Path
+
+_SPEC = importlib.util.spec_from_file_location(
+    "_lantern_xla_options",
+    Path(__file__).resolve().parents[1] / "lantern_jax" / "core" / "xla_options.py",
+)
+xla_options = importlib.util.module_from_spec(_SPEC)
+_SPEC.loader.exec_module(xla_options)
 
 #: The flag, where the installed jaxlib's XLA has it.
-EARLIER_EMITTERS = "--xla_cpu_use_fusion_emitters=false"
-#: The first jaxlib release whose XLA does not know :data:`EARLIER_EMITTERS`.
-WITHOUT_EARLIER_EMITTERS = (0, 11)
-
-
-def jaxlib_version() -> tuple[int, ...]:
-    """The installed jaxlib's release as numbers, e.g. ``(0, 10, 2)`` (read from its metadata,
-    without importing it)."""
-    text = importlib.metadata.version("jaxlib")
-    return tuple(int(p) for p in text.split("+")[0].split(".")[:3] if p.isdigit())
+EARLIER_EMITTERS = f"--{xla_options.EARLIER_EMITTERS_OPTION}=false"
 
 
 def xla_flags_for_tests() -> str:
     """The tests' XLA flags for the installed jaxlib ("" where it has none of them)."""
-    return EARLIER_EMITTERS if jaxlib_version() < WITHOUT_EARLIER_EMITTERS else ""
+    return EARLIER_EMITTERS if xla_options.has_earlier_emitters() else ""
 
 
 if __name__ == "__main__":

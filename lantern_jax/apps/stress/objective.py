@@ -62,6 +62,7 @@ from lantern_jax.apps.stress.king import king_cost
 from lantern_jax.apps.stress.space import Space
 from lantern_jax.apps.stress.watch import soft_rollout_batch
 from lantern_jax.core.constants import DT, MAX_ACTORS
+from lantern_jax.core.xla_options import fast_compile_options
 from lantern_jax.policies.base import Policy
 from lantern_jax.scoring.cus import cus_of, quality_a, soft_execution_terms
 from lantern_jax.scoring.smooth import softmin_decode
@@ -399,8 +400,10 @@ def part_samples(problem: Problem, grad: bool = True) -> Callable:
     """``(part, points (R, M, K)) -> (values (R, M), grads (R, M, K))``: one part's surrogate and
     pathwise gradient at every point (``grads`` None when ``grad`` is False: no backward pass),
     compiled once per static part of the problem (both parts and every restart share the
-    program).  The R x M points are one batch of :func:`part_values`; their gradients are one
-    backward pass of the batch's sum (each value depends on its own point only)."""
+    program), with :func:`~lantern_jax.core.xla_options.fast_compile_options` (a cell's compile
+    is what its user waits for).  The R x M points are one batch of :func:`part_values`; their
+    gradients are one backward pass of the batch's sum (each value depends on its own point
+    only)."""
 
     def values(z, data, part, mp):
         return part_values(problem, z, part, mp, data)
@@ -411,7 +414,9 @@ def part_samples(problem: Problem, grad: bool = True) -> Callable:
 
     fn = remember(
         ("part_samples", grad, problem.static()),
-        lambda: jax.jit(values_and_grads if grad else values),
+        lambda: jax.jit(
+            values_and_grads if grad else values, compiler_options=fast_compile_options()
+        ),
     )
     data = problem.data()
 

@@ -26,6 +26,7 @@ from lantern_jax.apps.stress.objective import EXPERT, POLICY, Problem
 from lantern_jax.apps.stress.watch import hard_batch
 from lantern_jax.core.constants import MAX_VERIFY_S, ROUTE_A_GATE_NAMES
 from lantern_jax.core.times import ticks
+from lantern_jax.core.xla_options import fast_compile_options
 from lantern_jax.dynamics.adversary import limits_of_kind
 from lantern_jax.scoring.cus import compiled_pair_components
 from lantern_jax.sim.engine import remember
@@ -69,14 +70,15 @@ class Verdict:
 def _hard_program(problem: Problem) -> Any:
     """``(scenarios, member_params) -> (metrics, watch)`` under the problem's settings,
     compiled once per driver and number of watched slots (which slots, and the settings' float
-    fields, are arguments)."""
+    fields, are arguments), with :func:`~lantern_jax.core.xla_options.fast_compile_options`."""
     driver = problem.driver
     fn = remember(
         ("stress-hard", getattr(driver, "program", driver), len(problem.watched)),
         lambda: jax.jit(
             lambda scs, params, watched, tracked, settings: hard_batch(
                 scs, driver, params, MAX_VERIFY_TICKS, watched, tracked, settings
-            )
+            ),
+            compiler_options=fast_compile_options(),
         ),
     )
     watched = jnp.asarray(problem.watched, jnp.int32)
