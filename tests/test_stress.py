@@ -225,6 +225,45 @@ def test_cmaes_tells_its_own_samples_and_converges_on_a_bowl():
     assert trace.lowest["cus"] < 1e-3
 
 
+def test_the_nominal_verification_runs_beside_the_methods_compile():
+    """``stress_test`` verifies the nominal scene (compiling the hard program) on a second
+    thread while the calling thread compiles the methods' programs: the verdict comes back,
+    the verification's error reaches the caller, and an error of the compile is raised at once,
+    without waiting for the verification still running."""
+    import threading
+
+    here = threading.current_thread().name
+    seen = {}
+
+    def verify():
+        seen["verify"] = threading.current_thread().name
+        return "verdict"
+
+    def compile_methods():
+        seen["compile"] = threading.current_thread().name
+
+    assert report._compile_beside(verify, compile_methods) == "verdict"
+    assert seen["compile"] == here != seen["verify"]
+
+    def broken():
+        raise ValueError("no hard program")
+
+    with pytest.raises(ValueError, match="no hard program"):
+        report._compile_beside(broken, compile_methods)
+
+    release = threading.Event()
+
+    def interrupted():
+        raise KeyboardInterrupt
+
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            report._compile_beside(lambda: release.wait(60.0), interrupted)
+        assert not release.is_set()  # raised while the verification still waited
+    finally:
+        release.set()
+
+
 def test_hybrid_descends_from_its_best_draw_and_counts_every_rollout(monkeypatch):
     """The hybrid method on a bowl in a box: each cycle verifies its draws, starts Adam at each
     restart's best draw (lowest fitness), verifies every new iterate, and counts the draws as
