@@ -8,7 +8,10 @@ for one piece of work and then run only briefly, that is the better trade:
   one cell, ``ego`` on the first Pedestrian Emergence pair in the 32-dimensional adversary
   space with random search, CMA-ES and gradient search, compiled in 52.2-56.7 s with XLA's
   defaults and in 39.3-40.3 s with these options, while its 48-rollout search took 31.6-33.6
-  and 31.7-32.7 s (2-core CPU, jaxlib 0.10.2, two interleaved rounds, docs/performance.md).
+  and 31.7-32.7 s (2-core CPU, jaxlib 0.10.2, two interleaved rounds, docs/performance.md);
+* **the fragility radii's program** (every pair's soft margin and its gradient over the knobs):
+  ``coop`` on ``lantern-v3``, compiled in 25.4-30.2 s with XLA's defaults and 20.3-20.7 s with
+  these options, its one run 3.3-3.8 s against 4.2-4.4 s (two interleaved rounds).
 
 The evaluation's programs keep XLA's defaults: the world program is compiled once per machine
 and kept, and its run is what every evaluation waits for (`coop`'s whole-suite split rollout
