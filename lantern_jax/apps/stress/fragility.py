@@ -137,10 +137,9 @@ def margin_program(policy: Policy, names: tuple[str, ...], horizon: int) -> Any:
 
     return remember(
         ("fragility", getattr(policy, "program", policy), names, horizon),
-        lambda: jax.jit(
-            jax.vmap(jax.value_and_grad(one), in_axes=(0, 0, 0, 0, 0, None, None))
-        ),
-    )
+        lambda: jax.jit(jax.vmap(jax.value_and_grad(one),
+                                 in_axes=(0, 0, 0, 0, 0, None, None))),
+    )  # fmt: skip
 
 
 def radius_of(margin: np.ndarray, grad: np.ndarray, active: np.ndarray,
