@@ -4,9 +4,11 @@ Runs pytest with this file as a plugin.  JAX reports every compilation through
 ``jax.monitoring`` (tracing to a jaxpr, lowering to StableHLO, XLA's backend compile, or the
 load from the persistent cache); the plugin adds those durations up per test (fixture set-up
 included) and prints, after the run, the totals, the slowest tests with their compile share and
-their largest programs, the largest programs over the whole run, and the seconds per test
-file; and the CPU time the run used against its wall time (how many cores were busy: a run
-that keeps every core busy is shortened only by less work, not by more workers).
+their largest programs, the largest programs over the whole run, the seconds per test file,
+every program by name (the small ones too: an eager operation compiles a program of its own per
+shape) and, with ``--sites``, the package line and the test line that asked for each; and the
+CPU time the run used against its wall time (how many cores were busy: a run that keeps every
+core busy is shortened only by less work, not by more workers).
 Subprocesses (the command-line tests, notebook kernels) are not seen by the plugin: their time
 counts as the test's wall time only (their CPU time is in the run's).
 
@@ -16,6 +18,7 @@ Usage (from the project root; every argument goes to pytest)::
     python benchmarks/profile_tests.py -m slow          # the slow tests
     python benchmarks/profile_tests.py tests/test_evaluate.py --top 10 --json times.json
     python benchmarks/profile_tests.py --workers 2 --cold   # as a fresh clone's test command
+    python benchmarks/profile_tests.py --workers 2 --cold --sites   # ... and who asked for each
 
 The tests run in this one process (``-n 0``), not in the worker processes the plain test
 command starts, so the figures add up the whole run's work rather than its wall time.
@@ -39,6 +42,7 @@ import os
 import sys
 import tempfile
 import time
+import traceback
 from pathlib import Path
 
 import jax
@@ -55,6 +59,29 @@ WORKER_DIR_ENV = "LANTERN_PROFILE_TESTS_DIR"
 _current = ["(collection and session start)"]
 _per_test: dict[str, collections.Counter] = collections.defaultdict(collections.Counter)
 _programs: dict[str, collections.Counter] = collections.defaultdict(collections.Counter)
+#: Every compilation by program name, whatever its size: event (and "n") -> seconds (count).
+_by_name: dict[str, collections.Counter] = collections.defaultdict(collections.Counter)
+#: With ``--sites``: XLA compilations by the line that asked for them (the innermost frame in
+#: the package, and the innermost in the tests): "n" -> count, "s" -> seconds.
+_sites: dict[str, collections.Counter] = collections.defaultdict(collections.Counter)
+SITES_ENV = "LANTERN_PROFILE_TESTS_SITES"
+_ROOT = str(Path(__file__).resolve().parents[1])
+
+
+def _site() -> str:
+    """The package line and the test line on the stack of the running compilation."""
+    package = test = "-"
+    for frame in reversed(traceback.extract_stack()):
+        name = frame.filename
+        if not name.startswith(_ROOT) or name.endswith("profile_tests.py"):
+            continue
+        where = f"{os.path.relpath(name, _ROOT)}:{frame.lineno}"
+        if package == "-" and "/lantern_jax/" in name:
+            package = where
+        if test == "-" and "/tests/" in name:
+            test = where
+            break
+    return f"{package}  <-  {test}"
 
 
 def _listener(event: str, duration: float, **kwargs) -> None:
@@ -63,8 +90,15 @@ def _listener(event: str, duration: float, **kwargs) -> None:
         return
     acc = _per_test[_current[0]]
     acc[event] += duration
+    named = _by_name[str(kwargs.get("fun_name", "?"))]
+    named[event] += duration
     if event == BACKEND:
         acc["compiles"] += 1
+        named["n"] += 1
+        if os.environ.get(SITES_ENV):
+            site = _sites[f"{kwargs.get('fun_name', '?')}  {_site()}"]
+            site["n"] += 1
+            site["s"] += duration
         if duration >= BIG_PROGRAM_S:
             _programs[_current[0]][str(kwargs.get("fun_name", "?"))] += duration
 
@@ -90,7 +124,9 @@ def pytest_unconfigure(config):
     worker, folder = os.environ.get("PYTEST_XDIST_WORKER"), os.environ.get(WORKER_DIR_ENV)
     if worker and folder:
         data = {"tests": {k: dict(v) for k, v in _per_test.items()},
-                "programs": {k: dict(v) for k, v in _programs.items()}}  # fmt: skip
+                "programs": {k: dict(v) for k, v in _programs.items()},
+                "by_name": {k: dict(v) for k, v in _by_name.items()},
+                "sites": {k: dict(v) for k, v in _sites.items()}}  # fmt: skip
         (Path(folder) / f"{worker}.json").write_text(json.dumps(data))
 
 
@@ -104,6 +140,10 @@ def gather(folder: str) -> int:
             _per_test[name].update(values)
         for name, values in data["programs"].items():
             _programs[name].update(values)
+        for name, values in data.get("by_name", {}).items():
+            _by_name[name].update(values)
+        for name, values in data.get("sites", {}).items():
+            _sites[name].update(values)
     return len(files)
 
 
@@ -144,8 +184,22 @@ def report(top: int) -> dict:
     print(f"\n{'wall s':>7} {'XLA s':>6}  file")
     for f, s in files.most_common(top):
         print(f"{s:7.1f} {compile_files[f]:6.1f}  {f}")
+    # every program by name, small ones included: where the many short compilations come from
+    spent = {k: v.get(BACKEND, 0.0) + v.get(TRACE, 0.0) + v.get(LOWER, 0.0)
+             for k, v in _by_name.items()}  # fmt: skip
+    print(f"\n{'s':>7} {'XLA s':>6} {'n':>5}  program name (every compilation: trace, lowering "
+          "and XLA)")  # fmt: skip
+    for k, s in sorted(spent.items(), key=lambda kv: -kv[1])[:top]:
+        v = _by_name[k]
+        print(f"{s:7.1f} {v.get(BACKEND, 0.0):6.1f} {v.get('n', 0):5.0f}  {k}")
+    if _sites:
+        print(f"\n{'XLA s':>7} {'n':>5}  program  package line  <-  test line (--sites)")
+        for k, v in sorted(_sites.items(), key=lambda kv: -kv[1]["s"])[:top]:
+            print(f"{v['s']:7.1f} {v['n']:5.0f}  {k}")
     return {"total": total, "tests": tests,
-            "programs": {k: dict(v) for k, v in _programs.items()}}  # fmt: skip
+            "programs": {k: dict(v) for k, v in _programs.items()},
+            "by_name": {k: dict(v) for k, v in _by_name.items()},
+            "sites": {k: dict(v) for k, v in _sites.items()}}  # fmt: skip
 
 
 def _cpu_seconds() -> float:
@@ -164,8 +218,13 @@ def main() -> int:
                          "and gather their figures (default 0: in this process)")  # fmt: skip
     ap.add_argument("--cold", action="store_true",
                     help="an empty compile cache for this run (a fresh clone's compile)")
+    ap.add_argument("--sites", action="store_true",
+                    help="also list the lines that asked for the compilations (the package's "
+                         "and the test's; slower: a stack walk per compilation)")  # fmt: skip
     ap.add_argument("--help-profile", action="help", help="this help (other arguments: pytest)")
     args, pytest_args = ap.parse_known_args()
+    if args.sites:  # read by the listener here and in every worker
+        os.environ[SITES_ENV] = "1"
     if args.cold:  # read by tests/conftest.py when pytest imports it, and by every worker
         cold = tempfile.TemporaryDirectory(prefix="profile_tests_cache_")
         os.environ["JAX_COMPILATION_CACHE_DIR"] = cold.name
