@@ -115,46 +115,41 @@ def pytest_configure(config) -> None:
 
 
 #: s, each test file's share of a tier's test time on the 2-core CPU, files over 3 s: the
-#: default tier's from ``benchmarks/profile_tests.py --workers 2 --cold`` (2026-12-03), the slow
+#: default tier's from ``benchmarks/profile_tests.py --workers 2 --cold`` (2026-12-05), the slow
 #: tier's from the ``--durations`` of a fresh-clone ``.ci/run`` that day (its 40 slowest tests,
-#: which hold nearly all of the tier's time; smaller files from the profile).  pytest-xdist
-#: hands whole files to its workers in the order of the collection (``--no-loadscope-reorder``
-#: in pyproject.toml; its own order is by the number of tests in a file), so
+#: which hold nearly all of the tier's time).  pytest-xdist hands whole files to its workers
+#: in the order of the collection (``--no-loadscope-reorder`` in pyproject.toml; its own order
+#: is by the number of tests in a file), so
 #: :func:`pytest_collection_modifyitems` puts the longest files first and the short ones fill
 #: in at the end, rather than a long file starting last while the other worker idles.  A file
 #: not listed runs after these, in its usual order: the table orders the files, never selects
 #: tests, and a stale entry costs only balance.
 FILE_SECONDS = {
     "default": {
-        "tests/test_bad_inputs.py": 172, "tests/test_unseen.py": 127, "tests/test_split.py": 101,
-        "tests/test_evaluate.py": 96, "tests/test_rollout.py": 90, "tests/test_settings.py": 76,
-        "tests/test_learned.py": 66, "tests/test_policy_boundary.py": 64,
-        "tests/test_plot_pair.py": 57, "tests/test_extension.py": 56,
-        "tests/test_bad_inputs_evidence.py": 53, "tests/test_protocol.py": 52,
-        "tests/test_dynamics.py": 45, "tests/test_cli.py": 41, "tests/test_adversary.py": 36,
-        "tests/test_expert.py": 35, "tests/test_scenarios.py": 34, "tests/test_false_brake.py": 27,
-        "tests/test_diagnostics.py": 24, "tests/test_envs.py": 24, "tests/test_report_page.py": 22,
-        "tests/test_switch.py": 22, "tests/test_host_policy.py": 21,
-        "tests/test_visibility.py": 18, "tests/test_jax_setup.py": 18, "tests/test_stream.py": 17,
-        "tests/test_stress.py": 17, "tests/test_scoring_telemetry.py": 14,
-        "tests/test_suite.py": 13, "tests/test_geometry.py": 9, "tests/test_schedule.py": 8,
-        "tests/test_scoring_components.py": 8, "tests/test_viz.py": 8,
-        "tests/test_warning_bank.py": 6, "tests/test_external_policy.py": 6,
-        "tests/test_warning_override.py": 6, "tests/test_language.py": 6,
-        "tests/test_fragility.py": 4, "tests/test_program_store.py": 4, "tests/test_layers.py": 4,
-        "tests/test_scoring_table.py": 3,
+        "tests/test_bad_inputs.py": 58, "tests/test_evaluate.py": 52, "tests/test_unseen.py": 43,
+        "tests/test_split.py": 41, "tests/test_rollout.py": 38, "tests/test_learned.py": 31,
+        "tests/test_settings.py": 30, "tests/test_extension.py": 20, "tests/test_dynamics.py": 18,
+        "tests/test_plot_pair.py": 18, "tests/test_ensemble.py": 15,
+        "tests/test_policy_boundary.py": 14, "tests/test_jax_setup.py": 14,
+        "tests/test_adversary.py": 14, "tests/test_false_brake.py": 14, "tests/test_cli.py": 13,
+        "tests/test_bad_inputs_evidence.py": 12, "tests/test_expert.py": 11,
+        "tests/test_envs.py": 11, "tests/test_scenarios.py": 10,
+        "tests/test_distractor_drives.py": 10, "tests/test_switch.py": 9,
+        "tests/test_diagnostics.py": 9, "tests/test_report_page.py": 8,
+        "tests/test_visibility.py": 8, "tests/test_host_policy.py": 7, "tests/test_protocol.py": 7,
+        "tests/test_stress.py": 7, "tests/test_suite.py": 6, "tests/test_scoring_telemetry.py": 6,
+        "tests/test_allocator.py": 6, "tests/test_stream.py": 5, "tests/test_report_tables.py": 4,
+        "tests/test_scoring_components.py": 4, "tests/test_viz.py": 4, "tests/test_geometry.py": 4,
+        "tests/test_schedule.py": 3, "tests/test_warning_override.py": 3,
     },
     "slow": {
-        "tests/test_stress.py": 444, "tests/test_cli.py": 264, "tests/test_settings.py": 258,
-        "tests/test_evaluate.py": 249, "tests/test_closed_loop.py": 201, "tests/test_envs.py": 180,
-        "tests/test_training.py": 127, "tests/test_dataset.py": 125,
-        "tests/test_multihost.py": 98, "tests/test_suite.py": 80, "tests/test_fragility.py": 75,
-        "tests/test_rollout.py": 70, "tests/test_policy_boundary.py": 62,
-        "tests/test_program_store.py": 61, "tests/test_host_policy.py": 58,
-        "tests/test_vector_env.py": 49, "tests/test_stream.py": 35,
-        "tests/test_bad_inputs.py": 35, "tests/test_unseen.py": 34,
-        "tests/test_learned_ppo.py": 22, "tests/test_learned.py": 12,
-        "tests/test_false_brake.py": 5, "tests/test_docs.py": 5,
+        "tests/test_stress.py": 298, "tests/test_cli.py": 224, "tests/test_settings.py": 159,
+        "tests/test_closed_loop.py": 124, "tests/test_evaluate.py": 100, "tests/test_envs.py": 94,
+        "tests/test_bad_inputs.py": 81, "tests/test_rollout.py": 59, "tests/test_multihost.py": 54,
+        "tests/test_fragility.py": 50, "tests/test_policy_boundary.py": 50,
+        "tests/test_stream.py": 38, "tests/test_unseen.py": 34, "tests/test_program_store.py": 34,
+        "tests/test_suite.py": 32, "tests/test_dataset.py": 30, "tests/test_host_policy.py": 24,
+        "tests/test_vector_env.py": 15, "tests/test_training.py": 9, "tests/test_learned.py": 8,
     },
 }  # fmt: skip
 
