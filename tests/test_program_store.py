@@ -16,6 +16,7 @@ import functools
 import os
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -100,6 +101,41 @@ def test_a_program_served_by_jax_cache_is_not_fresh():
     # (the test session keeps every program, conftest.py)
     _, fresh = program_store.compile_lowered(jax.jit(lambda v: jnp.cos(v) * salt).lower(x))
     assert not fresh
+
+
+def test_a_program_jax_hands_back_from_memory_is_not_fresh():
+    """A program lowered again in the same process is the module JAX lowered the first time,
+    and JAX gives back the executable it made of it then, without a compile or a cache hit.
+    When that executable came from JAX's persistent cache it cannot be stored whole: an entry
+    written from it failed in a later process with "Function ... not found".  So only the
+    compile that XLA ran here counts as fresh, and another thread's compile at the same moment
+    does not make this thread's program fresh."""
+    if not jax.config.jax_enable_compilation_cache:
+        pytest.skip("needs the test session's persistent compilation cache")
+    salt = float(np.random.default_rng().uniform(1.0, 2.0))  # a program no run compiled before
+    x = np.arange(5, dtype=np.float32)
+    first = jax.jit(lambda v: jnp.tan(v) * salt)
+    _, fresh = program_store.compile_lowered(first.lower(x))
+    assert fresh
+    _, again = program_store.compile_lowered(first.lower(x))  # JAX's executable, from memory
+    assert not again
+    served = jax.jit(lambda v: jnp.tan(v) * salt)  # a new function: JAX's cache serves it
+    compiled, fresh = program_store.compile_lowered(served.lower(x))
+    assert not fresh
+
+    class LoweredBesideAnotherCompile:
+        """``served``'s program lowered again, compiled while another thread compiles a new
+        program (as the split path compiles its programs side by side)."""
+
+        def compile(self):
+            other = threading.Thread(target=lambda: jax.jit(lambda v: v * (salt + 1.0)).lower(x)
+                                     .compile())  # fmt: skip
+            other.start()
+            other.join()
+            return served.lower(x).compile()
+
+    again, fresh = program_store.compile_lowered(LoweredBesideAnotherCompile())
+    assert again.runtime_executable() is compiled.runtime_executable() and not fresh
 
 
 @pytest.mark.slow  # compiles its own programs; run by the slow tier

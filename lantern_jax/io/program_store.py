@@ -34,7 +34,7 @@ package, such as a user's own policy or a host-callback model; an object whose t
 part of its state) is not stored: it is traced and compiled as before, and JAX's persistent
 cache still serves its XLA compilation.  Programs that close over constant arrays cannot be
 serialized and are not stored either, and neither is a program that JAX's own cache served
-(:func:`compile_lowered` says why).
+or that JAX gave back from memory (:func:`compile_lowered` says why).
 
 **Where**: the ``lantern-programs`` folder inside JAX's persistent compilation cache folder,
 whenever that cache is on (``lantern-jax`` turns it on by default; ``--no-compile-cache`` and
@@ -71,6 +71,7 @@ import logging
 import os
 import pickle
 import sys
+import threading
 import types
 from collections.abc import Callable
 from pathlib import Path
@@ -333,30 +334,55 @@ def describable(identity: Any) -> bool:
 
 
 _JAX_CACHE_HIT = "/jax/compilation_cache/cache_hits"
-_jax_cache_hits = 0
+#: JAX records this duration around every backend compilation: an XLA compile, or a load from
+#: its persistent cache.  A program JAX already holds in memory (the same lowered module compiled
+#: again) records nothing.
+_BACKEND_COMPILE = "/jax/core/compile/backend_compile_duration"
+
+
+class _Counts(threading.local):
+    """This thread's count of JAX's persistent-cache hits and of backend compilations.  JAX
+    calls its listeners in the thread that compiles, so a compilation in another thread (the
+    split path compiles several programs side by side) never counts here."""
+
+    hits = 0
+    compiles = 0
+
+
+_counts = _Counts()
 
 
 def _count_jax_cache_hits(event: str, **_: Any) -> None:
-    global _jax_cache_hits
     if event == _JAX_CACHE_HIT:
-        _jax_cache_hits += 1
+        _counts.hits += 1
+
+
+def _count_backend_compiles(event: str, duration: float, **_: Any) -> None:
+    if event == _BACKEND_COMPILE:
+        _counts.compiles += 1
 
 
 monitoring.register_event_listener(_count_jax_cache_hits)
+monitoring.register_event_duration_secs_listener(_count_backend_compiles)
 
 
 def compile_lowered(lowered: Any) -> tuple[Any, bool]:
-    """``lowered.compile()``, and whether XLA compiled it here (``False``: JAX loaded it from
-    its persistent compilation cache).
+    """``lowered.compile()``, and whether XLA compiled it here and now (``False``: JAX loaded it
+    from its persistent compilation cache, or gave back an executable it already held in
+    memory).
 
     Only a program compiled here may be stored: an executable that JAX loaded from its own
     cache serializes into an entry whose kernels are missing when it is loaded again (XLA on
     CPU, jaxlib 0.10: "Function ... not found" when it runs), so :func:`save` is given only
-    fresh compilations; JAX's cache keeps serving the others.
+    fresh compilations; JAX's cache keeps serving the others.  That includes an executable
+    JAX hands back from memory: a program lowered again in the same process (after it left
+    :mod:`lantern_jax.sim.programs`' bounded cache, say) is the same module, and JAX returns
+    the executable it made of it the first time, perhaps the one it loaded from its cache,
+    without a compile or a cache hit.  Both are counted in this thread only.
     """
-    before = _jax_cache_hits
+    hits, compiles = _counts.hits, _counts.compiles
     compiled = lowered.compile()
-    return compiled, _jax_cache_hits == before
+    return compiled, _counts.compiles > compiles and _counts.hits == hits
 
 
 def _devices_of(compiled: Any) -> list[int] | None:
