@@ -88,19 +88,19 @@ def _listener(event: str, duration: float, **kwargs) -> None:
     """``jax.monitoring`` duration listener: charge the event to the running test."""
     if event not in (BACKEND, TRACE, LOWER):
         return
-    acc = _per_test[_current[0]]
+    name = str(kwargs.get("fun_name", "?"))
+    acc, named = _per_test[_current[0]], _by_name[name]
     acc[event] += duration
-    named = _by_name[str(kwargs.get("fun_name", "?"))]
     named[event] += duration
     if event == BACKEND:
         acc["compiles"] += 1
         named["n"] += 1
         if os.environ.get(SITES_ENV):
-            site = _sites[f"{kwargs.get('fun_name', '?')}  {_site()}"]
+            site = _sites[f"{name}  {_site()}"]
             site["n"] += 1
             site["s"] += duration
         if duration >= BIG_PROGRAM_S:
-            _programs[_current[0]][str(kwargs.get("fun_name", "?"))] += duration
+            _programs[_current[0]][name] += duration
 
 
 @pytest.hookimpl(hookwrapper=True)
