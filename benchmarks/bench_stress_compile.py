@@ -2,13 +2,17 @@
 
 Runs :func:`lantern_jax.apps.stress.report.stress_test` on one cell (the first pair of
 ``--family`` under ``--policy``, the adversary space, ``--restarts`` restarts, ``--methods``) with
-a budget of 8 rollouts per restart, JAX's persistent cache off, and prints the ``compiled in``
+a budget of 8 rollouts per restart, JAX's persistent cache off (with ``--cache DIR``: on, in
+``DIR``, the program store with it, as the command line runs), and prints the ``compiled in``
 time it reports (the nominal scene's verification and every method's programs) with XLA's
 compile, tracing and lowering summed over every program (and over the threads that compile
 them), and the machine's load.  Run it once per code version, the versions interleaved, to
 compare them::
 
     python benchmarks/bench_stress_compile.py --family PE --policy ego
+
+A cell run again in a new process (another seed, budget or method list) is
+``--cache DIR`` twice with the same ``DIR``: the second run is what a rerun waits for.
 """
 
 from __future__ import annotations
@@ -35,8 +39,16 @@ def main() -> None:
     ap.add_argument("--policy", default="ego")
     ap.add_argument("--methods", default="random,cmaes,gradient", help="comma-separated")
     ap.add_argument("--restarts", type=int, default=4)
+    ap.add_argument("--cache", default=None, metavar="DIR",
+                    help="JAX's persistent cache and the program store in DIR (default: off)")
     args = ap.parse_args()
-    jax.config.update("jax_enable_compilation_cache", False)
+    if args.cache is None:
+        jax.config.update("jax_enable_compilation_cache", False)
+    else:
+        from lantern_jax.core.jax_setup import CACHE_DIR_ENV, configure_compile_cache
+
+        os.environ[CACHE_DIR_ENV] = args.cache
+        configure_compile_cache(True)
     seconds: dict[str, float] = collections.defaultdict(float)
     count = collections.Counter()
 
@@ -65,7 +77,7 @@ def main() -> None:
     print(f"{pair.pair_id} {args.policy} ({args.methods}): compiled in "
           f"{problem.info['compile_s']:.1f} s (the whole call {total:.1f} s); "
           + ", ".join(f"{k} {seconds[e]:.1f} s" for k, e in EVENTS.items())
-          + f" ({count[EVENTS['XLA']]} programs)")  # fmt: skip
+          + f" ({count[EVENTS['XLA']]} programs; cache {args.cache or 'off'})")  # fmt: skip
 
 
 if __name__ == "__main__":

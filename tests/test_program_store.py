@@ -89,6 +89,70 @@ def test_a_new_process_loads_the_stored_program_without_tracing_and_same_results
         assert (tmp_path / "first" / name).read_bytes() == (tmp_path / "second" / name).read_bytes()
 
 
+#: A stress cell's verification of the nominal scene (``ego``, the first PE pair, the adversary
+#: space): prints, as JSON, its verdict and, for the first request of each stress program, whether
+#: it was loaded from the program store and the seconds spent tracing and lowering it.
+STRESS_VERIFY_SCRIPT = """
+import json
+import numpy as np
+from lantern_jax.core.jax_setup import configure_compile_cache
+configure_compile_cache(True)
+from lantern_jax.apps.stress import report, verify
+from lantern_jax.policies.registry import get_policy
+from lantern_jax.scenarios.suite import load_suite
+from lantern_jax.sim import programs
+
+asked = []
+
+def kept(fn, *args, identity=None, **kwargs):
+    spent = {}
+    exe = programs.executable(fn, *args, identity=identity, timings=spent, **kwargs)
+    if identity[0] not in [name for name, _, _ in asked]:  # its first request
+        asked.append((identity[0], spent["program load"] > 0.0, spent["trace + lower"]))
+    return exe
+
+verify.executable = kept
+pair = next(p for p in load_suite().pairs if p.family == "PE")
+problem = report.make_problem(pair, get_policy("ego"), None, report.StressConfig(space="adversary"))
+verdict = verify.Verifier(problem, batch=2)(np.zeros((1, problem.space.dim), np.float32))
+print(json.dumps(dict(asked=asked, cus=verdict.cus.tolist(), failed=verdict.failed.tolist(),
+                      clearance=verdict.clearance_m.tolist())))
+"""
+
+
+def _stress_verify_in_new_process(cache: Path) -> dict:
+    """:data:`STRESS_VERIFY_SCRIPT` in a fresh process with its own cache folder."""
+    import json
+
+    from conftest import TEST_XLA_FLAGS
+
+    env = dict(os.environ, LANTERN_JAX_CACHE_DIR=str(cache), LANTERN_JAX_CPU_DEVICES="1",
+               XLA_FLAGS=TEST_XLA_FLAGS)  # fmt: skip
+    env.pop("JAX_COMPILATION_CACHE_DIR", None)
+    res = subprocess.run([sys.executable, "-c", STRESS_VERIFY_SCRIPT], env=env,
+                         capture_output=True, text=True, timeout=600)  # fmt: skip
+    assert res.returncode == 0, res.stderr[-2000:]
+    return json.loads(res.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.slow  # compiles its own programs; run by the slow tier
+def test_a_stress_cells_programs_load_in_a_new_process_with_the_same_verdict(tmp_path):
+    """A stress cell run again in a new process (another seed, budget or method list) loads
+    its programs from the store: the pair builder and the hard program of the verification
+    here, whose first process compiled and kept them (the soft program takes the same road,
+    ``tests/test_stress.py`` checks that it asks for it)."""
+    cache = tmp_path / "cache"
+    first = _stress_verify_in_new_process(cache)
+    assert [(name, loaded) for name, loaded, _ in first["asked"]] == [
+        ("stress-pairs", False), ("stress-hard", False)]  # fmt: skip
+    assert all(traced > 0.0 for _, _, traced in first["asked"])
+    second = _stress_verify_in_new_process(cache)
+    assert [(name, loaded, traced) for name, loaded, traced in second["asked"]] == [
+        ("stress-pairs", True, 0.0), ("stress-hard", True, 0.0)]  # fmt: skip
+    for field in ("cus", "failed", "clearance"):
+        assert second[field] == first[field], field
+
+
 def test_a_program_served_by_jax_cache_is_not_fresh():
     """What JAX's persistent cache served cannot be stored (see ``compile_lowered``)."""
     if not jax.config.jax_enable_compilation_cache:

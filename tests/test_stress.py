@@ -630,3 +630,80 @@ def test_verification_rejects_a_soft_failure_whose_hard_rollout_passes(suite):
     verdict = Verifier(problem)(np.asarray(nominal))
     assert bool(verdict.gates_passed[0]) and verdict.cus[0] > FAIL_BELOW_CUS
     assert not bool(verdict.failed[0])
+
+
+# ---------------------------------------------------------------------------------------------
+# the program store
+# ---------------------------------------------------------------------------------------------
+def _user_speed_setter(scenario, value):
+    """A knob's write function from outside the package (here: a test module)."""
+    return scenario
+
+
+def test_a_cells_programs_are_kept_only_when_the_store_can_vouch_for_them(suite, monkeypatch):
+    """A stress cell's programs are keyed for the program store when everything they call is
+    this package's: a reference policy on the adversary space, the knobs or both.  A policy or a
+    knob from outside the package cannot be described with certainty, and the cell then
+    compiles its programs in every process.  What compiles another program keys another
+    entry."""
+    from lantern_jax.io.program_store import describable
+    from lantern_jax.scenarios import knobs
+
+    pair = next(p for p in suite.pairs if p.family == "PE")
+    ego = get_policy("ego")
+    problems = {space: report.make_problem(pair, ego, None, report.StressConfig(space=space))
+                for space in report.SPACES}  # fmt: skip
+    for space, problem in problems.items():
+        for name in ("values_and_grads", "values"):
+            assert describable(problem.store_identity(name)), (space, name)
+    ids = {problem.store_identity("values") for problem in problems.values()}
+    assert len(ids) == len(problems)
+    knob_problem = problems["knobs"]
+    for field, value in (("temperature", 1.0), ("horizon", knob_problem.horizon + 1),
+                         ("objective", "margin"), ("expert_weight", 0.0)):  # fmt: skip
+        other = dataclasses.replace(knob_problem, **{field: value})
+        assert other.store_identity("values") != knob_problem.store_identity("values"), field
+    assert not describable(dataclasses.replace(knob_problem, policy=CRUISE)
+                           .store_identity("values"))  # fmt: skip
+    speed = knobs.knob("hazard_speed")
+    monkeypatch.setitem(knobs.KNOBS, "hazard_speed",
+                        dataclasses.replace(speed, set=_user_speed_setter))  # fmt: skip
+    assert not describable(knob_problem.store_identity("values"))
+    assert describable(problems["adversary"].store_identity("values"))  # reads no knob
+
+
+def test_a_cells_programs_are_asked_of_the_program_store(suite, monkeypatch):
+    """The soft program (with and without its backward pass), the hard program, the pair
+    builder and the fragility map's program are each asked for under an identity the store
+    keys; none is compiled here (the request stops there)."""
+    from lantern_jax.apps.stress import fragility, verify
+    from lantern_jax.io.program_store import describable
+
+    class Asked(Exception):
+        pass
+
+    asked = []
+
+    def spy(fn, *args, identity=None, **kwargs):
+        asked.append(identity)
+        raise Asked
+
+    for module in (objective, verify, fragility):
+        monkeypatch.setattr(module, "executable", spy)
+    pair = next(p for p in suite.pairs if p.family == "PE")
+    problem = report.make_problem(pair, get_policy("ego"), None,
+                                  report.StressConfig(space="adversary"))  # fmt: skip
+    points = np.zeros((1, 1, problem.space.dim), np.float32)
+    for grad in (True, False):
+        with pytest.raises(Asked):
+            objective.part_samples(problem, grad=grad)(objective.POLICY, points)
+    with pytest.raises(Asked):
+        verify.Verifier(problem)(np.zeros((1, problem.space.dim), np.float32))
+    with pytest.raises(Asked):
+        verify._hard_program(problem)(None, None)
+    with pytest.raises(Asked):
+        fragility.radii(suite.select(["pe_0001"]), get_policy("ego"), None)
+    assert asked[:2] == [problem.store_identity("values_and_grads"),
+                         problem.store_identity("values")]  # fmt: skip
+    assert [a[0] for a in asked[2:]] == ["stress-pairs", "stress-hard", "fragility"]
+    assert all(describable(a) for a in asked)

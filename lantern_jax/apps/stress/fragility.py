@@ -82,7 +82,8 @@ from lantern_jax.scenarios.families import family
 from lantern_jax.scenarios.knobs import knob
 from lantern_jax.scenarios.suite import Suite, build_suite_batches, suite_hash
 from lantern_jax.scoring.uncertainty import sample_interval
-from lantern_jax.sim.programs import remember
+from lantern_jax.sim.engine import program_identity
+from lantern_jax.sim.programs import executable, remember
 from lantern_jax.sim.settings import Settings, default_settings
 from lantern_jax.types.world import Scenario
 
@@ -128,7 +129,8 @@ def pair_margin(
 def margin_program(policy: Policy, names: tuple[str, ...], horizon: int) -> Any:
     """``jit((u (P, K), scenarios, lo, hi, active, params, settings) -> (margins (P,),
     grads (P, K)))``: every pair's margin and its gradient in one vmapped pass, built once per
-    policy program, knob set and horizon in this process.  XLA's default options: with
+    policy program, knob set and horizon in this process (:func:`radii` keeps the compiled
+    program in the program store for later ones).  XLA's default options: with
     :func:`~lantern_jax.core.xla_options.fast_compile_options` it compiled 5-9 s sooner, but the
     gradients through 500 soft ticks moved the radii by up to 0.4 % (docs/performance.md)."""
 
@@ -308,8 +310,12 @@ def radii(
     f32 = lambda x: jnp.asarray(x, jnp.float32)  # noqa: E731
     args = (f32(boxes.u0), scen_a, f32(boxes.lo), f32(boxes.hi), jnp.asarray(boxes.active),
             params, settings)  # fmt: skip
+    # kept in the program store: a rerun in a new process loads it (the knobs' functions in the
+    # identity, since a registered knob may be a user's own)
+    identity = ("fragility", program_identity(policy), boxes.names, horizon,
+                tuple(knob(n) for n in boxes.names))  # fmt: skip
     t0 = time.perf_counter()
-    compiled = fn.lower(*args).compile()
+    compiled = executable(fn, *args, identity=identity)
     t1 = time.perf_counter()
     margin, grad = jax.device_get(compiled(*args))
     t2 = time.perf_counter()

@@ -66,7 +66,8 @@ from lantern_jax.core.xla_options import fast_compile_options
 from lantern_jax.policies.base import Policy
 from lantern_jax.scoring.cus import cus_of, quality_a, soft_execution_terms
 from lantern_jax.scoring.smooth import softmin_decode
-from lantern_jax.sim.engine import remember
+from lantern_jax.sim.engine import program_identity, remember
+from lantern_jax.sim.programs import executable
 from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings
 from lantern_jax.sim.switch import policy_switch, switch_params
 from lantern_jax.types.world import Scenario
@@ -211,6 +212,18 @@ class Problem:
             self.actor_temperature,
         )
 
+    def store_identity(self, name: str) -> tuple:
+        """The program store's identity of this problem's program ``name``
+        (:func:`lantern_jax.sim.programs.executable`): what a compilation depends on besides
+        the arrays (:meth:`static`), the functions the space calls (a knob's) and the compiler
+        options, so that a cell run again in a new process loads its programs instead of
+        tracing and compiling them.  A policy, expert or knob from outside this package cannot
+        be described with certainty, and its programs are then compiled in every process
+        (:func:`lantern_jax.io.program_store.program_key`)."""
+        drivers = (program_identity(self.driver), program_identity(self.soft_driver))
+        return ("stress", name, self.space.key(), *drivers, *self.static()[3:],
+                self.space.program_parts(), fast_compile_options())  # fmt: skip
+
 
 @functools.cache
 def held_plans(expert: Policy) -> Policy:
@@ -223,8 +236,10 @@ def held_plans(expert: Policy) -> Policy:
                          "with memory); the expert guard and KING's detached ego need one "
                          "without")  # fmt: skip
 
+    expert_act = expert.act  # the program's identity names the act function, not the policy
+
     def act(params, obs):
-        return jax.lax.stop_gradient(expert.act(params, obs))
+        return jax.lax.stop_gradient(expert_act(params, obs))
 
     return Policy(
         f"{expert.name} (plans held)", expert.init, act, expert.description, sensors=expert.sensors
@@ -400,10 +415,10 @@ def part_samples(problem: Problem, grad: bool = True) -> Callable:
     """``(part, points (R, M, K)) -> (values (R, M), grads (R, M, K))``: one part's surrogate and
     pathwise gradient at every point (``grads`` None when ``grad`` is False: no backward pass),
     compiled once per static part of the problem (both parts and every restart share the
-    program), with :func:`~lantern_jax.core.xla_options.fast_compile_options` (a cell's compile
-    is what its user waits for).  The R x M points are one batch of :func:`part_values`; their
-    gradients are one backward pass of the batch's sum (each value depends on its own point
-    only)."""
+    program) with :func:`~lantern_jax.core.xla_options.fast_compile_options` (a cell's compile
+    is what its user waits for) and kept in the program store (:meth:`Problem.store_identity`).
+    The R x M points are one batch of :func:`part_values`; their gradients are one backward
+    pass of the batch's sum (each value depends on its own point only)."""
 
     def values(z, data, part, mp):
         return part_values(problem, z, part, mp, data)
@@ -419,11 +434,13 @@ def part_samples(problem: Problem, grad: bool = True) -> Callable:
         ),
     )
     data = problem.data()
+    identity = problem.store_identity("values_and_grads" if grad else "values")
 
     def run(part: int, pts: Array):
         pts = jnp.asarray(pts, jnp.float32)
         r, m, k = pts.shape
-        out = fn(pts.reshape(r * m, k), data, jnp.int32(part), problem.member(part, True))
+        args = (pts.reshape(r * m, k), data, jnp.int32(part), problem.member(part, True))
+        out = executable(fn, *args, identity=identity)(*args)
         if not grad:
             return out.reshape(r, m), None
         v, g = out

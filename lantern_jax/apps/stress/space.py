@@ -97,6 +97,11 @@ class Space:
         """The pair with one candidate's values applied (differentiable in ``values`` (K,))."""
         raise NotImplementedError
 
+    def program_parts(self) -> tuple:
+        """What :meth:`apply` calls besides this package's code, for the program store's key
+        (:meth:`lantern_jax.apps.stress.objective.Problem.store_identity`): nothing here."""
+        return ()
+
     def params(self, values: Array) -> dict:
         """The fields one candidate adds to a pair's parameter dict (``knobs``, ``adversary``)."""
         raise NotImplementedError
@@ -114,6 +119,11 @@ class SearchSpace(Space):
     def apply(self, scenario_a: Scenario, scenario_b: Scenario, values: Array) -> tuple:
         """The pair with the knobs set (differentiable in ``values``, one candidate)."""
         return apply_knobs(scenario_a, scenario_b, {n: values[i] for i, n in enumerate(self.names)})
+
+    def program_parts(self) -> tuple:
+        """The knobs set, with their read and write functions (a registered knob may be a
+        user's own, which the program store's key cannot describe)."""
+        return tuple(knob(n) for n in self.names)
 
     def params(self, values: Array) -> dict:
         """``{"knobs": {name: value}}``."""
@@ -185,6 +195,10 @@ class ProductSpace(Space):
     def _slices(self) -> list[slice]:
         edges = np.cumsum([0] + [p.dim for p in self.parts])
         return [slice(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:], strict=True)]
+
+    def program_parts(self) -> tuple:
+        """The parts' own."""
+        return tuple(x for p in self.parts for x in p.program_parts())
 
     def apply(self, scenario_a: Scenario, scenario_b: Scenario, values: Array) -> tuple:
         """Every part applied in turn."""

@@ -29,7 +29,8 @@ from lantern_jax.core.times import ticks
 from lantern_jax.core.xla_options import fast_compile_options
 from lantern_jax.dynamics.adversary import limits_of_kind
 from lantern_jax.scoring.cus import compiled_pair_components
-from lantern_jax.sim.engine import remember
+from lantern_jax.sim.engine import program_identity, remember
+from lantern_jax.sim.programs import executable
 
 FAIL_BELOW_CUS = rules.FAIL_BELOW_CUS
 ROUTE_A_GATES = ROUTE_A_GATE_NAMES  # the five gates of a Route A execution
@@ -70,10 +71,15 @@ class Verdict:
 def _hard_program(problem: Problem) -> Any:
     """``(scenarios, member_params) -> (metrics, watch)`` under the problem's settings,
     compiled once per driver and number of watched slots (which slots, and the settings' float
-    fields, are arguments), with :func:`~lantern_jax.core.xla_options.fast_compile_options`."""
+    fields, are arguments), with :func:`~lantern_jax.core.xla_options.fast_compile_options`,
+    and kept in the program store (a driver from outside this package is compiled in every
+    process: :func:`lantern_jax.io.program_store.program_key`)."""
     driver = problem.driver
+    static = ("stress-hard", getattr(driver, "program", driver), len(problem.watched))
+    identity = (static[0], program_identity(driver), *static[2:], MAX_VERIFY_TICKS,
+                fast_compile_options())  # fmt: skip
     fn = remember(
-        ("stress-hard", getattr(driver, "program", driver), len(problem.watched)),
+        static,
         lambda: jax.jit(
             lambda scs, params, watched, tracked, settings: hard_batch(
                 scs, driver, params, MAX_VERIFY_TICKS, watched, tracked, settings
@@ -84,18 +90,30 @@ def _hard_program(problem: Problem) -> Any:
     watched = jnp.asarray(problem.watched, jnp.int32)
     tracked = jnp.asarray(problem.tracked_mask)
     settings = problem.settings
-    return lambda scs, params: fn(scs, params, watched, tracked, settings)
+
+    def run(scs: Any, params: Any) -> Any:
+        args = (scs, params, watched, tracked, settings)
+        return executable(fn, *args, identity=identity)(*args)
+
+    return run
 
 
 def _pair_builder(problem: Problem) -> Any:
-    """``jit((scenario_a, scenario_b, values (N, K)) -> batched pairs)`` per space layout."""
+    """``(scenario_a, scenario_b, values (N, K)) -> batched pairs``, compiled once per space
+    layout and kept in the program store (:meth:`Problem.store_identity`)."""
     space = problem.space
-    return remember(
+    fn = remember(
         ("stress-pairs", space.key()),
         lambda: jax.jit(
             jax.vmap(lambda sa, sb, v: space.apply(sa, sb, v), in_axes=(None, None, 0))
         ),
     )
+    identity = ("stress-pairs", space.key(), space.program_parts())
+
+    def run(*args: Any) -> Any:
+        return executable(fn, *args, identity=identity)(*args)
+
+    return run
 
 
 def speed_limits(problem: Problem) -> np.ndarray:
