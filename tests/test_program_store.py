@@ -225,6 +225,37 @@ def test_a_policy_from_outside_the_package_is_compiled_not_stored(store, monkeyp
                           ("policy-step", False)}  # fmt: skip
 
 
+def _attention_elsewhere(*args, **kwargs):
+    """A function from outside the package and its libraries (here: a test module)."""
+
+
+def test_a_structure_that_names_a_function_by_its_address_is_keyed_by_its_name():
+    """JAX writes a tree node's static data that holds a function by its memory address, which
+    changes from process to process (a flax NNX model's parameters hold their attention
+    function so).  Such a structure is described node by node instead: keyed when every
+    function is this package's or a keyed library's, the same key for an equal tree, and not
+    keyed at all for a function from elsewhere."""
+    from flax import nnx
+    from jax.tree_util import Partial
+
+    x = np.zeros(3, np.float32)
+    flax_fn = (Partial(nnx.dot_product_attention), x)
+    assert " at 0x" in str(jax.tree.structure(flax_fn))
+    key = program_store.program_key(("t",), flax_fn)
+    assert key is not None and " at 0x" not in program_store.structure_text(
+        jax.tree.structure(flax_fn))  # fmt: skip
+    assert program_store.program_key(("t",), (Partial(nnx.dot_product_attention), x)) == key
+    other = (Partial(nnx.dot_product_attention), x, x)
+    assert program_store.program_key(("t",), other) not in (None, key)
+    assert program_store.program_key(("t",), (Partial(_attention_elsewhere), x)) is None
+    # a learned model's parameters (a flax NNX model: its attention function, tree structures
+    # nested in its static data): keyed, and alike for two loads of the checkpoint
+    learned = get_policy("learned-closed-loop")
+    keys = {program_store.program_key(("t",), (learned.init(jax.random.PRNGKey(i)),))
+            for i in range(2)}  # fmt: skip
+    assert len(keys) == 1 and None not in keys
+
+
 def test_describe_accepts_package_functions_and_refuses_what_it_cannot_vouch_for(monkeypatch):
     assert program_store.describe(expert_act) == program_store.describe(expert_act)
     plain = program_store.describe(expert_act)

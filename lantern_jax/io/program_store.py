@@ -22,8 +22,9 @@ section).
   functions by module and qualified name plus everything they close over, this package's
   objects by their fields, arrays by their bytes;
 * the arguments' tree structure (the static part of the settings included: tick windows, the
-  user metrics) and every leaf's shape, dtype and placement (the text bank's tables: their
-  rows, a multiple of 128 texts).
+  user metrics; written node by node where JAX's own text names a function by its address, as
+  a learned model's parameters do: :func:`structure_text`) and every leaf's shape, dtype and
+  placement (the text bank's tables: their rows, a multiple of 128 texts).
 
 Every value a user may change is an argument (:class:`lantern_jax.sim.settings.Settings`, the
 policy's parameters), never baked into the program, so the key needs no picture of the
@@ -227,6 +228,8 @@ def describe(obj: Any, _depth: int = 0) -> str:
         return _array_text(obj)
     if isinstance(obj, np.dtype):
         return f"dtype:{obj.str}"
+    if isinstance(obj, jax.tree_util.PyTreeDef):  # static data holding a tree's structure
+        return f"treedef:{structure_text(obj)}"
     if isinstance(obj, tuple | list):
         return f"{type(obj).__name__}(" + ",".join(describe(x, d) for x in obj) + ")"
     if isinstance(obj, dict):
@@ -303,6 +306,32 @@ def _leaf_text(x: Any, host: str) -> str:
     raise Unkeyable(f"argument leaf of type {type(x).__qualname__}")
 
 
+def _node_text(treedef: Any, _depth: int = 0) -> str:
+    """A tree structure node by node: each node's type and static data by :func:`describe`, then
+    its children (``*`` a leaf)."""
+    if _depth > 200:
+        raise Unkeyable("tree nested too deeply")
+    data = treedef.node_data()
+    if data is None:
+        return "*"
+    kind, aux = data
+    children = ",".join(_node_text(c, _depth + 1) for c in treedef.children())
+    return f"{describe(kind)}[{describe(aux)}]({children})"
+
+
+def structure_text(treedef: Any) -> str:
+    """The text of the arguments' tree structure in a key: JAX's own text, unless a node's
+    static data is written there by its memory address (a flax NNX module's parameters name
+    their attention function so), which changes from process to process; then every node is
+    described (:func:`describe`), which names such a function by module and name.
+
+    Raises:
+        Unkeyable: for static data :func:`describe` cannot vouch for.
+    """
+    text = str(treedef)
+    return text if " at 0x" not in text else _node_text(treedef)
+
+
 def program_key(identity: Any, args: tuple) -> str | None:
     """The store key of the program ``identity`` compiled for ``args``, or ``None`` when it
     cannot be keyed with certainty (see :func:`describe`)."""
@@ -312,13 +341,11 @@ def program_key(identity: Any, args: tuple) -> str | None:
         text = "\n".join([
             repr(sorted(environment().items())),
             describe(identity),
-            str(treedef),
+            structure_text(treedef),
             *(_leaf_text(x, host) for x in leaves),
         ])  # fmt: skip
     except Unkeyable as e:
         log.debug("program not stored: %s", e)
-        return None
-    if " at 0x" in str(treedef):
         return None
     return hashlib.sha256(text.encode()).hexdigest()
 
