@@ -199,10 +199,15 @@ class Problem:
 
     def static(self) -> tuple:
         """What a compilation depends on besides the arrays."""
+        driver, soft = (getattr(d, "program", d) for d in (self.driver, self.soft_driver))
+        return self._static(driver, soft)
+
+    def _static(self, driver: Any, soft_driver: Any) -> tuple:
+        """:meth:`static` with the drivers as given."""
         return (
             self.space.key(),
-            getattr(self.driver, "program", self.driver),
-            getattr(self.soft_driver, "program", self.soft_driver),
+            driver,
+            soft_driver,
             self.horizon,
             float(self.temperature),
             self.objective,
@@ -220,9 +225,8 @@ class Problem:
         tracing and compiling them.  A policy, expert or knob from outside this package cannot
         be described with certainty, and its programs are then compiled in every process
         (:func:`lantern_jax.io.program_store.program_key`)."""
-        drivers = (program_identity(self.driver), program_identity(self.soft_driver))
-        return ("stress", name, self.space.key(), *drivers, *self.static()[3:],
-                self.space.program_parts(), fast_compile_options())  # fmt: skip
+        static = self._static(program_identity(self.driver), program_identity(self.soft_driver))
+        return ("stress", name, *static, self.space.program_parts(), fast_compile_options())
 
 
 @functools.cache

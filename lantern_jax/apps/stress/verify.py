@@ -75,11 +75,11 @@ def _hard_program(problem: Problem) -> Any:
     and kept in the program store (a driver from outside this package is compiled in every
     process: :func:`lantern_jax.io.program_store.program_key`)."""
     driver = problem.driver
-    static = ("stress-hard", getattr(driver, "program", driver), len(problem.watched))
-    identity = (static[0], program_identity(driver), *static[2:], MAX_VERIFY_TICKS,
+    n_watched = len(problem.watched)
+    identity = ("stress-hard", program_identity(driver), n_watched, MAX_VERIFY_TICKS,
                 fast_compile_options())  # fmt: skip
     fn = remember(
-        static,
+        ("stress-hard", getattr(driver, "program", driver), n_watched),
         lambda: jax.jit(
             lambda scs, params, watched, tracked, settings: hard_batch(
                 scs, driver, params, MAX_VERIFY_TICKS, watched, tracked, settings
