@@ -121,6 +121,7 @@ class Browser:
         def loaded(m: dict) -> bool:
             return m.get("method") == "Page.loadEventFired" and m.get("sessionId") == sid
 
+        first_wait = min(timeout, FIRST_LOAD_WAIT_S)
         for attempt in (1, 2):
             first = len(self.events)
             result = self.send("Page.navigate", {"url": url}, session=sid)
@@ -129,13 +130,12 @@ class Browser:
             if any(loaded(m) for m in self.events[first:]):
                 return
             try:
-                self.wait(loaded, min(timeout, FIRST_LOAD_WAIT_S) if attempt == 1 else timeout)
+                self.wait(loaded, first_wait if attempt == 1 else timeout)
                 return
             except TimeoutError:
                 if attempt == 2:
                     seen = sorted({str(m.get("method")) for m in self.events[first:]
                                    if m.get("sessionId") == sid})  # fmt: skip
-                    first_wait = min(timeout, FIRST_LOAD_WAIT_S)
                     raise TimeoutError(f"{url} did not load in {first_wait:.0f} s, nor in "
                                        f"{timeout:.0f} s more; the tab reported "
                                        f"{seen or 'nothing'}") from None  # fmt: skip

@@ -678,6 +678,7 @@ def test_a_cells_programs_are_asked_of_the_program_store(suite, monkeypatch):
     keys; none is compiled here (the request stops there)."""
     from lantern_jax.apps.stress import fragility, verify
     from lantern_jax.io.program_store import describable
+    from lantern_jax.sim import programs
 
     class Asked(Exception):
         pass
@@ -688,7 +689,7 @@ def test_a_cells_programs_are_asked_of_the_program_store(suite, monkeypatch):
         asked.append(identity)
         raise Asked
 
-    for module in (objective, verify, fragility):
+    for module in (programs, fragility):  # programs.stored calls programs.executable
         monkeypatch.setattr(module, "executable", spy)
     pair = next(p for p in suite.pairs if p.family == "PE")
     problem = report.make_problem(pair, get_policy("ego"), None,

@@ -4,6 +4,7 @@
   function, its static arguments and the arguments' structure, shapes and dtypes); with an
   identity, the program is also kept on disk by :mod:`lantern_jax.io.program_store` and loaded
   from there by a later process;
+* :func:`stored` — a jitted function called through :func:`executable` (and the store);
 * :func:`remember` — build a value (a jitted function, usually) once per key;
 * :func:`abstract` — ``jax.eval_shape`` of a package function once per argument structure,
   kept in the program store for later processes (an abstract trace of the observation costs
@@ -101,6 +102,18 @@ def executable(fn, *args, static: dict | None = None, timings: dict | None = Non
     if timings is not None:
         timings.update(spent)
     return _EXECUTABLES[key]
+
+
+def stored(fn, identity: Any) -> Callable[..., Any]:
+    """``fn`` as a callable that runs, for each call's arguments, the program :func:`executable`
+    gives (compiled once per argument structure, kept in the program store under ``identity``).
+    Each call pays for :func:`executable`'s lookup (about 1.4 ms for a stress cell's soft
+    program of a learned policy, whose parameters are hundreds of leaves)."""
+
+    def call(*args: Any) -> Any:
+        return executable(fn, *args, identity=identity)(*args)
+
+    return call
 
 
 def abstract(name: str, fn: Callable, *args: Any, parts: tuple[str, ...] = ()) -> Any:

@@ -67,7 +67,7 @@ from lantern_jax.policies.base import Policy
 from lantern_jax.scoring.cus import cus_of, quality_a, soft_execution_terms
 from lantern_jax.scoring.smooth import softmin_decode
 from lantern_jax.sim.engine import program_identity, remember
-from lantern_jax.sim.programs import executable
+from lantern_jax.sim.programs import stored
 from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings
 from lantern_jax.sim.switch import policy_switch, switch_params
 from lantern_jax.types.world import Scenario
@@ -438,13 +438,12 @@ def part_samples(problem: Problem, grad: bool = True) -> Callable:
         ),
     )
     data = problem.data()
-    identity = problem.store_identity("values_and_grads" if grad else "values")
+    program = stored(fn, problem.store_identity("values_and_grads" if grad else "values"))
 
     def run(part: int, pts: Array):
         pts = jnp.asarray(pts, jnp.float32)
         r, m, k = pts.shape
-        args = (pts.reshape(r * m, k), data, jnp.int32(part), problem.member(part, True))
-        out = executable(fn, *args, identity=identity)(*args)
+        out = program(pts.reshape(r * m, k), data, jnp.int32(part), problem.member(part, True))
         if not grad:
             return out.reshape(r, m), None
         v, g = out

@@ -30,7 +30,7 @@ from lantern_jax.core.xla_options import fast_compile_options
 from lantern_jax.dynamics.adversary import limits_of_kind
 from lantern_jax.scoring.cus import compiled_pair_components
 from lantern_jax.sim.engine import program_identity, remember
-from lantern_jax.sim.programs import executable
+from lantern_jax.sim.programs import stored
 
 FAIL_BELOW_CUS = rules.FAIL_BELOW_CUS
 ROUTE_A_GATES = ROUTE_A_GATE_NAMES  # the five gates of a Route A execution
@@ -90,12 +90,8 @@ def _hard_program(problem: Problem) -> Any:
     watched = jnp.asarray(problem.watched, jnp.int32)
     tracked = jnp.asarray(problem.tracked_mask)
     settings = problem.settings
-
-    def run(scs: Any, params: Any) -> Any:
-        args = (scs, params, watched, tracked, settings)
-        return executable(fn, *args, identity=identity)(*args)
-
-    return run
+    run = stored(fn, identity)
+    return lambda scs, params: run(scs, params, watched, tracked, settings)
 
 
 def _pair_builder(problem: Problem) -> Any:
@@ -108,12 +104,7 @@ def _pair_builder(problem: Problem) -> Any:
             jax.vmap(lambda sa, sb, v: space.apply(sa, sb, v), in_axes=(None, None, 0))
         ),
     )
-    identity = ("stress-pairs", space.key(), space.program_parts())
-
-    def run(*args: Any) -> Any:
-        return executable(fn, *args, identity=identity)(*args)
-
-    return run
+    return stored(fn, ("stress-pairs", space.key(), space.program_parts()))
 
 
 def speed_limits(problem: Problem) -> np.ndarray:
