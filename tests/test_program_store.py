@@ -391,6 +391,47 @@ def test_prune_keeps_the_most_recently_used(tmp_path):
     assert sorted(p.name for p in tmp_path.glob("*.program")) == ["p3.program", "p4.program"]
 
 
+def _entries(folder: Path, sizes: dict[str, int], suffix: str = ".program") -> None:
+    """Entries named after ``sizes`` (bytes each, sparse: nothing is written), used in that
+    order (the last most recently)."""
+    now = time.time()
+    for i, (name, size) in enumerate(sizes.items()):
+        p = folder / f"{name}{suffix}"
+        with open(p, "wb") as fh:
+            fh.truncate(size)
+        os.utime(p, (now - 100 + i, now - 100 + i))
+
+
+def test_prune_keeps_the_most_recently_used_within_a_byte_budget(tmp_path):
+    """Entries are kept from the most recently used back while their sizes fit the budget;
+    the first one that does not, and every older one, are removed (small old entries do not
+    outlive a large newer one); the most recent is kept even when it alone is over."""
+    _entries(tmp_path, {"old_small": 10, "big": 60, "mid": 30, "new": 20})
+    removed = program_store.prune(tmp_path, max_bytes=55)
+    assert sorted(p.name for p in removed) == ["big.program", "old_small.program"]
+    assert sorted(p.name for p in tmp_path.glob("*.program")) == ["mid.program", "new.program"]
+    assert program_store.prune(tmp_path, max_bytes=5) == [tmp_path / "mid.program"]
+    assert [p.name for p in tmp_path.glob("*.program")] == ["new.program"]
+
+
+def test_a_study_of_many_stress_cells_keeps_every_cells_programs(store):
+    """The store's own budget, as :func:`~lantern_jax.io.program_store.save` prunes after a
+    write: a study of 40 stress cells (each three programs of 7, 15 and 0.4 MB, measured on
+    ``ego``'s first PE cell) written after the world program keeps every program (a count of
+    32 kept ten cells), and the values beside them are bounded apart."""
+    assert program_store.MAX_STORED_BYTES >= 40 * 23 * 2**20
+    sizes = {"world": 8 * 2**20}
+    for c in range(40):
+        sizes |= {f"hard{c}": 7 * 2**20, f"soft{c}": 15 * 2**20, f"pairs{c}": 400 * 2**10}
+    _entries(store, sizes)
+    assert program_store._write(store, "last", ("last", b""), ".program")
+    assert len(list(store.glob("*.program"))) == len(sizes) + 1
+    _entries(store, {f"v{i}": 10 for i in range(program_store.MAX_STORED_VALUES + 5)}, ".value")
+    assert program_store._write(store, "newest", ("newest", 1), ".value")
+    kept = {p.stem for p in store.glob("*.value")}
+    assert len(kept) == program_store.MAX_STORED_VALUES and "newest" in kept and "v0" not in kept
+
+
 def test_the_store_is_off_with_the_compilation_cache():
     was = jax.config.jax_enable_compilation_cache
     try:

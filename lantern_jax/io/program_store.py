@@ -41,17 +41,17 @@ or that JAX gave back from memory (:func:`compile_lowered` says why).
 whenever that cache is on (``lantern-jax`` turns it on by default; ``--no-compile-cache`` and
 ``jax.config.update("jax_enable_compilation_cache", False)`` turn the store off with it), and
 never under JAX's distributed runtime.  Files are written atomically (two processes storing
-the same program leave one whole entry); at most :data:`MAX_STORED_PROGRAMS` are kept, the least
-recently used removed first.  An entry records its own key and the SHA-256 of its executable:
-an entry that cannot be read back (truncated, corrupted, of another store format) or that holds
-another program than its name says (entries swapped or copied under another name) is deleted
-with a warning and the program compiled again (JAX's persistent cache still serves the XLA
-compilation).
+the same program leave one whole entry); at most :data:`MAX_STORED_BYTES` of programs are kept
+(and at most :data:`MAX_STORED_PROGRAMS` of them), the least recently used removed first.  An
+entry records its own key and the SHA-256 of its executable: an entry that cannot be read back
+(truncated, corrupted, of another store format) or that holds another program than its name
+says (entries swapped or copied under another name) is deleted with a warning and the program
+compiled again (JAX's persistent cache still serves the XLA compilation).
 
 **Values** (:func:`save_value`, :func:`load_value`): a few small results that every process
 would otherwise compute again before its first program runs -- the split path's world
 signature, a policy's observation shapes, the built-in families' worlds of a suite -- are kept
-beside the programs (``*.value``, at most :data:`MAX_STORED_PROGRAMS`), keyed by :func:`value_key`
+beside the programs (``*.value``, at most :data:`MAX_STORED_VALUES`), keyed by :func:`value_key`
 (the same environment and code fingerprint, and texts naming everything else the value depends
 on).  An entry that cannot be read back or holds another key is deleted and the value computed
 again.
@@ -88,10 +88,19 @@ log = logging.getLogger(__name__)
 
 #: Sub-folder of JAX's compilation cache folder that holds the stored programs.
 STORE_SUBDIR = "lantern-programs"
-#: Most programs (and, apart, values) kept on disk, least recently used removed first; an
-#: evaluation program is 5-15 MB.  (:data:`lantern_jax.sim.programs.MAX_PROGRAMS` bounds the
+#: Bytes of programs kept on disk, the least recently used removed first.  Programs differ in
+#: size by a hundredfold: a policy's own program on the split path is 0.15-0.5 MB, the world
+#: program and a fused evaluation 4-15 MB, a stress cell's three programs 22 MB (the soft
+#: program 15 MB; ``ego``'s first PE cell, 32-dimensional adversary).  A budget in bytes keeps
+#: a study of many cells whole: under a count of 32 programs, a study of more than ten cells
+#: run again found none of its programs (each cell's were removed by the cells after it).
+#: JAX's own persistent cache, beside it, is unbounded.
+MAX_STORED_BYTES = 2 * 1024**3
+#: Most programs kept on disk whatever their size (a bound on the folder's entries), and most
+#: values (``*.value``) kept apart.  (:data:`lantern_jax.sim.programs.MAX_PROGRAMS` bounds the
 #: programs held in a process.)
-MAX_STORED_PROGRAMS = 32
+MAX_STORED_PROGRAMS = 1024
+MAX_STORED_VALUES = 32
 #: Bumped when the file layout changes (old entries then simply miss).
 STORE_FORMAT = 2
 #: JAX options that change what a trace or a compilation produces.
@@ -508,7 +517,10 @@ def _write(folder: Path, key: str, record: Any, suffix: str) -> bool:
     except Exception as e:  # noqa: BLE001  (not picklable or not writable: not stored)
         log.debug("entry %s%s not stored: %s", key[:12], suffix, e)
         return False
-    prune(folder, suffix=suffix)
+    if suffix == _SUFFIX:
+        prune(folder, max_bytes=MAX_STORED_BYTES)
+    else:
+        prune(folder, keep=MAX_STORED_VALUES, suffix=suffix)
     return True
 
 
@@ -568,16 +580,27 @@ def kept(key: str | None, compute: Callable[[], Any],
     return value
 
 
-def prune(folder: Path, keep: int = MAX_STORED_PROGRAMS, suffix: str = _SUFFIX) -> list[Path]:
-    """Remove all but the ``keep`` most recently used entries of ``folder`` named ``*suffix``
-    (programs by default); returns what was removed."""
+def prune(
+    folder: Path,
+    keep: int = MAX_STORED_PROGRAMS,
+    suffix: str = _SUFFIX,
+    max_bytes: int | None = None,
+) -> list[Path]:
+    """Remove the least recently used entries of ``folder`` named ``*suffix`` (programs by
+    default) until at most ``keep`` are left and, with ``max_bytes``, their sizes add up to at
+    most ``max_bytes``; returns what was removed.  The most recently used entry is always kept
+    (a program larger than the budget is still kept until another is stored)."""
     entries = []
     for p in folder.glob("*" + suffix):
         with contextlib.suppress(OSError):
-            entries.append((p.stat().st_mtime, p))
-    entries.sort(reverse=True)
-    removed = []
-    for _, p in entries[keep:]:
+            st = p.stat()
+            entries.append((st.st_mtime, st.st_size, p))
+    entries.sort(key=lambda e: e[0], reverse=True)
+    removed, total = [], 0
+    for i, (_, size, p) in enumerate(entries):
+        total += size
+        if i == 0 or (i < keep and (max_bytes is None or total <= max_bytes)):
+            continue
         with contextlib.suppress(OSError):
             p.unlink()
             removed.append(p)
