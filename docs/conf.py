@@ -151,7 +151,9 @@ def _navigation_shared_by_folder(app) -> None:
     navigation (its entry and their parents marked current) is computed for it as before."""
     import furo
 
-    compute = furo._compute_navigation_tree
+    compute = getattr(furo, "_compute_navigation_tree", None)
+    if compute is None:  # another Furo: every page computes its own, as Furo does
+        return
     by_folder: dict[str, str] = {}
 
     def navigation(context: dict) -> str:
