@@ -418,7 +418,7 @@ def test_a_study_of_many_stress_cells_keeps_every_cells_programs(store):
     """The store's own budget, as :func:`~lantern_jax.io.program_store.save` prunes after a
     write: a study of 40 stress cells (each three programs of 7, 15 and 0.4 MB, measured on
     ``ego``'s first PE cell) written after the world program keeps every program (a count of
-    32 kept ten cells), and the values beside them are bounded apart."""
+    32 programs kept ten such cells), and the values beside them are bounded apart."""
     assert program_store.MAX_STORED_BYTES >= 40 * 23 * 2**20
     sizes = {"world": 8 * 2**20}
     for c in range(40):

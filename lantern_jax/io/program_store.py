@@ -92,8 +92,9 @@ STORE_SUBDIR = "lantern-programs"
 #: size by a hundredfold: a policy's own program on the split path is 0.15-0.5 MB, the world
 #: program and a fused evaluation 4-15 MB, a stress cell's three programs 22 MB (the soft
 #: program 15 MB; ``ego``'s first PE cell, 32-dimensional adversary).  A budget in bytes keeps
-#: a study of many cells whole: under a count of 32 programs, a study of more than ten cells
-#: run again found none of its programs (each cell's were removed by the cells after it).
+#: a study of many cells whole: under a count of 32 programs, a study whose programs outnumbered
+#: 32 (about a dozen cells) found none of them when run again, each cell's removed by the
+#: cells stored after it.
 #: JAX's own persistent cache, beside it, is unbounded.
 MAX_STORED_BYTES = 2 * 1024**3
 #: Most programs kept on disk whatever their size (a bound on the folder's entries), and most
