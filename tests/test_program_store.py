@@ -380,17 +380,6 @@ def test_a_program_run_from_memory_stays_recently_used_in_the_store(store):
     assert list(store.glob("*.program")) == [entry]
 
 
-def test_prune_keeps_the_most_recently_used(tmp_path):
-    now = time.time()
-    for i in range(5):
-        p = tmp_path / f"p{i}.program"
-        p.write_bytes(b"x")
-        os.utime(p, (now - 100 + i, now - 100 + i))
-    removed = program_store.prune(tmp_path, keep=2)
-    assert sorted(p.name for p in removed) == ["p0.program", "p1.program", "p2.program"]
-    assert sorted(p.name for p in tmp_path.glob("*.program")) == ["p3.program", "p4.program"]
-
-
 def _entries(folder: Path, sizes: dict[str, int], suffix: str = ".program") -> None:
     """Entries named after ``sizes`` (bytes each, sparse: nothing is written), used in that
     order (the last most recently)."""
@@ -400,6 +389,13 @@ def _entries(folder: Path, sizes: dict[str, int], suffix: str = ".program") -> N
         with open(p, "wb") as fh:
             fh.truncate(size)
         os.utime(p, (now - 100 + i, now - 100 + i))
+
+
+def test_prune_keeps_the_most_recently_used(tmp_path):
+    _entries(tmp_path, {f"p{i}": 1 for i in range(5)})
+    removed = program_store.prune(tmp_path, keep=2)
+    assert sorted(p.name for p in removed) == ["p0.program", "p1.program", "p2.program"]
+    assert sorted(p.name for p in tmp_path.glob("*.program")) == ["p3.program", "p4.program"]
 
 
 def test_prune_keeps_the_most_recently_used_within_a_byte_budget(tmp_path):

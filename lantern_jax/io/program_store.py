@@ -122,6 +122,9 @@ _PACKAGE = "lantern_jax"
 LIBRARIES = ("jax", "jaxlib", "flax", "numpy", "optax")
 _SUFFIX = ".program"
 _VALUE_SUFFIX = ".value"  # small values kept beside the programs (save_value)
+#: How :func:`prune` bounds each kind of entry after a write: programs by their bytes
+#: (:data:`MAX_STORED_BYTES`, and :data:`MAX_STORED_PROGRAMS` of them), values by their count.
+_BOUNDS = {_SUFFIX: {"max_bytes": MAX_STORED_BYTES}, _VALUE_SUFFIX: {"keep": MAX_STORED_VALUES}}
 
 
 class Unkeyable(Exception):
@@ -518,10 +521,7 @@ def _write(folder: Path, key: str, record: Any, suffix: str) -> bool:
     except Exception as e:  # noqa: BLE001  (not picklable or not writable: not stored)
         log.debug("entry %s%s not stored: %s", key[:12], suffix, e)
         return False
-    if suffix == _SUFFIX:
-        prune(folder, max_bytes=MAX_STORED_BYTES)
-    else:
-        prune(folder, keep=MAX_STORED_VALUES, suffix=suffix)
+    prune(folder, suffix=suffix, **_BOUNDS[suffix])
     return True
 
 
