@@ -22,12 +22,13 @@ The names a user needs, importable from the package itself::
   (``docs/families.md``).
 
 * :func:`setup` — JAX's CPU devices and compilation cache as the command line has them
-  (:mod:`lantern_jax.core.jax_setup`; done by ``import lantern_jax`` itself when JAX is not
-  imported yet).
+  (:mod:`lantern_jax.core.jax_setup`; done by ``import lantern_jax`` itself, the device count
+  only when JAX is not imported yet).
 
 The names are loaded on first use, so ``import lantern_jax`` stays cheap and does not import
-JAX; where JAX is not imported yet it exposes one XLA CPU device per core and turns JAX's
-persistent compilation cache on (``LANTERN_JAX_AUTO_SETUP=0`` leaves both alone).
+JAX; where JAX is not imported yet it exposes one XLA CPU device per core, and in any case it
+turns JAX's persistent compilation cache on unless the process configured or turned off its
+own (``LANTERN_JAX_AUTO_SETUP=0`` leaves both alone).
 """
 
 from __future__ import annotations
@@ -38,8 +39,8 @@ from typing import TYPE_CHECKING, Any
 
 from lantern_jax.core import jax_setup, renamed
 
-# One XLA CPU device per core and the persistent compilation cache, as the command line has
-# them, when JAX is not imported yet (lantern_jax.core.jax_setup; LANTERN_JAX_AUTO_SETUP=0: off).
+# One XLA CPU device per core (when JAX is not imported yet) and the persistent compilation
+# cache, as the command line has them (lantern_jax.core.jax_setup; LANTERN_JAX_AUTO_SETUP=0: off).
 jax_setup.auto_setup()
 # Renamed modules stay importable under their old names for one release (lantern_jax.core.renamed).
 renamed.install()

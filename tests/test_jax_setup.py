@@ -1,7 +1,8 @@
 """JAX's set-up for the Python API (:mod:`lantern_jax.core.jax_setup`): ``import lantern_jax``
 before JAX gives one XLA CPU device per core and the persistent compilation cache, as the command
-line has them; it can be turned off; JAX imported first keeps its own device count and
-:func:`lantern_jax.setup` says why; a bad device count is a warning naming the variable.
+line has them; it can be turned off; JAX imported first keeps its own device count (and
+:func:`lantern_jax.setup` says why) but still gets the cache, unless the process decided its
+own; a bad device count is a warning naming the variable.
 
 Each case runs in a fresh Python process (the set-up is only possible before JAX starts).
 """
@@ -78,6 +79,68 @@ def test_jax_first_keeps_one_device_and_setup_says_why(tmp_path):
     assert out["devices"] == 1
     assert "JAX was imported before lantern_jax" in out["note"]
     assert out["cache_after"] == str(tmp_path / "xdg" / "lantern-jax" / "jax")
+
+
+def test_jax_first_still_gets_the_cache_at_import(tmp_path):
+    """``import jax`` before ``lantern_jax`` (as most scripts begin): the device count stays,
+    the compilation cache is turned on all the same."""
+    out = _probe(tmp_path, "import jax; import lantern_jax", LANTERN_JAX_CPU_DEVICES="3")
+    assert out["devices"] == 1
+    assert out["cache"] == str(tmp_path / "xdg" / "lantern-jax" / "jax")
+    assert out["cache_on"] and out["xla_caches"] == XLA_CACHES_CPU
+
+
+@pytest.mark.parametrize(
+    "mine, cache, on",
+    [
+        ("jax.config.update('jax_compilation_cache_dir', {mine!r})", "mine", True),
+        ("jax.config.update('jax_enable_compilation_cache', False)", None, False),
+    ],
+    ids=["own-folder", "turned-off"],
+)
+def test_jax_first_keeps_the_processes_own_cache_decision(tmp_path, mine, cache, on):
+    folder = str(tmp_path / "mine")
+    first = f"import jax; {mine.format(mine=folder)}; import lantern_jax"
+    out = _probe(tmp_path, first)
+    assert out["cache"] == (folder if cache else None)
+    assert out["cache_on"] is on
+
+
+def test_jax_first_with_auto_setup_off_leaves_the_cache_off(tmp_path):
+    out = _probe(tmp_path, "import jax; import lantern_jax", LANTERN_JAX_AUTO_SETUP="0")
+    assert out["cache"] is None
+
+
+#: ``import jax`` first and a compile before ``lantern_jax`` is imported; then one program
+#: compiled; prints how many compilations JAX's persistent cache served.
+JAX_FIRST = """
+import jax, jax.numpy as jnp
+from jax import monitoring
+hits = []
+monitoring.register_event_listener(
+    lambda e, **k: hits.append(e) if e == "/jax/compilation_cache/cache_hits" else None)
+jax.jit(lambda x: x + 1.0)(jnp.float32(1.0)).block_until_ready()
+import lantern_jax
+print(float(jax.jit(lambda x: jnp.cos(x) * 5.0 - x)(jnp.float32(0.25))), len(hits))
+"""
+
+
+def test_jax_first_a_second_process_is_served_by_the_cache(tmp_path):
+    """The cache turned on after JAX's first compile still serves the next process."""
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("JAX_COMPILATION_CACHE_DIR", "LANTERN_JAX_CACHE_DIR",
+                        "LANTERN_JAX_AUTO_SETUP", XLA_CACHES_ENV)}  # fmt: skip
+    env.update(XDG_CACHE_HOME=str(tmp_path / "xdg"), JAX_PLATFORMS="cpu")
+
+    def run():
+        out = subprocess.run([sys.executable, "-c", JAX_FIRST], capture_output=True, text=True,
+                             env=env, timeout=120, check=True)  # fmt: skip
+        value, hits = out.stdout.split()
+        return value, int(hits)
+
+    first, again = run(), run()
+    assert first[1] == 0 and again[1] >= 1 and again[0] == first[0]
+    assert (tmp_path / "xdg" / "lantern-jax" / "jax").is_dir()
 
 
 def test_bad_device_count_warns_on_first_use(tmp_path):

@@ -1,18 +1,19 @@
 """JAX's process set-up for this package: one XLA CPU device per core and the persistent
 compilation cache — what makes the command line fast, for the Python API too.
 
-Both must happen before JAX starts (the CPU device count) or before the first compile (the
-cache).  The command line does both, and so does ``import lantern_jax`` when JAX is not
-imported yet (:func:`auto_setup`; ``LANTERN_JAX_AUTO_SETUP=0`` turns that off)::
+The CPU device count must be set before JAX starts; the cache can be turned on at any time.
+The command line does both, and so does ``import lantern_jax`` (:func:`auto_setup`;
+``LANTERN_JAX_AUTO_SETUP=0`` turns that off)::
 
     import lantern_jax as lj       # before jax: one CPU device per core, the compile cache
     result = lj.evaluate("coop")
 
-Where JAX was imported first, its CPU device count stays JAX's (one device: the evaluation then
-runs on one core); :func:`setup` still turns the compilation cache on and says, in the
-:class:`SetupReport` it returns, why the device count could not be set.  Nothing is changed
-that the environment already decides: ``XLA_FLAGS`` with a device count,
-``LANTERN_JAX_CPU_DEVICES``, a compilation cache folder already configured.
+Where JAX was imported first, its CPU device count stays JAX's (one device: the fused rollout
+then runs on one core); ``import lantern_jax`` still turns the compilation cache on
+(:func:`late_cache_setup`), and :func:`setup` says, in the :class:`SetupReport` it returns, why
+the device count could not be set.  Nothing is changed that the process or its environment
+already decides: ``XLA_FLAGS`` with a device count, ``LANTERN_JAX_CPU_DEVICES``, a compilation
+cache folder already configured or the cache turned off.
 """
 
 from __future__ import annotations
@@ -232,15 +233,23 @@ def setup(compile_cache: bool = True) -> SetupReport:
 
 
 def auto_setup() -> None:
-    """The set-up at ``import lantern_jax``, without importing JAX: when JAX is not imported
-    yet and ``LANTERN_JAX_AUTO_SETUP`` is not ``0``, one XLA CPU device per core
+    """The set-up at ``import lantern_jax``, unless ``LANTERN_JAX_AUTO_SETUP`` is ``0``.
+
+    When JAX is not imported yet (without importing it): one XLA CPU device per core
     (:func:`expose_cpu_cores`) and ``$JAX_COMPILATION_CACHE_DIR`` set to
     :func:`compile_cache_dir` unless already set (JAX reads it when it starts), and JAX's XLA
-    caches as :func:`xla_caches_default` says.  A bad
-    ``LANTERN_JAX_CPU_DEVICES`` changes nothing here; it is reported, as a warning, on the
-    first use of a name of the package (:func:`warn_pending`)."""
+    caches as :func:`xla_caches_default` says.  A bad ``LANTERN_JAX_CPU_DEVICES`` changes
+    nothing here; it is reported, as a warning, on the first use of a name of the package
+    (:func:`warn_pending`).
+
+    When JAX was imported first, its device count can no longer change, but its persistent
+    cache still can: :func:`late_cache_setup`.
+    """
     global _PENDING
-    if os.environ.get(AUTO_SETUP_ENV, "1").strip() == "0" or "jax" in sys.modules:
+    if os.environ.get(AUTO_SETUP_ENV, "1").strip() == "0":
+        return
+    if "jax" in sys.modules:
+        late_cache_setup()
         return
     try:
         expose_cpu_cores()
@@ -251,6 +260,29 @@ def auto_setup() -> None:
     caches = xla_caches_default()
     if caches is not None:
         os.environ[XLA_CACHES_ENV] = caches
+
+
+def late_cache_setup() -> str | None:
+    """Turn JAX's persistent compilation cache on in :func:`compile_cache_dir` in a process
+    that imported JAX before ``lantern_jax`` (``import jax`` first, as most scripts and
+    notebooks begin), unless the process already decided: a cache folder configured
+    (``$JAX_COMPILATION_CACHE_DIR`` when JAX started, or ``jax.config``) or the cache turned
+    off (``jax_enable_compilation_cache`` false).  JAX reads the folder at its next compile,
+    so this works after earlier compiles too.
+
+    Without it such a process kept nothing between runs: the program store, which lives in the
+    cache folder, was off as well, and every run compiled the world program again (a new
+    policy on the 6-pair subset: 10.7 s to the table in a second process, against 1.6 s with
+    the cache; ``docs/performance.md``).
+
+    Returns:
+        The cache folder turned on, or None when nothing was changed.
+    """
+    import jax
+
+    if jax.config.jax_compilation_cache_dir or not jax.config.jax_enable_compilation_cache:
+        return None
+    return configure_compile_cache(True)
 
 
 def warn_pending() -> None:
