@@ -258,10 +258,15 @@ def write_failed(out: str | os.PathLike, error: OSError) -> int:
     return 1
 
 
+def files_count(n: int) -> str:
+    """``"1 file"``, ``"N files"``."""
+    return f"{n} file" if n == 1 else f"{n} files"
+
+
 def list_written(paths: Iterable[str | os.PathLike]) -> None:
-    """Print ``Wrote N files:`` and the files, one a line."""
+    """Print ``Wrote N files:`` (``Wrote 1 file:``) and the files, one a line."""
     paths = list(paths)
-    print(f"Wrote {len(paths)} files:")
+    print(f"Wrote {files_count(len(paths))}:")
     for path in paths:
         print(f"  {path}")
 

@@ -33,7 +33,7 @@ import math
 from collections.abc import Sequence
 
 from lantern_jax.commands import UsageError
-from lantern_jax.commands.common import check_out, write_failed
+from lantern_jax.commands.common import check_out, files_count, write_failed
 from lantern_jax.commands.values import count, number, seed, whole
 from lantern_jax.core.constants import (
     CONDITIONS,
@@ -286,7 +286,7 @@ def cmd_stress(args: argparse.Namespace, argv: Sequence[str]) -> int:
     except OSError as e:
         return write_failed(args.out, e)
     _print_summary(args, report.comparison_table(traces, problem), problem, title, files)
-    print(f"Wrote {len(files)} files to {args.out}")
+    print(f"Wrote {files_count(len(files))} to {args.out}")
     return 0
 
 
@@ -339,7 +339,7 @@ def _cmd_fragility(args: argparse.Namespace) -> int:
     if result.sampling is not None:
         print("\nRank correlation of the radius with the failure rate of draws around each pair:")
         print(result.sampling.to_string(index=False, float_format=fmt))
-    print(f"Wrote {len(files)} files to {args.out}")
+    print(f"Wrote {files_count(len(files))} to {args.out}")
     return 0
 
 
