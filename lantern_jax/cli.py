@@ -208,7 +208,7 @@ def _run(args: argparse.Namespace, argv: Sequence[str]) -> int:
     check_path_lengths(args)
     families.load(args.families)
     if hasattr(args, "no_compile_cache"):
-        runtime.configure_compile_cache(not args.no_compile_cache)
+        runtime.configure_compile_cache(not args.no_compile_cache, warn=runtime.warn_line)
     if getattr(args, "coordinator", None) or getattr(args, "num_processes", None):
         runtime.initialize_distributed(args)
     code = args.func(args, argv)

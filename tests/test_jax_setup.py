@@ -111,6 +111,49 @@ def test_jax_first_with_auto_setup_off_leaves_the_cache_off(tmp_path):
     assert out["cache"] is None
 
 
+@pytest.mark.parametrize("first", ["import lantern_jax", "import jax; import lantern_jax"],
+                         ids=["lantern-first", "jax-first"])  # fmt: skip
+def test_a_cache_folder_that_cannot_be_used_is_one_warning_and_the_cache_stays_off(
+    tmp_path, first
+):
+    """A file where the folder should be: no cache (nothing would be kept; every compile would
+    fail to write), one warning on first use naming the folder and the variable."""
+    (tmp_path / "a-file").write_text("")
+    folder = tmp_path / "a-file" / "cache"
+    out = _probe(tmp_path, f"{first}; lantern_jax.load_suite",
+                 LANTERN_JAX_CACHE_DIR=str(folder))  # fmt: skip
+    assert out["cache"] is None
+    warned = [line for line in out["stderr"].splitlines() if "UserWarning" in line]
+    assert len(warned) == 1, out["stderr"]
+    assert str(folder) in warned[0] and "is not a folder" in warned[0]
+    assert "LANTERN_JAX_CACHE_DIR" in warned[0]
+
+
+def test_the_command_line_says_so_in_one_line(tmp_path):
+    (tmp_path / "a-file").write_text("")
+    env = {k: v for k, v in os.environ.items() if k != "JAX_COMPILATION_CACHE_DIR"}
+    env.update(LANTERN_JAX_CACHE_DIR=str(tmp_path / "a-file" / "cache"), JAX_PLATFORMS="cpu")
+    done = subprocess.run([sys.executable, "-m", "lantern_jax", "evaluate", "--pairs", "nope"],
+                          capture_output=True, text=True, env=env, timeout=120)  # fmt: skip
+    assert done.returncode == 2  # the bad pair id, after the set-up
+    lines = [line for line in done.stderr.splitlines() if "cache" in line]
+    assert len(lines) == 1 and lines[0].startswith("lantern-jax: warning: "), done.stderr
+    assert "LANTERN_JAX_CACHE_DIR" in lines[0] and "Warning" not in done.stderr
+
+
+@pytest.mark.parametrize("make, problem", [
+    (lambda p: p, None),
+    (lambda p: p / "new" / "deeper", None),
+    (lambda p: (p / "f").write_text("") or p / "f", "is not a folder"),
+    (lambda p: (p / "f").write_text("") or p / "f" / "x" / "y", "is not a folder"),
+], ids=["folder", "to-be-made", "a-file", "below-a-file"])  # fmt: skip
+def test_cache_dir_problem(tmp_path, make, problem):
+    from lantern_jax.core.jax_setup import cache_dir_problem
+
+    found = cache_dir_problem(str(make(tmp_path)))
+    assert found is None if problem is None else problem in found
+
+
 #: ``import jax`` first and a compile before ``lantern_jax`` is imported; then one program
 #: compiled; prints how many compilations JAX's persistent cache served.
 JAX_FIRST = """

@@ -155,6 +155,12 @@ compile_cache_dir = jax_setup.compile_cache_dir
 configure_compile_cache = jax_setup.configure_compile_cache
 
 
+def warn_line(message: str) -> None:
+    """Print ``lantern-jax: warning: MESSAGE`` on standard error: a problem the command works
+    around (a compilation cache folder it cannot use), in one line."""
+    print(f"lantern-jax: warning: {message}", file=sys.stderr, flush=True)
+
+
 def add_cache_flag(parser: argparse.ArgumentParser) -> None:
     """Add ``--no-compile-cache`` to a command that compiles (the command line then configures
     the cache, :func:`configure_compile_cache`, before the command runs)."""

@@ -22,6 +22,7 @@ import dataclasses
 import os
 import sys
 import warnings
+from collections.abc import Callable
 
 #: Environment variable that sets the number of XLA CPU devices (default: one per core).
 CPU_DEVICES_ENV = "LANTERN_JAX_CPU_DEVICES"
@@ -57,6 +58,16 @@ XLA_CACHES_ENV = "JAX_PERSISTENT_CACHE_ENABLE_XLA_CACHES"
 XLA_CACHES_CPU = "none"
 
 _PENDING = ""  # a set-up problem found at import, reported on first use
+
+
+def _warn(message: str) -> None:
+    warnings.warn(message, stacklevel=3)
+
+
+def _defer(message: str) -> None:
+    """Keep ``message`` for :func:`warn_pending` (a problem found at import)."""
+    global _PENDING
+    _PENDING = "; ".join(m for m in (_PENDING, message) if m)
 
 
 class SetupError(ValueError):
@@ -169,24 +180,55 @@ def xla_caches_default() -> str | None:
     return XLA_CACHES_CPU
 
 
-def configure_compile_cache(enabled: bool) -> str | None:
+def cache_dir_problem(path: str) -> str | None:
+    """Why the folder ``path`` cannot hold the compilation cache, or None when it can (as far
+    as can be told without creating it): the nearest part of the path that exists must be a
+    folder this process may write in.  A folder a file stands in the way of, or one on a
+    read-only file system (a read-only home directory), would otherwise fail at every compile,
+    and keep nothing."""
+    p = os.path.abspath(os.path.expanduser(path))
+    while not os.path.exists(p) and os.path.dirname(p) != p:
+        p = os.path.dirname(p)
+    if not os.path.isdir(p):
+        return f"{p} is not a folder"
+    if not os.access(p, os.W_OK | os.X_OK):
+        return f"{p} is not writable"
+    return None
+
+
+def unusable_cache_message(path: str, problem: str) -> str:
+    """The one-line message of a compilation cache folder that cannot be used."""
+    return (f"the compilation cache folder {path} cannot be used ({problem}): compiled "
+            f"programs are not kept between runs; set {CACHE_DIR_ENV} to a writable "
+            "folder")  # fmt: skip
+
+
+def configure_compile_cache(
+    enabled: bool, warn: Callable[[str], None] | None = None
+) -> str | None:
     """Turn JAX's persistent compilation cache on (in :func:`compile_cache_dir`) or off.
 
     A second run of the same evaluation then loads its compiled programs instead of compiling
     them again, also from a cache folder copied or moved elsewhere (no folder path in the
-    programs' keys on a CPU-only install, :func:`xla_caches_default`).  Must run before the
-    first compile.
+    programs' keys on a CPU-only install, :func:`xla_caches_default`).  JAX reads the folder
+    at its next compile.
+
+    A folder that cannot be used (:func:`cache_dir_problem`) leaves the cache off, said once
+    through ``warn`` (default: a :class:`UserWarning`).
 
     Returns:
-        The cache folder, or None when disabled.
+        The cache folder, or None when the cache is off.
     """
     # deferred: JAX is configured here before its first import
     import jax
 
-    jax.config.update("jax_enable_compilation_cache", enabled)
-    if not enabled:
-        return None
     path = compile_cache_dir()
+    problem = cache_dir_problem(path) if enabled else None
+    jax.config.update("jax_enable_compilation_cache", enabled and problem is None)
+    if problem is not None:
+        (warn or _warn)(unusable_cache_message(path, problem))
+    if not enabled or problem is not None:
+        return None
     jax.config.update("jax_compilation_cache_dir", path)
     if CACHE_MIN_COMPILE_ENV not in os.environ:
         jax.config.update("jax_persistent_cache_min_compile_time_secs", CACHE_MIN_COMPILE_S)
@@ -201,8 +243,9 @@ def setup(compile_cache: bool = True) -> SetupReport:
     imported yet) and the persistent compilation cache (unless one is configured already).
 
     Args:
-        compile_cache: keep compiled programs between runs (:func:`compile_cache_dir`);
-            ``False`` turns the cache off.
+        compile_cache: keep compiled programs between runs (:func:`compile_cache_dir`; a
+            folder that cannot be used leaves the cache off, with a warning); ``False`` turns
+            the cache off.
 
     Returns:
         :class:`SetupReport`: the device count asked for, why it could not be (if so), and the
@@ -227,8 +270,8 @@ def setup(compile_cache: bool = True) -> SetupReport:
         cache = configure_compile_cache(False)
     elif configured and jax.config.jax_enable_compilation_cache:
         cache = configured
-    else:
-        cache = configure_compile_cache(True)
+    else:  # a folder it cannot use: warned at the caller's line
+        cache = configure_compile_cache(True, warn=lambda m: warnings.warn(m, stacklevel=4))
     return SetupReport(cpu_devices=n, cpu_devices_note=note, compile_cache=cache)
 
 
@@ -239,8 +282,9 @@ def auto_setup() -> None:
     (:func:`expose_cpu_cores`) and ``$JAX_COMPILATION_CACHE_DIR`` set to
     :func:`compile_cache_dir` unless already set (JAX reads it when it starts), and JAX's XLA
     caches as :func:`xla_caches_default` says.  A bad ``LANTERN_JAX_CPU_DEVICES`` changes
-    nothing here; it is reported, as a warning, on the first use of a name of the package
-    (:func:`warn_pending`).
+    nothing here, nor does a cache folder that cannot be used (:func:`cache_dir_problem`: the
+    cache then stays off); either is reported, as a warning, on the first use of a name of the
+    package (:func:`warn_pending`).
 
     When JAX was imported first, its device count can no longer change, but its persistent
     cache still can: :func:`late_cache_setup`.
@@ -255,7 +299,13 @@ def auto_setup() -> None:
         expose_cpu_cores()
     except SetupError as e:
         _PENDING = f"{e}; lantern_jax leaves JAX's CPU device count as it is"
-    os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", compile_cache_dir())
+    if "JAX_COMPILATION_CACHE_DIR" not in os.environ:
+        path = compile_cache_dir()
+        problem = cache_dir_problem(path)
+        if problem is None:
+            os.environ["JAX_COMPILATION_CACHE_DIR"] = path
+        else:
+            _defer(unusable_cache_message(path, problem))
     os.environ.setdefault(CACHE_MIN_COMPILE_ENV, str(CACHE_MIN_COMPILE_S))
     caches = xla_caches_default()
     if caches is not None:
@@ -275,14 +325,17 @@ def late_cache_setup() -> str | None:
     policy on the 6-pair subset: 10.7 s to the table in a second process, against 1.6 s with
     the cache; ``docs/performance.md``).
 
+    A folder that cannot be used is reported on the first use of a name of the package
+    (:func:`warn_pending`), as :func:`auto_setup` reports its problems.
+
     Returns:
-        The cache folder turned on, or None when nothing was changed.
+        The cache folder turned on, or None when it is not.
     """
     import jax
 
     if jax.config.jax_compilation_cache_dir or not jax.config.jax_enable_compilation_cache:
         return None
-    return configure_compile_cache(True)
+    return configure_compile_cache(True, warn=_defer)
 
 
 def warn_pending() -> None:
