@@ -380,6 +380,68 @@ def test_a_program_run_from_memory_stays_recently_used_in_the_store(store):
     assert list(store.glob("*.program")) == [entry]
 
 
+def _after_an_edit(monkeypatch) -> None:
+    """The package as if a file of it had been edited (every program key changes), in a new
+    process (nothing compiled in memory)."""
+    monkeypatch.setattr(program_store, "code_fingerprint", lambda: "edited")
+    monkeypatch.setattr(programs, "_EXECUTABLES", collections.OrderedDict())
+
+
+def test_after_an_edit_an_unchanged_program_is_found_by_what_it_lowers_to(store, monkeypatch):
+    """Every key changes with the package, but a program that lowers to what it did is loaded
+    from the earlier entry (not compiled: JAX's cache would serve it, and a program that cache
+    serves cannot be stored), kept under the new key, and a later process of the edited package
+    loads it by that key without lowering it."""
+    salt = float(np.random.default_rng().uniform(1.0, 2.0))  # a program no run compiled before
+    fn = jax.jit(lambda v: jnp.tanh(v) * salt)
+    x = np.linspace(0.0, 1.0, 6, dtype=np.float32)
+    ident = ("rollout", expert_act, round(salt * 1e9))
+    before = np.asarray(programs.executable(fn, x, identity=ident)(x))
+    assert len(list(store.glob("*.program"))) == len(list(store.glob("*.lowered"))) == 1
+
+    _after_an_edit(monkeypatch)
+    real = program_store.compile_lowered
+    monkeypatch.setattr(program_store, "compile_lowered",
+                        lambda lowered: pytest.fail("compiled again"))  # fmt: skip
+    spent: dict = {}
+    after = programs.executable(fn, x, identity=ident, timings=spent)
+    assert spent["program load"] > 0.0 and spent["XLA compile"] == 0.0
+    np.testing.assert_array_equal(np.asarray(after(x)), before)
+    assert len(list(store.glob("*.program"))) == 2
+
+    monkeypatch.setattr(programs, "_EXECUTABLES", collections.OrderedDict())
+    spent = {}
+    again = programs.executable(fn, x, identity=ident, timings=spent)
+    assert spent["trace + lower"] == 0.0 and spent["program load"] > 0.0
+    np.testing.assert_array_equal(np.asarray(again(x)), before)
+    monkeypatch.setattr(program_store, "compile_lowered", real)
+
+
+def test_after_an_edit_a_changed_or_removed_program_is_compiled(store, monkeypatch):
+    salt = float(np.random.default_rng().uniform(1.0, 2.0))
+    x = np.linspace(0.0, 1.0, 6, dtype=np.float32)
+    ident = ("rollout", expert_act, round(salt * 1e9))
+    programs.executable(jax.jit(lambda v: jnp.tanh(v) * salt), x, identity=ident)
+    compiled = []
+    real = program_store.compile_lowered
+    monkeypatch.setattr(program_store, "compile_lowered",
+                        lambda lowered: compiled.append(1) or real(lowered))  # fmt: skip
+
+    _after_an_edit(monkeypatch)  # the edit changed what the program lowers to
+    changed = jax.jit(lambda v: jnp.tanh(v) * salt + 1.0)
+    out = programs.executable(changed, x, identity=ident)(x)
+    np.testing.assert_allclose(np.asarray(out), np.tanh(x) * salt + 1.0, rtol=1e-6)
+    assert compiled == [1]
+
+    for entry in store.glob("*.program"):  # the edit kept the program, the store lost it
+        entry.unlink()
+    monkeypatch.setattr(program_store, "code_fingerprint", lambda: "edited again")
+    monkeypatch.setattr(programs, "_EXECUTABLES", collections.OrderedDict())
+    out = programs.executable(changed, x, identity=ident)(x)
+    np.testing.assert_allclose(np.asarray(out), np.tanh(x) * salt + 1.0, rtol=1e-6)
+    assert compiled == [1, 1]
+
+
 def _entries(folder: Path, sizes: dict[str, int], suffix: str = ".program") -> None:
     """Entries named after ``sizes`` (bytes each, sparse: nothing is written), used in that
     order (the last most recently)."""

@@ -122,9 +122,17 @@ _PACKAGE = "lantern_jax"
 LIBRARIES = ("jax", "jaxlib", "flax", "numpy", "optax")
 _SUFFIX = ".program"
 _VALUE_SUFFIX = ".value"  # small values kept beside the programs (save_value)
+#: The index of the programs by what they lower to (:func:`lowered_key`): each entry holds the
+#: key of the program entry that was compiled from that lowered program.
+_LOWERED_SUFFIX = ".lowered"
 #: How :func:`prune` bounds each kind of entry after a write: programs by their bytes
-#: (:data:`MAX_STORED_BYTES`, and :data:`MAX_STORED_PROGRAMS` of them), values by their count.
-_BOUNDS = {_SUFFIX: {"max_bytes": MAX_STORED_BYTES}, _VALUE_SUFFIX: {"keep": MAX_STORED_VALUES}}
+#: (:data:`MAX_STORED_BYTES`, and :data:`MAX_STORED_PROGRAMS` of them), values and the index
+#: by their count.
+_BOUNDS = {
+    _SUFFIX: {"max_bytes": MAX_STORED_BYTES},
+    _VALUE_SUFFIX: {"keep": MAX_STORED_VALUES},
+    _LOWERED_SUFFIX: {"keep": MAX_STORED_PROGRAMS},
+}
 
 
 class Unkeyable(Exception):
@@ -345,22 +353,55 @@ def structure_text(treedef: Any) -> str:
     return text if " at 0x" not in text else _node_text(treedef)
 
 
+def _key_text(identity: Any, args: tuple, code: bool = True) -> str:
+    """What a program key is the hash of: the environment (without this package's code
+    fingerprint unless ``code``), the identity, the arguments' structure and leaves.
+
+    Raises:
+        Unkeyable: for an identity or argument that cannot be described with certainty.
+    """
+    leaves, treedef = jax.tree.flatten(args)
+    host = _host_placement()
+    env = environment()
+    if not code:
+        env.pop("code")
+    return "\n".join([
+        repr(sorted(env.items())),
+        describe(identity),
+        structure_text(treedef),
+        *(_leaf_text(x, host) for x in leaves),
+    ])  # fmt: skip
+
+
 def program_key(identity: Any, args: tuple) -> str | None:
     """The store key of the program ``identity`` compiled for ``args``, or ``None`` when it
     cannot be keyed with certainty (see :func:`describe`)."""
     try:
-        leaves, treedef = jax.tree.flatten(args)
-        host = _host_placement()
-        text = "\n".join([
-            repr(sorted(environment().items())),
-            describe(identity),
-            structure_text(treedef),
-            *(_leaf_text(x, host) for x in leaves),
-        ])  # fmt: skip
+        text = _key_text(identity, args)
     except Unkeyable as e:
         log.debug("program not stored: %s", e)
         return None
     return hashlib.sha256(text.encode()).hexdigest()
+
+
+def lowered_key(identity: Any, args: tuple, lowered: Any) -> str | None:
+    """The key of the program ``identity`` for ``args`` by what it lowers to: :func:`program_key`'s
+    text with the lowered program's text (``lowered.as_text()``, without debug locations) in
+    place of this package's code fingerprint, or ``None`` when it cannot be keyed.
+
+    After an edit of the package (or an upgrade) every program key changes, but most programs
+    lower to what they lowered to before.  JAX's persistent cache then serves them, and a
+    program it served cannot be stored (:func:`compile_lowered`), so without this index the
+    store would never hold them again on that cache folder, and every run would trace and lower
+    them.  The identity names whatever compiles the lowered program differently (the compiler
+    options of the stress programs are part of theirs).
+    """
+    try:
+        text = _key_text(identity, args, code=False)
+    except Unkeyable:
+        return None
+    program = hashlib.sha256(lowered.as_text().encode()).hexdigest()
+    return hashlib.sha256(f"{text}\nlowered {program}".encode()).hexdigest()
 
 
 def describable(identity: Any) -> bool:
@@ -444,6 +485,13 @@ def load(key: str) -> Any | None:
     """The stored program ``key`` as a callable :class:`jax.stages.Compiled`, or ``None`` when
     there is none (or it cannot be read back or holds another program: the entry is then
     deleted, with a warning)."""
+    loaded = _load(key)
+    return None if loaded is None else loaded[0]
+
+
+def _load(key: str, trees: tuple[Any, Any] | None = None) -> tuple[Any, tuple] | None:
+    """:func:`load`, with the entry's record; ``trees`` (``(in_tree, out_tree)``) replace the
+    stored argument and result structures (the program kept under another key)."""
     folder = store_dir()
     if folder is None:
         return None
@@ -465,6 +513,7 @@ def load(key: str) -> Any | None:
                              "(swapped or copied under another name)")  # fmt: skip
         if hashlib.sha256(payload).hexdigest() != digest:
             raise ValueError("its executable does not match its SHA-256 (corrupted)")
+        in_tree, out_tree = trees or (in_tree, out_tree)
         by_id = {d.id: d for d in jax.devices()}
         compiled = se.deserialize_and_load(
             payload, in_tree, out_tree, execution_devices=[by_id[i] for i in ids]
@@ -476,7 +525,37 @@ def load(key: str) -> Any | None:
         return None
     with contextlib.suppress(OSError):
         os.utime(path)  # recently used
+    return compiled, (stored_key, digest, payload, in_tree, out_tree, ids)
+
+
+def load_lowered(lowered_as: str, key: str, lowered: Any) -> Any | None:
+    """The program stored under an earlier key for the same lowered program (the index entry
+    ``lowered_as``, :func:`lowered_key`), now kept under ``key`` too (with ``lowered``'s argument
+    and result structures) so that the next process loads it without lowering; ``None`` when
+    the index names none or the entry is gone."""
+    folder = store_dir()
+    if folder is None:
+        return None
+    try:
+        earlier = pickle.loads((folder / (lowered_as + _LOWERED_SUFFIX)).read_bytes())
+    except Exception:  # noqa: BLE001  (absent or unreadable: compile instead)
+        return None
+    if not isinstance(earlier, str) or earlier == key:
+        return None
+    loaded = _load(earlier, trees=(lowered.in_tree, lowered.out_tree))
+    if loaded is None:
+        return None
+    compiled, (_, digest, payload, in_tree, out_tree, ids) = loaded
+    if _write(folder, key, (key, digest, payload, in_tree, out_tree, ids), _SUFFIX):
+        index(lowered_as, key)
     return compiled
+
+
+def index(lowered_as: str, key: str) -> bool:
+    """Record that the program entry ``key`` holds the program of :func:`lowered_key`
+    ``lowered_as`` (:func:`load_lowered` reads it)."""
+    folder = store_dir()
+    return folder is not None and _write(folder, lowered_as, key, _LOWERED_SUFFIX)
 
 
 def touch(key: str) -> None:

@@ -63,7 +63,10 @@ def executable(fn, *args, static: dict | None = None, timings: dict | None = Non
 
     With an ``identity`` (what determines the program besides the package's code and the
     arguments, :func:`lantern_jax.io.program_store.program_key`) the compiled program is also kept
-    on disk in the program store and, in a later process, loaded from there.
+    on disk in the program store and, in a later process, loaded from there.  After an edit of
+    the package the key is new; a program that still lowers to what an earlier key's did is
+    then loaded from that entry once lowered
+    (:func:`lantern_jax.io.program_store.load_lowered`), and kept under the new key.
 
     ``timings`` (optional) receives the seconds of tracing and lowering (``"trace + lower"``),
     of XLA's compilation or the load from JAX's persistent cache (``"XLA compile"``) and of a
@@ -90,10 +93,19 @@ def executable(fn, *args, static: dict | None = None, timings: dict | None = Non
                 stage("compiling")
             lowered = fn.lower(*args, **static)
             t1 = time.perf_counter()
-            exe, fresh = program_store.compile_lowered(lowered)
-            spent["trace + lower"], spent["XLA compile"] = t1 - t0, time.perf_counter() - t1
-            if stored is not None and fresh:
-                program_store.save(stored, exe)
+            spent["trace + lower"] = t1 - t0
+            # kept under another key for the same lowered program (the package edited since)
+            as_lowered = program_store.lowered_key(identity, args, lowered) if stored else None
+            exe = program_store.load_lowered(as_lowered, stored, lowered) if as_lowered else None
+            if exe is not None:
+                spent["program load"] = time.perf_counter() - t1
+            else:
+                t2 = time.perf_counter()
+                exe, fresh = program_store.compile_lowered(lowered)
+                spent["XLA compile"] = time.perf_counter() - t2
+                if stored is not None and fresh and program_store.save(stored, exe):
+                    if as_lowered is not None:
+                        program_store.index(as_lowered, stored)
         _EXECUTABLES[key] = exe
         if stored is not None:
             _STORE_KEYS[key] = stored
