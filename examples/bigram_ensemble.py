@@ -23,9 +23,15 @@ SEEDS = (0, 1, 2)
 MODEL = "closed/learned-closed-loop-rig-bigram.msgpack"  # each chain's last stage
 
 
-def member_paths(runs: str | Path = RUNS) -> list[Path]:
-    """The three chains' closed-loop checkpoints under ``runs``, seeds 0, 1, 2."""
-    return [Path(runs) / f"bigram_s{seed}" / MODEL for seed in SEEDS]
+#: The variant whose counterfactual positions are drawn where true warnings state theirs
+#: (``CLOSED_CONFIG=configs/train_closed_loop_rig_bigram_stated.toml``, ``docs/learned.md``).
+STATED_RUNS = Path("runs/train/bigram_stated")
+STATED_MODEL = "closed/learned-closed-loop-rig-bigram-stated.msgpack"
+
+
+def member_paths(runs: str | Path = RUNS, model: str = MODEL) -> list[Path]:
+    """The three chains' closed-loop checkpoints ``model`` under ``runs``, seeds 0, 1, 2."""
+    return [Path(runs) / f"bigram_s{seed}" / model for seed in SEEDS]
 
 
 def bigram_ensemble(runs: str | Path = RUNS) -> Policy:
@@ -37,3 +43,9 @@ def bigram_ensemble(runs: str | Path = RUNS) -> Policy:
     """
     return ensemble_policy("bigram-ensemble", member_paths(runs),
                            "mean plan of the bigram reader's three seeds")  # fmt: skip
+
+
+def bigram_stated_ensemble(runs: str | Path = STATED_RUNS) -> Policy:
+    """The three chains of the stated-positions variant as one policy (not shipped)."""
+    return ensemble_policy("bigram-stated-ensemble", member_paths(runs, STATED_MODEL),
+                           "mean plan of the stated-positions variant's three seeds")  # fmt: skip

@@ -3,6 +3,12 @@
 #
 #   bash examples/train_bigram_ensemble.sh [OUT]      # OUT: runs/train/bigram_ensemble
 #
+# CLOSED_CONFIG names another closed-loop stage's config (the first two stages are the same),
+# e.g. the counterfactual positions drawn where true warnings state theirs:
+#
+#   CLOSED_CONFIG=configs/train_closed_loop_rig_bigram_stated.toml \
+#       bash examples/train_bigram_ensemble.sh runs/train/bigram_stated
+#
 # Each seed's chain is the configs' own (docs/learned.md, "Reading which word follows which"):
 # base -> distance (onset only) -> nine closed-loop rounds, each stage from the same seed's
 # previous checkpoint, written to OUT/bigram_s<seed>/{base,distance,closed}, its output appended
@@ -15,6 +21,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=${1:-runs/train/bigram_ensemble}
+CLOSED_CONFIG=${CLOSED_CONFIG:-configs/train_closed_loop_rig_bigram.toml}
 mkdir -p "$OUT"
 
 chain() {  # one seed's three stages, each from the previous one's exported model
@@ -24,7 +31,7 @@ chain() {  # one seed's three stages, each from the previous one's exported mode
   .venv/bin/lantern-jax train --config configs/train_distance_onset_only_rig_bigram.toml \
       --seed "$seed" --out "$d/distance" \
       --init-from "$d/base/learned-base-rig-bigram.msgpack" --quiet &&
-  .venv/bin/lantern-jax train --config configs/train_closed_loop_rig_bigram.toml \
+  .venv/bin/lantern-jax train --config "$CLOSED_CONFIG" \
       --seed "$seed" --out "$d/closed" \
       --init-from "$d/distance/learned-distance-onset-only-rig-bigram.msgpack" --quiet
 }

@@ -6,6 +6,7 @@ compiles the rollout: about a minute on two CPU cores).
 
 from __future__ import annotations
 
+import collections
 import json
 from pathlib import Path
 from types import SimpleNamespace
@@ -24,6 +25,7 @@ from lantern_jax.apps.training.relabel import ego_frame_offsets
 from lantern_jax.core.constants import FAMILIES, NUM_WAYPOINTS
 from lantern_jax.core.times import NEVER
 from lantern_jax.types.language import PAD_ID
+from lantern_jax.types.observation import stated_position
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -103,6 +105,53 @@ def test_distractor_sentences_replace_a_share_of_the_counterfactual_texts_only()
                                    warning_values=out.obs["warning_values"][i])  # fmt: skip
         pos, stated = stated_position(text_obs)
         assert bool(stated) and cf.NEAR_X_M[0] <= float(pos[0]) <= cf.NEAR_X_M[1]
+
+
+def test_stated_positions_are_drawn_where_the_familys_true_warnings_state_theirs():
+    """With ``positions="stated"`` a counterfactual states a position that a true warning of
+    its frame's family states in the examples (a Route A frame's text); a family whose examples
+    state none keeps the near box; frames, texts and variants are those of the near draw."""
+    from lantern_jax.scenarios.warnings import text_tables
+
+    ex, families, routes = _examples(480)
+    tables = text_tables()
+    told_at = {"LWW": [(12.5, -24.0), (14.0, -22.5)], "RWW": [(9.5, 21.0)]}
+    turning = np.flatnonzero(np.isin(families, list(told_at)))
+    routes[turning[::3]] = "A"  # a third of their frames: Route A, the warning delivered
+    seen = collections.Counter()
+    for i in turning[::3]:
+        fam = str(families[i])
+        if fam in told_at:
+            f = FAMILIES.index(fam)  # the family's canonical text: it states a position
+            ex.obs["warning_tokens"][i] = tables.tokens[f]
+            x, y = told_at[fam][seen[fam] % len(told_at[fam])]
+            seen[fam] += 1
+            ex.obs["warning_values"][i, tables.x_slot[f]] = x
+            ex.obs["warning_values"][i, tables.y_slot[f]] = y
+    pool = cf.stated_positions(ex, families, routes)
+    assert {tuple(p) for p in pool["LWW"]} == set(told_at["LWW"]) and len(pool["PE"]) == 0
+    near, v_near = cf.counterfactual_examples(ex, families, routes, 0.5, 0, distractors=0.5)
+    out, variant = cf.counterfactual_examples(ex, families, routes, 0.5, 0, distractors=0.5,
+                                              positions="stated")  # fmt: skip
+    np.testing.assert_array_equal(variant, v_near)
+    np.testing.assert_array_equal(out.obs["warning_tokens"], near.obs["warning_tokens"])
+    fam = families[np.asarray([int(s[1:]) for s in out.sequence])]
+    moved = 0
+    for i in range(len(out)):
+        text_obs = SimpleNamespace(warning_tokens=out.obs["warning_tokens"][i],
+                                   warning_values=out.obs["warning_values"][i])  # fmt: skip
+        pos, stated = stated_position(text_obs)
+        if not bool(stated):
+            continue
+        if fam[i] in told_at:
+            assert tuple(np.round(np.asarray(pos), 2)) in set(told_at[fam[i]])
+            moved += 1
+        else:  # no position stated for this family: the near draw
+            np.testing.assert_array_equal(out.obs["warning_values"][i],
+                                          near.obs["warning_values"][i])
+    assert moved > 10
+    with pytest.raises(ValueError, match="positions"):
+        cf.counterfactual_examples(ex, families, routes, 0.5, 0, positions="far")
 
 
 def test_training_distractors_are_not_the_language_probes():

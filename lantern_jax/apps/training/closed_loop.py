@@ -279,7 +279,8 @@ def _dataset_examples(cfg: TrainConfig, card: dict) -> Examples:
     ex = recipe_examples(frames, card, dataclasses.replace(cfg, recipe="distance"))
     plain = ex.take(np.arange(len(frames)))  # the frames themselves, before the far copies
     cf = frame_counterfactuals(
-        plain, frames, cfg.counterfactual, cfg.seed, cfg.distractors, cfg.distractor_texts
+        plain, frames, cfg.counterfactual, cfg.seed, cfg.distractors, cfg.distractor_texts,
+        cfg.counterfactual_positions,
     )
     return concat([ex, cf])
 

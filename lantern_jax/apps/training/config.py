@@ -63,6 +63,16 @@ TABLE = "train"
 ConfigError = ConfigFileError
 
 
+#: Where a counterfactual's stated position is drawn (``TrainConfig.counterfactual_positions``):
+#: ``"near"``, uniformly in the box ``counterfactual.NEAR_X_M`` x ``NEAR_Y_M`` (10-60 m ahead,
+#: within 4 m of the lane); ``"stated"``, among the positions that the true warnings of the
+#: frame's family state in the examples (``counterfactual.stated_positions``).  The box holds
+#: 18 % of PE's and 49 % of VC's stated positions and none of LWW's, RWW's or RTY's
+#: (lantern-v3, the expert driving, every tick a warning is delivered; the turning families'
+#: hazards are stated 14-48 m to the side): a position where only true warnings ever state one
+#: can be a cue of its own.
+POSITION_SOURCES = ("near", "stated")
+
 @dataclasses.dataclass(frozen=True)
 class TrainConfig:
     """Everything a training run depends on (defaults in brackets)."""
@@ -107,6 +117,10 @@ class TrainConfig:
     # position statements; "position_and_lane": those and eight in the templates' own phrases;
     # "position_lane_negations": those and seven negations in other words than "no")
     distractor_texts: str = "position"
+    # where the counterfactual frames' stated positions are drawn (counterfactual.POSITION_SOURCES):
+    # "near", uniformly ahead within 4 m of the lane; "stated", among the positions the true
+    # warnings of the frame's family state in the dataset
+    counterfactual_positions: str = "near"
     # s: also keep the visits this long before each driven execution's first collision, every
     # failure_every_s (the states that lead the learner into a failure); 0 keeps none
     failure_window_s: float = 0.0
@@ -222,6 +236,9 @@ def _range_problem(cfg: TrainConfig) -> tuple[str, str] | None:
     if cfg.distractor_texts not in DISTRACTOR_SETS:
         problems.append(("distractor_texts", f"{cfg.distractor_texts!r} not one of "
                                              f"{', '.join(DISTRACTOR_SETS)}"))  # fmt: skip
+    if cfg.counterfactual_positions not in POSITION_SOURCES:
+        problems.append(("counterfactual_positions", f"{cfg.counterfactual_positions!r} not "
+                         f"one of {', '.join(POSITION_SOURCES)}"))  # fmt: skip
     if cfg.rig not in RIGS:
         problems.append(("rig", f"{cfg.rig!r} not one of {', '.join(RIGS)}"))
     elif cfg.recipe == "surround" and cfg.rig != "surround":

@@ -31,11 +31,12 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from lantern_jax.apps.training.config import POSITION_SOURCES
 from lantern_jax.apps.training.data import Examples
 from lantern_jax.core.constants import FAMILIES
 from lantern_jax.scenarios.warning_texts import DISTRACTOR_SETS
 from lantern_jax.scenarios.warnings import DEFAULT_BANK, TextBank, text_tables
-from lantern_jax.types.language import round_number
+from lantern_jax.types.language import NUMBER_ID, round_number
 
 NEAR_X_M = (10.0, 60.0)  # m, forward range of a counterfactual's stated position
 NEAR_Y_M = (-4.0, 4.0)  # m, lateral range (right positive)
@@ -71,10 +72,28 @@ def distractor_bank(texts: str = "position") -> tuple[TextBank, np.ndarray]:
     return bank, np.asarray(ids, np.int32)
 
 
+def stated_positions(
+    ex: Examples, families: np.ndarray, routes: np.ndarray
+) -> dict[str, np.ndarray]:
+    """(k, 2) float32 m, per family code, the positions stated by the Route A examples whose
+    text writes one (ego frame, x forward, y right): each text's first two numbers, as
+    :func:`~lantern_jax.types.observation.stated_position` reads them."""
+    tokens, values = ex.obs["warning_tokens"], ex.obs["warning_values"]
+    is_num = tokens == NUMBER_ID
+    rank = np.cumsum(is_num, axis=1) - 1
+    x = np.sum(np.where(is_num & (rank == 0), values, 0.0), axis=1)
+    y = np.sum(np.where(is_num & (rank == 1), values, 0.0), axis=1)
+    stated = (is_num.sum(axis=1) >= 2) & (np.asarray(routes) == "A")
+    xy = np.stack([x, y], axis=-1).astype(np.float32)
+    families = np.asarray(families)
+    return {str(f): xy[stated & (families == f)] for f in np.unique(families)}
+
+
 def counterfactual_examples(
     ex: Examples, families: np.ndarray, routes: np.ndarray, share: float, seed: int,
     distractors: float = 0.0,
     distractor_texts: str = "position",
+    positions: str = "near",
 ) -> tuple[Examples, np.ndarray]:
     """Counterfactual copies of a seeded ``share`` of the Route B examples.
 
@@ -89,6 +108,11 @@ def counterfactual_examples(
             a run without the setting).
         distractor_texts: which distractor set they are drawn from (a key of
             :data:`~lantern_jax.scenarios.warning_texts.DISTRACTOR_SETS`).
+        positions: where the stated positions are drawn
+            (:data:`~lantern_jax.apps.training.config.POSITION_SOURCES`); with
+            ``"stated"`` a family whose examples state no position keeps the near box.  The
+            frames, texts and the near draws are those of ``"near"`` (the stated positions
+            come from a stream of their own).
 
     Returns:
         (the counterfactual examples — text replaced, labels kept, not ordinary driving —,
@@ -118,8 +142,19 @@ def counterfactual_examples(
         text = np.where(told, rng_d.choice(distractor_ids, m), text).astype(np.int32)
         x[told] = round_number(rng_d.uniform(*NEAR_X_M, int(told.sum())))
         y[told] = round_number(rng_d.uniform(*NEAR_Y_M, int(told.sum())))
-    values = np.zeros(sel.obs["warning_values"].shape, np.float32)
     rows = np.flatnonzero(tables.x_slot[text] >= 0)
+    if positions == "stated":
+        pool = stated_positions(ex, families, routes)
+        rng_p = np.random.default_rng([seed, 44])
+        for f in np.unique(fam[rows]):
+            if len(pool.get(str(f), ())) == 0:
+                continue  # no position stated for this family: the near box
+            mine = rows[fam[rows] == f]
+            drawn = pool[str(f)][rng_p.integers(0, len(pool[str(f)]), len(mine))]
+            x[mine], y[mine] = round_number(drawn[:, 0]), round_number(drawn[:, 1])
+    elif positions != "near":
+        raise ValueError(f"positions: {positions!r} not one of {', '.join(POSITION_SOURCES)}")
+    values = np.zeros(sel.obs["warning_values"].shape, np.float32)
     values[rows, tables.x_slot[text[rows]]] = x[rows]
     values[rows, tables.y_slot[text[rows]]] = y[rows]
     obs = dict(sel.obs)
@@ -130,10 +165,10 @@ def counterfactual_examples(
 
 def frame_counterfactuals(
     ex: Examples, frames: pd.DataFrame, share: float, seed: int, distractors: float = 0.0,
-    distractor_texts: str = "position",
+    distractor_texts: str = "position", positions: str = "near",
 ) -> Examples:
     """:func:`counterfactual_examples` of dataset examples (``ex`` built from ``frames``)."""
     return counterfactual_examples(
         ex, frames["family"].to_numpy(str), frames["route"].to_numpy(str), share, seed,
-        distractors, distractor_texts,
+        distractors, distractor_texts, positions,
     )[0]
