@@ -394,8 +394,10 @@ def lowered_key(identity: Any, args: tuple, lowered: Any) -> str | None:
     program it served cannot be stored (:func:`compile_lowered`), so without this index the
     store would never hold them again on that cache folder, and every run would trace and lower
     them.  The identity names whatever compiles the lowered program differently (the compiler
-    options of the stress programs are part of theirs).
+    options of the stress programs are part of theirs).  ``None`` too when the store is off.
     """
+    if store_dir() is None:
+        return None  # the store is off: nothing to find or index
     try:
         text = _key_text(identity, args, code=False)
     except Unkeyable:
