@@ -61,6 +61,7 @@ _PENDING = ""  # a set-up problem found at import, reported on first use
 
 
 def _warn(message: str) -> None:
+    """A :class:`UserWarning` at the line that called the caller of this module's function."""
     warnings.warn(message, stacklevel=3)
 
 
