@@ -171,8 +171,9 @@ def test_the_example_ensemble_file_averages_the_three_chains_it_names(tmp_path, 
         load_policy_source(f"{root}/examples/bigram_ensemble.py:bigram_ensemble")
     script = root / "examples" / "train_bigram_ensemble.sh"
     assert subprocess.run(["bash", "-n", str(script)], check=False).returncode == 0
-    configs = set(re.findall(r"configs/\S+\.toml", script.read_text()))
-    assert len(configs) == 3 and all((root / c).is_file() for c in configs), configs
+    configs = set(re.findall(r"configs/\S+\.toml", script.read_text()))  # the three stages'
+    #                                      and the variant CLOSED_CONFIG its comment names
+    assert len(configs) == 4 and all((root / c).is_file() for c in configs), configs
 
 
 def test_the_training_script_runs_each_seeds_stages_in_order_and_names_a_failed_seed(tmp_path):
