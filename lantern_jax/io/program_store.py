@@ -548,16 +548,8 @@ def load_lowered(lowered_as: str, key: str, lowered: Any) -> Any | None:
     if loaded is None:
         return None
     compiled, (_, digest, payload, in_tree, out_tree, ids) = loaded
-    if _write(folder, key, (key, digest, payload, in_tree, out_tree, ids), _SUFFIX):
-        index(lowered_as, key)
+    _write_indexed(folder, key, (key, digest, payload, in_tree, out_tree, ids), lowered_as)
     return compiled
-
-
-def index(lowered_as: str, key: str) -> bool:
-    """Record that the program entry ``key`` holds the program of :func:`lowered_key`
-    ``lowered_as`` (:func:`load_lowered` reads it)."""
-    folder = store_dir()
-    return folder is not None and _write(folder, lowered_as, key, _LOWERED_SUFFIX)
 
 
 def touch(key: str) -> None:
@@ -571,9 +563,10 @@ def touch(key: str) -> None:
             os.utime(folder / (key + _SUFFIX))
 
 
-def save(key: str, compiled: Any) -> bool:
-    """Store ``compiled`` under ``key`` (atomically); ``False`` when it cannot be serialized
-    (a program with constant arrays) or written."""
+def save(key: str, compiled: Any, lowered_as: str | None = None) -> bool:
+    """Store ``compiled`` under ``key`` (atomically), indexed under its :func:`lowered_key`
+    ``lowered_as`` when given; ``False`` when it cannot be serialized (a program with constant
+    arrays) or written."""
     folder = store_dir()
     if folder is None:
         return False
@@ -589,7 +582,17 @@ def save(key: str, compiled: Any) -> bool:
     except Exception as e:  # noqa: BLE001  (not serializable: not stored)
         log.debug("program %s not stored: %s", key[:12], e)
         return False
-    return _write(folder, key, record, _SUFFIX)
+    return _write_indexed(folder, key, record, lowered_as)
+
+
+def _write_indexed(folder: Path, key: str, record: tuple, lowered_as: str | None) -> bool:
+    """Write the program entry ``record`` under ``key`` and, when it is written and
+    ``lowered_as`` is given, the index entry that names it (:func:`load_lowered` reads it)."""
+    if not _write(folder, key, record, _SUFFIX):
+        return False
+    if lowered_as is not None:
+        _write(folder, lowered_as, key, _LOWERED_SUFFIX)
+    return True
 
 
 def _write(folder: Path, key: str, record: Any, suffix: str) -> bool:

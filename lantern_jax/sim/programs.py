@@ -103,9 +103,8 @@ def executable(fn, *args, static: dict | None = None, timings: dict | None = Non
                 t2 = time.perf_counter()
                 exe, fresh = program_store.compile_lowered(lowered)
                 spent["XLA compile"] = time.perf_counter() - t2
-                if stored is not None and fresh and program_store.save(stored, exe):
-                    if as_lowered is not None:
-                        program_store.index(as_lowered, stored)
+                if stored is not None and fresh:
+                    program_store.save(stored, exe, as_lowered)
         _EXECUTABLES[key] = exe
         if stored is not None:
             _STORE_KEYS[key] = stored
