@@ -27,6 +27,10 @@ MODEL = "closed/learned-closed-loop-rig-bigram.msgpack"  # each chain's last sta
 #: (``CLOSED_CONFIG=configs/train_closed_loop_rig_bigram_stated.toml``, ``docs/learned.md``).
 STATED_RUNS = Path("runs/train/bigram_stated")
 STATED_MODEL = "closed/learned-closed-loop-rig-bigram-stated.msgpack"
+#: The variant with half of those positions drawn so, half in the near box
+#: (``CLOSED_CONFIG=configs/train_closed_loop_rig_bigram_stated_half.toml``).
+STATED_HALF_RUNS = Path("runs/train/bigram_stated_half")
+STATED_HALF_MODEL = "closed/learned-closed-loop-rig-bigram-stated-half.msgpack"
 
 
 def member_paths(runs: str | Path = RUNS, model: str = MODEL) -> list[Path]:
@@ -49,3 +53,10 @@ def bigram_stated_ensemble(runs: str | Path = STATED_RUNS) -> Policy:
     """The three chains of the stated-positions variant as one policy (not shipped)."""
     return ensemble_policy("bigram-stated-ensemble", member_paths(runs, STATED_MODEL),
                            "mean plan of the stated-positions variant's three seeds")  # fmt: skip
+
+
+def bigram_stated_half_ensemble(runs: str | Path = STATED_HALF_RUNS) -> Policy:
+    """The three chains of the half-stated-positions variant as one policy (not shipped)."""
+    return ensemble_policy("bigram-stated-half-ensemble",
+                           member_paths(runs, STATED_HALF_MODEL),
+                           "mean plan of the half-stated-positions variant's three seeds")  # fmt: skip

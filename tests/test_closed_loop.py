@@ -154,6 +154,45 @@ def test_stated_positions_are_drawn_where_the_familys_true_warnings_state_theirs
         cf.counterfactual_examples(ex, families, routes, 0.5, 0, positions="far")
 
 
+def test_a_share_of_stated_positions_moves_that_share_and_keeps_the_rest_near():
+    """``stated_share`` draws about that share of the position-stating counterfactuals among
+    the stated positions; every other frame is the near draw, bit for bit; 1 is the whole."""
+    from lantern_jax.scenarios.warnings import text_tables
+
+    ex, families, routes = _examples(1400)
+    tables = text_tables()
+    turning = np.flatnonzero(families == "LWW")
+    routes[turning] = np.where(np.arange(len(turning)) % 2 == 0, "A", "B")
+    f = FAMILIES.index("LWW")  # every LWW frame states the one position below
+    ex.obs["warning_tokens"][turning] = tables.tokens[f]
+    ex.obs["warning_values"][turning, tables.x_slot[f]] = 12.5
+    ex.obs["warning_values"][turning, tables.y_slot[f]] = -24.0
+    args = (ex, families, routes, 1.0, 0)
+    near, _ = cf.counterfactual_examples(*args)
+    whole, _ = cf.counterfactual_examples(*args, positions="stated")
+    np.testing.assert_array_equal(
+        cf.counterfactual_examples(*args, positions="stated", stated_share=1.0)[0]
+        .obs["warning_values"], whole.obs["warning_values"])  # fmt: skip
+    half, _ = cf.counterfactual_examples(*args, positions="stated", stated_share=0.5)
+    fam = families[np.asarray([int(s[1:]) for s in half.sequence])]
+    moved = kept = 0
+    for i in np.flatnonzero(fam == "LWW"):
+        text_obs = SimpleNamespace(warning_tokens=half.obs["warning_tokens"][i],
+                                   warning_values=half.obs["warning_values"][i])  # fmt: skip
+        pos, stated = stated_position(text_obs)
+        if not bool(stated):
+            continue
+        if tuple(np.round(np.asarray(pos), 2)) == (12.5, -24.0):
+            moved += 1
+            np.testing.assert_array_equal(half.obs["warning_values"][i],
+                                          whole.obs["warning_values"][i])  # fmt: skip
+        else:
+            kept += 1
+            np.testing.assert_array_equal(half.obs["warning_values"][i],
+                                          near.obs["warning_values"][i])  # fmt: skip
+    assert moved + kept > 40 and 0.3 < moved / (moved + kept) < 0.7
+
+
 def test_training_distractors_are_not_the_language_probes():
     from lantern_jax.scenarios.warning_texts import (
         DEFAULT_BANK,

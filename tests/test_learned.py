@@ -460,6 +460,10 @@ def write(tmp_path, text: str):
             r"train\.text_encoder: the surround recipe reads no text",
         ),
         ("[train]\nname = 'x'\nrecipe = 'base'\ntext_layers = 0\n", r"train\.text_layers"),
+        (
+            "[train]\nname = 'x'\nrecipe = 'base'\ncounterfactual_stated_share = 1.5\n",
+            r"train\.counterfactual_stated_share: must be in \[0, 1\], got 1\.5",
+        ),
         ("[evaluate]\nname = 'x'\n", r"\[train\]"),
         ("[train\nname = 'x'\n", "not valid TOML"),
     ],

@@ -280,7 +280,7 @@ def _dataset_examples(cfg: TrainConfig, card: dict) -> Examples:
     plain = ex.take(np.arange(len(frames)))  # the frames themselves, before the far copies
     cf = frame_counterfactuals(
         plain, frames, cfg.counterfactual, cfg.seed, cfg.distractors, cfg.distractor_texts,
-        cfg.counterfactual_positions,
+        cfg.counterfactual_positions, cfg.counterfactual_stated_share,
     )
     return concat([ex, cf])
 

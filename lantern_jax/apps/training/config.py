@@ -121,6 +121,9 @@ class TrainConfig:
     # "near", uniformly ahead within 4 m of the lane; "stated", among the positions the true
     # warnings of the frame's family state in the dataset
     counterfactual_positions: str = "near"
+    # with "stated": the share of those frames drawn among the stated positions, the others
+    # in the near box (1: all of them)
+    counterfactual_stated_share: float = 1.0
     # s: also keep the visits this long before each driven execution's first collision, every
     # failure_every_s (the states that lead the learner into a failure); 0 keeps none
     failure_window_s: float = 0.0
@@ -239,6 +242,9 @@ def _range_problem(cfg: TrainConfig) -> tuple[str, str] | None:
     if cfg.counterfactual_positions not in POSITION_SOURCES:
         problems.append(("counterfactual_positions", f"{cfg.counterfactual_positions!r} not "
                          f"one of {', '.join(POSITION_SOURCES)}"))  # fmt: skip
+    if not 0.0 <= cfg.counterfactual_stated_share <= 1.0:
+        problems.append(("counterfactual_stated_share",
+                         f"must be in [0, 1], got {cfg.counterfactual_stated_share}"))
     if cfg.rig not in RIGS:
         problems.append(("rig", f"{cfg.rig!r} not one of {', '.join(RIGS)}"))
     elif cfg.recipe == "surround" and cfg.rig != "surround":

@@ -94,6 +94,7 @@ def counterfactual_examples(
     distractors: float = 0.0,
     distractor_texts: str = "position",
     positions: str = "near",
+    stated_share: float = 1.0,
 ) -> tuple[Examples, np.ndarray]:
     """Counterfactual copies of a seeded ``share`` of the Route B examples.
 
@@ -113,6 +114,9 @@ def counterfactual_examples(
             ``"stated"`` a family whose examples state no position keeps the near box.  The
             frames, texts and the near draws are those of ``"near"`` (the stated positions
             come from a stream of their own).
+        stated_share: with ``"stated"``, the share of those frames, in [0, 1], drawn among the
+            stated positions; the others keep their near draw (chosen from a stream of their
+            own: with 1 the frames are exactly those of a run without the setting).
 
     Returns:
         (the counterfactual examples — text replaced, labels kept, not ordinary driving —,
@@ -146,10 +150,13 @@ def counterfactual_examples(
     if positions == "stated":
         pool = stated_positions(ex, families, routes)
         rng_p = np.random.default_rng([seed, 44])
-        for f in np.unique(fam[rows]):
+        moved = rows  # the frames whose position is drawn among the stated ones
+        if stated_share < 1.0:  # the others keep the near box
+            moved = rows[np.random.default_rng([seed, 45]).random(len(rows)) < stated_share]
+        for f in np.unique(fam[moved]):
             if len(pool.get(str(f), ())) == 0:
                 continue  # no position stated for this family: the near box
-            mine = rows[fam[rows] == f]
+            mine = moved[fam[moved] == f]
             drawn = pool[str(f)][rng_p.integers(0, len(pool[str(f)]), len(mine))]
             x[mine], y[mine] = round_number(drawn[:, 0]), round_number(drawn[:, 1])
     elif positions != "near":
@@ -165,10 +172,10 @@ def counterfactual_examples(
 
 def frame_counterfactuals(
     ex: Examples, frames: pd.DataFrame, share: float, seed: int, distractors: float = 0.0,
-    distractor_texts: str = "position", positions: str = "near",
+    distractor_texts: str = "position", positions: str = "near", stated_share: float = 1.0,
 ) -> Examples:
     """:func:`counterfactual_examples` of dataset examples (``ex`` built from ``frames``)."""
     return counterfactual_examples(
         ex, frames["family"].to_numpy(str), frames["route"].to_numpy(str), share, seed,
-        distractors, distractor_texts, positions,
+        distractors, distractor_texts, positions, stated_share,
     )[0]
