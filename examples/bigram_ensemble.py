@@ -57,6 +57,6 @@ def bigram_stated_ensemble(runs: str | Path = STATED_RUNS) -> Policy:
 
 def bigram_stated_half_ensemble(runs: str | Path = STATED_HALF_RUNS) -> Policy:
     """The three chains of the half-stated-positions variant as one policy (not shipped)."""
-    return ensemble_policy("bigram-stated-half-ensemble",
-                           member_paths(runs, STATED_HALF_MODEL),
-                           "mean plan of the half-stated-positions variant's three seeds")  # fmt: skip
+    paths = member_paths(runs, STATED_HALF_MODEL)
+    what = "mean plan of the half-stated-positions variant's three seeds"
+    return ensemble_policy("bigram-stated-half-ensemble", paths, what)
