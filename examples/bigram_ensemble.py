@@ -23,14 +23,12 @@ SEEDS = (0, 1, 2)
 MODEL = "closed/learned-closed-loop-rig-bigram.msgpack"  # each chain's last stage
 
 
-#: The variant whose counterfactual positions are drawn where true warnings state theirs
-#: (``CLOSED_CONFIG=configs/train_closed_loop_rig_bigram_stated.toml``, ``docs/learned.md``).
-STATED_RUNS = Path("runs/train/bigram_stated")
-STATED_MODEL = "closed/learned-closed-loop-rig-bigram-stated.msgpack"
-#: The variant with half of those positions drawn so, half in the near box
-#: (``CLOSED_CONFIG=configs/train_closed_loop_rig_bigram_stated_half.toml``).
-STATED_HALF_RUNS = Path("runs/train/bigram_stated_half")
-STATED_HALF_MODEL = "closed/learned-closed-loop-rig-bigram-stated-half.msgpack"
+#: The variants whose counterfactual positions are drawn where true warnings state theirs,
+#: all of them or a share (``docs/learned.md``, "Counterfactual positions where true warnings
+#: state theirs"): variant -> the share drawn so, in words.  Each trains with
+#: ``CLOSED_CONFIG=configs/train_closed_loop_rig_bigram_<variant>.toml`` into
+#: ``runs/train/bigram_<variant>``.
+STATED_VARIANTS = {"stated": "all", "stated_half": "half", "stated_quarter": "a quarter"}
 
 
 def member_paths(runs: str | Path = RUNS, model: str = MODEL) -> list[Path]:
@@ -49,14 +47,32 @@ def bigram_ensemble(runs: str | Path = RUNS) -> Policy:
                            "mean plan of the bigram reader's three seeds")  # fmt: skip
 
 
-def bigram_stated_ensemble(runs: str | Path = STATED_RUNS) -> Policy:
-    """The three chains of the stated-positions variant as one policy (not shipped)."""
-    return ensemble_policy("bigram-stated-ensemble", member_paths(runs, STATED_MODEL),
-                           "mean plan of the stated-positions variant's three seeds")  # fmt: skip
+def stated_variant_ensemble(variant: str, runs: str | Path | None = None) -> Policy:
+    """The three chains of a :data:`STATED_VARIANTS` variant as one policy (not shipped),
+    named ``bigram-<variant>-ensemble`` (underscores as hyphens).
+
+    Raises:
+        KeyError: for a variant not in :data:`STATED_VARIANTS`.
+        lantern_jax.policies.learned.checkpoint.CheckpointError: as :func:`bigram_ensemble`.
+    """
+    share = STATED_VARIANTS[variant]
+    tag = variant.replace("_", "-")
+    runs = Path(f"runs/train/bigram_{variant}") if runs is None else Path(runs)
+    model = f"closed/learned-closed-loop-rig-bigram-{tag}.msgpack"
+    what = f"mean plan of the three seeds with {share} of the counterfactual positions stated"
+    return ensemble_policy(f"bigram-{tag}-ensemble", member_paths(runs, model), what)
 
 
-def bigram_stated_half_ensemble(runs: str | Path = STATED_HALF_RUNS) -> Policy:
-    """The three chains of the half-stated-positions variant as one policy (not shipped)."""
-    paths = member_paths(runs, STATED_HALF_MODEL)
-    what = "mean plan of the half-stated-positions variant's three seeds"
-    return ensemble_policy("bigram-stated-half-ensemble", paths, what)
+def bigram_stated_ensemble() -> Policy:
+    """Every counterfactual position drawn where true warnings state theirs."""
+    return stated_variant_ensemble("stated")
+
+
+def bigram_stated_half_ensemble() -> Policy:
+    """Half of them drawn so, half in the near box."""
+    return stated_variant_ensemble("stated_half")
+
+
+def bigram_stated_quarter_ensemble() -> Policy:
+    """A quarter of them drawn so, three quarters in the near box."""
+    return stated_variant_ensemble("stated_quarter")

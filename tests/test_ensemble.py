@@ -218,3 +218,27 @@ def test_the_training_script_runs_each_seeds_stages_in_order_and_names_a_failed_
     failed = run("1")
     assert failed.returncode == 1 and "seed 1 failed; see out/bigram_s1.log" in failed.stderr
     assert "seed 0" not in failed.stderr and "seed 2" not in failed.stderr
+
+
+def test_each_stated_variant_ensemble_reads_what_its_config_trains():
+    """``examples/bigram_ensemble.py``'s stated-position variants: each has its closed-loop
+    config, whose model name is the checkpoint the ensemble loads, and whose share is the one
+    named; a variant not listed is refused."""
+    import importlib.util
+    import tomllib
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    path = root / "examples" / "bigram_ensemble.py"
+    spec = importlib.util.spec_from_file_location("_bigram_ensemble", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    shares = {"all": 1.0, "half": 0.5, "a quarter": 0.25}
+    for variant, share in mod.STATED_VARIANTS.items():
+        cfg = tomllib.loads((root / "configs" / f"train_closed_loop_rig_bigram_{variant}.toml")
+                            .read_text())["train"]  # fmt: skip
+        assert cfg["name"] == "learned-closed-loop-rig-bigram-" + variant.replace("_", "-")
+        assert cfg["counterfactual_positions"] == "stated"
+        assert cfg.get("counterfactual_stated_share", 1.0) == shares[share], variant
+    with pytest.raises(KeyError):
+        mod.stated_variant_ensemble("stated_tenth")
