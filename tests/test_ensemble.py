@@ -45,6 +45,21 @@ def test_the_plan_is_the_mean_of_the_members_plans(obs, embedding):
     assert "m0, m1" in ens.description
 
 
+def test_the_median_plan_is_each_coordinates_middle_member(obs, embedding):
+    """``combine="median"``: with three members, every coordinate of every waypoint is the
+    middle one of the three plans' (their element-wise median), not their mean; any other
+    combine is refused naming it."""
+    members = [tiny(f"m{i}", i, embedding) for i in range(3)]
+    ens = ensemble_policy("med", members, combine="median")
+    plans = np.stack([plan(m, obs) for m in members])  # (3, 10, 2)
+    middle = np.sort(plans, axis=0)[1]
+    assert not np.allclose(middle, plans.mean(axis=0), atol=1e-4)  # the median is a test
+    np.testing.assert_allclose(plan(ens, obs), middle, rtol=1e-5, atol=1e-5)
+    assert ens.description.startswith("median plan of 3 models")
+    with pytest.raises(ValueError, match="combine 'vote' is not one of mean, median"):
+        ensemble_policy("bad", members, combine="vote")
+
+
 def test_one_member_is_that_member(obs, embedding):
     member = tiny("m", 4, embedding)
     np.testing.assert_allclose(plan(ensemble_policy("one", [member]), obs), plan(member, obs),

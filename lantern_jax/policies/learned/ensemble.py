@@ -11,7 +11,9 @@ Averaging plans is the plain ensemble of regression models: where the members ag
 little, where one member would pull away or brake alone the others damp it.  It is not a vote
 between modes (two members that pass a car on either side average to a plan between them), so
 it suits members of one recipe trained from several seeds, as measured in the learned models'
-page of the documentation.
+page of the documentation.  ``combine="median"`` takes the element-wise median of the plans
+instead: with three members, where two agree and one would pull away or brake alone, the plan
+follows the two.
 """
 
 from __future__ import annotations
@@ -30,13 +32,30 @@ from lantern_jax.types.observation import Observation
 Array = jax.Array
 
 
-def ensemble_act(params: LearnedParams, obs: Observation) -> Array:
-    """``(10, 2)`` float32 waypoints (m, ego frame): the mean of the plans of every member
+def member_plans(params: LearnedParams, obs: Observation) -> Array:
+    """``(K, 10, 2)`` float32 waypoints (m, ego frame): the plan of each of the ``K`` members
     whose weights ``params.model`` stacks along its leading axis, for one observation."""
-    plans = jax.vmap(lambda weights: learned_act(params.replace(model=weights), obs))(
+    return jax.vmap(lambda weights: learned_act(params.replace(model=weights), obs))(
         params.model
-    )  # (K, 10, 2)
-    return jnp.mean(plans, axis=0)
+    )
+
+
+def ensemble_act(params: LearnedParams, obs: Observation) -> Array:
+    """``(10, 2)`` float32 waypoints (m, ego frame): the mean of the members' plans
+    (:func:`member_plans`), for one observation."""
+    return jnp.mean(member_plans(params, obs), axis=0)
+
+
+def ensemble_median_act(params: LearnedParams, obs: Observation) -> Array:
+    """``(10, 2)`` float32 waypoints (m, ego frame): the element-wise median of the members'
+    plans (:func:`member_plans`), for one observation.  With three members each coordinate of
+    each waypoint is the middle one of the three: where two members agree and one would pull
+    away or brake alone, the plan follows the two (the mean moves a third of the way)."""
+    return jnp.median(member_plans(params, obs), axis=0)
+
+
+#: How an ensemble joins its members' plans (``ensemble_policy(..., combine=)``).
+COMBINES = {"mean": ensemble_act, "median": ensemble_median_act}
 
 
 def _member(item: Policy | str | Path) -> Policy:
@@ -77,8 +96,8 @@ def stacked_params(members: Sequence[Policy]) -> LearnedParams:
 
 
 def ensemble_policy(name: str, members: Sequence[Policy | str | Path],
-                    description: str = "") -> Policy:  # fmt: skip
-    """One policy that drives with the mean plan of several learned models.
+                    description: str = "", combine: str = "mean") -> Policy:  # fmt: skip
+    """One policy that drives with the mean (or median) plan of several learned models.
 
     Args:
         name: the name its result rows carry.
@@ -86,17 +105,22 @@ def ensemble_policy(name: str, members: Sequence[Policy | str | Path],
             (``get_policy("learned-closed-loop-rig")``) or checkpoint paths (``.msgpack``,
             :func:`~lantern_jax.policies.learned.checkpoint.checkpoint_policy`).
         description: one line (default: the members' names).
+        combine: how the plans are joined, a key of :data:`COMBINES`: ``"mean"``
+            (:func:`ensemble_act`) or ``"median"`` (:func:`ensemble_median_act`).
 
     Returns:
         A stateless :class:`~lantern_jax.policies.base.Policy` whose ``act`` is
-        :func:`ensemble_act` and whose sensors are the members' (they must declare the same).
+        ``COMBINES[combine]`` and whose sensors are the members' (they must declare the same).
 
     Raises:
         ValueError: for no members, members with other sensors or another architecture
-            (naming the member), or a bad name.
+            (naming the member), a bad name, or a ``combine`` not in :data:`COMBINES`.
         TypeError: naming a member that is not a learned model.
         CheckpointError: for a member path that is no valid checkpoint.
     """
+    if combine not in COMBINES:
+        raise ValueError(f"ensemble_policy: combine {combine!r} is not one of "
+                         f"{', '.join(COMBINES)}")  # fmt: skip
     if isinstance(members, (str, Path, Policy)) or len(members) == 0:
         raise ValueError("ensemble_policy: members: expected a sequence of at least one learned "
                          "model or checkpoint path")  # fmt: skip
@@ -106,7 +130,7 @@ def ensemble_policy(name: str, members: Sequence[Policy | str | Path],
             raise ValueError(f"ensemble member {m.name!r}: sensors {m.sensors} differ from "
                              f"{policies[0].name!r}'s {policies[0].sensors}")  # fmt: skip
     params = stacked_params(policies)
-    desc = description or f"mean plan of {len(policies)} models: " + ", ".join(
+    desc = description or f"{combine} plan of {len(policies)} models: " + ", ".join(
         m.name for m in policies
     )
-    return Policy(name, lambda key: params, ensemble_act, desc, sensors=policies[0].sensors)
+    return Policy(name, lambda key: params, COMBINES[combine], desc, sensors=policies[0].sensors)
