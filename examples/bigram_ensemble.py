@@ -47,9 +47,12 @@ def bigram_ensemble(runs: str | Path = RUNS) -> Policy:
                            "mean plan of the bigram reader's three seeds")  # fmt: skip
 
 
-def stated_variant_ensemble(variant: str, runs: str | Path | None = None) -> Policy:
+def stated_variant_ensemble(variant: str, runs: str | Path | None = None,
+                            combine: str = "mean") -> Policy:  # fmt: skip
     """The three chains of a :data:`STATED_VARIANTS` variant as one policy (not shipped),
-    named ``bigram-<variant>-ensemble`` (underscores as hyphens).
+    named ``bigram-<variant>-ensemble`` (underscores as hyphens), or
+    ``bigram-<variant>-median-ensemble`` with ``combine="median"`` (the element-wise median of
+    the three plans, :func:`~lantern_jax.policies.learned.ensemble.ensemble_median_act`).
 
     Raises:
         KeyError: for a variant not in :data:`STATED_VARIANTS`.
@@ -59,8 +62,9 @@ def stated_variant_ensemble(variant: str, runs: str | Path | None = None) -> Pol
     tag = variant.replace("_", "-")
     runs = Path(f"runs/train/bigram_{variant}") if runs is None else Path(runs)
     model = f"closed/learned-closed-loop-rig-bigram-{tag}.msgpack"
-    what = f"mean plan of the three seeds with {share} of the counterfactual positions stated"
-    return ensemble_policy(f"bigram-{tag}-ensemble", member_paths(runs, model), what)
+    what = f"{combine} plan of the three seeds with {share} of the counterfactual positions stated"
+    name = f"bigram-{tag}-ensemble" if combine == "mean" else f"bigram-{tag}-{combine}-ensemble"
+    return ensemble_policy(name, member_paths(runs, model), what, combine=combine)
 
 
 def bigram_stated_ensemble() -> Policy:
@@ -76,3 +80,13 @@ def bigram_stated_half_ensemble() -> Policy:
 def bigram_stated_quarter_ensemble() -> Policy:
     """A quarter of them drawn so, three quarters in the near box."""
     return stated_variant_ensemble("stated_quarter")
+
+
+def bigram_stated_half_median_ensemble() -> Policy:
+    """The half variant's three seeds joined by the median of their plans."""
+    return stated_variant_ensemble("stated_half", combine="median")
+
+
+def bigram_stated_quarter_median_ensemble() -> Policy:
+    """The quarter variant's three seeds joined by the median of their plans."""
+    return stated_variant_ensemble("stated_quarter", combine="median")

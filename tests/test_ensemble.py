@@ -180,6 +180,16 @@ def test_the_example_ensemble_file_averages_the_three_chains_it_names(tmp_path, 
     assert ens.name == "bigram-ensemble" and source["file"] == "bigram_ensemble.py"
     want = np.mean([plan(m, obs) for m in members], axis=0)
     np.testing.assert_allclose(plan(ens, obs), want, rtol=1e-5, atol=1e-5)
+    for seed in (0, 1, 2):  # the same models as the half-stated variant's chains
+        where = tmp_path / "runs/train/bigram_stated_half" / f"bigram_s{seed}" / "closed"
+        where.mkdir(parents=True)
+        name = "learned-closed-loop-rig-bigram-stated-half"
+        save_model(new_model(bigram, seed=seed), where / name)
+    med, _ = load_policy_source(
+        f"{root}/examples/bigram_ensemble.py:bigram_stated_half_median_ensemble")
+    assert med.name == "bigram-stated-half-median-ensemble"
+    want = np.median([plan(m, obs) for m in members], axis=0)
+    np.testing.assert_allclose(plan(med, obs), want, rtol=1e-5, atol=1e-5)
     (tmp_path / "runs/train/bigram_ensemble/bigram_s1/closed/"
      "learned-closed-loop-rig-bigram.msgpack").unlink()  # fmt: skip
     with pytest.raises(ValueError, match=r"bigram_s1/closed/learned-closed-loop-rig-bigram"):
