@@ -464,6 +464,11 @@ def write(tmp_path, text: str):
             "[train]\nname = 'x'\nrecipe = 'base'\ncounterfactual_stated_share = 1.5\n",
             r"train\.counterfactual_stated_share: must be in \[0, 1\], got 1\.5",
         ),
+        (
+            "[train]\nname = 'x'\nrecipe = 'base'\ncounterfactual_stated_share = 0.5\n",
+            r"train\.counterfactual_stated_share: .*only with counterfactual_positions = "
+            r"\"stated\"",
+        ),
         ("[evaluate]\nname = 'x'\n", r"\[train\]"),
         ("[train\nname = 'x'\n", "not valid TOML"),
     ],

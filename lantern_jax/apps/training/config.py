@@ -122,7 +122,7 @@ class TrainConfig:
     # warnings of the frame's family state in the dataset
     counterfactual_positions: str = "near"
     # with "stated": the share of those frames drawn among the stated positions, the others
-    # in the near box (1: all of them)
+    # in the near box (1: all of them; another value only with "stated")
     counterfactual_stated_share: float = 1.0
     # s: also keep the visits this long before each driven execution's first collision, every
     # failure_every_s (the states that lead the learner into a failure); 0 keeps none
@@ -245,6 +245,10 @@ def _range_problem(cfg: TrainConfig) -> tuple[str, str] | None:
     if not 0.0 <= cfg.counterfactual_stated_share <= 1.0:
         problems.append(("counterfactual_stated_share",
                          f"must be in [0, 1], got {cfg.counterfactual_stated_share}"))
+    elif cfg.counterfactual_stated_share != 1.0 and cfg.counterfactual_positions != "stated":
+        problems.append(("counterfactual_stated_share", "a share of the positions drawn where "
+                         "true warnings state theirs: only with counterfactual_positions = "
+                         "\"stated\""))  # fmt: skip
     if cfg.rig not in RIGS:
         problems.append(("rig", f"{cfg.rig!r} not one of {', '.join(RIGS)}"))
     elif cfg.recipe == "surround" and cfg.rig != "surround":
