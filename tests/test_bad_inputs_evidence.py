@@ -295,6 +295,31 @@ def test_compare_refuses_a_policy_or_a_set_compared_with_itself(result_set, tmp_
     assert r.rc == 2 and "the same result set" in r.err
 
 
+def test_compare_of_two_sets_and_two_policies_is_the_first_sets_against_the_seconds(
+    result_set, tmp_path
+):
+    """``compare A B --policy p --policy q``: A's p against B's q, the same differences as p
+    against q in one set (B a copy of A), labelled with each set; a policy named twice with
+    the same set twice is refused."""
+    import pandas as pd
+
+    b = _copy(result_set, tmp_path / "b")
+    one = run_cli(["compare", str(result_set), "--policy", "ego", "--policy", "coop",
+                   "--out", str(tmp_path / "one")])  # fmt: skip
+    two = run_cli(["compare", str(result_set), str(b), "--policy", "ego", "--policy", "coop",
+                   "--out", str(tmp_path / "two")])  # fmt: skip
+    assert one.rc == 0 and two.rc == 0, (one.err, two.err)
+    t1 = pd.read_csv(tmp_path / "one" / "comparison.csv")
+    t2 = pd.read_csv(tmp_path / "two" / "comparison.csv")
+    assert (t1["n"] > 0).any()
+    cols = ["condition", "family", "n", "difference", "p"]
+    pd.testing.assert_frame_equal(t1[cols], t2[cols])
+    assert f"ego ({result_set})" in two.out and f"coop ({b})" in two.out
+    r = run_cli(["compare", str(result_set), str(result_set), "--policy", "ego", "--policy",
+                 "ego", "--out", str(tmp_path / "same")])  # fmt: skip
+    assert r.rc == 2 and "the same result set" in r.err
+
+
 def test_compare_refuses_a_folder_without_its_manifest(result_set, tmp_path):
     b = _copy(result_set, tmp_path / "b")
     (b / "reproducibility_manifest.json").unlink()

@@ -4,6 +4,7 @@
 
     lantern-jax compare results --policy coop --policy expert       # two policies, one set
     lantern-jax compare runs/before runs/after --policy coop        # one policy, two sets
+    lantern-jax compare runs/v1 runs/v2 --policy mine-v1 --policy mine-v2   # each set's own
 
 Per family and overall, under every condition both sides hold and for the warning gain: the
 paired difference of mean CUS (first minus second), its bootstrap interval and a paired
@@ -66,18 +67,20 @@ def cmd_compare(args: argparse.Namespace, argv: Sequence[str]) -> int:
         df = _read(sets[0]).table
         a, b = (_rows(df, p, sets[0]) for p in policies)
         labels = policies
-    elif len(sets) == 2 and len(policies) == 1:
+    elif len(sets) == 2 and len(policies) in (1, 2):
         ra, rb = _read(sets[0]), _read(sets[1])
-        if ra.csv.resolve() == rb.csv.resolve():
+        pa, pb = policies[0], policies[-1]
+        if ra.csv.resolve() == rb.csv.resolve() and pa == pb:
             raise UsageError(f"{sets[0]} and {sets[1]} are the same result set: a policy "
                              "compared with itself differs by nothing")  # fmt: skip
         notes = _protocol_notes(ra.manifest, rb.manifest, sets, args.accept_protocol_difference)
-        a = _rows(ra.table, policies[0], sets[0])
-        b = _rows(rb.table, policies[0], sets[1])
-        labels = [f"{policies[0]} ({s})" for s in sets]
+        a = _rows(ra.table, pa, sets[0])
+        b = _rows(rb.table, pb, sets[1])
+        labels = [f"{pa} ({sets[0]})", f"{pb} ({sets[1]})"]
     else:
         raise UsageError(
             "give one result set and two --policy names, or two result sets and one --policy "
+            "(or two: the first set's against the second's) "
             f"(got {len(sets)} result set(s) and {len(policies)} policy name(s))"
         )
     seed = SEED if args.bootstrap_seed is None else args.bootstrap_seed
@@ -121,7 +124,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description="Paired difference of mean CUS (first minus second) per family and overall, "
         "under every shared condition and for the warning gain, with its bootstrap interval "
         "and p-value: two policies of one result set, or one policy in two result sets over "
-        "the same pairs.",
+        "the same pairs, or the first set's policy against the second set's.",
         allow_abbrev=False,
     )
     co.add_argument(
@@ -134,7 +137,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--policy",
         action="append",
         metavar="NAME",
-        help="the policy (two result sets) or each of the two policies (one result set)",
+        help="the policy (two result sets) or each of the two policies (one result set; with "
+        "two result sets, the first set's policy then the second's)",
     )
     co.add_argument(
         "--bootstrap-seed", type=seed(), metavar="N", help="seed of the bootstrap (default fixed)"
