@@ -28,12 +28,17 @@ MODEL = "closed/learned-closed-loop-rig-bigram.msgpack"  # each chain's last sta
 #: state theirs"): variant -> the share drawn so, in words.  Each trains with
 #: ``CLOSED_CONFIG=configs/train_closed_loop_rig_bigram_<variant>.toml`` into
 #: ``runs/train/bigram_<variant>``.
-STATED_VARIANTS = {"stated": "all", "stated_half": "half", "stated_quarter": "a quarter"}
+STATED_VARIANTS = {"stated": "all", "stated_half": "half", "stated_quarter": "a quarter",
+                   "stated_half_short": "half"}
+#: What else a variant's closed-loop stage changes, in words (its config says it in full).
+VARIANT_ROUNDS = {"stated_half_short": "fourteen closed-loop rounds of one epoch"}
 
 
-def member_paths(runs: str | Path = RUNS, model: str = MODEL) -> list[Path]:
-    """The three chains' closed-loop checkpoints ``model`` under ``runs``, seeds 0, 1, 2."""
-    return [Path(runs) / f"bigram_s{seed}" / model for seed in SEEDS]
+def member_paths(runs: str | Path = RUNS, model: str = MODEL,
+                 seeds: tuple[int, ...] = SEEDS) -> list[Path]:  # fmt: skip
+    """The chains' closed-loop checkpoints ``model`` under ``runs``, one per seed (0, 1, 2
+    unless ``seeds`` names others)."""
+    return [Path(runs) / f"bigram_s{seed}" / model for seed in seeds]
 
 
 def bigram_ensemble(runs: str | Path = RUNS) -> Policy:
@@ -47,12 +52,15 @@ def bigram_ensemble(runs: str | Path = RUNS) -> Policy:
                            "mean plan of the bigram reader's three seeds")  # fmt: skip
 
 
-def stated_variant_ensemble(variant: str, runs: str | Path | None = None,
-                            combine: str = "mean") -> Policy:  # fmt: skip
+def stated_variant_ensemble(variant: str, runs: str | Path | None = None, combine: str = "mean",
+                            seeds: tuple[int, ...] = SEEDS) -> Policy:  # fmt: skip
     """The three chains of a :data:`STATED_VARIANTS` variant as one policy (not shipped),
     named ``bigram-<variant>-ensemble`` (underscores as hyphens), or
     ``bigram-<variant>-median-ensemble`` with ``combine="median"`` (the element-wise median of
     the three plans, :func:`~lantern_jax.policies.learned.ensemble.ensemble_median_act`).
+    Another set of ``seeds`` (trained with ``SEEDS="3 4 5"``) is read from
+    ``runs/train/bigram_<variant>_s345`` unless ``runs`` is given, and its name ends in
+    ``-s345``.
 
     Raises:
         KeyError: for a variant not in :data:`STATED_VARIANTS`.
@@ -60,11 +68,17 @@ def stated_variant_ensemble(variant: str, runs: str | Path | None = None,
     """
     share = STATED_VARIANTS[variant]
     tag = variant.replace("_", "-")
-    runs = Path(f"runs/train/bigram_{variant}") if runs is None else Path(runs)
+    tail = "" if seeds == SEEDS else "_s" + "".join(str(seed) for seed in seeds)
+    runs = Path(f"runs/train/bigram_{variant}{tail}") if runs is None else Path(runs)
     model = f"closed/learned-closed-loop-rig-bigram-{tag}.msgpack"
     what = f"{combine} plan of the three seeds with {share} of the counterfactual positions stated"
+    if variant in VARIANT_ROUNDS:
+        what += f", {VARIANT_ROUNDS[variant]}"
     name = f"bigram-{tag}-ensemble" if combine == "mean" else f"bigram-{tag}-{combine}-ensemble"
-    return ensemble_policy(name, member_paths(runs, model), what, combine=combine)
+    if tail:
+        name += tail.replace("_", "-")
+        what += f" (seeds {', '.join(str(seed) for seed in seeds)})"
+    return ensemble_policy(name, member_paths(runs, model, seeds), what, combine=combine)
 
 
 def bigram_stated_ensemble() -> Policy:
@@ -90,3 +104,23 @@ def bigram_stated_half_median_ensemble() -> Policy:
 def bigram_stated_quarter_median_ensemble() -> Policy:
     """The quarter variant's three seeds joined by the median of their plans."""
     return stated_variant_ensemble("stated_quarter", combine="median")
+
+
+def bigram_stated_half_short_ensemble() -> Policy:
+    """The half variant trained in fourteen closed-loop rounds of one epoch each."""
+    return stated_variant_ensemble("stated_half_short")
+
+
+def bigram_stated_half_short_median_ensemble() -> Policy:
+    """Those three seeds joined by the median of their plans."""
+    return stated_variant_ensemble("stated_half_short", combine="median")
+
+
+def bigram_stated_half_short_s345_ensemble() -> Policy:
+    """The same recipe's second, independent set of seeds (3, 4, 5)."""
+    return stated_variant_ensemble("stated_half_short", seeds=(3, 4, 5))
+
+
+def bigram_stated_half_short_s345_median_ensemble() -> Policy:
+    """That set joined by the median of its plans."""
+    return stated_variant_ensemble("stated_half_short", combine="median", seeds=(3, 4, 5))

@@ -9,6 +9,10 @@
 #   CLOSED_CONFIG=configs/train_closed_loop_rig_bigram_stated.toml \
 #       bash examples/train_bigram_ensemble.sh runs/train/bigram_stated
 #
+# SEEDS names the seeds (default "0 1 2"), e.g. a second, independent set of three chains:
+#
+#   SEEDS="3 4 5" bash examples/train_bigram_ensemble.sh runs/train/bigram_seeds345
+#
 # Each seed's chain is the configs' own (docs/learned.md, "Reading which word follows which"):
 # base -> distance (onset only) -> nine closed-loop rounds, each stage from the same seed's
 # previous checkpoint, written to OUT/bigram_s<seed>/{base,distance,closed}, its output appended
@@ -22,6 +26,10 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=${1:-runs/train/bigram_ensemble}
 CLOSED_CONFIG=${CLOSED_CONFIG:-configs/train_closed_loop_rig_bigram.toml}
+read -r -a SEED_LIST <<< "${SEEDS:-0 1 2}"
+# the closed-loop stage exports its model under the name its config gives
+CLOSED_NAME=$(sed -n 's/^name *= *"\(.*\)"/\1/p' "$CLOSED_CONFIG")
+[ -n "$CLOSED_NAME" ] || { echo "train_bigram_ensemble: no name in $CLOSED_CONFIG" >&2; exit 2; }
 mkdir -p "$OUT"
 
 chain() {  # one seed's three stages, each from the previous one's exported model
@@ -37,18 +45,19 @@ chain() {  # one seed's three stages, each from the previous one's exported mode
 }
 
 pids=()
-for seed in 0 1 2; do
+for seed in "${SEED_LIST[@]}"; do
   chain "$seed" >> "$OUT/bigram_s$seed.log" 2>&1 &  # appended: a rerun keeps the earlier log
   pids+=("$!")
 done
 failed=0
-for seed in 0 1 2; do
-  if ! wait "${pids[$seed]}"; then
+for i in "${!SEED_LIST[@]}"; do
+  seed=${SEED_LIST[$i]}
+  if ! wait "${pids[$i]}"; then
     echo "train_bigram_ensemble: seed $seed failed; see $OUT/bigram_s$seed.log" >&2
     failed=1
   fi
 done
 [ "$failed" = 0 ] || exit 1
-for seed in 0 1 2; do
-  echo "$OUT/bigram_s$seed/closed/learned-closed-loop-rig-bigram.msgpack"
+for seed in "${SEED_LIST[@]}"; do
+  echo "$OUT/bigram_s$seed/closed/$CLOSED_NAME.msgpack"
 done

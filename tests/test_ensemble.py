@@ -213,6 +213,7 @@ def test_the_training_script_runs_each_seeds_stages_in_order_and_names_a_failed_
     root = Path(__file__).resolve().parents[1]
     (tmp_path / "examples").mkdir()
     shutil.copy(root / "examples" / "train_bigram_ensemble.sh", tmp_path / "examples")
+    shutil.copytree(root / "configs", tmp_path / "configs")  # the closed stage's model name
     fake = tmp_path / ".venv" / "bin" / "lantern-jax"
     fake.parent.mkdir(parents=True)
     # argv: train --config CONFIG --seed SEED ...; one log per config and seed
@@ -221,8 +222,8 @@ def test_the_training_script_runs_each_seeds_stages_in_order_and_names_a_failed_
     fake.chmod(0o755)
     script = tmp_path / "examples" / "train_bigram_ensemble.sh"
 
-    def run(fail: str):
-        env = dict(os.environ, OUT_LOG=str(tmp_path / "calls"), FAIL_SEED=fail)
+    def run(fail: str, **extra: str):
+        env = dict(os.environ, OUT_LOG=str(tmp_path / "calls"), FAIL_SEED=fail, **extra)
         return subprocess.run(["bash", str(script), "out"], env=env, capture_output=True,
                               text=True, timeout=60, check=False)  # fmt: skip
 
@@ -243,6 +244,16 @@ def test_the_training_script_runs_each_seeds_stages_in_order_and_names_a_failed_
     failed = run("1")
     assert failed.returncode == 1 and "seed 1 failed; see out/bigram_s1.log" in failed.stderr
     assert "seed 0" not in failed.stderr and "seed 2" not in failed.stderr
+    # another seed set and a variant's closed-loop config: its seeds, its model's name
+    variant = "configs/train_closed_loop_rig_bigram_stated_half_short.toml"
+    other = run("none", SEEDS="3 4 5", CLOSED_CONFIG=variant)
+    assert other.returncode == 0, other.stderr
+    assert other.stdout.split() == [
+        f"out/bigram_s{s}/closed/learned-closed-loop-rig-bigram-stated-half-short.msgpack"
+        for s in (3, 4, 5)]
+    assert (tmp_path / f"calls.{Path(variant).name}.4").is_file()
+    failed = run("4", SEEDS="3 4 5")
+    assert failed.returncode == 1 and "seed 4 failed; see out/bigram_s4.log" in failed.stderr
 
 
 def test_each_stated_variant_ensemble_reads_what_its_config_trains():
@@ -265,5 +276,17 @@ def test_each_stated_variant_ensemble_reads_what_its_config_trains():
         assert cfg["name"] == "learned-closed-loop-rig-bigram-" + variant.replace("_", "-")
         assert cfg["counterfactual_positions"] == "stated"
         assert cfg.get("counterfactual_stated_share", 1.0) == shares[share], variant
+    short = tomllib.loads((root / "configs" / "train_closed_loop_rig_bigram_stated_half_short.toml")
+                          .read_text())["train"]  # fmt: skip
+    assert (short["rounds"], short["epochs"]) == (14, 1)
     with pytest.raises(KeyError):
         mod.stated_variant_ensemble("stated_tenth")
+    # another seed set: its own folder, members and name (the loading stood in for)
+    mod.ensemble_policy = lambda name, members, what, combine: (name, members, what, combine)
+    name, members, what, combine = mod.stated_variant_ensemble(
+        "stated_half_short", combine="median", seeds=(3, 4, 5))
+    assert name == "bigram-stated-half-short-median-ensemble-s345" and combine == "median"
+    assert members == [
+        Path(f"runs/train/bigram_stated_half_short_s345/bigram_s{s}/closed/"
+             "learned-closed-loop-rig-bigram-stated-half-short.msgpack") for s in (3, 4, 5)]
+    assert what.endswith("fourteen closed-loop rounds of one epoch (seeds 3, 4, 5)")
