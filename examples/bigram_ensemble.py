@@ -58,9 +58,9 @@ def stated_variant_ensemble(variant: str, runs: str | Path | None = None, combin
     named ``bigram-<variant>-ensemble`` (underscores as hyphens), or
     ``bigram-<variant>-median-ensemble`` with ``combine="median"`` (the element-wise median of
     the three plans, :func:`~lantern_jax.policies.learned.ensemble.ensemble_median_act`).
-    Another set of ``seeds`` (trained with ``SEEDS="3 4 5"``) is read from
-    ``runs/train/bigram_<variant>_s345`` unless ``runs`` is given, and its name ends in
-    ``-s345``.
+    Another set of ``seeds``, e.g. ``(3, 4, 5)`` (trained with ``SEEDS="3 4 5"``), is read
+    from ``runs/train/bigram_<variant>_s345`` unless ``runs`` is given, and its name ends in
+    ``-s345`` (the seeds' digits).
 
     Raises:
         KeyError: for a variant not in :data:`STATED_VARIANTS`.

@@ -52,7 +52,8 @@ def _rows(df, model: str, where: str):
 
 
 def cmd_compare(args: argparse.Namespace, argv: Sequence[str]) -> int:
-    """Compare two policies of one result set, or one policy in two; returns the exit code."""
+    """Compare two policies of one result set, one policy in two, or the first set's policy
+    with the second set's; returns the exit code."""
     from lantern_jax.report import interval_note
     from lantern_jax.report.compare import COMPARISON_FILES, compare_runs, write_comparison
     from lantern_jax.scoring.uncertainty import SEED, settings
