@@ -11,12 +11,13 @@
 #
 # SEEDS names the seeds (default "0 1 2"), e.g. a second, independent set of three chains:
 #
-#   SEEDS="3 4 5" bash examples/train_bigram_ensemble.sh runs/train/bigram_seeds345
+#   SEEDS="3 4 5" bash examples/train_bigram_ensemble.sh runs/train/bigram_ensemble_s345
 #
 # Each seed's chain is the configs' own (docs/learned.md, "Reading which word follows which"):
 # base -> distance (onset only) -> the closed-loop rounds CLOSED_CONFIG sets (nine by default),
 # each stage from the same seed's previous checkpoint, written to
-# OUT/bigram_s<seed>/{base,distance,closed}, its output appended to OUT/bigram_s<seed>.log. Then evaluate the three as one ensemble (the mean of their plans):
+# OUT/bigram_s<seed>/{base,distance,closed}, its output appended to OUT/bigram_s<seed>.log.
+# Then evaluate the three as one ensemble (the mean of their plans):
 #
 #   .venv/bin/lantern-jax evaluate --policy examples/bigram_ensemble.py:bigram_ensemble
 #
