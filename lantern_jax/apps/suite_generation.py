@@ -52,6 +52,7 @@ from lantern_jax.core import family_codes
 from lantern_jax.core.constants import FAMILIES, ROUTE_A_GATE_NAMES, WEATHERS
 from lantern_jax.core.times import happened, ticks_covering
 from lantern_jax.policies.registry import get_policy
+from lantern_jax.scenarios.assemble import host_arrays
 from lantern_jax.scenarios.duplicates import near_duplicate, route_samples
 from lantern_jax.scenarios.families import sample_params
 from lantern_jax.scenarios.spec import PARAM_RANGES, param_ranges, route_timeout_s
@@ -202,7 +203,8 @@ class _Generation:
                 self.stats["candidates"][fam] += 1
                 try:  # a sampler may draw an infeasible dict: a static rejection
                     params = sample_params(fam, self.rngs[(w, f)], WEATHERS[w])
-                    a, b, meta = static_check(params, self.seen)
+                    with host_arrays():
+                        a, b, meta = static_check(params, self.seen)
                 except ValueError as e:
                     key = "premise_rejected" if "premise" in str(e) else "static_rejected"
                     self.stats[key][fam] += 1
