@@ -124,3 +124,60 @@ def bigram_stated_half_short_s345_ensemble() -> Policy:
 def bigram_stated_half_short_s345_median_ensemble() -> Policy:
     """That set joined by the median of its plans."""
     return stated_variant_ensemble("stated_half_short", combine="median", seeds=(3, 4, 5))
+
+
+#: The generation seed of the validation suite the members are chosen on
+#: (``lantern-jax suite --regenerate runs/eval/validation/lantern-v3-seed20261206.json --seed
+#: 20261206``): a suite used to choose, never to report.
+VALIDATION_SEED = 20261206
+#: The seeds :func:`choose_on_validation` kept of the stated-half-short recipe's six (0-5) on
+#: that suite (``docs/learned.md``, "Three of six, chosen on a validation suite").
+VALIDATION_CHOSEN = (0, 1, 3)
+
+
+def choose_on_validation(members: dict[int, Path], validation_suite, keep: int = 3,
+                         evaluate=None) -> list[int]:  # fmt: skip
+    """The ``keep`` seeds of ``members`` (seed -> checkpoint) whose models score the highest
+    overall warning CUS on ``validation_suite`` (a :class:`~lantern_jax.scenarios.suite.Suite`
+    or a manifest path), best first; ties keep the lower seed first.  ``evaluate`` (default
+    :func:`lantern_jax.evaluate`) evaluates one policy on the suite.
+
+    Raises:
+        ValueError: when ``keep`` is not between 1 and the number of members.
+    """
+    from lantern_jax.policies.learned.checkpoint import checkpoint_policy
+
+    if not 1 <= keep <= len(members):
+        raise ValueError(f"keep: expected 1 to {len(members)} members, got {keep}")
+    if evaluate is None:
+        import lantern_jax
+
+        evaluate = lantern_jax.evaluate
+    score = {}
+    for seed, path in sorted(members.items()):
+        result = evaluate([checkpoint_policy(path, name=f"seed-{seed}")],
+                          suite=validation_suite, progress=False)  # fmt: skip
+        table = result.family_table.set_index("condition")
+        score[seed] = float(table.loc["warning", "Overall"])
+    return sorted(score, key=lambda seed: (-score[seed], seed))[:keep]
+
+
+def stated_half_short_six_members() -> dict[int, Path]:
+    """The stated-half-short recipe's six closed-loop checkpoints: seeds 0-2 (the default
+    set's folder) and 3-5 (``SEEDS="3 4 5"``)."""
+    tag = "stated-half-short"
+    model = f"closed/learned-closed-loop-rig-bigram-{tag}.msgpack"
+    first = member_paths("runs/train/bigram_stated_half_short", model, (0, 1, 2))
+    second = member_paths("runs/train/bigram_stated_half_short_s345", model, (3, 4, 5))
+    return dict(zip(range(6), first + second, strict=True))
+
+
+def bigram_stated_half_short_chosen_ensemble() -> Policy:
+    """The mean plan of the three of the six seeds chosen on the validation suite
+    (:data:`VALIDATION_CHOSEN`; :func:`choose_on_validation` computes the choice again)."""
+    members = stated_half_short_six_members()
+    seeds = ", ".join(str(seed) for seed in VALIDATION_CHOSEN)
+    what = (f"mean plan of seeds {seeds}, the three of six with the highest warning CUS on "
+            f"the validation suite (seed {VALIDATION_SEED})")
+    return ensemble_policy("bigram-stated-half-short-chosen-ensemble",
+                           [members[seed] for seed in VALIDATION_CHOSEN], what)  # fmt: skip

@@ -290,3 +290,48 @@ def test_each_stated_variant_ensemble_reads_what_its_config_trains():
         Path(f"runs/train/bigram_stated_half_short_s345/bigram_s{s}/closed/"
              "learned-closed-loop-rig-bigram-stated-half-short.msgpack") for s in (3, 4, 5)]
     assert what.endswith("fourteen closed-loop rounds of one epoch (seeds 3, 4, 5)")
+
+
+def test_members_are_chosen_by_their_warning_cus_on_the_validation_suite(monkeypatch):
+    """``examples/bigram_ensemble.py``'s choice of members: each seed's checkpoint evaluated once
+    on the validation suite it is given, the ``keep`` best by overall warning CUS kept (a tie
+    keeps the lower seed); a ``keep`` the members cannot fill is refused.  The chosen ensemble
+    names the seeds the docs report, from both seed sets' folders."""
+    import importlib.util
+    from pathlib import Path
+    from types import SimpleNamespace
+
+    import pandas as pd
+
+    root = Path(__file__).resolve().parents[1]
+    path = root / "examples" / "bigram_ensemble.py"
+    spec = importlib.util.spec_from_file_location("_bigram_ensemble_choice", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    import lantern_jax.policies.learned.checkpoint as checkpoint
+
+    monkeypatch.setattr(checkpoint, "checkpoint_policy", lambda path, name: name)
+    scores = {0: 79.0, 1: 78.7, 2: 77.0, 3: 78.2, 4: 73.3, 5: 79.0}
+    calls = []
+
+    def evaluate(policies, suite, progress):
+        (name,) = policies
+        calls.append((name, suite))
+        seed = int(name.split("-")[1])
+        table = pd.DataFrame({"condition": ["warning", "no-warning"],
+                              "Overall": [scores[seed], 40.0]})  # fmt: skip
+        return SimpleNamespace(family_table=table)
+
+    members = {seed: Path(f"s{seed}.msgpack") for seed in scores}
+    assert mod.choose_on_validation(members, "val.json", keep=3, evaluate=evaluate) == [0, 5, 1]
+    assert calls == [(f"seed-{seed}", "val.json") for seed in range(6)]
+    assert mod.choose_on_validation(members, "val.json", keep=1, evaluate=evaluate) == [0]
+    for keep in (0, 7):
+        with pytest.raises(ValueError, match="keep"):
+            mod.choose_on_validation(members, "val.json", keep=keep, evaluate=evaluate)
+    mod.ensemble_policy = lambda name, members, what: (name, members, what)
+    name, chosen, what = mod.bigram_stated_half_short_chosen_ensemble()
+    assert name == "bigram-stated-half-short-chosen-ensemble"
+    assert chosen == [mod.stated_half_short_six_members()[s] for s in mod.VALIDATION_CHOSEN]
+    assert "bigram_stated_half_short_s345/bigram_s3/" in str(chosen[2])
+    assert f"seed {mod.VALIDATION_SEED}" in what
