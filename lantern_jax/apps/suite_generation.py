@@ -203,6 +203,8 @@ class _Generation:
                 self.stats["candidates"][fam] += 1
                 try:  # a sampler may draw an infeasible dict: a static rejection
                     params = sample_params(fam, self.rngs[(w, f)], WEATHERS[w])
+                    # built with NumPy leaves: the checks read them on the host, and only the
+                    # dynamic check's batch goes to the device
                     with host_arrays():
                         a, b, meta = static_check(params, self.seen)
                 except ValueError as e:
