@@ -52,6 +52,21 @@ def bigram_ensemble(runs: str | Path = RUNS) -> Policy:
                            "mean plan of the bigram reader's three seeds")  # fmt: skip
 
 
+def _seed_tail(seeds: tuple[int, ...]) -> str:
+    """``""`` for the default seeds, else ``_s`` and the seeds' digits (``_s345``)."""
+    return "" if seeds == SEEDS else "_s" + "".join(str(seed) for seed in seeds)
+
+
+def variant_members(variant: str, seeds: tuple[int, ...] = SEEDS,
+                    runs: str | Path | None = None) -> list[Path]:  # fmt: skip
+    """The closed-loop checkpoints of a :data:`STATED_VARIANTS` variant's chains, one per seed:
+    under ``runs/train/bigram_<variant>`` (another seed set's folder ends in its
+    :func:`_seed_tail`, e.g. ``_s345``) unless ``runs`` is given."""
+    tag = variant.replace("_", "-")
+    runs = Path(f"runs/train/bigram_{variant}{_seed_tail(seeds)}") if runs is None else runs
+    return member_paths(runs, f"closed/learned-closed-loop-rig-bigram-{tag}.msgpack", seeds)
+
+
 def stated_variant_ensemble(variant: str, runs: str | Path | None = None, combine: str = "mean",
                             seeds: tuple[int, ...] = SEEDS) -> Policy:  # fmt: skip
     """The three chains of a :data:`STATED_VARIANTS` variant as one policy (not shipped),
@@ -68,9 +83,7 @@ def stated_variant_ensemble(variant: str, runs: str | Path | None = None, combin
     """
     share = STATED_VARIANTS[variant]
     tag = variant.replace("_", "-")
-    tail = "" if seeds == SEEDS else "_s" + "".join(str(seed) for seed in seeds)
-    runs = Path(f"runs/train/bigram_{variant}{tail}") if runs is None else Path(runs)
-    model = f"closed/learned-closed-loop-rig-bigram-{tag}.msgpack"
+    tail = _seed_tail(seeds)
     what = f"{combine} plan of the three seeds with {share} of the counterfactual positions stated"
     if variant in VARIANT_ROUNDS:
         what += f", {VARIANT_ROUNDS[variant]}"
@@ -78,7 +91,7 @@ def stated_variant_ensemble(variant: str, runs: str | Path | None = None, combin
     if tail:
         name += tail.replace("_", "-")
         what += f" (seeds {', '.join(str(seed) for seed in seeds)})"
-    return ensemble_policy(name, member_paths(runs, model, seeds), what, combine=combine)
+    return ensemble_policy(name, variant_members(variant, seeds, runs), what, combine=combine)
 
 
 def bigram_stated_ensemble() -> Policy:
@@ -165,11 +178,8 @@ def choose_on_validation(members: dict[int, Path], validation_suite, keep: int =
 def stated_half_short_six_members() -> dict[int, Path]:
     """The stated-half-short recipe's six closed-loop checkpoints: seeds 0-2 (the default
     set's folder) and 3-5 (``SEEDS="3 4 5"``)."""
-    tag = "stated-half-short"
-    model = f"closed/learned-closed-loop-rig-bigram-{tag}.msgpack"
-    first = member_paths("runs/train/bigram_stated_half_short", model, (0, 1, 2))
-    second = member_paths("runs/train/bigram_stated_half_short_s345", model, (3, 4, 5))
-    return dict(zip(range(6), first + second, strict=True))
+    paths = variant_members("stated_half_short") + variant_members("stated_half_short", (3, 4, 5))
+    return dict(zip(range(6), paths, strict=True))
 
 
 def bigram_stated_half_short_chosen_ensemble() -> Policy:

@@ -256,19 +256,28 @@ def test_the_training_script_runs_each_seeds_stages_in_order_and_names_a_failed_
     assert failed.returncode == 1 and "seed 4 failed; see out/bigram_s4.log" in failed.stderr
 
 
+def _example_module(name: str):
+    """``examples/bigram_ensemble.py`` loaded as a fresh module called ``name`` (each test may
+    replace its names without touching another's copy)."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "examples" / "bigram_ensemble.py"
+    spec = importlib.util.spec_from_file_location(name, path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
 def test_each_stated_variant_ensemble_reads_what_its_config_trains():
     """``examples/bigram_ensemble.py``'s stated-position variants: each has its closed-loop
     config, whose model name is the checkpoint the ensemble loads, and whose share is the one
     named; a variant not listed is refused."""
-    import importlib.util
     import tomllib
     from pathlib import Path
 
     root = Path(__file__).resolve().parents[1]
-    path = root / "examples" / "bigram_ensemble.py"
-    spec = importlib.util.spec_from_file_location("_bigram_ensemble", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    mod = _example_module("_bigram_ensemble")
     shares = {"all": 1.0, "half": 0.5, "a quarter": 0.25}
     for variant, share in mod.STATED_VARIANTS.items():
         cfg = tomllib.loads((root / "configs" / f"train_closed_loop_rig_bigram_{variant}.toml")
@@ -297,17 +306,12 @@ def test_members_are_chosen_by_their_warning_cus_on_the_validation_suite(monkeyp
     on the validation suite it is given, the ``keep`` best by overall warning CUS kept (a tie
     keeps the lower seed); a ``keep`` the members cannot fill is refused.  The chosen ensemble
     names the seeds the docs report, from both seed sets' folders."""
-    import importlib.util
     from pathlib import Path
     from types import SimpleNamespace
 
     import pandas as pd
 
-    root = Path(__file__).resolve().parents[1]
-    path = root / "examples" / "bigram_ensemble.py"
-    spec = importlib.util.spec_from_file_location("_bigram_ensemble_choice", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    mod = _example_module("_bigram_ensemble_choice")
     import lantern_jax.policies.learned.checkpoint as checkpoint
 
     monkeypatch.setattr(checkpoint, "checkpoint_policy", lambda path, name: name)
