@@ -18,8 +18,13 @@ import pytest
 
 from lantern_jax.apps.dataset import frames as fr
 from lantern_jax.apps.training import counterfactual as cf
-from lantern_jax.apps.training.closed_loop import round_specs
-from lantern_jax.apps.training.config import ConfigError, TrainConfig, load_config
+from lantern_jax.apps.training.closed_loop import family_shares, round_specs
+from lantern_jax.apps.training.config import (
+    ConfigError,
+    TrainConfig,
+    load_config,
+    parse_family_weights,
+)
 from lantern_jax.apps.training.data import Examples
 from lantern_jax.apps.training.relabel import ego_frame_offsets
 from lantern_jax.core.constants import FAMILIES, NUM_WAYPOINTS
@@ -373,6 +378,42 @@ def test_round_specs_spread_over_families_and_change_by_round():
     assert pd.Series([s.family for s in a]).value_counts().to_dict() == {f: 2 for f in FAMILIES}
     assert [s.index for s in a] != [s.index for s in b]
     assert [s.index for s in a] == [s.index for s in round_specs(specs, 12, 0, 0)]
+
+
+def test_family_weights_spread_a_round_in_proportion():
+    """Weights 2 for three families of six: 48 pairs as 5 / 5 / 5 / 11 / 11 / 11 (45 rounded
+    down, the three larger remainders 2/3 each take one more); equal weights are the even
+    spread itself, draw for draw; a family never gives more pairs than its pool holds."""
+    from lantern_jax.apps.dataset.scenes import SceneSpec
+
+    assert family_shares(48, [1, 1, 1, 2, 2, 2]) == [5, 5, 5, 11, 11, 11]
+    assert family_shares(13, [1.0] * 6) == [3, 2, 2, 2, 2, 2]
+    assert family_shares(7, [1, 3]) == [2, 5]  # 1.75 / 5.25: the larger remainder takes one
+    specs = [SceneSpec(i, FAMILIES[i % 6], "clear", {}, f"{i:064x}") for i in range(120)]
+    weights = parse_family_weights("LWW=2, RWW=2,RTY=2")
+    assert weights == {"LWW": 2.0, "RWW": 2.0, "RTY": 2.0}
+    got = pd.Series([s.family for s in round_specs(specs, 48, 0, 0, weights)]).value_counts()
+    assert got.to_dict() == {"PE": 5, "VC": 5, "OR": 5, "LWW": 11, "RWW": 11, "RTY": 11}
+    even = [s.index for s in round_specs(specs, 48, 3, 2)]
+    assert [s.index for s in round_specs(specs, 48, 3, 2, {f: 4.0 for f in FAMILIES})] == even
+    assert [s.index for s in round_specs(specs, 48, 3, 2, {})] == even
+    few = round_specs(specs, 48, 0, 0, {"PE": 100.0})  # PE's pool holds 20
+    assert sum(s.family == "PE" for s in few) == 20
+
+
+@pytest.mark.parametrize("text, match", [
+    ("LWW=0", "'LWW=0' is not FAMILY=WEIGHT"), ("XX=1", "'XX=1'"), ("LWW", "'LWW'"),
+    ("LWW=two", "'LWW=two'"), ("LWW=nan", "'LWW=nan'"), ("LWW=1,LWW=2", "LWW is given twice"),
+    ("LWW=1,", "'' is not"),
+])  # fmt: skip
+def test_bad_family_weights_are_refused_naming_the_entry(text, match, tmp_path):
+    with pytest.raises(ValueError, match=match):
+        parse_family_weights(text)
+    bad = tmp_path / "c.toml"
+    bad.write_text('[train]\nname = "x"\nrecipe = "closed_loop"\ninit_from = "m"\n'
+                   f'family_weights = "{text}"\n')  # fmt: skip
+    with pytest.raises(ConfigError, match="train.family_weights"):
+        load_config(bad)
 
 
 @pytest.mark.slow

@@ -49,7 +49,7 @@ from tqdm.auto import tqdm
 
 from lantern_jax.apps.dataset.scenes import PLAN_JSON, SceneSpec
 from lantern_jax.apps.dataset.store import dataset_provenance, load_frames, read_card
-from lantern_jax.apps.training.config import TrainConfig
+from lantern_jax.apps.training.config import TrainConfig, parse_family_weights
 from lantern_jax.apps.training.counterfactual import frame_counterfactuals
 from lantern_jax.apps.training.data import (
     Examples,
@@ -91,17 +91,38 @@ def plan_specs(dataset: str | Path) -> list[SceneSpec]:
         raise ValueError(f"{path}: no readable scene plan ({e!r})") from None
 
 
-def round_specs(specs: list[SceneSpec], n: int, seed: int, r: int) -> list[SceneSpec]:
-    """``n`` scene pairs for round ``r``, spread evenly over the families (seeded draw)."""
+def round_specs(
+    specs: list[SceneSpec], n: int, seed: int, r: int, weights: dict[str, float] | None = None
+) -> list[SceneSpec]:
+    """``n`` scene pairs for round ``r`` (seeded draw), spread over the families in proportion
+    to ``weights`` (family -> weight; a family not named weighs 1; ``None`` or every weight
+    equal: evenly, the first ``n % families`` families taking one more).
+
+    Shares are ``n * weight / total`` rounded down, the pairs left over going to the largest
+    remainders (ties to the earlier family of :data:`~lantern_jax.core.constants.FAMILIES`); a
+    family never gives more pairs than its pool holds."""
     rng = np.random.default_rng([seed, 7, r])
     by_family = {f: [s for s in specs if s.family == f] for f in FAMILIES}
     by_family = {f: v for f, v in by_family.items() if v}
+    takes = family_shares(n, [(weights or {}).get(f, 1.0) for f in by_family])
     out: list[SceneSpec] = []
-    for k, (_, pool) in enumerate(by_family.items()):
-        take = n // len(by_family) + (1 if k < n % len(by_family) else 0)
+    for take, pool in zip(takes, by_family.values(), strict=True):
         idx = rng.choice(len(pool), min(take, len(pool)), replace=False)
         out += [pool[i] for i in sorted(idx)]
     return out
+
+
+def family_shares(n: int, weights: list[float]) -> list[int]:
+    """``n`` split over families of ``weights`` (> 0): each ``n * w / sum`` rounded down, the
+    rest one each to the largest remainders, ties to the earlier family.  Equal weights give
+    ``n // k`` each and one more to the first ``n % k``."""
+    total = float(sum(weights))
+    exact = [n * w / total for w in weights]
+    takes = [int(np.floor(e + 1e-9)) for e in exact]
+    order = sorted(range(len(weights)), key=lambda k: (-(exact[k] - takes[k]), k))
+    for k in order[: n - sum(takes)]:
+        takes[k] += 1
+    return takes
 
 
 def _scene_batch(specs: list[SceneSpec]):
@@ -306,7 +327,8 @@ def train_closed_loop(cfg: TrainConfig, progress: bool = True) -> dict:
         if (folder / VISITS_NPZ).exists():
             new, counts = _load_examples(folder / VISITS_NPZ), {}
         else:
-            chosen = round_specs(specs, cfg.scenes_per_round, cfg.seed, r)
+            chosen = round_specs(specs, cfg.scenes_per_round, cfg.seed, r,
+                                     parse_family_weights(cfg.family_weights))
             new, counts = collect(cfg, model, data, chosen, r, progress)
             _save_examples(folder / VISITS_NPZ, new)
         visits.append(new)

@@ -48,6 +48,7 @@ from pathlib import Path
 from typing import Any
 
 from lantern_jax.apps.dataset.store import EXCLUDE_CROSSING
+from lantern_jax.core.constants import FAMILIES
 from lantern_jax.io.config_file import ConfigFileError, check_keys, read_table, typed_value
 from lantern_jax.policies.learned.features import RIGS
 from lantern_jax.policies.learned.model import TEXT_ENCODERS
@@ -106,6 +107,9 @@ class TrainConfig:
     # closed_loop (DAgger) only:
     rounds: int = 3  # collect-relabel-train rounds
     scenes_per_round: int = 96  # dataset-plan scene pairs driven per round (A and B each)
+    # how a round's scene pairs are spread over the families: "FAMILY=WEIGHT,..." (a family
+    # not named weighs 1; "": evenly); closed_loop.round_specs
+    family_weights: str = ""
     visit_every_s: float = 2.0  # s, simulated time between two relabelled visits
     max_seconds: float = 40.0  # s, visits are kept until this time of an execution
     beta: float = 0.5  # round 0: probability that the expert drives a segment between visits
@@ -249,6 +253,10 @@ def _range_problem(cfg: TrainConfig) -> tuple[str, str] | None:
         problems.append(("counterfactual_stated_share", "a share of the positions drawn where "
                          "true warnings state theirs: only with counterfactual_positions = "
                          "\"stated\""))  # fmt: skip
+    try:
+        parse_family_weights(cfg.family_weights)
+    except ValueError as e:
+        problems.append(("family_weights", str(e)))
     if cfg.rig not in RIGS:
         problems.append(("rig", f"{cfg.rig!r} not one of {', '.join(RIGS)}"))
     elif cfg.recipe == "surround" and cfg.rig != "surround":
@@ -261,3 +269,30 @@ def _range_problem(cfg: TrainConfig) -> tuple[str, str] | None:
     if cfg.width % cfg.heads:
         problems.append(("heads", f"{cfg.heads} does not divide width {cfg.width}"))
     return problems[0] if problems else None
+
+
+def parse_family_weights(text: str) -> dict[str, float]:
+    """``"LWW=2,RWW=2"`` -> ``{"LWW": 2.0, "RWW": 2.0}`` (the ``family_weights`` setting; ``""``:
+    no weights).
+
+    Raises:
+        ValueError: naming the entry that is not ``FAMILY=WEIGHT`` with a built-in family and a
+            finite weight > 0, or a family named twice.
+    """
+    out: dict[str, float] = {}
+    for entry in (e.strip() for e in text.split(",")):
+        if not entry and not text.strip():
+            continue
+        family, sep, value = entry.partition("=")
+        family = family.strip()
+        try:
+            weight = float(value) if sep else float("nan")
+        except ValueError:
+            weight = float("nan")
+        if family not in FAMILIES or not (math.isfinite(weight) and weight > 0):
+            raise ValueError(f"{entry!r} is not FAMILY=WEIGHT with FAMILY one of "
+                             f"{', '.join(FAMILIES)} and WEIGHT a number > 0")  # fmt: skip
+        if family in out:
+            raise ValueError(f"{family} is given twice")
+        out[family] = weight
+    return out
