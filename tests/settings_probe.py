@@ -29,9 +29,8 @@ from lantern_jax.core.constants import ROUTE_B, WARNING_CONDITION
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.suite import load_suite
 from lantern_jax.scoring.cus import soft_pair_cus
-from lantern_jax.sim.engine import build_executions, run_executions
+from lantern_jax.sim.engine import build_executions
 from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings
-from lantern_jax.sim.switch import reference_driver
 
 #: A pedestrian emergence (a warning the keyword rule does not act on), a right-turn yield (one
 #: it acts on, a light) and an Obstacle Reveal (cleared by the ego's stop): every change below
@@ -97,26 +96,24 @@ def probe_with(settings: Settings, params: Any = None) -> bytes:
     suite = load_suite().select(PAIRS)
     result = evaluate([coop], [params], suite=suite, progress=False, settings=settings)
     table = result.route_table.to_csv(index=False, float_format="%.9g").encode()
-    return table + b"\0" + _soft_cus(coop, params, suite, settings)
-
-
-def _soft_cus(policy, params, suite, settings: Settings) -> bytes:
-    a, b, d_safe = route_telemetry(policy, params, suite, settings)
+    tel_a, tel_b, d_safe = pair_telemetry(result.runs[0].telemetry, suite)
     soft = jax.vmap(lambda ta, tb, d: soft_pair_cus(ta, tb, d, settings=settings.scoring))
-    return np.asarray(soft(a, b, d_safe), np.float32).tobytes()
+    return table + b"\0" + np.asarray(soft(tel_a, tel_b, d_safe), np.float32).tobytes()
+
+
+def pair_telemetry(telemetry: Any, suite) -> tuple[Any, Any, Any]:
+    """Every pair's final telemetry of Route A with the warning and of Route B, and its
+    ``d_safe``, from an evaluation's telemetry of ``suite`` (:attr:`PolicyRun.telemetry`, in
+    the order of the evaluation's executions)."""
+    execs = build_executions(suite, bucket=True)
+    d_safe = execs.take(execs.scenarios.config.d_safe, WARNING_CONDITION)
+    return execs.take(telemetry, WARNING_CONDITION), execs.take(telemetry, ROUTE_B), d_safe
 
 
 def route_telemetry(policy, params, suite, settings: Settings) -> tuple[Any, Any, Any]:
-    """Every pair's final telemetry of Route A with the warning and of Route B, and its
-    ``d_safe``, from the evaluation's own batch and program (the reference switch, padded to
-    the suite's shape): what the route table reads, compiled once for every probe."""
-    execs = build_executions(suite, bucket=True)
-    driver, run_params = reference_driver(policy, params)
-    final, _ = run_executions(driver, execs.scenarios, run_params, execs.max_ticks, settings,
-                              pad_to=execs.pad_to)  # fmt: skip
-    tel = final.telemetry
-    d_safe = execs.take(execs.scenarios.config.d_safe, WARNING_CONDITION)
-    return execs.take(tel, WARNING_CONDITION), execs.take(tel, ROUTE_B), d_safe
+    """:func:`pair_telemetry` of ``policy``'s evaluation on ``suite`` under ``settings``."""
+    result = evaluate([policy], [params], suite=suite, progress=False, settings=settings)
+    return pair_telemetry(result.runs[0].telemetry, suite)
 
 
 def digest(data: bytes) -> str:

@@ -37,7 +37,7 @@ from lantern_jax.scoring.table import (
     schema_columns,
     validate_route_table,
 )
-from lantern_jax.sim.engine import SUITE_BATCH_SHAPE, batch_shape
+from lantern_jax.sim.engine import SUITE_BATCH_SHAPE, batch_shape, finalize_batch
 from lantern_jax.types.observation import warning_delivered
 
 PAIRS = ["pe_0001", "lww_0001"]  # v_ref 8.45 m/s and 6.29 m/s
@@ -220,6 +220,25 @@ def test_coop_gains_from_warnings(base):
     ft = base.family_table
     gain = ft[(ft["model"] == "coop") & (ft["condition"] == "warning gain")]
     assert float(gain["Overall"].iloc[0]) > 0.0
+
+
+def test_each_run_keeps_the_telemetry_its_metrics_were_read_from(base, suite2):
+    """``PolicyRun.telemetry`` is every execution's final telemetry: finalised, it gives the
+    run's metrics bit for bit; the soft score of a pair reads it without a second rollout and
+    is a CUS in [0, 100]."""
+    from lantern_jax.core.constants import ROUTE_B, WARNING_CONDITION
+    from lantern_jax.scoring.cus import soft_pair_cus
+
+    execs = build_executions(suite2, bucket=True)
+    for run in base.runs:
+        assert jax.tree.leaves(run.telemetry)[0].shape[0] == execs.num_executions
+        again = finalize_batch(run.telemetry)
+        for name, value in run.metrics.items():
+            np.testing.assert_array_equal(getattr(again, name), value, err_msg=name)
+        tel_a, tel_b = (execs.take(run.telemetry, c) for c in (WARNING_CONDITION, ROUTE_B))
+        d_safe = execs.take(execs.scenarios.config.d_safe, WARNING_CONDITION)
+        soft = np.asarray(jax.vmap(soft_pair_cus)(tel_a, tel_b, d_safe))
+        assert soft.shape == (len(suite2.pairs),) and np.all((soft >= 0) & (soft <= 100))
 
 
 # ---------------------------------------------------------------------------------------------

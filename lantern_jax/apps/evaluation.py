@@ -204,6 +204,7 @@ def run_policy(
         seconds_run=t2 - t0 - t_compile,
         timings=timings,
         program=str(chosen[-1]),
+        telemetry=jax.tree.map(np.asarray, final.telemetry),
     )
 
 

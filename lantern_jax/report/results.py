@@ -10,6 +10,7 @@ methods that write its files and its HTML report.
 from __future__ import annotations
 
 import dataclasses
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -32,6 +33,10 @@ class PolicyRun:
     timings: dict[str, float] = dataclasses.field(default_factory=dict)
     #: how it was rolled out and why (:class:`~lantern_jax.sim.engine.PathChoice` as text)
     program: str = ""
+    #: every execution's final :class:`~lantern_jax.scoring.telemetry.Telemetry` (NumPy, leading
+    #: axis Executions.num_executions; about 0.5 kB each): what the soft, differentiable score
+    #: reads (:func:`~lantern_jax.scoring.cus.soft_pair_cus`), so that it needs no second rollout
+    telemetry: Any = None
 
 
 @dataclasses.dataclass
