@@ -29,9 +29,13 @@ MODEL = "closed/learned-closed-loop-rig-bigram.msgpack"  # each chain's last sta
 #: ``CLOSED_CONFIG=configs/train_closed_loop_rig_bigram_<variant>.toml`` into
 #: ``runs/train/bigram_<variant>``.
 STATED_VARIANTS = {"stated": "all", "stated_half": "half", "stated_quarter": "a quarter",
-                   "stated_half_short": "half"}
+                   "stated_half_short": "half", "stated_half_short_hard": "half"}
 #: What else a variant's closed-loop stage changes, in words (its config says it in full).
-VARIANT_ROUNDS = {"stated_half_short": "fourteen closed-loop rounds of one epoch"}
+VARIANT_ROUNDS = {
+    "stated_half_short": "fourteen closed-loop rounds of one epoch",
+    "stated_half_short_hard": "fourteen closed-loop rounds of one epoch, each round's pairs "
+                              "weighted to LWW, RWW and RTY",
+}
 
 
 def member_paths(runs: str | Path = RUNS, model: str = MODEL,
@@ -127,6 +131,12 @@ def bigram_stated_half_short_ensemble() -> Policy:
 def bigram_stated_half_short_median_ensemble() -> Policy:
     """Those three seeds joined by the median of their plans."""
     return stated_variant_ensemble("stated_half_short", combine="median")
+
+
+def bigram_stated_half_short_hard_ensemble() -> Policy:
+    """As :func:`bigram_stated_half_short_ensemble`, each round driving 11 pairs of LWW, RWW
+    and RTY and 5 of the other families (``family_weights``)."""
+    return stated_variant_ensemble("stated_half_short_hard")
 
 
 def bigram_stated_half_short_s345_ensemble() -> Policy:

@@ -288,6 +288,12 @@ def test_each_stated_variant_ensemble_reads_what_its_config_trains():
     short = tomllib.loads((root / "configs" / "train_closed_loop_rig_bigram_stated_half_short.toml")
                           .read_text())["train"]  # fmt: skip
     assert (short["rounds"], short["epochs"]) == (14, 1)
+    hard = tomllib.loads((root / "configs" /
+                          "train_closed_loop_rig_bigram_stated_half_short_hard.toml").read_text())
+    hard = hard["train"]  # the short recipe with its rounds weighted, nothing else changed
+    same = {k: v for k, v in hard.items() if k not in ("name", "out", "family_weights")}
+    assert same == {k: v for k, v in short.items() if k not in ("name", "out")}
+    assert hard["family_weights"] == "LWW=2,RWW=2,RTY=2"
     with pytest.raises(KeyError):
         mod.stated_variant_ensemble("stated_tenth")
     # another seed set: its own folder, members and name (the loading stood in for)
