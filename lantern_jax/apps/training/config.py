@@ -20,6 +20,8 @@ carries — the paper's three learned rows:
   an empty text, with the ordinary trajectory; ``distractors`` of them a training-only negated
   or irrelevant sentence that states a position instead, drawn from the set
   ``distractor_texts`` names; :mod:`lantern_jax.apps.training.counterfactual`).
+  ``family_weights`` spreads each round's scene pairs over the families in proportion to
+  their weights (``"LWW=2,RWW=2"``; evenly when empty).
   With ``failure_window_s > 0`` each round also keeps the visits of the last seconds before
   every collision of the driven executions, every ``failure_every_s`` (recovery states).
   With ``no_warning > 0`` that share of each round's pairs also drives Route A without its
