@@ -139,6 +139,11 @@ def bigram_stated_half_short_hard_ensemble() -> Policy:
     return stated_variant_ensemble("stated_half_short_hard")
 
 
+def bigram_stated_half_short_hard_s345_ensemble() -> Policy:
+    """:func:`bigram_stated_half_short_hard_ensemble` of the second seed set (3, 4, 5)."""
+    return stated_variant_ensemble("stated_half_short_hard", seeds=(3, 4, 5))
+
+
 def bigram_stated_half_short_s345_ensemble() -> Policy:
     """The same recipe's second, independent set of seeds (3, 4, 5)."""
     return stated_variant_ensemble("stated_half_short", seeds=(3, 4, 5))
