@@ -328,7 +328,7 @@ def train_closed_loop(cfg: TrainConfig, progress: bool = True) -> dict:
             new, counts = _load_examples(folder / VISITS_NPZ), {}
         else:
             chosen = round_specs(specs, cfg.scenes_per_round, cfg.seed, r,
-                                     parse_family_weights(cfg.family_weights))
+                                 parse_family_weights(cfg.family_weights))
             new, counts = collect(cfg, model, data, chosen, r, progress)
             _save_examples(folder / VISITS_NPZ, new)
         visits.append(new)
