@@ -189,7 +189,8 @@ def run_policy(
     if stage is not None:
         stage("scoring")
     t2 = time.perf_counter()
-    m_struct = finalize_batch(final.telemetry, settings)
+    telemetry = jax.tree.map(np.asarray, final.telemetry)  # read back once, kept in the run
+    m_struct = finalize_batch(telemetry, settings)
     proto = jax.tree.map(np.asarray, final.protocol)
     proto = {f.name: getattr(proto, f.name) for f in dataclasses.fields(proto)}
     table = _route_rows(m_struct, proto, execs, model or pol.name, settings)
@@ -204,7 +205,7 @@ def run_policy(
         seconds_run=t2 - t0 - t_compile,
         timings=timings,
         program=str(chosen[-1]),
-        telemetry=jax.tree.map(np.asarray, final.telemetry),
+        telemetry=telemetry,
     )
 
 

@@ -282,9 +282,9 @@ def parse_family_weights(text: str) -> dict[str, float]:
             finite weight > 0, or a family named twice.
     """
     out: dict[str, float] = {}
+    if not text.strip():
+        return out
     for entry in (e.strip() for e in text.split(",")):
-        if not entry and not text.strip():
-            continue
         family, sep, value = entry.partition("=")
         family = family.strip()
         try:
