@@ -548,3 +548,21 @@ def test_surround_rig_reads_the_simulators_360_degree_view(tmp_path):
                  pol.init(None).nav_tokens))  # fmt: skip
     final, _ = jax.jit(lambda w: rollout(w, pol, pol.init(None), 40))(world)
     assert np.isfinite(np.asarray(final.ego.xy)).all() and float(final.t) > 0
+
+
+def test_an_epochs_batches_form_groups_of_steps_the_last_one_padded():
+    """Batches in order, :data:`~lantern_jax.apps.training.fit.STEPS_PER_CALL` to a group; the
+    last group repeats the epoch's last batch in rows marked not valid; batches of different
+    sizes are refused (one program serves every group)."""
+    from lantern_jax.apps.training.fit import step_groups
+
+    batches = [np.arange(3 * k, 3 * k + 3) for k in range(7)]
+    groups = step_groups(batches, 3)
+    assert [g.idx.shape for g in groups] == [(3, 3)] * 3
+    np.testing.assert_array_equal(np.concatenate([g.idx for g in groups])[:7], np.stack(batches))
+    assert [g.valid.tolist() for g in groups] == [[True] * 3, [True] * 3, [True, False, False]]
+    np.testing.assert_array_equal(groups[-1].idx[1:], np.stack([batches[-1]] * 2))
+    assert [g.steps for g in groups] == [3, 3, 1] and sum(g.examples for g in groups) == 21
+    assert step_groups([], 3) == []
+    with pytest.raises(ValueError, match="sizes"):
+        step_groups([np.arange(3), np.arange(2)], 3)

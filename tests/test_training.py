@@ -136,3 +136,31 @@ def test_surround_recipe_trains_on_the_rig_and_drives(dataset, tmp_path):
     pairs = load_suite().select(["pe_0001", "vc_0001"])
     res = evaluate([pol], suite=pairs, progress=False, path="split")
     assert np.isfinite(res.route_table["CUS"]).all() and len(res.route_table) == 4
+
+
+def test_steps_in_groups_give_the_weights_of_one_step_per_call(dataset, tmp_path, monkeypatch):
+    """Training runs :data:`~lantern_jax.apps.training.fit.STEPS_PER_CALL` steps per compiled
+    call, the epoch's last group padded with steps that change nothing: the exported weights
+    and every epoch's losses are the bits of one step per call (two epochs, a padded group in
+    each)."""
+    from lantern_jax.apps.training import fit
+
+    cfg = tiny(dataset, tmp_path / "grouped", epochs=2, batch_size=48)
+    per_epoch = len(fit.Batches(*_train_split(dataset, cfg), cfg).epoch(0))
+    assert per_epoch % fit.STEPS_PER_CALL != 0, per_epoch  # the last group is padded
+    grouped = train(cfg, progress=False)
+    monkeypatch.setattr(fit, "STEPS_PER_CALL", 1)
+    single = train(dataclasses.replace(cfg, out=str(tmp_path / "single")), progress=False)
+    sha = [read_meta(tmp_path / d / "learned-tiny")["params_sha256"] for d in ("grouped", "single")]
+    assert sha[0] == sha[1]
+    curves = [pd.read_csv(tmp_path / d / "curve.csv") for d in ("grouped", "single")]
+    for column in ("train_l1_m", "val_l1_m"):
+        np.testing.assert_array_equal(curves[0][column], curves[1][column])
+    assert grouped["frames_per_s"] > 0 and single["best_val_l1_m"] == grouped["best_val_l1_m"]
+
+
+def _train_split(dataset, cfg: TrainConfig):
+    """(examples, training indices) of a base-recipe config, as ``train`` builds them."""
+    frames = load_frames(dataset, exclude_crossing=cfg.exclude_crossing)
+    ex = recipe_examples(frames, read_card(dataset), cfg)
+    return ex, split_by_sequence(ex, cfg.val_fraction, cfg.seed)[0]

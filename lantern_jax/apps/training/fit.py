@@ -78,6 +78,52 @@ def make_loss(graphdef: Any, rig: str):
     return loss
 
 
+#: Training steps per compiled call.  A group's steps run in order inside one program (a
+#: ``lax.scan`` of the step), so the host's work around a call -- dispatching it with the
+#: parameters', the optimiser's and the batch's arrays, reading the loss back -- is paid once
+#: per group, and the next group's batches are gathered while this one runs.  The weights are
+#: the bits one call per step gave (``tests/test_training.py``); a closed-loop round's training
+#: loop about a tenth shorter on a 2-core CPU (docs/performance.md, "Eight steps a call").
+STEPS_PER_CALL = 8
+
+
+@dataclasses.dataclass(frozen=True)
+class StepGroup:
+    """The batches of consecutive training steps run by one call (:func:`step_groups`)."""
+
+    idx: np.ndarray  # (size, batch) int, example indices, one row per step
+    valid: np.ndarray  # (size,) bool, False for the rows that pad the epoch's last group
+
+    @property
+    def steps(self) -> int:
+        """The group's real steps."""
+        return int(self.valid.sum())
+
+    @property
+    def examples(self) -> int:
+        """Examples its real steps train on."""
+        return self.steps * int(self.idx.shape[1])
+
+
+def step_groups(batches: list[np.ndarray], size: int) -> list[StepGroup]:
+    """An epoch's batches (equal-sized index arrays, in order) as groups of ``size`` steps; the
+    last group is padded with copies of the epoch's last batch, marked not ``valid``.
+
+    Raises:
+        ValueError: for batches of different sizes (one compiled program serves every group).
+    """
+    if len({len(b) for b in batches}) > 1:
+        raise ValueError(f"step_groups: batches of sizes {sorted({len(b) for b in batches})}; "
+                         "a group's batches must be equal-sized")  # fmt: skip
+    groups = []
+    for k in range(0, len(batches), size):
+        part = list(batches[k : k + size])
+        valid = np.arange(size) < len(part)
+        part += [part[-1]] * (size - len(part))
+        groups.append(StepGroup(np.stack(part), valid))
+    return groups
+
+
 class Batches:
     """Seeded mini-batches of training indices: every batch draws ``base_mix`` of its rows from
     the ordinary-driving frames (coop, distance, closed_loop) and ``pools``' shares from their
@@ -119,7 +165,8 @@ def fit(cfg: TrainConfig, model: Any, ex: Examples, batches: Batches, val_idx: n
         out: Path, progress: bool = True, info: dict | None = None) -> dict:  # fmt: skip
     """``cfg.epochs`` epochs of ``model`` on the batches of ``ex``, checkpointed in ``out``
     (a rerun resumes from the latest epoch); exports the best model (validation L1 on
-    ``val_idx``) as ``out/<name>.msgpack`` with ``info`` added to its description.
+    ``val_idx``) as ``out/<name>.msgpack`` with ``info`` added to its description.  Runs
+    :data:`STEPS_PER_CALL` steps per compiled call (:func:`step_groups`).
 
     Returns:
         The run's summary (best validation L1 in m and its epoch, examples, frames/s, path).
@@ -157,13 +204,30 @@ def fit(cfg: TrainConfig, model: Any, ex: Examples, batches: Batches, val_idx: n
         vocab = jnp.asarray(text_vocabulary(ex.obs["warning_tokens"], np.asarray(nav)))
 
     @jax.jit
-    def step_with(params, opt_state, obs, targets, embedding, nav, vocab):
-        value, grads = jax.value_and_grad(loss_fn)(params, obs, targets, embedding, nav, vocab)
-        updates, opt_state = tx.update(grads, opt_state, params)
-        return optax.apply_updates(params, updates), opt_state, value
+    def steps_with(params, opt_state, obs, targets, valid, embedding, nav, vocab):
+        """``valid.shape[0]`` training steps in order (``obs`` and ``targets`` one batch per
+        step along their leading axis); a step whose ``valid`` is False leaves the parameters
+        and the optimiser's state as they were.  Returns them and each step's loss."""
 
-    def step(params, opt_state, obs, targets):
-        return step_with(params, opt_state, obs, targets, embedding, nav, vocab)
+        def one(carry, batch):
+            p, o = carry
+            ob, tg, ok = batch
+            value, grads = jax.value_and_grad(loss_fn)(p, ob, tg, embedding, nav, vocab)
+            updates, o_next = tx.update(grads, o, p)
+            p_next = optax.apply_updates(p, updates)
+            kept = (jax.tree.map(lambda a, b: jnp.where(ok, a, b), new, old)
+                    for new, old in ((p_next, p), (o_next, o)))  # fmt: skip
+            return tuple(kept), value
+
+        (params, opt_state), values = jax.lax.scan(one, (params, opt_state), (obs, targets, valid))
+        return params, opt_state, values
+
+    def steps(params, opt_state, group: StepGroup):  # gathers the group's batches, sends them
+        b = ex.take(group.idx.reshape(-1))
+        k = group.idx.shape[0]
+        obs = {name: v.reshape(k, -1, *v.shape[1:]) for name, v in b.obs.items()}
+        targets = b.targets.reshape(k, -1, *b.targets.shape[1:])
+        return steps_with(params, opt_state, obs, targets, group.valid, embedding, nav, vocab)
 
     val_loss_with = jax.jit(loss_fn)
 
@@ -183,15 +247,16 @@ def fit(cfg: TrainConfig, model: Any, ex: Examples, batches: Batches, val_idx: n
     t_start, seen = time.perf_counter(), 0
     bar = _progress(progress, cfg, start * per_epoch, steps)
     for e in range(start, cfg.epochs):
-        losses = []
-        for idx in batches.epoch(e):
-            b = ex.take(idx)
-            params, opt_state, value = step(params, opt_state, b.obs, jnp.asarray(b.targets))
-            losses.append(float(value))
-            seen += len(idx)
-            if bar is not None:
-                bar.set_postfix_str(f"epoch {e} loss {np.mean(losses[-50:]):.3f} m")
-                bar.update(1)
+        losses: list[float] = []
+        pending = None  # the group sent last: its losses are read once the next one is sent
+        for group in step_groups(batches.epoch(e), STEPS_PER_CALL):
+            params, opt_state, values = steps(params, opt_state, group)
+            seen += group.examples
+            if pending is not None:
+                _read_losses(*pending, losses, bar, e)
+            pending = (values, group)
+        if pending is not None:
+            _read_losses(*pending, losses, bar, e)
         val = _evaluate(val_loss_fn, params, ex, val_idx, cfg.batch_size)
         train_l1 = float(np.mean(losses)) if losses else np.nan
         elapsed = round(time.perf_counter() - t_start, 1)
@@ -216,6 +281,15 @@ def fit(cfg: TrainConfig, model: Any, ex: Examples, batches: Batches, val_idx: n
                 train_examples=int(len(batches.train_idx)), val_examples=int(len(val_idx)),
                 frames_per_s=seen / max(elapsed, 1e-9), seconds=elapsed,
                 model=str(out / f"{cfg.name}.msgpack"))  # fmt: skip
+
+
+def _read_losses(values: Any, group: StepGroup, losses: list[float], bar, epoch: int) -> None:
+    """Append a group's real steps' losses (``values`` (STEPS_PER_CALL,), m) to ``losses`` and
+    advance the progress bar by its steps."""
+    losses.extend(np.asarray(values)[group.valid].tolist())
+    if bar is not None:
+        bar.set_postfix_str(f"epoch {epoch} loss {np.mean(losses[-50:]):.3f} m")
+        bar.update(group.steps)
 
 
 def _evaluate(loss_fn, params, ex: Examples, idx: np.ndarray, batch_size: int) -> float:
