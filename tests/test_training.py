@@ -138,7 +138,8 @@ def test_surround_recipe_trains_on_the_rig_and_drives(dataset, tmp_path):
     assert np.isfinite(res.route_table["CUS"]).all() and len(res.route_table) == 4
 
 
-def test_steps_in_groups_give_the_weights_of_one_step_per_call(dataset, tmp_path, monkeypatch):
+def test_steps_in_groups_give_the_weights_of_one_step_per_call(dataset, tmp_path, monkeypatch,
+                                                                 capsys):
     """Training runs :data:`~lantern_jax.apps.training.fit.STEPS_PER_CALL` steps per compiled
     call, the epoch's last group padded with steps that change nothing: the exported weights
     and every epoch's losses are the bits of one step per call (two epochs, a padded group in
@@ -148,7 +149,8 @@ def test_steps_in_groups_give_the_weights_of_one_step_per_call(dataset, tmp_path
     cfg = tiny(dataset, tmp_path / "grouped", epochs=2, batch_size=48)
     per_epoch = len(fit.Batches(*_train_split(dataset, cfg), cfg).epoch(0))
     assert per_epoch % fit.STEPS_PER_CALL != 0, per_epoch  # the last group is padded
-    grouped = train(cfg, progress=False)
+    grouped = train(cfg, progress=True)  # the bar counts every real step
+    assert f"{2 * per_epoch}/{2 * per_epoch}" in capsys.readouterr().err
     monkeypatch.setattr(fit, "STEPS_PER_CALL", 1)
     single = train(dataclasses.replace(cfg, out=str(tmp_path / "single")), progress=False)
     sha = [read_meta(tmp_path / d / "learned-tiny")["params_sha256"] for d in ("grouped", "single")]

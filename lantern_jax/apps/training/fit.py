@@ -222,7 +222,7 @@ def fit(cfg: TrainConfig, model: Any, ex: Examples, batches: Batches, val_idx: n
         (params, opt_state), values = jax.lax.scan(one, (params, opt_state), (obs, targets, valid))
         return params, opt_state, values
 
-    def steps(params, opt_state, group: StepGroup):  # gathers the group's batches, sends them
+    def run_group(params, opt_state, group: StepGroup):  # gathers its batches, sends them
         b = ex.take(group.idx.reshape(-1))
         k = group.idx.shape[0]
         obs = {name: v.reshape(k, -1, *v.shape[1:]) for name, v in b.obs.items()}
@@ -250,7 +250,7 @@ def fit(cfg: TrainConfig, model: Any, ex: Examples, batches: Batches, val_idx: n
         losses: list[float] = []
         pending = None  # the group sent last: its losses are read once the next one is sent
         for group in step_groups(batches.epoch(e), STEPS_PER_CALL):
-            params, opt_state, values = steps(params, opt_state, group)
+            params, opt_state, values = run_group(params, opt_state, group)
             seen += group.examples
             if pending is not None:
                 _read_losses(*pending, losses, bar, e)
