@@ -9,6 +9,14 @@
 #   CLOSED_CONFIG=configs/train_closed_loop_rig_bigram_stated.toml \
 #       bash examples/train_bigram_ensemble.sh runs/train/bigram_stated
 #
+# BASE_CONFIG and DISTANCE_CONFIG name the first two stages' configs (default the bigram rig's),
+# e.g. the model whose actors are pooled by their mean and largest values, all three stages:
+#
+#   BASE_CONFIG=configs/train_base_rig_bigram_max.toml \
+#   DISTANCE_CONFIG=configs/train_distance_onset_only_rig_bigram_max.toml \
+#   CLOSED_CONFIG=configs/train_closed_loop_rig_bigram_stated_half_short_max.toml \
+#       bash examples/train_bigram_ensemble.sh runs/train/bigram_max
+#
 # SEEDS names the seeds (default "0 1 2"), e.g. a second, independent set of three chains:
 #
 #   SEEDS="3 4 5" bash examples/train_bigram_ensemble.sh runs/train/bigram_ensemble_s345
@@ -26,23 +34,32 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=${1:-runs/train/bigram_ensemble}
+BASE_CONFIG=${BASE_CONFIG:-configs/train_base_rig_bigram.toml}
+DISTANCE_CONFIG=${DISTANCE_CONFIG:-configs/train_distance_onset_only_rig_bigram.toml}
 CLOSED_CONFIG=${CLOSED_CONFIG:-configs/train_closed_loop_rig_bigram.toml}
 read -r -a SEED_LIST <<< "${SEEDS:-0 1 2}"
-# the closed-loop stage exports its model under the name its config gives
-CLOSED_NAME=$(sed -n 's/^name *= *"\(.*\)"/\1/p' "$CLOSED_CONFIG")
-[ -n "$CLOSED_NAME" ] || { echo "train_bigram_ensemble: no name in $CLOSED_CONFIG" >&2; exit 2; }
+
+config_name() {  # each stage exports its model under the name its config gives
+  local name
+  name=$(sed -n 's/^name *= *"\(.*\)"/\1/p' "$1")
+  [ -n "$name" ] || { echo "train_bigram_ensemble: no name in $1" >&2; return 2; }
+  echo "$name"
+}
+BASE_NAME=$(config_name "$BASE_CONFIG")
+DISTANCE_NAME=$(config_name "$DISTANCE_CONFIG")
+CLOSED_NAME=$(config_name "$CLOSED_CONFIG")
 mkdir -p "$OUT"
 
 chain() {  # one seed's three stages, each from the previous one's exported model
   local seed=$1 d="$OUT/bigram_s$1"
-  .venv/bin/lantern-jax train --config configs/train_base_rig_bigram.toml --seed "$seed" \
+  .venv/bin/lantern-jax train --config "$BASE_CONFIG" --seed "$seed" \
       --out "$d/base" --quiet &&
-  .venv/bin/lantern-jax train --config configs/train_distance_onset_only_rig_bigram.toml \
+  .venv/bin/lantern-jax train --config "$DISTANCE_CONFIG" \
       --seed "$seed" --out "$d/distance" \
-      --init-from "$d/base/learned-base-rig-bigram.msgpack" --quiet &&
+      --init-from "$d/base/$BASE_NAME.msgpack" --quiet &&
   .venv/bin/lantern-jax train --config "$CLOSED_CONFIG" \
       --seed "$seed" --out "$d/closed" \
-      --init-from "$d/distance/learned-distance-onset-only-rig-bigram.msgpack" --quiet
+      --init-from "$d/distance/$DISTANCE_NAME.msgpack" --quiet
 }
 
 pids=()

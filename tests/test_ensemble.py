@@ -196,9 +196,9 @@ def test_the_example_ensemble_file_averages_the_three_chains_it_names(tmp_path, 
         load_policy_source(f"{root}/examples/bigram_ensemble.py:bigram_ensemble")
     script = root / "examples" / "train_bigram_ensemble.sh"
     assert subprocess.run(["bash", "-n", str(script)], check=False).returncode == 0
-    configs = set(re.findall(r"configs/\S+\.toml", script.read_text()))  # the three stages'
-    #                                      and the variant CLOSED_CONFIG its comment names
-    assert len(configs) == 4 and all((root / c).is_file() for c in configs), configs
+    configs = set(re.findall(r"configs/\S+\.toml", script.read_text()))  # the three stages',
+    #               the variant CLOSED_CONFIG its comment names and the max-pooled chain's three
+    assert len(configs) == 7 and all((root / c).is_file() for c in configs), configs
 
 
 def test_the_training_script_runs_each_seeds_stages_in_order_and_names_a_failed_seed(tmp_path):
@@ -252,6 +252,23 @@ def test_the_training_script_runs_each_seeds_stages_in_order_and_names_a_failed_
         f"out/bigram_s{s}/closed/learned-closed-loop-rig-bigram-stated-half-short.msgpack"
         for s in (3, 4, 5)]
     assert (tmp_path / f"calls.{Path(variant).name}.4").is_file()
+    # every stage's config given: each stage starts from the export its previous config names
+    stages = ("train_base_rig_bigram_max.toml", "train_distance_onset_only_rig_bigram_max.toml",
+              "train_closed_loop_rig_bigram_stated_half_short_max.toml")  # fmt: skip
+    pooled = run("none", SEEDS="7", **dict(zip(
+        ("BASE_CONFIG", "DISTANCE_CONFIG", "CLOSED_CONFIG"), (f"configs/{c}" for c in stages),
+        strict=True)))  # fmt: skip
+    assert pooled.returncode == 0, pooled.stderr
+    assert pooled.stdout.split() == [
+        "out/bigram_s7/closed/learned-closed-loop-rig-bigram-stated-half-short-max.msgpack"]
+    calls = [(tmp_path / f"calls.{c}.7").read_text().split() for c in stages]
+    assert [c[c.index("--init-from") + 1] for c in calls[1:]] == [
+        "out/bigram_s7/base/learned-base-rig-bigram-max.msgpack",
+        "out/bigram_s7/distance/learned-distance-onset-only-rig-bigram-max.msgpack"]
+    nameless = tmp_path / "configs" / "nameless.toml"
+    nameless.write_text("[train]\nrecipe = 'base'\n")
+    refused = run("none", BASE_CONFIG=str(nameless))
+    assert refused.returncode != 0 and "no name in" in refused.stderr
     failed = run("4", SEEDS="3 4 5")
     assert failed.returncode == 1 and "seed 4 failed; see out/bigram_s4.log" in failed.stderr
 
@@ -294,6 +311,18 @@ def test_each_stated_variant_ensemble_reads_what_its_config_trains():
     same = {k: v for k, v in hard.items() if k not in ("name", "out", "family_weights")}
     assert same == {k: v for k, v in short.items() if k not in ("name", "out")}
     assert hard["family_weights"] == "LWW=2,RWW=2,RTY=2"
+    # the max-pooled chain: each stage its bigram twin's config but the pooling and its names
+    for plain, maxed in (("train_base_rig_bigram", "train_base_rig_bigram_max"),
+                         ("train_distance_onset_only_rig_bigram",
+                          "train_distance_onset_only_rig_bigram_max"),
+                         ("train_closed_loop_rig_bigram_stated_half_short",
+                          "train_closed_loop_rig_bigram_stated_half_short_max")):  # fmt: skip
+        one, two = (tomllib.loads((root / "configs" / f"{c}.toml").read_text())["train"]
+                    for c in (plain, maxed))  # fmt: skip
+        named = ("name", "out", "init_from", "object_pool")
+        assert {k: v for k, v in two.items() if k not in named} == {
+            k: v for k, v in one.items() if k not in named}, maxed
+        assert two["object_pool"] == "mean_max" and two["name"] == one["name"] + "-max"
     with pytest.raises(KeyError):
         mod.stated_variant_ensemble("stated_tenth")
     # another seed set: its own folder, members and name (the loading stood in for)

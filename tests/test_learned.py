@@ -274,20 +274,72 @@ def test_a_description_written_before_the_text_encoder_loads_as_pooled(saved):
 
     meta = json.loads(saved.with_suffix(".json").read_text())
     del meta["config"]["text_encoder"], meta["config"]["text_layers"]
+    del meta["config"]["object_pool"]  # a later field still: the mean of that time
     meta["sha256"] = description_hash(meta)
     saved.with_suffix(".json").write_text(json.dumps(meta))
     assert load_model(saved, expect=SMALL).config == SMALL
 
 
-def test_an_unknown_text_encoder_is_refused(saved):
+@pytest.mark.parametrize("field, value", [("text_encoder", "lstm"), ("object_pool", "max")])
+def test_an_unknown_text_encoder_or_object_pool_is_refused(saved, field, value):
     from lantern_jax.policies.learned.checkpoint import description_hash
 
     meta = json.loads(saved.with_suffix(".json").read_text())
-    meta["config"]["text_encoder"] = "lstm"
+    meta["config"][field] = value
     meta["sha256"] = description_hash(meta)
     saved.with_suffix(".json").write_text(json.dumps(meta))
-    with pytest.raises(CheckpointError, match=r"config\.text_encoder: 'lstm' not one of"):
+    with pytest.raises(CheckpointError, match=rf"config\.{field}: '{value}' not one of"):
         load_model(saved)
+
+
+def test_masked_max_takes_each_features_largest_seen_value():
+    """Hand-built tokens: each column's maximum over the seen rows, a hidden row's larger
+    values ignored, zeros when nothing is seen; the gradient reaches only the maximum's row."""
+    from lantern_jax.policies.learned.model import _masked_max
+
+    tokens = jnp.asarray([[1.0, -4.0, 0.5], [3.0, -2.0, 0.25], [9.0, 9.0, 9.0]])  # (3, 3)
+    mask = jnp.asarray([True, True, False])
+    np.testing.assert_array_equal(np.asarray(_masked_max(tokens, mask)), [3.0, -2.0, 0.5])
+    np.testing.assert_array_equal(np.asarray(_masked_max(tokens, jnp.zeros(3, bool))), 0.0)
+    grad = np.asarray(jax.grad(lambda t: jnp.sum(_masked_max(t, mask)))(tokens))
+    np.testing.assert_array_equal(grad, [[0, 0, 1], [1, 1, 0], [0, 0, 0]])
+    assert np.all(np.isfinite(np.asarray(jax.grad(
+        lambda t: jnp.sum(_masked_max(t, jnp.zeros(3, bool))))(tokens))))  # fmt: skip
+
+
+def test_mean_max_pooling_reads_one_actor_and_ignores_unseen_slots(obs, tables, tmp_path):
+    """``object_pool = "mean_max"``: a training config's setting reaches the architecture and
+    its checkpoint (a mean-pooled expectation refuses it); the plan does not depend on what an
+    unseen actor slot holds (the padding invariance of the mean pool kept), the trunk's input
+    is wider by the max, and gradients reach the new weights (finite, non-zero)."""
+    from lantern_jax.apps.training.config import TrainConfig
+    from lantern_jax.apps.training.fit import model_config
+
+    trained = TrainConfig(name="x", recipe="base", width=16, heads=2, object_pool="mean_max")
+    maxed = model_config(trained, ranges=SMALL.ranges)
+    assert maxed == ModelConfig(width=16, heads=2, object_pool="mean_max")
+    model = new_model(maxed, seed=5)
+    save_model(model, tmp_path / "maxed")
+    assert load_model(tmp_path / "maxed", expect=maxed).config == maxed
+    with pytest.raises(CheckpointError, match="object_pool"):
+        load_model(tmp_path / "maxed", expect=SMALL)
+    assert model.trunk.layers[0].kernel.shape[0] == 4 * 16
+    assert new_model(SMALL, seed=5).trunk.layers[0].kernel.shape[0] == 3 * 16
+    f = features(obs, "front", *tables)
+    slots, width = f.objects.shape  # three actors seen, drawn at random; the rest unseen
+    seen = jax.random.normal(jax.random.PRNGKey(1), (slots, width))
+    f = f.replace(objects=seen, mask=jnp.arange(slots) < 3)
+    hidden = jnp.where(f.mask[:, None], f.objects, 1e3)  # junk in every unseen slot
+    np.testing.assert_allclose(np.asarray(model(f.replace(objects=hidden))),
+                               np.asarray(model(f)), rtol=1e-6, atol=1e-6)  # fmt: skip
+    graphdef, params = nnx.split(model, nnx.Param)
+
+    def loss(p):
+        return jnp.sum(nnx.merge(graphdef, p)(f) ** 2)
+
+    g = nnx.State(jax.grad(loss)(params))
+    kernel = np.asarray(g["trunk"]["layers"][0]["kernel"][...])
+    assert np.all(np.isfinite(kernel)) and np.abs(kernel[16:32]).max() > 0.0  # the max's rows
 
 
 def test_policy_act_is_pure_and_batchable(obs, tables):
@@ -460,6 +512,10 @@ def write(tmp_path, text: str):
             r"train\.text_encoder: the surround recipe reads no text",
         ),
         ("[train]\nname = 'x'\nrecipe = 'base'\ntext_layers = 0\n", r"train\.text_layers"),
+        (
+            "[train]\nname = 'x'\nrecipe = 'base'\nobject_pool = 'max'\n",
+            r"train\.object_pool: 'max' not one of mean, mean_max",
+        ),
         (
             "[train]\nname = 'x'\nrecipe = 'base'\ncounterfactual_stated_share = 1.5\n",
             r"train\.counterfactual_stated_share: must be in \[0, 1\], got 1\.5",

@@ -33,7 +33,8 @@ carries — the paper's three learned rows:
 
 The text encoder (``text_encoder``) is the pooled bag of words unless given; ``"attention"``
 reads the words in order, ``"bigram"`` which word follows which
-(:mod:`lantern_jax.policies.learned.model`).  A model fine-tuned from
+(:mod:`lantern_jax.policies.learned.model`).  The seen actors' tokens are pooled by their mean
+unless ``object_pool = "mean_max"`` adds each feature's largest value.  A model fine-tuned from
 ``init_from`` must have the architecture of that checkpoint.
 
 The camera rig (``rig``) is the recipe's own unless given: the six-camera rig for ``surround``,
@@ -53,7 +54,7 @@ from lantern_jax.apps.dataset.store import EXCLUDE_CROSSING
 from lantern_jax.core.constants import FAMILIES
 from lantern_jax.io.config_file import ConfigFileError, check_keys, read_table, typed_value
 from lantern_jax.policies.learned.features import RIGS
-from lantern_jax.policies.learned.model import TEXT_ENCODERS
+from lantern_jax.policies.learned.model import OBJECT_POOLS, TEXT_ENCODERS
 from lantern_jax.policies.names import name_problem
 from lantern_jax.scenarios.warning_texts import DISTRACTOR_SETS
 
@@ -95,6 +96,9 @@ class TrainConfig:
     # or "bigram" (every ordered pair of adjacent words)
     text_encoder: str = "pooled"
     text_layers: int = 1
+    # how the seen actors' tokens are pooled (policies.learned.model.OBJECT_POOLS): "mean", or
+    # "mean_max" (the mean beside each feature's largest value, so one actor can set a feature)
+    object_pool: str = "mean"
     epochs: int = 6
     batch_size: int = 256
     lr: float = 1e-3  # peak learning rate (one-cycle: warm-up then cosine decay)
@@ -268,6 +272,9 @@ def _range_problem(cfg: TrainConfig) -> tuple[str, str] | None:
                                          f"{', '.join(TEXT_ENCODERS)}"))  # fmt: skip
     elif cfg.text_encoder != "pooled" and not cfg.language:
         problems.append(("text_encoder", f"the {cfg.recipe} recipe reads no text; leave it out"))
+    if cfg.object_pool not in OBJECT_POOLS:
+        problems.append(("object_pool", f"{cfg.object_pool!r} not one of "
+                                        f"{', '.join(OBJECT_POOLS)}"))  # fmt: skip
     if cfg.width % cfg.heads:
         problems.append(("heads", f"{cfg.heads} does not divide width {cfg.width}"))
     return problems[0] if problems else None

@@ -36,7 +36,7 @@ def model_config(cfg: TrainConfig, ranges: int) -> ModelConfig:
     """The architecture a training config asks for."""
     return ModelConfig(rig=cfg.rig, language=cfg.language, width=cfg.width, heads=cfg.heads,
                        layers=cfg.layers, ranges=ranges, text_encoder=cfg.text_encoder,
-                       text_layers=cfg.text_layers)  # fmt: skip
+                       text_layers=cfg.text_layers, object_pool=cfg.object_pool)  # fmt: skip
 
 
 def _observation(batch: dict[str, Any]) -> Observation:

@@ -36,7 +36,12 @@ from flax import nnx, serialization, struct
 from lantern_jax.io.files import atomic_write
 from lantern_jax.policies.base import Policy
 from lantern_jax.policies.learned.features import RIGS, features, nav_token_table
-from lantern_jax.policies.learned.model import TEXT_ENCODERS, DrivingModel, ModelConfig
+from lantern_jax.policies.learned.model import (
+    OBJECT_POOLS,
+    TEXT_ENCODERS,
+    DrivingModel,
+    ModelConfig,
+)
 from lantern_jax.policies.learned.shipped import SHIPPED_MODELS
 from lantern_jax.policies.names import name_problem
 from lantern_jax.types.language import load_embedding
@@ -169,9 +174,9 @@ def _is_sha256(v: object) -> bool:
 
 #: ModelConfig fields added after checkpoints were first written: a description without one
 #: describes a model built with the field's default (the architecture of that time).
-LATER_CONFIG_FIELDS = ("text_encoder", "text_layers")
+LATER_CONFIG_FIELDS = ("text_encoder", "text_layers", "object_pool")
 #: The accepted values of a ModelConfig field of type str.
-_CHOICES = {"rig": RIGS, "text_encoder": TEXT_ENCODERS}
+_CHOICES = {"rig": RIGS, "text_encoder": TEXT_ENCODERS, "object_pool": OBJECT_POOLS}
 
 
 def _config_problem(raw: object) -> tuple[str, str] | None:

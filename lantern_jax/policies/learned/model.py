@@ -3,6 +3,7 @@
 ::
 
     object tokens (A, F) --Linear--> (A, W) --self-attention (masked) x layers--> mean over seen
+                         (W,), or by ``ModelConfig.object_pool`` "mean_max" [mean, max] (2W,)
     range image (N,)     --MLP-----> (W,)
     ego + route          --MLP-----> (W,)
     trunk = MLP([objects, ranges, ego])                               (W,)
@@ -24,6 +25,13 @@ along the plan; their scale is set by :data:`STEP_SCALE_M` (a 10 m/s plan moves 
 The token-embedding table is not part of the model: the pooled embedding and the word tokens'
 embeddings are inputs (:mod:`lantern_jax.policies.learned.features`), so checkpoints hold only
 trained weights.
+
+The mean over the seen actors' tokens weighs each actor by one over how many are seen: among the
+rig's sixteen slots, the one car that matters (the next car of the flow a right turn yields to,
+a wrong-way car) is a sixteenth of the pooled vector, however far its own token moves.  The
+``mean_max`` pooling (``ModelConfig.object_pool``) adds each feature's largest value over the
+seen actors, as point-set and vector-map encoders pool, so one actor can set a feature whatever
+the others are.
 
 The pooled text is a bag of words: the mean of the tokens' embeddings cannot tell "The vehicle
 at position (x, y) will cut into the ego lane." from a sentence that uses the same words to
@@ -62,6 +70,8 @@ Array = jax.Array
 STEP_SCALE_M = 2.5  # m, scale of one predicted waypoint increment
 #: How the text channel is read (``ModelConfig.text_encoder``; see the module docstring).
 TEXT_ENCODERS = ("pooled", "attention", "bigram")
+#: How the seen actors' tokens are pooled (``ModelConfig.object_pool``; the module docstring).
+OBJECT_POOLS = ("mean", "mean_max")
 WORD_POSITION_INIT_STD = 0.02  # standard deviation of the learned word-position embeddings
 
 
@@ -93,6 +103,7 @@ class ModelConfig:
     text_dim: int = 256  # D, embedding width
     text_encoder: str = "pooled"  # one of TEXT_ENCODERS
     text_layers: int = 1  # self-attention layers over the words (text_encoder "attention")
+    object_pool: str = "mean"  # one of OBJECT_POOLS
 
 
 class _MLP(nnx.Module):
@@ -124,7 +135,8 @@ class DrivingModel(nnx.Module):
         self.norms = nnx.List([nnx.LayerNorm(w, rngs=rngs) for _ in range(config.layers)])
         self.ranges = _MLP((config.ranges, w, w), rngs)
         self.ego = _MLP((9 + 52, w, w), rngs)
-        self.trunk = _MLP((3 * w, 2 * w, w), rngs)
+        pooled_width = w * (2 if config.object_pool == "mean_max" else 1)
+        self.trunk = _MLP((pooled_width + 2 * w, 2 * w, w), rngs)
         if config.language and config.text_encoder != "pooled":  # a reader of the words
             self.embed_words = nnx.Linear(WORD_DIM, w, rngs=rngs)
             if config.text_encoder == "bigram":
@@ -163,8 +175,10 @@ class DrivingModel(nnx.Module):
         """(10, 2) float32 waypoints, ego frame (x forward, y right), metres.  ``tables``
         (bigram reader only; :meth:`word_tables`) must project every token id of ``f.tokens``:
         the result is the per-slot reading's within float32 rounding."""
-        pooled = _attend_and_pool(self.embed_objects(f.objects), f.mask,  # (A, W) tokens
-                                  self.attention, self.norms)  # fmt: skip
+        objects = _attend(self.embed_objects(f.objects), f.mask, self.attention, self.norms)
+        pooled = _masked_mean(objects, f.mask)  # (W,)
+        if self.config.object_pool == "mean_max":
+            pooled = jnp.concatenate([pooled, _masked_max(objects, f.mask)])  # (2W,)
         h = jnp.concatenate([pooled, self.ranges(f.ranges),
                              self.ego(jnp.concatenate([f.ego, f.route]))])  # fmt: skip
         h = self.trunk(h)
@@ -191,19 +205,28 @@ class DrivingModel(nnx.Module):
                 pairs = tables.first[row[:-1]] * tables.second[row[1:]]  # (L-1, W)
             return _masked_mean(pairs, mask[:-1] & mask[1:])
         x = self.embed_words(words) + self.word_position[...]  # (L, W)
-        return _attend_and_pool(x, mask, self.text_attention, self.text_norms)
+        return _masked_mean(_attend(x, mask, self.text_attention, self.text_norms), mask)
 
 
-def _attend_and_pool(tokens: Array, mask: Array, attention, norms) -> Array:
-    """(W,) mean over the masked tokens after residual self-attention layers among them:
-    ``tokens`` (T, W) float32, ``mask`` (T,) bool (an empty mask pools to zeros)."""
+def _attend(tokens: Array, mask: Array, attention, norms) -> Array:
+    """(T, W) float32 tokens after residual self-attention layers among the masked ones:
+    ``tokens`` (T, W) float32, ``mask`` (T,) bool (unmasked rows are left for the pooling to
+    drop)."""
     pair_mask = (mask[:, None] & mask[None, :])[None]  # (1, T, T)
     for att, norm in zip(attention, norms, strict=True):
         tokens = norm(tokens + att(tokens, mask=pair_mask))
-    return _masked_mean(tokens, mask)
+    return tokens
 
 
 def _masked_mean(tokens: Array, mask: Array) -> Array:
     """(W,) mean of ``tokens`` (T, W) over ``mask`` (T,) bool; zeros for an empty mask."""
     seen = mask.astype(jnp.float32)[:, None]
     return jnp.sum(tokens * seen, axis=0) / jnp.maximum(jnp.sum(seen), 1.0)
+
+
+def _masked_max(tokens: Array, mask: Array) -> Array:
+    """(W,) largest value of each column of ``tokens`` (T, W) over ``mask`` (T,) bool; zeros
+    for an empty mask.  Its gradient reaches only the row that holds each column's maximum."""
+    lowest = jnp.finfo(tokens.dtype).min
+    largest = jnp.max(jnp.where(mask[:, None], tokens, lowest), axis=0)
+    return jnp.where(jnp.any(mask), largest, 0.0)
