@@ -29,12 +29,15 @@ MODEL = "closed/learned-closed-loop-rig-bigram.msgpack"  # each chain's last sta
 #: ``CLOSED_CONFIG=configs/train_closed_loop_rig_bigram_<variant>.toml`` into
 #: ``runs/train/bigram_<variant>``.
 STATED_VARIANTS = {"stated": "all", "stated_half": "half", "stated_quarter": "a quarter",
-                   "stated_half_short": "half", "stated_half_short_hard": "half"}
+                   "stated_half_short": "half", "stated_half_short_hard": "half",
+                   "stated_half_short_max": "half"}
 #: What else a variant's closed-loop stage changes, in words (its config says it in full).
 VARIANT_ROUNDS = {
     "stated_half_short": "fourteen closed-loop rounds of one epoch",
     "stated_half_short_hard": "fourteen closed-loop rounds of one epoch, each round's pairs "
                               "weighted to LWW, RWW and RTY",
+    "stated_half_short_max": "fourteen closed-loop rounds of one epoch, the actors pooled by "
+                             "their mean and largest values (every stage)",
 }
 
 
@@ -142,6 +145,13 @@ def bigram_stated_half_short_hard_ensemble() -> Policy:
 def bigram_stated_half_short_hard_s345_ensemble() -> Policy:
     """:func:`bigram_stated_half_short_hard_ensemble` of the second seed set (3, 4, 5)."""
     return stated_variant_ensemble("stated_half_short_hard", seeds=(3, 4, 5))
+
+
+def bigram_stated_half_short_max_ensemble() -> Policy:
+    """As :func:`bigram_stated_half_short_ensemble`, every stage's model pooling the seen
+    actors by their mean and each feature's largest value (``object_pool = "mean_max"``;
+    trained with the three ``*_max.toml`` configs, ``examples/train_bigram_ensemble.sh``)."""
+    return stated_variant_ensemble("stated_half_short_max")
 
 
 def bigram_stated_half_short_s345_ensemble() -> Policy:

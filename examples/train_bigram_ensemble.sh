@@ -15,7 +15,7 @@
 #   BASE_CONFIG=configs/train_base_rig_bigram_max.toml \
 #   DISTANCE_CONFIG=configs/train_distance_onset_only_rig_bigram_max.toml \
 #   CLOSED_CONFIG=configs/train_closed_loop_rig_bigram_stated_half_short_max.toml \
-#       bash examples/train_bigram_ensemble.sh runs/train/bigram_max
+#       bash examples/train_bigram_ensemble.sh runs/train/bigram_stated_half_short_max
 #
 # SEEDS names the seeds (default "0 1 2"), e.g. a second, independent set of three chains:
 #
