@@ -154,6 +154,21 @@ def bigram_stated_half_short_max_ensemble() -> Policy:
     return stated_variant_ensemble("stated_half_short_max")
 
 
+def bigram_stated_half_short_max_median_ensemble() -> Policy:
+    """Those three seeds joined by the median of their plans."""
+    return stated_variant_ensemble("stated_half_short_max", combine="median")
+
+
+def bigram_stated_half_short_max_medoid_ensemble() -> Policy:
+    """Those three seeds driving the plan of the member nearest the others (``"medoid"``)."""
+    return stated_variant_ensemble("stated_half_short_max", combine="medoid")
+
+
+def bigram_stated_half_short_medoid_ensemble() -> Policy:
+    """:func:`bigram_stated_half_short_ensemble`'s seeds driving their medoid plan."""
+    return stated_variant_ensemble("stated_half_short", combine="medoid")
+
+
 def bigram_stated_half_short_s345_ensemble() -> Policy:
     """The same recipe's second, independent set of seeds (3, 4, 5)."""
     return stated_variant_ensemble("stated_half_short", seeds=(3, 4, 5))

@@ -56,8 +56,31 @@ def test_the_median_plan_is_each_coordinates_middle_member(obs, embedding):
     assert not np.allclose(middle, plans.mean(axis=0), atol=1e-4)  # the median is a test
     np.testing.assert_allclose(plan(ens, obs), middle, rtol=1e-5, atol=1e-5)
     assert ens.description.startswith("median plan of 3 models")
-    with pytest.raises(ValueError, match="combine 'vote' is not one of mean, median"):
+    with pytest.raises(ValueError, match="combine 'vote' is not one of mean, median, medoid"):
         ensemble_policy("bad", members, combine="vote")
+
+
+def test_the_medoid_plan_is_one_members_plan_nearest_the_others(obs, embedding):
+    """``combine="medoid"``: hand-built plans -- one stopping at 2 m, one crossing to 20 m and
+    one to 18 m -- give the 18-m plan (distances 16·√10 + 2·√10 against 18·√10 + 2·√10 and
+    18·√10 + 16·√10: the mean and the median would be plans no member proposed); a tie gives
+    the first; with three learned members the plan is the member's whose summed distance to
+    the others is least (the NumPy reference)."""
+    from lantern_jax.policies.learned.ensemble import medoid_plan
+
+    ahead = np.linspace(0.1, 1.0, 10, dtype=np.float32)[:, None] * np.asarray([1.0, 0.0])
+    plans = np.stack([2.0 * ahead, 20.0 * ahead, 18.0 * ahead]).astype(np.float32)  # (3, 10, 2)
+    np.testing.assert_array_equal(np.asarray(medoid_plan(jnp.asarray(plans))), plans[2])
+    np.testing.assert_array_equal(np.asarray(medoid_plan(jnp.asarray(plans[[1, 1]]))), plans[1])
+    members = [tiny(f"m{i}", i, embedding) for i in range(3)]
+    ens = ensemble_policy("medoid", members, combine="medoid")
+    got = np.stack([plan(m, obs) for m in members])  # (3, 10, 2)
+    flat = got.reshape(3, -1).astype(np.float64)
+    summed = np.linalg.norm(flat[:, None] - flat[None], axis=-1).sum(axis=1)
+    want = got[int(np.argmin(summed))]
+    np.testing.assert_allclose(plan(ens, obs), want, rtol=1e-6, atol=1e-6)
+    assert not np.allclose(want, got.mean(axis=0), atol=1e-4)  # not the mean: a test
+    assert ens.description.startswith("medoid plan of 3 models")
 
 
 def test_one_member_is_that_member(obs, embedding):

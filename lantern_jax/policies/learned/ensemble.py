@@ -13,7 +13,9 @@ between modes (two members that pass a car on either side average to a plan betw
 it suits members of one recipe trained from several seeds, as measured in the learned models'
 page of the documentation.  ``combine="median"`` takes the element-wise median of the plans
 instead: with three members, where two agree and one would pull away or brake alone, the plan
-follows the two.
+follows the two.  Both can give a plan no member proposed (the mean of a member that stops short
+of a junction and one that crosses it creeps into the junction); ``combine="medoid"`` drives the
+plan of one member, the one whose plan lies nearest the others'.
 """
 
 from __future__ import annotations
@@ -54,8 +56,24 @@ def ensemble_median_act(params: LearnedParams, obs: Observation) -> Array:
     return jnp.median(member_plans(params, obs), axis=0)
 
 
+def medoid_plan(plans: Array) -> Array:
+    """``(10, 2)`` float32: the one of ``plans`` (``(K, 10, 2)`` float32, m) whose summed
+    Euclidean distance to the others (each plan's waypoints as one vector) is least, the first
+    such on a tie.  It is always a plan some member proposed."""
+    flat = plans.reshape(plans.shape[0], -1)  # (K, 20)
+    gaps = jnp.sqrt(jnp.sum((flat[:, None, :] - flat[None, :, :]) ** 2, axis=-1) + 1e-12)
+    return plans[jnp.argmin(jnp.sum(gaps, axis=1))]
+
+
+def ensemble_medoid_act(params: LearnedParams, obs: Observation) -> Array:
+    """``(10, 2)`` float32 waypoints (m, ego frame): the members' medoid plan
+    (:func:`medoid_plan` of :func:`member_plans`), for one observation: one member's own plan,
+    never a blend of plans that disagree."""
+    return medoid_plan(member_plans(params, obs))
+
+
 #: How an ensemble joins its members' plans (``ensemble_policy(..., combine=)``).
-COMBINES = {"mean": ensemble_act, "median": ensemble_median_act}
+COMBINES = {"mean": ensemble_act, "median": ensemble_median_act, "medoid": ensemble_medoid_act}
 
 
 def _member(item: Policy | str | Path) -> Policy:
@@ -97,7 +115,7 @@ def stacked_params(members: Sequence[Policy]) -> LearnedParams:
 
 def ensemble_policy(name: str, members: Sequence[Policy | str | Path],
                     description: str = "", combine: str = "mean") -> Policy:  # fmt: skip
-    """One policy that drives with the mean (or median) plan of several learned models.
+    """One policy that drives with the mean (median, medoid) plan of several learned models.
 
     Args:
         name: the name its result rows carry.
@@ -106,7 +124,8 @@ def ensemble_policy(name: str, members: Sequence[Policy | str | Path],
             :func:`~lantern_jax.policies.learned.checkpoint.checkpoint_policy`).
         description: one line (default: the members' names).
         combine: how the plans are joined, a key of :data:`COMBINES`: ``"mean"``
-            (:func:`ensemble_act`) or ``"median"`` (:func:`ensemble_median_act`).
+            (:func:`ensemble_act`), ``"median"`` (:func:`ensemble_median_act`) or ``"medoid"``
+            (:func:`ensemble_medoid_act`, the plan of the member nearest the others).
 
     Returns:
         A stateless :class:`~lantern_jax.policies.base.Policy` whose ``act`` is
