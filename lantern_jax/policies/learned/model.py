@@ -26,12 +26,13 @@ The token-embedding table is not part of the model: the pooled embedding and the
 embeddings are inputs (:mod:`lantern_jax.policies.learned.features`), so checkpoints hold only
 trained weights.
 
-The mean over the seen actors' tokens weighs each actor by one over how many are seen: among the
-rig's sixteen slots, the one car that matters (the next car of the flow a right turn yields to,
-a wrong-way car) is a sixteenth of the pooled vector, however far its own token moves.  The
-``mean_max`` pooling (``ModelConfig.object_pool``) adds each feature's largest value over the
-seen actors, as point-set and vector-map encoders pool, so one actor can set a feature whatever
-the others are.
+The mean over the seen actors' tokens weighs every seen actor alike: the one car that matters
+(the next car of the flow a right turn yields to, a wrong-way car) is one term of a mean over up
+to sixteen slots.  The ``mean_max`` pooling (``ModelConfig.object_pool``) adds each feature's
+largest value over the seen actors, as point-set and vector-map encoders pool, so one actor can
+set a feature whatever the others are.  Measured on the closed-loop recipe, it does not score
+better than the mean (the learned models' page, "Pooling the actors by their largest values"),
+and the mean stays the default.
 
 The pooled text is a bag of words: the mean of the tokens' embeddings cannot tell "The vehicle
 at position (x, y) will cut into the ego lane." from a sentence that uses the same words to
