@@ -169,6 +169,12 @@ def bigram_stated_half_short_medoid_ensemble() -> Policy:
     return stated_variant_ensemble("stated_half_short", combine="medoid")
 
 
+def bigram_stated_half_short_slowest_ensemble() -> Policy:
+    """:func:`bigram_stated_half_short_ensemble`'s seeds driving the plan of the member that
+    would travel least (``"slowest"``)."""
+    return stated_variant_ensemble("stated_half_short", combine="slowest")
+
+
 def bigram_stated_half_short_s345_ensemble() -> Policy:
     """The same recipe's second, independent set of seeds (3, 4, 5)."""
     return stated_variant_ensemble("stated_half_short", seeds=(3, 4, 5))

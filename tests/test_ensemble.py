@@ -56,7 +56,7 @@ def test_the_median_plan_is_each_coordinates_middle_member(obs, embedding):
     assert not np.allclose(middle, plans.mean(axis=0), atol=1e-4)  # the median is a test
     np.testing.assert_allclose(plan(ens, obs), middle, rtol=1e-5, atol=1e-5)
     assert ens.description.startswith("median plan of 3 models")
-    with pytest.raises(ValueError, match="combine 'vote' is not one of mean, median, medoid"):
+    with pytest.raises(ValueError, match="is not one of mean, median, medoid, slowest"):
         ensemble_policy("bad", members, combine="vote")
 
 
@@ -81,6 +81,36 @@ def test_the_medoid_plan_is_one_members_plan_nearest_the_others(obs, embedding):
     np.testing.assert_allclose(plan(ens, obs), want, rtol=1e-6, atol=1e-6)
     assert not np.allclose(want, got.mean(axis=0), atol=1e-4)  # not the mean: a test
     assert ens.description.startswith("medoid plan of 3 models")
+
+
+def test_the_slowest_plan_is_the_members_plan_that_travels_least(obs, embedding):
+    """``combine="slowest"``: hand-built plans -- one to 20 m, one stopping at 2 m, one to 18 m
+    straight ahead -- have path lengths 20, 2 and 18 m and give the 2-m plan; a plan that zigzags
+    sideways (0.5 m ahead and 3 m across at every other waypoint) travels farther than its last
+    waypoint's distance and is not chosen over a straight 4-m plan; a tie gives the first; with
+    three learned members the plan is the member's with the shortest path (the NumPy
+    reference)."""
+    from lantern_jax.policies.learned.ensemble import plan_length, slowest_plan
+
+    ahead = np.linspace(0.1, 1.0, 10, dtype=np.float32)[:, None] * np.asarray([1.0, 0.0])
+    plans = np.stack([20.0 * ahead, 2.0 * ahead, 18.0 * ahead]).astype(np.float32)  # (3, 10, 2)
+    np.testing.assert_allclose(np.asarray(plan_length(jnp.asarray(plans))), [20.0, 2.0, 18.0],
+                               rtol=1e-5)  # fmt: skip
+    np.testing.assert_array_equal(np.asarray(slowest_plan(jnp.asarray(plans))), plans[1])
+    zigzag = np.stack([0.05 * np.arange(1, 11), 3.0 * (np.arange(1, 11) % 2)], -1)  # ends 0.5 m
+    two = np.stack([zigzag, 4.0 * ahead]).astype(np.float32)
+    assert float(plan_length(jnp.asarray(two))[0]) > 30.0
+    np.testing.assert_array_equal(np.asarray(slowest_plan(jnp.asarray(two))), two[1])
+    np.testing.assert_array_equal(np.asarray(slowest_plan(jnp.asarray(plans[[2, 2]]))), plans[2])
+    members = [tiny(f"m{i}", i, embedding) for i in range(3)]
+    ens = ensemble_policy("slowest", members, combine="slowest")
+    got = np.stack([plan(m, obs) for m in members]).astype(np.float64)  # (3, 10, 2)
+    path = np.concatenate([np.zeros((3, 1, 2)), got], axis=1)
+    lengths = np.linalg.norm(np.diff(path, axis=1), axis=-1).sum(axis=1)
+    assert np.ptp(lengths) > 1e-3  # the members' lengths differ, so the choice is a test
+    np.testing.assert_allclose(plan(ens, obs), got[int(np.argmin(lengths))], rtol=1e-6,
+                               atol=1e-6)  # fmt: skip
+    assert ens.description.startswith("slowest plan of 3 models")
 
 
 def test_one_member_is_that_member(obs, embedding):

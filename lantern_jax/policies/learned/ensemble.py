@@ -15,7 +15,10 @@ page of the documentation.  ``combine="median"`` takes the element-wise median o
 instead: with three members, where two agree and one would pull away or brake alone, the plan
 follows the two.  Both can give a plan no member proposed (the mean of a member that stops short
 of a junction and one that crosses it creeps into the junction); ``combine="medoid"`` drives the
-plan of one member, the one whose plan lies nearest the others'.
+plan of one member, the one whose plan lies nearest the others'.  ``combine="slowest"`` drives
+the plan of the member that would travel least along its ten waypoints: where any member would
+wait, the ensemble waits (a safety-first arbitration, which also crawls for as long as the most
+hesitant member does).
 """
 
 from __future__ import annotations
@@ -72,8 +75,30 @@ def ensemble_medoid_act(params: LearnedParams, obs: Observation) -> Array:
     return medoid_plan(member_plans(params, obs))
 
 
+def plan_length(plans: Array) -> Array:
+    """``(K,)`` float32, m: the length of each of ``plans`` (``(K, 10, 2)`` float32, m, ego
+    frame) as a path from the ego (the origin) through its ten waypoints in order."""
+    steps = jnp.diff(jnp.concatenate([jnp.zeros_like(plans[:, :1]), plans], axis=1), axis=1)
+    return jnp.sum(jnp.sqrt(jnp.sum(steps**2, axis=-1) + 1e-12), axis=-1)
+
+
+def slowest_plan(plans: Array) -> Array:
+    """``(10, 2)`` float32: the one of ``plans`` (``(K, 10, 2)`` float32, m) whose path is
+    shortest (:func:`plan_length`), the first such on a tie: the plan of the member that would
+    travel least over the next 2.5 s.  It is always a plan some member proposed."""
+    return plans[jnp.argmin(plan_length(plans))]
+
+
+def ensemble_slowest_act(params: LearnedParams, obs: Observation) -> Array:
+    """``(10, 2)`` float32 waypoints (m, ego frame): the slowest member's plan
+    (:func:`slowest_plan` of :func:`member_plans`), for one observation: the ensemble waits
+    wherever one member would."""
+    return slowest_plan(member_plans(params, obs))
+
+
 #: How an ensemble joins its members' plans (``ensemble_policy(..., combine=)``).
-COMBINES = {"mean": ensemble_act, "median": ensemble_median_act, "medoid": ensemble_medoid_act}
+COMBINES = {"mean": ensemble_act, "median": ensemble_median_act, "medoid": ensemble_medoid_act,
+            "slowest": ensemble_slowest_act}
 
 
 def _member(item: Policy | str | Path) -> Policy:
@@ -115,7 +140,8 @@ def stacked_params(members: Sequence[Policy]) -> LearnedParams:
 
 def ensemble_policy(name: str, members: Sequence[Policy | str | Path],
                     description: str = "", combine: str = "mean") -> Policy:  # fmt: skip
-    """One policy that drives with the mean (median, medoid) plan of several learned models.
+    """One policy that drives with the mean (median, medoid, slowest) plan of several learned
+    models.
 
     Args:
         name: the name its result rows carry.
@@ -124,8 +150,10 @@ def ensemble_policy(name: str, members: Sequence[Policy | str | Path],
             :func:`~lantern_jax.policies.learned.checkpoint.checkpoint_policy`).
         description: one line (default: the members' names).
         combine: how the plans are joined, a key of :data:`COMBINES`: ``"mean"``
-            (:func:`ensemble_act`), ``"median"`` (:func:`ensemble_median_act`) or ``"medoid"``
-            (:func:`ensemble_medoid_act`, the plan of the member nearest the others).
+            (:func:`ensemble_act`), ``"median"`` (:func:`ensemble_median_act`), ``"medoid"``
+            (:func:`ensemble_medoid_act`, the plan of the member nearest the others) or
+            ``"slowest"`` (:func:`ensemble_slowest_act`, the plan of the member that would
+            travel least).
 
     Returns:
         A stateless :class:`~lantern_jax.policies.base.Policy` whose ``act`` is
