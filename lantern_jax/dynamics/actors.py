@@ -18,8 +18,12 @@
   - every other present actor and the ego whose box centre lies ahead of this actor, within
     ``LEADER_LATERAL`` (1.6 m) of its heading line (a local-frame search, exact on straight
     lanes); gap = longitudinal offset minus both half lengths, leader speed = its velocity
-    component along this actor's heading (>= 0).  The ego counts, so background traffic never
-    drives into the ego from behind;
+    component along this actor's heading (>= 0).  The ego counts, so traffic behind the ego in
+    its lane on a straight road stops for it.  The test is on box centres and the heading line:
+    on a curved lane a follower still in the bend misses an ego ahead of it (its centre off the
+    tangent) until it comes out, and an ego whose nose is in the lane with its centre more than
+    1.6 m off the line is not a leader at all (``docs/learned.md``, "The slowest member's plan",
+    traces such collisions);
   - the stop line ``stop_s`` of the actor's light (``light_index >= 0``) while that light is red
     or yellow, as a stopped leader (gap = stop_s - s - half length), provided the actor can still
     stop before it: on red if ``gap >= v^2 / (2 max_brake)``, on yellow if
