@@ -16,8 +16,8 @@ The names a user needs, importable from the package itself::
   :func:`register_policy_source` — a policy in a file or module (``file.py:NAME``);
 * :func:`rollout` — one execution, tick by tick, for your own loops;
 * :class:`Settings`, :class:`ScoringSettings`, :class:`ProtocolSettings`, :class:`TextBank`,
-  :data:`DEFAULT_SETTINGS` and :func:`default_settings` — the values a simulation reads,
-  passed as arguments (:mod:`lantern_jax.sim.settings`);
+  :class:`ActorSettings`, :data:`DEFAULT_SETTINGS` and :func:`default_settings` — the values a
+  simulation reads, passed as arguments (:mod:`lantern_jax.sim.settings`);
 * :class:`FamilyRecord` and :func:`register_family` — a hazard family of your own
   (``docs/families.md``).
 
@@ -69,12 +69,14 @@ _EXPORTS = {
     "default_settings": "lantern_jax.sim.settings",
     "ScoringSettings": "lantern_jax.scoring.thresholds",
     "ProtocolSettings": "lantern_jax.sim.protocol",
+    "ActorSettings": "lantern_jax.dynamics.actors",
     "TextBank": "lantern_jax.scenarios.warnings",
     "FamilyRecord": "lantern_jax.scenarios.registry",
     "register_family": "lantern_jax.scenarios.registry",
 }
 
 __all__ = [
+    "ActorSettings",
     "DEFAULT_SETTINGS",
     "EvalResult",
     "FamilyRecord",
@@ -114,6 +116,7 @@ def __dir__() -> list[str]:
 if TYPE_CHECKING:  # for type checkers and IDEs: the same names, imported eagerly
     from lantern_jax.apps.evaluation import EvalResult, evaluate
     from lantern_jax.core.jax_setup import setup
+    from lantern_jax.dynamics.actors import ActorSettings
     from lantern_jax.policies.base import Policy
     from lantern_jax.policies.registry import get_policy, policy_names, register_policy_source
     from lantern_jax.report import write_outputs

@@ -20,6 +20,7 @@ from lantern_jax.core.constants import (
     BIG,
     DT,
     EGO_HALF_LENGTH,
+    EGO_HALF_WIDTH,
     EGO_MAX_BRAKE,
     EGO_MAX_STEER,
     EGO_WHEELBASE,
@@ -37,7 +38,12 @@ from lantern_jax.core.constants import (
     TRIGGER_EVENT,
     TRIGGER_NEVER,
 )
-from lantern_jax.dynamics.actors import step_actors
+from lantern_jax.dynamics.actors import (
+    EGO_BOX_MARGIN,
+    LEADER_LATERAL,
+    ActorSettings,
+    step_actors,
+)
 from lantern_jax.dynamics.bicycle import (
     bicycle_step,
     longitudinal_step,
@@ -683,6 +689,96 @@ def test_idm_stops_behind_the_ego():
     gap = 60.0 - EGO_HALF_LENGTH - (tr.s[:, 0] + 2.0)
     assert float(jnp.min(gap)) > 0.0
     assert float(gap[-1]) == pytest.approx(2.0, abs=0.2)
+
+
+V_FOLLOW = 8.0  # m/s, the follower of the ego-as-leader scenes below, at its desired speed
+
+
+def _one_tick_speed(actors, script, ego, rule):
+    """The follower's (slot 0) speed after one tick under the ego-leader ``rule``."""
+    out = jax.jit(step_actors, static_argnames="ego_leader")(
+        actors, script, _f(DT), _f(INF_TIME), light_states(NO_LIGHTS, _f(0.0)), *ego,
+        ego_leader=rule,
+    )  # fmt: skip
+    return float(out.speed[0])
+
+
+def _braked_for(gap: float, v_lead: float = 0.0) -> float:
+    """The IDM follower's speed after one tick behind a leader ``gap`` m ahead (no other)."""
+    acc = float(idm_accel(_f(V_FOLLOW), _f(V_FOLLOW), _f(gap), _f(V_FOLLOW - v_lead)))
+    assert -IDMParams().max_brake < acc < 0.0  # not at the limit: the gap and speed count
+    return V_FOLLOW + acc * DT
+
+
+@pytest.mark.parametrize("case", ["bend", "nose in", "adjacent lane", "behind"])
+def test_the_ego_as_a_leader_by_heading_line_or_by_box_on_the_path(case):
+    """The two ego-leader rules (``ActorSettings.ego_leader``) on hand-built scenes, one IDM car
+    at 8 m/s (its desired speed, so without a leader it keeps it); where the ego leads, the car's
+    next speed is the IDM's behind a leader at the derived gap and speed (neither at the braking
+    limit, so both count):
+
+    * *bend*: both on a circle of radius 18 m, the ego 20 m ahead along it, aligned with it, at
+      6 m/s: its centre lies 18 (1 - cos(20/18)) = 10.0 m off the car's heading line, which misses
+      it; on the path it leads at 20 - 2.0 - 2.4508 m and 6 m/s;
+    * *nose in*: a straight lane, the ego 20 m ahead, 2.6 m to the right, turned 60 degrees into
+      the lane, at 4 m/s: its box reaches sin 60 * 2.4508 + cos 60 * 1.0642 = 2.654 m across,
+      within 0.9 + 2.654 + 0.3 of the lane's line; it leads at 20 - 2.0 - (cos 60 * 2.4508 +
+      sin 60 * 1.0642) m and 4 cos 60 = 2 m/s along the lane;
+    * *adjacent lane*: the ego parallel, 3.5 m to the side (its box reaches 1.0642 m across:
+      outside 0.9 + 1.0642 + 0.3): no rule brakes;
+    * *behind*: the ego 15 m behind on the lane: no rule brakes.
+    """
+    actors, script = make_scene([dict(motion=MOTION_IDM, v_pre=V_FOLLOW, speed=V_FOLLOW)])
+    half_len, half_w = 2.0, 0.9  # make_scene's car
+    if case == "bend":
+        r = 18.0
+        n = 161  # a point every 0.25 m: the chords' arcs within 1e-4 m of the circle's
+        s_path = np.linspace(0.0, 40.0, n)
+        pts = np.stack([r * np.sin(s_path / r), r * (1 - np.cos(s_path / r))], -1)
+        seg = np.linalg.norm(np.diff(pts, axis=0), axis=-1)
+        script = script.replace(
+            path=_f(pts[None]), path_s=_f(np.concatenate([[0.0], np.cumsum(seg)])[None]),
+            path_valid=jnp.ones((1, n), bool),
+        )  # fmt: skip
+        th = 20.0 / r
+        ego = (_f([r * np.sin(th), r * (1 - np.cos(th))]), _f(th), _f(6.0))
+        assert r * (1 - np.cos(th)) > LEADER_LATERAL  # off the heading line
+        want_box = _braked_for(20.0 - half_len - EGO_HALF_LENGTH, 6.0)
+    elif case == "nose in":
+        yaw = np.pi / 3
+        across = np.sin(yaw) * EGO_HALF_LENGTH + np.cos(yaw) * EGO_HALF_WIDTH
+        assert LEADER_LATERAL < 2.6 < half_w + across + EGO_BOX_MARGIN
+        ego = (_f([20.0, -2.6]), _f(yaw), _f(4.0))
+        along = np.cos(yaw) * EGO_HALF_LENGTH + np.sin(yaw) * EGO_HALF_WIDTH
+        want_box = _braked_for(20.0 - half_len - along, 4.0 * np.cos(yaw))
+    elif case == "adjacent lane":
+        assert 3.5 > half_w + EGO_HALF_WIDTH + EGO_BOX_MARGIN
+        ego = (_f([15.0, -3.5]), _f(0.0), _f(0.0))
+        want_box = V_FOLLOW
+    else:
+        ego = (_f([-15.0, 0.0]), _f(0.0), _f(0.0))
+        want_box = V_FOLLOW
+    heading = _one_tick_speed(actors, script, ego, "heading_line")
+    box = _one_tick_speed(actors, script, ego, "heading_line_or_box")
+    assert heading == pytest.approx(V_FOLLOW, abs=1e-4)  # the heading line sees no leader
+    assert box == pytest.approx(want_box, abs=2e-3)
+    if case in ("bend", "nose in"):
+        assert box < V_FOLLOW - 0.05  # it brakes
+
+
+def test_the_box_rule_keeps_every_leader_the_heading_line_finds():
+    """``"heading_line_or_box"`` takes the nearer of the two gaps: where the heading line finds
+    the ego (on the lane, 30 m ahead) the car brakes exactly as under ``"heading_line"``; an
+    unknown rule is refused naming the field."""
+    actors, script = make_scene([dict(motion=MOTION_IDM, v_pre=V_FOLLOW, speed=V_FOLLOW)])
+    ego = (_f([30.0, 0.2]), _f(0.0), _f(0.0))
+    heading = _one_tick_speed(actors, script, ego, "heading_line")
+    assert heading == pytest.approx(_braked_for(30.0 - 2.0 - EGO_HALF_LENGTH), abs=2e-3)
+    assert _one_tick_speed(actors, script, ego, "heading_line_or_box") == pytest.approx(
+        heading, abs=1e-5
+    )
+    with pytest.raises(ValueError, match="ActorSettings.ego_leader: 'box' is not one of"):
+        ActorSettings(ego_leader="box").validate()
 
 
 def test_idm_red_light_and_yellow_dilemma():

@@ -21,13 +21,14 @@ import numpy as np
 import pytest
 import settings_probe as sp
 
+from lantern_jax.dynamics.actors import ActorSettings
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.suite import load_suite
 from lantern_jax.scoring.cus import pair_components
 from lantern_jax.scoring.metrics import finalize
 from lantern_jax.scoring.thresholds import DEFAULT_SCORING, ScoringSettings
 from lantern_jax.sim import programs
-from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings
+from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings, settings_record
 
 PROBE = Path(__file__).with_name("settings_probe.py")
 #: Changes of a static setting (a tick window): another program, compiled again.
@@ -139,6 +140,45 @@ def test_settings_batch_with_vmap():
     assert len(set(np.round(apart, 4))) > 1  # the settings matter on this pair
 
 
+def test_the_actors_settings_are_recorded_only_where_they_are_not_the_default():
+    """A manifest written before ``Settings.actors`` existed is the record of the default; the
+    other rule is recorded, and a result's record gives the settings back (``plot`` reads them)."""
+    from lantern_jax.viz.pair import _settings_from_record
+
+    assert "actors" not in settings_record(DEFAULT_SETTINGS)
+    braking = Settings(actors=ActorSettings(ego_leader="heading_line_or_box"))
+    record = settings_record(braking)
+    assert record["actors"] == {"ego_leader": "heading_line_or_box"}
+    assert _settings_from_record(record).actors == braking.actors
+    assert _settings_from_record(settings_record(DEFAULT_SETTINGS)).actors == ActorSettings()
+
+
+@pytest.mark.slow
+def test_the_actors_rule_is_its_own_world_program_and_changes_what_it_says():
+    """``coop`` on ``rty_0006``, warned, the split path: under ``lantern-v3``'s rule a car of the
+    flow drives into it as it pulls out; under ``"heading_line_or_box"`` the car brakes and no
+    collision happens, from a world program of its own; the default again gives the first
+    answer (no program of the other rule is reused)."""
+    from lantern_jax.apps.evaluation import evaluate
+
+    pair = load_suite().select(["rty_0006"])
+    braking = Settings(actors=ActorSettings(ego_leader="heading_line_or_box"))
+
+    def warned(settings):
+        table = evaluate(["coop"], suite=pair, settings=settings, path="split",
+                         progress=False).route_table  # fmt: skip
+        return table[table["condition"] == "warning"].iloc[0]
+
+    first = warned(DEFAULT_SETTINGS)
+    assert first["no_collision"] == 0
+    before = set(programs._EXECUTABLES)
+    other = warned(braking)
+    assert other["no_collision"] == 1 and other["CUS"] > 50.0
+    assert set(programs._EXECUTABLES) - before, "another rule must be another world program"
+    again = warned(DEFAULT_SETTINGS)
+    assert again["no_collision"] == 0 and again["CUS"] == first["CUS"]
+
+
 @pytest.mark.parametrize(
     "settings, match",
     [
@@ -147,6 +187,8 @@ def test_settings_batch_with_vmap():
         (Settings(scoring=ScoringSettings(react_fraction=1.5)), r"react_fraction"),
         (DEFAULT_SETTINGS.replace(bank=("text",)), r"Settings.bank: expected a TextBank"),
         (DEFAULT_SETTINGS.replace(scoring=0.05), r"Settings.scoring: expected ScoringSettings"),
+        (DEFAULT_SETTINGS.replace(actors="box"), r"Settings.actors: expected ActorSettings"),
+        (Settings(actors=ActorSettings(ego_leader="box")), r"ActorSettings.ego_leader: 'box'"),
     ],
 )
 def test_bad_settings_are_refused_naming_the_field(settings, match):

@@ -23,7 +23,9 @@
     on a curved lane a follower still in the bend misses an ego ahead of it (its centre off the
     tangent) until it comes out, and an ego whose nose is in the lane with its centre more than
     1.6 m off the line is not a leader at all (``docs/learned.md``, "The slowest member's plan",
-    traces such collisions);
+    traces such collisions).  That is ``lantern-v3``'s rule, the default; with
+    ``ActorSettings(ego_leader="heading_line_or_box")`` the ego also leads wherever its box lies
+    on the actor's own path (:func:`_ego_box_on_path`), the nearer of the two gaps counting;
   - the stop line ``stop_s`` of the actor's light (``light_index >= 0``) while that light is red
     or yellow, as a stopped leader (gap = stop_s - s - half length), provided the actor can still
     stop before it: on red if ``gap >= v^2 / (2 max_brake)``, on yellow if
@@ -43,11 +45,13 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+from flax import struct
 
 from lantern_jax.core.constants import (
     BIG,
     DT,
     EGO_HALF_LENGTH,
+    EGO_HALF_WIDTH,
     LIGHT_GREEN,
     LIGHT_RED,
     LIGHT_YELLOW,
@@ -70,7 +74,7 @@ from lantern_jax.dynamics.scripted import (
     scripted_pose,
     trigger_time,
 )
-from lantern_jax.maths.polyline import interpolate, left_normal
+from lantern_jax.maths.polyline import interpolate, left_normal, project
 from lantern_jax.types.world import ActorScript, ActorState, present
 
 Array = jax.Array
@@ -79,6 +83,44 @@ LEADER_LATERAL = (
     1.6  # m, |lateral offset| from an IDM actor's heading line within which others lead it
 )
 LEADER_RANGE = 80.0  # m, look-ahead of the leader search
+#: m, what the ``"heading_line_or_box"`` rule adds to both half widths: the ego leads an IDM actor
+#: when its box, projected on the actor's path, comes this close to the actor's own box sideways.
+EGO_BOX_MARGIN = 0.3
+#: How an IDM actor finds the ego as its leader (:class:`ActorSettings`): ``"heading_line"``, the
+#: ego's box centre within :data:`LEADER_RANGE` ahead and :data:`LEADER_LATERAL` of the actor's
+#: heading line, as for every other candidate (``lantern-v3``'s rule); ``"heading_line_or_box"``,
+#: that or the ego's box on the actor's own path (:func:`_ego_box_on_path`), so that a car brakes
+#: for an ego pulling out in front of it at an angle and for one ahead of it in a bend.
+EGO_LEADER_RULES = ("heading_line", "heading_line_or_box")
+
+
+@struct.dataclass
+class ActorSettings:
+    """How the IDM-driven actors treat the ego (``Settings.actors``,
+    :class:`~lantern_jax.sim.settings.Settings`).
+
+    ``ego_leader`` is static (a change compiles the world's program again): one of
+    :data:`EGO_LEADER_RULES`.  The default is the rule every published figure of ``lantern-v3``
+    was measured under; ``docs/learned.md`` ("The slowest member's plan") measures the other on
+    the reference policies and a learned ensemble.
+    """
+
+    ego_leader: str = struct.field(pytree_node=False, default="heading_line")
+
+    def validate(self) -> ActorSettings:
+        """Check the values outside ``jit``; returns self.
+
+        Raises:
+            ValueError: naming ``ActorSettings.ego_leader`` when it is not a known rule.
+        """
+        if self.ego_leader not in EGO_LEADER_RULES:
+            raise ValueError(f"ActorSettings.ego_leader: {self.ego_leader!r} is not one of "
+                             f"{', '.join(EGO_LEADER_RULES)}")  # fmt: skip
+        return self
+
+
+#: lantern-v3's actors.
+DEFAULT_ACTORS = ActorSettings()
 
 
 def _zero_where_invalid(x: Array, valid: Array) -> Array:
@@ -145,6 +187,43 @@ def _idm_candidates(
     return gap, v_lead
 
 
+def _ego_box_on_path(
+    actors: ActorState, script: ActorScript, ego_xy: Array, ego_yaw: Array, ego_speed: Array
+) -> tuple[Array, Array]:
+    """The ego as each IDM actor's leader when its box lies on the actor's own path.
+
+    The ego's box centre is projected on every actor's path polyline
+    (:func:`~lantern_jax.maths.polyline.project`: arc, signed offset, the path's heading there).
+    Across the path the box reaches ``|sin d| L + |cos d| W`` from its centre, along it
+    ``|cos d| L + |sin d| W`` (``d`` the ego's heading relative to the path's, ``L``, ``W`` its
+    half length and width).  It leads actor ``i`` when its centre is ahead of the actor's arc
+    (by less than :data:`LEADER_RANGE`) and its offset from the actor's own lateral place is
+    within the actor's half width, the box's reach across and :data:`EGO_BOX_MARGIN`.
+
+    Args:
+        actors: (A,) actor states (``s``, m along the path; ``lat``, m off it).
+        script: (A,) slots (``path``, ``path_s``, ``path_valid``; ``extent``, m).
+        ego_xy: (2,) float32, m; ego_yaw: () float32, rad; ego_speed: () float32, m/s.
+
+    Returns:
+        gap: (A,) float32, m, bumper-to-bumper along the path (``BIG`` where the ego does not lead).
+        v_lead: (A,) float32, m/s, the ego's speed along the path (>= 0; 0 where it does not lead).
+    """
+    arc, lat, heading, _ = jax.vmap(project, in_axes=(0, 0, 0, None))(
+        script.path, script.path_s, script.path_valid, ego_xy
+    )
+    d = ego_yaw - heading
+    cos_d, sin_d = jnp.abs(jnp.cos(d)), jnp.abs(jnp.sin(d))
+    across = sin_d * EGO_HALF_LENGTH + cos_d * EGO_HALF_WIDTH
+    along = cos_d * EGO_HALF_LENGTH + sin_d * EGO_HALF_WIDTH
+    ahead = arc - actors.s
+    reach = script.extent[:, 1] + across + EGO_BOX_MARGIN
+    leads = (ahead > 0.0) & (ahead < LEADER_RANGE) & (jnp.abs(lat - actors.lat) < reach)
+    gap = jnp.where(leads, ahead - script.extent[:, 0] - along, BIG)
+    v_lead = jnp.where(leads, jnp.maximum(ego_speed * jnp.cos(d), 0.0), 0.0)
+    return gap, v_lead
+
+
 def _idm_update(
     actors: ActorState,
     script: ActorScript,
@@ -156,16 +235,22 @@ def _idm_update(
     dt: float,
     params: IDMParams,
     track_accel: Array | None = None,
+    ego_leader: str = "heading_line",
 ) -> tuple[Array, Array, Array]:
     """New (s, speed, active) of every slot integrated as an IDM actor, each (A,).
 
     ``track_accel`` (A,) m/s^2 is an adversarial track's commanded acceleration, added to the
     IDM's and the sum kept within the track's limits (:mod:`lantern_jax.dynamics.adversary`;
-    an exact no-op when 0).
+    an exact no-op when 0).  ``ego_leader`` is one of :data:`EGO_LEADER_RULES`.
     """
     v = jnp.maximum(actors.speed, 0.0)
     half = script.extent[:, 0]
     gap, v_lead = _idm_candidates(actors, script.extent, present, ego_xy, ego_yaw, ego_speed)
+    if ego_leader == "heading_line_or_box":  # the nearer of the two as the ego's gap
+        box_gap, box_v = _ego_box_on_path(actors, script, ego_xy, ego_yaw, ego_speed)
+        nearer = box_gap < gap[:, -1]
+        v_lead = v_lead.at[:, -1].set(jnp.where(nearer, box_v, v_lead[:, -1]))
+        gap = gap.at[:, -1].set(jnp.where(nearer, box_gap, gap[:, -1]))
 
     # traffic light stop line as a stopped leader
     num_lights = light_state.shape[0]
@@ -302,6 +387,7 @@ def step_actors(
     ego_speed: Array,
     dt: float = DT,
     idm_params: IDMParams = DEFAULT_IDM,
+    ego_leader: str = "heading_line",
 ) -> ActorState:
     """Advance every actor of one scenario to time ``t_next``.
 
@@ -316,6 +402,8 @@ def step_actors(
         ego_speed: () float32, m/s, ego speed (>= 0).
         dt: s, tick used to integrate the IDM actors.
         idm_params: IDM parameters of the IDM actors.
+        ego_leader: how an IDM actor finds the ego as its leader, one of
+            :data:`EGO_LEADER_RULES` (static; :class:`ActorSettings`).
 
     Returns:
         The actors at ``t_next`` (``xy``, ``yaw``, ``speed``, ``s``, ``lat``, ``active``); slots
@@ -346,7 +434,7 @@ def step_actors(
         track_accel, track_lat = _idm_track(clean, script, handed, tau, t_next, t_event, dt)
     id_s, id_speed, id_active = _idm_update(
         clean, idm_script, is_present, light_state, ego_xy, ego_yaw, ego_speed, dt, idm_params,
-        track_accel,
+        track_accel, ego_leader,
     )  # fmt: skip
     id_pt, id_yaw = jax.vmap(interpolate)(script.path, script.path_s, script.path_valid, id_s)
     id_lat = jnp.where(handed, sc_lat, 0.0) if track_lat is None else track_lat

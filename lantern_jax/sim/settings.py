@@ -7,7 +7,9 @@
 * ``protocol`` — the temporal protocol's thresholds
   (:class:`~lantern_jax.sim.protocol.ProtocolSettings`);
 * ``bank`` — the warning texts (:class:`~lantern_jax.scenarios.warnings.TextBank`; its token
-  tables, padded to a multiple of 128 texts, are the program's arguments).
+  tables, padded to a multiple of 128 texts, are the program's arguments);
+* ``actors`` — how the IDM-driven actors treat the ego
+  (:class:`~lantern_jax.dynamics.actors.ActorSettings`; static).
 
 A planner's constants are its policy's parameters (``PlannerConfig`` inside the reference
 policies' params), the other thing a rollout takes as an argument.
@@ -33,6 +35,7 @@ from typing import Any
 import numpy as np
 from flax import struct
 
+from lantern_jax.dynamics.actors import DEFAULT_ACTORS, ActorSettings
 from lantern_jax.scenarios.warnings import DEFAULT_BANK, TextBank, registered_bank
 from lantern_jax.scoring.thresholds import DEFAULT_SCORING, ScoringSettings
 from lantern_jax.sim.protocol import DEFAULT_PROTOCOL, ProtocolSettings
@@ -45,6 +48,7 @@ class Settings:
     scoring: ScoringSettings = DEFAULT_SCORING
     protocol: ProtocolSettings = DEFAULT_PROTOCOL
     bank: TextBank = DEFAULT_BANK  # a pytree: its token tables (padded) are the leaves
+    actors: ActorSettings = DEFAULT_ACTORS  # static: a change compiles again
 
     def validate(self) -> Settings:
         """Check the values outside ``jit``; returns self.
@@ -58,7 +62,10 @@ class Settings:
             raise ValueError(f"Settings.protocol: expected ProtocolSettings, got {self.protocol!r}")
         if not isinstance(self.bank, TextBank):
             raise ValueError(f"Settings.bank: expected a TextBank, got {type(self.bank).__name__}")
+        if not isinstance(self.actors, ActorSettings):
+            raise ValueError(f"Settings.actors: expected ActorSettings, got {self.actors!r}")
         self.scoring.validate()
+        self.actors.validate()
         return self
 
     def check_texts(self, text_ids) -> Settings:
@@ -101,7 +108,9 @@ def default_settings() -> Settings:
 
 def settings_record(settings: Settings) -> dict:
     """The settings of an evaluation as the manifest records them (every value, the bank as
-    its size and content hash, the user metrics by name, unit and description)."""
+    its size and content hash, the user metrics by name, unit and description; the actors'
+    settings only where they differ from ``lantern-v3``'s, so that a record written before they
+    existed is the record of the same settings)."""
     bank = settings.bank
     digest = hashlib.sha256(repr(bank.entries).encode()).hexdigest()
     scoring = {f.name: getattr(settings.scoring, f.name)
@@ -113,6 +122,8 @@ def settings_record(settings: Settings) -> dict:
         text_bank=dict(texts=len(bank), sha256=digest),
         # the user metrics (scoring/user_metrics.py) the route table holds, when there are any
         **({"metrics": [m.record() for m in metrics]} if metrics else {}),
+        **({"actors": dataclasses.asdict(settings.actors)}
+           if settings.actors != DEFAULT_ACTORS else {}),
     )
 
 

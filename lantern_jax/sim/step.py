@@ -157,7 +157,7 @@ def _stage_actors(sc: Scenario, st: State, x: TickParts, settings: Settings) -> 
     ego = x.ego
     actors = step_actors(
         st.actors, sc.actors, x.t, x.proto.t_event, light_states(sc.lights, x.t),
-        ego.xy, ego.yaw, ego.speed,
+        ego.xy, ego.yaw, ego.speed, ego_leader=settings.actors.ego_leader,
     )  # fmt: skip
     return x.replace(actors=actors)
 

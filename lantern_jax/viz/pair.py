@@ -376,7 +376,8 @@ def _settings_from_record(record: dict | None) -> Settings:
         )
     scoring = dataclasses.replace(base.scoring, **record.get("scoring", {}))
     protocol = dataclasses.replace(base.protocol, **record.get("protocol", {}))
-    return base.replace(scoring=scoring, protocol=protocol).validate()
+    actors = dataclasses.replace(base.actors, **record.get("actors", {}))
+    return base.replace(scoring=scoring, protocol=protocol, actors=actors).validate()
 
 
 def safe_name(name: str) -> str:
