@@ -51,6 +51,24 @@ def test_a_report_holds_the_identity_the_plots_the_tables_and_every_failure(fold
     assert "http://" not in page and "https://" not in page  # nothing to fetch when viewed
 
 
+def test_the_run_says_how_its_actors_found_the_ego(folder, tmp_path):
+    """The run's identity names the actors' ego-leader rule: the default where the manifest
+    records none (as every run of the default does), the other where it records it."""
+    import shutil
+
+    page = build_report([folder], tmp_path / "default.html").read_text()
+    assert "heading_line (the default)" in page
+    other = tmp_path / "other"
+    shutil.copytree(folder, other)
+    path = other / "reproducibility_manifest.json"
+    manifest = json.loads(path.read_text())
+    assert "actors" not in manifest["settings"]
+    manifest["settings"]["actors"] = {"ego_leader": "heading_line_or_box"}
+    path.write_text(json.dumps(manifest))
+    page = build_report([other], tmp_path / "other.html").read_text()
+    assert "heading_line_or_box" in page and "(the default)" not in page
+
+
 def test_the_command_line_writes_the_report_and_refuses_what_it_cannot(folder, tmp_path):
     out = tmp_path / "r.html"
     assert cli.main(["report", str(folder), "--out", str(out), "--quiet"]) == 0

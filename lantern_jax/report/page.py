@@ -9,8 +9,9 @@ the failure figures (only when a ``figures`` function is given: they need a re-s
 :func:`lantern_jax.viz.pair.plot_pair`) are PNG files in a folder beside it.  Sections:
 
 * **the run** -- per result folder: suite and its hash, every policy with its parameters' hash
-  and, for a policy from a file, the file and its SHA-256; ablation, the text bank's hash,
-  package versions, and when the manifest was written;
+  and, for a policy from a file, the file and its SHA-256; ablation, the text bank's hash, the
+  rule by which the actors find the ego ahead of them (``Settings.actors``), package versions,
+  and when the manifest was written;
 * **per-family CUS** -- warning, no-warning and the warning gain of every family and overall,
   every policy side by side, with the 95 % intervals, as a plot and as a table;
 * **CUS decomposition and gate failures** -- the components and each gate's failure rate as a
@@ -38,6 +39,7 @@ import numpy as np
 import pandas as pd
 
 from lantern_jax.core.constants import FAMILIES, GATE_COLUMN_NAMES
+from lantern_jax.dynamics.actors import DEFAULT_ACTORS
 from lantern_jax.io.files import OutputFolderError, atomic_write
 from lantern_jax.report.evidence import ResultSet, read_result_set
 from lantern_jax.report.outputs import DECOMPOSITION_CSV, FAMILY_CSV
@@ -163,6 +165,11 @@ def _identity(rs: ResultSet) -> str:
     versions = ", ".join(f"{k} {packages[k]}" for k in ("lantern-jax", "jax", "jaxlib", "numpy")
                          if k in packages)  # fmt: skip
     bank = ((m.get("settings") or {}).get("text_bank")) or {}
+    # recorded only where not lantern-v3's rule (lantern_jax.sim.settings.settings_record)
+    actors = ((m.get("settings") or {}).get("actors")) or {}
+    leader = actors.get("ego_leader", DEFAULT_ACTORS.ego_leader)
+    if leader == DEFAULT_ACTORS.ego_leader:
+        leader = f"{leader} (the default)"
     items = [
         ("folder", _esc(rs.folder)),
         ("suite", f"{_esc(m.get('suite_id'))} ({m.get('num_pairs')} pairs, SHA-256 "
@@ -170,6 +177,7 @@ def _identity(rs: ResultSet) -> str:
         ("policies", "<br>".join(policies) or "-"),
         ("ablation", _esc(m.get("ablation", "-"))),
         ("warning texts", f"{bank.get('texts', '-')} (SHA-256 {str(bank.get('sha256'))[:12]}...)"),
+        ("actors find the ego ahead by", _esc(leader)),
         ("packages", _esc(versions or "-")),
         ("written", when),
     ]  # fmt: skip
