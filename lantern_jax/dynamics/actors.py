@@ -92,6 +92,8 @@ EGO_BOX_MARGIN = 0.3
 #: that or the ego's box on the actor's own path (:func:`_ego_box_on_path`), so that a car brakes
 #: for an ego pulling out in front of it at an angle and for one ahead of it in a bend.
 EGO_LEADER_RULES = ("heading_line", "heading_line_or_box")
+#: lantern-v3's rule, the default of :class:`ActorSettings` and of the functions below.
+DEFAULT_EGO_LEADER = EGO_LEADER_RULES[0]
 
 
 @struct.dataclass
@@ -105,7 +107,7 @@ class ActorSettings:
     the reference policies and a learned ensemble.
     """
 
-    ego_leader: str = struct.field(pytree_node=False, default="heading_line")
+    ego_leader: str = struct.field(pytree_node=False, default=DEFAULT_EGO_LEADER)
 
     def validate(self) -> ActorSettings:
         """Check the values outside ``jit``; returns self.
@@ -235,7 +237,7 @@ def _idm_update(
     dt: float,
     params: IDMParams,
     track_accel: Array | None = None,
-    ego_leader: str = "heading_line",
+    ego_leader: str = DEFAULT_EGO_LEADER,
 ) -> tuple[Array, Array, Array]:
     """New (s, speed, active) of every slot integrated as an IDM actor, each (A,).
 
@@ -387,7 +389,7 @@ def step_actors(
     ego_speed: Array,
     dt: float = DT,
     idm_params: IDMParams = DEFAULT_IDM,
-    ego_leader: str = "heading_line",
+    ego_leader: str = DEFAULT_EGO_LEADER,
 ) -> ActorState:
     """Advance every actor of one scenario to time ``t_next``.
 
