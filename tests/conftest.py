@@ -22,7 +22,7 @@ import os
 import sys
 from pathlib import Path
 
-from xla_flags import TEST_XLA_CACHES, xla_flags_for_tests
+from xla_flags import xla_flags_for_tests
 
 #: XLA flags of every test process (and of the processes the tests start, which inherit them):
 #: XLA's CPU backend with its earlier fusion emitters, where the installed jaxlib has them
@@ -35,13 +35,13 @@ TEST_XLA_FLAGS = xla_flags_for_tests()
 if TEST_XLA_FLAGS and TEST_XLA_FLAGS.split("=")[0] not in os.environ.get("XLA_FLAGS", ""):
     os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {TEST_XLA_FLAGS}".strip()
 
-#: No cache folder path in the programs' cache keys (``tests/xla_flags.py``: TEST_XLA_CACHES),
-#: as ``import lantern_jax`` sets it on a CPU-only install where JAX is not imported first
-#: (here it is, so this file does it; ``lantern_jax.core.jax_setup.xla_caches_default``,
-#: checked in ``tests/test_jax_setup.py``): the tests then compile the programs a user's process
-#: compiles, whose keys do not depend on the cache folder.  Exported, so the processes the
-#: tests start (and the notebooks' kernels) share it; ``.ci/run`` gives it to the documentation
-#: build as well.
+#: No cache folder path in the programs' cache keys, as ``import lantern_jax`` sets it on a
+#: CPU-only install where JAX is not imported first (here it is, so this file does it;
+#: ``lantern_jax.core.jax_setup.xla_caches_default``, checked in ``tests/test_jax_setup.py``):
+#: the tests then compile the programs a user's process compiles, whose keys do not depend on
+#: the cache folder.  Exported, so the processes the tests start (and the notebooks' kernels)
+#: share it.
+TEST_XLA_CACHES = "none"
 os.environ.setdefault("JAX_PERSISTENT_CACHE_ENABLE_XLA_CACHES", TEST_XLA_CACHES)
 
 import jax  # XLA reads its flags when JAX starts its backend

@@ -250,6 +250,23 @@ def test_the_test_session_sets_what_the_package_sets():
     assert TEST_XLA_CACHES == XLA_CACHES_CPU == os.environ[XLA_CACHES_ENV]
 
 
+def test_ci_builds_the_documentation_on_the_tests_device_count():
+    """``.ci/run`` builds the site (its notebooks executed) after the README's test command, in
+    the same cache folder.  The build's process imports the package, which would give its
+    notebook kernels one CPU device per core; the tests run on one (JAX is imported before the
+    package), and a program for two devices is another program: ``.ci/run`` gives the build one
+    device (unless ``LANTERN_JAX_CPU_DEVICES`` says otherwise), so the kernels load what the
+    tests compiled."""
+    from pathlib import Path
+
+    import jax
+
+    assert jax.local_device_count() == 1
+    ci = (Path(__file__).resolve().parents[1] / ".ci" / "run").read_text()
+    build = ci[ci.index("-m sphinx") - 200 : ci.index("-m sphinx")]
+    assert 'LANTERN_JAX_CPU_DEVICES="${LANTERN_JAX_CPU_DEVICES:-1}"' in build
+
+
 def test_a_program_that_captures_a_large_constant_is_flagged():
     """The test session's limit on the constants one program captures (``tests/conftest.py``):
     an array past it, closed over by a jitted function, draws JAX's warning (which fails any

@@ -7,7 +7,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from xla_flags import TEST_XLA_CACHES, xla_flags_for_tests
+from xla_flags import xla_flags_for_tests
 
 from lantern_jax.core import xla_options
 
@@ -24,26 +24,6 @@ def test_the_earlier_emitters_only_where_jaxlib_has_them(monkeypatch, release, e
     monkeypatch.setenv("XLA_FLAGS", "--xla_force_host_platform_device_count=2")
     assert xla_options.fast_compile_options() == expected
     assert xla_flags_for_tests() == ("--xla_cpu_use_fusion_emitters=false" if expected else "")
-
-
-def test_the_documentation_build_is_given_the_test_sessions_settings():
-    """``.ci/run`` reads the flags and the XLA caches setting it gives the documentation build
-    from ``python tests/xla_flags.py [--xla-caches]``: those are this session's, so the
-    notebooks' kernels compile programs with the tests' keys."""
-    import os
-    import subprocess
-    import sys
-    from pathlib import Path
-
-    script = Path(__file__).with_name("xla_flags.py")
-    read = [
-        subprocess.run([sys.executable, str(script), *arg], capture_output=True, text=True,
-                       check=True).stdout.strip()
-        for arg in ([], ["--xla-caches"])
-    ]  # fmt: skip
-    assert read == [xla_flags_for_tests(), TEST_XLA_CACHES]
-    assert os.environ["JAX_PERSISTENT_CACHE_ENABLE_XLA_CACHES"] == TEST_XLA_CACHES
-    assert "--xla-caches" in Path(__file__).parents[1].joinpath(".ci", "run").read_text()
 
 
 @pytest.mark.parametrize("value", ["true", "false"])

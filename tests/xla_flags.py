@@ -1,7 +1,5 @@
-"""The XLA flags and the XLA caches setting of every test process, apart from ``conftest.py`` so
-that ``.ci/run`` can read them without importing JAX (``python tests/xla_flags.py`` prints the
-flags, ``python tests/xla_flags.py --xla-caches`` the caches setting) and give them to the
-documentation build, whose notebook kernels then compile programs with the tests' keys.
+"""The XLA flags of every test process, apart from ``conftest.py`` so that ``.ci/run`` can read
+them without importing JAX (``python tests/xla_flags.py`` prints them).
 
 XLA's CPU backend with its earlier fusion emitters compiles the world's programs in about 30 %
 less time (the split path's world tick 6.3-8.1 s against 9.2-10.1 s on a 2-core CPU) for a
@@ -29,16 +27,6 @@ _SPEC = importlib.util.spec_from_file_location(
 xla_options = importlib.util.module_from_spec(_SPEC)
 _SPEC.loader.exec_module(xla_options)
 
-#: ``$JAX_PERSISTENT_CACHE_ENABLE_XLA_CACHES`` of the test processes: what ``import lantern_jax``
-#: sets on a CPU-only install (``lantern_jax.core.jax_setup.XLA_CACHES_CPU``; checked in
-#: ``tests/test_jax_setup.py``): no cache folder path in a program's key.  The tests import JAX
-#: before the package, and so do the notebooks, so neither gets it from the package; given to
-#: the documentation build's kernels by ``.ci/run``, it lets them load the programs the tests
-#: compiled into the shared cache folder (the quickstart notebook's CPU time 78 s against 44 s
-#: with the default tier's programs at hand, 2-core CPU): JAX's own setting puts the folder's
-#: path in every key.
-TEST_XLA_CACHES = "none"
-
 #: The flag, where the installed jaxlib's XLA has it.
 EARLIER_EMITTERS = f"--{xla_options.EARLIER_EMITTERS_OPTION}=false"
 
@@ -49,6 +37,4 @@ def xla_flags_for_tests() -> str:
 
 
 if __name__ == "__main__":
-    import sys
-
-    print(TEST_XLA_CACHES if sys.argv[1:] == ["--xla-caches"] else xla_flags_for_tests())
+    print(xla_flags_for_tests())
