@@ -44,6 +44,17 @@ if TEST_XLA_FLAGS and TEST_XLA_FLAGS.split("=")[0] not in os.environ.get("XLA_FL
 TEST_XLA_CACHES = "none"
 os.environ.setdefault("JAX_PERSISTENT_CACHE_ENABLE_XLA_CACHES", TEST_XLA_CACHES)
 
+#: XLA CPU devices of the processes the tests start (the command line, scripts), exported: one,
+#: as in the test processes themselves (JAX is imported above before ``lantern_jax``, which
+#: leaves JAX's one device).  A program for two devices is another program, so a command-line
+#: process on one device per core compiled again what the in-process tests had put in the
+#: shared cache (the default tier on a 2-core CPU, cold cache: 93 fewer programs compiled with
+#: it, docs/performance.md).  The tests of other device counts set their own
+#: (``tests/test_bad_inputs.py``'s written promise, ``tests/test_multihost.py``,
+#: ``tests/test_jax_setup.py``); a count set before the tests start is kept.
+TEST_CPU_DEVICES = "1"
+os.environ.setdefault("LANTERN_JAX_CPU_DEVICES", TEST_CPU_DEVICES)
+
 import jax  # XLA reads its flags when JAX starts its backend
 import jax.numpy as jnp
 import numpy as np

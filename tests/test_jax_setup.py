@@ -267,6 +267,22 @@ def test_ci_builds_the_documentation_on_the_tests_device_count():
     assert 'LANTERN_JAX_CPU_DEVICES="${LANTERN_JAX_CPU_DEVICES:-1}"' in build
 
 
+def test_the_processes_the_tests_start_run_on_the_tests_device_count():
+    """A command-line or script process a test starts imports the package first, which gives
+    it one CPU device per core unless told otherwise; ``tests/conftest.py`` exports one device,
+    the test session's own, so such a process compiles (or loads) the programs the in-process
+    tests keep in the shared cache, not two-device ones."""
+    import jax
+    from conftest import TEST_CPU_DEVICES
+
+    if os.environ["LANTERN_JAX_CPU_DEVICES"] != TEST_CPU_DEVICES:
+        pytest.skip("LANTERN_JAX_CPU_DEVICES was set before the tests started")
+    code = "import lantern_jax, jax; print(jax.device_count())"
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=120, check=True)  # fmt: skip
+    assert int(done.stdout.strip().splitlines()[-1]) == jax.local_device_count() == 1
+
+
 def test_a_program_that_captures_a_large_constant_is_flagged():
     """The test session's limit on the constants one program captures (``tests/conftest.py``):
     an array past it, closed over by a jitted function, draws JAX's warning (which fails any
