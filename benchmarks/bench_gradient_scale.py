@@ -9,7 +9,13 @@ notebook's cell (``coop`` on the first Right-Turn Yield pair, the hazard's track
 knots) and its two random points; ``docs/stress.md`` gives the figures::
 
     python benchmarks/bench_gradient_scale.py --policy coop --family RTY --knots 8 \\
-        --points 2 --steps 0.05,0.02,0.01,0.005,0.002
+        --points 2 --steps 0.05,0.02,0.01,0.005,0.002 --lines 3
+
+``--lines N`` also walks N random lines through the first point (``--line-reach`` either way,
+``--line-points`` evaluations) and lists where the objective jumps: where its change between
+neighbouring evaluations differs from what the pathwise slope there predicts by more than
+``--jump-tol``.  Between jumps the slope is the gradient's; a finite difference whose step
+spans a jump measures the jump instead.
 """
 
 from __future__ import annotations
@@ -21,7 +27,7 @@ import platform
 import numpy as np
 import pandas as pd
 
-from lantern_jax.apps.stress import report
+from lantern_jax.apps.stress import objective, report
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.suite import load_suite
 
@@ -35,6 +41,10 @@ def main() -> None:
     ap.add_argument("--points", type=int, default=2, help="random points (seed 7, sd 0.5)")
     ap.add_argument("--directions", type=int, default=8)
     ap.add_argument("--steps", default="0.05,0.02,0.01,0.005,0.002")
+    ap.add_argument("--lines", type=int, default=0, help="random lines through point 0")
+    ap.add_argument("--line-reach", type=float, default=0.03)
+    ap.add_argument("--line-points", type=int, default=31)
+    ap.add_argument("--jump-tol", type=float, default=0.005)
     args = ap.parse_args()
     suite = load_suite()
     pair = next(p for p in suite.pairs if p.family == args.family)
@@ -53,6 +63,38 @@ def main() -> None:
     table = pd.DataFrame(rows, index=[f"point {i}" for i in range(args.points)])
     print("cosine, pathwise gradient against central finite differences:")
     print(table.round(3).to_string())
+    if args.lines > 0:
+        walk_lines(problem, points, args)
+
+
+def walk_lines(problem, points: np.ndarray, args: argparse.Namespace) -> None:
+    """The objective (both parts summed) and its pathwise slope along random lines through
+    ``points[0]``, evaluated ``args.points`` candidates per call (the program compiled above);
+    prints each line's jumps."""
+    samples = objective.part_samples(problem)
+    rng = np.random.default_rng(0)
+    ts = np.linspace(-args.line_reach, args.line_reach, args.line_points)
+    for k in range(args.lines):
+        d = rng.normal(size=problem.space.dim)
+        d /= np.linalg.norm(d)
+        pts = (points[0][None] + ts[:, None] * d[None]).astype(np.float32)
+        pad = (-len(pts)) % args.points
+        padded = np.concatenate([pts, np.repeat(pts[-1:], pad, axis=0)])
+        values, slopes = np.zeros(len(padded)), np.zeros(len(padded))
+        for i in range(0, len(padded), args.points):
+            chunk = padded[i : i + args.points, None, :]
+            for part in objective.parts_of(problem):
+                v, g = samples(part, chunk)
+                values[i : i + args.points] += np.asarray(v)[:, 0]
+                slopes[i : i + args.points] += np.asarray(g)[:, 0] @ d
+        values, slopes = values[: len(pts)], slopes[: len(pts)]
+        dt = ts[1] - ts[0]
+        misfit = np.diff(values) - 0.5 * (slopes[1:] + slopes[:-1]) * dt
+        jumps = [f"{0.5 * (ts[i] + ts[i + 1]):+.3f}: {misfit[i]:+.3f}"
+                 for i in np.flatnonzero(np.abs(misfit) > args.jump_tol)]  # fmt: skip
+        print(f"line {k}: slope {slopes.min():+.3f} to {slopes.max():+.3f}; value "
+              f"{values.min():.3f} to {values.max():.3f}; jumps (position: size) "
+              f"{', '.join(jumps) if jumps else 'none'}")  # fmt: skip
 
 
 if __name__ == "__main__":

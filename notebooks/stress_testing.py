@@ -126,9 +126,10 @@ if entries:
 # where the gradient is taken: a cosine near 1 there says the gradient is computed right. Over
 # ±0.05 they measure the slope over a neighbourhood still smaller than one step of the gradient
 # search (Adam moves up to about 0.2 per coordinate a step here). Where the two steps disagree,
-# the surrogate's slope changes within a few hundredths of that point (the closed loop takes
-# another course there; which decision turns is not traced here), and the gradient, though
-# right, says little about where a search step lands.
+# the surrogate jumps within a few hundredths of that point: it is smooth in pieces, and the
+# gradient, right within its piece, does not see the steps between them (`docs/stress.md`,
+# "How far from a point the gradient holds"), so it says little about where a search step
+# lands.
 
 # %%
 points = np.random.default_rng(7).normal(0.0, 0.5, (2 if SMALL else 8, problem.space.dim))
