@@ -3,10 +3,10 @@ central finite differences of the same soft objective along random directions, a
 finite-difference step lengths (in the search's unconstrained coordinates).
 
 A cosine near 1 at a small step says the gradient is computed right at the point; one that
-falls at a larger step says the objective's slope changes within that distance, which is what a
-search step (Adam, about ``lr`` per coordinate) crosses.  The defaults are the stress
-notebook's cell (``coop`` on the first Right-Turn Yield pair, the hazard's track alone, 8
-knots) and its two random points; ``docs/stress.md`` gives the figures::
+falls at a larger step says the objective does something else within that distance (it
+jumps, or bends), which a search step (Adam, about ``lr`` per coordinate) crosses.  The
+defaults are the stress notebook's cell (``coop`` on the first Right-Turn Yield pair, the
+hazard's track alone, 8 knots) and its two random points; ``docs/stress.md`` gives the figures::
 
     python benchmarks/bench_gradient_scale.py --policy coop --family RTY --knots 8 \\
         --points 2 --steps 0.05,0.02,0.01,0.005,0.002 --lines 3
@@ -14,8 +14,8 @@ knots) and its two random points; ``docs/stress.md`` gives the figures::
 ``--lines N`` also walks N random lines through the first point (``--line-reach`` either way,
 ``--line-points`` evaluations) and lists where the objective jumps: where its change between
 neighbouring evaluations differs from what the pathwise slope there predicts by more than
-``--jump-tol``.  Between jumps the slope is the gradient's; a finite difference whose step
-spans a jump measures the jump instead.
+``--jump-tol``.  A finite difference whose step spans a jump measures the jump, which the
+pathwise gradient does not see.
 """
 
 from __future__ import annotations
@@ -78,8 +78,7 @@ def walk_lines(problem, points: np.ndarray, args: argparse.Namespace) -> None:
         d = rng.normal(size=problem.space.dim)
         d /= np.linalg.norm(d)
         pts = (points[0][None] + ts[:, None] * d[None]).astype(np.float32)
-        pad = (-len(pts)) % args.points
-        padded = np.concatenate([pts, np.repeat(pts[-1:], pad, axis=0)])
+        padded = objective.pad_rows(pts, args.points)
         values, slopes = np.zeros(len(padded)), np.zeros(len(padded))
         for i in range(0, len(padded), args.points):
             chunk = padded[i : i + args.points, None, :]

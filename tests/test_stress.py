@@ -348,6 +348,18 @@ def test_autodiff_agrees_with_finite_differences_on_a_smooth_scene():
     assert np.all(np.linalg.norm(np.asarray(grad.first), axis=1) > 0)
 
 
+@given(rows=st.integers(1, 9), multiple=st.integers(1, 5))
+@settings(max_examples=40, deadline=None)
+def test_padded_candidates_are_the_last_one_repeated_to_a_whole_batch(rows, multiple):
+    """:func:`objective.pad_rows`: the candidates first, unchanged, then copies of the last one
+    until the count is a multiple of the compiled batch, and no more than that."""
+    x = np.arange(rows * 3, dtype=np.float32).reshape(rows, 3)
+    out = objective.pad_rows(x, multiple)
+    assert len(out) % multiple == 0 and len(out) - rows < multiple
+    np.testing.assert_array_equal(out[:rows], x)
+    np.testing.assert_array_equal(out[rows:], np.broadcast_to(x[-1], (len(out) - rows, 3)))
+
+
 @pytest.mark.slow  # the soft program of the test above (two candidates per batch)
 def test_a_candidate_s_value_and_gradient_do_not_see_the_rest_of_its_batch():
     """The candidates of a batch are one soft rollout and one backward pass of their sum

@@ -415,6 +415,14 @@ def estimate(
     return smoothed_estimate(lambda x: soft_objective(problem, x, data), z, eps, sigma)
 
 
+def pad_rows(x: np.ndarray, multiple: int) -> np.ndarray:
+    """``x`` (N, ...) with its last row repeated until N is a multiple of ``multiple``: the
+    candidates of one call of a program compiled for batches of ``multiple`` (the rows added
+    are evaluated and dropped, so they never change a result)."""
+    pad = (-len(x)) % multiple
+    return np.concatenate([x, np.repeat(x[-1:], pad, axis=0)]) if pad else x
+
+
 def part_samples(problem: Problem, grad: bool = True) -> Callable:
     """``(part, points (R, M, K)) -> (values (R, M), grads (R, M, K))``: one part's surrogate and
     pathwise gradient at every point (``grads`` None when ``grad`` is False: no backward pass),

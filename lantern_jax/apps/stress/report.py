@@ -40,6 +40,7 @@ from lantern_jax.apps.stress.objective import (
     WATCHES,
     Problem,
     batched_estimator,
+    pad_rows,
     part_samples,
     parts_of,
     watched_slots,
@@ -552,9 +553,7 @@ def gradient_quality(
     samples_fn = part_samples(problem)
 
     def chunks(z: np.ndarray):
-        n = len(z)
-        pad = (-n) % batch
-        return np.concatenate([z, np.repeat(z[-1:], pad, axis=0)]) if pad else z, n
+        return pad_rows(z, batch), len(z)
 
     def smoothed(zs: np.ndarray) -> np.ndarray:
         z, n = chunks(np.asarray(zs, np.float32))

@@ -22,7 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from lantern_jax.apps.stress import plausibility as rules
-from lantern_jax.apps.stress.objective import EXPERT, POLICY, Problem
+from lantern_jax.apps.stress.objective import EXPERT, POLICY, Problem, pad_rows
 from lantern_jax.apps.stress.watch import hard_batch
 from lantern_jax.core.constants import MAX_VERIFY_S, ROUTE_A_GATE_NAMES
 from lantern_jax.core.times import ticks
@@ -164,8 +164,7 @@ class Verifier:
         """Verify candidates given as values (N, K) of the problem's space."""
         values = np.asarray(values, np.float32)
         n = values.shape[0]
-        pad = (-n) % self.batch
-        padded = np.concatenate([values, np.repeat(values[-1:], pad, axis=0)]) if pad else values
+        padded = pad_rows(values, self.batch)
         parts = [self._chunk(padded[i : i + self.batch]) for i in range(0, len(padded), self.batch)]
         cat = lambda *xs: np.concatenate([np.asarray(x) for x in xs])[:n]  # noqa: E731
         r = jax.tree.map(cat, *parts)
