@@ -21,6 +21,7 @@ from pathlib import Path
 DOCS = Path(__file__).resolve().parent
 ROOT = DOCS.parent
 sys.path.insert(0, str(ROOT))  # autodoc reads the package of this checkout
+sys.path.insert(0, str(DOCS / "_ext"))  # this site's own extensions
 
 # The notebooks run in their small, fast setting unless asked otherwise; the kernels that
 # MyST-NB starts inherit this process's environment.
@@ -49,6 +50,7 @@ extensions = [
     "sphinx.ext.autosummary",
     "sphinx.ext.napoleon",
     "sphinx.ext.viewcode",
+    "shared_navigation",  # docs/_ext/shared_navigation.py
 ]
 
 # Markdown pages, the API pages autosummary writes, and the notebooks.  Only these: the
@@ -141,33 +143,5 @@ def _named_returns(app, what, name, obj, options, lines: list[str]) -> None:
         i += len(out)
 
 
-def _navigation_shared_by_folder(app) -> None:
-    """Furo writes the whole site's navigation into every page it renders, resolving the
-    global toctree for that page: about half of an unexecuted build's time, most of it for the
-    pages that are not documents (the highlighted source of every module, the indices), about
-    190 of the 420 pages.  Such a page is in no toctree, so no entry of its navigation is marked
-    current, and every link in it is relative to the page's folder: its navigation is the same
-    for every page of that folder, and it is computed once per folder.  A document's own
-    navigation (its entry and their parents marked current) is computed for it as before."""
-    import furo
-
-    compute = getattr(furo, "_compute_navigation_tree", None)
-    if compute is None:  # another Furo: every page computes its own, as Furo does
-        return
-    by_folder: dict[str, str] = {}
-
-    def navigation(context: dict) -> str:
-        page = context.get("pagename", "")
-        if page in app.env.all_docs:
-            return compute(context)
-        folder = page.rpartition("/")[0]
-        if folder not in by_folder:
-            by_folder[folder] = compute(context)
-        return by_folder[folder]
-
-    furo._compute_navigation_tree = navigation
-
-
 def setup(app):
     app.connect("autodoc-process-docstring", _named_returns, priority=400)  # before Napoleon
-    app.connect("builder-inited", _navigation_shared_by_folder)
