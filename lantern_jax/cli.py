@@ -81,7 +81,10 @@ __all__ = [
     "main",
 ]
 
-#: The command modules, in the order ``lantern-jax --help`` lists them.
+#: The command modules, in the order ``lantern-jax --help`` lists them.  (Their reprs name
+#: this machine's paths, so the documentation leaves the value out.)
+#:
+#: :meta hide-value:
 COMMANDS = (
     evaluate, suite, policies, ablations, stress, compare, report, dataset, train, unseen,
     wording, diagnostics, plot,

@@ -256,3 +256,14 @@ def test_an_api_page_renders(browser, site):
     assert not problems, (page.name, problems)
     assert page.stem in facts["h1"], facts
     assert facts["text"] > 500, facts
+
+
+@pytest.mark.slow
+def test_no_page_names_the_folder_the_site_was_built_from(site):
+    """A value the API reference shows (a module's repr, a default path) would print the build
+    machine's folders; such values are documented without them (``:meta hide-value:``).  The
+    executed notebooks' pages are left out: their outputs are what the kernels printed."""
+    pages = [p for p in site.rglob("*.html") if "notebooks" not in p.relative_to(site).parts]
+    assert len(pages) > 100
+    named = [str(p.relative_to(site)) for p in pages if str(ROOT) in p.read_text()]
+    assert not named, named

@@ -102,6 +102,9 @@ class Component:
 
 
 #: Every component with accumulators, in the order the telemetry folds them and holds them.
+#: (Their modules' reprs name this machine's paths, so the documentation leaves the value out.)
+#:
+#: :meta hide-value:
 COMPONENTS: tuple[Component, ...] = (
     Component("ttc", ttc, "hazard", "S_TTC"),
     Component("clearance", clearance, "hazard", "S_clear"),
@@ -123,10 +126,14 @@ def by_role(role: str) -> dict[str, ModuleType]:
 
 
 #: The hazard components by Telemetry field (and availability key).
+#:
+#: :meta hide-value:
 HAZARD_COMPONENTS = by_role("hazard")
 #: The Route A gates by Telemetry field (the pass flag is ``"gate_" + field``), in failure-time
 #: order: the order of their names in :data:`lantern_jax.core.constants.ROUTE_A_GATE_FIELDS`,
 #: which the tables read without importing JAX.
+#:
+#: :meta hide-value:
 ROUTE_A_GATES = by_role("route_a_gate")
 if tuple(ROUTE_A_GATES) != ROUTE_A_GATE_FIELDS:
     raise AssertionError(f"Route A gates {tuple(ROUTE_A_GATES)} != {ROUTE_A_GATE_FIELDS}")
