@@ -104,8 +104,28 @@ def _clean_run(name: str, tmp_path: Path, monkeypatch) -> tuple[str, int]:
     errors = [o for o in outputs if o.get("output_type") == "error"]
     assert not errors, [f"{e.get('ename')}: {e.get('evalue')}" for e in errors]
     text = "\n".join(_text(o) for o in outputs)
+    assert "TqdmWarning" not in text  # lantern_jax.core.progress: no widget, no warning
     images = [o for o in outputs if "image/png" in o.get("data", {})]
     return text, len(images)
+
+
+def test_the_package_imports_in_a_kernel_without_a_warning(tmp_path, monkeypatch):
+    """In a Jupyter kernel the package's progress bars come from ``tqdm.auto`` only where
+    ``ipywidgets`` is installed: without it ``tqdm.auto`` warns on import ("IProgress not
+    found"), which used to open every notebook's first output (``lantern_jax.core.progress``)."""
+    import nbformat
+
+    from lantern_jax.core.progress import HAS_WIDGETS
+
+    share = _install_kernelspec(tmp_path / "kernel")
+    monkeypatch.setenv("JUPYTER_PATH", str(share))
+    code = ("import lantern_jax.apps.evaluation as ev, lantern_jax.apps.stream as st\n"
+            "print(type(ev.tqdm(total=1, disable=True)).__module__, ev.tqdm is st.tqdm)")
+    nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell(code)])
+    nbclient.NotebookClient(nb, timeout=300, kernel_name=KERNEL_NAME).execute()
+    text = "\n".join(_text(o) for o in _outputs(nb))
+    assert "Warning" not in text, text
+    assert text.split() == ["tqdm.notebook" if HAS_WIDGETS else "tqdm.std", "True"], text
 
 
 @pytest.mark.slow

@@ -30,10 +30,10 @@ from typing import Any
 import jax
 import numpy as np
 import pandas as pd
-from tqdm.auto import tqdm
 
 from lantern_jax.core.checks import check_seed
 from lantern_jax.core.constants import CONDITIONS, DT, ROUTE_B, SUITE_ID
+from lantern_jax.core.progress import tqdm
 from lantern_jax.core.times import happened, time_or_nan
 from lantern_jax.policies.base import Policy, check_policy_output
 from lantern_jax.policies.external import is_policy_source

@@ -25,9 +25,9 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 import numpy as np
-from tqdm.auto import tqdm
 
 from lantern_jax.core.constants import SUITE_ID
+from lantern_jax.core.progress import tqdm
 from lantern_jax.core.times import ticks_covering
 from lantern_jax.scenarios.knobs import get_knobs, set_knobs
 from lantern_jax.scenarios.suite import Suite, load_suite

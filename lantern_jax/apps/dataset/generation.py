@@ -22,7 +22,6 @@ from typing import Any
 import jax
 import numpy as np
 import pandas as pd
-from tqdm.auto import tqdm
 
 from lantern_jax.apps.dataset import frames as fr
 from lantern_jax.apps.dataset.record import FRAME_TICKS, RIG_FIELDS, batched_recorder
@@ -48,6 +47,7 @@ from lantern_jax.apps.dataset.store import (
 from lantern_jax.apps.evaluation import package_versions
 from lantern_jax.core import family_codes
 from lantern_jax.core.constants import DT, FAMILIES, WEATHERS
+from lantern_jax.core.progress import tqdm
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.suite import load_suite
 from lantern_jax.scoring.metrics import finalize

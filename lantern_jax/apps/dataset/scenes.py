@@ -28,7 +28,6 @@ from pathlib import Path
 
 import jax.numpy as jnp
 import numpy as np
-from tqdm.auto import tqdm
 
 from lantern_jax.apps.dataset.store import DatasetError
 from lantern_jax.core import family_codes
@@ -38,6 +37,7 @@ from lantern_jax.core.constants import (  # noqa: F401  (DATASET_SEED, PAIRS_PER
     PAIRS_PER_FAMILY,
     WEATHERS,
 )
+from lantern_jax.core.progress import tqdm
 from lantern_jax.io.files import atomic_write
 from lantern_jax.scenarios.assemble import host_arrays
 from lantern_jax.scenarios.duplicates import near_duplicate, route_samples

@@ -45,7 +45,6 @@ from pathlib import Path
 
 import jax
 import numpy as np
-from tqdm.auto import tqdm
 
 from lantern_jax.apps.dataset.scenes import PLAN_JSON, SceneSpec
 from lantern_jax.apps.dataset.store import dataset_provenance, load_frames, read_card
@@ -68,6 +67,7 @@ from lantern_jax.apps.training.distractor_drives import (
 from lantern_jax.apps.training.fit import Batches, fit, model_config
 from lantern_jax.apps.training.relabel import Visits, relabel_batch
 from lantern_jax.core.constants import FAMILIES
+from lantern_jax.core.progress import tqdm
 from lantern_jax.io.files import atomic_write
 from lantern_jax.policies.learned.checkpoint import load_model, model_policy, save_model
 from lantern_jax.policies.registry import get_policy

@@ -20,10 +20,10 @@ import numpy as np
 import optax
 import pandas as pd
 from flax import nnx
-from tqdm.auto import tqdm
 
 from lantern_jax.apps.training.config import TrainConfig
 from lantern_jax.apps.training.data import Examples
+from lantern_jax.core.progress import tqdm
 from lantern_jax.io.files import atomic_write
 from lantern_jax.policies.learned.checkpoint import save_model
 from lantern_jax.policies.learned.features import features, nav_token_table
