@@ -5,9 +5,10 @@ toctree for that page: 40 of an unexecuted build's 88 s of CPU time on a 2-core 
 420 pages (most of them API pages).  What differs between two pages of one folder is only which
 entry is marked current, since every link is relative to the folder.  So the toctree is
 resolved once per folder, for a page name that is in no toctree (:data:`UNLISTED_PAGE`), and
-each page marks its own entry in a copy (:func:`mark_current`); a page in no toctree (the
-highlighted source of every module, the indices) marks none.  Furo then adds its checkboxes to
-that tree, as it does to its own.  The navigation written is the one Furo writes, byte for
+each page marks its own entry in a copy (:func:`mark_current`).  Furo then adds its
+checkboxes to that tree, as it does to its own.  A page in no toctree (the highlighted source of
+every module, the indices) marks none, so its whole navigation, checkboxes added, is the same
+for its folder and is made once.  The navigation written is the one Furo writes, byte for
 byte: checked on every page of this site's build, and by ``tests/test_docs_navigation.py`` on a
 small site built both ways.
 
@@ -98,24 +99,31 @@ def share_navigation(app) -> None:
     compute = getattr(furo, "_compute_navigation_tree", None)
     if compute is None:
         return
-    resolved: dict[tuple, str] = {}
+    resolved: dict[tuple, str] = {}  # (folder, toctree options) -> the unmarked toctree
+    unmarked: dict[str, str] = {}  # folder -> the navigation of its pages in no toctree
 
     def navigation(context: dict) -> str:
         if "toctree" not in context:
             return compute(context)
         page = context.get("pagename", "")
         folder = page.rpartition("/")[0]
+        listed = page in app.env.all_docs
+        if not listed and folder in unmarked:
+            return unmarked[folder]
         unlisted = f"{folder}/{UNLISTED_PAGE}" if folder else UNLISTED_PAGE
 
         def toctree(**kwargs) -> str:
             key = (folder, tuple(sorted(kwargs.items())))
             if key not in resolved:
                 resolved[key] = app.builder._get_local_toctree(unlisted, **kwargs)
-            if page not in app.env.all_docs:
+            if not listed:
                 return resolved[key]
             return mark_current(resolved[key], app.builder.get_relative_uri(unlisted, page))
 
-        return compute({**context, "toctree": toctree})
+        html = compute({**context, "toctree": toctree})
+        if not listed:
+            unmarked[folder] = html
+        return html
 
     furo._compute_navigation_tree = navigation
 
