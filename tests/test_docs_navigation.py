@@ -62,9 +62,10 @@ def test_html_that_is_not_a_toctree_is_refused():
         nav.mark_current("</li><ul></ul>", "a.html")
 
 
-def _site(root: Path, extension: bool) -> Path:
+def _site(root: Path, extension: bool, extra: bool = False) -> Path:
     """A small Furo site: pages in the root and in a folder, one listed twice, one listed in
-    no toctree; built (not in parallel) into ``root/out``."""
+    no toctree (and with ``extra`` one more page, ``e``, in the first toctree); built (not in
+    parallel) into ``root/out``."""
     from sphinx.cmd.build import build_main
 
     src = root / "src"
@@ -75,13 +76,15 @@ def _site(root: Path, extension: bool) -> Path:
         f"project = 'site'\nhtml_theme = 'furo'\nextensions = {extensions!r}\n"
     )
     pages = {
-        "index": (".. toctree::\n   :caption: Guide\n\n   a\n   sub/b\n   sub/c\n\n"
-                  ".. toctree::\n   :caption: Again\n\n   a\n"),
+        "index": (".. toctree::\n   :caption: Guide\n\n   a\n   sub/b\n   sub/c\n"
+                  + ("   e\n" if extra else "")
+                  + "\n.. toctree::\n   :caption: Again\n\n   a\n"),
         "a": "",
         "sub/b": ".. toctree::\n\n   d\n",
         "sub/c": "",
         "sub/d": "",
         "sub/alone": ":orphan:\n\n",
+        **({"e": ""} if extra else {}),
     }
     for name, body in pages.items():
         title = name.rpartition("/")[2].title()
@@ -100,6 +103,11 @@ def test_a_site_built_with_the_extension_is_the_site_built_without_it(tmp_path, 
     monkeypatch.setattr(furo, "_compute_navigation_tree", furo._compute_navigation_tree)
     plain = _site(tmp_path / "plain", extension=False)
     shared = _site(tmp_path / "shared", extension=True)
+    # a second build in the same process (of a site with one more page) starts from Furo's
+    # function, not from the first build's, whose toctree lacks that page
+    again = _site(tmp_path / "again", extension=True, extra=True)
+    assert 'href="e.html"' in (again / "a.html").read_text()
+    assert 'class="current reference internal" href="#">E<' in (again / "e.html").read_text()
     pages = sorted(p.relative_to(plain) for p in plain.rglob("*.html"))
     wanted = {Path("a.html"), Path("sub/b.html"), Path("sub/d.html"), Path("sub/alone.html")}
     assert wanted <= set(pages)

@@ -99,6 +99,9 @@ def share_navigation(app) -> None:
     compute = getattr(furo, "_compute_navigation_tree", None)
     if compute is None:
         return
+    # a build before this one in the same process replaced Furo's function with one bound to
+    # its own application: start from Furo's again
+    compute = getattr(compute, "furo_navigation", compute)
     resolved: dict[tuple, str] = {}  # (folder, toctree options) -> the unmarked toctree
     unmarked: dict[str, str] = {}  # folder -> the navigation of its pages in no toctree
 
@@ -125,6 +128,7 @@ def share_navigation(app) -> None:
             unmarked[folder] = html
         return html
 
+    navigation.furo_navigation = compute
     furo._compute_navigation_tree = navigation
 
 
