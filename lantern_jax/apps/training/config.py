@@ -34,8 +34,9 @@ carries — the paper's three learned rows:
 The text encoder (``text_encoder``) is the pooled bag of words unless given; ``"attention"``
 reads the words in order, ``"bigram"`` which word follows which
 (:mod:`lantern_jax.policies.learned.model`).  The seen actors' tokens are pooled by their mean
-unless ``object_pool = "mean_max"`` adds each feature's largest value.  A model fine-tuned from
-``init_from`` must have the architecture of that checkpoint.
+unless ``object_pool = "mean_max"`` adds each feature's largest value.  The head proposes one
+plan unless ``modes`` asks for several, each with a score, the model driving the one it scores
+highest.  A model fine-tuned from ``init_from`` must have the architecture of that checkpoint.
 
 The camera rig (``rig``) is the recipe's own unless given: the six-camera rig for ``surround``,
 the front camera for the others.  A language recipe may take ``rig = "surround"``: its model
@@ -99,6 +100,10 @@ class TrainConfig:
     # how the seen actors' tokens are pooled (policies.learned.model.OBJECT_POOLS): "mean", or
     # "mean_max" (the mean beside each feature's largest value, so one actor can set a feature)
     object_pool: str = "mean"
+    # plans the model's head proposes (policies.learned.model.ModelConfig.modes): 1, one plan
+    # trained by its L1; K > 1, K plans and their scores trained winner-takes-all, the model
+    # driving the one it scores highest
+    modes: int = 1
     epochs: int = 6
     batch_size: int = 256
     lr: float = 1e-3  # peak learning rate (one-cycle: warm-up then cosine decay)
@@ -216,7 +221,7 @@ def _range_problem(cfg: TrainConfig) -> tuple[str, str] | None:
     if cfg.recipe in ("coop", "distance", "closed_loop") and not cfg.init_from:
         problems.append(("init_from", f"the {cfg.recipe} recipe fine-tunes a base model; give it"))
     for key in ("epochs", "batch_size", "width", "heads", "layers", "text_layers", "rounds",
-                "scenes_per_round"):  # fmt: skip
+                "scenes_per_round", "modes"):  # fmt: skip
         if getattr(cfg, key) < 1:
             problems.append((key, f"must be >= 1, got {getattr(cfg, key)}"))
     for key in ("lr", "max_minutes", "far_m", "visit_every_s", "max_seconds", "failure_every_s",

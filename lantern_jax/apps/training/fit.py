@@ -27,7 +27,7 @@ from lantern_jax.core.progress import tqdm
 from lantern_jax.io.files import atomic_write
 from lantern_jax.policies.learned.checkpoint import save_model
 from lantern_jax.policies.learned.features import features, nav_token_table
-from lantern_jax.policies.learned.model import ModelConfig, reads_word_pairs
+from lantern_jax.policies.learned.model import ModelConfig, modes_loss, reads_word_pairs
 from lantern_jax.types.language import load_embedding
 from lantern_jax.types.observation import Observation, SurroundView
 
@@ -36,7 +36,8 @@ def model_config(cfg: TrainConfig, ranges: int) -> ModelConfig:
     """The architecture a training config asks for."""
     return ModelConfig(rig=cfg.rig, language=cfg.language, width=cfg.width, heads=cfg.heads,
                        layers=cfg.layers, ranges=ranges, text_encoder=cfg.text_encoder,
-                       text_layers=cfg.text_layers, object_pool=cfg.object_pool)  # fmt: skip
+                       text_layers=cfg.text_layers, object_pool=cfg.object_pool,
+                       modes=cfg.modes)  # fmt: skip
 
 
 def _observation(batch: dict[str, Any]) -> Observation:
@@ -60,20 +61,30 @@ def text_vocabulary(warning_tokens: np.ndarray, nav_tokens: np.ndarray) -> np.nd
     return np.unique(ids).astype(np.int32)
 
 
-def make_loss(graphdef: Any, rig: str):
-    """``loss(params, obs_batch, targets, embedding, nav, vocabulary=None) -> () mean L1`` over
-    a batch.  With ``vocabulary`` ((U,) int32, :func:`text_vocabulary` of the examples) a
-    bigram reader projects the vocabulary's rows once for the batch instead of every token
-    slot of every example (:class:`~lantern_jax.policies.learned.model.WordTables`); other
-    models ignore it."""
+def make_loss(graphdef: Any, rig: str, driven: bool = False):
+    """``loss(params, obs_batch, targets, embedding, nav, vocabulary=None) -> ()`` over a
+    batch: the mean L1 (m) of the model's plan, or for a model with ``modes`` > 1 the mean of
+    :func:`~lantern_jax.policies.learned.model.modes_loss` (the nearest plan's L1 plus the
+    weighted cross-entropy of the scores), which training minimises.  ``driven``: the mean L1
+    of the plan the model drives instead (the validation figure; for one mode the same value).
+    With ``vocabulary`` ((U,) int32, :func:`text_vocabulary` of the examples) a bigram reader
+    projects the vocabulary's rows once for the batch instead of every token slot of every
+    example (:class:`~lantern_jax.policies.learned.model.WordTables`); other models ignore
+    it."""
 
     def loss(params, obs, targets, embedding, nav, vocabulary=None):
         model = nnx.merge(graphdef, params)
         tables = None if vocabulary is None else model.word_tables(embedding, vocabulary)
-        pred = jax.vmap(lambda o: model(features(o, rig, embedding, nav), tables))(
+        if model.config.modes == 1:
+            pred = jax.vmap(lambda o: model(features(o, rig, embedding, nav), tables))(
+                _observation(obs)
+            )
+            return jnp.mean(jnp.abs(pred - targets))
+        plans, scores = jax.vmap(lambda o: model.plans(features(o, rig, embedding, nav), tables))(
             _observation(obs)
         )
-        return jnp.mean(jnp.abs(pred - targets))
+        objective, driven_l1 = jax.vmap(modes_loss)(plans, scores, targets)
+        return jnp.mean(driven_l1 if driven else objective)
 
     return loss
 
@@ -229,7 +240,7 @@ def fit(cfg: TrainConfig, model: Any, ex: Examples, batches: Batches, val_idx: n
         targets = b.targets.reshape(k, -1, *b.targets.shape[1:])
         return steps_with(params, opt_state, obs, targets, group.valid, embedding, nav, vocab)
 
-    val_loss_with = jax.jit(loss_fn)
+    val_loss_with = jax.jit(make_loss(graphdef, cfg.rig, driven=True))
 
     def val_loss_fn(p, o, t):
         return val_loss_with(p, o, t, embedding, nav, vocab)

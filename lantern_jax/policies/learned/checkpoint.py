@@ -174,7 +174,7 @@ def _is_sha256(v: object) -> bool:
 
 #: ModelConfig fields added after checkpoints were first written: a description without one
 #: describes a model built with the field's default (the architecture of that time).
-LATER_CONFIG_FIELDS = ("text_encoder", "text_layers", "object_pool")
+LATER_CONFIG_FIELDS = ("text_encoder", "text_layers", "object_pool", "modes")
 #: The accepted values of a ModelConfig field of type str.
 _CHOICES = {"rig": RIGS, "text_encoder": TEXT_ENCODERS, "object_pool": OBJECT_POOLS}
 

@@ -18,7 +18,9 @@
                    second Linear (L-1, W)--> mean over the text's adjacent pairs (W,);
                    gamma, beta = the same MLP as "attention"
         trunk = trunk * (1 + gamma) + beta                            (FiLM)
-    head: MLP(trunk) -> (10, 2) increments, summed along the horizon  (ego frame, metres)
+    head: MLP(trunk) -> (10, 2) increments, summed along the horizon  (ego frame, metres);
+          with ``ModelConfig.modes`` K > 1: K such plans and K scores, the plan driven the one
+          scored highest
 
 The head predicts per-step displacements and accumulates them, so the waypoints are ordered
 along the plan; their scale is set by :data:`STEP_SCALE_M` (a 10 m/s plan moves 2.5 m a step).
@@ -51,6 +53,14 @@ hundred distinct tokens need not project every one of its B x L token slots: tra
 per step (:meth:`DrivingModel.word_tables`) and each slot reads its token's projected row
 (:class:`WordTables`).  The function is the same; the float32 sums of the gradient run in
 another order, so the weights are not the bits of the per-slot form.
+
+One plan per observation, trained by its L1 distance to the expert's, is the expert's plans
+averaged where the model cannot tell them apart: where the expert sometimes waits and sometimes
+goes (a restart after a crossing vehicle has cleared), the regression's answer is a creep that
+is neither.  ``ModelConfig.modes`` K > 1 gives the head K plans and a score for each, trained
+winner-takes-all (:func:`modes_loss`: the L1 of the plan nearest the expert's, plus the
+cross-entropy of the scores against that plan's index), as multi-hypothesis trajectory
+predictors are; the model drives the plan it scores highest, always one of its own plans.
 """
 
 from __future__ import annotations
@@ -74,6 +84,10 @@ TEXT_ENCODERS = ("pooled", "attention", "bigram")
 #: How the seen actors' tokens are pooled (``ModelConfig.object_pool``; the module docstring).
 OBJECT_POOLS = ("mean", "mean_max")
 WORD_POSITION_INIT_STD = 0.02  # standard deviation of the learned word-position embeddings
+#: Weight of the mode scores' cross-entropy beside the winning plan's L1 (m) in
+#: :func:`modes_loss`: a tenth, so that the scores' loss (ln K nats at the start, 1.1 for three
+#: modes) weighs about as the plans' (0.1-0.3 m once the open-loop stages have fitted).
+MODE_SCORE_WEIGHT = 0.1
 
 
 class WordTables(NamedTuple):
@@ -105,6 +119,7 @@ class ModelConfig:
     text_encoder: str = "pooled"  # one of TEXT_ENCODERS
     text_layers: int = 1  # self-attention layers over the words (text_encoder "attention")
     object_pool: str = "mean"  # one of OBJECT_POOLS
+    modes: int = 1  # K, plans the head proposes (the module docstring); 1: one plan, no scores
 
 
 class _MLP(nnx.Module):
@@ -158,7 +173,8 @@ class DrivingModel(nnx.Module):
             self.film = _MLP((config.text_dim + w + 4, 2 * w, 2 * w), rngs)
         elif config.language:
             self.film = nnx.Linear(config.text_dim + 4, 2 * w, rngs=rngs)
-        self.head = _MLP((w, w, 2 * NUM_WAYPOINTS), rngs)
+        scores = config.modes if config.modes > 1 else 0
+        self.head = _MLP((w, w, config.modes * 2 * NUM_WAYPOINTS + scores), rngs)
 
     def word_tables(self, embedding: Array, vocabulary: Array) -> WordTables | None:
         """The bigram reader's projections of ``vocabulary`` ((U,) int32 sorted token ids, every
@@ -173,9 +189,19 @@ class DrivingModel(nnx.Module):
         return WordTables(row, self.embed_words(rows), self.embed_next(rows))
 
     def __call__(self, f: Features, tables: WordTables | None = None) -> Array:
-        """(10, 2) float32 waypoints, ego frame (x forward, y right), metres.  ``tables``
+        """(10, 2) float32 waypoints, ego frame (x forward, y right), metres: the plan the model
+        drives (with ``modes`` > 1 the one it scores highest, :meth:`plans`).  ``tables``
         (bigram reader only; :meth:`word_tables`) must project every token id of ``f.tokens``:
         the result is the per-slot reading's within float32 rounding."""
+        plans, scores = self.plans(f, tables)
+        if self.config.modes == 1:
+            return plans[0]
+        return plans[jnp.argmax(scores)]
+
+    def plans(self, f: Features, tables: WordTables | None = None) -> tuple[Array, Array]:
+        """Every plan the head proposes: ((K, 10, 2) float32 waypoints as :meth:`__call__`'s,
+        (K,) float32 scores, logits of which plan to drive), K = ``ModelConfig.modes``; with one
+        mode its score is 0."""
         objects = _attend(self.embed_objects(f.objects), f.mask, self.attention, self.norms)
         pooled = _masked_mean(objects, f.mask)  # (W,)
         if self.config.object_pool == "mean_max":
@@ -190,8 +216,11 @@ class DrivingModel(nnx.Module):
             cond = jnp.concatenate([*parts, f.position, f.has_position[None], f.warning[None]])
             gamma, beta = jnp.split(self.film(cond), 2)
             h = h * (1.0 + gamma) + beta
-        steps = self.head(nnx.gelu(h)).reshape(NUM_WAYPOINTS, 2) * STEP_SCALE_M
-        return jnp.cumsum(steps, axis=0)
+        out = self.head(nnx.gelu(h))
+        k = self.config.modes
+        steps = out[: k * 2 * NUM_WAYPOINTS].reshape(k, NUM_WAYPOINTS, 2) * STEP_SCALE_M
+        scores = out[k * 2 * NUM_WAYPOINTS :] if k > 1 else jnp.zeros(1, out.dtype)
+        return jnp.cumsum(steps, axis=1), scores
 
     def _read_words(self, words: Array, mask: Array, tokens: Array | None = None,
                     tables: WordTables | None = None) -> Array:  # fmt: skip
@@ -231,3 +260,18 @@ def _masked_max(tokens: Array, mask: Array) -> Array:
     lowest = jnp.finfo(tokens.dtype).min
     largest = jnp.max(jnp.where(mask[:, None], tokens, lowest), axis=0)
     return jnp.where(jnp.any(mask), largest, 0.0)
+
+
+def modes_loss(plans: Array, scores: Array, target: Array) -> tuple[Array, Array]:
+    """Winner-takes-all loss of one example's proposals: ``plans`` (K, 10, 2) float32 m,
+    ``scores`` (K,) float32 logits, ``target`` (10, 2) float32 m, the expert's plan.  Returns
+    (the training loss: the L1 of the plan nearest the target, mean over its waypoints' two
+    coordinates, in m, plus :data:`MODE_SCORE_WEIGHT` times the scores' cross-entropy against
+    that plan's index; the L1 of the plan the model drives, m).  Only the nearest plan learns
+    from the example, so the K plans can come to cover answers the expert gives in states the
+    model cannot tell apart, rather than their average."""
+    l1 = jnp.mean(jnp.abs(plans - target[None]), axis=(1, 2))  # (K,)
+    nearest = jnp.argmin(l1)
+    cross_entropy = jax.nn.logsumexp(scores) - scores[nearest]
+    driven = l1[jnp.argmax(scores)]
+    return l1[nearest] + MODE_SCORE_WEIGHT * cross_entropy, driven
