@@ -30,7 +30,7 @@ MODEL = "closed/learned-closed-loop-rig-bigram.msgpack"  # each chain's last sta
 #: ``runs/train/bigram_<variant>``.
 STATED_VARIANTS = {"stated": "all", "stated_half": "half", "stated_quarter": "a quarter",
                    "stated_half_short": "half", "stated_half_short_hard": "half",
-                   "stated_half_short_max": "half"}
+                   "stated_half_short_max": "half", "stated_half_short_modes": "half"}
 #: What else a variant's closed-loop stage changes, in words (its config says it in full).
 VARIANT_ROUNDS = {
     "stated_half_short": "fourteen closed-loop rounds of one epoch",
@@ -38,6 +38,8 @@ VARIANT_ROUNDS = {
                               "weighted to LWW, RWW and RTY",
     "stated_half_short_max": "fourteen closed-loop rounds of one epoch, the actors pooled by "
                              "their mean and largest values (every stage)",
+    "stated_half_short_modes": "fourteen closed-loop rounds of one epoch, a head of three "
+                               "scored plans (every stage)",
 }
 
 
@@ -162,6 +164,13 @@ def bigram_stated_half_short_max_median_ensemble() -> Policy:
 def bigram_stated_half_short_max_medoid_ensemble() -> Policy:
     """Those three seeds driving the plan of the member nearest the others (``"medoid"``)."""
     return stated_variant_ensemble("stated_half_short_max", combine="medoid")
+
+
+def bigram_stated_half_short_modes_ensemble() -> Policy:
+    """As :func:`bigram_stated_half_short_ensemble`, every stage's model proposing three plans
+    and driving the one it scores highest (``modes = 3``; trained with the three
+    ``*_modes.toml`` configs, ``examples/train_bigram_ensemble.sh``)."""
+    return stated_variant_ensemble("stated_half_short_modes")
 
 
 def bigram_stated_half_short_medoid_ensemble() -> Policy:

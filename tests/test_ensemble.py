@@ -364,18 +364,19 @@ def test_each_stated_variant_ensemble_reads_what_its_config_trains():
     same = {k: v for k, v in hard.items() if k not in ("name", "out", "family_weights")}
     assert same == {k: v for k, v in short.items() if k not in ("name", "out")}
     assert hard["family_weights"] == "LWW=2,RWW=2,RTY=2"
-    # the max-pooled chain: each stage its bigram twin's config but the pooling and its names
-    for plain, maxed in (("train_base_rig_bigram", "train_base_rig_bigram_max"),
-                         ("train_distance_onset_only_rig_bigram",
-                          "train_distance_onset_only_rig_bigram_max"),
-                         ("train_closed_loop_rig_bigram_stated_half_short",
-                          "train_closed_loop_rig_bigram_stated_half_short_max")):  # fmt: skip
-        one, two = (tomllib.loads((root / "configs" / f"{c}.toml").read_text())["train"]
-                    for c in (plain, maxed))  # fmt: skip
-        named = ("name", "out", "init_from", "object_pool")
-        assert {k: v for k, v in two.items() if k not in named} == {
-            k: v for k, v in one.items() if k not in named}, maxed
-        assert two["object_pool"] == "mean_max" and two["name"] == one["name"] + "-max"
+    # the max-pooled and the three-plan chains: each stage its bigram twin's config but the
+    # pooling (the head) and its names
+    for tail, field, value in (("max", "object_pool", "mean_max"), ("modes", "modes", 3)):
+        for plain in ("train_base_rig_bigram", "train_distance_onset_only_rig_bigram",
+                      "train_closed_loop_rig_bigram_stated_half_short"):  # fmt: skip
+            one, two = (tomllib.loads((root / "configs" / f"{c}.toml").read_text())["train"]
+                        for c in (plain, f"{plain}_{tail}"))  # fmt: skip
+            named = ("name", "out", "init_from", field)
+            assert {k: v for k, v in two.items() if k not in named} == {
+                k: v for k, v in one.items() if k not in named}, (plain, tail)
+            assert two[field] == value and two["name"] == f"{one['name']}-{tail}"
+            if "init_from" in one:  # from the previous stage of the same chain
+                assert two["init_from"].endswith(f"-{tail}.msgpack"), (plain, tail)
     with pytest.raises(KeyError):
         mod.stated_variant_ensemble("stated_tenth")
     # another seed set: its own folder, members and name (the loading stood in for)
