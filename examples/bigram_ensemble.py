@@ -173,6 +173,17 @@ def bigram_stated_half_short_modes_ensemble() -> Policy:
     return stated_variant_ensemble("stated_half_short_modes")
 
 
+def bigram_stated_half_short_modes_s345_ensemble() -> Policy:
+    """:func:`bigram_stated_half_short_modes_ensemble` of the second seed set (3, 4, 5)."""
+    return stated_variant_ensemble("stated_half_short_modes", seeds=(3, 4, 5))
+
+
+def bigram_stated_half_short_modes_medoid_ensemble() -> Policy:
+    """Those three seeds driving the plan of the member nearest the others (``"medoid"``):
+    always one member's own plan, where the mean of plans chosen among modes is none."""
+    return stated_variant_ensemble("stated_half_short_modes", combine="medoid")
+
+
 def bigram_stated_half_short_medoid_ensemble() -> Policy:
     """:func:`bigram_stated_half_short_ensemble`'s seeds driving their medoid plan."""
     return stated_variant_ensemble("stated_half_short", combine="medoid")

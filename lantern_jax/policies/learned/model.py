@@ -56,11 +56,15 @@ another order, so the weights are not the bits of the per-slot form.
 
 One plan per observation, trained by its L1 distance to the expert's, is the expert's plans
 averaged where the model cannot tell them apart: where the expert sometimes waits and sometimes
-goes (a restart after a crossing vehicle has cleared), the regression's answer is a creep that
-is neither.  ``ModelConfig.modes`` K > 1 gives the head K plans and a score for each, trained
-winner-takes-all (:func:`modes_loss`: the L1 of the plan nearest the expert's, plus the
+goes (a restart after a crossing vehicle has cleared), the regression's answer can be a creep
+that is neither.  ``ModelConfig.modes`` K > 1 gives the head K plans and a score for each,
+trained winner-takes-all (:func:`modes_loss`: the L1 of the plan nearest the expert's, plus the
 cross-entropy of the scores against that plan's index), as multi-hypothesis trajectory
 predictors are; the model drives the plan it scores highest, always one of its own plans.
+Measured on the closed-loop recipe with three plans, the left turn with a wrong-way car is
+driven better with the warning, but the warning gain is no larger beyond the spread and the
+right-turn yield's warning hurts more (the learned models' page, "Three plans and a score for
+each"); one plan stays the default.
 """
 
 from __future__ import annotations
