@@ -102,7 +102,8 @@ class TrainConfig:
     object_pool: str = "mean"
     # plans the model's head proposes (policies.learned.model.ModelConfig.modes): 1, one plan
     # trained by its L1; K > 1, K plans and their scores trained winner-takes-all, the model
-    # driving the one it scores highest
+    # driving the one it scores highest (the curve's train_l1_m is then that training loss, its
+    # val_l1_m the L1 of the plans driven)
     modes: int = 1
     epochs: int = 6
     batch_size: int = 256
