@@ -62,19 +62,26 @@ def test_the_loss_of_hand_built_plans():
     np.testing.assert_allclose(float(driven), 0.1, rtol=1e-6)
 
 
+def _plans_and_driven(model):
+    """A jitted ``f -> (plans, scores, the plan driven)`` of ``model`` (one program)."""
+    graphdef, params = nnx.split(model)
+
+    @jax.jit
+    def run(p, f):
+        m = nnx.merge(graphdef, p)
+        return (*m.plans(f), m(f))
+
+    return lambda f: run(params, f)
+
+
 def test_the_model_drives_the_plan_it_scores_highest(obs, tables):
-    model = new_model(THREE, seed=3)
     f = features(obs, "front", *tables)
-    plans, scores = model.plans(f)
+    plans, scores, driven = _plans_and_driven(new_model(THREE, seed=3))(f)
     assert plans.shape == (3, NUM_WAYPOINTS, 2) and scores.shape == (3,)
     assert np.all(np.isfinite(np.asarray(plans))) and np.all(np.isfinite(np.asarray(scores)))
     assert len({tuple(np.asarray(p).ravel().round(4)) for p in plans}) == 3  # three plans
     best = int(np.argmax(np.asarray(scores)))
-    np.testing.assert_array_equal(np.asarray(model(f)), np.asarray(plans[best]))
-    # and so under jit and vmap, as a policy runs it
-    batch = jax.tree.map(lambda x: jnp.stack([x, x]), f)
-    np.testing.assert_allclose(np.asarray(jax.jit(jax.vmap(model))(batch)[1]),
-                               np.asarray(plans[best]), atol=1e-5)  # fmt: skip
+    np.testing.assert_array_equal(np.asarray(driven), np.asarray(plans[best]))
 
 
 def test_one_mode_is_the_model_of_one_plan(obs, tables):
@@ -97,35 +104,39 @@ def _batch(obs, n: int) -> dict:
     return {k: jnp.stack([getattr(obs, k)] * n) for k in names}
 
 
+def _modes_loss_reference(plans: np.ndarray, scores: np.ndarray, target: np.ndarray):
+    """NumPy reference of :func:`modes_loss` for one example (float64)."""
+    l1 = np.abs(plans.astype(np.float64) - target[None]).mean(axis=(1, 2))
+    nearest = int(np.argmin(l1))
+    s = scores.astype(np.float64)
+    cross_entropy = np.log(np.exp(s - s.max()).sum()) + s.max() - s[nearest]
+    return l1[nearest] + MODE_SCORE_WEIGHT * cross_entropy, l1[int(np.argmax(s))]
+
+
 def test_the_training_loss_and_the_validation_figure(obs, tables):
-    """``make_loss`` of a three-plan model is the batch's mean :func:`modes_loss`; with
-    ``driven`` the mean L1 of the plans driven; its gradient is finite and reaches the scores'
-    and the plans' weights."""
+    """``make_loss`` of a three-plan model is the batch's mean :func:`modes_loss` (against a
+    NumPy reference); with ``driven`` the mean L1 of the plans driven; its gradient is finite
+    and reaches the scores' and the plans' weights."""
     model = new_model(THREE, seed=8)
     graphdef, params = nnx.split(model)
     batch = _batch(obs, 4)
-    targets = jnp.asarray(np.stack([_straight(v) for v in (0.0, 2.0, 5.0, 9.0)]))
-    f = features(obs, "front", *tables)
-    plans, scores = model.plans(f)
-    by_hand = [modes_loss(plans, scores, t) for t in targets]
-    objective = make_loss(graphdef, "front")(params, batch, targets, *tables)
-    driven = make_loss(graphdef, "front", driven=True)(params, batch, targets, *tables)
-    np.testing.assert_allclose(float(objective), np.mean([float(o) for o, _ in by_hand]),
-                               rtol=1e-5)  # fmt: skip
-    np.testing.assert_allclose(float(driven), np.mean([float(d) for _, d in by_hand]),
-                               rtol=1e-5)  # fmt: skip
-    grads = jax.grad(make_loss(graphdef, "front"))(params, batch, targets, *tables)
+    targets = np.stack([_straight(v) for v in (0.0, 2.0, 5.0, 9.0)])
+    plans, scores, _ = _plans_and_driven(model)(features(obs, "front", *tables))
+    by_hand = np.asarray([_modes_loss_reference(np.asarray(plans), np.asarray(scores), t)
+                          for t in targets])  # fmt: skip
+
+    @jax.jit  # the tables an argument, as training passes them (not a 33 MB captured constant)
+    def figures(p, g, t, tabs):
+        loss, driven = (make_loss(g, "front", driven=d) for d in (False, True))
+        return (loss(p, batch, t, *tabs), driven(p, batch, t, *tabs),
+                jax.grad(loss)(p, batch, t, *tabs))  # fmt: skip
+
+    objective, driven, grads = figures(params, graphdef, jnp.asarray(targets), tables)
+    np.testing.assert_allclose(float(objective), by_hand[:, 0].mean(), rtol=1e-5)
+    np.testing.assert_allclose(float(driven), by_hand[:, 1].mean(), rtol=1e-5)
     kernel = np.asarray(grads["head"]["layers"][1]["kernel"][...])  # (16, 63)
     assert np.all(np.isfinite(kernel))
     assert np.abs(kernel[:, :60]).max() > 0 and np.abs(kernel[:, 60:]).max() > 0
-    # one plan: the training loss and the validation figure are the same mean L1
-    graphdef1, params1 = nnx.split(new_model(ONE, seed=8))
-    one = make_loss(graphdef1, "front")(params1, batch, targets, *tables)
-    pred = new_model(ONE, seed=8)(f)
-    np.testing.assert_allclose(float(one), float(jnp.mean(jnp.abs(pred[None] - targets))),
-                               rtol=1e-6)  # fmt: skip
-    same = make_loss(graphdef1, "front", driven=True)(params1, batch, targets, *tables)
-    assert float(same) == float(one)
 
 
 def test_two_plans_learn_both_answers_the_expert_gives_for_one_observation(obs, tables):
