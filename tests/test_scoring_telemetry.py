@@ -240,6 +240,99 @@ def test_recovery_latency_and_cap(base):
     assert pair(slow, b)["S_rec"] == 0.0
 
 
+# ---------------------------------------------------- a route that ends soon after the release
+def release_index(tr):
+    """The first tick at which both the warning's termination and the clearance happened."""
+    both = (tr["t_warn_off"] < 0.5 * INF_TIME) & (tr["t_clear"] < 0.5 * INF_TIME)
+    return int(np.argmax(both))
+
+
+def ends_at(tr, kc):
+    """``tr`` cut on tick ``kc``, its route's end zone reached on exactly that tick (the
+    simulator ends an execution there): the route's length is the tick's progress plus the end
+    zone's 2 m, less 1 cm."""
+    out = {k: v[: kc + 1].copy() for k, v in tr.items()}
+    out["route_length"][:] = out["progress"][-1] + S.completion_tol_m - 0.01
+    assert out["progress"][-2] < out["route_length"][-1] - S.completion_tol_m  # reached at kc
+    return out
+
+
+def ends_after_release(tr, m):
+    """``tr`` cut ``m`` ticks after its release (:func:`ends_at`)."""
+    return ends_at(tr, release_index(tr) + m)
+
+
+#: A cruise at 8 m/s that never brakes, past a pedestrian who crosses and clears 110 m ahead
+#: before the ego arrives: the release comes while the ego drives on at 8 m/s (0.4 m a tick).
+CRUISE = dict(brake_decel=0.0, hazard_ahead=80.0)
+
+
+@pytest.mark.parametrize("m, latency", [(1, math.nan), (2, 0.0), (10, 0.0), (30, 0.0)])
+def test_a_route_that_ends_within_a_window_of_the_release(base, m, latency):
+    """An ego that keeps its 8 m/s from the release to the route's end recovered at the release
+    (RL = 0, S_rec = 1) however soon after it the route ends, as long as it gained the window's
+    0.5 m: one tick after the release it has gained 0.4 m (no recovery), two ticks 0.8 m.  Ten
+    ticks is a window cut short by the route's end; thirty ticks hold a full one."""
+    _, b = base
+    a = ends_after_release(make_trajectory(**CRUISE), m)
+    assert np.all(a["ego_speed"] == 8.0)
+    got = float(metrics(a).recovery_latency_s)
+    assert (math.isnan(got) and math.isnan(latency)) or got == pytest.approx(latency, abs=1e-6)
+    assert pair(a, b)["S_rec"] == (0.0 if math.isnan(latency) else 1.0)
+    want = reference_execution(a)["recovery_latency_s"]
+    assert (math.isnan(got) and math.isnan(want)) or got == pytest.approx(want, abs=1e-6)
+
+
+def test_a_cut_window_starts_where_the_speed_came_back_and_needs_the_threshold(base):
+    """Below the threshold (max(2, 0.5 * 8) = 4 m/s) for the first five ticks after the release,
+    above it for the seven up to the route's end: recovered on the sixth tick, RL = 5 * 0.05 s.
+    Below it up to the end: no recovery (S_rec = 0)."""
+    _, b = base
+    tr = make_trajectory(**CRUISE)
+    k = release_index(tr)
+    dip = dict(tr, ego_speed=tr["ego_speed"].copy())
+    dip["ego_speed"][k : k + 5] = 3.0
+    a = ends_after_release(dip, 12)
+    assert float(metrics(a).recovery_latency_s) == pytest.approx(5 * DT, abs=1e-5)
+    assert reference_execution(a)["recovery_latency_s"] == pytest.approx(5 * DT, abs=1e-5)
+    slow = dict(tr, ego_speed=tr["ego_speed"].copy())
+    slow["ego_speed"][k:] = 3.0
+    a = ends_after_release(slow, 12)
+    assert math.isnan(float(metrics(a).recovery_latency_s))
+    assert pair(a, b)["S_rec"] == 0.0
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_routes_ending_after_the_release_match_the_numpy_reference(seed):
+    """Random executions (stops, dips and noise in the speed) cut 0-30 ticks after their
+    release, on a tick where the ego moves (the end zone reached there): the recovery fields as
+    the NumPy reference computes them."""
+    rng = np.random.default_rng(seed)
+    tr = random_trajectory(seed + 500)
+    k, prog = release_index(tr), tr["progress"]
+    assert k > 0  # seeds 500-507 release (10 and 15 do not)
+    # ticks where the ego moves on and is short of the draw's own route end: the end zone can
+    # be reached there
+    ends = [kc for kc in range(k, min(k + 31, len(prog)))
+            if prog[kc] > prog[kc - 1] and prog[kc] < tr["route_length"][0]]  # fmt: skip
+    a = ends_at(tr, int(rng.choice(ends)))
+    got, want = metrics(a), reference_execution(a)
+    for name in ("recovery_latency_s", "recovery_available"):
+        g, w = np.asarray(getattr(got, name)).item(), want[name]
+        assert (isinstance(w, float) and math.isnan(w) and math.isnan(g)) or g == pytest.approx(w)
+
+
+def test_soft_recovery_of_a_cut_window_converges_to_the_hard_one(base):
+    """The soft score of the ten-tick case above tends to its hard CUS as the temperature falls
+    (the cut window counted in the soft first crossing as in the hard one)."""
+    _, b = base
+    a = ends_after_release(make_trajectory(**CRUISE), 10)
+    hard = float(pair_components(metrics(a), metrics(b), 2.0)["CUS"])
+    errs = [abs(float(soft_pair_cus(fold(a, t), fold(b, t), 2.0)) - hard)
+            for t in (0.1, 0.01, 0.001)]  # fmt: skip
+    assert errs[2] <= errs[1] + 1e-4 and errs[2] < 0.1, errs
+
+
 # ------------------------------------------------------------------------------- NaN policy
 def test_collision_before_warning_point_leaves_hazard_fields_unavailable(base):
     a, b = base

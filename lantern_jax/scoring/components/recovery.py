@@ -8,10 +8,27 @@
 whose ticks all lie at/after ``t_release`` with speed above ``v_thr`` and whose progress gain
 (last tick minus first tick of the window) is >= 0.5 m.
 
+**A window cut short by the route's end.**  The execution ends on the tick the ego reaches the
+route's end zone (:func:`~lantern_jax.scoring.components.progress.is_completed`).  When that
+happens less than a window after ``t_release`` no full window fits, and an ego that held its
+speed from the release to the end would score "no recovery" (``S_rec = 0``) where one that
+reached the end a tick later scores ``RL = 0`` (``S_rec = 1``): a cliff of a tenth of a second
+in route completion, seen in Right-Turn Yield, where the release can come when the crossing car
+passes behind an ego that went first.  The paper's appendix does not say what a route that
+ends before the window fits scores (it asks for 29 m of route after the conflict, so that the
+window fits after a yield).  Here, on the tick the route is completed, the windows that end
+there are counted too, shorter than 20 ticks: the earliest whose ticks all lie at/after
+``t_release`` with speed above ``v_thr`` and whose progress gain is >= 0.5 m (the same two
+tests; only the duration is cut by the route's end) gives ``t_recover`` when no full window
+passed before.  A full window keeps precedence, and an ego below ``v_thr`` at the end, or that
+gained less than 0.5 m since the release, still has no recovery.
+
 Soft (a soft first crossing): window ``k`` passes with probability ``sigma_k``, the product of
 ``sigmoid((v - v_thr) / T)`` over its ticks times ``sigmoid((gain - 0.5) / T)``;
-``p_k = sigma_k prod_{j<k} (1 - sigma_j)``.  The state holds ``sum p_k`` and ``sum p_k t_k``; the
-score uses the expected ``t_recover`` given a recovery, times the probability of a recovery.
+``p_k = sigma_k prod_{j<k} (1 - sigma_j)``; the windows cut short by the route's end follow the
+full window of the completing tick in that order, earliest start first.  The state holds
+``sum p_k`` and ``sum p_k t_k``; the score uses the expected ``t_recover`` given a recovery,
+times the probability of a recovery.
 
 Available (valid) when ``t_release`` happened no later than the first Route A gate failure.
 """
@@ -25,6 +42,7 @@ import jax.numpy as jnp
 from flax import struct
 
 from lantern_jax.core.times import NEVER, happened, time_or_nan
+from lantern_jax.scoring.components import progress
 from lantern_jax.scoring.components.accumulate import expected_time, first_time, push, run
 from lantern_jax.scoring.components.context import (
     Context,
@@ -104,13 +122,74 @@ def update(
     gain_ok = jax.nn.sigmoid((gain - settings.recover_min_progress_m) / temperature)
     sigma = jnp.where(complete, jnp.exp(jnp.sum(log_ok)) * gain_ok, 0.0)
     p_k = state.surv * sigma
-    return RecoveryState(
+    new = RecoveryState(
         run=n_run,
         t_recover=first_time(happened(state.t_recover), ok, window_start, state.t_recover),
         log_ok=log_ok,
         surv=state.surv * (1.0 - sigma),
         p=state.p + p_k,
         pt=state.pt + p_k * window_start,
+    )
+    if settings.recover_window < 2:  # static: no window shorter than the full one
+        return new
+    return _cut_by_route_end(new, tick, t_release, settings)
+
+
+def route_end_reached(tick: Tick, settings: ScoringSettings) -> Array:
+    """() bool: this tick is the first in the route's end zone (the execution ends on it).
+
+    Args:
+        tick: the tick's context (its progress and the ring's previous entry).
+        settings: the end zone (``completion_tol_m``).
+    """
+    before = tick.progress_ring[-2]  # the previous tick's progress (0 before the first)
+    return progress.is_completed(tick.progress, tick.route_length, settings) & ~(
+        (tick.n_ticks > 1) & progress.is_completed(before, tick.route_length, settings)
+    )
+
+
+def _cut_by_route_end(
+    state: RecoveryState, tick: Tick, t_release: Array, settings: ScoringSettings
+) -> RecoveryState:
+    """The windows of 1 ... ``recover_window - 1`` ticks that end on the tick completing the
+    route (module docstring), after the full window of that tick, earliest start first.
+
+    Args:
+        state: the accumulators after the tick's full window.
+        tick: the tick's context; its rings end with this tick.
+        t_release: () float32, s, the release time (``NEVER`` before it).
+        settings: the recovery thresholds and the end zone.
+
+    Returns:
+        The accumulators with the cut windows folded in (unchanged on every other tick).
+    """
+    ring, window = ring_length(settings), settings.recover_window
+    end = route_end_reached(tick, settings) & happened(t_release)
+    min_gain = settings.recover_min_progress_m
+    # hard: the run of ticks above the threshold that ends here started at or after the release
+    # (``run`` counts only such ticks); its earliest cut window is the longest (window - 1
+    # ticks at most: a full one was judged by the full window), and a later start only gains
+    # less progress
+    k = ring - jnp.clip(state.run, 1, window - 1)
+    hard_ok = end & (state.run >= 1) & (tick.progress - tick.progress_ring[k] >= min_gain)
+    t_recover = first_time(happened(state.t_recover), hard_ok, tick.time_ring[k], state.t_recover)
+    # soft: each cut window, earliest start first (ring index ks, lengths window-1 ... 1)
+    lengths = jnp.arange(window - 1, 0, -1)
+    ks = ring - lengths
+    suffix = jnp.cumsum(state.log_ok[::-1])[::-1]  # (ring,) sum of log_ok from each index on
+    starts = tick.time_ring[ks]
+    live = end & (starts >= t_release) & (tick.n_ticks >= lengths)
+    gain_ok = jax.nn.sigmoid((tick.progress - tick.progress_ring[ks] - min_gain)
+                             / settings.temperature)  # fmt: skip
+    sigma = jnp.where(live, jnp.exp(suffix[ks]) * gain_ok, 0.0)
+    survive = jnp.cumprod(1.0 - sigma)
+    before = jnp.concatenate([jnp.ones(1, jnp.float32), survive[:-1]])
+    p_k = state.surv * sigma * before
+    return state.replace(
+        t_recover=t_recover,
+        surv=state.surv * survive[-1],
+        p=state.p + jnp.sum(p_k),
+        pt=state.pt + jnp.sum(p_k * starts),
     )
 
 
