@@ -240,6 +240,26 @@ def test_recovery_latency_and_cap(base):
     assert pair(slow, b)["S_rec"] == 0.0
 
 
+@pytest.mark.parametrize("react_window_s", [0.25, 1.0, 1.5, 2.0])
+def test_recovery_does_not_read_the_reaction_window(react_window_s):
+    """The recovery window is 1 s whatever the reaction window: the rings the two share are as
+    long as the longer one, and a 1.5- or 2-s reaction window once placed the recovery 0.5 or
+    1 s early (a latency of -0.35 s where the default gives 0.65 s).  Hard and soft alike."""
+    tr = make_trajectory(n=N, resume_offset=9.2)
+    s = S.replace(react_window_s=react_window_s)
+    samples = to_samples(tr)
+    hard = finalize(fold_telemetry(samples, s), s)
+    assert float(hard.recovery_latency_s) == pytest.approx(
+        float(metrics(tr).recovery_latency_s), abs=1e-5
+    )
+    assert float(metrics(tr).recovery_latency_s) == pytest.approx(0.65, abs=1e-5)
+    soft = fold_telemetry(samples, s.replace(temperature=0.01))
+    default = fold(tr, 0.01)
+    for field in ("p", "pt"):
+        got, want = getattr(soft.recovery, field), getattr(default.recovery, field)
+        assert float(got) == pytest.approx(float(want), rel=1e-4), field
+
+
 # ---------------------------------------------------- a route that ends soon after the release
 def release_index(tr):
     """The first tick at which both the warning's termination and the clearance happened."""

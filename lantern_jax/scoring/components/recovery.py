@@ -113,14 +113,17 @@ def update(
     post_rel = happened(t_release) & (tick.t >= t_release)
     v_thr = jnp.maximum(settings.recover_min_speed_mps, settings.recover_pre_fraction * tick.v_pre)
     n_run = run(state.run, post_rel & (tick.speed > v_thr))
-    window_start = tick.time_ring[0]
-    gain = tick.progress - tick.progress_ring[0]
+    # the window's first tick: the rings are as long as the longer of the reaction and recovery
+    # windows, so the recovery window is their last ``recover_window`` entries
+    first = ring_length(settings) - settings.recover_window
+    window_start = tick.time_ring[first]
+    gain = tick.progress - tick.progress_ring[first]
     ok = (n_run >= settings.recover_window) & (gain >= settings.recover_min_progress_m)
 
     log_ok = push(state.log_ok, jax.nn.log_sigmoid((tick.speed - v_thr) / temperature))
     complete = post_rel & (tick.n_ticks >= settings.recover_window) & (window_start >= t_release)
     gain_ok = jax.nn.sigmoid((gain - settings.recover_min_progress_m) / temperature)
-    sigma = jnp.where(complete, jnp.exp(jnp.sum(log_ok)) * gain_ok, 0.0)
+    sigma = jnp.where(complete, jnp.exp(jnp.sum(log_ok[first:])) * gain_ok, 0.0)
     p_k = state.surv * sigma
     new = RecoveryState(
         run=n_run,
