@@ -138,7 +138,7 @@ def update(
     return _cut_by_route_end(new, tick, t_release, settings)
 
 
-def route_end_reached(tick: Tick, settings: ScoringSettings) -> Array:
+def _route_end_reached(tick: Tick, settings: ScoringSettings) -> Array:
     """() bool: this tick is the first in the route's end zone (the execution ends on it).
 
     Args:
@@ -167,7 +167,7 @@ def _cut_by_route_end(
         The accumulators with the cut windows folded in (unchanged on every other tick).
     """
     ring, window = ring_length(settings), settings.recover_window
-    end = route_end_reached(tick, settings) & happened(t_release)
+    end = _route_end_reached(tick, settings) & happened(t_release)
     min_gain = settings.recover_min_progress_m
     # hard: the run of ticks above the threshold that ends here started at or after the release
     # (``run`` counts only such ticks); its earliest cut window is the longest (window - 1
