@@ -240,7 +240,7 @@ def test_recovery_latency_and_cap(base):
     assert pair(slow, b)["S_rec"] == 0.0
 
 
-@pytest.mark.parametrize("react_window_s", [0.25, 1.0, 1.5, 2.0])
+@pytest.mark.parametrize("react_window_s", [0.25, 2.0])
 def test_recovery_does_not_read_the_reaction_window(react_window_s):
     """The recovery window is 1 s whatever the reaction window: the rings the two share are as
     long as the longer one, and a 1.5- or 2-s reaction window once placed the recovery 0.5 or

@@ -168,32 +168,32 @@ def _cut_by_route_end(
     """
     ring, window = ring_length(settings), settings.recover_window
     end = _route_end_reached(tick, settings) & happened(t_release)
-    min_gain = settings.recover_min_progress_m
-    # hard: the run of ticks above the threshold that ends here started at or after the release
-    # (``run`` counts only such ticks); its earliest cut window is the longest (window - 1
-    # ticks at most: a full one was judged by the full window), and a later start only gains
-    # less progress
-    k = ring - jnp.clip(state.run, 1, window - 1)
-    hard_ok = end & (state.run >= 1) & (tick.progress - tick.progress_ring[k] >= min_gain)
-    t_recover = first_time(happened(state.t_recover), hard_ok, tick.time_ring[k], state.t_recover)
-    # soft: each cut window, earliest start first (ring index ks, lengths window-1 ... 1)
+    # the cut windows, earliest start first: lengths window-1 ... 1, starting at the ring's
+    # entries ring-window+1 ... ring-1 (static slices)
     lengths = jnp.arange(window - 1, 0, -1)
-    ks = ring - lengths
-    suffix = jnp.cumsum(state.log_ok[::-1])[::-1]  # (ring,) sum of log_ok from each index on
-    starts = tick.time_ring[ks]
-    live = end & (starts >= t_release) & (tick.n_ticks >= lengths)
-    gain_ok = jax.nn.sigmoid((tick.progress - tick.progress_ring[ks] - min_gain)
-                             / settings.temperature)  # fmt: skip
-    sigma = jnp.where(live, jnp.exp(suffix[ks]) * gain_ok, 0.0)
-    survive = jnp.cumprod(1.0 - sigma)
-    before = jnp.concatenate([jnp.ones(1, jnp.float32), survive[:-1]])
-    p_k = state.surv * sigma * before
-    return state.replace(
-        t_recover=t_recover,
-        surv=state.surv * survive[-1],
-        p=state.p + jnp.sum(p_k),
-        pt=state.pt + jnp.sum(p_k * starts),
-    )
+    starts = tick.time_ring[ring - window + 1 :]
+    gains = tick.progress - tick.progress_ring[ring - window + 1 :]
+    opened = end & (starts >= t_release) & (tick.n_ticks >= lengths)
+    # hard: every tick of the window above the threshold (``run`` counts the ticks after the
+    # release that are, up to this one) and its progress; the earliest such window
+    hard_ok = opened & (lengths <= state.run) & (gains >= settings.recover_min_progress_m)
+    t_cut = jnp.min(jnp.where(hard_ok, starts, NEVER))
+    t_recover = first_time(happened(state.t_recover), jnp.any(hard_ok), t_cut, state.t_recover)
+    # soft: each window passes with the product of its ticks' speed sigmoids times its
+    # progress sigmoid, after the ones that start earlier failed (unrolled: elementwise work
+    # XLA fuses, where a cumulative sum or product is a kernel of its own on every tick)
+    gain_ok = jax.nn.sigmoid((gains - settings.recover_min_progress_m) / settings.temperature)
+    log_all = jnp.zeros((), jnp.float32)
+    suffix = [None] * (window - 1)  # log_ok summed from each window's start to this tick
+    for i in range(window - 2, -1, -1):
+        log_all = log_all + state.log_ok[ring - window + 1 + i]
+        suffix[i] = log_all
+    surv, p, pt = state.surv, state.p, state.pt
+    for i in range(window - 1):
+        sigma = jnp.where(opened[i], jnp.exp(suffix[i]) * gain_ok[i], 0.0)
+        p_i = surv * sigma
+        surv, p, pt = surv * (1.0 - sigma), p + p_i, pt + p_i * starts[i]
+    return state.replace(t_recover=t_recover, surv=surv, p=p, pt=pt)
 
 
 def valid(state: RecoveryState, ctx: Context, t_fail: Array) -> Array:
