@@ -276,16 +276,17 @@ def reference_execution(tr: dict[str, np.ndarray]) -> dict[str, float]:
     ok = np.array([_hap(rel[k]) and t[k] >= rel[k] and v[k] > thr for k in range(n)])
     t_recover = math.inf
     prog = g["progress"]
-    in_end_zone = prog >= g["route_length"] - 2.0
-    k_end = int(np.argmax(in_end_zone)) if in_end_zone.any() else -1  # the route completed
-    for e in range(n):  # windows by the tick they end on
-        starts = [e - 19] if e >= 19 else []
-        if e == k_end:  # ... and the shorter ones cut by the route's end, earliest first
-            starts += list(range(max(e - 18, 0), e + 1))
-        hit = [k0 for k0 in starts if ok[k0 : e + 1].all() and prog[e] - prog[k0] >= 0.5]
-        if hit:
-            t_recover = t[hit[0]]
+    for k0 in range(n - 19):
+        if ok[k0 : k0 + 20].all() and prog[k0 + 19] - prog[k0] >= 0.5:
+            t_recover = t[k0]
             break
+    if math.isinf(t_recover) and prog[-1] >= g["route_length"][-1] - 2.0:
+        # the route completed: the windows cut short by the execution's end, earliest first
+        e = n - 1
+        for k0 in range(max(e - 18, 0), e + 1):
+            if ok[k0:].all() and prog[e] - prog[k0] >= 0.5:
+                t_recover = t[k0]
+                break
     t_release = rel[-1]
 
     # gates

@@ -21,12 +21,15 @@ there are counted too, shorter than 20 ticks: the earliest whose ticks all lie a
 ``t_release`` with speed above ``v_thr`` and whose progress gain is >= 0.5 m (the same two
 tests; only the duration is cut by the route's end) gives ``t_recover`` when no full window
 passed before.  A full window keeps precedence, and an ego below ``v_thr`` at the end, or that
-gained less than 0.5 m since the release, still has no recovery.
+gained less than 0.5 m since the release, still has no recovery.  The cut windows are judged
+once, when the execution has ended (:func:`cut_windows`, called by :func:`hard` and
+:func:`soft`), on its last tick, the one that completed the route: nothing is added to a tick
+of the rollout.
 
 Soft (a soft first crossing): window ``k`` passes with probability ``sigma_k``, the product of
 ``sigmoid((v - v_thr) / T)`` over its ticks times ``sigmoid((gain - 0.5) / T)``;
 ``p_k = sigma_k prod_{j<k} (1 - sigma_j)``; the windows cut short by the route's end follow the
-full window of the completing tick in that order, earliest start first.  The state holds
+full windows in that order, earliest start first.  The state holds
 ``sum p_k`` and ``sum p_k t_k``; the score uses the expected ``t_recover`` given a recovery,
 times the probability of a recovery.
 
@@ -42,7 +45,6 @@ import jax.numpy as jnp
 from flax import struct
 
 from lantern_jax.core.times import NEVER, happened, time_or_nan
-from lantern_jax.scoring.components import progress
 from lantern_jax.scoring.components.accumulate import expected_time, first_time, push, run
 from lantern_jax.scoring.components.context import (
     Context,
@@ -68,6 +70,11 @@ class RecoveryState:
     surv: Array  # () float32, soft probability that no window has passed yet
     p: Array  # () float32, soft probability that some window passed, sum_k p_k
     pt: Array  # () float32, s, sum_k p_k t_k
+    # the settings the windows cut short by the route's end are judged with at the end
+    # (:func:`hard`, :func:`soft`: the hazard role's functions take no settings)
+    window: Array  # () int32, ticks of a full window (``recover_window``)
+    min_gain: Array  # () float32, m, progress a window needs (``recover_min_progress_m``)
+    end_zone: Array  # () float32, m, the route's end zone (``completion_tol_m``)
 
 
 def init(settings: ScoringSettings) -> RecoveryState:
@@ -77,6 +84,8 @@ def init(settings: ScoringSettings) -> RecoveryState:
     return RecoveryState(
         run=jnp.asarray(0, jnp.int32), t_recover=f(NEVER), log_ok=jnp.zeros(ring, jnp.float32),
         surv=f(1.0), p=f(0.0), pt=f(0.0),
+        window=jnp.asarray(settings.recover_window, jnp.int32),
+        min_gain=f(settings.recover_min_progress_m), end_zone=f(settings.completion_tol_m),
     )  # fmt: skip
 
 
@@ -125,7 +134,7 @@ def update(
     gain_ok = jax.nn.sigmoid((gain - settings.recover_min_progress_m) / temperature)
     sigma = jnp.where(complete, jnp.exp(jnp.sum(log_ok[first:])) * gain_ok, 0.0)
     p_k = state.surv * sigma
-    new = RecoveryState(
+    return state.replace(
         run=n_run,
         t_recover=first_time(happened(state.t_recover), ok, window_start, state.t_recover),
         log_ok=log_ok,
@@ -133,67 +142,51 @@ def update(
         p=state.p + p_k,
         pt=state.pt + p_k * window_start,
     )
-    if settings.recover_window < 2:  # static: no window shorter than the full one
-        return new
-    return _cut_by_route_end(new, tick, t_release, settings)
 
 
-def _route_end_reached(tick: Tick, settings: ScoringSettings) -> Array:
-    """() bool: this tick is the first in the route's end zone (the execution ends on it).
-
-    Args:
-        tick: the tick's context (its progress and the ring's previous entry).
-        settings: the end zone (``completion_tol_m``).
-    """
-    before = tick.progress_ring[-2]  # the previous tick's progress (0 before the first)
-    return progress.is_completed(tick.progress, tick.route_length, settings) & ~(
-        (tick.n_ticks > 1) & progress.is_completed(before, tick.route_length, settings)
-    )
-
-
-def _cut_by_route_end(
-    state: RecoveryState, tick: Tick, t_release: Array, settings: ScoringSettings
-) -> RecoveryState:
-    """The windows of 1 ... ``recover_window - 1`` ticks that end on the tick completing the
-    route (module docstring), after the full window of that tick, earliest start first.
+def cut_windows(state: RecoveryState, ctx: Context) -> tuple[Array, Array, Array]:
+    """The windows cut short by the route's end (module docstring), judged once the execution
+    has ended: when its route is completed, the windows of 1 ... ``window - 1`` ticks that end
+    on its last tick (the one that completed it: an execution ends there), after that tick's
+    full window, earliest start first.
 
     Args:
-        state: the accumulators after the tick's full window.
-        tick: the tick's context; its rings end with this tick.
-        t_release: () float32, s, the release time (``NEVER`` before it).
-        settings: the recovery thresholds and the end zone.
+        state: final accumulators (leading batch axes allowed, as everywhere here).
+        ctx: final shared context (its rings end with the last tick).
 
     Returns:
-        The accumulators with the cut windows folded in (unchanged on every other tick).
+        ``(t_cut, p, pt)``: (...) float32, s, the start of the earliest cut window that passes
+        (``NEVER``: none); () float32 and () float32 s, the soft first crossings they add to
+        ``state.p`` and ``state.pt`` (the speed sigmoids as folded, the progress sigmoid at the
+        context's temperature).
     """
-    ring, window = ring_length(settings), settings.recover_window
-    end = _route_end_reached(tick, settings) & happened(t_release)
-    # the cut windows, earliest start first: lengths window-1 ... 1, starting at the ring's
-    # entries ring-window+1 ... ring-1 (static slices)
-    lengths = jnp.arange(window - 1, 0, -1)
-    starts = tick.time_ring[ring - window + 1 :]
-    gains = tick.progress - tick.progress_ring[ring - window + 1 :]
-    opened = end & (starts >= t_release) & (tick.n_ticks >= lengths)
-    # hard: every tick of the window above the threshold (``run`` counts the ticks after the
-    # release that are, up to this one) and its progress; the earliest such window
-    hard_ok = opened & (lengths <= state.run) & (gains >= settings.recover_min_progress_m)
-    t_cut = jnp.min(jnp.where(hard_ok, starts, NEVER))
-    t_recover = first_time(happened(state.t_recover), jnp.any(hard_ok), t_cut, state.t_recover)
-    # soft: each window passes with the product of its ticks' speed sigmoids times its
-    # progress sigmoid, after the ones that start earlier failed (unrolled: elementwise work
-    # XLA fuses, where a cumulative sum or product is a kernel of its own on every tick)
-    gain_ok = jax.nn.sigmoid((gains - settings.recover_min_progress_m) / settings.temperature)
-    log_all = jnp.zeros((), jnp.float32)
-    suffix = [None] * (window - 1)  # log_ok summed from each window's start to this tick
-    for i in range(window - 2, -1, -1):
-        log_all = log_all + state.log_ok[ring - window + 1 + i]
-        suffix[i] = log_all
-    surv, p, pt = state.surv, state.p, state.pt
-    for i in range(window - 1):
-        sigma = jnp.where(opened[i], jnp.exp(suffix[i]) * gain_ok[i], 0.0)
-        p_i = surv * sigma
-        surv, p, pt = surv * (1.0 - sigma), p + p_i, pt + p_i * starts[i]
-    return state.replace(t_recover=t_recover, surv=surv, p=p, pt=pt)
+    ring = state.log_ok.shape[-1]
+    col = lambda x: jnp.asarray(x)[..., None]  # noqa: E731  (...) -> (..., 1) beside the windows
+    lengths = jnp.arange(ring - 1, 0, -1)  # window lengths, earliest start first
+    starts = ctx.time_ring[..., 1:]  # (..., ring - 1) s, their first ticks
+    gains = col(ctx.progress_m) - ctx.progress_ring[..., 1:]  # (..., ring - 1) m
+    t_release = col(release_time(ctx.t_warn_off, ctx.t_clear))
+    completed = col(ctx.progress_m >= ctx.route_length_m - state.end_zone)
+    opened = (completed & happened(t_release) & (starts >= t_release)
+              & (lengths < col(state.window)) & (col(ctx.n_ticks) >= lengths))  # fmt: skip
+    # hard: every tick above the threshold (``run`` counts the ticks after the release that
+    # are, up to the last one) and the progress; the earliest such window
+    hard_ok = opened & (lengths <= col(state.run)) & (gains >= col(state.min_gain))
+    t_cut = jnp.min(jnp.where(hard_ok, starts, NEVER), axis=-1)
+    # soft: each passes with its ticks' speed sigmoids times its progress sigmoid, after the
+    # earlier ones failed
+    suffix = jnp.cumsum(state.log_ok[..., ::-1], axis=-1)[..., ::-1][..., 1:]  # summed to the end
+    gain_ok = jax.nn.sigmoid((gains - col(state.min_gain)) / col(ctx.temperature))
+    sigma = jnp.where(opened, jnp.exp(suffix) * gain_ok, 0.0)
+    survive = jnp.cumprod(1.0 - sigma, axis=-1)
+    before = jnp.concatenate([jnp.ones_like(survive[..., :1]), survive[..., :-1]], axis=-1)
+    p_k = col(state.surv) * sigma * before
+    return t_cut, jnp.sum(p_k, axis=-1), jnp.sum(p_k * starts, axis=-1)
+
+
+def _t_recover(state: RecoveryState, ctx: Context) -> Array:
+    """() float32, s: the start of the first window that passed, full or cut (``NEVER``)."""
+    return jnp.where(happened(state.t_recover), state.t_recover, cut_windows(state, ctx)[0])
 
 
 def valid(state: RecoveryState, ctx: Context, t_fail: Array) -> Array:
@@ -218,7 +211,7 @@ def recovered_at(state: RecoveryState, ctx: Context, t_fail: Array) -> tuple[Arr
     Returns:
         ``(t_recover, valid)``: () float32, s (``NaN`` = no recovery); () bool.
     """
-    return time_or_nan(state.t_recover), valid(state, ctx, t_fail)
+    return time_or_nan(_t_recover(state, ctx)), valid(state, ctx, t_fail)
 
 
 def hard(state: RecoveryState, ctx: Context, t_fail: Array) -> tuple[Array, Array]:
@@ -232,8 +225,9 @@ def hard(state: RecoveryState, ctx: Context, t_fail: Array) -> tuple[Array, Arra
     Returns:
         ``(latency, valid)``: () float32, s (``NaN`` = no recovery); () bool.
     """
-    latency = state.t_recover - release_time(ctx.t_warn_off, ctx.t_clear)
-    return jnp.where(happened(state.t_recover), latency, jnp.nan), valid(state, ctx, t_fail)
+    t_recover = _t_recover(state, ctx)
+    latency = t_recover - release_time(ctx.t_warn_off, ctx.t_clear)
+    return jnp.where(happened(t_recover), latency, jnp.nan), valid(state, ctx, t_fail)
 
 
 def score(recovery_latency_s: Any, settings: ScoringSettings, available: Any = True) -> Array:
@@ -272,10 +266,12 @@ def soft(
         ``(s_rec, valid)``: () float32 in [0, 1]; () bool (the hard availability).
     """
     ok = valid(state, ctx, t_fail)
-    has, e_rec = expected_time(state.p, state.pt)
+    _, p_cut, pt_cut = cut_windows(state, ctx)
+    p, pt = state.p + p_cut, state.pt + pt_cut
+    has, e_rec = expected_time(p, pt)
     t_rel = jnp.where(ok, release_time(ctx.t_warn_off, ctx.t_clear), 0.0)
     clipped = smooth_clip01(1.0 - (e_rec - t_rel) / settings.recover_cap_s, temperature)
-    return jnp.where(has, state.p * clipped, 0.0), ok
+    return jnp.where(has, p * clipped, 0.0), ok
 
 
 #: Its columns of the route-level table: column -> (route, ExecutionMetrics field), the
