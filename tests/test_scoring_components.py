@@ -292,6 +292,13 @@ def test_progress_counts_the_end_zone_as_complete():
     ctx, _ = fold(rule, tr)
     assert f(progress.hard(ctx, S)[0]) == 1.0
     assert bool(progress.is_completed(ctx.progress_m, ctx.route_length_m, S))
+    # the recovery's end-of-route windows use the same rule with the end zone as a value: the
+    # zone's first metre counts, the metre before it does not
+    lengths = jnp.full(3, 42.0)
+    reached = jnp.asarray([39.9, 40.0, 41.0])
+    want = [False, True, True]
+    assert progress.is_completed(reached, lengths, S).tolist() == want
+    assert progress.reached_end_zone(reached, lengths, S.completion_tol_m).tolist() == want
 
 
 # ---------------------------------------------------------------------------------------- gates

@@ -32,7 +32,23 @@ def is_completed(progress_m: Array, route_length_m: Array, settings: ScoringSett
     Returns:
         (...) bool: ``progress_m >= route_length_m - 2 m``.
     """
-    return progress_m >= route_length_m - settings.completion_tol_m
+    return reached_end_zone(progress_m, route_length_m, settings.completion_tol_m)
+
+
+def reached_end_zone(progress_m: Array, route_length_m: Array, end_zone_m: Array) -> Array:
+    """:func:`is_completed` with the end zone given as a value rather than read from the
+    settings (for a term judged where the settings are not at hand: the recovery's windows cut
+    short by the route's end, :func:`lantern_jax.scoring.components.recovery.cut_windows`).
+
+    Args:
+        progress_m: (...) float32, m, furthest route arc reached.
+        route_length_m: (...) float32, m.
+        end_zone_m: (...) float32, m, the end zone's length (``completion_tol_m``).
+
+    Returns:
+        (...) bool: ``progress_m >= route_length_m - end_zone_m``.
+    """
+    return progress_m >= route_length_m - end_zone_m
 
 
 def hard(ctx: Context, settings: ScoringSettings) -> tuple[Array, Array]:

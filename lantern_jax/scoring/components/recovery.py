@@ -53,6 +53,7 @@ from lantern_jax.scoring.components.context import (
     ring_length,
     value_or_nan,
 )
+from lantern_jax.scoring.components.progress import reached_end_zone
 from lantern_jax.scoring.sample import TickSample
 from lantern_jax.scoring.smooth import smooth_clip01
 from lantern_jax.scoring.thresholds import ScoringSettings
@@ -70,8 +71,9 @@ class RecoveryState:
     surv: Array  # () float32, soft probability that no window has passed yet
     p: Array  # () float32, soft probability that some window passed, sum_k p_k
     pt: Array  # () float32, s, sum_k p_k t_k
-    # the settings the windows cut short by the route's end are judged with at the end
-    # (:func:`hard`, :func:`soft`: the hazard role's functions take no settings)
+    # the settings the windows cut short by the route's end are judged with at the end (the
+    # hazard role's :func:`hard` takes no settings; :func:`soft` and :func:`outputs` judge the
+    # windows with the same values)
     window: Array  # () int32, ticks of a full window (``recover_window``)
     min_gain: Array  # () float32, m, progress a window needs (``recover_min_progress_m``)
     end_zone: Array  # () float32, m, the route's end zone (``completion_tol_m``)
@@ -156,9 +158,9 @@ def cut_windows(state: RecoveryState, ctx: Context) -> tuple[Array, Array, Array
 
     Returns:
         ``(t_cut, p, pt)``: (...) float32, s, the start of the earliest cut window that passes
-        (``NEVER``: none); () float32 and () float32 s, the soft first crossings they add to
-        ``state.p`` and ``state.pt`` (the speed sigmoids as folded, the progress sigmoid at the
-        context's temperature).
+        (``NEVER``: none); (...) float32 and (...) float32, s, the soft first crossings they
+        add to ``state.p`` and ``state.pt`` (the speed sigmoids as folded, the progress sigmoid
+        at the context's temperature).
     """
     ring = state.log_ok.shape[-1]
     col = lambda x: jnp.asarray(x)[..., None]  # noqa: E731  (...) -> (..., 1) beside the windows
@@ -166,7 +168,7 @@ def cut_windows(state: RecoveryState, ctx: Context) -> tuple[Array, Array, Array
     starts = ctx.time_ring[..., 1:]  # (..., ring - 1) s, their first ticks
     gains = col(ctx.progress_m) - ctx.progress_ring[..., 1:]  # (..., ring - 1) m
     t_release = col(release_time(ctx.t_warn_off, ctx.t_clear))
-    completed = col(ctx.progress_m >= ctx.route_length_m - state.end_zone)
+    completed = col(reached_end_zone(ctx.progress_m, ctx.route_length_m, state.end_zone))
     opened = (completed & happened(t_release) & (starts >= t_release)
               & (lengths < col(state.window)) & (col(ctx.n_ticks) >= lengths))  # fmt: skip
     # hard: every tick above the threshold (``run`` counts the ticks after the release that
@@ -187,6 +189,13 @@ def cut_windows(state: RecoveryState, ctx: Context) -> tuple[Array, Array, Array
 def _t_recover(state: RecoveryState, ctx: Context) -> Array:
     """() float32, s: the start of the first window that passed, full or cut (``NEVER``)."""
     return jnp.where(happened(state.t_recover), state.t_recover, cut_windows(state, ctx)[0])
+
+
+def _latency(t_recover: Array, ctx: Context) -> Array:
+    """() float32, s: ``t_recover - t_release`` (``NaN`` = no recovery), for the
+    :func:`_t_recover` of the same execution."""
+    latency = t_recover - release_time(ctx.t_warn_off, ctx.t_clear)
+    return jnp.where(happened(t_recover), latency, jnp.nan)
 
 
 def valid(state: RecoveryState, ctx: Context, t_fail: Array) -> Array:
@@ -225,9 +234,7 @@ def hard(state: RecoveryState, ctx: Context, t_fail: Array) -> tuple[Array, Arra
     Returns:
         ``(latency, valid)``: () float32, s (``NaN`` = no recovery); () bool.
     """
-    t_recover = _t_recover(state, ctx)
-    latency = t_recover - release_time(ctx.t_warn_off, ctx.t_clear)
-    return jnp.where(happened(t_recover), latency, jnp.nan), valid(state, ctx, t_fail)
+    return _latency(_t_recover(state, ctx), ctx), valid(state, ctx, t_fail)
 
 
 def score(recovery_latency_s: Any, settings: ScoringSettings, available: Any = True) -> Array:
@@ -297,11 +304,12 @@ def outputs(state: RecoveryState, ctx: Context, t_fail: Array, settings: Scoring
             ) -> dict[str, Array]:  # fmt: skip
     """Its per-execution outputs: the :data:`OUTPUTS` fields of
     :class:`~lantern_jax.scoring.metrics.ExecutionMetrics` (``t_fail``: () float32, s, the
-    first Route A gate failure)."""
-    latency, ok = hard(state, ctx, t_fail)
+    first Route A gate failure).  The windows cut short by the route's end are judged once for
+    both times (:func:`cut_windows`)."""
+    t_recover, ok = _t_recover(state, ctx), valid(state, ctx, t_fail)
     return {
         "t_release_s": time_or_nan(release_time(ctx.t_warn_off, ctx.t_clear)),
-        "t_recover_s": value_or_nan(*recovered_at(state, ctx, t_fail)),
-        "recovery_latency_s": value_or_nan(latency, ok),
+        "t_recover_s": value_or_nan(time_or_nan(t_recover), ok),
+        "recovery_latency_s": value_or_nan(_latency(t_recover, ctx), ok),
         "recovery_available": ok,
     }
