@@ -52,21 +52,21 @@ def test_a_report_holds_the_identity_the_plots_the_tables_and_every_failure(fold
 
 
 def test_the_run_says_how_its_actors_found_the_ego(folder, tmp_path):
-    """The run's identity names the actors' ego-leader rule: the default where the manifest
-    records none (as every run of the default does), the other where it records it."""
+    """The run's identity names the actors' ego-leader rule: the default as every new run
+    records it; the earlier rule for a manifest written before 2026-12-08 that records none."""
     import shutil
 
     page = build_report([folder], tmp_path / "default.html").read_text()
-    assert "heading_line (the default)" in page
-    other = tmp_path / "other"
-    shutil.copytree(folder, other)
-    path = other / "reproducibility_manifest.json"
+    assert "heading_line_or_box (the default)" in page
+    older = tmp_path / "older"
+    shutil.copytree(folder, older)
+    path = older / "reproducibility_manifest.json"
     manifest = json.loads(path.read_text())
-    assert "actors" not in manifest["settings"]
-    manifest["settings"]["actors"] = {"ego_leader": "heading_line_or_box"}
+    assert manifest["settings"]["actors"] == {"ego_leader": "heading_line_or_box"}
+    del manifest["settings"]["actors"]
     path.write_text(json.dumps(manifest))
-    page = build_report([other], tmp_path / "other.html").read_text()
-    assert "heading_line_or_box" in page and "(the default)" not in page
+    page = build_report([older], tmp_path / "older.html").read_text()
+    assert "heading_line" in page and "(the default)" not in page
 
 
 def test_the_command_line_writes_the_report_and_refuses_what_it_cannot(folder, tmp_path):

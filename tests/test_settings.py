@@ -140,42 +140,59 @@ def test_settings_batch_with_vmap():
     assert len(set(np.round(apart, 4))) > 1  # the settings matter on this pair
 
 
-def test_the_actors_settings_are_recorded_only_where_they_are_not_the_default():
-    """A manifest written before ``Settings.actors`` existed is the record of the default; the
-    other rule is recorded, and a result's record gives the settings back (``plot`` reads them)."""
+def test_the_actors_settings_are_recorded_and_an_older_record_reads_as_the_earlier_rule():
+    """Every record names the actors' rule; a record written before 2026-12-08 names it only
+    where it was not that day's default, so a record without it ran under the earlier rule
+    (``EARLIER_ACTORS``): ``plot`` replays it so, and ``compare`` finds no difference between
+    it and a new record of that rule, and a difference between it and one of the default."""
+    from lantern_jax.dynamics.actors import DEFAULT_ACTORS, EARLIER_ACTORS
+    from lantern_jax.report.evidence import protocol_differences
+    from lantern_jax.sim.settings import actors_of_record
     from lantern_jax.viz.pair import _settings_from_record
 
-    assert "actors" not in settings_record(DEFAULT_SETTINGS)
-    braking = Settings(actors=ActorSettings(ego_leader="heading_line_or_box"))
-    record = settings_record(braking)
-    assert record["actors"] == {"ego_leader": "heading_line_or_box"}
-    assert _settings_from_record(record).actors == braking.actors
-    assert _settings_from_record(settings_record(DEFAULT_SETTINGS)).actors == ActorSettings()
+    assert DEFAULT_ACTORS.ego_leader == "heading_line_or_box"
+    assert EARLIER_ACTORS.ego_leader == "heading_line"
+    new = settings_record(DEFAULT_SETTINGS)
+    assert new["actors"] == {"ego_leader": "heading_line_or_box"}
+    earlier = DEFAULT_SETTINGS.replace(actors=EARLIER_ACTORS)
+    older = {k: v for k, v in settings_record(earlier).items() if k != "actors"}  # as written then
+    for record, actors in ((new, DEFAULT_ACTORS), (settings_record(earlier), EARLIER_ACTORS),
+                           (older, EARLIER_ACTORS), (None, EARLIER_ACTORS)):  # fmt: skip
+        assert actors_of_record(record) == actors
+        assert _settings_from_record(record).actors == actors
+    assert protocol_differences({"settings": older}, {"settings": settings_record(earlier)}) == []
+    assert protocol_differences({"settings": older}, {"settings": new}) == [
+        "settings.actors.ego_leader: 'heading_line' vs 'heading_line_or_box'"
+    ]
+    with pytest.raises(ValueError, match="ActorSettings.ego_leader: 'box'"):
+        actors_of_record({**new, "actors": {"ego_leader": "box"}})
 
 
 @pytest.mark.slow
 def test_the_actors_rule_is_its_own_world_program_and_changes_what_it_says():
-    """``coop`` on ``rty_0006``, warned, the split path: under ``lantern-v3``'s rule a car of the
-    flow drives into it as it pulls out; under ``"heading_line_or_box"`` the car brakes and no
-    collision happens, from a world program of its own; the default again gives the first
-    answer (no program of the other rule is reused)."""
+    """``coop`` on ``rty_0006``, warned, the split path: under the earlier rule
+    (``"heading_line"``) a car of the flow drives into it as it pulls out; under the default
+    (``"heading_line_or_box"``) the car brakes and no collision happens, from a world program of
+    its own; the earlier rule again gives the first answer (no program of the other rule is
+    reused)."""
     from lantern_jax.apps.evaluation import evaluate
 
     pair = load_suite().select(["rty_0006"])
-    braking = Settings(actors=ActorSettings(ego_leader="heading_line_or_box"))
+    earlier = Settings(actors=ActorSettings(ego_leader="heading_line"))
+    braking = DEFAULT_SETTINGS
 
     def warned(settings):
         table = evaluate(["coop"], suite=pair, settings=settings, path="split",
                          progress=False).route_table  # fmt: skip
         return table[table["condition"] == "warning"].iloc[0]
 
-    first = warned(DEFAULT_SETTINGS)
+    first = warned(earlier)
     assert first["no_collision"] == 0
     before = set(programs._EXECUTABLES)
     other = warned(braking)
     assert other["no_collision"] == 1 and other["CUS"] > 50.0
     assert set(programs._EXECUTABLES) - before, "another rule must be another world program"
-    again = warned(DEFAULT_SETTINGS)
+    again = warned(earlier)
     assert again["no_collision"] == 0 and again["CUS"] == first["CUS"]
 
 

@@ -51,6 +51,7 @@ import numpy as np
 from lantern_jax.core import family_codes
 from lantern_jax.core.constants import FAMILIES, ROUTE_A_GATE_NAMES, WEATHERS
 from lantern_jax.core.times import happened, ticks_covering
+from lantern_jax.dynamics.actors import EARLIER_ACTORS
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.assemble import host_arrays
 from lantern_jax.scenarios.duplicates import near_duplicate, route_samples
@@ -66,6 +67,7 @@ from lantern_jax.scenarios.suite import (
 )
 from lantern_jax.scoring.metrics import finalize
 from lantern_jax.sim.engine import run_executions
+from lantern_jax.sim.settings import default_settings
 from lantern_jax.types.world import Scenario, tree_stack
 
 DEFAULT_SEED = 20260611
@@ -94,6 +96,12 @@ def max_ticks(families: Sequence[str]) -> int:
 
 VALIDATOR = "expert"  # policy that filters newly generated suites
 LEGACY_VALIDATOR = "expert-v1"  # the validator of manifests that do not name one
+#: How the IDM actors treat the ego while a validator drives: the rule ``lantern-v3`` and every
+#: suite of its design were filtered under (:data:`~lantern_jax.dynamics.actors.EARLIER_ACTORS`,
+#: the default until 2026-12-08), kept so that each regenerates from its seed bit for bit.  The
+#: suites are evaluated under the default rule, under which the flow's cars also brake for an
+#: ego on their path: the validator then meets at most the same cars.
+VALIDATION_ACTORS = EARLIER_ACTORS
 
 _VALIDATOR_PARAMS = {}
 
@@ -135,8 +143,9 @@ def dynamic_check(
     if batch_size is not None and batch_size < len(execs):
         raise ValueError(f"dynamic_check: {len(execs)} executions exceed batch {batch_size}")
     pol, params = _validator(validator)
+    settings = default_settings().replace(actors=VALIDATION_ACTORS)
     final, _ = run_executions(
-        pol, tree_stack(execs), params, ticks, compact=True, pad_to=batch_size
+        pol, tree_stack(execs), params, ticks, settings, compact=True, pad_to=batch_size
     )
     m = jax.tree.map(np.asarray, finalize(final.telemetry))
     proto = jax.tree.map(np.asarray, final.protocol)

@@ -23,9 +23,11 @@
     on a curved lane a follower still in the bend misses an ego ahead of it (its centre off the
     tangent) until it comes out, and an ego whose nose is in the lane with its centre more than
     1.6 m off the line is not a leader at all (``docs/learned.md``, "The slowest member's plan",
-    traces such collisions).  That is ``lantern-v3``'s rule, the default; with
-    ``ActorSettings(ego_leader="heading_line_or_box")`` the ego also leads wherever its box lies
-    on the actor's own path (:func:`_ego_box_on_path`), the nearer of the two gaps counting;
+    traces such collisions).  That is ``ActorSettings(ego_leader="heading_line")``, the rule
+    of every result written before 2026-12-08.  The default, ``"heading_line_or_box"``, also
+    lets the ego lead wherever its box lies on the actor's own path (:func:`_ego_box_on_path`),
+    the nearer of the two gaps counting: CARLA's agents, which drive the paper's scenario
+    actors, test the vehicles on their path by their boxes, not their centres;
   - the stop line ``stop_s`` of the actor's light (``light_index >= 0``) while that light is red
     or yellow, as a stopped leader (gap = stop_s - s - half length), provided the actor can still
     stop before it: on red if ``gap >= v^2 / (2 max_brake)``, on yellow if
@@ -88,12 +90,26 @@ LEADER_RANGE = 80.0  # m, look-ahead of the leader search
 EGO_BOX_MARGIN = 0.3
 #: How an IDM actor finds the ego as its leader (:class:`ActorSettings`): ``"heading_line"``, the
 #: ego's box centre within :data:`LEADER_RANGE` ahead and :data:`LEADER_LATERAL` of the actor's
-#: heading line, as for every other candidate (``lantern-v3``'s rule); ``"heading_line_or_box"``,
-#: that or the ego's box on the actor's own path (:func:`_ego_box_on_path`), so that a car brakes
-#: for an ego pulling out in front of it at an angle and for one ahead of it in a bend.
+#: heading line, as for every other candidate; ``"heading_line_or_box"``, that or the ego's box
+#: on the actor's own path (:func:`_ego_box_on_path`), so that a car brakes for an ego pulling out
+#: in front of it at an angle and for one ahead of it in a bend.
 EGO_LEADER_RULES = ("heading_line", "heading_line_or_box")
-#: lantern-v3's rule, the default of :class:`ActorSettings` and of the functions below.
-DEFAULT_EGO_LEADER = EGO_LEADER_RULES[0]
+#: The default of :class:`ActorSettings` and of the functions below (since 2026-12-08).  The
+#: paper's scenario actors and background traffic are driven by CARLA's agents (scenario
+#: runner's ``ActorFlow`` drives the Right-Turn Yield flow with a ``BasicAgent``; Traffic Manager
+#: the rest), which brake for a vehicle whose bounding box meets the path ahead of them (inside a
+#: junction always; several Leaderboard 2.0 scenarios turn the box test on everywhere for their
+#: scenario vehicles, so that these never drive over the ego), not only for one centred on
+#: their lane.  Under the heading
+#: line alone a flow car drives into an ego that pulls out in front of it at an angle: 6 of
+#: ``coop``'s 20 warned Right-Turn Yield executions on ``lantern-v3`` and one of the ``expert``'s
+#: (``docs/settings.md``).
+DEFAULT_EGO_LEADER = EGO_LEADER_RULES[1]
+#: The rule of every result written before 2026-12-08, when it was the default: a manifest whose
+#: settings record no ``actors`` ran under it (:func:`lantern_jax.sim.settings.actors_of_record`),
+#: and the validators that filtered ``lantern-v3`` and every suite of its design drive under it
+#: (:data:`lantern_jax.apps.suite_generation.VALIDATION_ACTORS`).
+EARLIER_EGO_LEADER = EGO_LEADER_RULES[0]
 
 
 @struct.dataclass
@@ -102,9 +118,8 @@ class ActorSettings:
     :class:`~lantern_jax.sim.settings.Settings`).
 
     ``ego_leader`` is static (a change compiles the world's program again): one of
-    :data:`EGO_LEADER_RULES`.  The default is the rule every published figure of ``lantern-v3``
-    was measured under; ``docs/learned.md`` ("The slowest member's plan") measures the other on
-    the reference policies and a learned ensemble.
+    :data:`EGO_LEADER_RULES`, default :data:`DEFAULT_EGO_LEADER` (why there);
+    :data:`EARLIER_ACTORS` are the actors of every result written before 2026-12-08.
     """
 
     ego_leader: str = struct.field(pytree_node=False, default=DEFAULT_EGO_LEADER)
@@ -121,8 +136,10 @@ class ActorSettings:
         return self
 
 
-#: lantern-v3's actors.
+#: The default actors.
 DEFAULT_ACTORS = ActorSettings()
+#: The actors of every result written before 2026-12-08 (:data:`EARLIER_EGO_LEADER`).
+EARLIER_ACTORS = ActorSettings(ego_leader=EARLIER_EGO_LEADER)
 
 
 def _zero_where_invalid(x: Array, valid: Array) -> Array:

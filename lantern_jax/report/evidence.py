@@ -35,6 +35,7 @@ from lantern_jax.report.outputs import (
     ROUTE_CSV,
 )
 from lantern_jax.scoring.table import read_route_table, validate_route_table
+from lantern_jax.sim.settings import normalised_record
 
 #: Route-level CSVs a result folder may hold, with the manifest beside each.
 RESULT_FILES = ((ROUTE_CSV, MANIFEST_JSON), (ABLATION_ROUTE_CSV, ABLATION_MANIFEST))
@@ -176,9 +177,21 @@ def _flat(value: Any, prefix: str = "") -> dict[str, Any]:
 
 def protocol_differences(a: dict, b: dict) -> list[str]:
     """What differs between two manifests' protocols (:data:`PROTOCOL_KEYS`, settings field by
-    field), one line each; empty when they agree."""
-    fa = _flat({k: a.get(k) for k in PROTOCOL_KEYS})
-    fb = _flat({k: b.get(k) for k in PROTOCOL_KEYS})
+    field), one line each; empty when they agree.  A settings record written before 2026-12-08
+    names the actors' rule only where it was not that day's default; it is compared as the rule
+    it ran under (:func:`lantern_jax.sim.settings.normalised_record`)."""
+
+    def protocol(m: dict) -> dict:
+        out = {k: m.get(k) for k in PROTOCOL_KEYS}
+        if isinstance(out.get("settings"), dict):
+            try:
+                out["settings"] = normalised_record(out["settings"])
+            except (TypeError, ValueError):  # not a record this package wrote: compared as is
+                pass
+        return out
+
+    fa = _flat(protocol(a))
+    fb = _flat(protocol(b))
     out = []
     for key in sorted(set(fa) | set(fb)):
         va, vb = fa.get(key), fb.get(key)

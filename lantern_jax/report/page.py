@@ -45,6 +45,7 @@ from lantern_jax.report.evidence import ResultSet, read_result_set
 from lantern_jax.report.outputs import DECOMPOSITION_CSV, FAMILY_CSV
 from lantern_jax.scoring.aggregate import premise_table
 from lantern_jax.scoring.paired import compare_runs
+from lantern_jax.sim.settings import actors_of_record
 
 #: The gate columns of a Route A execution, in the order the gallery reads them.
 A_GATES = tuple(g for g in GATE_COLUMN_NAMES if g != "no_false_brake")
@@ -165,9 +166,12 @@ def _identity(rs: ResultSet) -> str:
     versions = ", ".join(f"{k} {packages[k]}" for k in ("lantern-jax", "jax", "jaxlib", "numpy")
                          if k in packages)  # fmt: skip
     bank = ((m.get("settings") or {}).get("text_bank")) or {}
-    # recorded only where not lantern-v3's rule (lantern_jax.sim.settings.settings_record)
-    actors = ((m.get("settings") or {}).get("actors")) or {}
-    leader = actors.get("ego_leader", DEFAULT_ACTORS.ego_leader)
+    # a record written before 2026-12-08 holds the actors only where not that day's default
+    # (lantern_jax.sim.settings.actors_of_record)
+    try:
+        leader = actors_of_record(m.get("settings")).ego_leader
+    except (TypeError, ValueError):  # a record this package never wrote: shown as it is
+        leader = str(((m.get("settings") or {}).get("actors")) or "-")
     if leader == DEFAULT_ACTORS.ego_leader:
         leader = f"{leader} (the default)"
     items = [

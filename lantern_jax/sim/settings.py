@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 from flax import struct
 
-from lantern_jax.dynamics.actors import DEFAULT_ACTORS, ActorSettings
+from lantern_jax.dynamics.actors import DEFAULT_ACTORS, EARLIER_ACTORS, ActorSettings
 from lantern_jax.scenarios.warnings import DEFAULT_BANK, TextBank, registered_bank
 from lantern_jax.scoring.thresholds import DEFAULT_SCORING, ScoringSettings
 from lantern_jax.sim.protocol import DEFAULT_PROTOCOL, ProtocolSettings
@@ -108,9 +108,10 @@ def default_settings() -> Settings:
 
 def settings_record(settings: Settings) -> dict:
     """The settings of an evaluation as the manifest records them (every value, the bank as
-    its size and content hash, the user metrics by name, unit and description; the actors'
-    settings only where they differ from ``lantern-v3``'s, so that a record written before they
-    existed is the record of the same settings)."""
+    its size and content hash, the user metrics by name, unit and description, the actors'
+    settings).  Records written before 2026-12-08 hold the actors' settings only where they
+    differed from that day's default, :data:`~lantern_jax.dynamics.actors.EARLIER_ACTORS`;
+    :func:`actors_of_record` reads either."""
     bank = settings.bank
     digest = hashlib.sha256(repr(bank.entries).encode()).hexdigest()
     scoring = {f.name: getattr(settings.scoring, f.name)
@@ -122,9 +123,30 @@ def settings_record(settings: Settings) -> dict:
         text_bank=dict(texts=len(bank), sha256=digest),
         # the user metrics (scoring/user_metrics.py) the route table holds, when there are any
         **({"metrics": [m.record() for m in metrics]} if metrics else {}),
-        **({"actors": dataclasses.asdict(settings.actors)}
-           if settings.actors != DEFAULT_ACTORS else {}),
+        actors=dataclasses.asdict(settings.actors),
     )
+
+
+def actors_of_record(record: dict | None) -> ActorSettings:
+    """The actors' settings a manifest's settings record (:func:`settings_record`) ran under:
+    its ``actors`` entry, or :data:`~lantern_jax.dynamics.actors.EARLIER_ACTORS` for a record
+    without one (written before 2026-12-08, when the record held them only where they were not
+    the default of then).
+
+    Raises:
+        ValueError: naming ``ActorSettings.ego_leader`` when the record names an unknown rule.
+    """
+    recorded = (record or {}).get("actors") or {}
+    return dataclasses.replace(EARLIER_ACTORS, **recorded).validate()
+
+
+def normalised_record(record: dict | None) -> dict | None:
+    """``record`` with its ``actors`` entry filled in where an older record has none
+    (:func:`actors_of_record`), so that two records of the same settings compare equal whatever
+    day they were written; ``None`` stays ``None``."""
+    if not record:
+        return record
+    return {**record, "actors": dataclasses.asdict(actors_of_record(record))}
 
 
 def _plain(v: Any) -> Any:

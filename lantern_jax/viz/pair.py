@@ -39,7 +39,7 @@ from lantern_jax.scenarios.families import build_pair
 from lantern_jax.scenarios.protocol_variants import get_ablation
 from lantern_jax.scenarios.suite import SUITE_ID, Suite, load_suite
 from lantern_jax.scoring.components import ROUTE_A_GATES
-from lantern_jax.sim.settings import Settings, default_settings
+from lantern_jax.sim.settings import Settings, actors_of_record, default_settings
 from lantern_jax.viz.animate import save_animation
 from lantern_jax.viz.common import (
     collision_index,
@@ -366,7 +366,8 @@ def _from_result(result: EvalResult, policy: Policy | str | None, settings: Sett
 
 def _settings_from_record(record: dict | None) -> Settings:
     """The :class:`Settings` an evaluation's manifest records (:func:`settings_record`)."""
-    base = default_settings()
+    # a record written before 2026-12-08 may name no actors (then the rule of then)
+    base = default_settings().replace(actors=actors_of_record(record))
     if not record or record == settings_record(base):
         return base
     if record.get("text_bank") != settings_record(base)["text_bank"]:
@@ -376,8 +377,7 @@ def _settings_from_record(record: dict | None) -> Settings:
         )
     scoring = dataclasses.replace(base.scoring, **record.get("scoring", {}))
     protocol = dataclasses.replace(base.protocol, **record.get("protocol", {}))
-    actors = dataclasses.replace(base.actors, **record.get("actors", {}))
-    return base.replace(scoring=scoring, protocol=protocol, actors=actors).validate()
+    return base.replace(scoring=scoring, protocol=protocol).validate()
 
 
 def safe_name(name: str) -> str:

@@ -19,12 +19,13 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
+from lantern_jax.dynamics.actors import EARLIER_ACTORS
 from lantern_jax.policies.base import Policy
 from lantern_jax.scenarios.warnings import TextBank
 from lantern_jax.sim.engine import Program, check_texts
 from lantern_jax.sim.observe import observe
 from lantern_jax.sim.rollout import start_state
-from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings, default_settings
+from lantern_jax.sim.settings import Settings, default_settings
 from lantern_jax.sim.state import State
 from lantern_jax.sim.step import step
 from lantern_jax.types.observation import (
@@ -83,15 +84,32 @@ def _frame(scenario: Scenario, state: State, bank: TextBank) -> FrameRecord:
     )
 
 
+#: How the IDM actors treat the ego while the dataset is recorded and while the closed-loop
+#: recipes drive and relabel (:func:`data_settings`): the rule the dataset and every shipped
+#: model were made under (:data:`~lantern_jax.dynamics.actors.EARLIER_ACTORS`, the default until
+#: 2026-12-08), kept so that the documented commands rebuild the same frames and retrain the
+#: same weights.  Evaluations run under the default rule, in which a flow car also brakes for an
+#: ego on its path; only Right-Turn Yield's flow and the background cars meet the ego at an
+#: angle.
+DATA_ACTORS = EARLIER_ACTORS
+
+
+def data_settings() -> Settings:
+    """:func:`~lantern_jax.sim.settings.default_settings` with :data:`DATA_ACTORS`: the
+    settings the dataset and the training recipes drive under unless given others."""
+    return default_settings().replace(actors=DATA_ACTORS)
+
+
 def record(
     scenario: Scenario,
     policy: Policy,
     policy_params: Any,
     num_frames: int,
-    settings: Settings = DEFAULT_SETTINGS,
+    settings: Settings | None = None,
 ) -> tuple[FrameRecord, State]:
     """Roll one execution, keeping one frame every :data:`FRAME_TICKS` ticks (the first at
-    ``t = 0``), until it ends or ``num_frames`` frames are kept.
+    ``t = 0``), until it ends or ``num_frames`` frames are kept (``settings`` default:
+    :func:`data_settings`).
 
     A ``while_loop`` writes into a preallocated buffer, so a batch (``vmap`` outside) stops as
     soon as every execution has ended; frames after the end keep ``live = False``.
@@ -99,6 +117,7 @@ def record(
     Returns:
         (frames with a leading axis ``num_frames``, the final state).
     """
+    settings = data_settings() if settings is None else settings
     state0 = start_state(scenario, policy, policy_params, settings)
     shapes = jax.eval_shape(lambda sc, st: _frame(sc, st, settings.bank), scenario, state0)
     empty = jax.tree.map(lambda x: jnp.zeros((num_frames, *x.shape), x.dtype), shapes)
@@ -134,11 +153,11 @@ def _record_batch(scenarios, policy_params, settings, *, program: Program, num_f
 def batched_recorder(policy: Policy, num_frames: int, settings: Settings | None = None):
     """``(scenarios, policy_params) -> (frames, final states)`` of a batch, one compiled
     program per (policy program, frame count) (a jitted function with those as static
-    arguments).  ``settings`` default: :func:`~lantern_jax.sim.settings.default_settings`
-    (the bank then holds every registered family's texts); a batch reading a text beyond the
-    bank is refused (ValueError)."""
+    arguments).  ``settings`` default: :func:`data_settings` (the bank then holds every
+    registered family's texts); a batch reading a text beyond the bank is refused
+    (ValueError)."""
     program = Program(policy)
-    settings = default_settings() if settings is None else settings
+    settings = data_settings() if settings is None else settings
 
     def run(scenarios, params):
         check_texts(settings, scenarios)

@@ -27,6 +27,7 @@ import jax
 import numpy as np
 from brax.training.agents.ppo import train as ppo
 
+from lantern_jax.apps.dataset.record import data_settings
 from lantern_jax.apps.envs import LanternEnv, build_bank, wrap_for_training
 from lantern_jax.apps.envs.bank import TRAIN_SEED
 from lantern_jax.policies.learned_ppo import save_checkpoint
@@ -114,7 +115,8 @@ def train(
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     settings = {**PPO_SETTINGS, **overrides}
-    env = LanternEnv(build_bank(pairs_per_family, bank_seed))
+    # the actors' rule the shipped policy was trained under (apps.dataset.record.DATA_ACTORS)
+    env = LanternEnv(build_bank(pairs_per_family, bank_seed), data_settings())
     curve: list[dict] = []
     meta = dict(settings=settings, pairs_per_family=pairs_per_family, bank_seed=bank_seed,
                 seed=seed)  # fmt: skip

@@ -32,9 +32,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from lantern_jax.apps.dataset.record import data_settings
 from lantern_jax.apps.training.counterfactual import distractor_bank
 from lantern_jax.policies.learned.checkpoint import LearnedParams, learned_act
-from lantern_jax.sim.settings import Settings, default_settings
+from lantern_jax.sim.settings import Settings
 from lantern_jax.types.language import PAD_ID
 from lantern_jax.types.observation import Observation
 from lantern_jax.types.world import Scenario
@@ -58,7 +59,7 @@ def distractor_scenarios(route_a: Scenario, texts: str, seed: int, r: int
     told = np.random.default_rng([seed, 44, r]).choice(ids, cfg.family.shape[0]).astype(np.int32)
     text_id = jnp.asarray(told).reshape(np.shape(cfg.text_id))
     warned = cfg.replace(text_id=text_id, warning_enabled=jnp.ones_like(cfg.warning_enabled))
-    return route_a.replace(config=warned), default_settings().replace(bank=bank), told
+    return route_a.replace(config=warned), data_settings().replace(bank=bank), told
 
 
 def text_in_view(obs: Observation) -> np.ndarray:

@@ -29,14 +29,14 @@ import jax
 import jax.numpy as jnp
 from flax import struct
 
-from lantern_jax.apps.dataset.record import FRAME_TICKS, FRONT_SENSORS, RIG_SENSORS
+from lantern_jax.apps.dataset.record import FRAME_TICKS, FRONT_SENSORS, RIG_SENSORS, data_settings
 from lantern_jax.core.constants import NUM_WAYPOINTS
 from lantern_jax.core.times import happened
 from lantern_jax.policies.base import Policy
 from lantern_jax.sim.engine import Program, check_texts
 from lantern_jax.sim.observe import observe
 from lantern_jax.sim.rollout import start_state
-from lantern_jax.sim.settings import Settings, default_settings
+from lantern_jax.sim.settings import Settings
 from lantern_jax.sim.state import State
 from lantern_jax.sim.step import policy_waypoints, step, transition
 from lantern_jax.types.observation import Observation
@@ -182,12 +182,12 @@ def relabel_batch(
         num_visits, every, phase: visits kept, ticks between visits, ticks before the first.
         segment: visits per segment of the beta mixture (a segment is ``segment * every``
             ticks).
-        settings: default :func:`~lantern_jax.sim.settings.default_settings`.
+        settings: default :func:`~lantern_jax.apps.dataset.record.data_settings`.
 
     Returns:
         :class:`Visits` with leading axes ``(B, num_visits)``.
     """
-    settings = default_settings() if settings is None else settings
+    settings = data_settings() if settings is None else settings
     check_texts(settings, scenarios)
     keys = jax.random.split(key, scenarios.config.family.shape[0])
     return _batch(scenarios, learner_params, expert_params, keys, jnp.float32(beta),
