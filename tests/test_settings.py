@@ -29,6 +29,7 @@ from lantern_jax.scoring.metrics import finalize
 from lantern_jax.scoring.thresholds import DEFAULT_SCORING, ScoringSettings
 from lantern_jax.sim import programs
 from lantern_jax.sim.settings import DEFAULT_SETTINGS, Settings, settings_record
+from lantern_jax.types.world import tree_stack
 
 PROBE = Path(__file__).with_name("settings_probe.py")
 #: Changes of a static setting (a tick window): another program, compiled again.
@@ -194,6 +195,26 @@ def test_the_actors_rule_is_its_own_world_program_and_changes_what_it_says():
     assert set(programs._EXECUTABLES) - before, "another rule must be another world program"
     again = warned(earlier)
     assert again["no_collision"] == 0 and again["CUS"] == first["CUS"]
+
+
+@pytest.mark.slow
+def test_the_validator_and_the_data_drive_under_the_earlier_rule():
+    """What keeps ``EARLIER_ACTORS`` (the suites' validation, the dataset and the training
+    recipes) drives under it, the evaluation under the default: on ``rty_0006`` the flow car
+    that drives into a warned ``coop`` under the earlier rule is a collision the validator
+    reports and a collision in the recorder's final state, whatever the default."""
+    from lantern_jax.apps.dataset.record import DATA_ACTORS, batched_recorder
+    from lantern_jax.apps.suite_generation import VALIDATION_ACTORS, dynamic_check
+    from lantern_jax.dynamics.actors import DEFAULT_ACTORS, EARLIER_ACTORS
+    from lantern_jax.scenarios.families import build_pair
+
+    assert VALIDATION_ACTORS == DATA_ACTORS == EARLIER_ACTORS != DEFAULT_ACTORS
+    a, b, _ = build_pair(load_suite().select(["rty_0006"]).pairs[0].params)
+    ok, reasons = dynamic_check([a], [b], validator="coop")
+    assert not ok[0] and "A: gate_collision failed" in reasons[0]
+    coop = get_policy("coop")
+    _, final = batched_recorder(coop, 300)(tree_stack([a]), coop.init(jax.random.PRNGKey(0)))
+    assert not bool(np.asarray(finalize(final.telemetry).gate_collision)[0])
 
 
 @pytest.mark.parametrize(

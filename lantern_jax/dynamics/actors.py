@@ -100,10 +100,9 @@ EGO_LEADER_RULES = ("heading_line", "heading_line_or_box")
 #: the rest), which brake for a vehicle whose bounding box meets the path ahead of them (inside a
 #: junction always; several Leaderboard 2.0 scenarios turn the box test on everywhere for their
 #: scenario vehicles, so that these never drive over the ego), not only for one centred on
-#: their lane.  Under the heading
-#: line alone a flow car drives into an ego that pulls out in front of it at an angle: 6 of
-#: ``coop``'s 20 warned Right-Turn Yield executions on ``lantern-v3`` and one of the ``expert``'s
-#: (``docs/settings.md``).
+#: their lane.  Under the heading line alone a flow car drives into an ego that pulls out in
+#: front of it at an angle: 6 of ``coop``'s 20 warned Right-Turn Yield executions on
+#: ``lantern-v3`` and one of the ``expert``'s (``docs/settings.md``).
 DEFAULT_EGO_LEADER = EGO_LEADER_RULES[1]
 #: The rule of every result written before 2026-12-08, when it was the default: a manifest whose
 #: settings record no ``actors`` ran under it (:func:`lantern_jax.sim.settings.actors_of_record`),
