@@ -30,7 +30,8 @@ MODEL = "closed/learned-closed-loop-rig-bigram.msgpack"  # each chain's last sta
 #: ``runs/train/bigram_<variant>``.
 STATED_VARIANTS = {"stated": "all", "stated_half": "half", "stated_quarter": "a quarter",
                    "stated_half_short": "half", "stated_half_short_hard": "half",
-                   "stated_half_short_max": "half", "stated_half_short_modes": "half"}
+                   "stated_half_short_max": "half", "stated_half_short_modes": "half",
+                   "stated_half_short_box": "half"}
 #: What else a variant's closed-loop stage changes, in words (its config says it in full).
 VARIANT_ROUNDS = {
     "stated_half_short": "fourteen closed-loop rounds of one epoch",
@@ -40,6 +41,8 @@ VARIANT_ROUNDS = {
                              "their mean and largest values (every stage)",
     "stated_half_short_modes": "fourteen closed-loop rounds of one epoch, a head of three "
                                "scored plans (every stage)",
+    "stated_half_short_box": "fourteen closed-loop rounds of one epoch driven under the "
+                             "benchmark's default actors' rule",
 }
 
 
@@ -257,3 +260,10 @@ def bigram_stated_half_short_chosen_ensemble() -> Policy:
             f"the validation suite (seed {VALIDATION_SEED})")
     return ensemble_policy("bigram-stated-half-short-chosen-ensemble",
                            [members[seed] for seed in VALIDATION_CHOSEN], what)  # fmt: skip
+
+
+def bigram_stated_half_short_box_ensemble() -> Policy:
+    """As :func:`bigram_stated_half_short_ensemble`, its closed-loop rounds driven under the
+    benchmark's default actors' rule (``ego_leader = "heading_line_or_box"``: a car also brakes
+    for the ego's box on its path), the rule the evaluations run under."""
+    return stated_variant_ensemble("stated_half_short_box")

@@ -17,6 +17,7 @@ import pandas as pd
 import pytest
 
 from lantern_jax.apps.dataset import frames as fr
+from lantern_jax.apps.dataset.record import DATA_ACTORS
 from lantern_jax.apps.training import counterfactual as cf
 from lantern_jax.apps.training.closed_loop import family_shares, round_specs
 from lantern_jax.apps.training.config import (
@@ -605,11 +606,12 @@ def test_collect_keeps_the_told_visits_with_the_learners_own_plan(monkeypatch):
 
     assert len(calls) == 2
     pairs, told = calls
-    assert pairs["beta"] == 0.5 and pairs["settings"] is None
+    assert pairs["beta"] == 0.5 and pairs["settings"].actors == DATA_ACTORS
     assert told["beta"] == 0.0 and told["route_a"].all() and told["warned"].all()
     assert told["every"] == horizon_ticks(0.5) and told["num_visits"] == 12
     assert set(told["text_id"]) <= set(distractor_bank("position")[1].tolist())
     assert told["settings"].bank == distractor_bank("position")[0]
+    assert told["settings"].actors == DATA_ACTORS
     n_told = 2 * 3  # specs 0 (PE) and 2 (VC), visits 2, 3 and 4
     assert counts["distractor_drive_visits"] == n_told and counts["executions"] == 8 + 2
     assert counts["no_warning_visits"] == 0
@@ -622,6 +624,57 @@ def test_collect_keeps_the_told_visits_with_the_learners_own_plan(monkeypatch):
     none = TrainConfig(name="x", recipe="closed_loop", init_from="m", max_seconds=6.0)
     assert cl.collect(none, None, like, specs, r=0)[1]["distractor_drive_visits"] == 0
     assert len(calls) == 1
+
+
+def test_ego_leader_sets_the_actors_rule_of_every_drive_of_a_round(monkeypatch):
+    """``ego_leader`` names the actors' rule that the pairs, the no-warning drives and the
+    distractor drives all run under (the distractor drives keep their bank); left out, each
+    runs under the dataset's rule."""
+    from lantern_jax.apps.training import closed_loop as cl
+    from lantern_jax.apps.training.counterfactual import distractor_bank
+
+    specs = _two_pe_two_vc()
+    seen = []
+
+    def fake_relabel(scenarios, learner, lp, expert, ep, key, beta=0.0, num_visits=40, every=40,
+                     phase=0, settings=None, segment=1):  # fmt: skip
+        seen.append(settings)
+        b = scenarios.config.family.shape[0]
+        obs = SimpleNamespace(warning_tokens=np.full((b, num_visits, 4), PAD_ID, np.int32),
+                              visible=np.zeros((b, num_visits, 1), bool))
+        z = np.zeros((b, num_visits), np.float32)
+        return _Visits(obs, np.zeros((b, num_visits, NUM_WAYPOINTS, 2), np.float32),
+                       np.ones((b, num_visits), bool), z, z.astype(bool), z.astype(bool),
+                       z + NEVER)  # fmt: skip
+
+    like = _stub_collection(monkeypatch, fake_relabel, "visible", "warning_tokens")
+    monkeypatch.setattr(cl, "own_plans", lambda params, obs: np.zeros(
+        (*np.shape(obs.warning_tokens)[:2], NUM_WAYPOINTS, 2), np.float32))  # fmt: skip
+    for rule, expected in (("heading_line_or_box", "heading_line_or_box"),
+                           ("", DATA_ACTORS.ego_leader)):  # fmt: skip
+        seen.clear()
+        cfg = TrainConfig(name="x", recipe="closed_loop", init_from="m", max_seconds=6.0,
+                          no_warning=0.5, distractor_drives=0.5, ego_leader=rule)  # fmt: skip
+        cl.collect(cfg, None, like, specs, r=0)
+        assert len(seen) == 3
+        assert [s.actors.ego_leader for s in seen] == [expected] * 3
+        assert seen[2].bank == distractor_bank("position")[0]
+    assert DATA_ACTORS.ego_leader != "heading_line_or_box"  # the two runs differ
+
+
+def test_ego_leader_is_checked(tmp_path):
+    bad = tmp_path / "bad.toml"
+    base = '[train]\nname = "x"\nrecipe = "closed_loop"\ninit_from = "m"\n'
+    bad.write_text(base + 'ego_leader = "box"\n')
+    with pytest.raises(ConfigError, match=r"train\.ego_leader: 'box' not one of heading_line, "):
+        load_config(bad)
+    bad.write_text('[train]\nname = "x"\nrecipe = "base"\nego_leader = "heading_line"\n')
+    with pytest.raises(ConfigError, match=r"train\.ego_leader: the base recipe drives nothing"):
+        load_config(bad)
+    bad.write_text(base + 'ego_leader = "heading_line_or_box"\n')
+    assert load_config(bad).ego_leader == "heading_line_or_box"
+    assert load_config(ROOT / "configs/train_closed_loop_rig_bigram_stated_half_short.toml"
+                       ).ego_leader == ""  # fmt: skip
 
 
 class _Visits(SimpleNamespace):

@@ -364,6 +364,12 @@ def test_each_stated_variant_ensemble_reads_what_its_config_trains():
     same = {k: v for k, v in hard.items() if k not in ("name", "out", "family_weights")}
     assert same == {k: v for k, v in short.items() if k not in ("name", "out")}
     assert hard["family_weights"] == "LWW=2,RWW=2,RTY=2"
+    box = tomllib.loads((root / "configs" /
+                         "train_closed_loop_rig_bigram_stated_half_short_box.toml").read_text())
+    box = box["train"]  # the short recipe's rounds under the default actors' rule, nothing else
+    assert {k: v for k, v in box.items() if k not in ("name", "out", "ego_leader")} == {
+        k: v for k, v in short.items() if k not in ("name", "out")}
+    assert box["ego_leader"] == "heading_line_or_box" and "ego_leader" not in short
     # the max-pooled and the three-plan chains: each stage its bigram twin's config but the
     # pooling (the head) and its names
     for tail, field, value in (("max", "object_pool", "mean_max"), ("modes", "modes", 3)):

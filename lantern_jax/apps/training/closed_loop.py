@@ -46,6 +46,7 @@ from pathlib import Path
 import jax
 import numpy as np
 
+from lantern_jax.apps.dataset.record import data_settings
 from lantern_jax.apps.dataset.scenes import PLAN_JSON, SceneSpec
 from lantern_jax.apps.dataset.store import dataset_provenance, load_frames, read_card
 from lantern_jax.apps.training.config import TrainConfig, parse_family_weights
@@ -68,11 +69,13 @@ from lantern_jax.apps.training.fit import Batches, fit, model_config
 from lantern_jax.apps.training.relabel import Visits, relabel_batch
 from lantern_jax.core.constants import FAMILIES
 from lantern_jax.core.progress import tqdm
+from lantern_jax.dynamics.actors import ActorSettings
 from lantern_jax.io.files import atomic_write
 from lantern_jax.policies.learned.checkpoint import load_model, model_policy, save_model
 from lantern_jax.policies.registry import get_policy
 from lantern_jax.scenarios.families import build_pair
 from lantern_jax.sim.rollout import horizon_ticks
+from lantern_jax.sim.settings import Settings
 from lantern_jax.types.language import PAD_ID
 from lantern_jax.types.world import tree_stack
 
@@ -185,6 +188,16 @@ def visits_to_examples(v: Visits, seq_ids: list[str], like: Examples, keep: np.n
     return Examples(obs, targets, np.asarray(seq_ids)[b].astype(str), base)
 
 
+def drive_settings(cfg: TrainConfig) -> Settings:
+    """The settings every drive of ``cfg``'s rounds runs under: the dataset's
+    (:func:`~lantern_jax.apps.dataset.record.data_settings`), with ``cfg.ego_leader``'s actors'
+    rule where it names one."""
+    settings = data_settings()
+    if cfg.ego_leader:
+        settings = settings.replace(actors=ActorSettings(ego_leader=cfg.ego_leader))
+    return settings
+
+
 def collect(cfg: TrainConfig, model, like: Examples, specs: list[SceneSpec], r: int,
             progress: bool = False) -> tuple[Examples, dict]:  # fmt: skip
     """Round ``r``'s visits of ``model`` on ``specs``, relabelled by the expert (a progress bar
@@ -218,7 +231,7 @@ def collect(cfg: TrainConfig, model, like: Examples, specs: list[SceneSpec], r: 
         v = jax.device_get(relabel_batch(
             _scene_batch(chunk), learner, lp, expert, ep, key, beta=beta,
             num_visits=num_visits, every=every // ratio, phase=phase,
-            segment=ratio))  # fmt: skip
+            segment=ratio, settings=drive_settings(cfg)))  # fmt: skip
         chosen = _chosen(v, ratio, cfg.failure_window_s)
         keep = _keep(v, cfg.exclude_crossing) & chosen
         parts.append(visits_to_examples(v, ids, like, keep))
@@ -229,13 +242,15 @@ def collect(cfg: TrainConfig, model, like: Examples, specs: list[SceneSpec], r: 
     drive = functools.partial(_second_drives, cfg, learner, lp, expert, ep, like, specs, r,
                               counts, progress)  # fmt: skip
     parts += drive(cfg.no_warning, cfg.no_warning_every_s, "no warning", "_A-no-warning",
-                   "no_warning_visits", lambda chunk, k: (_no_warning_batch(chunk), None),
+                   "no_warning_visits",
+                   lambda chunk, k: (_no_warning_batch(chunk), drive_settings(cfg)),
                    keep=lambda v, sc: hazard_in_view(v, sc.config.hazard_index))  # fmt: skip
     parts += drive(cfg.distractor_drives, cfg.distractor_drive_every_s, "distractor drives",
                    SEQUENCE_SUFFIX, "distractor_drive_visits",
                    lambda chunk, k: distractor_scenarios(_route_a_batch(chunk),
                                                          cfg.distractor_texts, cfg.seed,
-                                                         r * 1000 + k)[:2],
+                                                         r * 1000 + k,
+                                                         drive_settings(cfg))[:2],
                    keep=lambda v, sc: text_in_view(v.obs),
                    label=lambda v: v.replace(waypoints=np.asarray(jax.device_get(
                        own_plans(lp, v.obs)))))  # fmt: skip
@@ -249,7 +264,7 @@ def _second_drives(cfg: TrainConfig, learner, lp, expert, ep, like: Examples,
     """Round ``r``'s second drives of Route A: ``share`` of ``specs`` (spread evenly: specs come
     family by family), the learner alone (beta 0), a visit every ``every_s``.
 
-    ``build(chunk, k)`` gives a chunk's scenarios and settings (None: the defaults), ``keep(v,
+    ``build(chunk, k)`` gives a chunk's scenarios and settings, ``keep(v,
     scenarios)`` the (B, V) visits kept beside the exclusion rule, ``label(v)`` the visits
     relabelled (default: the expert's label). The kept visits carry the sequence ids
     ``<family>_<index><suffix>`` and are added to ``counts`` (``count`` among them).

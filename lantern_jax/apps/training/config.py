@@ -30,6 +30,10 @@ carries — the paper's three learned rows:
   With ``distractor_drives > 0`` that share also drives Route A told a training distractor
   sentence in place of its warning, each visit labelled with the learner's own plan without
   the sentence (:mod:`lantern_jax.apps.training.distractor_drives`).
+  Every drive of the rounds runs under the dataset's actors' rule
+  (:data:`~lantern_jax.apps.dataset.record.DATA_ACTORS`) unless ``ego_leader`` names another
+  (``"heading_line_or_box"``: the benchmark's default, in which a car also brakes for the ego's
+  box on its path).
 
 The text encoder (``text_encoder``) is the pooled bag of words unless given; ``"attention"``
 reads the words in order, ``"bigram"`` which word follows which
@@ -53,6 +57,7 @@ from typing import Any
 
 from lantern_jax.apps.dataset.store import EXCLUDE_CROSSING
 from lantern_jax.core.constants import FAMILIES
+from lantern_jax.dynamics.actors import EGO_LEADER_RULES
 from lantern_jax.io.config_file import ConfigFileError, check_keys, read_table, typed_value
 from lantern_jax.policies.learned.features import RIGS
 from lantern_jax.policies.learned.model import OBJECT_POOLS, TEXT_ENCODERS
@@ -156,6 +161,12 @@ class TrainConfig:
     # 0: none
     distractor_drives: float = 0.0
     distractor_drive_every_s: float = 0.5  # s, spacing of those visits
+    # how the IDM cars treat the ego while the learner drives and the expert relabels its visits
+    # (dynamics.actors.EGO_LEADER_RULES); "" is the dataset's rule (apps.dataset.record
+    # .DATA_ACTORS, the earlier one, under which the dataset and every shipped model were made);
+    # "heading_line_or_box", the benchmark's default since 2026-12-08, drives the rounds in the
+    # world the model is evaluated in
+    ego_leader: str = ""
     # the camera rig the model reads (features.RIGS); "" is the recipe's own: "surround" for
     # the surround recipe, "front" for the others
     rig: str = ""
@@ -281,6 +292,13 @@ def _range_problem(cfg: TrainConfig) -> tuple[str, str] | None:
     if cfg.object_pool not in OBJECT_POOLS:
         problems.append(("object_pool", f"{cfg.object_pool!r} not one of "
                                         f"{', '.join(OBJECT_POOLS)}"))  # fmt: skip
+    if cfg.ego_leader and cfg.ego_leader not in EGO_LEADER_RULES:
+        rules = ", ".join(EGO_LEADER_RULES)
+        problems.append(("ego_leader", f"{cfg.ego_leader!r} not one of {rules} "
+                                       "(or \"\", the dataset's rule)"))  # fmt: skip
+    elif cfg.ego_leader and cfg.recipe != "closed_loop":
+        problems.append(("ego_leader", f"the {cfg.recipe} recipe drives nothing (it reads the "
+                                       "dataset's frames); leave it out"))  # fmt: skip
     if cfg.width % cfg.heads:
         problems.append(("heads", f"{cfg.heads} does not divide width {cfg.width}"))
     return problems[0] if problems else None

@@ -44,22 +44,25 @@ from lantern_jax.types.world import Scenario
 SEQUENCE_SUFFIX = "_A-distractor"
 
 
-def distractor_scenarios(route_a: Scenario, texts: str, seed: int, r: int
+def distractor_scenarios(route_a: Scenario, texts: str, seed: int, r: int,
+                         settings: Settings | None = None
                          ) -> tuple[Scenario, Settings, np.ndarray]:  # fmt: skip
     """``route_a`` (stacked Route A scenarios, leading axis n) in the warning condition, each
     told a distractor sentence of the set ``texts`` in place of its warning (drawn per
     scenario, seeded by ``seed`` and round ``r``).
 
     Returns:
-        the scenarios, the settings whose bank holds the distractor sentences, and the (n,)
-        int32 text ids told.
+        the scenarios, ``settings`` (default :func:`~lantern_jax.apps.dataset.record
+        .data_settings`) with a bank that holds the distractor sentences, and the (n,) int32
+        text ids told.
     """
+    settings = data_settings() if settings is None else settings
     bank, ids = distractor_bank(texts)
     cfg = route_a.config
     told = np.random.default_rng([seed, 44, r]).choice(ids, cfg.family.shape[0]).astype(np.int32)
     text_id = jnp.asarray(told).reshape(np.shape(cfg.text_id))
     warned = cfg.replace(text_id=text_id, warning_enabled=jnp.ones_like(cfg.warning_enabled))
-    return route_a.replace(config=warned), data_settings().replace(bank=bank), told
+    return route_a.replace(config=warned), settings.replace(bank=bank), told
 
 
 def text_in_view(obs: Observation) -> np.ndarray:
